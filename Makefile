@@ -1,0 +1,38 @@
+# The two commands: `make demo` (the benchmark) and `make test` (the test suite).
+# Each builds .venv from nothing the first time, and again whenever pyproject.toml changes.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+RESULTS ?= results
+
+.PHONY: demo test test-slow lint format bench-speed clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/machining-bench benchmark --quick --out $(RESULTS)
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -m "not slow" -q
+
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest -m slow -q
+
+lint: $(STAMP)
+	$(BIN)/ruff check machining_envs agents tests benchmarks
+	$(BIN)/ruff format --check machining_envs agents tests benchmarks
+
+format: $(STAMP)
+	$(BIN)/ruff format machining_envs agents tests benchmarks
+	$(BIN)/ruff check --fix machining_envs agents tests benchmarks
+
+bench-speed: $(STAMP)
+	$(BIN)/python benchmarks/throughput.py
+
+clean:
+	rm -rf $(VENV) $(RESULTS) .pytest_cache .ruff_cache

@@ -1,0 +1,13 @@
+"""Agents for the machining envs: the papers' classical controllers and RL policies.
+
+Every agent follows Stable-Baselines3's ``predict`` signature, so classical controllers and
+SB3 models run under one harness (and under SB3's own ``evaluate_policy``)::
+
+    action, state = agent.predict(obs, state=None, episode_start=None, deterministic=True)
+"""
+
+from agents.adaptive import VariableGainPI
+from agents.base import Agent
+from agents.pid import ConstantFeed, FixedGainPI
+
+__all__ = ["Agent", "ConstantFeed", "FixedGainPI", "VariableGainPI"]

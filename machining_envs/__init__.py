@@ -1,0 +1,38 @@
+"""machining_envs: Gymnasium environments for feed-rate control of machine tools.
+
+Importing the package registers every env id under the ``machining_envs/`` namespace::
+
+    import gymnasium as gym
+    import machining_envs  # or gym.make("machining_envs:machining_envs/Turning-v0")
+
+    env = gym.make("machining_envs/Turning-v0")
+"""
+
+from __future__ import annotations
+
+from gymnasium.envs.registration import register, registry
+
+from machining_envs.envs.turning import TurningEnv, TurningReward
+from machining_envs.plants.turning import TurningParams
+from machining_envs.scenarios import TURNING_SCENARIOS, TurningScenario
+from machining_envs.workpieces import DepthProfile
+
+__all__ = [
+    "DepthProfile",
+    "TURNING_SCENARIOS",
+    "TurningEnv",
+    "TurningParams",
+    "TurningReward",
+    "TurningScenario",
+    "ENV_IDS",
+]
+__version__ = "0.1.0"
+
+#: Every env id this package registers.
+ENV_IDS = ("machining_envs/Turning-v0",)
+
+if "machining_envs/Turning-v0" not in registry:
+    register(
+        id="machining_envs/Turning-v0",
+        entry_point="machining_envs.envs.turning:TurningEnv",
+    )

@@ -1,0 +1,5 @@
+"""Gymnasium environments, one module per machining process."""
+
+from machining_envs.envs.turning import TurningEnv, TurningReward
+
+__all__ = ["TurningEnv", "TurningReward"]

@@ -1,0 +1,104 @@
+"""What every regulation env shares: action scaling, bad-input checks, keyword checks, plots."""
+
+from __future__ import annotations
+
+import difflib
+import math
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+
+__all__ = [
+    "ActionMap",
+    "check_action",
+    "check_overrides",
+    "render_signals",
+]
+
+
+class ActionMap:
+    """Affine map between the agent's ``Box(-1, 1)`` action and a physical command range."""
+
+    def __init__(self, command_min: float, command_max: float):
+        if not (
+            math.isfinite(command_min) and math.isfinite(command_max) and command_max > command_min
+        ):
+            raise ValueError(
+                f"command range must be finite with command_max > command_min, got "
+                f"[{command_min}, {command_max}]"
+            )
+        self.command_min = float(command_min)
+        self.command_max = float(command_max)
+        self._half = 0.5 * (self.command_max - self.command_min)
+        self._mid = 0.5 * (self.command_max + self.command_min)
+
+    def action_to_command(self, action):
+        """Physical command for an action in [-1, 1] (array or scalar)."""
+        return self._mid + self._half * np.asarray(action, dtype=np.float64)
+
+    def command_to_action(self, command):
+        """Action in [-1, 1] for a physical command (not clipped)."""
+        return (np.asarray(command, dtype=np.float64) - self._mid) / self._half
+
+
+def check_action(action, env_name: str) -> tuple[float, bool]:
+    """Return the action as a float in [-1, 1] and whether it had to be clipped.
+
+    NaN or inf raise ``ValueError`` naming the env and the value; a finite action outside the
+    box is clipped (the caller counts it in ``info``).
+    """
+    a = np.asarray(action, dtype=np.float64).reshape(-1)
+    if a.size != 1:
+        raise ValueError(f"{env_name}: action must hold one value, got shape {np.shape(action)}")
+    v = float(a[0])
+    if not math.isfinite(v):
+        raise ValueError(f"{env_name}: action must be finite, got {v!r}")
+    if v > 1.0:
+        return 1.0, True
+    if v < -1.0:
+        return -1.0, True
+    return v, False
+
+
+def check_overrides(owner: str, overrides: dict, allowed: Iterable[str]) -> None:
+    """``TypeError`` for keyword arguments that are not parameter names, with a suggestion."""
+    allowed = list(allowed)
+    for key in overrides:
+        if key not in allowed:
+            close = difflib.get_close_matches(key, allowed, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise TypeError(f"{owner}() got an unexpected keyword argument {key!r}{hint}")
+
+
+def render_signals(
+    t: Sequence[float],
+    panels: Sequence[tuple[str, Sequence[tuple[str, Sequence[float], str]]]],
+    title: str,
+) -> np.ndarray:
+    """Plot stacked panels of signals against time and return the image as an RGB array.
+
+    ``panels`` is a list of ``(y label, [(legend, values, style), ...])``.
+    """
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError as exc:  # pragma: no cover - matplotlib is a dependency
+        raise ImportError("rendering needs matplotlib: pip install matplotlib") from exc
+    fig = Figure(figsize=(7, 2.0 * len(panels) + 0.6), dpi=80)
+    canvas = FigureCanvasAgg(fig)
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, (ylabel, lines) in zip(axes, panels, strict=True):
+        for label, values, style in lines:
+            ax.plot(t, values, style, label=label, lw=1.2)
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+        if len(lines) > 1:
+            ax.legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time (s)")
+    axes[0].set_title(title, fontsize=10)
+    fig.tight_layout()
+    canvas.draw()
+    return np.asarray(canvas.buffer_rgba())[..., :3].copy()
