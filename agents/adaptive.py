@@ -2,27 +2,45 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from agents.base import Agent
 from agents.pid import TurningIO, _positive
+from machining_envs.plants.turning import SPINDLE_RPM_RANGE, TurningParams
 
 __all__ = ["VariableGainPI"]
+
+
+@functools.lru_cache(maxsize=512)
+def _unit_plant(params: TurningParams, spindle_rpm: float) -> np.ndarray:
+    """``[b1, b2, b3, a1, a2, a3]`` of the unit-gain discrete plant of eq. (14) at this speed."""
+    numd, dend = params.discrete_open_loop(spindle_rpm)
+    numd = np.pad(numd, (0, 4 - numd.size))
+    dend = np.pad(dend, (0, 4 - dend.size))
+    return np.concatenate([numd[1:4], dend[1:4]])
 
 
 class VariableGainPI(Agent):
     r"""PI controller whose gain holds the open-loop gain ``K = Kh Kp`` constant, eq. (15)-(16).
 
-    .. math:: K_h = K / \hat K_p, \qquad \hat K_p = F_c / U
+    .. math:: K_h = K / \hat K_p, \qquad \hat K_p = F_c / \hat U
 
-    ``Kp_hat`` is the measured force (counts) over the command now applied (counts): exact
-    in steady state, since there ``F_c = K_p U`` (eq. 11). The PI law is that of
-    :class:`~agents.pid.FixedGainPI` with Kh recomputed every sample.
+    The paper estimates ``Kp = Fc / U``, which holds in steady state (eq. 16). Here ``U`` is
+    replaced by ``U_hat``, the command passed through the paper's own unit-gain plant model
+    (eq. 11 discretised as eq. 14 at the observed spindle speed): in steady state
+    ``U_hat = U`` and the estimate is the paper's; during the start-up ramp and after a step
+    it also accounts for the 2-4 samples the force lags the command, which the plain ratio
+    does not (there ``Fc / U`` underestimates ``Kp`` several times over, ``Kh`` comes out
+    too large and the first overshoot can break the tool at low spindle speed).
+    The PI law is that of :class:`~agents.pid.FixedGainPI` with ``Kh`` recomputed every
+    sample.
 
-    Start-up guard: while the command is below ``min_command_fraction`` of its range or the
-    force below ``min_force_fraction`` of the reference, ``Fc / U`` is meaningless (0/0 at
-    rest), so the previous estimate is kept; the first comes from the nominal model,
-    eq. (11) at the reference force, the observed spindle speed and ``design_depth_mm``.
+    Start-up guard: while ``U_hat`` is below ``min_command_fraction`` of the command range or
+    the force below ``min_force_fraction`` of the reference, the ratio is 0/0-like, so the
+    previous estimate is kept; the first comes from the nominal model, eq. (11) at the
+    reference force, the observed spindle speed and ``design_depth_mm``.
 
     Parameters
     ----------
@@ -33,7 +51,8 @@ class VariableGainPI(Agent):
         Kgh = 1 + Kg/Kh (paper: 1.9).
     """
 
-    state_size = 3  # [U_{k-1}, E_{k-1}, Kp_hat]
+    # [E_{k-1}, Kp_hat, U_{k-1..k-3}, U_hat_{k-1..k-3}, b1..b3, a1..a3]
+    state_size = 14
     obs_dim = 7
 
     def __init__(
@@ -67,20 +86,28 @@ class VariableGainPI(Agent):
 
     def initial_state(self, n, obs):
         st = np.zeros((n, self.state_size))
+        rpm = np.clip(self.io.spindle_rpm(obs), *SPINDLE_RPM_RANGE)
         fr_N = self.io.force_scale_N * obs[:, 1]
         fr_N = np.where(fr_N > 0, fr_N, self.io.force_scale_N)
-        st[:, 2] = self.nominal_process_gain(self.io.spindle_rpm(obs), fr_N)
+        st[:, 1] = self.nominal_process_gain(rpm, fr_N)
+        for i in range(n):  # the model at each env's spindle speed (cached per speed)
+            st[i, 8:14] = _unit_plant(self.io.params, round(float(rpm[i]), 6))
         return st
 
     def _act(self, obs, state):
         fm, fr = self.io.force_counts(obs)
-        u_prev = state[:, 0]
-        ok = (u_prev >= self.min_command) & (fm >= self.min_force_fraction * fr)
-        kp_hat = np.where(ok, fm / np.where(ok, u_prev, 1.0), state[:, 2])
+        u_hist = state[:, 2:5]
+        y_hist = state[:, 5:8]
+        y = np.sum(state[:, 8:11] * u_hist, axis=1) - np.sum(state[:, 11:14] * y_hist, axis=1)
+        ok = (y >= self.min_command) & (fm >= self.min_force_fraction * fr)
+        kp_hat = np.where(ok, fm / np.where(ok, y, 1.0), state[:, 1])
         kh = self.k / kp_hat
         e = fr - fm
-        u = np.clip(u_prev + kh * (self.kgh * e - state[:, 1]), 0.0, self.io.command_max)
-        state[:, 0] = u
-        state[:, 1] = e
-        state[:, 2] = kp_hat
+        u = np.clip(u_hist[:, 0] + kh * (self.kgh * e - state[:, 0]), 0.0, self.io.command_max)
+        state[:, 0] = e
+        state[:, 1] = kp_hat
+        state[:, 3:5] = u_hist[:, 0:2].copy()
+        state[:, 2] = u
+        state[:, 6:8] = y_hist[:, 0:2].copy()
+        state[:, 5] = y
         return self.io.action(u)

@@ -8,14 +8,21 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["regulation_metrics", "segment_bounds", "SETTLE_BAND", "OVER_LIMIT"]
+__all__ = [
+    "regulation_metrics",
+    "segment_bounds",
+    "oscillation_amplitude",
+    "SETTLE_BAND",
+    "OVER_LIMIT",
+    "OSC_WINDOW_S",
+]
 
 #: Half-width of the band around the reference that counts as settled (5 % of the reference).
 SETTLE_BAND = 0.05
 #: Force (or torque) above this multiple of the reference counts as over the limit.
 OVER_LIMIT = 1.1
 #: Window of the moving mean removed before measuring oscillation, s.
-_OSC_WINDOW_S = 1.0
+OSC_WINDOW_S = 1.0
 
 
 def segment_bounds(segment: np.ndarray) -> list[tuple[int, int]]:
@@ -28,7 +35,7 @@ def segment_bounds(segment: np.ndarray) -> list[tuple[int, int]]:
     return [(edges[i], edges[i + 1]) for i in range(len(edges) - 1)]
 
 
-def _oscillation(e: np.ndarray, window: int) -> float:
+def oscillation_amplitude(e: np.ndarray, window: int) -> float:
     """Half the peak-to-peak of ``e`` less its moving mean, over the segment's second half."""
     if e.size < 2 * window + 4:
         return 0.0
@@ -77,7 +84,7 @@ def regulation_metrics(
     inside = np.flatnonzero(ae <= SETTLE_BAND)
     out["max_overshoot"] = float(max(0.0, ee[inside[0] :].max())) if inside.size else 0.0
 
-    window = max(1, int(round(_OSC_WINDOW_S / dt))) if dt > 0 else 1
+    window = max(1, int(round(OSC_WINDOW_S / dt))) if dt > 0 else 1
     seg = np.asarray(traj.get("segment", np.zeros(t.size)))[1:][cutting]
     settle, sse, osc = [], [], []
     unsettled = 0
@@ -91,7 +98,7 @@ def regulation_metrics(
             settle.append((bad[-1] + 1) * dt if bad.size else 0.0)
         tail = es[int(0.7 * es.size) :]
         sse.append(abs(float(tail.mean())) if tail.size else 0.0)
-        osc.append(_oscillation(es, window))
+        osc.append(oscillation_amplitude(es, window))
     out["settling_time_s"] = float(np.mean(settle)) if settle else 0.0
     out["n_unsettled"] = float(unsettled)
     out["steady_state_error"] = float(np.mean(sse)) if sse else 0.0

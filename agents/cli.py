@@ -1,0 +1,65 @@
+"""``machining-bench``: the command line of the library.
+
+machining-bench benchmark [--quick] [--out results] [--seed 1000]
+machining-bench reproduce turning [--out results] [--sensor-gain 17]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+__all__ = ["main"]
+
+
+def _positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="machining-bench", description=__doc__.split("\n\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+
+    b = sub.add_parser("benchmark", help="every agent on every env; table, CSV, report, plots")
+    b.add_argument(
+        "--quick", action="store_true", help="fewer episodes (a couple of minutes on 2 cores)"
+    )
+    b.add_argument("--out", default="results", help="output folder (default: results)")
+    b.add_argument("--seed", type=int, default=1000, help="first episode seed (default: 1000)")
+
+    r = sub.add_parser("reproduce", help="run a paper's experiments; paper vs ours")
+    r.add_argument("process", choices=["turning"], help="which paper")
+    r.add_argument("--out", default="results", help="folder for the figure (default: results)")
+    r.add_argument("--seed", type=int, default=0)
+    r.add_argument(
+        "--sensor-gain",
+        type=_positive_float,
+        default=None,
+        help="turning: override Ke (counts/N) to explore the calibration",
+    )
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.command == "benchmark":
+        from agents.benchmark import run_benchmark
+
+        run_benchmark(args.out, quick=args.quick, seed=args.seed)
+        return 0
+    if args.command == "reproduce":
+        from agents.reproduce import reproduce_turning
+
+        results = reproduce_turning(args.out, sensor_gain=args.sensor_gain, seed=args.seed)
+        return 0 if all(r["match"] for r in results) else 1
+    return 2  # pragma: no cover - argparse rejects other commands
+
+
+if __name__ == "__main__":
+    sys.exit(main())
