@@ -1,0 +1,141 @@
+"""The turning plant against the paper's equations and independent computations."""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from agents.reproduce import critical_gain_turning
+from machining_envs.plants.lti import butterworth_lowpass, critical_gain, zoh
+from machining_envs.plants.turning import TurningParams, TurningPlant
+from machining_envs.workpieces import DepthProfile
+
+
+def test_zoh_reproduces_eq14_at_405_rpm():
+    num, den = TurningParams().discrete_open_loop(405.0)
+    # Numerator 0.287 z^-1 + 0.515 z^-2 + 0.071 z^-3 (eq. 14). The paper prints three
+    # decimals; we ask for agreement within one unit of the third (ours: 0.28646, 0.51468,
+    # 0.07094 - the first reads 0.287 only when rounded up, as the paper seems to have).
+    np.testing.assert_allclose(num, [0.0, 0.287, 0.515, 0.071], atol=1e-3)
+    # Denominator (1 - 0.060 z^-1 + 0.237 z^-2)(1 - 0.259 z^-1) (eq. 14), factor by factor.
+    paper = np.convolve([1.0, -0.060, 0.237], [1.0, -0.259])
+    np.testing.assert_allclose(den, paper, atol=1e-3)
+    roots = np.roots(den)
+    real = roots[np.isclose(roots.imag, 0)].real
+    np.testing.assert_allclose(real, [0.259], atol=1e-3)
+    pair = roots[~np.isclose(roots.imag, 0)]
+    np.testing.assert_allclose(np.poly(pair).real, [1.0, -0.060, 0.237], atol=1e-3)
+
+
+def test_critical_gain_within_5_percent_of_paper():
+    k = critical_gain_turning(405.0, kgh=1.9)
+    assert abs(k - 0.807) / 0.807 < 0.05, k
+    # At that gain a closed-loop root sits on the unit circle; 1 % below it, all inside.
+    num, den = TurningParams().discrete_open_loop(405.0)
+    n = np.convolve([1.9, -1.0], num)
+    d = np.convolve([1.0, -1.0], den)
+    assert max(abs(np.roots(d + k * n))) == pytest.approx(1.0, abs=1e-6)
+    assert max(abs(np.roots(d + 0.99 * k * n))) < 1.0
+
+
+def test_critical_gain_of_a_known_loop():
+    # L(z) = K z^-1 / (1 - 0.5 z^-1): pole 0.5 - K, unstable past K = 1.5.
+    assert critical_gain([0.0, 1.0], [1.0, -0.5]) == pytest.approx(1.5, rel=1e-8)
+
+
+def test_zoh_matches_scalar_closed_form():
+    phi, gam = zoh(np.array([[-2.0]]), np.array([[3.0]]), 0.1)
+    assert phi[0, 0] == pytest.approx(np.exp(-0.2))
+    assert gam[0, 0] == pytest.approx(1.5 * (1 - np.exp(-0.2)))
+
+
+def test_butterworth_half_power_at_cutoff():
+    a, b, c = butterworth_lowpass(10.0, 2)
+    w = 2 * np.pi * 10.0
+    h = c @ np.linalg.solve(1j * w * np.eye(2) - a, b)
+    assert abs(h[0]) == pytest.approx(1 / np.sqrt(2), rel=1e-9)
+    assert abs(c @ np.linalg.solve(-a, b))[0] == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("rpm", [245.0, 405.0, 700.0, 1234.5])
+def test_feed_is_the_exact_moving_integral(rpm):
+    """f(t) = int_{t-T}^t Vf: compare with a tight ODE solution of the servo (eq. 1-4)."""
+    p = TurningParams()
+    prof = DepthProfile.steps()
+    plant = TurningPlant(p, rpm, prof)
+    rng = np.random.default_rng(3)
+    us = rng.uniform(0, 3000, size=25)
+    feeds = [plant.step(u).feed_mm_per_rev for u in us]
+    wn, z = p.servo_natural_freq_rad_s, p.servo_damping
+    g = p.servo_gain * p.gear_ratio * wn**2
+
+    def rhs(t, x):
+        u = us[min(int(t / 0.1), len(us) - 1)]
+        return [x[1], -(wn**2) * x[0] - 2 * z * wn * x[1] + g * u, x[0]]
+
+    tt = np.linspace(0, 2.5, 250001)
+    sol = solve_ivp(rhs, (0, 2.5), [0, 0, 0], t_eval=tt, rtol=1e-11, atol=1e-12, max_step=1e-3)
+    t_k = 0.1 * np.arange(1, 26)
+    ref = np.interp(t_k, tt, sol.y[2]) - np.interp(t_k - 60 / rpm, tt, sol.y[2], left=0.0)
+    np.testing.assert_allclose(feeds, ref, atol=1e-8)
+
+
+def test_steady_state_follows_eq_1_to_10():
+    p = TurningParams(noise_std_N=0.0)
+    plant = TurningPlant(p, 405.0, DepthProfile.steps((2.0,), 1000.0))
+    u = 1500.0
+    for _ in range(100):
+        s = plant.step(u)
+    feed = p.servo_gain * p.gear_ratio * u * 60 / 405.0  # f = Ks Km U T
+    force = p.force_coefficient * feed**p.feed_exponent * 2.0
+    assert s.feed_mm_per_rev == pytest.approx(feed, rel=1e-9)
+    assert s.force_N == pytest.approx(force, rel=1e-9)
+    assert s.measured_counts == pytest.approx(p.sensor_gain * force, rel=1e-6)
+    # Eq. (11)'s Kp is the steady ratio Fc / U.
+    kp = p.process_gain(405.0, 2.0, feed)
+    assert s.measured_counts / u == pytest.approx(kp, rel=1e-6)
+
+
+def test_substep_size_is_converged():
+    """2 ms sub-steps: force and filtered measurement within 0.5 % of a 0.2 ms simulation."""
+    prof = DepthProfile.steps((1.0, 2.0, 3.0), 3.0)
+    rng = np.random.default_rng(0)
+    us = rng.uniform(0, 4000, size=40)
+    out = {}
+    for m in (50, 500):
+        plant = TurningPlant(TurningParams(substeps=m), 405.0, prof)
+        out[m] = np.array([[s.force_N, s.measured_counts] for s in (plant.step(u) for u in us)])
+    scale = np.abs(out[500]).max(axis=0)
+    assert np.max(np.abs(out[50] - out[500]) / scale) < 5e-3
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [("sample_time_s", 0.0), ("servo_damping", -0.1), ("feed_exponent", float("nan")),
+     ("sensor_filter_order", 3), ("substeps", 0)],
+)
+def test_bad_params_name_the_parameter(field, value):
+    with pytest.raises(ValueError, match=field):
+        TurningParams(**{field: value})
+
+
+def test_plant_rejects_bad_spindle_speed():
+    with pytest.raises(ValueError, match="spindle_rpm"):
+        TurningPlant(TurningParams(), -405.0, DepthProfile.steps())
+
+
+def test_depth_profiles():
+    prof = DepthProfile.steps((1.0, 2.0, 3.0), 10.0)
+    np.testing.assert_allclose(prof([-1.0, 0.0, 9.99, 10.0, 25.0, 30.0]), [0, 1, 1, 2, 3, 0])
+    assert prof.change_positions_mm() == (10.0, 20.0)
+    taper = DepthProfile.taper(1.0, 3.0, 40.0)
+    assert taper(20.0) == pytest.approx(2.0)
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        r = DepthProfile.random(rng)
+        ends = np.array(r.end_depths_mm[:-1])
+        starts = np.array(r.start_depths_mm[1:])
+        assert np.all(np.maximum(starts / ends, ends / starts) <= 2.5 + 1e-12)
+    with pytest.raises(ValueError, match="edges_mm"):
+        DepthProfile((0.0, 5.0, 3.0), (1.0, 1.0), (1.0, 1.0))
+    with pytest.raises(ValueError, match="start_depths_mm"):
+        DepthProfile((0.0, 5.0), (-1.0,), (1.0,))
