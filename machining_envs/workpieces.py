@@ -40,29 +40,40 @@ class DepthProfile:
     name: str = "custom"
 
     def __post_init__(self) -> None:
-        e = np.asarray(self.edges_mm, dtype=np.float64)
-        if e.ndim != 1 or e.size < 2 or not np.all(np.isfinite(e)):
+        try:
+            e = [float(v) for v in self.edges_mm]
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"edges_mm must be a sequence of numbers, got {self.edges_mm!r}"
+            ) from None
+        if len(e) < 2 or not all(math.isfinite(v) for v in e):
             raise ValueError(
                 f"edges_mm must hold at least two finite values, got {self.edges_mm!r}"
             )
-        if e[0] != 0.0 or not np.all(np.diff(e) > 0):
+        if e[0] != 0.0 or any(b <= a for a, b in zip(e[:-1], e[1:], strict=True)):
             raise ValueError(
                 f"edges_mm must start at 0 and increase strictly, got {self.edges_mm!r}"
             )
+        lo, hi = DEPTH_RANGE_MM
         for label, d in (
             ("start_depths_mm", self.start_depths_mm),
             ("end_depths_mm", self.end_depths_mm),
         ):
-            arr = np.asarray(d, dtype=np.float64)
-            if arr.shape != (e.size - 1,):
-                raise ValueError(f"{label} must hold {e.size - 1} values, got {d!r}")
-            lo, hi = DEPTH_RANGE_MM
-            if not np.all(np.isfinite(arr)) or np.any(arr < lo) or np.any(arr > hi):
+            try:
+                vals = [float(v) for v in d]
+            except (TypeError, ValueError):
+                raise ValueError(f"{label} must be a sequence of numbers, got {d!r}") from None
+            if len(vals) != len(e) - 1:
+                raise ValueError(f"{label} must hold {len(e) - 1} values, got {d!r}")
+            if not all(math.isfinite(v) and lo <= v <= hi for v in vals):
                 raise ValueError(f"{label} must lie in [{lo}, {hi}] mm, got {d!r}")
-        object.__setattr__(self, "_e", e)
-        object.__setattr__(self, "_d0", np.asarray(self.start_depths_mm, dtype=np.float64))
-        slope = (np.asarray(self.end_depths_mm) - self._d0) / np.diff(e)
-        object.__setattr__(self, "_slope", slope)
+        edges = np.array(e)
+        d0 = np.array(self.start_depths_mm, dtype=np.float64)
+        object.__setattr__(self, "_e", edges)
+        object.__setattr__(self, "_d0", d0)
+        object.__setattr__(
+            self, "_slope", (np.array(self.end_depths_mm, dtype=np.float64) - d0) / np.diff(edges)
+        )
 
     # ---- constructors ---------------------------------------------------------------------
     @classmethod
@@ -119,22 +130,24 @@ class DepthProfile:
         if not max_jump_ratio > 1.0:
             raise ValueError(f"max_jump_ratio must be > 1, got {max_jump_ratio!r}")
         n = int(rng.integers(n_segments[0], n_segments[1] + 1))
-        lengths = rng.uniform(segment_mm[0], segment_mm[1], size=n)
-        edges = np.concatenate([[0.0], np.cumsum(lengths)])
+        draws = rng.random((4, n)).tolist()  # lengths, start depths, taper?, end depths
+        edges = [0.0]
+        for r in draws[0]:
+            edges.append(edges[-1] + segment_mm[0] + (segment_mm[1] - segment_mm[0]) * r)
         starts, ends = [], []
         prev = None
-        for _ in range(n):
+        for k in range(n):
             a, b = (
                 (lo, hi)
                 if prev is None
                 else (max(lo, prev / max_jump_ratio), min(hi, prev * max_jump_ratio))
             )
-            d0 = float(rng.uniform(a, b))
-            d1 = float(rng.uniform(lo, hi)) if rng.random() < taper_probability else d0
+            d0 = a + (b - a) * draws[1][k]
+            d1 = lo + (hi - lo) * draws[3][k] if draws[2][k] < taper_probability else d0
             starts.append(d0)
             ends.append(d1)
             prev = d1
-        return cls(tuple(float(v) for v in edges), tuple(starts), tuple(ends), name)
+        return cls(tuple(edges), tuple(starts), tuple(ends), name)
 
     # ---- evaluation -----------------------------------------------------------------------
     @property

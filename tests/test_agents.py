@@ -36,7 +36,9 @@ def test_batched_predict_equals_single(factory):
         starts = np.full(3, k == 0)
         batch_act, batch_state = agent.predict(batch_obs, state=batch_state, episode_start=starts)
         for i in range(3):
-            act, singles[i] = agent.predict(obs[i], state=singles[i], episode_start=np.array([k == 0]))
+            act, singles[i] = agent.predict(
+                obs[i], state=singles[i], episode_start=np.array([k == 0])
+            )
             np.testing.assert_array_equal(act, batch_act[i])
             obs[i] = envs[i].step(act)[0]
 
@@ -81,7 +83,9 @@ def test_adaptive_start_up_has_no_division_by_zero():
         for _ in range(5):
             a, s = ad.predict(obs, state=s)  # force stays 0: the estimate is held
     assert np.all(np.isfinite(s)) and np.isfinite(a).all()
-    assert s[0, 1] == pytest.approx(ad.nominal_process_gain(np.array([405.0]), np.array([1000.0]))[0])
+    assert s[0, 1] == pytest.approx(
+        ad.nominal_process_gain(np.array([405.0]), np.array([1000.0]))[0]
+    )
 
 
 def test_adaptive_estimate_is_the_papers_in_steady_state():

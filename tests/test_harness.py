@@ -80,8 +80,12 @@ def test_evaluate_table_and_csv(tmp_path):
 
 
 def test_same_seeds_give_every_agent_the_same_workpieces():
-    a = evaluate(FixedGainPI.from_env, TURNING, ["test"], n_episodes=3, seed=5, keep_trajectories=True)
-    b = evaluate(VariableGainPI.from_env, TURNING, ["test"], n_episodes=3, seed=5, keep_trajectories=True)
+    a = evaluate(
+        FixedGainPI.from_env, TURNING, ["test"], n_episodes=3, seed=5, keep_trajectories=True
+    )
+    b = evaluate(
+        VariableGainPI.from_env, TURNING, ["test"], n_episodes=3, seed=5, keep_trajectories=True
+    )
     for ta, tb in zip(a.trajectories, b.trajectories, strict=True):
         assert ta["workpiece_length_mm"][0] == tb["workpiece_length_mm"][0]
         assert ta["spindle_rpm"][0] == tb["spindle_rpm"][0]
@@ -97,11 +101,18 @@ def test_cli_reproduce_turning(tmp_path, capsys):
 def test_cli_benchmark_quick_writes_report(tmp_path):
     out = subprocess.run(
         [sys.executable, "-m", "agents.cli", "benchmark", "--quick", "--out", str(tmp_path)],
-        capture_output=True, text=True, check=True,
+        capture_output=True,
+        text=True,
+        check=True,
     )
     assert "| agent | scenario |" in out.stdout
-    for name in ("benchmark.csv", "report.md", "Turning-v0_trajectories.png", "Turning-v0_metrics.png",
-                 "reproduce_turning.png"):
+    for name in (
+        "benchmark.csv",
+        "report.md",
+        "Turning-v0_trajectories.png",
+        "Turning-v0_metrics.png",
+        "reproduce_turning.png",
+    ):
         assert (tmp_path / name).stat().st_size > 0, name
 
 

@@ -110,8 +110,13 @@ def test_substep_size_is_converged():
 
 @pytest.mark.parametrize(
     "field, value",
-    [("sample_time_s", 0.0), ("servo_damping", -0.1), ("feed_exponent", float("nan")),
-     ("sensor_filter_order", 3), ("substeps", 0)],
+    [
+        ("sample_time_s", 0.0),
+        ("servo_damping", -0.1),
+        ("feed_exponent", float("nan")),
+        ("sensor_filter_order", 3),
+        ("substeps", 0),
+    ],
 )
 def test_bad_params_name_the_parameter(field, value):
     with pytest.raises(ValueError, match=field):
@@ -139,3 +144,25 @@ def test_depth_profiles():
         DepthProfile((0.0, 5.0, 3.0), (1.0, 1.0), (1.0, 1.0))
     with pytest.raises(ValueError, match="start_depths_mm"):
         DepthProfile((0.0, 5.0), (-1.0,), (1.0,))
+
+
+def test_position_excursion_bound_holds():
+    """The one-segment shortcut relies on |Vf| <= the BIBO bound; bang-bang commands test it."""
+    p = TurningParams()
+    plant = TurningPlant(p, 405.0, DepthProfile.steps((1.0,), 1e5))
+    vmax = 0.0
+    for k in range(300):
+        plant.step(p.command_max if (k // 3) % 2 == 0 else 0.0)
+        vmax = max(vmax, abs(plant.state[0]))
+    assert vmax > p.max_feed_velocity_mm_s  # the servo does overshoot
+    assert vmax * p.sample_time_s <= plant._margin
+
+
+def test_force_across_a_step_edge_matches_direct_evaluation():
+    """Sub-steps straddling an edge use the profile itself: compare with a fine plant."""
+    prof = DepthProfile.steps((1.0, 3.0), 0.5)
+    coarse = TurningPlant(TurningParams(), 405.0, prof)
+    forces = [coarse.step(3000.0).force_N for _ in range(12)]
+    ref = TurningPlant(TurningParams(substeps=1000), 405.0, prof)
+    forces_ref = [ref.step(3000.0).force_N for _ in range(12)]
+    np.testing.assert_allclose(forces, forces_ref, rtol=1e-9)

@@ -16,8 +16,18 @@ from machining_envs.workpieces import DepthProfile
 from tests.conftest import TURNING, random_rollout
 
 DESIGN_INFO_KEYS = {
-    "t_s", "command", "action_clipped", "breakage", "diverged", "force_N", "force_ref_N",
-    "measured", "feed_mm_per_rev", "depth_mm", "spindle_rpm", "position_mm",
+    "t_s",
+    "command",
+    "action_clipped",
+    "breakage",
+    "diverged",
+    "force_N",
+    "force_ref_N",
+    "measured",
+    "feed_mm_per_rev",
+    "depth_mm",
+    "spindle_rpm",
+    "position_mm",
 }
 
 
@@ -188,7 +198,9 @@ def test_hidden_quantities_stay_out_of_the_observation():
     """Two cuts differing only in hidden depth and Kf give the same first observation."""
     env = gym.make(TURNING)
     a = TurningScenario("a", DepthProfile.steps((1.0,), 20.0), 405.0, noise_scale=0.0)
-    b = TurningScenario("b", DepthProfile.steps((2.5,), 20.0), 405.0, force_coefficient_scale=1.2, noise_scale=0.0)
+    b = TurningScenario(
+        "b", DepthProfile.steps((2.5,), 20.0), 405.0, force_coefficient_scale=1.2, noise_scale=0.0
+    )
     oa, _ = env.reset(seed=0, options={"scenario": a})
     ob, _ = env.reset(seed=0, options={"scenario": b})
     assert oa.tobytes() == ob.tobytes()

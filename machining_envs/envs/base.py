@@ -47,10 +47,15 @@ def check_action(action, env_name: str) -> tuple[float, bool]:
     NaN or inf raise ``ValueError`` naming the env and the value; a finite action outside the
     box is clipped (the caller counts it in ``info``).
     """
-    a = np.asarray(action, dtype=np.float64).reshape(-1)
-    if a.size != 1:
-        raise ValueError(f"{env_name}: action must hold one value, got shape {np.shape(action)}")
-    v = float(a[0])
+    if isinstance(action, np.ndarray) and action.shape == (1,):
+        v = float(action[0])
+    else:
+        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        if a.size != 1:
+            raise ValueError(
+                f"{env_name}: action must hold one value, got shape {np.shape(action)}"
+            )
+        v = float(a[0])
     if not math.isfinite(v):
         raise ValueError(f"{env_name}: action must be finite, got {v!r}")
     if v > 1.0:

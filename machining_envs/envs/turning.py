@@ -224,10 +224,14 @@ class TurningEnv(gym.Env):
         self.scenario = sc
         self._truth = sc.true_params(self.params)
         self.plant = TurningPlant(self._truth, sc.spindle_rpm, sc.profile)
-        self._fr = sc.force_ref_N
+        self._fr = float(sc.force_ref_N)
+        self._length = sc.profile.length_mm
+        self._vmax = self._truth.max_feed_velocity_mm_s
         self._noise_counts = self._truth.sensor_gain * self._truth.noise_std_N
         self._meas = [0.0] * (_HISTORY + 1)  # newest first, N
-        self._obs_buf = np.zeros(3 + 1 + _HISTORY, dtype=np.float32)
+        self._normals: list[float] = []
+        self._fr_obs = min(self._fr / self.params.force_scale_N, 10.0)
+        self._rpm_obs = sc.spindle_rpm / 1000.0
         self._prev_action = -1.0
         self._n_clipped = 0
         self._done = False
@@ -237,7 +241,7 @@ class TurningEnv(gym.Env):
             feed_mm_per_rev=0.0,
             feed_velocity_mm_s=0.0,
             position_mm=0.0,
-            depth_mm=float(sc.profile(0.0)),
+            depth_mm=float(sc.profile.start_depths_mm[0]),
             peak_force_N=0.0,
             segment=0,
         )
@@ -256,49 +260,60 @@ class TurningEnv(gym.Env):
             else 0.0
         )
         s = self.plant.step(u, noise)
-        prm = self._truth
+        t = self.plant.t_s
+        force, peak, counts = s.force_N, s.peak_force_N, s.measured_counts
         diverged = not (
-            math.isfinite(s.force_N)
-            and math.isfinite(s.measured_counts)
-            and math.isfinite(s.position_mm)
+            math.isfinite(force) and math.isfinite(counts) and math.isfinite(s.position_mm)
         )
-        measured_N = s.measured_counts / self.params.sensor_gain if not diverged else 0.0
-        self._meas.pop()
-        self._meas.insert(0, measured_N)
+        if diverged:  # never seen; kept so that no NaN can reach an observation or a reward
+            force = peak = counts = 0.0
+        measured_N = counts / self.params.sensor_gain
+        meas = self._meas
+        meas.pop()
+        meas.insert(0, measured_N)
         self._prev_action = a
-        breakage = (not diverged) and s.peak_force_N > prm.breakage_force_N
+        breakage = peak > self._truth.breakage_force_N
         finished = s.finish_time_s is not None
         terminated = diverged or breakage or finished
-        truncated = (not terminated) and self.plant.t_s >= self.max_episode_time_s - 1e-9
+        truncated = (not terminated) and t >= self.max_episode_time_s - 1e-9
 
         w = self.reward_weights
-        if diverged:
-            reward = -w.breakage - w.tracking
-        else:
-            e = s.force_N / self._fr
-            reward = -w.tracking * abs(e - 1.0) - w.overforce * max(0.0, e - w.overforce_threshold)
-            if w.progress:
-                reward += w.progress * s.feed_velocity_mm_s / prm.max_feed_velocity_mm_s
-            if breakage:
-                reward -= w.breakage
+        e = force / self._fr
+        reward = -w.tracking * abs(e - 1.0) - w.overforce * max(0.0, e - w.overforce_threshold)
+        if w.progress:
+            reward += w.progress * s.feed_velocity_mm_s / self._vmax
+        if breakage or diverged:
+            reward -= w.breakage
 
-        info = self._info(self.plant.t_s, u, measured_N, clipped, breakage, diverged)
-        info.update(
-            force_N=s.force_N if not diverged else 0.0,
-            peak_force_N=s.peak_force_N if not diverged else 0.0,
-            measured_counts=s.measured_counts if not diverged else 0.0,
-            feed_mm_per_rev=s.feed_mm_per_rev if not diverged else 0.0,
-            feed_velocity_mm_s=s.feed_velocity_mm_s if not diverged else 0.0,
-            position_mm=s.position_mm if not diverged else 0.0,
-            depth_mm=s.depth_mm if not diverged else 0.0,
-            segment=s.segment,
-            finished=finished,
-        )
+        sc = self.scenario
+        info = {
+            "t_s": t,
+            "command": u,
+            "action_clipped": clipped,
+            "n_action_clipped": self._n_clipped,
+            "breakage": breakage,
+            "diverged": diverged,
+            "finished": finished,
+            "force_N": force,
+            "force_ref_N": self._fr,
+            "measured": measured_N,
+            "measured_counts": counts,
+            "peak_force_N": peak,
+            "feed_mm_per_rev": s.feed_mm_per_rev if not diverged else 0.0,
+            "feed_velocity_mm_s": s.feed_velocity_mm_s if not diverged else 0.0,
+            "position_mm": s.position_mm if not diverged else 0.0,
+            "depth_mm": s.depth_mm,
+            "segment": s.segment,
+            "spindle_rpm": sc.spindle_rpm,
+            "workpiece_length_mm": self._length,
+            "scenario": sc.name,
+        }
         if finished:
             info["machining_time_s"] = s.finish_time_s
-        self._record(info)
-        if self.render_mode == "human":
-            self.render()
+        if self.render_mode is not None:
+            self._record(info)
+            if self.render_mode == "human":
+                self.render()
         return self._obs(), float(reward), terminated, truncated, info
 
     # ---- helpers -------------------------------------------------------------------------
@@ -306,15 +321,18 @@ class TurningEnv(gym.Env):
         fs = self.params.force_scale_N
         lo, hi = _FORCE_OBS
         m = self._meas
-        obs = self._obs_buf
-        obs[0] = min(max(m[0] / fs, lo), hi)
-        obs[1] = min(self._fr / fs, 10.0)
-        obs[2] = self._prev_action
-        obs[3] = self.scenario.spindle_rpm / 1000.0
-        obs[4] = min(max(m[1] / fs, lo), hi)
-        obs[5] = min(max(m[2] / fs, lo), hi)
-        obs[6] = min(max(m[3] / fs, lo), hi)
-        return obs.copy()
+        return np.array(
+            (
+                min(max(m[0] / fs, lo), hi),
+                self._fr_obs,
+                self._prev_action,
+                self._rpm_obs,
+                min(max(m[1] / fs, lo), hi),
+                min(max(m[2] / fs, lo), hi),
+                min(max(m[3] / fs, lo), hi),
+            ),
+            dtype=np.float32,
+        )
 
     def _info(self, t, command, measured, clipped, breakage, diverged) -> dict:
         sc = self.scenario

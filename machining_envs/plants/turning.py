@@ -212,10 +212,7 @@ class _Matrices:
 
     big: np.ndarray  # (2M + 3, 4(L + 1)): rows = positions, feeds, next state
     lags: int  # L
-    filt_a_m: np.ndarray  # (n_f, n_f): filter transition over one sample
-    filt_h: np.ndarray  # (n_f, M): filter response to the force at each sub-step point
-    filt_prev: np.ndarray  # (n_f,): filter response to the force at the sample's start
-    filt_c: np.ndarray  # (n_f,)
+    filt_step: np.ndarray  # (n_f, n_f + M + 1): next filter state from [state, F_1..F_M, F_0]
 
 
 class _LinearKey(NamedTuple):
@@ -281,42 +278,77 @@ def _speed_free(params: _LinearKey):
     return phis, gams, acc, filt_h, 0.5 * held[:, 0], fc
 
 
+@functools.lru_cache(maxsize=16)
+def _velocity_bound(params: _LinearKey, command_max: float) -> float:
+    """Largest |Vf| (mm/s) any command sequence in [0, command_max] can produce from rest.
+
+    BIBO bound: Ks Km U_max times the L1 norm of the servo's unit impulse response, which
+    for zeta = 0.43 is about 1.6 (the overshoot and ring-down add to the steady speed);
+    5 % is added for safety.
+    Integrated on a grid 1/50 of the damped period, over 40 decay time constants.
+    """
+    wn, z = params.servo_natural_freq_rad_s, params.servo_damping
+    a = np.array([[0.0, 1.0], [-(wn**2), -2.0 * z * wn]])
+    b = np.array([[0.0], [wn**2]])
+    horizon = 40.0 / (z * wn)
+    dt = min(2 * np.pi / (wn * 50.0), horizon / 2000.0)
+    phi, _ = zoh(a, b, dt)
+    x = b[:, 0].copy()  # state just after a unit impulse
+    l1 = 0.0
+    for _ in range(int(horizon / dt)):
+        x_next = phi @ x
+        l1 += 0.5 * (abs(x[0]) + abs(x_next[0])) * dt
+        x = x_next
+    return 1.05 * params.servo_gain * params.gear_ratio * command_max * l1
+
+
+@functools.lru_cache(maxsize=16)
+def _speed_free_rows(params: _LinearKey) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of the step matrix on the current pair ``(x_k, u_k)`` and the filter's matrix."""
+    m = params.substeps
+    phis, gams, filt_a_m, filt_h, filt_prev, filt_c = _speed_free(params)
+    base = np.zeros((2 * m + 3, 4))
+    base[:m, 0:3] = phis[1:, 2]  # positions I(t_j), j = 1..M
+    base[:m, 3] = gams[1:, 2]
+    base[m : 2 * m] = base[:m]  # feeds start from the same, less the delayed value
+    base[2 * m :, 0:3] = phis[m]  # next state
+    base[2 * m :, 3] = gams[m]
+    # The filter's output is its first state (both orders): y = x_f[0].
+    assert filt_c[0] == 1.0 and not np.any(filt_c[1:])
+    filt_step = np.hstack([filt_a_m, filt_h, filt_prev[:, None]])
+    return base, filt_step
+
+
 @functools.lru_cache(maxsize=256)
 def _matrices(params: _LinearKey, spindle_rpm: float) -> _Matrices:
     m = params.substeps
     ts = params.sample_time_s
     h = ts / m
-    phis, gams, filt_a_m, filt_h, filt_prev, filt_c = _speed_free(params)
-    a, b = _servo_system(params)
+    phis, gams = _speed_free(params)[:2]
+    base, filt_step = _speed_free_rows(params)
     period = 60.0 / spindle_rpm
     lags = int(math.ceil(period / ts + 1e-12)) + 1
-    width = 4 * (lags + 1)
-    big = np.zeros((2 * m + 3, width))
+    big = np.zeros((2 * m + 3, 4 * (lags + 1)))
+    big[:, 0:4] = base
     # Every delayed instant t_j - T sits the same fraction rho of a sub-step past a sub-step
     # point, so one exponential over rho and the powers over i*h give all of them exactly.
     rho = (-period) % h
     if rho > h - 1e-12 * h:
         rho = 0.0
-    phi_r, gam_r = zoh(a, b, rho) if rho > 0 else (np.eye(3), np.zeros((3, 1)))
-
-    j = np.arange(1, m + 1)
-    back = j * h - period  # t_j - T relative to t_k
+    if rho > 0:
+        phi_r, gam_r = zoh(*_servo_system(params), rho)
+    else:
+        phi_r, gam_r = np.eye(3), np.zeros((3, 1))
+    back = np.arange(1, m + 1) * h - period  # t_j - T relative to t_k
     lag = np.where(back < 0, np.ceil(-back / ts - 1e-9), 0).astype(int)
-    offset = back + lag * ts  # in [0, Ts)
-    i = np.rint((offset - rho) / h).astype(int)
-    phi_s = phi_r[2] @ phis[i]  # (M, 3): I-row of Phi(rho) Phi(i h)
-    gam_s = gams[i] @ phi_r[2] + gam_r[2, 0]  # (M,): I-entry of Phi(rho) Gamma(i h) + Gamma(rho)
-    rows = np.arange(m)
-    big[rows, 0:3] = phis[j, 2]
-    big[rows, 3] = gams[j, 2]
-    big[m + rows, 0:3] = phis[j, 2]
-    big[m + rows, 3] = gams[j, 2]
-    for k in range(3):
-        np.subtract.at(big, (m + rows, 4 * lag + k), phi_s[:, k])
-    np.subtract.at(big, (m + rows, 4 * lag + 3), gam_s)
-    big[2 * m : 2 * m + 3, 0:3] = phis[m]
-    big[2 * m : 2 * m + 3, 3] = gams[m]
-    return _Matrices(big, lags, filt_a_m, filt_h, filt_prev, filt_c)
+    i = np.rint((back + lag * ts - rho) / h).astype(int)  # offset = i h + rho in [0, Ts)
+    delayed = np.empty((m, 4))
+    delayed[:, 0:3] = phi_r[2] @ phis[i]  # I-row of Phi(rho) Phi(i h)
+    delayed[:, 3] = gams[i] @ phi_r[2] + gam_r[2, 0]  # I-entry of Phi(rho) Gamma(i h) + Gamma(rho)
+    # Each feed row has one delayed block; where it is block 0 it overlaps the terms above.
+    cols = 4 * lag[:, None] + np.arange(4)
+    big[np.arange(m, 2 * m)[:, None], cols] -= delayed
+    return _Matrices(big, lags, filt_step)
 
 
 @dataclass(slots=True)
@@ -360,7 +392,9 @@ class TurningPlant:
         self.spindle_rpm = float(spindle_rpm)
         self.profile = profile
         self.length_mm = profile.length_mm
-        self._mx = _matrices(_LinearKey.of(params), self.spindle_rpm)
+        key = _LinearKey.of(params)
+        self._mx = _matrices(key, self.spindle_rpm)
+        self._margin = _velocity_bound(key, params.command_max) * params.sample_time_s
         self._edges = np.asarray(profile.edges_mm, dtype=np.float64)
         d0 = np.asarray(profile.start_depths_mm, dtype=np.float64)
         self._d0 = d0
@@ -374,60 +408,83 @@ class TurningPlant:
         mx = self._mx
         self.t_s = 0.0
         self.z = np.zeros(4 * (mx.lags + 1))
-        self.filt = np.zeros(mx.filt_c.shape[0])
-        self.force_prev = 0.0
+        n_f = mx.filt_step.shape[0]
+        # [filter state (n_f), force at the M sub-steps of this sample, force at its start]
+        self._buf = np.zeros(mx.filt_step.shape[1])
+        self._n_f = n_f
         self.finished = False
         self._seg = 0
+        self._edge_list = [float(v) for v in self._edges]
+        self._d0_list = [float(v) for v in self._d0]
+        self._slope_list = [float(v) for v in self._slope]
 
     @property
     def state(self) -> np.ndarray:
         """Servo state ``[Vf (mm/s), dVf/dt (mm/s^2), position (mm)]`` now."""
         return self.z[:3].copy()
 
-    def _depth(self, position: np.ndarray) -> np.ndarray:
-        e = self._edges
-        i = self._seg
-        if e[i] <= position[0] and position[-1] < e[i + 1] and position[0] <= position[-1]:
-            return self._d0[i] + self._slope[i] * (position - e[i])
-        self._seg = min(max(int(np.searchsorted(e, position[-1], side="right")) - 1, 0), e.size - 2)
-        return self.profile(position)
-
     def step(self, command: float, noise_counts: float = 0.0) -> TurningStep:
-        """Hold ``command`` (counts, already clipped) for one sample time and advance."""
+        """Hold ``command`` (counts; clipped to [0, command_max]) for one sample and advance."""
         prm = self.params
-        mx = self._mx
         m = prm.substeps
         z = self.z
-        z[3] = command
-        y = mx.big @ z
+        z[3] = min(max(command, 0.0), prm.command_max)
+        y = self._mx.big @ z
         position = y[:m]
-        feed = y[m : 2 * m]
-        depth = self._depth(position)
-        force = prm.force_coefficient * np.maximum(feed, 0.0) ** prm.feed_exponent * depth
-        self.filt = mx.filt_a_m @ self.filt + mx.filt_h @ force + mx.filt_prev * self.force_prev
-        measured = prm.sensor_gain * float(mx.filt_c @ self.filt) + noise_counts
+        p_start = float(z[2])
+        p_end = float(position[-1])
+        buf = self._buf
+        n_f = self._n_f
+        force = buf[n_f : n_f + m]  # a view: the force is written into the filter's input
+        np.maximum(y[m : 2 * m], 0.0, out=force)
+        feed_end = float(y[2 * m - 1])
+        np.power(force, prm.feed_exponent, out=force)
+        # Depth at the sub-steps: one segment (almost always) or the general lookup. Within a
+        # sample the tool stays within ``margin`` of the span of its end positions (|Vf| is
+        # at most its BIBO bound), so far from the edges the ends decide; near an edge the
+        # sub-step positions themselves are checked.
+        e = self._edge_list
+        i = self._seg
+        lo, hi = (p_start, p_end) if p_start <= p_end else (p_end, p_start)
+        margin = self._margin
+        one_segment = e[i] <= lo - margin and hi + margin < e[i + 1]
+        if not one_segment and e[i] <= lo and hi < e[i + 1]:
+            one_segment = e[i] <= float(position.min()) and float(position.max()) < e[i + 1]
+        if one_segment:
+            slope = self._slope_list[i]
+            if slope == 0.0:
+                depth_end = self._d0_list[i]
+                force *= prm.force_coefficient * depth_end
+            else:
+                depth = (position - e[i]) * slope + self._d0_list[i]
+                depth_end = float(depth[-1])
+                force *= depth
+                force *= prm.force_coefficient
+        else:
+            depth = self.profile(position)
+            self._seg = min(
+                max(int(np.searchsorted(self._edges, p_end, side="right")) - 1, 0), len(e) - 2
+            )
+            depth_end = float(depth[-1])
+            force *= depth
+            force *= prm.force_coefficient
+        filt = self._mx.filt_step @ buf
+        buf[:n_f] = filt
+        measured = prm.sensor_gain * float(filt[0]) + noise_counts
+        f_end = float(force[-1])
+        peak = float(force.max())
+        buf[-1] = f_end
         # Shift the memory one sample back; the new state leads, its command is set next step.
         z[4:] = z[:-4]
         z[:3] = y[2 * m :]
         z[3] = 0.0
 
-        pos_end = float(position[-1])
         finish = None
-        if not self.finished and pos_end >= self.length_mm:
+        if not self.finished and p_end >= self.length_mm:
             j = int(np.argmax(position >= self.length_mm))
             finish = self.t_s + (j + 1) * prm.sample_time_s / m
             self.finished = True
-        f_end = float(force[-1])
-        self.force_prev = f_end
         self.t_s += prm.sample_time_s
         return TurningStep(
-            f_end,
-            float(force.max()),
-            measured,
-            float(feed[-1]),
-            float(z[0]),
-            pos_end,
-            float(depth[-1]),
-            self._seg,
-            finish,
+            f_end, peak, measured, feed_end, float(z[0]), p_end, depth_end, self._seg, finish
         )
