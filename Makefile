@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 RESULTS ?= results
 
-.PHONY: demo test test-slow lint format bench-speed clean
+.PHONY: demo test lint format bench-speed clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -19,9 +19,6 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -m "not slow" -q
-
-test-slow: $(STAMP)
-	$(BIN)/python -m pytest -m slow -q
 
 lint: $(STAMP)
 	$(BIN)/ruff check machining_envs agents tests benchmarks
