@@ -11,7 +11,7 @@ import numpy as np
 from scipy.linalg import expm
 from scipy.signal import cont2discrete
 
-__all__ = ["zoh", "zoh_tf", "substep_responses", "critical_gain", "butterworth_lowpass"]
+__all__ = ["zoh", "zoh_tf", "critical_gain", "butterworth_lowpass"]
 
 
 def zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -39,29 +39,6 @@ def zoh_tf(num, den, dt: float) -> tuple[np.ndarray, np.ndarray]:
     numd = np.atleast_1d(np.squeeze(numd))
     dend = np.atleast_1d(np.squeeze(dend))
     return numd / dend[0], dend / dend[0]
-
-
-def substep_responses(
-    a: np.ndarray, b: np.ndarray, h: float, m: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """States at ``m`` sub-steps of length ``h`` under one held input, as two stacked arrays.
-
-    Returns ``P`` of shape ``(m, n, n)`` and ``Q`` of shape ``(m, n)`` such that the state
-    ``j + 1`` sub-steps after ``x0`` under the constant input ``u`` is ``P[j] @ x0 + Q[j] * u``.
-    One call to ``np.einsum``/``@`` then advances all sub-steps of a control period at once.
-    """
-    phi, gam = zoh(a, b, h)
-    n = phi.shape[0]
-    p = np.empty((m, n, n))
-    q = np.empty((m, n))
-    pj = np.eye(n)
-    qj = np.zeros(n)
-    for j in range(m):
-        qj = phi @ qj + gam[:, 0]
-        pj = phi @ pj
-        p[j] = pj
-        q[j] = qj
-    return p, q
 
 
 def butterworth_lowpass(cutoff_hz: float, order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
