@@ -15,8 +15,9 @@ from pathlib import Path
 import gymnasium as gym
 
 from agents.adaptive import VariableGainPI
-from agents.harness import Evaluation, evaluate, rollout
+from agents.harness import Evaluation, agent_name, evaluate, rollout
 from agents.pid import ConstantFeed, FixedGainPI
+from machining_envs.metrics import regulation_metrics
 
 __all__ = ["BenchmarkSpec", "BENCHMARKS", "run_benchmark"]
 
@@ -37,11 +38,27 @@ TABLE_METRICS = (
 
 @dataclass(frozen=True)
 class BenchmarkSpec:
+    """One env's part of the benchmark (append one per env to ``BENCHMARKS``)."""
+
     env_id: str
     agents: tuple[Callable, ...]  # factories env -> agent
     paper_scenarios: tuple[str, ...]
     heldout_scenario: str
     showcase_scenario: str
+    metrics_fn: Callable[[dict], dict] = regulation_metrics
+    table_metrics: tuple[str, ...] = TABLE_METRICS
+    #: (info key, reference key or None, axis label) of the trajectory plot's upper panel,
+    #: (info key, label) of its lower panel and of the context drawn on the lower panel's
+    #: right axis (None for none).
+    plot_main: tuple[str, str | None, str] = ("force_N", "force_ref_N", "force (N)")
+    plot_lower: tuple[str, str] = ("feed_mm_per_rev", "feed (mm/rev)")
+    plot_context: tuple[str, str] | None = ("depth_mm", "depth (mm)")
+    bar_metrics: tuple[tuple[str, str], ...] = (
+        ("machining_time_s", "machining time (s)"),
+        ("iae", "IAE (s)"),
+        ("time_over_limit", "share of time over 1.1x reference"),
+        ("breakage", "breakage rate"),
+    )
 
 
 BENCHMARKS = (
@@ -78,7 +95,14 @@ def run_benchmark(
                 (spec.paper_scenarios, n_paper),
                 ((spec.heldout_scenario,), n_test),
             ):
-                ev = evaluate(factory, spec.env_id, scenarios, n_episodes=n, seed=seed)
+                ev = evaluate(
+                    factory,
+                    spec.env_id,
+                    scenarios,
+                    n_episodes=n,
+                    seed=seed,
+                    metrics_fn=spec.metrics_fn,
+                )
                 for row in ev.rows:
                     row["env_id"] = spec.env_id
                 spec_evals.append(ev)
@@ -89,7 +113,7 @@ def run_benchmark(
                 )
         ev = Evaluation.concat(spec_evals)
         evals.append(ev)
-        table = ev.to_markdown(TABLE_METRICS)
+        table = ev.to_markdown(spec.table_metrics)
         report += [
             f"## {env_name}",
             "",
@@ -104,25 +128,26 @@ def run_benchmark(
         traj_png = out / f"{env_name}_trajectories.png"
         _plot_trajectories(spec, traj_png, seed)
         bars_png = out / f"{env_name}_metrics.png"
-        _plot_bars(ev, spec.heldout_scenario, bars_png)
+        _plot_bars(ev, spec, bars_png)
         report += [f"![trajectories]({traj_png.name})", "", f"![metrics]({bars_png.name})", ""]
     allev = Evaluation.concat(evals)
     allev.to_csv(out / "benchmark.csv")
 
-    from agents.reproduce import reproduce_turning
+    from agents.cli import REPRODUCTIONS, reproduction
 
-    if verbose:
-        print("### Paper reproduction: turning (Noh, Kim & Kim 1992)\n")
-    repro = reproduce_turning(out, verbose=verbose)
-    n_ok = sum(r["match"] for r in repro)
-    report += [
-        "## Paper reproduction: turning",
-        "",
-        f"{n_ok}/{len(repro)} runs show the paper's behaviour.",
-        "",
-        "![reproduction](reproduce_turning.png)",
-        "",
-    ]
+    for process in REPRODUCTIONS:
+        if verbose:
+            print(f"### Paper reproduction: {process}\n")
+        repro = reproduction(process)(out, verbose=verbose)
+        n_ok = sum(r["match"] for r in repro)
+        report += [
+            f"## Paper reproduction: {process}",
+            "",
+            f"{n_ok}/{len(repro)} experiments show the paper's behaviour.",
+            "",
+            f"![reproduction](reproduce_{process}.png)",
+            "",
+        ]
     (out / "report.md").write_text("\n".join(report))
     if verbose:
         print(
@@ -138,49 +163,47 @@ def _plot_trajectories(spec: BenchmarkSpec, path: Path, seed: int) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    key, ref_key, label = spec.plot_main
+    low_key, low_label = spec.plot_lower
     fig, axes = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
     env = gym.make(spec.env_id)
     try:
         for i, factory in enumerate(spec.agents):
             agent = factory(env)
             tr = rollout(agent, env, spec.showcase_scenario, seed)
-            axes[0].plot(tr["t_s"], tr["force_N"], color=f"C{i}", lw=1, label=agent.name)
-            axes[1].plot(tr["t_s"], tr["feed_mm_per_rev"], color=f"C{i}", lw=1)
-        axes[0].axhline(tr["force_ref_N"][0], color="k", ls="--", lw=0.8, label="reference")
-        ax2 = axes[1].twinx()
-        ax2.plot(tr["t_s"], tr["depth_mm"], color="0.6", lw=0.8)
-        ax2.set_ylabel("depth (mm)", color="0.5")
+            axes[0].plot(tr["t_s"], tr[key], color=f"C{i}", lw=1, label=agent_name(agent))
+            axes[1].plot(tr["t_s"], tr[low_key], color=f"C{i}", lw=1)
+        if ref_key is not None:
+            axes[0].plot(tr["t_s"], tr[ref_key], color="k", ls="--", lw=0.8, label="reference")
+        if spec.plot_context is not None:
+            ctx_key, ctx_label = spec.plot_context
+            ax2 = axes[1].twinx()
+            ax2.plot(tr["t_s"], tr[ctx_key], color="0.6", lw=0.8)
+            ax2.set_ylabel(ctx_label, color="0.5")
     finally:
         env.close()
-    axes[0].set_ylabel("force (N)")
+    axes[0].set_ylabel(label)
     axes[0].legend(fontsize=8)
     axes[0].set_title(f"{spec.env_id}, scenario {spec.showcase_scenario}, seed {seed}")
-    axes[1].set_ylabel("feed (mm/rev)")
+    axes[1].set_ylabel(low_label)
     axes[1].set_xlabel("time (s)")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
 
 
-def _plot_bars(ev: Evaluation, scenario: str, path: Path) -> None:
+def _plot_bars(ev: Evaluation, spec: BenchmarkSpec, path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    summ = [
-        r
-        for r in ev.summary(["machining_time_s", "iae", "time_over_limit", "breakage"])
-        if r["scenario"] == scenario
-    ]
+    scenario = spec.heldout_scenario
+    keys = [m for m, _ in spec.bar_metrics]
+    summ = [r for r in ev.summary(keys) if r["scenario"] == scenario]
     names = [r["agent"] for r in summ]
-    fig, axes = plt.subplots(1, 4, figsize=(13, 3.2))
-    for ax, m, label in zip(
-        axes,
-        ("machining_time_s", "iae", "time_over_limit", "breakage"),
-        ("machining time (s)", "IAE (s)", "share of time F > 1.1 Fr", "breakage rate"),
-        strict=True,
-    ):
+    fig, axes = plt.subplots(1, len(keys), figsize=(3.3 * len(keys), 3.2), squeeze=False)
+    for ax, (m, label) in zip(axes[0], spec.bar_metrics, strict=True):
         ax.bar(
             range(len(names)),
             [r[m] for r in summ],

@@ -9,7 +9,22 @@ from __future__ import annotations
 import argparse
 import sys
 
-__all__ = ["main"]
+__all__ = ["main", "REPRODUCTIONS", "reproduction"]
+
+#: process -> "module:function" of its paper reproduction. Each function takes the output
+#: folder (or None), ``seed=`` and ``verbose=``, prints paper vs ours, saves its figures and
+#: returns a list of dicts with a boolean ``"match"`` per experiment.
+REPRODUCTIONS = {
+    "turning": "agents.reproduce:reproduce_turning",
+}
+
+
+def reproduction(process: str):
+    """The reproduction function of ``process`` (imported on demand)."""
+    import importlib
+
+    module, func = REPRODUCTIONS[process].split(":")
+    return getattr(importlib.import_module(module), func)
 
 
 def _positive_float(text: str) -> float:
@@ -34,7 +49,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--seed", type=int, default=1000, help="first episode seed (default: 1000)")
 
     r = sub.add_parser("reproduce", help="run a paper's experiments; paper vs ours")
-    r.add_argument("process", choices=["turning"], help="which paper")
+    r.add_argument("process", choices=sorted(REPRODUCTIONS), help="which paper")
     r.add_argument("--out", default="results", help="folder for the figure (default: results)")
     r.add_argument("--seed", type=int, default=0)
     r.add_argument(
@@ -54,9 +69,12 @@ def main(argv: list[str] | None = None) -> int:
         run_benchmark(args.out, quick=args.quick, seed=args.seed)
         return 0
     if args.command == "reproduce":
-        from agents.reproduce import reproduce_turning
-
-        results = reproduce_turning(args.out, sensor_gain=args.sensor_gain, seed=args.seed)
+        kwargs = {"seed": args.seed}
+        if args.sensor_gain is not None:
+            if args.process != "turning":
+                raise SystemExit("--sensor-gain applies to 'reproduce turning' only")
+            kwargs["sensor_gain"] = args.sensor_gain
+        results = reproduction(args.process)(args.out, **kwargs)
         return 0 if all(r["match"] for r in results) else 1
     return 2  # pragma: no cover - argparse rejects other commands
 

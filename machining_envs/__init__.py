@@ -28,11 +28,12 @@ __all__ = [
 ]
 __version__ = "0.1.0"
 
-#: Every env id this package registers.
-ENV_IDS = ("machining_envs/Turning-v0",)
+#: Every env id this package registers, with its entry point (one line per env).
+_ENTRY_POINTS = {
+    "machining_envs/Turning-v0": "machining_envs.envs.turning:TurningEnv",
+}
+ENV_IDS = tuple(_ENTRY_POINTS)
 
-if "machining_envs/Turning-v0" not in registry:
-    register(
-        id="machining_envs/Turning-v0",
-        entry_point="machining_envs.envs.turning:TurningEnv",
-    )
+for _id, _entry in _ENTRY_POINTS.items():
+    if _id not in registry:
+        register(id=_id, entry_point=_entry)
