@@ -58,6 +58,24 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="turning: override Ke (counts/N) to explore the calibration",
     )
+    t = sub.add_parser("train", help="train an SB3 policy (PPO, SAC, TD3) on an env")
+    t.add_argument("--env", required=True, help="env id, e.g. machining_envs/Turning-v0")
+    t.add_argument("--algo", default="ppo", choices=["ppo", "sac", "td3"])
+    t.add_argument("--out", required=True, help="run folder (must be new unless --resume)")
+    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--timesteps", type=int, default=None, help="override n_timesteps of the config")
+    t.add_argument("--config", default=None, help="YAML file (default agents/configs/<algo>.yml)")
+    t.add_argument("--resume", action="store_true", help="continue from the run's last checkpoint")
+    t.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    e = sub.add_parser("evaluate", help="the harness on a saved policy")
+    e.add_argument(
+        "--model", required=True, help="a saved model .zip (VecNormalize stats beside it)"
+    )
+    e.add_argument("--env", required=True)
+    e.add_argument("--scenarios", nargs="+", default=["test"])
+    e.add_argument("--episodes", type=int, default=20)
+    e.add_argument("--seed", type=int, default=1000)
     return p
 
 
@@ -76,6 +94,38 @@ def main(argv: list[str] | None = None) -> int:
             kwargs["sensor_gain"] = args.sensor_gain
         results = reproduction(args.process)(args.out, **kwargs)
         return 0 if all(r["match"] for r in results) else 1
+    if args.command == "train":
+        from agents.rl import ConfigError, train
+
+        try:
+            train(
+                args.env,
+                args.algo,
+                args.out,
+                seed=args.seed,
+                config_path=args.config,
+                n_timesteps=args.timesteps,
+                resume=args.resume,
+                progress_bar=not args.no_progress,
+            )
+        except (ConfigError, FileExistsError, FileNotFoundError) as exc:
+            print(f"machining-bench train: {exc}", file=sys.stderr)
+            return 2
+        return 0
+    if args.command == "evaluate":
+        from agents.rl import evaluate_policy_file, primary_score
+
+        ev = evaluate_policy_file(args.model, args.env, args.scenarios, args.episodes, args.seed)
+        print(
+            ev.to_markdown(
+                ["machining_time_s", "iae", "itae", "time_over_limit", "breakage", "finished"]
+            )
+        )
+        s = primary_score(ev.rows)
+        print(
+            f"\nprimary score {s['score']:.2f} s (episodes that count: {s['valid']:.0%}), ITAE {s['itae']:.2f}"
+        )
+        return 0
     return 2  # pragma: no cover - argparse rejects other commands
 
 
