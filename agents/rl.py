@@ -50,6 +50,7 @@ __all__ = [
     "PolicyAgent",
     "load_policy",
     "primary_score",
+    "FAILED_EPISODE_TIME_S",
 ]
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
@@ -181,20 +182,24 @@ def load_config(env_id: str, algo: str, path=None) -> TrainConfig:
     return cfg
 
 
-def primary_score(rows: list[dict], time_limit_s: float | None = None) -> dict:
+#: What an episode that does not count costs in the primary score, s: Turning-v0's time
+#: limit, i.e. the cut is charged as if it had used the whole budget.
+FAILED_EPISODE_TIME_S = 200.0
+
+
+def primary_score(rows: list[dict], failed_time_s: float = FAILED_EPISODE_TIME_S) -> dict:
     """The benchmark's primary score of a set of regulation episodes.
 
-    An episode *counts* if the tool did not break and the regulated signal spent under 2 % of
-    the time above 1.1x its reference. Score: mean machining time (s, lower is better) with
-    every episode that does not count, or did not finish, charged ``time_limit_s`` (its
-    episode's own length if not given). Returns ``score``, ``valid`` (share that counted) and
-    ``itae`` (mean) for the table.
+    An episode *counts* if it finished the workpiece, the tool did not break, and the
+    regulated signal spent under 2 % of the time above 1.1x its reference. Score: mean
+    machining time (s, lower is better) with every episode that does not count charged
+    ``failed_time_s``, so no policy can win by breaking the constraint. Returns ``score``,
+    ``valid`` (share of episodes that counted) and ``itae`` (mean) for the table.
     """
     times, valid, itae = [], [], []
     for r in rows:
         ok = r["breakage"] == 0.0 and r["time_over_limit"] < 0.02 and r["finished"] == 1.0
-        limit = time_limit_s if time_limit_s is not None else r["machining_time_s"]
-        times.append(r["machining_time_s"] if ok else max(limit, r["machining_time_s"]))
+        times.append(r["machining_time_s"] if ok else max(failed_time_s, r["machining_time_s"]))
         valid.append(ok)
         itae.append(r["itae"])
     return {

@@ -7,7 +7,7 @@ import pytest
 
 from agents.cli import main
 from agents.harness import evaluate
-from agents.rl import ConfigError, load_config, load_policy, train
+from agents.rl import ConfigError, load_config, load_policy, primary_score, train
 from tests.conftest import TURNING
 
 TINY = """
@@ -179,3 +179,19 @@ def test_cli_evaluate(tiny, tmp_path, capsys):
         == 0
     )
     assert "primary score" in capsys.readouterr().out
+
+
+def test_primary_score_charges_episodes_that_do_not_count():
+    base = {
+        "breakage": 0.0,
+        "time_over_limit": 0.0,
+        "finished": 1.0,
+        "machining_time_s": 30.0,
+        "itae": 1.0,
+    }
+    assert primary_score([base])["score"] == 30.0
+    broke = dict(base, breakage=1.0, machining_time_s=5.0)
+    over = dict(base, time_over_limit=0.05, machining_time_s=10.0)
+    s = primary_score([base, broke, over], failed_time_s=200.0)
+    assert s["score"] == pytest.approx((30.0 + 200.0 + 200.0) / 3)
+    assert s["valid"] == pytest.approx(1 / 3)
