@@ -9,6 +9,7 @@ the nominal torque coefficient and feed exponent). Pass a name or a scenario obj
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -29,6 +30,7 @@ __all__ = [
     "paper_step_profile",
     "paper_taper_profile",
     "cut_area_mm2",
+    "CutArea",
 ]
 
 #: Workpiece length L, mm (Park & Yoon §4: L = 40, cut in 200 samples).
@@ -135,27 +137,51 @@ def paper_taper_profile() -> DepthProfile:
     return DepthProfile.taper(lo, hi, PAPER_LENGTH_MM, name="taper 0-3 mm")
 
 
-def cut_area_mm2(profile: DepthProfile, x_mm: float) -> float:
-    """Area under the radial-depth profile from 0 to ``x_mm`` (clipped to the workpiece), mm².
+class CutArea:
+    """Area under a radial-depth profile from 0 to ``x`` (clipped to the workpiece), mm².
 
-    Times the axial depth it is the volume removed when the tool has reached ``x_mm``.
-    Exact for the piecewise-linear profile (trapezoids between its edges).
+    Times the axial depth it is the volume removed when the tool has reached ``x``. Exact
+    for the piecewise-linear profile (trapezoids between its edges); the areas up to each
+    edge are summed once, so a call costs one bisection.
     """
-    x = min(max(float(x_mm), 0.0), profile.length_mm)
-    area = 0.0
-    for a, b, d0, d1 in zip(
-        profile.edges_mm[:-1],
-        profile.edges_mm[1:],
-        profile.start_depths_mm,
-        profile.end_depths_mm,
-        strict=True,
-    ):
-        if x <= a:
-            break
-        end = min(x, b)
-        d_end = d0 + (d1 - d0) * (end - a) / (b - a)
-        area += 0.5 * (d0 + d_end) * (end - a)
-    return area
+
+    def __init__(self, profile: DepthProfile):
+        self.edges = [float(v) for v in profile.edges_mm]
+        self.d0 = [float(v) for v in profile.start_depths_mm]
+        self.slope = [
+            (float(d1) - float(d0)) / (b - a)
+            for d0, d1, a, b in zip(
+                profile.start_depths_mm,
+                profile.end_depths_mm,
+                self.edges[:-1],
+                self.edges[1:],
+                strict=True,
+            )
+        ]
+        acc = [0.0]
+        for i in range(len(self.d0)):
+            w = self.edges[i + 1] - self.edges[i]
+            acc.append(acc[-1] + w * (self.d0[i] + 0.5 * self.slope[i] * w))
+        self.cumulative = acc
+
+    @property
+    def total(self) -> float:
+        return self.cumulative[-1]
+
+    def __call__(self, x_mm: float) -> float:
+        e = self.edges
+        if x_mm <= 0.0:
+            return 0.0
+        if x_mm >= e[-1]:
+            return self.cumulative[-1]
+        i = bisect.bisect_right(e, x_mm) - 1
+        w = x_mm - e[i]
+        return self.cumulative[i] + w * (self.d0[i] + 0.5 * self.slope[i] * w)
+
+
+def cut_area_mm2(profile: DepthProfile, x_mm: float) -> float:
+    """Area under the radial-depth profile from 0 to ``x_mm``, mm² (see :class:`CutArea`)."""
+    return CutArea(profile)(float(x_mm))
 
 
 def _fixed(name: str, profile: Callable[[], DepthProfile]):

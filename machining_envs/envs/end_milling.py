@@ -13,8 +13,8 @@ from gymnasium import spaces
 from machining_envs.envs.base import ActionMap, check_action, check_overrides, render_signals
 from machining_envs.milling_scenarios import (
     MILLING_SCENARIOS,
+    CutArea,
     MillingScenario,
-    cut_area_mm2,
     milling_scenario,
 )
 from machining_envs.plants.milling import SPINDLE_RPM_RANGE, MillingParams, MillingPlant
@@ -240,7 +240,8 @@ class EndMillingEnv(gym.Env):
         self._tr = sc.torque_ref_Nmm(self.params)
         self._length = sc.profile.length_mm
         self._w = self._truth.axial_depth_mm
-        self._volume = self._w * cut_area_mm2(sc.profile, self._length)
+        self._area = CutArea(sc.profile)
+        self._volume = self._w * self._area.total
         self._vmax = self._truth.max_feed_velocity_mm_s
         self._ke = self.params.sensor_gain
         self._noise_counts = self._truth.sensor_gain * self._truth.noise_std_Nmm
@@ -319,7 +320,7 @@ class EndMillingEnv(gym.Env):
             "depth_mm": s.depth_mm,
             "segment": s.segment,
             "spindle_rpm": self._rpm,
-            "removed_volume_mm3": self._w * cut_area_mm2(self.scenario.profile, position),
+            "removed_volume_mm3": self._w * self._area(position),
             "workpiece_length_mm": self._length,
             "workpiece_volume_mm3": self._volume,
             "scenario": self.scenario.name,

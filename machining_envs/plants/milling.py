@@ -464,37 +464,26 @@ def mean_torque_average_force(
 
 
 # ---- discrete-time machinery -------------------------------------------------------------
-class _LinearKey(NamedTuple):
-    """The fields the linear blocks depend on (not the torque law or noise)."""
+class _ServoKey(NamedTuple):
+    """The fields the servo's discretisation depends on (not the spindle or torque law)."""
 
     servo_gain: float
     wn: float
     damping: float
     sample_time_s: float
     substeps: int
-    lag_s: float
 
     @classmethod
-    def of(cls, p: MillingParams, spindle_rpm: float) -> _LinearKey:
+    def of(cls, p: MillingParams) -> _ServoKey:
         return cls(
-            p.servo_gain,
-            p.servo_natural_freq_rad_s,
-            p.servo_damping,
-            p.sample_time_s,
-            p.substeps,
-            p.process_lag_s(spindle_rpm),
+            p.servo_gain, p.servo_natural_freq_rad_s, p.servo_damping, p.sample_time_s, p.substeps
         )
 
 
-@functools.lru_cache(maxsize=256)
-def _matrices(key: _LinearKey) -> tuple[np.ndarray, np.ndarray, float]:
-    """Step matrix of the servo and position, and the process lag's matrix.
-
-    ``big @ [Vf, dVf/dt, x, U]`` gives the feed velocity at the M sub-step points, the
-    position at the M sub-step points and the next state (3 rows). ``lag @ [T_0, u_0, ...,
-    u_M]`` gives the lagged torque at the M sub-step points for a static torque ``u``
-    linear between sub-step points (exact first-order hold).
-    """
+@functools.lru_cache(maxsize=64)
+def _servo_matrix(key: _ServoKey) -> np.ndarray:
+    """``big @ [Vf, dVf/dt, x, U]``: the feed velocity at the M sub-step points, the position
+    at the M sub-step points and the next state (3 rows), all exact (ZOH)."""
     m = key.substeps
     h = key.sample_time_s / m
     wn, z = key.wn, key.damping
@@ -509,12 +498,18 @@ def _matrices(key: _LinearKey) -> tuple[np.ndarray, np.ndarray, float]:
         big[j, :3], big[j, 3] = phi[0], gam[0]
         big[m + j, :3], big[m + j, 3] = phi[2], gam[2]
     big[2 * m :, :3], big[2 * m :, 3] = phi, gam
+    return big
 
-    r = h / key.lag_s
+
+@functools.lru_cache(maxsize=256)
+def _lag_matrix(substeps: int, h: float, lag_s: float) -> np.ndarray:
+    """``lag @ [T_0, u_0, ..., u_M]``: the lagged torque at the M sub-step points for a static
+    torque ``u`` linear between sub-step points (exact first-order hold of eq. 10)."""
+    m = substeps
+    r = h / lag_s
     alpha = math.exp(-r)
-    # FOH weights; for tiny r use the series to avoid cancellation.
-    if r < 1e-6:
-        b1, b0 = 0.5 * r, 0.5 * r
+    if r < 1e-6:  # series, to avoid cancellation
+        b1 = b0 = 0.5 * r
     else:
         b1 = 1.0 - (1.0 - alpha) / r
         b0 = (1.0 - alpha) / r - alpha
@@ -522,12 +517,11 @@ def _matrices(key: _LinearKey) -> tuple[np.ndarray, np.ndarray, float]:
     row = np.zeros(m + 2)
     row[0] = 1.0  # T_0
     for j in range(m):
-        new = alpha * row
-        new[1 + j] += b0
-        new[2 + j] += b1
-        row = new
+        row = alpha * row
+        row[1 + j] += b0
+        row[2 + j] += b1
         lag[j] = row
-    return big, lag, h
+    return lag
 
 
 @dataclass(slots=True)
@@ -582,7 +576,9 @@ class MillingPlant:
         self.spindle_rpm = float(spindle_rpm)
         self.profile = profile
         self.length_mm = profile.length_mm
-        self._big, self._lag, self._h = _matrices(_LinearKey.of(params, self.spindle_rpm))
+        self._h = params.sample_time_s / params.substeps
+        self._big = _servo_matrix(_ServoKey.of(params))
+        self._lag = _lag_matrix(params.substeps, self._h, params.process_lag_s(self.spindle_rpm))
         self._ft_per_vf = 60.0 / (self.spindle_rpm * params.n_teeth)
         self._rev_per_s = self.spindle_rpm / 60.0
         self._exp = params.torque_feed_exponent
