@@ -180,7 +180,8 @@ def _acc_gains(traj: dict, env_kwargs: dict, seed: int, scenario: str) -> np.nda
 def reproduce_milling(out_dir=None, seed: int = 0, verbose: bool = True) -> list[dict]:
     """Run Table 1 and the Fig. 5 pair; print paper vs ours; save the figure if ``out_dir``.
 
-    Returns a list of dicts, one per row, each with a boolean ``"match"``.
+    Returns a list of dicts, one per row, each with a boolean ``"match"`` and the run's
+    trajectory (``"traj"``).
     """
     results: list[dict] = []
     runs: dict[str, dict] = {}
@@ -200,6 +201,7 @@ def reproduce_milling(out_dir=None, seed: int = 0, verbose: bool = True) -> list
                 "mrr": m_no["mrr_mm3_per_min"],
                 "note": f"time {d_time:+.2%}, MRR {d_mrr:+.2%} off",
                 "match": bool(d_time <= TABLE_TOLERANCE and d_mrr <= TABLE_TOLERANCE),
+                "traj": tr_no,
             }
         )
         gain = 1.0 - m_ac["machining_time_min"] / m_no["machining_time_min"]
@@ -222,6 +224,7 @@ def reproduce_milling(out_dir=None, seed: int = 0, verbose: bool = True) -> list
                 ),
                 "match": bool(gain >= MIN_TIME_GAIN and hold["held"] and not broke),
                 "agent": agent.name,
+                "traj": tr_ac,
             }
         )
         runs[wp] = {"ac": tr_ac, "no_ac": tr_no}
@@ -251,6 +254,7 @@ def reproduce_milling(out_dir=None, seed: int = 0, verbose: bool = True) -> list
                 "critical_kn_by_depth": {d: critical_servo_gain(d, 0.2) for d in (1.0, 2.0, 3.0)},
                 "note": "oscillation 1/2/3 mm: " + "/".join(f"{v:.2f}" for v in osc.values()),
                 "match": bool(match),
+                "traj": tr,
             }
         )
         fig5[kn] = tr
@@ -264,6 +268,7 @@ def reproduce_milling(out_dir=None, seed: int = 0, verbose: bool = True) -> list
             "oscillation_by_depth": osc,
             "note": "oscillation 1/2/3 mm: " + "/".join(f"{v:.2f}" for v in osc.values()),
             "match": bool(max(osc.values()) <= UNSTABLE_OSCILLATION and not np.any(tr["breakage"])),
+            "traj": tr,
         }
     )
     fig5["acc_0.025"] = tr

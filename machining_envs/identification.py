@@ -560,7 +560,7 @@ def fit_servo(
     IdentificationError
         Fewer than 20 samples, uneven or non-increasing times, non-finite values, a
         command or response that does not vary, or no second-order fit with a natural
-        frequency inside the record's resolvable band.
+        frequency inside the record's resolvable band and a damping below 50.
     """
     t = _vector("t_s", t_s)
     n = t.size
@@ -620,6 +620,12 @@ def fit_servo(
             f"no second-order fit with a natural frequency the record resolves "
             f"({wn_lo / (2 * math.pi):.3g} to {wn_hi / (2 * math.pi):.3g} Hz): "
             "record longer, or sample faster"
+        )
+    if zeta > 0.99 * math.exp(hi[2]):
+        raise IdentificationError(
+            f"the best fit is damped {zeta:.3g} times critically: the response does not look "
+            "like a second-order servo driven by this command (is the command clipped, or "
+            "the record the wrong signal?)"
         )
     r = sol.fun
     sst = float(np.sum((y - y.mean()) ** 2))

@@ -43,8 +43,12 @@ def _ode_reference(p: MillingParams, rpm: float, profile, commands):
             vf, dvf, x, torque = s
             ft = max(vf, 0.0) * 60.0 / (rpm * p.n_teeth)
             static = c * depth(x) ** e_d * ft**e_f
-            return [dvf, -(wn**2) * vf - 2 * z * wn * dvf + wn**2 * p.servo_gain * u, vf,
-                    (static - torque) / tau]
+            return [
+                dvf,
+                -(wn**2) * vf - 2 * z * wn * dvf + wn**2 * p.servo_gain * u,
+                vf,
+                (static - torque) / tau,
+            ]
 
         sol = solve_ivp(rhs, (k * ts, (k + 1) * ts), s, rtol=1e-10, atol=1e-10, max_step=2e-3)
         s = list(sol.y[:, -1])
@@ -152,7 +156,8 @@ def test_average_force_torque_is_the_tangential_force_times_radius():
 
 @pytest.mark.parametrize("mode", ["up", "down"])
 def test_mean_forces_match_numerical_integration(mode):
-    """Seed 002 eq. (1) (Altintas' form) against the mean of the instantaneous tooth forces."""
+    """Seed 002 eq. (1) (Altintas' form) against the mean of the instantaneous tooth forces
+    (tangential and radial on each tooth resolved in x, y; axial along -z)."""
     kt, kr, ka, nf, r, a, ft, dr = 700.0, 210.0, 140.0, 2, 6.0, 10.0, 0.05, 4.0
     st, ex = (float(v) for v in immersion_angles(dr, r, mode))
 
@@ -162,7 +167,7 @@ def test_mean_forces_match_numerical_integration(mode):
             f_t, f_r, f_a = kt * a * h, kr * a * h, ka * a * h
             fx = -f_t * math.cos(phi) - f_r * math.sin(phi)
             fy = f_t * math.sin(phi) - f_r * math.cos(phi)
-            return (fx, fy, f_a)[i]
+            return (fx, fy, -f_a)[i]  # axial force on the workpiece along -z (seed 002)
 
         return nf * quad(integrand, st, ex)[0] / (2 * math.pi)
 

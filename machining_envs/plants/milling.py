@@ -425,15 +425,19 @@ def mean_forces(
     tool_radius_mm: float,
     mode: str = "down",
 ) -> np.ndarray:
-    r"""Mean cutting forces ``[Fx, Fy, Fz]`` (N) of a flat end mill (seed 002 eq. 1).
+    r"""Mean cutting forces ``[Fx, Fy, Fz]`` (N) of a flat end mill (seed 002 eq. 1-4).
 
     .. math::
 
         \bar F_x &= \Big\{\frac{N_f a f_t}{8\pi}\big[K_t\cos 2\phi - K_r(2\phi - \sin 2\phi)\big]\Big\}_{\phi_{st}}^{\phi_{ex}} \\
         \bar F_y &= \Big\{\frac{N_f a f_t}{8\pi}\big[K_t(2\phi - \sin 2\phi) + K_r\cos 2\phi\big]\Big\}_{\phi_{st}}^{\phi_{ex}} \\
-        \bar F_z &= \Big\{\frac{N_f a f_t}{2\pi}\big[-K_a\cos\phi\big]\Big\}_{\phi_{st}}^{\phi_{ex}}
+        \bar F_z &= \Big\{\frac{N_f a f_t}{2\pi}\,K_a\cos\phi\Big\}_{\phi_{st}}^{\phi_{ex}}
 
-    (the OCR of seed 002 swaps Kt and Kr in ``F_x``; this is Altintas' form). Inputs
+    (the OCR of seed 002 swaps Kt and Kr in ``F_x``; this is Altintas' form). The sign of
+    ``F_z`` follows seed 002's own eq. (3)-(4), ``F_z = N a f_t C_3 K_a / (8 pi)`` with
+    ``C_3 = 4 (cos phi_ex - cos phi_st)``, and its measurements (the fitted [C] gives
+    ``F_z < 0`` for every cut): the axial force on the workpiece points along ``-z``. (The
+    OCR of eq. 1 carries a minus sign before ``K_a``, which would flip it.) Inputs
     broadcast; the result has a trailing axis of length 3.
     """
     st, ex = immersion_angles(radial_depth_mm, tool_radius_mm, mode)
@@ -445,7 +449,7 @@ def mean_forces(
     c3 = np.cos(ex) - np.cos(st)
     fx = k * (kt * c1 - kr * c2)
     fy = k * (kt * c2 + kr * c1)
-    fz = -4.0 * k * ka * c3
+    fz = 4.0 * k * ka * c3
     return np.stack(np.broadcast_arrays(fx, fy, fz), axis=-1)
 
 
