@@ -198,8 +198,8 @@ class MillingParams:
     torque_ref_Nmm: float = 3600.0
     """Tr, the reference (constraint) torque, N·mm (367 kgf·mm). Not given: chosen so that
     holding Tr at every depth of the step workpiece takes, by eq. (20), the paper's
-    machining time with AC (3.117 min, Table 1); see ``docs/milling.md``. Observations
-    are normalised by it."""
+    machining time with AC (3.117 min, Table 1): 3613 N·mm exactly, rounded to 3600
+    (3.145 min). Observations are normalised by it."""
 
     breakage_torque_Nmm: float = 15000.0
     """Torque at which the tool is taken to break, N·mm (1530 kgf·mm). Not given: above the
