@@ -15,7 +15,6 @@ import machining_envs
 from machining_envs import EndMillingEnv, MillingParams, MillingScenario
 from machining_envs.milling_scenarios import cut_area_mm2
 from machining_envs.workpieces import DepthProfile
-from tests.conftest import random_rollout
 
 MILLING = "machining_envs/EndMilling-v0"
 
@@ -38,7 +37,8 @@ DESIGN_INFO_KEYS = {
 
 
 def _random_rollout(env, n_steps, seed):
-    """``tests.conftest.random_rollout`` reads ``force_N``; this one reads the torque."""
+    """Random actions from a seeded generator, resetting on episode end (the torque twin of
+    ``tests.conftest.random_rollout``, which reads ``force_N``)."""
     rng = np.random.default_rng(seed)
     obs, _ = env.reset(seed=seed)
     out_obs, out_rew, out_torque = [obs], [], []
@@ -85,7 +85,6 @@ def test_same_seed_bit_identical_1000_steps():
         assert x.tobytes() == y.tobytes()
     c = _random_rollout(gym.make(MILLING), 1000, seed=8)
     assert a[0].tobytes() != c[0].tobytes()
-    assert random_rollout is not None  # the turning helper stays as it is
 
 
 def test_pickle_mid_episode_continues_identically():
