@@ -8,6 +8,15 @@ SB3 models run under one harness (and under SB3's own ``evaluate_policy``)::
 
 from agents.adaptive import VariableGainPI
 from agents.base import Agent
+from agents.integral import FixedGainIntegral, IntegralACC, MillingConstantFeed
 from agents.pid import ConstantFeed, FixedGainPI
 
-__all__ = ["Agent", "ConstantFeed", "FixedGainPI", "VariableGainPI"]
+__all__ = [
+    "Agent",
+    "ConstantFeed",
+    "FixedGainPI",
+    "VariableGainPI",
+    "FixedGainIntegral",
+    "IntegralACC",
+    "MillingConstantFeed",
+]

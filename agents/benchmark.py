@@ -16,8 +16,10 @@ import gymnasium as gym
 
 from agents.adaptive import VariableGainPI
 from agents.harness import Evaluation, agent_name, evaluate, rollout
+from agents.integral import FixedGainIntegral, IntegralACC, MillingConstantFeed
 from agents.pid import ConstantFeed, FixedGainPI
 from machining_envs.metrics import regulation_metrics
+from machining_envs.milling_metrics import milling_metrics
 
 __all__ = ["BenchmarkSpec", "BENCHMARKS", "run_benchmark"]
 
@@ -72,6 +74,38 @@ BENCHMARKS = (
         ("paper_245", "paper_405", "paper_700", "taper_405"),
         "test",
         "paper_405",
+    ),
+    BenchmarkSpec(
+        "machining_envs/EndMilling-v0",
+        (
+            MillingConstantFeed.from_env,
+            FixedGainIntegral.from_env,
+            IntegralACC.from_env,
+        ),
+        ("paper_step", "paper_taper"),
+        "test",
+        "paper_step",
+        metrics_fn=milling_metrics,
+        table_metrics=(
+            "machining_time_min",
+            "mrr_mm3_per_min",
+            "iae",
+            "max_overshoot",
+            "settling_time_s",
+            "oscillation",
+            "time_over_limit",
+            "breakage",
+            "finished",
+        ),
+        plot_main=("torque_Nmm", "torque_ref_Nmm", "torque (N·mm)"),
+        plot_lower=("feed_mm_per_rev", "feed (mm/rev)"),
+        plot_context=("depth_mm", "radial depth (mm)"),
+        bar_metrics=(
+            ("machining_time_min", "machining time, eq. 20 (min)"),
+            ("iae", "IAE (s)"),
+            ("oscillation", "torque oscillation (share of Tr)"),
+            ("time_over_limit", "share of time over 1.1x reference"),
+        ),
     ),
 )
 

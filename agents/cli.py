@@ -16,6 +16,7 @@ __all__ = ["main", "REPRODUCTIONS", "reproduction"]
 #: returns a list of dicts with a boolean ``"match"`` per experiment.
 REPRODUCTIONS = {
     "turning": "agents.reproduce:reproduce_turning",
+    "milling": "agents.reproduce_milling:reproduce_milling",
 }
 
 

@@ -118,6 +118,6 @@ def test_cli_benchmark_quick_writes_report(tmp_path):
 
 def test_cli_rejects_bad_arguments():
     with pytest.raises(SystemExit):
-        main(["reproduce", "milling"])
+        main(["reproduce", "grinding"])
     with pytest.raises(SystemExit):
         main(["reproduce", "turning", "--sensor-gain", "-3"])
