@@ -12,7 +12,10 @@ from __future__ import annotations
 
 from gymnasium.envs.registration import register, registry
 
+from machining_envs.drilling_scenarios import DRILLING_SCENARIOS, DrillingScenario
+from machining_envs.envs.micro_drilling import DrillingReward, MicroDrillingEnv
 from machining_envs.envs.turning import TurningEnv, TurningReward
+from machining_envs.plants.drilling import DrillingParams
 from machining_envs.plants.turning import TurningParams
 from machining_envs.scenarios import TURNING_SCENARIOS, TurningScenario
 from machining_envs.workpieces import DepthProfile
@@ -25,12 +28,18 @@ __all__ = [
     "TurningReward",
     "TurningScenario",
     "ENV_IDS",
+    "DRILLING_SCENARIOS",
+    "DrillingParams",
+    "DrillingReward",
+    "DrillingScenario",
+    "MicroDrillingEnv",
 ]
 __version__ = "0.1.0"
 
 #: Every env id this package registers, with its entry point (one line per env).
 _ENTRY_POINTS = {
     "machining_envs/Turning-v0": "machining_envs.envs.turning:TurningEnv",
+    "machining_envs/MicroDrilling-v0": "machining_envs.envs.micro_drilling:MicroDrillingEnv",
 }
 ENV_IDS = tuple(_ENTRY_POINTS)
 
