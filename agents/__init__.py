@@ -8,6 +8,18 @@ SB3 models run under one harness (and under SB3's own ``evaluate_policy``)::
 
 from agents.adaptive import VariableGainPI
 from agents.base import Agent
+from agents.drilling import PD, NoControl
+from agents.peck import PeckDrilling
 from agents.pid import ConstantFeed, FixedGainPI
+from agents.sliding_mode import SlidingMode
 
-__all__ = ["Agent", "ConstantFeed", "FixedGainPI", "VariableGainPI"]
+__all__ = [
+    "Agent",
+    "ConstantFeed",
+    "FixedGainPI",
+    "VariableGainPI",
+    "NoControl",
+    "PD",
+    "PeckDrilling",
+    "SlidingMode",
+]

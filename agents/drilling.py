@@ -117,22 +117,29 @@ class DrillingIO:
 class NoControl(Agent):
     """The paper's uncontrolled run: the nominal voltage (545 Hz) and the nominal feed, held.
 
-    With ``control="voltage"`` it holds ``nominal_voltage``; with ``control="feed"`` it holds
-    the nominal feed velocity (the voltage is then the env's nominal one): the same cut.
+    With ``control="voltage"`` it holds ``voltage`` (default ``nominal_voltage``); with
+    ``control="feed"`` it holds the nominal feed velocity (the voltage is then the env's
+    nominal one): the same cut.
     """
 
     state_size = 0
     obs_dim = _OBS_DIM
 
-    def __init__(self, io: DrillingIO):
+    def __init__(self, io: DrillingIO, voltage: float | None = None):
         self.io = io
         p = io.params
-        self.command = p.nominal_voltage if io.control == "voltage" else p.feed_velocity_mm_s
+        if io.control == "voltage":
+            u = p.nominal_voltage if voltage is None else voltage
+            self.command = _in_range("voltage", u, 0.0, p.voltage_max)
+        else:
+            if voltage is not None:
+                raise ValueError("voltage applies to control='voltage' only")
+            self.command = p.feed_velocity_mm_s
         self.name = "no control"
 
     @classmethod
-    def from_env(cls, env) -> NoControl:
-        return cls(DrillingIO.from_env(env))
+    def from_env(cls, env, voltage: float | None = None) -> NoControl:
+        return cls(DrillingIO.from_env(env), voltage)
 
     def _act(self, obs, state):
         return self.io.action(np.full(obs.shape[0], self.command))
