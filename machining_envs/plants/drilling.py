@@ -578,18 +578,19 @@ def _valve_matrices(wn: float, zeta: float, k1: float, ts: float, m: int):
 def _filter_weights(cutoff_hz: float, ts: float, m: int) -> tuple[float, tuple[float, ...]]:
     """First-order sensor filter over one sample: ``y+ = a y + sum_j w_j T_j`` (j = 0..m).
 
-    The input is piecewise linear between the sub-step values ``T_j``; integrated exactly
-    (trapezoid of the exact convolution weights over each sub-step).
+    Exact for an input that is linear between the sub-step values ``T_j``: over a sub-step
+    of length ``h`` with ``a_h = exp(-h / tau)``, a ramp from ``x0`` to ``x1`` moves the
+    output to ``a_h y + (1 - a_h - c) x0 + c x1`` with ``c = 1 - (tau / h)(1 - a_h)``.
     """
-    wc = _TWO_PI * cutoff_hz
+    tau = 1.0 / (_TWO_PI * cutoff_hz)
     h = ts / m
-    a_h = math.exp(-wc * h)
-    g_h = 1.0 - a_h
+    a_h = math.exp(-h / tau)
+    c = 1.0 - (tau / h) * (1.0 - a_h)
     w = [0.0] * (m + 1)
     for j in range(1, m + 1):
         decay = a_h ** (m - j)  # from the end of sub-step j to the end of the sample
-        w[j - 1] += 0.5 * g_h * decay
-        w[j] += 0.5 * g_h * decay
+        w[j - 1] += (1.0 - a_h - c) * decay
+        w[j] += c * decay
     return a_h**m, tuple(w)
 
 
@@ -662,9 +663,12 @@ class DrillingPlant:
         p = params
         self.coeffs = p.coefficients(diameter_mm)
         m = p.substeps
-        self._half, self._vstep = _valve_matrices(
+        half, vstep = _valve_matrices(
             p.valve_natural_freq_rad_s, p.valve_damping, p.k1, p.sample_time_s, m
         )
+        # Rows as float tuples: three products each beat a numpy call at this size.
+        self._half = [tuple(float(v) for v in row) for row in half]
+        self._vstep = [tuple(float(v) for v in row) for row in vstep]
         self._fa, self._fw = _filter_weights(p.sensor_cutoff_hz, p.sample_time_s, m)
         self._ou_c = math.exp(-p.sample_time_s / p.chip_fluctuation_time_s)
         self._ou_c_in = math.sqrt(1.0 - self._ou_c**2)
@@ -765,7 +769,8 @@ class DrillingPlant:
             k4 = kh = kh2 = 0.0
 
         # Valve exactly at every half sub-step; spindle by RK4 with the load k4 / omega.
-        xv = (self._half @ (self.x1, self.x2, u)).tolist()
+        x1, x2 = self.x1, self.x2
+        xv = [a * x1 + b * x2 + c * u for a, b, c in self._half]
         k2, k3, n = p.spindle_drive_gain, p.spindle_friction, p.spindle_friction_exponent
         load_c = k4 / p.spindle_inertia_Nmm_s2
         w_floor = _TWO_PI  # 1 Hz: below it the torque law is not evaluated (the drill stalls)
@@ -788,8 +793,9 @@ class DrillingPlant:
             if w < 0.0:
                 w = 0.0
             ws.append(w)
-        x_next = self._vstep @ (self.x1, self.x2, u)
-        self.x1, self.x2 = float(x_next[0]), float(x_next[1])
+        (a1, b1, c1), (a2, b2, c2) = self._vstep
+        self.x1 = a1 * x1 + b1 * x2 + c1 * u
+        self.x2 = a2 * x1 + b2 * x2 + c2 * u
         self.omega = w
 
         # Torque and thrust at the sub-step instants; the sensors filter them.
@@ -797,16 +803,12 @@ class DrillingPlant:
         tq_f = self.torque_filt * fa
         th_f = self.thrust_filt * fa
         peak = 0.0
-        t_prev, h_prev = self.torque_Nmm, self.thrust_N
         for j in range(m + 1):
-            if j == 0:
-                tq, th = t_prev, h_prev
-            else:
-                wj = ws[j] if ws[j] > w_floor else w_floor
-                tq = k4 / wj
-                th = kh / wj + kh2 / (wj * wj)
-                if tq > peak:
-                    peak = tq
+            wj = ws[j] if ws[j] > w_floor else w_floor
+            tq = k4 / wj
+            th = kh / wj + kh2 / (wj * wj)
+            if tq > peak:
+                peak = tq
             tq_f += fw[j] * tq
             th_f += fw[j] * th
         self.torque_filt, self.thrust_filt = tq_f, th_f
