@@ -99,7 +99,7 @@ def test_spindle_against_an_independent_ode_solution():
     volts = [5.0 + 2.0 * math.sin(TWO_PI * 2.0 * k * p.sample_time_s) for k in range(200)]
     plant = DrillingPlant(p, 0.8, 8.0, start_position_mm=-1.0)
     x = np.array([plant.x1, plant.x2, plant.omega])
-    for k, u in enumerate(volts):
+    for u in volts:
         s = plant.step(u, 0.0)
 
         def f(t, y, u=u):
