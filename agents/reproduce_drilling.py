@@ -33,9 +33,16 @@ from agents.peck import PeckDrilling
 from agents.sliding_mode import SlidingMode
 from machining_envs.drilling_metrics import drilling_mask, drilling_metrics
 from machining_envs.drilling_scenarios import PAPER_DIAMETERS_MM, DrillingScenario
-from machining_envs.plants.drilling import DrillingParams
+from machining_envs.plants.drilling import DrillingParams, DrillingPlant
 
-__all__ = ["reproduce_drilling", "drilling_comparison", "ENV_ID", "RANKED"]
+__all__ = [
+    "reproduce_drilling",
+    "drilling_comparison",
+    "plant_responses",
+    "plot_drilling_reproduction",
+    "ENV_ID",
+    "RANKED",
+]
 
 ENV_ID = "machining_envs/MicroDrilling-v0"
 #: The quantities the paper ranks (Fig. 18-21), as ``drilling_metrics`` names.
@@ -229,21 +236,54 @@ def reproduce_drilling(out_dir=None, seed: int = 0, verbose: bool = True, n_seed
         print(f"\n{n}/{len(results)} checks show the paper's behaviour")
     if out_dir is not None:
         path = Path(out_dir) / "reproduce_drilling.png"
-        plot_drilling_reproduction(comp, tr12, path)
+        plot_drilling_reproduction(comp, tr12, path, p)
         if verbose:
             print(f"figure: {path}")
     return results
 
 
-def plot_drilling_reproduction(comp: dict, fig12_traj: dict, path) -> None:
-    """Thrust and torque against time per drill (like Fig. 18-21), Fig. 22 and Fig. 12."""
+def plant_responses(params: DrillingParams | None = None) -> dict:
+    """The open-loop responses of the paper's identification figures, from the plant alone.
+
+    ``"fig7"``: the free spindle under a sine voltage, 5 +- 2 V at 0.5 Hz, for 6 s;
+    ``"fig8"``: torque, thrust and spindle frequency over the first 1.7 s of a 0.8 mm hole
+    at 0.32 mm/s with the voltage of a 750 Hz free spindle (before the chips matter).
+    Noise-free; arrays keyed by name.
+    """
+    p = params or DrillingParams()
+    plant = DrillingPlant(p, 0.8, 8.0, start_position_mm=-p.retract_limit_mm)
+    n = int(round(6.0 / p.sample_time_s))
+    t = p.sample_time_s * np.arange(1, n + 1)
+    volts = 5.0 + 2.0 * np.sin(2.0 * np.pi * 0.5 * t)
+    hz = np.array([plant.step(float(u), 0.0).speed_hz for u in volts])
+    fig7 = {"t_s": t, "voltage_V": volts, "spindle_hz": hz}
+    quiet = p.replace(chip_fluctuation=0.0, cutting_fluctuation=0.0)
+    u750 = p.voltage_for_speed(750.0)
+    plant = DrillingPlant(quiet, 0.8, 8.0)
+    plant.reset(voltage=u750)
+    n = int(round(1.7 / p.sample_time_s))
+    steps = [plant.step(u750, p.feed_velocity_mm_s) for _ in range(n)]
+    fig8 = {
+        "t_s": p.sample_time_s * np.arange(1, n + 1),
+        "torque_Nmm": np.array([s.torque_Nmm for s in steps]),
+        "thrust_N": np.array([s.thrust_N for s in steps]),
+        "spindle_hz": np.array([s.speed_hz for s in steps]),
+    }
+    return {"fig7": fig7, "fig8": fig8}
+
+
+def plot_drilling_reproduction(
+    comp: dict, fig12_traj: dict, path, params: DrillingParams | None = None
+) -> None:
+    """Thrust and torque against time per drill (like Fig. 18-21), Fig. 22 and Fig. 12,
+    and the open-loop responses of Fig. 7 and 8 (:func:`plant_responses`)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     diameters = list(comp)
-    rows = len(diameters) + 1
+    rows = len(diameters) + 2
     fig, axes = plt.subplots(rows, 2, figsize=(11, 2.3 * rows), squeeze=False)
     for i, d in enumerate(diameters):
         for j, (key, label) in enumerate(
@@ -275,6 +315,23 @@ def plot_drilling_reproduction(comp: dict, fig12_traj: dict, path) -> None:
     ax.set_title("like Fig. 12: no control, 0.5 mm, 750 Hz", fontsize=9)
     ax.set_xlabel("hole depth (mm)")
     ax.legend(fontsize=7)
+    resp = plant_responses(params)
+    f7, f8 = resp["fig7"], resp["fig8"]
+    ax = axes[-2, 0]
+    ax.plot(f7["t_s"], f7["spindle_hz"], "C2-", lw=0.9)
+    ax.set_ylabel("spindle (Hz)")
+    ax.set_title("like Fig. 7: free spindle, sine voltage 5 +- 2 V at 0.5 Hz", fontsize=9)
+    ax2 = ax.twinx()
+    ax2.plot(f7["t_s"], f7["voltage_V"], color="0.6", lw=0.8)
+    ax2.set_ylabel("voltage (V)", color="0.5")
+    ax = axes[-2, 1]
+    ax.plot(f8["t_s"], f8["torque_Nmm"], "C0-", lw=0.9, label="torque (N·mm)")
+    ax.plot(f8["t_s"], f8["thrust_N"], "C1-", lw=0.9, label="thrust (N)")
+    ax.set_title("like Fig. 8: first 1.7 s of a 0.8 mm hole, 750 Hz free", fontsize=9)
+    ax.legend(fontsize=7, loc="center right")
+    ax2 = ax.twinx()
+    ax2.plot(f8["t_s"], f8["spindle_hz"], "C2-", lw=0.9)
+    ax2.set_ylabel("spindle (Hz)", color="C2")
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=90)
