@@ -136,14 +136,15 @@ class SlidingMode(Agent):
     io : DrillingIO
     lam : float
         lambda of the surface ``S = e'' + 2 lambda e' + lambda^2 e``, rad/s. Not given in
-        the paper: 8 rad/s, half the valve-spindle loop's usable bandwidth and twice the
-        spindle's own (4 rad/s), fast against the packing of chips.
+        the paper: 12 rad/s, three times the spindle's own 4 rad/s and a quarter of the
+        valve's 50 rad/s, which the feedback linearisation inverts, so the valve model's
+        errors stay small at the loop's speed.
     epsilon : float
         Torque-error bound inside the boundary layer as a share of the reference:
         ``phi = epsilon T_r lambda^2`` (default 3 %).
     near_rate : float
-        ``K_near / phi``, 1/s: how fast ``S`` decays inside the layer (default 25/s, a
-        quarter of the 100 Hz sample rate, so the sampled loop stays well damped).
+        ``K_near / phi``, 1/s: how fast ``S`` decays inside the layer (default 35/s, a third
+        of the 100 Hz sample rate, so the sampled loop stays well damped).
     far_ratio : float
         ``K_far / K_near`` (default 0.25: the paper's small gain outside the layer).
     k4_filter_s : float
