@@ -13,13 +13,5 @@ from agents.peck import PeckDrilling
 from agents.pid import ConstantFeed, FixedGainPI
 from agents.sliding_mode import SlidingMode
 
-__all__ = [
-    "Agent",
-    "ConstantFeed",
-    "FixedGainPI",
-    "VariableGainPI",
-    "NoControl",
-    "PD",
-    "PeckDrilling",
-    "SlidingMode",
-]
+__all__ = ["Agent", "ConstantFeed", "FixedGainPI", "VariableGainPI"]
+__all__ += ["NoControl", "PD", "PeckDrilling", "SlidingMode"]
