@@ -8,8 +8,11 @@ SB3 models run under one harness (and under SB3's own ``evaluate_policy``)::
 
 from agents.adaptive import VariableGainPI
 from agents.base import Agent
+from agents.drilling import PD, NoControl
 from agents.integral import FixedGainIntegral, IntegralACC, MillingConstantFeed
+from agents.peck import PeckDrilling
 from agents.pid import ConstantFeed, FixedGainPI
+from agents.sliding_mode import SlidingMode
 
 __all__ = [
     "Agent",
@@ -20,3 +23,4 @@ __all__ = [
     "IntegralACC",
     "MillingConstantFeed",
 ]
+__all__ += ["NoControl", "PD", "PeckDrilling", "SlidingMode"]

@@ -15,9 +15,12 @@ from pathlib import Path
 import gymnasium as gym
 
 from agents.adaptive import VariableGainPI
+from agents.drilling import PD, NoControl
 from agents.harness import Evaluation, agent_name, evaluate, rollout
 from agents.integral import FixedGainIntegral, IntegralACC, MillingConstantFeed
 from agents.pid import ConstantFeed, FixedGainPI
+from agents.sliding_mode import SlidingMode
+from machining_envs.drilling_metrics import drilling_metrics
 from machining_envs.metrics import regulation_metrics
 from machining_envs.milling_metrics import milling_metrics
 
@@ -105,6 +108,35 @@ BENCHMARKS = (
             ("iae", "IAE (s)"),
             ("oscillation", "torque oscillation (share of Tr)"),
             ("time_over_limit", "share of time over 1.1x reference"),
+        ),
+    ),
+    BenchmarkSpec(
+        "machining_envs/MicroDrilling-v0",
+        (NoControl.from_env, PD.from_env, SlidingMode.from_env),
+        ("paper_0.5", "paper_0.6", "paper_0.7", "paper_0.8"),
+        "test",
+        "paper_0.8",
+        metrics_fn=drilling_metrics,
+        table_metrics=(
+            "drilling_time_s",
+            "torque_mean_rel",
+            "torque_std_rel",
+            "thrust_mean_N",
+            "thrust_std_N",
+            "spindle_range_hz",
+            "time_over_limit",
+            "peak_torque_rel",
+            "breakage",
+            "finished",
+        ),
+        plot_main=("torque_Nmm", "torque_ref_Nmm", "torque (N·mm)"),
+        plot_lower=("spindle_hz", "spindle (Hz)"),
+        plot_context=("depth_mm", "hole depth (mm)"),
+        bar_metrics=(
+            ("torque_mean_rel", "mean torque / reference"),
+            ("torque_std_rel", "torque std / reference"),
+            ("peak_torque_rel", "peak torque / breakage torque"),
+            ("breakage", "breakage rate"),
         ),
     ),
 )

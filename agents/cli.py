@@ -17,6 +17,7 @@ __all__ = ["main", "REPRODUCTIONS", "reproduction"]
 REPRODUCTIONS = {
     "turning": "agents.reproduce:reproduce_turning",
     "milling": "agents.reproduce_milling:reproduce_milling",
+    "drilling": "agents.reproduce_drilling:reproduce_drilling",
 }
 
 

@@ -112,10 +112,10 @@ class Evaluation:
         return "\n".join(lines)
 
     def to_csv(self, path) -> None:
+        """One line per episode; the columns are every metric any row has (rows from envs
+        with different metrics leave the others' cells empty)."""
         if not self.rows:
             raise ValueError("no rows to write")
-        # Envs report different metrics: the header is every key, in order of appearance,
-        # and a row leaves the metrics of other envs empty.
         fields = list(dict.fromkeys(k for row in self.rows for k in row))
         with open(path, "w", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=fields, restval="")

@@ -12,9 +12,12 @@ from __future__ import annotations
 
 from gymnasium.envs.registration import register, registry
 
+from machining_envs.drilling_scenarios import DRILLING_SCENARIOS, DrillingScenario
 from machining_envs.envs.end_milling import EndMillingEnv, MillingReward
+from machining_envs.envs.micro_drilling import DrillingReward, MicroDrillingEnv
 from machining_envs.envs.turning import TurningEnv, TurningReward
 from machining_envs.milling_scenarios import MILLING_SCENARIOS, MillingScenario
+from machining_envs.plants.drilling import DrillingParams
 from machining_envs.plants.milling import MillingParams
 from machining_envs.plants.turning import TurningParams
 from machining_envs.scenarios import TURNING_SCENARIOS, TurningScenario
@@ -33,6 +36,11 @@ __all__ = [
     "MillingParams",
     "MillingReward",
     "MillingScenario",
+    "DRILLING_SCENARIOS",
+    "DrillingParams",
+    "DrillingReward",
+    "DrillingScenario",
+    "MicroDrillingEnv",
 ]
 __version__ = "0.1.0"
 
@@ -40,6 +48,7 @@ __version__ = "0.1.0"
 _ENTRY_POINTS = {
     "machining_envs/Turning-v0": "machining_envs.envs.turning:TurningEnv",
     "machining_envs/EndMilling-v0": "machining_envs.envs.end_milling:EndMillingEnv",
+    "machining_envs/MicroDrilling-v0": "machining_envs.envs.micro_drilling:MicroDrillingEnv",
 }
 ENV_IDS = tuple(_ENTRY_POINTS)
 
