@@ -12,12 +12,22 @@ from __future__ import annotations
 
 from gymnasium.envs.registration import register, registry
 
+from machining_envs.contouring_scenarios import CONTOURING_SCENARIOS, ContouringScenario
+from machining_envs.envs.contouring import ContouringEnv, ContouringReward
 from machining_envs.envs.turning import TurningEnv, TurningReward
+from machining_envs.paths import Path
+from machining_envs.plants.contouring import ContouringParams
 from machining_envs.plants.turning import TurningParams
 from machining_envs.scenarios import TURNING_SCENARIOS, TurningScenario
 from machining_envs.workpieces import DepthProfile
 
 __all__ = [
+    "CONTOURING_SCENARIOS",
+    "ContouringEnv",
+    "ContouringParams",
+    "ContouringReward",
+    "ContouringScenario",
+    "Path",
     "DepthProfile",
     "TURNING_SCENARIOS",
     "TurningEnv",
@@ -31,6 +41,7 @@ __version__ = "0.1.0"
 #: Every env id this package registers, with its entry point (one line per env).
 _ENTRY_POINTS = {
     "machining_envs/Turning-v0": "machining_envs.envs.turning:TurningEnv",
+    "machining_envs/Contouring-v0": "machining_envs.envs.contouring:ContouringEnv",
 }
 ENV_IDS = tuple(_ENTRY_POINTS)
 
