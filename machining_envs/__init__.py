@@ -14,6 +14,7 @@ from gymnasium.envs.registration import register, registry
 
 from machining_envs.contouring_scenarios import CONTOURING_SCENARIOS, ContouringScenario
 from machining_envs.envs.contouring import ContouringEnv, ContouringReward
+from machining_envs.envs.contouring_feed import ContouringFeedEnv, FeedReward
 from machining_envs.envs.turning import TurningEnv, TurningReward
 from machining_envs.paths import Path
 from machining_envs.plants.contouring import ContouringParams
@@ -24,6 +25,8 @@ from machining_envs.workpieces import DepthProfile
 __all__ = [
     "CONTOURING_SCENARIOS",
     "ContouringEnv",
+    "ContouringFeedEnv",
+    "FeedReward",
     "ContouringParams",
     "ContouringReward",
     "ContouringScenario",
@@ -42,6 +45,7 @@ __version__ = "0.1.0"
 _ENTRY_POINTS = {
     "machining_envs/Turning-v0": "machining_envs.envs.turning:TurningEnv",
     "machining_envs/Contouring-v0": "machining_envs.envs.contouring:ContouringEnv",
+    "machining_envs/ContouringFeed-v0": "machining_envs.envs.contouring_feed:ContouringFeedEnv",
 }
 ENV_IDS = tuple(_ENTRY_POINTS)
 

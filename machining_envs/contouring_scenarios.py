@@ -155,13 +155,22 @@ def _paper(name: str, path: Callable[[], Path], feed: float, loads=()):
 def _random(
     name: str,
     segments: tuple[int, int],
+    line: tuple[float, float],
     radius: tuple[float, float],
+    sweep: tuple[float, float],
     feed: tuple[float, float],
     inertia: tuple[float, float],
     load_max: float,
 ):
     def make(rng: np.random.Generator) -> ContouringScenario:
-        path = Path.random_smooth(rng, n_segments=segments, radius_mm=radius, name=f"{name} path")
+        path = Path.random_smooth(
+            rng,
+            n_segments=segments,
+            line_mm=line,
+            radius_mm=radius,
+            sweep_deg=sweep,
+            name=f"{name} path",
+        )
         f = float(np.exp(rng.uniform(np.log(feed[0]), np.log(feed[1]))))
         sx, sy = (float(v) for v in np.exp(rng.uniform(np.log(inertia[0]), np.log(inertia[1]), 2)))
         loads = ()
@@ -178,10 +187,11 @@ def _random(
 #: ``paper_step`` / ``paper_step_load`` (Fig. 4-5: a 0.1 mm X step; with a 1 N m load step at
 #: 0.15 s), ``paper_corner`` (Fig. 6, 5 mm/s), ``paper_circle`` (Fig. 7, R 10 mm at 50 mm/s),
 #: ``paper_involute`` (Fig. 8, R 50 mm at 50 mm/s) and ``paper_circle_load`` (the circle with
-#: 1 N m on both axes from 0.5 s). ``train``: 3-6 random lines and arcs (radius 3-30 mm),
-#: feed log-uniform 10-60 mm/s, inertias x0.8-1.25, half the runs with one load step of up
-#: to 1.5 N m per axis. ``test`` (held out): 3-8 segments, radius 2-40 mm, feed 5-80 mm/s,
-#: inertias x0.7-1.4, loads up to 2 N m.
+#: 1 N m on both axes from 0.5 s). ``train``: 3-5 random tangent-continuous lines (5-20 mm)
+#: and arcs (radius 3-30 mm, 30-180 degrees), feed log-uniform 20-60 mm/s, inertias
+#: log-uniform x0.8-1.25, half the runs with one load step of up to 1.5 N m per axis at a
+#: random time. ``test`` (held out, wider): 3-6 segments, lines 3-20 mm, radius 2-40 mm,
+#: 20-240 degrees, feed 15-90 mm/s, inertias x0.7-1.4, loads up to 2 N m.
 CONTOURING_SCENARIOS: dict[str, Callable[[np.random.Generator], ContouringScenario]] = {
     "paper_step": _step(False),
     "paper_step_load": _step(True),
@@ -194,8 +204,12 @@ CONTOURING_SCENARIOS: dict[str, Callable[[np.random.Generator], ContouringScenar
         PAPER_FEED_MM_S,
         ((0.5, PAPER_LOAD_TORQUE_NM, PAPER_LOAD_TORQUE_NM),),
     ),
-    "train": _random("train", (3, 6), (3.0, 30.0), (10.0, 60.0), (0.8, 1.25), 1.5),
-    "test": _random("test", (3, 8), (2.0, 40.0), (5.0, 80.0), (0.7, 1.4), 2.0),
+    "train": _random(
+        "train", (3, 5), (5.0, 20.0), (3.0, 30.0), (30.0, 180.0), (20.0, 60.0), (0.8, 1.25), 1.5
+    ),
+    "test": _random(
+        "test", (3, 6), (3.0, 20.0), (2.0, 40.0), (20.0, 240.0), (15.0, 90.0), (0.7, 1.4), 2.0
+    ),
 }
 
 

@@ -70,6 +70,9 @@ class Line:
     def points(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return self.start[0] + self._u[0] * s, self.start[1] + self._u[1] * s
 
+    def point(self, s: float) -> tuple[float, float]:
+        return self.start[0] + self._u[0] * s, self.start[1] + self._u[1] * s
+
     def turning(self, s: np.ndarray) -> np.ndarray:
         """Heading change since the segment's start, rad."""
         return np.zeros_like(s)
@@ -93,7 +96,7 @@ class Line:
     def closest_many(self, px: np.ndarray, py: np.ndarray):
         x0, y0 = self.start
         ux, uy = self._u
-        t = np.clip((px - x0) * ux + (py - y0) * uy, 0.0, self.length)
+        t = np.minimum(np.maximum((px - x0) * ux + (py - y0) * uy, 0.0), self.length)
         qx, qy = x0 + ux * t, y0 + uy * t
         return np.hypot(px - qx, py - qy), qx, qy
 
@@ -138,6 +141,9 @@ class Arc:
     def turning(self, s: np.ndarray) -> np.ndarray:
         return self.sign * s / self.radius
 
+    def point(self, s: float) -> tuple[float, float]:
+        return self._at(self.start_angle + self.sign * s / self.radius)
+
     def curvatures(self, s: np.ndarray) -> np.ndarray:
         return np.full_like(s, self.sign / self.radius)
 
@@ -165,6 +171,9 @@ class Arc:
         rho = np.hypot(dx, dy)
         rel = np.mod((np.arctan2(dy, dx) - self.start_angle) * self.sign, _TWO_PI)
         inside = (rel <= abs(self.sweep)) & (rho > 0.0)
+        if inside.all():
+            k = self.radius / rho
+            return np.abs(rho - self.radius), cx + dx * k, cy + dy * k
         k = self.radius / np.where(rho > 0.0, rho, 1.0)
         d = np.abs(rho - self.radius)
         qx, qy = cx + dx * k, cy + dy * k
@@ -229,6 +238,9 @@ class Involute:
             self.center[0] + self.radius * (c + theta * s),
             self.center[1] + self.radius * (s - theta * c),
         )
+
+    def point(self, s: float) -> tuple[float, float]:
+        return self.point_at(math.sqrt(self.theta_start**2 + 2.0 * s / self.radius))
 
     def theta_of(self, s: np.ndarray) -> np.ndarray:
         """Parameter ``theta`` at arc length ``s`` from the segment's start."""
@@ -321,6 +333,19 @@ class Involute:
 Segment = Line | Arc | Involute
 
 
+def _bounding_circle(seg) -> tuple[float, float, float]:
+    """A circle ``(cx, cy, radius)`` that contains the whole segment.
+
+    From 257 points along it: their centroid, and the largest distance to them plus the
+    largest gap between neighbours (the curve between two neighbours stays within that).
+    """
+    s = np.linspace(0.0, seg.length, 257)
+    x, y = seg.points(s)
+    cx, cy = float(x.mean()), float(y.mean())
+    gap = float(np.max(np.hypot(np.diff(x), np.diff(y))))
+    return cx, cy, float(np.max(np.hypot(x - cx, y - cy))) + gap
+
+
 def _wrap(a: float) -> float:
     """Angle wrapped to (-pi, pi]."""
     return a - _TWO_PI * math.floor((a + math.pi) / _TWO_PI)
@@ -363,7 +388,9 @@ class Path:
         lengths = [seg.length for seg in segs]
         self._starts = np.concatenate([[0.0], np.cumsum(lengths)])
         self._start_list = [float(v) for v in self._starts]
+        self._inner = self._starts[1:-1].copy()
         self.length = float(self._starts[-1])
+        self._bounds = [_bounding_circle(seg) for seg in segs]
         # Unwrapped heading at each segment's start: corners add their turn in (-pi, pi].
         head = [segs[0].heading0]
         for k in range(1, len(segs)):
@@ -467,60 +494,92 @@ class Path:
         return self.length / feed_mm_s
 
     def _index(self, s: np.ndarray) -> np.ndarray:
-        return np.clip(
-            np.searchsorted(self._starts, s, side="right") - 1, 0, len(self.segments) - 1
-        )
+        """Segment index of each arc length in ``s`` (already within ``[0, length]``)."""
+        return np.searchsorted(self._inner, s, side="right")
+
+    def _per_segment(self, s, fn) -> list:
+        """Evaluate ``fn(k, segment, local arc lengths)`` segment by segment over ``s``.
+
+        Returns ``[(mask or None, result), ...]``; ``mask`` is None when one segment holds
+        every value (the usual case for the short, ascending runs the envs ask for).
+        """
+        idx = self._index(s)
+        lo, hi = int(idx.min()), int(idx.max())
+        if lo == hi:
+            return [(None, fn(lo, self.segments[lo], s - self._start_list[lo]))]
+        out = []
+        for k in range(lo, hi + 1):
+            m = idx == k
+            if m.any():
+                out.append((m, fn(k, self.segments[k], s[m] - self._start_list[k])))
+        return out
+
+    def _clamp(self, s) -> np.ndarray:
+        return np.minimum(np.maximum(np.asarray(s, dtype=np.float64), 0.0), self.length)
 
     def points(self, s) -> tuple[np.ndarray, np.ndarray]:
         """Points ``(x, y)`` (mm) at arc lengths ``s`` (array; clamped to the path)."""
-        s = np.clip(np.asarray(s, dtype=np.float64), 0.0, self.length)
-        if len(self.segments) == 1:
-            return self.segments[0].points(s)
-        idx = self._index(s)
+        s = self._clamp(s)
+        if len(self.segments) == 1 or s.ndim == 0 or s.size == 0:
+            if len(self.segments) == 1:
+                return self.segments[0].points(s)
+            s = np.atleast_1d(s)
+        parts = self._per_segment(s, lambda k, seg, loc: seg.points(loc))
+        if parts[0][0] is None:
+            return parts[0][1]
         x = np.empty_like(s)
         y = np.empty_like(s)
-        for k, seg in enumerate(self.segments):
-            m = idx == k
-            if m.any():
-                x[m], y[m] = seg.points(s[m] - self._starts[k])
+        for m, (px, py) in parts:
+            x[m], y[m] = px, py
         return x, y
 
     def point(self, s: float) -> tuple[float, float]:
-        """One point ``(x, y)`` at arc length ``s``."""
-        x, y = self.points(np.array([s]))
-        return float(x[0]), float(y[0])
+        """One point ``(x, y)`` at arc length ``s`` (clamped to the path)."""
+        s = min(max(float(s), 0.0), self.length)
+        starts = self._start_list
+        k = len(self.segments) - 1
+        while k > 0 and s < starts[k]:
+            k -= 1
+        return self.segments[k].point(s - starts[k])
+
+    def _gather(self, s, fn) -> np.ndarray:
+        s = np.atleast_1d(self._clamp(s))
+        parts = self._per_segment(s, fn)
+        if parts[0][0] is None:
+            return np.asarray(parts[0][1], dtype=np.float64) + np.zeros_like(s)
+        out = np.empty_like(s)
+        for m, v in parts:
+            out[m] = v
+        return out
 
     def headings(self, s) -> np.ndarray:
         """Unwrapped heading of the path (rad) at ``s``: the total turn since the start plus
         the first heading. Corners count as the turn they make (in ``(-pi, pi]``)."""
-        s = np.clip(np.asarray(s, dtype=np.float64), 0.0, self.length)
-        idx = self._index(s)
-        out = np.empty_like(s)
-        for k, seg in enumerate(self.segments):
-            m = idx == k
-            if m.any():
-                out[m] = self._heading_starts[k] + seg.turning(s[m] - self._starts[k])
-        return out
+        hs = self._heading_starts
+        return self._gather(s, lambda k, seg, loc: hs[k] + seg.turning(loc))
 
     def curvatures(self, s) -> np.ndarray:
         """Signed curvature (1/mm, positive turning left) at ``s``; corners are not counted."""
-        s = np.clip(np.asarray(s, dtype=np.float64), 0.0, self.length)
-        idx = self._index(s)
-        out = np.empty_like(s)
-        for k, seg in enumerate(self.segments):
-            m = idx == k
-            if m.any():
-                out[m] = seg.curvatures(s[m] - self._starts[k])
-        return out
+        return self._gather(s, lambda k, seg, loc: seg.curvatures(loc))
 
     def segment_index(self, s: float) -> int:
         """Index of the segment that holds arc length ``s``."""
-        return int(self._index(np.array([s]))[0])
+        s = min(max(float(s), 0.0), self.length)
+        starts = self._start_list
+        k = len(self.segments) - 1
+        while k > 0 and s < starts[k]:
+            k -= 1
+        return k
 
     def closest(self, px: float, py: float) -> tuple[float, float, float]:
-        """``(contour error, qx, qy)``: distance from ``p`` to the path and the nearest point."""
+        """``(contour error, qx, qy)``: distance from ``p`` to the path and the nearest point.
+
+        Segments whose bounding circle lies farther than the best distance so far are
+        skipped (they cannot hold a nearer point)."""
         best = (math.inf, 0.0, 0.0)
-        for seg in self.segments:
+        for seg, (cx, cy, rad) in zip(self.segments, self._bounds, strict=True):
+            if math.hypot(px - cx, py - cy) - rad >= best[0]:
+                continue
             c = seg.closest(px, py)
             if c[0] < best[0]:
                 best = c
@@ -536,9 +595,19 @@ class Path:
         """Vector form of :meth:`closest` for arrays of points."""
         px = np.asarray(px, dtype=np.float64)
         py = np.asarray(py, dtype=np.float64)
-        d, qx, qy = self.segments[0].closest_many(px, py)
-        for seg in self.segments[1:]:
-            d2, qx2, qy2 = seg.closest_many(px, py)
+        if len(self.segments) == 1:
+            return self.segments[0].closest_many(px, py)
+        # Start from the segment nearest the points' centre; skip every segment whose
+        # bounding circle lies beyond the largest distance found so far for all points.
+        mx, my = float(np.mean(px)), float(np.mean(py))
+        spread = float(np.max(np.hypot(px - mx, py - my))) if px.size else 0.0
+        lower = [math.hypot(mx - cx, my - cy) - rad for cx, cy, rad in self._bounds]
+        order = sorted(range(len(self.segments)), key=lower.__getitem__)
+        d, qx, qy = self.segments[order[0]].closest_many(px, py)
+        for k in order[1:]:
+            if lower[k] - spread >= float(np.max(d)):
+                continue
+            d2, qx2, qy2 = self.segments[k].closest_many(px, py)
             better = d2 < d
             d = np.where(better, d2, d)
             qx = np.where(better, qx2, qx)

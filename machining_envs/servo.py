@@ -391,46 +391,75 @@ class ServoLoop:
         self.designs = tuple(designs)
         self.block = block
         self._umax = truth.command_max_mm_s
+        nb = block
         self._axes = []
+        blocks = []
+        offset = 0
         for axis, design in zip(AXES, self.designs, strict=True):
-            a, b, cy, cu, du = closed_loop(truth, design, axis)
+            a, b, _, cu, du = closed_loop(truth, design, axis)
             n = a.shape[0]
-            # z_j = A^j z_0 + sum_{i<j} A^(j-1-i) B w_i for j = 0..block; w_i = [r_i, TL_i].
+            # z_j = A^j z_0 + sum_{i<j} A^(j-1-i) B w_i (j = 0..block), w_i = [r_i, TL_i].
             powers = [np.eye(n)]
-            for _ in range(block):
+            for _ in range(nb):
                 powers.append(a @ powers[-1])
-            free = np.stack(powers)  # (block+1, n, n)
-            forced = np.zeros((block + 1, n, block, 2))
-            for j in range(1, block + 1):
-                for i in range(j):
-                    forced[j, :, i, :] = powers[j - 1 - i] @ b
+            free = np.stack(powers)  # (nb+1, n, n)
+            pb = np.stack([powers[m] @ b for m in range(nb)])  # A^m B, (nb, n, 2)
+            forced = np.zeros((nb + 1, n, nb, 2))
+            for j in range(1, nb + 1):
+                forced[j, :, :j, :] = pb[j - 1 :: -1].transpose(1, 0, 2)
+            # Output rows: positions after each period (nb), velocities at every instant
+            # (nb + 1), commands (nb), the state at the block's end (n).
+            cu_row = cu[0]
+            u_free = np.einsum("k,jkl->jl", cu_row, free[:-1])
+            u_forced = np.einsum("k,jkim->jim", cu_row, forced[:-1])
+            u_forced[np.arange(nb), np.arange(nb), :] += du[0]
+            rows_free = np.concatenate([free[1:, 0, :], free[:, 1, :], u_free, free[-1]])
+            rows_forced = np.concatenate(
+                [forced[1:, 0], forced[:, 1], u_forced, forced[-1]]
+            )  # (R, nb, 2)
+            blocks.append((rows_free, rows_forced[:, :, 0], rows_forced[:, :, 1], n))
             self._axes.append(
                 {
                     "a": a,
                     "b": b,
-                    "cu": cu[0],
+                    "cu": cu_row,
                     "du": du[0],
-                    "free": free.reshape((block + 1) * n, n),
-                    "forced": forced.reshape((block + 1) * n, block * 2),
                     "n": n,
                     "gu": truth.discrete_axis(axis)[1][:, 0].copy(),
+                    "slice": slice(offset, offset + n),
                 }
             )
+            offset += n
+        self.n_states = offset
+        # One matrix for both axes: columns [z_x, z_y, r_x, TL_x, r_y, TL_y].
+        n_rows = [rf.shape[0] for rf, *_ in blocks]
+        big = np.zeros((sum(n_rows), offset + 4 * nb))
+        r0 = 0
+        for k, (rf, rr, rl, n) in enumerate(blocks):
+            sl = self._axes[k]["slice"]
+            big[r0 : r0 + rf.shape[0], sl] = rf
+            c0 = offset + 2 * nb * k
+            big[r0 : r0 + rf.shape[0], c0 : c0 + nb] = rr
+            big[r0 : r0 + rf.shape[0], c0 + nb : c0 + 2 * nb] = rl
+            self._axes[k]["rows"] = r0
+            r0 += rf.shape[0]
+        self._big = big
+        self._vec = np.zeros(big.shape[1])
         self._tq = [
             truth.inertia_kgm2(ax) / (truth.mm_per_rad * truth.sample_time_s) for ax in AXES
         ]
 
-    def initial_state(self) -> list[np.ndarray]:
-        """Table at rest at its start, controllers at rest."""
-        return [np.zeros(ax["n"]) for ax in self._axes]
+    def initial_state(self) -> np.ndarray:
+        """Table at rest at its start, controllers at rest: ``[z_x, z_y]``."""
+        return np.zeros(self.n_states)
 
-    def run(self, state: list[np.ndarray], ref: np.ndarray, load: np.ndarray):
+    def run(self, state: np.ndarray, ref: np.ndarray, load: np.ndarray):
         """Advance one block.
 
         Parameters
         ----------
-        state : list of two arrays
-            Closed-loop states of X and Y at the block's start (updated in place).
+        state : array
+            Closed-loop states of X then Y at the block's start (updated in place).
         ref : (block, 2) array
             Set points (relative to the start) at the block's periods.
         load : (block, 2) array
@@ -442,28 +471,37 @@ class ServoLoop:
         there; cmd : (block, 2) commands applied; torque : (block, 2) mean motor torques;
         clipped : bool, whether a command reached the limit.
         """
-        n_b = self.block
-        pos = np.empty((n_b, 2))
-        vel = np.empty((n_b, 2))
-        cmd = np.empty((n_b, 2))
-        torque = np.empty((n_b, 2))
+        nb = self.block
+        ns = self.n_states
+        vec = self._vec
+        vec[:ns] = state
+        vec[ns : ns + nb] = ref[:, 0]
+        vec[ns + nb : ns + 2 * nb] = load[:, 0]
+        vec[ns + 2 * nb : ns + 3 * nb] = ref[:, 1]
+        vec[ns + 3 * nb :] = load[:, 1]
+        out = self._big @ vec
+        pos = np.empty((nb, 2))
+        vel = np.empty((nb + 1, 2))
+        cmd = np.empty((nb, 2))
         clipped = False
         for k, ax in enumerate(self._axes):
-            n = ax["n"]
-            w = np.empty(2 * n_b)
-            w[0::2] = ref[:, k]
-            w[1::2] = load[:, k]
-            z = (ax["free"] @ state[k] + ax["forced"] @ w).reshape(n_b + 1, n)
-            u = z[:-1] @ ax["cu"] + ref[:, k] * ax["du"][0]
-            if np.max(np.abs(u)) > self._umax:
+            r0 = ax["rows"]
+            u = out[r0 + 2 * nb + 1 : r0 + 3 * nb + 1]
+            if max(u.max(), -u.min()) > self._umax:
                 clipped = True
-                z, u = self._clipped(ax, state[k], ref[:, k], load[:, k])
-            pos[:, k] = z[1:, 0]
-            vel[:, k] = z[1:, 1]
+                z, u = self._clipped(ax, state[ax["slice"]], ref[:, k], load[:, k])
+                pos[:, k] = z[1:, 0]
+                vel[:, k] = z[:, 1]
+                state[ax["slice"]] = z[-1]
+            else:
+                pos[:, k] = out[r0 : r0 + nb]
+                vel[:, k] = out[r0 + nb : r0 + 2 * nb + 1]
+                state[ax["slice"]] = out[r0 + 3 * nb + 1 : r0 + 3 * nb + 1 + ax["n"]]
             cmd[:, k] = u
-            state[k][:] = z[-1]
-            torque[:, k] = self._tq[k] * np.diff(z[:, 1]) + load[:, k]
-        return pos, vel, cmd, torque, clipped
+        torque = np.diff(vel, axis=0)
+        torque *= self._tq
+        torque += load
+        return pos, vel[1:], cmd, torque, clipped
 
     def _clipped(self, ax, z0, ref, load):
         a, b, cu, du = ax["a"], ax["b"], ax["cu"], ax["du"]

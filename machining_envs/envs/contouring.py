@@ -40,6 +40,7 @@ VELOCITY_SCALE_MM_S = 100.0
 #: at 5 kHz), as the mean reference velocity over each horizon.
 PREVIEW_TICKS = (1, 10, 50)
 
+_CHUNK = 4096
 _ERR_LIM = 100.0
 _VEL_LIM = 10.0
 _POS_LIM = 20.0
@@ -124,9 +125,10 @@ def _positive(name: str, value, lo: float, hi: float) -> float:
 
 
 def _circle_info(path: Path) -> dict:
+    """The circle's centre and radius for a one-arc path (a circle test), else nothing."""
     c = path.circle()
     if c is None:
-        return {"circle_cx_mm": math.nan, "circle_cy_mm": math.nan, "circle_radius_mm": math.nan}
+        return {}
     return {"circle_cx_mm": c[0], "circle_cy_mm": c[1], "circle_radius_mm": c[2]}
 
 
@@ -201,8 +203,8 @@ class ContouringEnv(gym.Env):
     ``y_ref_mm``, ``contour_error_mm``, ``tracking_error_mm``, ``vx_mm_s``, ``vy_mm_s``,
     ``torque_x_Nm``, ``torque_y_Nm``, ``torque_sq_Nm2`` (sum of squares), ``load_x_Nm``,
     ``load_y_Nm``, ``path_s_mm`` (set point's arc length), ``path_length_mm``, ``segment``
-    (path segment of the set point), ``feed_mm_s``, ``circle_cx_mm``, ``circle_cy_mm``,
-    ``circle_radius_mm`` (NaN unless the path is one arc), ``reference_end_s``,
+    (path segment of the set point), ``feed_mm_s`` (0 for a step command), ``reference_end_s``, ``circle_cx_mm``,
+    ``circle_cy_mm`` and ``circle_radius_mm`` (only when the path is one arc),
     ``scenario``, and ``machining_time_s`` (the cycle time) once finished.
 
     ## Version History
@@ -314,15 +316,11 @@ class ContouringEnv(gym.Env):
         self._t_max = t_max
         self._n_max = int(math.ceil(t_max / ts - 1e-9))
         self._t_finish = self._ref_end + sc.dwell_s
-        n_ref = self._n_max + PREVIEW_TICKS[-1] + 1
-        if sc.is_step:
-            s = np.full(n_ref, path.length)
-        else:
-            s = np.minimum(np.arange(n_ref) * (sc.feed_mm_s * ts), path.length)
-        rx, ry = path.points(s)
-        self._rx, self._ry = rx.tolist(), ry.tolist()
-        self._s = s.tolist()
-        self._seg = path._index(s).tolist()
+        # Set points are computed in chunks as the run goes (a long path's whole schedule
+        # would make every reset slow): ``_extend`` keeps them ahead of the preview.
+        self._n_ref = self._n_max + PREVIEW_TICKS[-1] + 1
+        self._rx, self._ry, self._s, self._seg = [], [], [], []
+        self._extend(PREVIEW_TICKS[-1] + 1)
         self._end = path.end
         x0, y0 = path.start
         self.plant.reset(x0, y0)
@@ -340,6 +338,25 @@ class ContouringEnv(gym.Env):
         if self.render_mode is not None:
             self._record(info)
         return self._obs(x0, y0, 0.0, 0.0), info
+
+    def _extend(self, n_needed: int) -> None:
+        """Compute set points up to index ``n_needed`` (exclusive), a chunk at a time."""
+        start = len(self._rx)
+        stop = min(self._n_ref, max(n_needed, start + _CHUNK))
+        if stop <= start:
+            return
+        sc = self.scenario
+        path = self._path
+        k = np.arange(start, stop)
+        if sc.is_step:
+            s = np.full(k.size, path.length)
+        else:
+            s = np.minimum(k * (sc.feed_mm_s * self._ts), path.length)
+        rx, ry = path.points(s)
+        self._rx += rx.tolist()
+        self._ry += ry.tolist()
+        self._s += s.tolist()
+        self._seg += path._index(s).tolist()
 
     def _advance_load(self, t: float) -> None:
         loads = self._loads
@@ -361,6 +378,8 @@ class ContouringEnv(gym.Env):
         s = self.plant.step(ux, uy, lx, ly)
         self._k += 1
         k = self._k
+        if k + PREVIEW_TICKS[-1] >= len(self._rx):
+            self._extend(k + PREVIEW_TICKS[-1] + 1)
         t = k * self._ts
         x, y = s.x_mm, s.y_mm
         diverged = not (
@@ -461,7 +480,7 @@ class ContouringEnv(gym.Env):
             "path_s_mm": self._s[k],
             "path_length_mm": self._path.length,
             "segment": self._seg[k],
-            "feed_mm_s": sc.feed_mm_s,
+            "feed_mm_s": 0.0 if sc.is_step else sc.feed_mm_s,
             "reference_end_s": self._ref_end,
             "scenario": sc.name,
         }
