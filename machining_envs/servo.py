@@ -435,7 +435,7 @@ class ServoLoop:
         n_rows = [rf.shape[0] for rf, *_ in blocks]
         big = np.zeros((sum(n_rows), offset + 4 * nb))
         r0 = 0
-        for k, (rf, rr, rl, n) in enumerate(blocks):
+        for k, (rf, rr, rl, _) in enumerate(blocks):
             sl = self._axes[k]["slice"]
             big[r0 : r0 + rf.shape[0], sl] = rf
             c0 = offset + 2 * nb * k

@@ -45,7 +45,12 @@ def test_zoh_step_matches_an_ode_solver_under_random_inputs():
         for k in range(n):
             w = np.array([u[k, i], tl[k, i]])
             sol = solve_ivp(
-                lambda t, z: a @ z + b @ w, (0, ts), z, rtol=1e-12, atol=1e-12, method="DOP853"
+                lambda t, z, a=a, b=b, w=w: a @ z + b @ w,
+                (0, ts),
+                z,
+                rtol=1e-12,
+                atol=1e-12,
+                method="DOP853",
             )
             z = sol.y[:, -1]
             np.testing.assert_allclose(ours[k, 2 * i : 2 * i + 2], z, rtol=1e-9, atol=1e-9)
