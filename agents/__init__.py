@@ -8,6 +8,17 @@ SB3 models run under one harness (and under SB3's own ``evaluate_policy``)::
 
 from agents.adaptive import VariableGainPI
 from agents.base import Agent
+from agents.feed import ConstantOverride
+from agents.hinf import HInf2DOF
 from agents.pid import ConstantFeed, FixedGainPI
+from agents.position import PIPosition
 
-__all__ = ["Agent", "ConstantFeed", "FixedGainPI", "VariableGainPI"]
+__all__ = [
+    "Agent",
+    "ConstantFeed",
+    "FixedGainPI",
+    "VariableGainPI",
+    "ConstantOverride",
+    "HInf2DOF",
+    "PIPosition",
+]

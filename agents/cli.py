@@ -16,6 +16,7 @@ __all__ = ["main", "REPRODUCTIONS", "reproduction"]
 #: returns a list of dicts with a boolean ``"match"`` per experiment.
 REPRODUCTIONS = {
     "turning": "agents.reproduce:reproduce_turning",
+    "contouring": "agents.reproduce_contouring:reproduce_contouring",
 }
 
 

@@ -25,7 +25,7 @@ __all__ = [
 ]
 
 #: Training paths the baseline is calibrated on: ``train`` scenarios drawn with these seeds.
-CALIBRATION_SEEDS = tuple(range(40))
+CALIBRATION_SEEDS = tuple(range(200))
 
 #: servo -> the largest constant override keeping the default tolerance on every path of
 #: ``CALIBRATION_SEEDS`` (default parameters, tolerance and decision interval), rounded down
@@ -66,6 +66,7 @@ def calibrate_constant_override(
             base.reset(seed=int(s), options={"scenario": "train"})
             scenarios.append(base.scenario)
         hi = base.override_max
+        seeds = list(seeds)
         for k, sc in enumerate(scenarios):
             if _max_error(env, sc, hi) <= base.tolerance_mm:
                 continue
@@ -76,9 +77,9 @@ def calibrate_constant_override(
                     lo_ok = mid
                 else:
                     hi_bad = mid
-            hi = math.floor(lo_ok / resolution) * resolution
+            hi = math.floor(lo_ok / resolution + 1e-9) * resolution
             if verbose:
-                print(f"path {k}: override <= {hi:.2f}")
+                print(f"path {k} (seed {seeds[k]}): override <= {hi:.2f}", flush=True)
         return float(hi)
     finally:
         env.close()

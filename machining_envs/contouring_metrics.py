@@ -22,11 +22,13 @@ def circle_radius_errors(traj: dict, steady_fraction: float = STEADY_FRACTION):
     """``(radius_reduction_mm, ellipse_mm)`` of a circle run, or NaNs if not a circle.
 
     With ``rho = |p - c|`` the table's distance from the circle's centre over the steady
-    part (set point past ``steady_fraction`` of the path and not yet at its end):
-    ``radius_reduction = R - mean(rho)`` (positive when the circle shrinks; for a
-    first-order axis of time constant T, about ``F^2 T^2 / (2R)``) and
-    ``ellipse = (max(rho) - min(rho)) / 2`` (half the difference of the axes when the two
-    axes' responses differ).
+    part (set point past ``steady_fraction`` of the path and not yet at its end; on a full
+    circle that is three quarters of a turn, so it holds both axes of the ellipse):
+    ``radius_reduction = R - (max(rho) + min(rho)) / 2`` and
+    ``ellipse = (max(rho) - min(rho)) / 2``. When the axes' steady responses differ
+    (gains ``Rx, Ry``, phases ``psi_x, psi_y``) the table runs an ellipse (paper §3.2) of
+    half-axes ``a, b``: these are ``R - (a + b) / 2`` (positive when the circle shrinks; for
+    first-order axes of time constant T about ``F^2 T^2 / (2R)``) and ``(a - b) / 2``.
     """
     if "circle_radius_mm" not in traj:
         return math.nan, math.nan
@@ -44,7 +46,8 @@ def circle_radius_errors(traj: dict, steady_fraction: float = STEADY_FRACTION):
     x = np.asarray(traj["x_mm"], dtype=np.float64)[steady]
     y = np.asarray(traj["y_mm"], dtype=np.float64)[steady]
     rho = np.hypot(x - cx, y - cy)
-    return float(r - rho.mean()), float(0.5 * (rho.max() - rho.min()))
+    hi, lo = float(rho.max()), float(rho.min())
+    return r - 0.5 * (hi + lo), 0.5 * (hi - lo)
 
 
 def contouring_metrics(traj: dict) -> dict[str, float]:

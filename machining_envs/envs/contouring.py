@@ -39,6 +39,7 @@ VELOCITY_SCALE_MM_S = 100.0
 #: The observation previews the set point this many servo periods ahead (0.2, 2 and 10 ms
 #: at 5 kHz), as the mean reference velocity over each horizon.
 PREVIEW_TICKS = (1, 10, 50)
+_P0, _P1, _P2 = PREVIEW_TICKS
 
 _CHUNK = 4096
 _ERR_LIM = 100.0
@@ -281,7 +282,6 @@ class ContouringEnv(gym.Env):
         lim = [_ERR_LIM] * 2 + [_VEL_LIM] * 2 + [_POS_LIM] * 2 + [_PRE_LIM] * 6 + [1.0] * 2
         high = np.array(lim, dtype=np.float32)
         self.observation_space = spaces.Box(-high, high, dtype=np.float32)
-        self._bounds = ((-high).tolist(), high.tolist())
         self.scenario: ContouringScenario | None = None
         self.plant: ContouringPlant | None = None
 
@@ -318,7 +318,6 @@ class ContouringEnv(gym.Env):
         self._t_finish = self._ref_end + sc.dwell_s
         # Set points are computed in chunks as the run goes (a long path's whole schedule
         # would make every reset slow): ``_extend`` keeps them ahead of the preview.
-        self._n_ref = self._n_max + PREVIEW_TICKS[-1] + 1
         self._rx, self._ry, self._s, self._seg = [], [], [], []
         self._extend(PREVIEW_TICKS[-1] + 1)
         self._end = path.end
@@ -342,9 +341,7 @@ class ContouringEnv(gym.Env):
     def _extend(self, n_needed: int) -> None:
         """Compute set points up to index ``n_needed`` (exclusive), a chunk at a time."""
         start = len(self._rx)
-        stop = min(self._n_ref, max(n_needed, start + _CHUNK))
-        if stop <= start:
-            return
+        stop = max(n_needed, start + _CHUNK)
         sc = self.scenario
         path = self._path
         k = np.arange(start, stop)
@@ -432,24 +429,28 @@ class ContouringEnv(gym.Env):
         rx, ry = self._rx, self._ry
         r0x, r0y = rx[k], ry[k]
         ps = self._pre_scale
+        # Only the errors and positions can leave their bounds (velocities are limited by
+        # the command range, preview values by the feed range).
+        ex = (r0x - x) / ERROR_SCALE_MM
+        ey = (r0y - y) / ERROR_SCALE_MM
+        px = r0x / POSITION_SCALE_MM
+        py = r0y / POSITION_SCALE_MM
         o = [
-            (r0x - x) / ERROR_SCALE_MM,
-            (r0y - y) / ERROR_SCALE_MM,
+            min(max(ex, -_ERR_LIM), _ERR_LIM),
+            min(max(ey, -_ERR_LIM), _ERR_LIM),
             vx / VELOCITY_SCALE_MM_S,
             vy / VELOCITY_SCALE_MM_S,
-            r0x / POSITION_SCALE_MM,
-            r0y / POSITION_SCALE_MM,
+            min(max(px, -_POS_LIM), _POS_LIM),
+            min(max(py, -_POS_LIM), _POS_LIM),
+            (rx[k + _P0] - r0x) * ps[0],
+            (rx[k + _P1] - r0x) * ps[1],
+            (rx[k + _P2] - r0x) * ps[2],
+            (ry[k + _P0] - r0y) * ps[0],
+            (ry[k + _P1] - r0y) * ps[1],
+            (ry[k + _P2] - r0y) * ps[2],
+            *self._prev_action,
         ]
-        o += [(rx[k + n] - r0x) * c for n, c in zip(PREVIEW_TICKS, ps, strict=True)]
-        o += [(ry[k + n] - r0y) * c for n, c in zip(PREVIEW_TICKS, ps, strict=True)]
-        o += self._prev_action
-        return np.array(
-            [
-                lo if v < lo else (hi if v > hi else v)
-                for v, lo, hi in zip(o, *self._bounds, strict=True)
-            ],
-            dtype=np.float32,
-        )
+        return np.array(o, dtype=np.float32)
 
     def _info(self, t, ux, uy, x, y, vx, vy, tx, ty, clipped, diverged, finished) -> dict:
         k = self._k
