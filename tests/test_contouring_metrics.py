@@ -122,7 +122,8 @@ def test_contouring_metrics_of_a_hand_made_run():
 def test_constant_override_baseline_keeps_the_tolerance_on_training_paths(servo, n_paths):
     """The stored baseline override keeps the default tolerance on training paths it was
     calibrated on (a spread sample of them, always including the path that bounds it), and
-    running 10 % faster breaks the tolerance on at least one of them."""
+    it is the largest such override to the calibration's resolution: 0.02 more breaks the
+    tolerance on the bounding path."""
     env = gym.make("machining_envs/ContouringFeed-v0", servo=servo)
     base = env.unwrapped
     agent = ConstantOverride.from_env(env)
@@ -139,7 +140,7 @@ def test_constant_override_baseline_keeps_the_tolerance_on_training_paths(servo,
     faster = []
     for seed in BINDING_SEEDS[servo]:
         base.reset(seed=seed, options={"scenario": "train"})
-        faster.append(_max_error(env, base.scenario, 1.1 * agent.override))
+        faster.append(_max_error(env, base.scenario, agent.override + 0.02))
     assert max(faster) > base.tolerance_mm
     print(
         f"{servo}: override {agent.override}, worst {1000 * worst:.2f} um of "
@@ -149,4 +150,4 @@ def test_constant_override_baseline_keeps_the_tolerance_on_training_paths(servo,
 
 #: The calibration paths whose bisection set the stored override (from ``python -m
 #: agents.feed``'s log).
-BINDING_SEEDS = {"pi": (7,), "hinf": (12,)}
+BINDING_SEEDS = {"pi": (7,), "hinf": (197,)}

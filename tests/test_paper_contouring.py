@@ -54,3 +54,31 @@ def test_cli_registry_names_the_reproduction():
     assert reproduction("contouring") is reproduce_contouring
     with pytest.raises(SystemExit):
         main(["reproduce", "contouring", "--sensor-gain", "15"])
+
+
+def test_pi_circle_matches_the_papers_ellipse_formula(repro):
+    """Paper §3.2: steady outputs x = Rx cos(wt - psi_x), y = Ry sin(wt - psi_y) trace an
+    ellipse with half-axes a, b = (sqrt(Rx^2 + Ry^2 + 2 Rx Ry cos d) +- sqrt(Rx^2 + Ry^2 -
+    2 Rx Ry cos d)) / 2, d = psi_x - psi_y. Gains and phases here come from the PI loops'
+    discrete frequency responses at w = F / R; the env's circle must show R - (a + b)/2
+    and (a - b)/2 (within 2 %: the discrete set point and the finite run)."""
+    import numpy as np
+
+    from machining_envs.plants.contouring import ContouringParams
+    from machining_envs.servo import closed_loop, pi_design
+
+    p = ContouringParams()
+    w = 50.0 / 10.0
+    gains = []
+    for axis in "xy":
+        a, b, cy, _, _ = closed_loop(p, pi_design(p, axis))
+        z = np.exp(1j * w * p.sample_time_s)
+        gains.append((cy @ np.linalg.solve(z * np.eye(a.shape[0]) - a, b[:, :1]))[0, 0])
+    rx, ry = abs(gains[0]) * 10.0, abs(gains[1]) * 10.0
+    d = np.angle(gains[0]) - np.angle(gains[1])
+    s1 = np.sqrt(rx**2 + ry**2 + 2 * rx * ry * np.cos(d))
+    s2 = np.sqrt(rx**2 + ry**2 - 2 * rx * ry * np.cos(d))
+    big, small = 0.5 * (s1 + s2), 0.5 * (s1 - s2)
+    r = repro[1]["paper_circle"]["pi"]
+    assert r["radius_reduction_mm"] == pytest.approx(10.0 - 0.5 * (big + small), rel=0.02)
+    assert r["ellipse_mm"] == pytest.approx(0.5 * (big - small), rel=0.02)
