@@ -114,8 +114,11 @@ class Evaluation:
     def to_csv(self, path) -> None:
         if not self.rows:
             raise ValueError("no rows to write")
+        # Envs report different metrics: the columns are every key, in order of first use
+        # (cells a row lacks stay empty).
+        fields = list(dict.fromkeys(k for r in self.rows for k in r))
         with open(path, "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=list(self.rows[0]))
+            w = csv.DictWriter(fh, fieldnames=fields, restval="")
             w.writeheader()
             w.writerows(self.rows)
 
