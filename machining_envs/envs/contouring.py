@@ -429,8 +429,8 @@ class ContouringEnv(gym.Env):
         rx, ry = self._rx, self._ry
         r0x, r0y = rx[k], ry[k]
         ps = self._pre_scale
-        # Only the errors and positions can leave their bounds (velocities are limited by
-        # the command range, preview values by the feed range).
+        # The preview cannot leave its bounds (feeds are at most 1000 mm/s); the rest can
+        # (a diverging run, or a drive overridden to more than 1000 mm/s).
         ex = (r0x - x) / ERROR_SCALE_MM
         ey = (r0y - y) / ERROR_SCALE_MM
         px = r0x / POSITION_SCALE_MM
@@ -438,8 +438,8 @@ class ContouringEnv(gym.Env):
         o = [
             min(max(ex, -_ERR_LIM), _ERR_LIM),
             min(max(ey, -_ERR_LIM), _ERR_LIM),
-            vx / VELOCITY_SCALE_MM_S,
-            vy / VELOCITY_SCALE_MM_S,
+            min(max(vx / VELOCITY_SCALE_MM_S, -_VEL_LIM), _VEL_LIM),
+            min(max(vy / VELOCITY_SCALE_MM_S, -_VEL_LIM), _VEL_LIM),
             min(max(px, -_POS_LIM), _POS_LIM),
             min(max(py, -_POS_LIM), _POS_LIM),
             (rx[k + _P0] - r0x) * ps[0],
