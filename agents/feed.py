@@ -61,12 +61,12 @@ def calibrate_constant_override(
     env = gym.make("machining_envs/ContouringFeed-v0", **(env_kwargs or {}))
     try:
         base = unwrap(env)
+        seeds = list(seeds)
         scenarios = []
         for s in seeds:
             base.reset(seed=int(s), options={"scenario": "train"})
             scenarios.append(base.scenario)
         hi = base.override_max
-        seeds = list(seeds)
         for k, sc in enumerate(scenarios):
             if _max_error(env, sc, hi) <= base.tolerance_mm:
                 continue
@@ -102,7 +102,7 @@ class ConstantOverride(Agent):
 
     ``from_env`` takes the override from :data:`BASELINE_OVERRIDE` when the env has the
     default parameters, tolerance and decision interval, and calibrates it on the training
-    paths otherwise (once per setting and process; a minute or so).
+    paths otherwise (once per setting and process; a few minutes).
     """
 
     state_size = 0
