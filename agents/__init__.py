@@ -9,9 +9,12 @@ SB3 models run under one harness (and under SB3's own ``evaluate_policy``)::
 from agents.adaptive import VariableGainPI
 from agents.base import Agent
 from agents.drilling import PD, NoControl
+from agents.feed import ConstantOverride
+from agents.hinf import HInf2DOF
 from agents.integral import FixedGainIntegral, IntegralACC, MillingConstantFeed
 from agents.peck import PeckDrilling
 from agents.pid import ConstantFeed, FixedGainPI
+from agents.position import PIPosition
 from agents.sliding_mode import SlidingMode
 
 __all__ = [
@@ -22,5 +25,8 @@ __all__ = [
     "FixedGainIntegral",
     "IntegralACC",
     "MillingConstantFeed",
+    "ConstantOverride",
+    "HInf2DOF",
+    "PIPosition",
 ]
 __all__ += ["NoControl", "PD", "PeckDrilling", "SlidingMode"]

@@ -7,6 +7,7 @@ to the output folder, plus the paper reproduction figure.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -16,10 +17,14 @@ import gymnasium as gym
 
 from agents.adaptive import VariableGainPI
 from agents.drilling import PD, NoControl
+from agents.feed import ConstantOverride
 from agents.harness import Evaluation, agent_name, evaluate, rollout
+from agents.hinf import HInf2DOF
 from agents.integral import FixedGainIntegral, IntegralACC, MillingConstantFeed
 from agents.pid import ConstantFeed, FixedGainPI
+from agents.position import PIPosition
 from agents.sliding_mode import SlidingMode
+from machining_envs.contouring_metrics import contouring_metrics
 from machining_envs.drilling_metrics import drilling_metrics
 from machining_envs.metrics import regulation_metrics
 from machining_envs.milling_metrics import milling_metrics
@@ -137,6 +142,59 @@ BENCHMARKS = (
             ("torque_std_rel", "torque std / reference"),
             ("peak_torque_rel", "peak torque / breakage torque"),
             ("breakage", "breakage rate"),
+        ),
+    ),
+    BenchmarkSpec(
+        "machining_envs/Contouring-v0",
+        (PIPosition.from_env, HInf2DOF.from_env),
+        ("paper_circle", "paper_involute"),
+        "test",
+        "paper_circle",
+        metrics_fn=contouring_metrics,
+        table_metrics=(
+            "max_contour_error_mm",
+            "rms_contour_error_mm",
+            "max_tracking_error_mm",
+            "radius_reduction_mm",
+            "ellipse_mm",
+            "cycle_time_s",
+            "effort_rms_Nm",
+            "finished",
+            "diverged",
+        ),
+        plot_main=("contour_error_mm", None, "contour error (mm)"),
+        plot_lower=("tracking_error_mm", "tracking error (mm)"),
+        plot_context=("path_s_mm", "set point along the path (mm)"),
+        bar_metrics=(
+            ("max_contour_error_mm", "largest contour error (mm)"),
+            ("rms_contour_error_mm", "RMS contour error (mm)"),
+            ("cycle_time_s", "cycle time (s)"),
+            ("effort_rms_Nm", "RMS motor torque (N m)"),
+        ),
+    ),
+    BenchmarkSpec(
+        "machining_envs/ContouringFeed-v0",
+        (ConstantOverride.from_env, functools.partial(ConstantOverride.from_env, override=1.0)),
+        ("paper_circle", "paper_involute"),
+        "test",
+        "paper_involute",
+        metrics_fn=contouring_metrics,
+        table_metrics=(
+            "cycle_time_s",
+            "max_contour_error_mm",
+            "rms_contour_error_mm",
+            "time_over_tolerance",
+            "effort_rms_Nm",
+            "finished",
+            "diverged",
+        ),
+        plot_main=("peak_contour_error_mm", "tolerance_mm", "contour error (mm)"),
+        plot_lower=("feed_override", "feed override"),
+        plot_context=("path_s_mm", "set point along the path (mm)"),
+        bar_metrics=(
+            ("cycle_time_s", "cycle time (s)"),
+            ("max_contour_error_mm", "largest contour error (mm)"),
+            ("time_over_tolerance", "share of steps over tolerance"),
         ),
     ),
 )

@@ -18,6 +18,7 @@ REPRODUCTIONS = {
     "turning": "agents.reproduce:reproduce_turning",
     "milling": "agents.reproduce_milling:reproduce_milling",
     "drilling": "agents.reproduce_drilling:reproduce_drilling",
+    "contouring": "agents.reproduce_contouring:reproduce_contouring",
 }
 
 

@@ -12,11 +12,16 @@ from __future__ import annotations
 
 from gymnasium.envs.registration import register, registry
 
+from machining_envs.contouring_scenarios import CONTOURING_SCENARIOS, ContouringScenario
 from machining_envs.drilling_scenarios import DRILLING_SCENARIOS, DrillingScenario
+from machining_envs.envs.contouring import ContouringEnv, ContouringReward
+from machining_envs.envs.contouring_feed import ContouringFeedEnv, FeedReward
 from machining_envs.envs.end_milling import EndMillingEnv, MillingReward
 from machining_envs.envs.micro_drilling import DrillingReward, MicroDrillingEnv
 from machining_envs.envs.turning import TurningEnv, TurningReward
 from machining_envs.milling_scenarios import MILLING_SCENARIOS, MillingScenario
+from machining_envs.paths import Path
+from machining_envs.plants.contouring import ContouringParams
 from machining_envs.plants.drilling import DrillingParams
 from machining_envs.plants.milling import MillingParams
 from machining_envs.plants.turning import TurningParams
@@ -24,6 +29,14 @@ from machining_envs.scenarios import TURNING_SCENARIOS, TurningScenario
 from machining_envs.workpieces import DepthProfile
 
 __all__ = [
+    "CONTOURING_SCENARIOS",
+    "ContouringEnv",
+    "ContouringFeedEnv",
+    "FeedReward",
+    "ContouringParams",
+    "ContouringReward",
+    "ContouringScenario",
+    "Path",
     "DepthProfile",
     "TURNING_SCENARIOS",
     "TurningEnv",
@@ -49,6 +62,8 @@ _ENTRY_POINTS = {
     "machining_envs/Turning-v0": "machining_envs.envs.turning:TurningEnv",
     "machining_envs/EndMilling-v0": "machining_envs.envs.end_milling:EndMillingEnv",
     "machining_envs/MicroDrilling-v0": "machining_envs.envs.micro_drilling:MicroDrillingEnv",
+    "machining_envs/Contouring-v0": "machining_envs.envs.contouring:ContouringEnv",
+    "machining_envs/ContouringFeed-v0": "machining_envs.envs.contouring_feed:ContouringFeedEnv",
 }
 ENV_IDS = tuple(_ENTRY_POINTS)
 

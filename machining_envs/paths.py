@@ -1,0 +1,635 @@
+r"""Toolpaths for two-axis contouring and the exact contour error.
+
+A :class:`Path` is a chain of segments (straight lines, circular arcs, involutes of a
+circle) parametrised by arc length ``s`` (mm). The reference of a contouring run moves
+along it at the feed ``F``: ``s = F t``. The **contour error** is the distance from the
+tool's actual position to the path (the shortest distance to any of its segments), not the
+tracking error to the current set point; each segment computes it in closed form:
+
+- line: the distance to the segment (projection clamped to its ends);
+- arc: ``| |P - C| - R |`` when ``P`` lies in the arc's angular range, otherwise the
+  distance to the nearer end;
+- involute of a circle of radius ``R`` centred at ``C``: every normal of an involute is
+  tangent to its base circle, so the feet of the normals from ``P`` are where the tangents
+  from ``P`` touch the base circle, ``phi = alpha +- arccos(R / rho)`` with
+  ``P - C = rho (cos alpha, sin alpha)``; the distance is the least over those feet (every
+  turn that lies in the segment's range) and the two ends.
+
+The paper's paths (Choi et al., seed 004, §3 and §5): :meth:`Path.paper_corner`,
+:meth:`Path.paper_circle` and :meth:`Path.paper_involute`; random tangent-continuous chains
+of lines and arcs for training: :meth:`Path.random_smooth`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+__all__ = ["Line", "Arc", "Involute", "Path", "PAPER_CORNER_FEED_MM_S", "PAPER_FEED_MM_S"]
+
+#: Feed of the paper's corner test, mm/s (§5, Fig. 6).
+PAPER_CORNER_FEED_MM_S = 5.0
+#: Feed of the paper's circle and involute tests, mm/s (§5, Fig. 7-8).
+PAPER_FEED_MM_S = 50.0
+
+_TWO_PI = 2.0 * math.pi
+
+
+def _finite(name: str, value) -> float:
+    ok = isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool)
+    if not (ok and math.isfinite(value)):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _point(name: str, p) -> tuple[float, float]:
+    try:
+        x, y = p
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a pair (x, y) in mm, got {p!r}") from None
+    return _finite(f"{name}[0]", x), _finite(f"{name}[1]", y)
+
+
+class Line:
+    """Straight segment from ``start`` to ``end`` (mm)."""
+
+    kind = "line"
+
+    def __init__(self, start, end) -> None:
+        self.start = _point("start", start)
+        self.end = _point("end", end)
+        dx, dy = self.end[0] - self.start[0], self.end[1] - self.start[1]
+        self.length = math.hypot(dx, dy)
+        if not self.length > 1e-9:
+            raise ValueError(f"a Line needs distinct ends, got {start!r} and {end!r}")
+        self._u = (dx / self.length, dy / self.length)
+        self.heading0 = math.atan2(dy, dx)
+
+    def points(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return self.start[0] + self._u[0] * s, self.start[1] + self._u[1] * s
+
+    def point(self, s: float) -> tuple[float, float]:
+        return self.start[0] + self._u[0] * s, self.start[1] + self._u[1] * s
+
+    def turning(self, s: np.ndarray) -> np.ndarray:
+        """Heading change since the segment's start, rad."""
+        return np.zeros_like(s)
+
+    def curvatures(self, s: np.ndarray) -> np.ndarray:
+        return np.zeros_like(s)
+
+    @property
+    def heading1(self) -> float:
+        return self.heading0
+
+    def closest(self, px: float, py: float) -> tuple[float, float, float]:
+        """``(distance, qx, qy)``: the nearest point ``q`` of the segment to ``p``."""
+        x0, y0 = self.start
+        ux, uy = self._u
+        t = (px - x0) * ux + (py - y0) * uy
+        t = 0.0 if t < 0.0 else (self.length if t > self.length else t)
+        qx, qy = x0 + ux * t, y0 + uy * t
+        return math.hypot(px - qx, py - qy), qx, qy
+
+    def closest_many(self, px: np.ndarray, py: np.ndarray):
+        x0, y0 = self.start
+        ux, uy = self._u
+        t = np.minimum(np.maximum((px - x0) * ux + (py - y0) * uy, 0.0), self.length)
+        qx, qy = x0 + ux * t, y0 + uy * t
+        return np.hypot(px - qx, py - qy), qx, qy
+
+    def __repr__(self) -> str:
+        return f"Line({self.start}, {self.end})"
+
+
+class Arc:
+    """Circular arc: centre ``center`` (mm), ``radius`` (mm), from ``start_angle`` (rad)
+    through ``sweep`` (rad; positive counter-clockwise, ``|sweep| <= 2 pi``)."""
+
+    kind = "arc"
+
+    def __init__(self, center, radius: float, start_angle: float, sweep: float) -> None:
+        self.center = _point("center", center)
+        self.radius = _finite("radius", radius)
+        if not self.radius > 0:
+            raise ValueError(f"radius must be > 0 mm, got {radius!r}")
+        self.start_angle = _finite("start_angle", start_angle)
+        self.sweep = _finite("sweep", sweep)
+        if not 0 < abs(self.sweep) <= _TWO_PI + 1e-12:
+            raise ValueError(f"sweep must satisfy 0 < |sweep| <= 2 pi rad, got {sweep!r}")
+        self.sign = 1.0 if self.sweep > 0 else -1.0
+        self.length = self.radius * abs(self.sweep)
+        self.start = self._at(self.start_angle)
+        self.end = self._at(self.start_angle + self.sweep)
+        self.heading0 = self.start_angle + self.sign * 0.5 * math.pi
+
+    def _at(self, ang: float) -> tuple[float, float]:
+        return (
+            self.center[0] + self.radius * math.cos(ang),
+            self.center[1] + self.radius * math.sin(ang),
+        )
+
+    def points(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        ang = self.start_angle + self.sign * s / self.radius
+        return (
+            self.center[0] + self.radius * np.cos(ang),
+            self.center[1] + self.radius * np.sin(ang),
+        )
+
+    def turning(self, s: np.ndarray) -> np.ndarray:
+        return self.sign * s / self.radius
+
+    def point(self, s: float) -> tuple[float, float]:
+        return self._at(self.start_angle + self.sign * s / self.radius)
+
+    def curvatures(self, s: np.ndarray) -> np.ndarray:
+        return np.full_like(s, self.sign / self.radius)
+
+    @property
+    def heading1(self) -> float:
+        return self.heading0 + self.sweep
+
+    def closest(self, px: float, py: float) -> tuple[float, float, float]:
+        cx, cy = self.center
+        dx, dy = px - cx, py - cy
+        rho = math.hypot(dx, dy)
+        rel = (math.atan2(dy, dx) - self.start_angle) * self.sign % _TWO_PI
+        if rel <= abs(self.sweep) and rho > 0.0:
+            k = self.radius / rho
+            return abs(rho - self.radius), cx + dx * k, cy + dy * k
+        if rho == 0.0:  # every point of the arc is R away; the start is one of them
+            return self.radius, self.start[0], self.start[1]
+        d0 = math.hypot(px - self.start[0], py - self.start[1])
+        d1 = math.hypot(px - self.end[0], py - self.end[1])
+        return (d0, *self.start) if d0 <= d1 else (d1, *self.end)
+
+    def closest_many(self, px: np.ndarray, py: np.ndarray):
+        cx, cy = self.center
+        dx, dy = px - cx, py - cy
+        rho = np.hypot(dx, dy)
+        rel = np.mod((np.arctan2(dy, dx) - self.start_angle) * self.sign, _TWO_PI)
+        inside = (rel <= abs(self.sweep)) & (rho > 0.0)
+        if inside.all():
+            k = self.radius / rho
+            return np.abs(rho - self.radius), cx + dx * k, cy + dy * k
+        k = self.radius / np.where(rho > 0.0, rho, 1.0)
+        d = np.abs(rho - self.radius)
+        qx, qy = cx + dx * k, cy + dy * k
+        d0 = np.hypot(px - self.start[0], py - self.start[1])
+        d1 = np.hypot(px - self.end[0], py - self.end[1])
+        use0 = d0 <= d1
+        ex = np.where(use0, self.start[0], self.end[0])
+        ey = np.where(use0, self.start[1], self.end[1])
+        ed = np.where(use0, d0, d1)
+        return np.where(inside, d, ed), np.where(inside, qx, ex), np.where(inside, qy, ey)
+
+    def __repr__(self) -> str:
+        return f"Arc(center={self.center}, radius={self.radius}, start_angle={self.start_angle}, sweep={self.sweep})"
+
+
+class Involute:
+    r"""Involute of the circle of ``radius`` R centred at ``center`` (paper §3.3):
+
+    .. math::
+
+        X &= R(\cos(\theta + \theta_1) + \theta \sin(\theta + \theta_1)) + X_0 \\
+        Y &= R(\sin(\theta + \theta_1) - \theta \cos(\theta + \theta_1)) + Y_0
+
+    for ``theta_start <= theta <= theta_end`` (rad, ``>= 0``). The arc length from
+    ``theta = 0`` is ``R theta^2 / 2``, so the constant feed ``F`` runs it with
+    ``theta = sqrt(2 F t / R)`` from ``theta = 0`` (the OCR'd ``sqrt(2 pi / R) t`` corrected).
+    """
+
+    kind = "involute"
+
+    def __init__(
+        self,
+        center,
+        radius: float,
+        theta1: float = 0.0,
+        theta_start: float = 0.0,
+        theta_end: float = 0.5 * math.pi,
+    ) -> None:
+        self.center = _point("center", center)
+        self.radius = _finite("radius", radius)
+        if not self.radius > 0:
+            raise ValueError(f"radius must be > 0 mm, got {radius!r}")
+        self.theta1 = _finite("theta1", theta1)
+        self.theta_start = _finite("theta_start", theta_start)
+        self.theta_end = _finite("theta_end", theta_end)
+        if not 0.0 <= self.theta_start < self.theta_end <= 100.0:
+            raise ValueError(
+                "theta_start and theta_end must satisfy 0 <= theta_start < theta_end <= 100 rad, "
+                f"got {theta_start!r}, {theta_end!r}"
+            )
+        self.length = 0.5 * self.radius * (self.theta_end**2 - self.theta_start**2)
+        self.start = self.point_at(self.theta_start)
+        self.end = self.point_at(self.theta_end)
+        self.heading0 = self.theta_start + self.theta1
+        self._k_span = int(math.ceil((self.theta_end - self.theta_start) / _TWO_PI)) + 2
+
+    def point_at(self, theta: float) -> tuple[float, float]:
+        """The involute's point at parameter ``theta`` (rad)."""
+        phi = theta + self.theta1
+        c, s = math.cos(phi), math.sin(phi)
+        return (
+            self.center[0] + self.radius * (c + theta * s),
+            self.center[1] + self.radius * (s - theta * c),
+        )
+
+    def point(self, s: float) -> tuple[float, float]:
+        return self.point_at(math.sqrt(self.theta_start**2 + 2.0 * s / self.radius))
+
+    def theta_of(self, s: np.ndarray) -> np.ndarray:
+        """Parameter ``theta`` at arc length ``s`` from the segment's start."""
+        return np.sqrt(self.theta_start**2 + 2.0 * s / self.radius)
+
+    def points(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        th = self.theta_of(s)
+        phi = th + self.theta1
+        c, sn = np.cos(phi), np.sin(phi)
+        return (
+            self.center[0] + self.radius * (c + th * sn),
+            self.center[1] + self.radius * (sn - th * c),
+        )
+
+    def turning(self, s: np.ndarray) -> np.ndarray:
+        return self.theta_of(s) - self.theta_start
+
+    def curvatures(self, s: np.ndarray) -> np.ndarray:
+        th = self.theta_of(s)
+        with np.errstate(divide="ignore"):
+            return np.where(th > 0, 1.0 / (self.radius * np.maximum(th, 1e-300)), np.inf)
+
+    @property
+    def heading1(self) -> float:
+        return self.theta_end + self.theta1
+
+    def _feet(self, px: float, py: float) -> list[float]:
+        """Parameters of the feet of the normals from ``p`` that lie on the segment."""
+        dx, dy = px - self.center[0], py - self.center[1]
+        rho = math.hypot(dx, dy)
+        out = [self.theta_start, self.theta_end]
+        if rho <= self.radius:
+            return out
+        alpha = math.atan2(dy, dx)
+        off = math.acos(self.radius / rho)
+        for phi in (alpha + off, alpha - off):
+            base = phi - self.theta1
+            k0 = math.ceil((self.theta_start - base) / _TWO_PI)
+            for k in range(k0, k0 + self._k_span):
+                th = base + k * _TWO_PI
+                if th > self.theta_end:
+                    break
+                out.append(th)
+        return out
+
+    def closest(self, px: float, py: float) -> tuple[float, float, float]:
+        best = (math.inf, 0.0, 0.0)
+        for th in self._feet(px, py):
+            qx, qy = self.point_at(th)
+            d = math.hypot(px - qx, py - qy)
+            if d < best[0]:
+                best = (d, qx, qy)
+        return best
+
+    def closest_many(self, px: np.ndarray, py: np.ndarray):
+        px = np.asarray(px, dtype=np.float64)
+        py = np.asarray(py, dtype=np.float64)
+        cands = [np.full(px.shape, self.theta_start), np.full(px.shape, self.theta_end)]
+        dx, dy = px - self.center[0], py - self.center[1]
+        rho = np.hypot(dx, dy)
+        outside = rho > self.radius
+        alpha = np.arctan2(dy, dx)
+        off = np.arccos(np.where(outside, self.radius / np.where(outside, rho, 1.0), 1.0))
+        for phi in (alpha + off, alpha - off):
+            base = phi - self.theta1
+            k0 = np.ceil((self.theta_start - base) / _TWO_PI)
+            for k in range(self._k_span):
+                th = base + (k0 + k) * _TWO_PI
+                ok = outside & (th <= self.theta_end)
+                cands.append(np.where(ok, th, self.theta_start))
+        th = np.stack(cands)
+        phi = th + self.theta1
+        c, sn = np.cos(phi), np.sin(phi)
+        qx = self.center[0] + self.radius * (c + th * sn)
+        qy = self.center[1] + self.radius * (sn - th * c)
+        d = np.hypot(px - qx, py - qy)
+        i = np.argmin(d, axis=0)
+        cols = np.arange(d.shape[1]) if d.ndim == 2 else None
+        if cols is None:
+            return d[i], qx[i], qy[i]
+        return d[i, cols], qx[i, cols], qy[i, cols]
+
+    def __repr__(self) -> str:
+        return (
+            f"Involute(center={self.center}, radius={self.radius}, theta1={self.theta1}, "
+            f"theta_start={self.theta_start}, theta_end={self.theta_end})"
+        )
+
+
+Segment = Line | Arc | Involute
+
+
+def _bounding_circle(seg) -> tuple[float, float, float]:
+    """A circle ``(cx, cy, radius)`` that contains the whole segment.
+
+    From 257 points along it: their centroid, and the largest distance to them plus the
+    largest gap between neighbours (the curve between two neighbours stays within that).
+    """
+    s = np.linspace(0.0, seg.length, 257)
+    x, y = seg.points(s)
+    cx, cy = float(x.mean()), float(y.mean())
+    gap = float(np.max(np.hypot(np.diff(x), np.diff(y))))
+    return cx, cy, float(np.max(np.hypot(x - cx, y - cy))) + gap
+
+
+def _wrap(a: float) -> float:
+    """Angle wrapped to (-pi, pi]."""
+    return a - _TWO_PI * math.floor((a + math.pi) / _TWO_PI)
+
+
+class Path:
+    """A chain of segments, each starting where the previous one ends (within 1 um).
+
+    Parameters
+    ----------
+    segments : sequence of Line, Arc, Involute
+    name : str
+        Label for plots and tables.
+
+    Positions along the path are arc lengths ``s`` in ``[0, length]`` mm; values outside are
+    clamped to the ends. Scalar queries (:meth:`closest`, :meth:`distance`) run in plain
+    Python for per-step use; the ``*_many`` / vector forms take arrays.
+    """
+
+    def __init__(self, segments: Sequence[Segment], name: str = "path") -> None:
+        segs = list(segments)
+        if not segs:
+            raise ValueError("segments must hold at least one Line, Arc or Involute")
+        for k, seg in enumerate(segs):
+            if not isinstance(seg, (Line, Arc, Involute)):
+                raise ValueError(
+                    f"segments[{k}] must be a Line, Arc or Involute, got {type(seg).__name__}"
+                )
+            if k:
+                gap = math.hypot(
+                    seg.start[0] - segs[k - 1].end[0], seg.start[1] - segs[k - 1].end[1]
+                )
+                if gap > 1e-3:
+                    raise ValueError(
+                        f"segments[{k}] starts {gap:.3g} mm from where segments[{k - 1}] ends; "
+                        "a path must be continuous"
+                    )
+        self.segments = tuple(segs)
+        self.name = str(name)
+        lengths = [seg.length for seg in segs]
+        self._starts = np.concatenate([[0.0], np.cumsum(lengths)])
+        self._start_list = [float(v) for v in self._starts]
+        self._inner = self._starts[1:-1].copy()
+        self.length = float(self._starts[-1])
+        self._bounds = [_bounding_circle(seg) for seg in segs]
+        # Unwrapped heading at each segment's start: corners add their turn in (-pi, pi].
+        head = [segs[0].heading0]
+        for k in range(1, len(segs)):
+            head.append(head[-1] + (segs[k - 1].heading1 - segs[k - 1].heading0))
+            head[-1] += _wrap(segs[k].heading0 - head[-1])
+        self._heading_starts = np.array(head)
+
+    # ---- constructors: the paper's paths -------------------------------------------------
+    @classmethod
+    def paper_corner(cls) -> Path:
+        """(0, 0) -> (35.3553, 35.3553) -> (70.7107, 0) mm: a 90 degree corner (Fig. 6)."""
+        a = 50.0 / math.sqrt(2.0)
+        return cls([Line((0.0, 0.0), (a, a)), Line((a, a), (2.0 * a, 0.0))], name="corner")
+
+    @classmethod
+    def paper_circle(cls, radius_mm: float = 10.0) -> Path:
+        """Full counter-clockwise circle of radius 10 mm centred at the origin, from (R, 0):
+        ``x = R cos(w t)``, ``y = R sin(w t)`` (§3.2, Fig. 7)."""
+        return cls([Arc((0.0, 0.0), radius_mm, 0.0, _TWO_PI)], name="circle")
+
+    @classmethod
+    def paper_involute(cls, radius_mm: float = 50.0, theta_end: float = 0.5 * math.pi) -> Path:
+        """Involute of a 50 mm base circle (§3.3, Fig. 8) from ``theta = 0`` to ``theta_end``.
+
+        The paper zooms into part of the curve and does not say which; a quarter turn of the
+        generating line (61.7 mm of path, 1.23 s at 50 mm/s) is taken, with ``theta1 = 0`` and
+        the base circle centred at ``(-R, 0)`` so that the path starts at the origin.
+        """
+        return cls([Involute((-radius_mm, 0.0), radius_mm, 0.0, 0.0, theta_end)], name="involute")
+
+    @classmethod
+    def line(cls, start, end, name: str = "line") -> Path:
+        return cls([Line(start, end)], name=name)
+
+    @classmethod
+    def random_smooth(
+        cls,
+        rng: np.random.Generator,
+        n_segments: tuple[int, int] = (3, 6),
+        line_mm: tuple[float, float] = (5.0, 30.0),
+        radius_mm: tuple[float, float] = (3.0, 30.0),
+        sweep_deg: tuple[float, float] = (30.0, 180.0),
+        line_probability: float = 0.4,
+        start=(0.0, 0.0),
+        name: str = "random",
+    ) -> Path:
+        """Random tangent-continuous chain of lines and arcs from ``start``.
+
+        ``n_segments`` is an inclusive integer range; the first heading is uniform; each
+        segment is a line (probability ``line_probability``, length uniform in ``line_mm``)
+        or an arc turning left or right (radius uniform in ``radius_mm``, sweep uniform in
+        ``sweep_deg``). Every number is drawn from ``rng``.
+        """
+        lo, hi = n_segments
+        if not (isinstance(lo, int) and isinstance(hi, int) and 1 <= lo <= hi <= 100):
+            raise ValueError(
+                f"n_segments must be integers 1 <= lo <= hi <= 100, got {n_segments!r}"
+            )
+        for label, (a, b) in (("line_mm", line_mm), ("radius_mm", radius_mm)):
+            if not (0 < a <= b < 1e4):
+                raise ValueError(f"{label} must satisfy 0 < lo <= hi < 10000, got {(a, b)!r}")
+        if not (0 < sweep_deg[0] <= sweep_deg[1] <= 360):
+            raise ValueError(f"sweep_deg must satisfy 0 < lo <= hi <= 360, got {sweep_deg!r}")
+        if not 0.0 <= line_probability <= 1.0:
+            raise ValueError(f"line_probability must be in [0, 1], got {line_probability!r}")
+        n = int(rng.integers(lo, hi + 1))
+        draws = rng.random((5, n)).tolist()  # kind, length/radius, sweep, direction, spare
+        heading = float(rng.uniform(-math.pi, math.pi))
+        p = _point("start", start)
+        segs: list[Segment] = []
+        for k in range(n):
+            if draws[0][k] < line_probability:
+                length = line_mm[0] + (line_mm[1] - line_mm[0]) * draws[1][k]
+                end = (p[0] + length * math.cos(heading), p[1] + length * math.sin(heading))
+                segs.append(Line(p, end))
+            else:
+                r = radius_mm[0] + (radius_mm[1] - radius_mm[0]) * draws[1][k]
+                sweep = math.radians(sweep_deg[0] + (sweep_deg[1] - sweep_deg[0]) * draws[2][k])
+                sign = 1.0 if draws[3][k] < 0.5 else -1.0
+                # Centre to the left (sign +1) or right of the heading.
+                cx = p[0] - sign * r * math.sin(heading)
+                cy = p[1] + sign * r * math.cos(heading)
+                a0 = math.atan2(p[1] - cy, p[0] - cx)
+                seg = Arc((cx, cy), r, a0, sign * sweep)
+                segs.append(seg)
+                heading += sign * sweep
+            p = segs[-1].end
+        return cls(segs, name=name)
+
+    # ---- geometry ---------------------------------------------------------------------------
+    @property
+    def start(self) -> tuple[float, float]:
+        return self.segments[0].start
+
+    @property
+    def end(self) -> tuple[float, float]:
+        return self.segments[-1].end
+
+    def duration_s(self, feed_mm_s: float) -> float:
+        """Time the reference takes at the constant feed ``feed_mm_s``."""
+        return self.length / feed_mm_s
+
+    def _index(self, s: np.ndarray) -> np.ndarray:
+        """Segment index of each arc length in ``s`` (already within ``[0, length]``)."""
+        return np.searchsorted(self._inner, s, side="right")
+
+    def _per_segment(self, s, fn) -> list:
+        """Evaluate ``fn(k, segment, local arc lengths)`` segment by segment over ``s``.
+
+        Returns ``[(mask or None, result), ...]``; ``mask`` is None when one segment holds
+        every value (the usual case for the short, ascending runs the envs ask for).
+        """
+        idx = self._index(s)
+        lo, hi = int(idx.min()), int(idx.max())
+        if lo == hi:
+            return [(None, fn(lo, self.segments[lo], s - self._start_list[lo]))]
+        out = []
+        for k in range(lo, hi + 1):
+            m = idx == k
+            if m.any():
+                out.append((m, fn(k, self.segments[k], s[m] - self._start_list[k])))
+        return out
+
+    def _clamp(self, s) -> np.ndarray:
+        return np.minimum(np.maximum(np.asarray(s, dtype=np.float64), 0.0), self.length)
+
+    def points(self, s) -> tuple[np.ndarray, np.ndarray]:
+        """Points ``(x, y)`` (mm) at arc lengths ``s`` (array; clamped to the path)."""
+        s = self._clamp(s)
+        if len(self.segments) == 1 or s.ndim == 0 or s.size == 0:
+            if len(self.segments) == 1:
+                return self.segments[0].points(s)
+            s = np.atleast_1d(s)
+        parts = self._per_segment(s, lambda k, seg, loc: seg.points(loc))
+        if parts[0][0] is None:
+            return parts[0][1]
+        x = np.empty_like(s)
+        y = np.empty_like(s)
+        for m, (px, py) in parts:
+            x[m], y[m] = px, py
+        return x, y
+
+    def point(self, s: float) -> tuple[float, float]:
+        """One point ``(x, y)`` at arc length ``s`` (clamped to the path)."""
+        s = min(max(float(s), 0.0), self.length)
+        starts = self._start_list
+        k = len(self.segments) - 1
+        while k > 0 and s < starts[k]:
+            k -= 1
+        return self.segments[k].point(s - starts[k])
+
+    def _gather(self, s, fn) -> np.ndarray:
+        s = np.atleast_1d(self._clamp(s))
+        parts = self._per_segment(s, fn)
+        if parts[0][0] is None:
+            return np.asarray(parts[0][1], dtype=np.float64) + np.zeros_like(s)
+        out = np.empty_like(s)
+        for m, v in parts:
+            out[m] = v
+        return out
+
+    def headings(self, s) -> np.ndarray:
+        """Unwrapped heading of the path (rad) at ``s``: the total turn since the start plus
+        the first heading. Corners count as the turn they make (in ``(-pi, pi]``)."""
+        hs = self._heading_starts
+        return self._gather(s, lambda k, seg, loc: hs[k] + seg.turning(loc))
+
+    def curvatures(self, s) -> np.ndarray:
+        """Signed curvature (1/mm, positive turning left) at ``s``; corners are not counted."""
+        return self._gather(s, lambda k, seg, loc: seg.curvatures(loc))
+
+    def segment_index(self, s: float) -> int:
+        """Index of the segment that holds arc length ``s``."""
+        s = min(max(float(s), 0.0), self.length)
+        starts = self._start_list
+        k = len(self.segments) - 1
+        while k > 0 and s < starts[k]:
+            k -= 1
+        return k
+
+    def closest(self, px: float, py: float) -> tuple[float, float, float]:
+        """``(contour error, qx, qy)``: distance from ``p`` to the path and the nearest point.
+
+        Segments whose bounding circle lies farther than the best distance so far are
+        skipped (they cannot hold a nearer point)."""
+        best = (math.inf, 0.0, 0.0)
+        for seg, (cx, cy, rad) in zip(self.segments, self._bounds, strict=True):
+            if math.hypot(px - cx, py - cy) - rad >= best[0]:
+                continue
+            c = seg.closest(px, py)
+            if c[0] < best[0]:
+                best = c
+        return best
+
+    def distance(self, px: float, py: float) -> float:
+        """Contour error of the point ``(px, py)``, mm: its distance to the path."""
+        if len(self.segments) == 1:
+            return self.segments[0].closest(px, py)[0]
+        return self.closest(px, py)[0]
+
+    def closest_many(self, px, py) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Vector form of :meth:`closest` for arrays of points."""
+        px = np.asarray(px, dtype=np.float64)
+        py = np.asarray(py, dtype=np.float64)
+        if len(self.segments) == 1:
+            return self.segments[0].closest_many(px, py)
+        # Start from the segment nearest the points' centre; skip every segment whose
+        # bounding circle lies beyond the largest distance found so far for all points.
+        mx, my = float(np.mean(px)), float(np.mean(py))
+        spread = float(np.max(np.hypot(px - mx, py - my))) if px.size else 0.0
+        lower = [math.hypot(mx - cx, my - cy) - rad for cx, cy, rad in self._bounds]
+        order = sorted(range(len(self.segments)), key=lower.__getitem__)
+        d, qx, qy = self.segments[order[0]].closest_many(px, py)
+        for k in order[1:]:
+            if lower[k] - spread >= float(np.max(d)):
+                continue
+            d2, qx2, qy2 = self.segments[k].closest_many(px, py)
+            better = d2 < d
+            d = np.where(better, d2, d)
+            qx = np.where(better, qx2, qx)
+            qy = np.where(better, qy2, qy)
+        return d, qx, qy
+
+    def distances(self, px, py) -> np.ndarray:
+        """Vector form of :meth:`distance`."""
+        return self.closest_many(px, py)[0]
+
+    def circle(self) -> tuple[float, float, float] | None:
+        """``(cx, cy, R)`` when the path is one arc (a circle test), else ``None``."""
+        if len(self.segments) == 1 and isinstance(self.segments[0], Arc):
+            seg = self.segments[0]
+            return seg.center[0], seg.center[1], seg.radius
+        return None
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(xmin, xmax, ymin, ymax)`` of the path, mm (sampled every 0.1 mm or finer)."""
+        s = np.linspace(0.0, self.length, max(50, int(self.length / 0.1) + 1))
+        x, y = self.points(s)
+        return float(x.min()), float(x.max()), float(y.min()), float(y.max())
+
+    def __repr__(self) -> str:
+        return f"Path({self.name!r}, {len(self.segments)} segments, {self.length:.4g} mm)"
