@@ -65,12 +65,12 @@ def main(argv=None) -> None:
     )
     med = {i: np.median(np.array(rates[i]), axis=0) for i in ids}
     print(
-        f"{'env':28s} {'step/s':>9s} {'ratio':>6s} {'with resets/s':>14s} {'ratio':>6s} {'resets':>7s}"
+        f"{"env":34s} {'step/s':>9s} {'ratio':>6s} {'with resets/s':>14s} {'ratio':>6s} {'resets':>7s}"
     )
     for env_id in ids:
         s, w, n = med[env_id]
         print(
-            f"{env_id:28s} {s:9.0f} {s / med[PEER][0]:6.2f} {w:14.0f} {w / med[PEER][1]:6.2f} {n:7.0f}"
+            f"{env_id:34s} {s:9.0f} {s / med[PEER][0]:6.2f} {w:14.0f} {w / med[PEER][1]:6.2f} {n:7.0f}"
         )
 
 
