@@ -65,7 +65,7 @@ def main(argv=None) -> None:
     )
     med = {i: np.median(np.array(rates[i]), axis=0) for i in ids}
     print(
-        f"{"env":34s} {'step/s':>9s} {'ratio':>6s} {'with resets/s':>14s} {'ratio':>6s} {'resets':>7s}"
+        f"{'env':34s} {'step/s':>9s} {'ratio':>6s} {'with resets/s':>14s} {'ratio':>6s} {'resets':>7s}"
     )
     for env_id in ids:
         s, w, n = med[env_id]
