@@ -1,0 +1,21 @@
+"""The throughput script runs and prints a ratio for every registered env (numbers not judged)."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import machining_envs
+
+SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "throughput.py"
+
+
+def test_throughput_script_reports_every_env():
+    out = subprocess.run(
+        [sys.executable, str(SCRIPT), "--steps", "200", "--rounds", "1"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    for env_id in ("Pendulum-v1", *machining_envs.ENV_IDS):
+        line = next(row for row in out.splitlines() if row.startswith(env_id))
+        assert float(line.split()[2]) > 0  # the step-rate ratio
