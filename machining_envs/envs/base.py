@@ -13,6 +13,7 @@ __all__ = [
     "check_action",
     "check_overrides",
     "render_signals",
+    "present_frame",
 ]
 
 
@@ -107,3 +108,18 @@ def render_signals(
     fig.tight_layout()
     canvas.draw()
     return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+
+def present_frame(img: np.ndarray, render_mode: str, window: str):
+    """What ``render()`` returns: the image for ``"rgb_array"``; for ``"human"`` the image is
+    shown in a matplotlib window named ``window`` and ``None`` is returned."""
+    if render_mode != "human":
+        return img
+    import matplotlib.pyplot as plt
+
+    plt.figure(window)
+    plt.clf()
+    plt.imshow(img)
+    plt.axis("off")
+    plt.pause(0.001)
+    return None

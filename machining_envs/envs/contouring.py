@@ -15,7 +15,7 @@ from machining_envs.contouring_scenarios import (
     ContouringScenario,
     contouring_scenario,
 )
-from machining_envs.envs.base import ActionMap, check_overrides
+from machining_envs.envs.base import ActionMap, check_overrides, present_frame
 from machining_envs.paths import Path
 from machining_envs.plants.contouring import ContouringParams, ContouringPlant
 
@@ -512,16 +512,7 @@ class ContouringEnv(gym.Env):
             np.array(log["eps"]),
             f"Contouring-v0 | {self.scenario.name}",
         )
-        if self.render_mode == "human":
-            import matplotlib.pyplot as plt
-
-            plt.figure("Contouring-v0")
-            plt.clf()
-            plt.imshow(img)
-            plt.axis("off")
-            plt.pause(0.001)
-            return None
-        return img
+        return present_frame(img, self.render_mode, "Contouring-v0")
 
 
 def render_xy(path: Path, x, y, t, eps, title: str) -> np.ndarray:

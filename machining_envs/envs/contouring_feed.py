@@ -17,7 +17,7 @@ from machining_envs.contouring_scenarios import (
     ContouringScenario,
     contouring_scenario,
 )
-from machining_envs.envs.base import ActionMap, check_overrides
+from machining_envs.envs.base import ActionMap, check_overrides, present_frame
 from machining_envs.envs.contouring import (
     ERROR_SCALE_MM,
     VELOCITY_SCALE_MM_S,
@@ -466,13 +466,4 @@ class ContouringFeedEnv(gym.Env):
             np.array(log["eps"]),
             f"ContouringFeed-v0 | {self.scenario.name} | servo {self.servo}",
         )
-        if self.render_mode == "human":
-            import matplotlib.pyplot as plt
-
-            plt.figure("ContouringFeed-v0")
-            plt.clf()
-            plt.imshow(img)
-            plt.axis("off")
-            plt.pause(0.001)
-            return None
-        return img
+        return present_frame(img, self.render_mode, "ContouringFeed-v0")

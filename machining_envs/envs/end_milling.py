@@ -10,7 +10,13 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from machining_envs.envs.base import ActionMap, check_action, check_overrides, render_signals
+from machining_envs.envs.base import (
+    ActionMap,
+    check_action,
+    check_overrides,
+    present_frame,
+    render_signals,
+)
 from machining_envs.milling_scenarios import (
     MILLING_SCENARIOS,
     CutArea,
@@ -414,13 +420,4 @@ class EndMillingEnv(gym.Env):
             ],
             f"EndMilling-v0 | {self.scenario.name} | {self._rpm:.0f} rpm",
         )
-        if self.render_mode == "human":
-            import matplotlib.pyplot as plt
-
-            plt.figure("EndMilling-v0")
-            plt.clf()
-            plt.imshow(img)
-            plt.axis("off")
-            plt.pause(0.001)
-            return None
-        return img
+        return present_frame(img, self.render_mode, "EndMilling-v0")

@@ -15,7 +15,13 @@ from machining_envs.drilling_scenarios import (
     DrillingScenario,
     drilling_scenario,
 )
-from machining_envs.envs.base import ActionMap, check_action, check_overrides, render_signals
+from machining_envs.envs.base import (
+    ActionMap,
+    check_action,
+    check_overrides,
+    present_frame,
+    render_signals,
+)
 from machining_envs.plants.drilling import DrillingParams, DrillingPlant
 
 __all__ = ["MicroDrillingEnv", "DrillingReward", "CONTROL_MODES"]
@@ -498,13 +504,4 @@ class MicroDrillingEnv(gym.Env):
             f"MicroDrilling-v0 | {self.scenario.name} | D = {self.scenario.diameter_mm:.2f} mm"
             f" | control = {self.control}",
         )
-        if self.render_mode == "human":
-            import matplotlib.pyplot as plt
-
-            plt.figure("MicroDrilling-v0")
-            plt.clf()
-            plt.imshow(img)
-            plt.axis("off")
-            plt.pause(0.001)
-            return None
-        return img
+        return present_frame(img, self.render_mode, "MicroDrilling-v0")

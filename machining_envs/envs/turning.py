@@ -10,7 +10,13 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from machining_envs.envs.base import ActionMap, check_action, check_overrides, render_signals
+from machining_envs.envs.base import (
+    ActionMap,
+    check_action,
+    check_overrides,
+    present_frame,
+    render_signals,
+)
 from machining_envs.plants.turning import SPINDLE_RPM_RANGE, TurningParams, TurningPlant
 from machining_envs.scenarios import TURNING_SCENARIOS, TurningScenario, turning_scenario
 
@@ -387,13 +393,4 @@ class TurningEnv(gym.Env):
             ],
             f"Turning-v0 | {self.scenario.name} | {self.scenario.spindle_rpm:.0f} rpm",
         )
-        if self.render_mode == "human":
-            import matplotlib.pyplot as plt
-
-            plt.figure("Turning-v0")
-            plt.clf()
-            plt.imshow(img)
-            plt.axis("off")
-            plt.pause(0.001)
-            return None
-        return img
+        return present_frame(img, self.render_mode, "Turning-v0")
