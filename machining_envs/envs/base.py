@@ -14,6 +14,10 @@ __all__ = [
     "check_overrides",
     "render_signals",
     "present_frame",
+    "check_render_mode",
+    "check_episode_time",
+    "check_scenario_spec",
+    "scenario_option",
 ]
 
 
@@ -123,3 +127,35 @@ def present_frame(img: np.ndarray, render_mode: str, window: str):
     plt.axis("off")
     plt.pause(0.001)
     return None
+
+
+def check_render_mode(render_mode, modes) -> str | None:
+    """``render_mode`` if it is None or one of ``modes``, else ``ValueError``."""
+    if render_mode is not None and render_mode not in modes:
+        raise ValueError(f"render_mode must be None or one of {modes}, got {render_mode!r}")
+    return render_mode
+
+
+def check_episode_time(max_episode_time_s) -> float:
+    """The time limit as a float if it lies in (0, 100000] s, else ``ValueError``."""
+    ok = isinstance(max_episode_time_s, (int, float)) and not isinstance(max_episode_time_s, bool)
+    if not (ok and 0 < max_episode_time_s <= 1e5):
+        raise ValueError(f"max_episode_time_s must be in (0, 100000], got {max_episode_time_s!r}")
+    return float(max_episode_time_s)
+
+
+def check_scenario_spec(spec, scenario_cls: type, names) -> None:
+    """``ValueError`` unless ``spec`` is a ``scenario_cls`` or one of the scenario ``names``."""
+    if not isinstance(spec, scenario_cls) and spec not in names:
+        raise ValueError(
+            f"scenario must be a {scenario_cls.__name__} or one of {sorted(names)}, got {spec!r}"
+        )
+
+
+def scenario_option(options: dict | None, default):
+    """The scenario asked for in ``reset(options=...)``; any other option is a ``ValueError``."""
+    options = dict(options or {})
+    spec = options.pop("scenario", default)
+    if options:
+        raise ValueError(f"reset options may only hold 'scenario', got {sorted(options)}")
+    return spec

@@ -15,7 +15,14 @@ from machining_envs.contouring_scenarios import (
     ContouringScenario,
     contouring_scenario,
 )
-from machining_envs.envs.base import ActionMap, check_overrides, present_frame
+from machining_envs.envs.base import (
+    ActionMap,
+    check_overrides,
+    check_render_mode,
+    check_scenario_spec,
+    present_frame,
+    scenario_option,
+)
 from machining_envs.paths import Path
 from machining_envs.plants.contouring import ContouringParams, ContouringPlant
 
@@ -263,17 +270,9 @@ class ContouringEnv(gym.Env):
         )
         self.in_position_mm = _positive("in_position_mm", in_position_mm, 0.0, 10.0)
         self.divergence_mm = _positive("divergence_mm", divergence_mm, 0.0, 1e4)
-        if not isinstance(scenario, ContouringScenario) and scenario not in CONTOURING_SCENARIOS:
-            raise ValueError(
-                f"scenario must be a ContouringScenario or one of {sorted(CONTOURING_SCENARIOS)}, "
-                f"got {scenario!r}"
-            )
+        check_scenario_spec(scenario, ContouringScenario, CONTOURING_SCENARIOS)
         self.default_scenario = scenario
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
-                f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}"
-            )
-        self.render_mode = render_mode
+        self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
 
         umax = self.params.command_max_mm_s
         self.command_map = ActionMap(-umax, umax)
@@ -297,10 +296,7 @@ class ContouringEnv(gym.Env):
     # ---- gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        options = dict(options or {})
-        spec = options.pop("scenario", self.default_scenario)
-        if options:
-            raise ValueError(f"reset options may only hold 'scenario', got {sorted(options)}")
+        spec = scenario_option(options, self.default_scenario)
         sc = contouring_scenario(spec, self.np_random)
         self.scenario = sc
         self._truth = sc.true_params(self.params)

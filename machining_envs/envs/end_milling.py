@@ -13,9 +13,13 @@ from gymnasium import spaces
 from machining_envs.envs.base import (
     ActionMap,
     check_action,
+    check_episode_time,
     check_overrides,
+    check_render_mode,
+    check_scenario_spec,
     present_frame,
     render_signals,
+    scenario_option,
 )
 from machining_envs.milling_scenarios import (
     MILLING_SCENARIOS,
@@ -187,26 +191,10 @@ class EndMillingEnv(gym.Env):
             raise ValueError(
                 f"reward must be a MillingReward or a dict, got {type(reward).__name__}"
             )
-        if not (
-            isinstance(max_episode_time_s, (int, float))
-            and not isinstance(max_episode_time_s, bool)
-            and 0 < max_episode_time_s <= 1e5
-        ):
-            raise ValueError(
-                f"max_episode_time_s must be in (0, 100000], got {max_episode_time_s!r}"
-            )
-        self.max_episode_time_s = float(max_episode_time_s)
-        if not isinstance(scenario, MillingScenario) and scenario not in MILLING_SCENARIOS:
-            raise ValueError(
-                f"scenario must be a MillingScenario or one of {sorted(MILLING_SCENARIOS)}, "
-                f"got {scenario!r}"
-            )
+        self.max_episode_time_s = check_episode_time(max_episode_time_s)
+        check_scenario_spec(scenario, MillingScenario, MILLING_SCENARIOS)
         self.default_scenario = scenario
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
-                f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}"
-            )
-        self.render_mode = render_mode
+        self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
 
         self.command_map = ActionMap(0.0, self.params.command_max)
         self._u_mid = 0.5 * self.params.command_max
@@ -233,10 +221,7 @@ class EndMillingEnv(gym.Env):
     # ---- gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        options = dict(options or {})
-        spec = options.pop("scenario", self.default_scenario)
-        if options:
-            raise ValueError(f"reset options may only hold 'scenario', got {sorted(options)}")
+        spec = scenario_option(options, self.default_scenario)
         sc = milling_scenario(spec, self.np_random)
         rpm = sc.spindle_rpm(self.params)
         self.scenario = sc

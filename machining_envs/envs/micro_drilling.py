@@ -18,9 +18,13 @@ from machining_envs.drilling_scenarios import (
 from machining_envs.envs.base import (
     ActionMap,
     check_action,
+    check_episode_time,
     check_overrides,
+    check_render_mode,
+    check_scenario_spec,
     present_frame,
     render_signals,
+    scenario_option,
 )
 from machining_envs.plants.drilling import DrillingParams, DrillingPlant
 
@@ -218,26 +222,10 @@ class MicroDrillingEnv(gym.Env):
             raise ValueError(
                 f"reward must be a DrillingReward or a dict, got {type(reward).__name__}"
             )
-        if not (
-            isinstance(max_episode_time_s, (int, float))
-            and not isinstance(max_episode_time_s, bool)
-            and 0 < max_episode_time_s <= 1e5
-        ):
-            raise ValueError(
-                f"max_episode_time_s must be in (0, 100000], got {max_episode_time_s!r}"
-            )
-        self.max_episode_time_s = float(max_episode_time_s)
-        if not isinstance(scenario, DrillingScenario) and scenario not in DRILLING_SCENARIOS:
-            raise ValueError(
-                f"scenario must be a DrillingScenario or one of {sorted(DRILLING_SCENARIOS)}, "
-                f"got {scenario!r}"
-            )
+        self.max_episode_time_s = check_episode_time(max_episode_time_s)
+        check_scenario_spec(scenario, DrillingScenario, DRILLING_SCENARIOS)
         self.default_scenario = scenario
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
-                f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}"
-            )
-        self.render_mode = render_mode
+        self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
 
         p = self.params
         if control == "voltage":
@@ -272,10 +260,7 @@ class MicroDrillingEnv(gym.Env):
     # ---- gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        options = dict(options or {})
-        spec = options.pop("scenario", self.default_scenario)
-        if options:
-            raise ValueError(f"reset options may only hold 'scenario', got {sorted(options)}")
+        spec = scenario_option(options, self.default_scenario)
         sc = drilling_scenario(spec, self.np_random)
         self.scenario = sc
         self._truth = sc.true_params(self.params)
