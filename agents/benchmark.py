@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import gymnasium as gym
+import numpy as np
 
 from agents.adaptive import VariableGainPI
 from agents.drilling import PD, NoControl
@@ -23,6 +24,7 @@ from agents.hinf import HInf2DOF
 from agents.integral import FixedGainIntegral, IntegralACC, MillingConstantFeed
 from agents.pid import ConstantFeed, FixedGainPI
 from agents.position import PIPosition
+from agents.rl import pretrained
 from agents.sliding_mode import SlidingMode
 from machining_envs.contouring_metrics import contouring_metrics
 from machining_envs.drilling_metrics import drilling_metrics
@@ -78,6 +80,7 @@ BENCHMARKS = (
             ConstantFeed.from_env,
             FixedGainPI.from_env,
             VariableGainPI.from_env,
+            pretrained("turning_ppo"),
         ),
         ("paper_245", "paper_405", "paper_700", "taper_405"),
         "test",
@@ -238,6 +241,10 @@ def run_benchmark(
         ev = Evaluation.concat(spec_evals)
         evals.append(ev)
         table = ev.to_markdown(spec.table_metrics)
+        limit = getattr(gym.make(spec.env_id).unwrapped, "max_episode_time_s", None)
+        primary = primary_score_table(ev, spec.heldout_scenario, limit) if limit else ""
+        if primary:
+            table += "\n\n" + primary
         report += [
             f"## {env_name}",
             "",
@@ -279,6 +286,40 @@ def run_benchmark(
             f"({time.perf_counter() - t0:.0f} s)"
         )
     return allev
+
+
+def primary_score_table(ev: Evaluation, scenario: str, failed_time_s: float) -> str:
+    """Markdown table of the primary score per agent on ``scenario`` (regulation envs only).
+
+    Score: mean machining time with episodes that break or spend >= 2 % of the time above
+    1.1x the reference charged ``failed_time_s``, the env's time limit
+    (``agents.rl.primary_score``); the spread is the standard error of that mean over
+    episodes. Empty when the rows lack the needed metrics.
+    """
+    from agents.rl import primary_score
+
+    need = {"breakage", "time_over_limit", "finished", "machining_time_s", "itae"}
+    rows = [r for r in ev.rows if r["scenario"] == scenario]
+    if not rows or not all(need <= set(r) for r in rows):
+        return ""
+    lines = [
+        f"Primary score on `{scenario}` (s, lower is better; episodes that do not count cost "
+        f"the time limit, {failed_time_s:g} s):",
+        "",
+        "| agent | score ± s.e. | episodes that count | ITAE |",
+        "|---|---|---|---|",
+    ]
+    by_agent: dict[str, list[dict]] = {}
+    for r in rows:
+        by_agent.setdefault(r["agent"], []).append(r)
+    for name, rs in by_agent.items():
+        s = primary_score(rs, failed_time_s)
+        charged = [primary_score([r], failed_time_s)["score"] for r in rs]
+        se = float(np.std(charged, ddof=1) / np.sqrt(len(rs))) if len(rs) > 1 else 0.0
+        lines.append(
+            f"| {name} | {s['score']:.1f} ± {se:.1f} | {s['valid']:.0%} | {s['itae']:.3g} |"
+        )
+    return "\n".join(lines)
 
 
 def _plot_trajectories(spec: BenchmarkSpec, path: Path, seed: int) -> None:

@@ -51,6 +51,8 @@ __all__ = [
     "load_policy",
     "primary_score",
     "FAILED_EPISODE_TIME_S",
+    "pretrained",
+    "PRETRAINED_DIR",
 ]
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
@@ -268,6 +270,20 @@ def load_policy(model_path, name: str | None = None) -> PolicyAgent:
     return PolicyAgent(
         model, obs_rms, clip, eps, name=name or f"{algo.upper()} ({model_path.parent.name})"
     )
+
+
+PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
+
+
+def pretrained(name: str):
+    """Factory ``env -> agent`` for a shipped policy ``agents/pretrained/<name>/best_model.zip``."""
+    path = PRETRAINED_DIR / name / "best_model.zip"
+
+    def make(env=None) -> PolicyAgent:
+        return load_policy(path, name=f"{name} (pretrained)")
+
+    make.__name__ = f"pretrained_{name}"
+    return make
 
 
 def _make_vec(cfg: TrainConfig, seed: int):
