@@ -35,6 +35,7 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 
 import machining_envs  # noqa: F401  (registers the env ids)
@@ -297,6 +298,18 @@ def _make_vec(cfg: TrainConfig, seed: int):
     return venv
 
 
+def _evaluation_setup(env_id: str, env_kwargs: dict):
+    """The env's metrics function (its benchmark spec's) and its time limit for the score."""
+    from agents.benchmark import BENCHMARKS
+    from machining_envs.metrics import regulation_metrics
+
+    metrics_fn = next((b.metrics_fn for b in BENCHMARKS if b.env_id == env_id), regulation_metrics)
+    env = gym.make(env_id, **dict(env_kwargs))
+    failed_time_s = float(getattr(env.unwrapped, "max_episode_time_s", FAILED_EPISODE_TIME_S))
+    env.close()
+    return metrics_fn, failed_time_s
+
+
 def _latest_checkpoint(folder: Path):
     best, steps = None, -1
     for p in folder.glob("rl_model_*_steps.zip"):
@@ -377,6 +390,7 @@ def train(
         (out / "config.json").write_text(json.dumps(meta, indent=2, default=str))
 
     eval_csv = out / "eval.csv"
+    metrics_fn, failed_time_s = _evaluation_setup(env_id, cfg.env_kwargs)
 
     class HeldOutEval(BaseCallback):
         """Every ``eval_freq`` env steps: the harness on the held-out scenarios; keep the best."""
@@ -410,8 +424,9 @@ def train(
                 n_episodes=cfg.eval_episodes,
                 seed=10_000,
                 env_kwargs=dict(cfg.env_kwargs),
+                metrics_fn=metrics_fn,
             )
-            s = primary_score(ev.rows)
+            s = primary_score(ev.rows, failed_time_s)
             new = not eval_csv.is_file()
             with open(eval_csv, "a", newline="") as fh:
                 w = csv.DictWriter(fh, fieldnames=["timesteps", "wall_s", "score", "valid", "itae"])

@@ -195,3 +195,22 @@ def test_primary_score_charges_episodes_that_do_not_count():
     s = primary_score([base, broke, over], failed_time_s=200.0)
     assert s["score"] == pytest.approx((30.0 + 200.0 + 200.0) / 3)
     assert s["valid"] == pytest.approx(1 / 3)
+
+
+def test_training_evaluates_with_the_envs_own_metrics(tmp_path):
+    """End milling reports torque, not force: the held-out evaluation uses its metrics."""
+    text = TINY.replace("machining_envs/Turning-v0", "machining_envs/EndMilling-v0").replace(
+        "paper_700", "paper_step"
+    )
+    path = tmp_path / "mill.yml"
+    path.write_text(text)
+    run = train(
+        "machining_envs/EndMilling-v0",
+        "ppo",
+        tmp_path / "run",
+        config_path=path,
+        progress_bar=False,
+        verbose=False,
+    )
+    rows = (run / "eval.csv").read_text().splitlines()
+    assert len(rows) >= 2 and rows[0].startswith("timesteps,")
