@@ -159,3 +159,51 @@ def scenario_option(options: dict | None, default):
     if options:
         raise ValueError(f"reset options may only hold 'scenario', got {sorted(options)}")
     return spec
+
+
+def resolve_params(owner: str, params, params_cls: type, default, overrides: dict):
+    """The nominal parameter set: ``params`` (or ``default()``) with ``overrides`` applied.
+
+    Unknown override names raise ``TypeError`` (see :func:`check_overrides`); a ``params``
+    of the wrong type raises ``ValueError``.
+    """
+    import dataclasses
+
+    check_overrides(owner, overrides, [f.name for f in dataclasses.fields(params_cls)])
+    if params is None:
+        params = default()
+    if not isinstance(params, params_cls):
+        raise ValueError(f"params must be a {params_cls.__name__}, got {type(params).__name__}")
+    return params.replace(**overrides) if overrides else params
+
+
+def resolve_reward(reward, reward_cls: type):
+    """Reward weights from ``None`` (defaults), a dict of weights, or a ``reward_cls``."""
+    import dataclasses
+
+    if isinstance(reward, dict):
+        check_overrides(
+            reward_cls.__name__, reward, [f.name for f in dataclasses.fields(reward_cls)]
+        )
+        reward = reward_cls(**reward)
+    if reward is None:
+        return reward_cls()
+    if not isinstance(reward, reward_cls):
+        raise ValueError(
+            f"reward must be a {reward_cls.__name__} or a dict, got {type(reward).__name__}"
+        )
+    return reward
+
+
+def ready_to_render(env, owner: str) -> bool:
+    """False (with a warning) without a render mode; ``RuntimeError`` before the first reset."""
+    if env.render_mode is None:
+        import gymnasium as gym
+
+        gym.logger.warn(
+            f"{owner}.render() called without a render_mode; pass render_mode='rgb_array'"
+        )
+        return False
+    if env.plant is None:
+        raise RuntimeError(f"{owner}: call reset() before render()")
+    return True

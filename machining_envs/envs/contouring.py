@@ -17,10 +17,12 @@ from machining_envs.contouring_scenarios import (
 )
 from machining_envs.envs.base import (
     ActionMap,
-    check_overrides,
     check_render_mode,
     check_scenario_spec,
     present_frame,
+    ready_to_render,
+    resolve_params,
+    resolve_reward,
     scenario_option,
 )
 from machining_envs.paths import Path
@@ -245,24 +247,10 @@ class ContouringEnv(gym.Env):
         divergence_mm: float = 50.0,
         **overrides,
     ):
-        check_overrides(
-            type(self).__name__, overrides, [f.name for f in dataclasses.fields(ContouringParams)]
+        self.params = resolve_params(
+            type(self).__name__, params, ContouringParams, ContouringParams.choi_et_al, overrides
         )
-        if params is None:
-            params = ContouringParams.choi_et_al()
-        if not isinstance(params, ContouringParams):
-            raise ValueError(f"params must be a ContouringParams, got {type(params).__name__}")
-        self.params = params.replace(**overrides) if overrides else params
-        if isinstance(reward, dict):
-            check_overrides(
-                "ContouringReward", reward, [f.name for f in dataclasses.fields(ContouringReward)]
-            )
-            reward = ContouringReward(**reward)
-        self.reward_weights = reward if reward is not None else ContouringReward()
-        if not isinstance(self.reward_weights, ContouringReward):
-            raise ValueError(
-                f"reward must be a ContouringReward or a dict, got {type(reward).__name__}"
-            )
+        self.reward_weights = resolve_reward(reward, ContouringReward)
         self.max_episode_time_s = (
             None
             if max_episode_time_s is None
@@ -492,13 +480,8 @@ class ContouringEnv(gym.Env):
         log["eps"].append(info["contour_error_mm"])
 
     def render(self):
-        if self.render_mode is None:
-            gym.logger.warn(
-                "ContouringEnv.render() called without a render_mode; pass render_mode='rgb_array'"
-            )
+        if not ready_to_render(self, "ContouringEnv"):
             return None
-        if self.plant is None:
-            raise RuntimeError("ContouringEnv: call reset() before render()")
         log = self._log
         img = render_xy(
             self._path,

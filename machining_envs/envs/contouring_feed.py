@@ -19,10 +19,11 @@ from machining_envs.contouring_scenarios import (
 )
 from machining_envs.envs.base import (
     ActionMap,
-    check_overrides,
     check_render_mode,
     check_scenario_spec,
     present_frame,
+    resolve_params,
+    resolve_reward,
     scenario_option,
 )
 from machining_envs.envs.contouring import (
@@ -184,26 +185,16 @@ class ContouringFeedEnv(gym.Env):
         divergence_mm: float = 50.0,
         **overrides,
     ):
-        check_overrides(
-            type(self).__name__, overrides, [f.name for f in dataclasses.fields(ContouringParams)]
+        self.params = resolve_params(
+            type(self).__name__, params, ContouringParams, ContouringParams.choi_et_al, overrides
         )
-        if params is None:
-            params = ContouringParams.choi_et_al()
-        if not isinstance(params, ContouringParams):
-            raise ValueError(f"params must be a ContouringParams, got {type(params).__name__}")
-        self.params = params.replace(**overrides) if overrides else params
         if servo not in SERVO_KINDS:
             raise ValueError(f"servo must be one of {SERVO_KINDS}, got {servo!r}")
         self.servo = servo
         if tolerance_mm is None:
             tolerance_mm = DEFAULT_TOLERANCE_MM[servo]
         self.tolerance_mm = _positive("tolerance_mm", tolerance_mm, 0.0, 100.0)
-        if isinstance(reward, dict):
-            check_overrides("FeedReward", reward, [f.name for f in dataclasses.fields(FeedReward)])
-            reward = FeedReward(**reward)
-        self.reward_weights = reward if reward is not None else FeedReward()
-        if not isinstance(self.reward_weights, FeedReward):
-            raise ValueError(f"reward must be a FeedReward or a dict, got {type(reward).__name__}")
+        self.reward_weights = resolve_reward(reward, FeedReward)
         ts = self.params.sample_time_s
         dec = _positive("decision_interval_s", decision_interval_s, 0.0, 1.0)
         n_sub = int(round(dec / ts))

@@ -14,11 +14,13 @@ from machining_envs.envs.base import (
     ActionMap,
     check_action,
     check_episode_time,
-    check_overrides,
     check_render_mode,
     check_scenario_spec,
     present_frame,
+    ready_to_render,
     render_signals,
+    resolve_params,
+    resolve_reward,
     scenario_option,
 )
 from machining_envs.milling_scenarios import (
@@ -173,24 +175,10 @@ class EndMillingEnv(gym.Env):
         max_episode_time_s: float = 1200.0,
         **overrides,
     ):
-        check_overrides(
-            type(self).__name__, overrides, [f.name for f in dataclasses.fields(MillingParams)]
+        self.params = resolve_params(
+            type(self).__name__, params, MillingParams, MillingParams.park_yoon_1986, overrides
         )
-        if params is None:
-            params = MillingParams.park_yoon_1986()
-        if not isinstance(params, MillingParams):
-            raise ValueError(f"params must be a MillingParams, got {type(params).__name__}")
-        self.params = params.replace(**overrides) if overrides else params
-        if isinstance(reward, dict):
-            check_overrides(
-                "MillingReward", reward, [f.name for f in dataclasses.fields(MillingReward)]
-            )
-            reward = MillingReward(**reward)
-        self.reward_weights = reward if reward is not None else MillingReward()
-        if not isinstance(self.reward_weights, MillingReward):
-            raise ValueError(
-                f"reward must be a MillingReward or a dict, got {type(reward).__name__}"
-            )
+        self.reward_weights = resolve_reward(reward, MillingReward)
         self.max_episode_time_s = check_episode_time(max_episode_time_s)
         check_scenario_spec(scenario, MillingScenario, MILLING_SCENARIOS)
         self.default_scenario = scenario
@@ -380,13 +368,8 @@ class EndMillingEnv(gym.Env):
         log["depth"].append(info["depth_mm"])
 
     def render(self):
-        if self.render_mode is None:
-            gym.logger.warn(
-                "EndMillingEnv.render() called without a render_mode; pass render_mode='rgb_array'"
-            )
+        if not ready_to_render(self, "EndMillingEnv"):
             return None
-        if self.plant is None:
-            raise RuntimeError("EndMillingEnv: call reset() before render()")
         log = self._log
         t = log["t"]
         img = render_signals(

@@ -19,11 +19,13 @@ from machining_envs.envs.base import (
     ActionMap,
     check_action,
     check_episode_time,
-    check_overrides,
     check_render_mode,
     check_scenario_spec,
     present_frame,
+    ready_to_render,
     render_signals,
+    resolve_params,
+    resolve_reward,
     scenario_option,
 )
 from machining_envs.plants.drilling import DrillingParams, DrillingPlant
@@ -201,27 +203,13 @@ class MicroDrillingEnv(gym.Env):
         max_episode_time_s: float = 150.0,
         **overrides,
     ):
-        check_overrides(
-            type(self).__name__, overrides, [f.name for f in dataclasses.fields(DrillingParams)]
+        self.params = resolve_params(
+            type(self).__name__, params, DrillingParams, DrillingParams.cheong_cho, overrides
         )
-        if params is None:
-            params = DrillingParams.cheong_cho()
-        if not isinstance(params, DrillingParams):
-            raise ValueError(f"params must be a DrillingParams, got {type(params).__name__}")
-        self.params = params.replace(**overrides) if overrides else params
         if control not in CONTROL_MODES:
             raise ValueError(f"control must be one of {CONTROL_MODES}, got {control!r}")
         self.control = control
-        if isinstance(reward, dict):
-            check_overrides(
-                "DrillingReward", reward, [f.name for f in dataclasses.fields(DrillingReward)]
-            )
-            reward = DrillingReward(**reward)
-        self.reward_weights = reward if reward is not None else DrillingReward()
-        if not isinstance(self.reward_weights, DrillingReward):
-            raise ValueError(
-                f"reward must be a DrillingReward or a dict, got {type(reward).__name__}"
-            )
+        self.reward_weights = resolve_reward(reward, DrillingReward)
         self.max_episode_time_s = check_episode_time(max_episode_time_s)
         check_scenario_spec(scenario, DrillingScenario, DRILLING_SCENARIOS)
         self.default_scenario = scenario
@@ -460,13 +448,8 @@ class MicroDrillingEnv(gym.Env):
         log["position"].append(info["position_mm"])
 
     def render(self):
-        if self.render_mode is None:
-            gym.logger.warn(
-                "MicroDrillingEnv.render() called without a render_mode; pass render_mode='rgb_array'"
-            )
+        if not ready_to_render(self, "MicroDrillingEnv"):
             return None
-        if self.plant is None:
-            raise RuntimeError("MicroDrillingEnv: call reset() before render()")
         log = self._log
         t = log["t"]
         img = render_signals(

@@ -14,11 +14,13 @@ from machining_envs.envs.base import (
     ActionMap,
     check_action,
     check_episode_time,
-    check_overrides,
     check_render_mode,
     check_scenario_spec,
     present_frame,
+    ready_to_render,
     render_signals,
+    resolve_params,
+    resolve_reward,
     scenario_option,
 )
 from machining_envs.plants.turning import SPINDLE_RPM_RANGE, TurningParams, TurningPlant
@@ -157,14 +159,9 @@ class TurningEnv(gym.Env):
         max_episode_time_s: float = 200.0,
         **overrides,
     ):
-        check_overrides(
-            type(self).__name__, overrides, [f.name for f in dataclasses.fields(TurningParams)]
+        self.params = resolve_params(
+            type(self).__name__, params, TurningParams, TurningParams.noh_kim_kim_1992, overrides
         )
-        if params is None:
-            params = TurningParams.noh_kim_kim_1992()
-        if not isinstance(params, TurningParams):
-            raise ValueError(f"params must be a TurningParams, got {type(params).__name__}")
-        self.params = params.replace(**overrides) if overrides else params
         if spindle_rpm is not None:
             lo, hi = SPINDLE_RPM_RANGE
             ok = isinstance(spindle_rpm, (int, float)) and math.isfinite(spindle_rpm)
@@ -172,16 +169,7 @@ class TurningEnv(gym.Env):
                 raise ValueError(f"spindle_rpm must be in [{lo}, {hi}], got {spindle_rpm!r}")
             spindle_rpm = float(spindle_rpm)
         self.spindle_rpm_override = spindle_rpm
-        if isinstance(reward, dict):
-            check_overrides(
-                "TurningReward", reward, [f.name for f in dataclasses.fields(TurningReward)]
-            )
-            reward = TurningReward(**reward)
-        self.reward_weights = reward if reward is not None else TurningReward()
-        if not isinstance(self.reward_weights, TurningReward):
-            raise ValueError(
-                f"reward must be a TurningReward or a dict, got {type(reward).__name__}"
-            )
+        self.reward_weights = resolve_reward(reward, TurningReward)
         self.max_episode_time_s = check_episode_time(max_episode_time_s)
         check_scenario_spec(scenario, TurningScenario, TURNING_SCENARIOS)
         self.default_scenario = scenario
@@ -357,13 +345,8 @@ class TurningEnv(gym.Env):
         log["depth"].append(info["depth_mm"])
 
     def render(self):
-        if self.render_mode is None:
-            gym.logger.warn(
-                "TurningEnv.render() called without a render_mode; pass render_mode='rgb_array'"
-            )
+        if not ready_to_render(self, "TurningEnv"):
             return None
-        if self.plant is None:
-            raise RuntimeError("TurningEnv: call reset() before render()")
         log = self._log
         t = log["t"]
         img = render_signals(
