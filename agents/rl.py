@@ -246,20 +246,29 @@ class PolicyAgent:
         )
 
 
-def load_policy(model_path, name: str | None = None) -> PolicyAgent:
-    """Load ``*.zip`` and, if present, the VecNormalize statistics saved beside it."""
+def load_policy(model_path, name: str | None = None, algo: str | None = None) -> PolicyAgent:
+    """Load ``*.zip`` and, if present, the VecNormalize statistics saved beside it.
+
+    The algorithm comes from ``algo``, else the run's ``config.json`` beside the model, else
+    the file name (``ppo``, ``sac`` or ``td3`` in it); otherwise ``ValueError``.
+    """
     import pickle
 
     model_path = Path(model_path)
     if not model_path.is_file():
         raise FileNotFoundError(f"no model at {model_path}")
     meta_path = model_path.parent / "config.json"
-    algo = None
-    if meta_path.is_file():
+    if algo is None and meta_path.is_file():
         algo = json.loads(meta_path.read_text())["algo"]
     if algo is None:
         m = re.search(r"(ppo|sac|td3)", model_path.name.lower())
-        algo = m.group(1) if m else "ppo"
+        if m is None:
+            raise ValueError(
+                f"cannot tell the algorithm of {model_path}: pass algo= one of {list(ALGOS)}"
+            )
+        algo = m.group(1)
+    if algo not in ALGOS:
+        raise ValueError(f"algo must be one of {list(ALGOS)}, got {algo!r}")
     model = _algos()[algo].load(model_path, device="cpu")
     stats = model_path.with_name(model_path.stem.replace("model", "vecnormalize") + ".pkl")
     obs_rms, clip, eps = None, 10.0, 1e-8
