@@ -25,6 +25,13 @@ from agents.integral import FixedGainIntegral, IntegralACC, MillingConstantFeed
 from agents.pid import ConstantFeed, FixedGainPI
 from agents.position import PIPosition
 from agents.rl import pretrained
+from agents.scores import (
+    CONTOURING_SCORE,
+    DRILLING_SCORE,
+    FEED_SCORE,
+    REGULATION_SCORE,
+    PrimaryScore,
+)
 from agents.sliding_mode import SlidingMode
 from machining_envs.contouring_metrics import contouring_metrics
 from machining_envs.drilling_metrics import drilling_metrics
@@ -58,6 +65,8 @@ class BenchmarkSpec:
     heldout_scenario: str
     showcase_scenario: str
     metrics_fn: Callable[[dict], dict] = regulation_metrics
+    #: The env's primary score (``agents.scores``), tabled per agent on the held-out set.
+    score: PrimaryScore = REGULATION_SCORE
     table_metrics: tuple[str, ...] = TABLE_METRICS
     #: (info key, reference key or None, axis label) of the trajectory plot's upper panel,
     #: (info key, label) of its lower panel and of the context drawn on the lower panel's
@@ -125,6 +134,7 @@ BENCHMARKS = (
         "test",
         "paper_0.8",
         metrics_fn=drilling_metrics,
+        score=DRILLING_SCORE,
         table_metrics=(
             "drilling_time_s",
             "torque_mean_rel",
@@ -154,6 +164,7 @@ BENCHMARKS = (
         "test",
         "paper_circle",
         metrics_fn=contouring_metrics,
+        score=CONTOURING_SCORE,
         table_metrics=(
             "max_contour_error_mm",
             "rms_contour_error_mm",
@@ -182,6 +193,7 @@ BENCHMARKS = (
         "test",
         "paper_involute",
         metrics_fn=contouring_metrics,
+        score=FEED_SCORE,
         table_metrics=(
             "cycle_time_s",
             "max_contour_error_mm",
@@ -241,8 +253,8 @@ def run_benchmark(
         ev = Evaluation.concat(spec_evals)
         evals.append(ev)
         table = ev.to_markdown(spec.table_metrics)
-        limit = getattr(gym.make(spec.env_id).unwrapped, "max_episode_time_s", None)
-        primary = primary_score_table(ev, spec.heldout_scenario, limit) if limit else ""
+        failed = spec.score.failed_value(gym.make(spec.env_id))
+        primary = primary_score_table(ev, spec.heldout_scenario, failed, spec.score)
         if primary:
             table += "\n\n" + primary
         report += [
@@ -288,36 +300,41 @@ def run_benchmark(
     return allev
 
 
-def primary_score_table(ev: Evaluation, scenario: str, failed_time_s: float) -> str:
-    """Markdown table of the primary score per agent on ``scenario`` (regulation envs only).
+def primary_score_table(
+    ev: Evaluation,
+    scenario: str,
+    failed_value: float,
+    score: PrimaryScore = REGULATION_SCORE,
+) -> str:
+    """Markdown table of the primary score per agent on ``scenario`` (``agents.scores``).
 
-    Score: mean machining time with episodes that break or spend >= 2 % of the time above
-    1.1x the reference charged ``failed_time_s``, the env's time limit
-    (``agents.rl.primary_score``); the spread is the standard error of that mean over
-    episodes. Empty when the rows lack the needed metrics.
+    Score: the mean of the env's score metric with episodes that do not count charged
+    ``failed_value`` (or their own ``time_limit_s``); the spread is the standard error of
+    that mean over episodes. Empty when the rows lack the needed metrics.
     """
-    from agents.rl import primary_score
-
-    need = {"breakage", "time_over_limit", "finished", "machining_time_s", "itae"}
+    need = {score.value_key, "finished"} | ({score.over_key} if score.over_key else set())
     rows = [r for r in ev.rows if r["scenario"] == scenario]
     if not rows or not all(need <= set(r) for r in rows):
         return ""
+    k = score.scale
+    cost = "their own time limit" if "time_limit_s" in rows[0] else f"{failed_value * k:g}"
     lines = [
-        f"Primary score on `{scenario}` (s, lower is better; episodes that do not count cost "
-        f"the time limit, {failed_time_s:g} s):",
+        f"Primary score on `{scenario}`: {score.label}, lower is better; episodes that do "
+        f"not count cost {cost}:",
         "",
-        "| agent | score ± s.e. | episodes that count | ITAE |",
+        f"| agent | score ± s.e. | episodes that count | {score.secondary_label} |",
         "|---|---|---|---|",
     ]
     by_agent: dict[str, list[dict]] = {}
     for r in rows:
         by_agent.setdefault(r["agent"], []).append(r)
     for name, rs in by_agent.items():
-        s = primary_score(rs, failed_time_s)
-        charged = [primary_score([r], failed_time_s)["score"] for r in rs]
+        s = score(rs, failed_value)
+        charged = [score.charged(r, failed_value) * k for r in rs]
         se = float(np.std(charged, ddof=1) / np.sqrt(len(rs))) if len(rs) > 1 else 0.0
         lines.append(
-            f"| {name} | {s['score']:.1f} ± {se:.1f} | {s['valid']:.0%} | {s['itae']:.3g} |"
+            f"| {name} | {s['score'] * k:.4g} ± {se:.2g} | {s['valid']:.0%} | "
+            f"{s['secondary']:.3g} |"
         )
     return "\n".join(lines)
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agents.base import Agent, unwrap
+from machining_envs.envs.base import ActionMap
 from machining_envs.envs.end_milling import EndMillingEnv
 from machining_envs.milling_scenarios import PAPER_CONSTANT_FEED_MM_MIN
 from machining_envs.plants.milling import SPINDLE_RPM_RANGE, MillingParams
@@ -56,6 +57,8 @@ class MillingIO:
     sample_time_s: float
     params: MillingParams
     """The nominal plant, for model-based initial values."""
+    command_map: ActionMap | None = None
+    """The env's action map (its ``command_map``); None: affine over [0, command_max]."""
 
     @classmethod
     def from_env(cls, env) -> MillingIO:
@@ -65,7 +68,9 @@ class MillingIO:
                 f"a milling controller needs an EndMillingEnv, got {type(base).__name__}"
             )
         p = base.params
-        return cls(p.sensor_gain, p.torque_ref_Nmm, p.command_max, p.sample_time_s, p)
+        return cls(
+            p.sensor_gain, p.torque_ref_Nmm, p.command_max, p.sample_time_s, p, base.command_map
+        )
 
     def torque_counts(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Measured torque Tc and reference Tr in counts, from a batch of observations."""
@@ -81,6 +86,8 @@ class MillingIO:
 
     def action(self, command: np.ndarray) -> np.ndarray:
         """Actions (n, 1) for commands (n,) in counts."""
+        if self.command_map is not None:
+            return self.command_map.command_to_action(command)[:, None]
         return (2.0 * command / self.command_max - 1.0)[:, None]
 
 

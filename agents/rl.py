@@ -40,6 +40,7 @@ import numpy as np
 
 import machining_envs  # noqa: F401  (registers the env ids)
 from agents.harness import Evaluation, evaluate
+from agents.scores import REGULATION_SCORE
 
 __all__ = [
     "ALGOS",
@@ -191,25 +192,16 @@ FAILED_EPISODE_TIME_S = 200.0
 
 
 def primary_score(rows: list[dict], failed_time_s: float = FAILED_EPISODE_TIME_S) -> dict:
-    """The benchmark's primary score of a set of regulation episodes.
+    """The primary score of a set of regulation episodes (Turning-v0, EndMilling-v0).
 
     An episode *counts* if it finished the workpiece, the tool did not break, and the
     regulated signal spent under 2 % of the time above 1.1x its reference. Score: mean
     machining time (s, lower is better) with every episode that does not count charged
     ``failed_time_s``, so no policy can win by breaking the constraint. Returns ``score``,
-    ``valid`` (share of episodes that counted) and ``itae`` (mean) for the table.
+    ``valid`` (share of episodes that counted) and ``itae`` (mean) for the table. The other
+    envs' scores are in ``agents.scores``.
     """
-    times, valid, itae = [], [], []
-    for r in rows:
-        ok = r["breakage"] == 0.0 and r["time_over_limit"] < 0.02 and r["finished"] == 1.0
-        times.append(r["machining_time_s"] if ok else max(failed_time_s, r["machining_time_s"]))
-        valid.append(ok)
-        itae.append(r["itae"])
-    return {
-        "score": float(np.mean(times)),
-        "valid": float(np.mean(valid)),
-        "itae": float(np.mean(itae)),
-    }
+    return REGULATION_SCORE(rows, failed_time_s)
 
 
 class PolicyAgent:
@@ -308,15 +300,28 @@ def _make_vec(cfg: TrainConfig, seed: int):
 
 
 def _evaluation_setup(env_id: str, env_kwargs: dict):
-    """The env's metrics function (its benchmark spec's) and its time limit for the score."""
+    """The env's metrics function and primary score (its benchmark spec's, else the
+    regulation envs') and the failure cost of that score for the env."""
     from agents.benchmark import BENCHMARKS
     from machining_envs.metrics import regulation_metrics
 
-    metrics_fn = next((b.metrics_fn for b in BENCHMARKS if b.env_id == env_id), regulation_metrics)
+    # Match by the env's class (entry point), so that ids registered from other projects
+    # with our env classes get the same metrics and score as ours.
+    def entry(eid):
+        e = gym.spec(eid).entry_point
+        return e if isinstance(e, str) else f"{e.__module__}:{e.__qualname__}"
+
+    spec = next((b for b in BENCHMARKS if b.env_id == env_id), None) or next(
+        (b for b in BENCHMARKS if entry(b.env_id) == entry(env_id)), None
+    )
+    metrics_fn = spec.metrics_fn if spec else regulation_metrics
+    score = spec.score if spec else REGULATION_SCORE
     env = gym.make(env_id, **dict(env_kwargs))
-    failed_time_s = float(getattr(env.unwrapped, "max_episode_time_s", FAILED_EPISODE_TIME_S))
+    failed = score.failed_value(env)
     env.close()
-    return metrics_fn, failed_time_s
+    if not math.isfinite(failed):
+        failed = FAILED_EPISODE_TIME_S
+    return metrics_fn, score, failed
 
 
 def _latest_checkpoint(folder: Path):
@@ -399,7 +404,7 @@ def train(
         (out / "config.json").write_text(json.dumps(meta, indent=2, default=str))
 
     eval_csv = out / "eval.csv"
-    metrics_fn, failed_time_s = _evaluation_setup(env_id, cfg.env_kwargs)
+    metrics_fn, score_fn, failed_value = _evaluation_setup(env_id, cfg.env_kwargs)
 
     class HeldOutEval(BaseCallback):
         """Every ``eval_freq`` env steps: the harness on the held-out scenarios; keep the best."""
@@ -435,10 +440,12 @@ def train(
                 env_kwargs=dict(cfg.env_kwargs),
                 metrics_fn=metrics_fn,
             )
-            s = primary_score(ev.rows, failed_time_s)
+            s = score_fn(ev.rows, failed_value)
+            sec = score_fn.secondary_key or "secondary"
+            s = {"score": s["score"], "valid": s["valid"], sec: s["secondary"]}
             new = not eval_csv.is_file()
             with open(eval_csv, "a", newline="") as fh:
-                w = csv.DictWriter(fh, fieldnames=["timesteps", "wall_s", "score", "valid", "itae"])
+                w = csv.DictWriter(fh, fieldnames=["timesteps", "wall_s", "score", "valid", sec])
                 if new:
                     w.writeheader()
                 w.writerow(

@@ -66,6 +66,8 @@ def contouring_metrics(traj: dict) -> dict[str, float]:
       effort; ``peak_command_mm_s``: largest velocity command;
     - ``time_over_tolerance``: share of steps whose contour error passed the env's
       tolerance (ContouringFeed-v0; NaN where the env has none);
+    - ``time_limit_s``: the episode's truncation time, where the env reports it
+      (ContouringFeed-v0; the primary score charges it to runs that do not count);
     - ``finished``, ``diverged`` (1.0 / 0.0), ``n_steps``.
     """
     t = np.asarray(traj["t_s"], dtype=np.float64)
@@ -98,6 +100,8 @@ def contouring_metrics(traj: dict) -> dict[str, float]:
         out["time_over_tolerance"] = float(np.mean(peak > tol)) if peak.size else 0.0
     else:
         out["time_over_tolerance"] = math.nan
+    if "time_limit_s" in traj:
+        out["time_limit_s"] = float(np.asarray(traj["time_limit_s"], dtype=np.float64)[0])
     out["finished"] = float(finished)
     out["diverged"] = float(np.any(np.asarray(traj["diverged"], dtype=bool)))
     out["n_steps"] = float(t.size - 1)

@@ -11,7 +11,10 @@ import nbformat
 from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
 
 HERE = Path(__file__).resolve().parent
-QUICK = "import os\nQUICK = os.environ.get('MACHINING_NB_QUICK') == '1'  # small budgets under the tests\n"
+QUICK = (
+    "import os\n\n"
+    'QUICK = os.environ.get("MACHINING_NB_QUICK") == "1"  # small budgets under the tests'
+)
 
 NOTEBOOKS = {
     "01_quickstart.ipynb": [
@@ -20,8 +23,9 @@ NOTEBOOKS = {
             "and plot force, feed and depth of cut."
         ),
         new_code_cell(
-            "import gymnasium as gym\nimport matplotlib.pyplot as plt\nimport numpy as np\n\n"
-            "import machining_envs\nfrom agents import ConstantFeed, VariableGainPI\nfrom agents.harness import rollout"
+            "import gymnasium as gym\nimport matplotlib.pyplot as plt\n\n"
+            "import machining_envs  # noqa: F401  (registers the env ids)\n"
+            "from agents import ConstantFeed, VariableGainPI\nfrom agents.harness import rollout"
         ),
         new_code_cell(
             'env = gym.make("machining_envs/Turning-v0", scenario="paper_405")\n'
@@ -29,17 +33,21 @@ NOTEBOOKS = {
             "agents = [VariableGainPI.from_env(env), ConstantFeed.from_env(env)]\n"
             "trajs = {a.name: rollout(a, env, seed=0) for a in agents}\n"
             "for name, tr in trajs.items():\n"
-            "    print(f\"{name}: cut in {tr['machining_time_s'][-1]:.1f} s, broke: {bool(tr['breakage'].any())}\")"
+            '    broke = bool(tr["breakage"].any())\n'
+            "    print(f\"{name}: cut in {tr['machining_time_s'][-1]:.1f} s, broke: {broke}\")"
         ),
         new_code_cell(
             "fig, ax = plt.subplots(3, 1, figsize=(8, 6), sharex=True)\n"
             "for name, tr in trajs.items():\n"
-            "    ax[0].plot(tr['t_s'], tr['force_N'], label=name)\n"
-            "    ax[1].plot(tr['t_s'], tr['feed_mm_per_rev'])\n"
-            "    ax[2].plot(tr['t_s'], tr['depth_mm'])\n"
-            "ax[0].axhline(1000, color='k', ls='--')\n"
-            "ax[0].set_ylabel('force (N)'); ax[1].set_ylabel('feed (mm/rev)'); ax[2].set_ylabel('depth (mm)')\n"
-            "ax[2].set_xlabel('time (s)'); ax[0].legend(); plt.show()"
+            '    ax[0].plot(tr["t_s"], tr["force_N"], label=name)\n'
+            '    ax[1].plot(tr["t_s"], tr["feed_mm_per_rev"])\n'
+            '    ax[2].plot(tr["t_s"], tr["depth_mm"])\n'
+            'ax[0].axhline(1000, color="k", ls="--")\n'
+            'ax[0].set_ylabel("force (N)")\n'
+            'ax[1].set_ylabel("feed (mm/rev)")\n'
+            'ax[2].set(xlabel="time (s)", ylabel="depth (mm)")\n'
+            "ax[0].legend()\n"
+            "plt.show()"
         ),
     ],
     "02_train_sb3.ipynb": [
@@ -53,16 +61,22 @@ NOTEBOOKS = {
             "import tempfile\nfrom pathlib import Path\n\n"
             "from agents import VariableGainPI\nfrom agents.harness import evaluate\n"
             "from agents.rl import load_policy, primary_score, train\n\n"
-            "out = Path(tempfile.mkdtemp()) / 'ppo_turning'\n"
-            "run = train('machining_envs/Turning-v0', 'ppo', out, seed=0,\n"
-            "            n_timesteps=2_000 if QUICK else 300_000, progress_bar=not QUICK)"
+            'out = Path(tempfile.mkdtemp()) / "ppo_turning"\n'
+            "run = train(\n"
+            '    "machining_envs/Turning-v0",\n'
+            '    "ppo",\n'
+            "    out,\n"
+            "    seed=0,\n"
+            "    n_timesteps=2_000 if QUICK else 300_000,\n"
+            "    progress_bar=not QUICK,\n"
+            ")"
         ),
         new_code_cell(
             "n = 2 if QUICK else 20\n"
-            "policy = load_policy(run / 'best_model.zip')\n"
+            'policy = load_policy(run / "best_model.zip")\n'
             "for agent in (policy, VariableGainPI.from_env):\n"
-            "    ev = evaluate(agent, 'machining_envs/Turning-v0', ['test'], n_episodes=n, seed=1000)\n"
-            "    print(ev.rows[0]['agent'], primary_score(ev.rows))"
+            '    ev = evaluate(agent, "machining_envs/Turning-v0", ["test"], n_episodes=n, seed=1000)\n'
+            '    print(ev.rows[0]["agent"], primary_score(ev.rows))'
         ),
     ],
     "03_benchmark.ipynb": [
@@ -75,10 +89,11 @@ NOTEBOOKS = {
             "from agents.harness import Evaluation, evaluate\n\n"
             "n = 2 if QUICK else 20\n"
             "ev = Evaluation.concat(\n"
-            "    evaluate(f, 'machining_envs/Turning-v0', ['test'], n_episodes=n, seed=1000)\n"
+            '    evaluate(f, "machining_envs/Turning-v0", ["test"], n_episodes=n, seed=1000)\n'
             "    for f in (ConstantFeed.from_env, FixedGainPI.from_env, VariableGainPI.from_env)\n"
             ")\n"
-            "print(ev.to_markdown(['machining_time_s', 'iae', 'itae', 'max_overshoot', 'time_over_limit', 'breakage']))"
+            'metrics = ["machining_time_s", "iae", "itae", "max_overshoot", "time_over_limit", "breakage"]\n'
+            "print(ev.to_markdown(metrics))"
         ),
     ],
     "04_reproduce_papers.ipynb": [
@@ -92,7 +107,209 @@ NOTEBOOKS = {
             "out = Path(tempfile.mkdtemp())\n"
             "for process in REPRODUCTIONS:\n"
             "    results = reproduction(process)(out)\n"
-            "    display(Image(filename=str(out / f'reproduce_{process}.png')))"
+            '    display(Image(filename=str(out / f"reproduce_{process}.png")))'
+        ),
+    ],
+    "05_identify_your_machine.ipynb": [
+        new_markdown_cell(
+            "# Identify your machine, then train on it\n\n"
+            "Fit the end-milling plant of `machining_envs/EndMilling-v0` to a few test cuts and a "
+            "feed-servo step logged on *your* machine, build the env on the fitted constants, run "
+            "the classical integral ACC on it as a baseline, and train a PPO policy on it."
+        ),
+        new_code_cell(QUICK),
+        new_markdown_cell(
+            "## 1. Your machine's data\n\n"
+            "**In real use these arrays come from your machine's log.** Here they are simulated "
+            "from a made-up `true` machine whose constants differ from the nominal Park & Yoon "
+            "(1986) set, so that the fit can be checked against the truth. Two records:\n\n"
+            "- **test cuts**, one row per cut with the same tool, axial depth and spindle speed "
+            "as in `MillingParams` (16 mm 4-tooth end mill, 32 mm, 400 rpm by default): radial "
+            "depth `d` (mm), feed per tooth `ft` (mm/tooth) and the mean spindle torque over the "
+            "cut (N·mm). Span the depths and feeds you will cut at; a grid lets the depth and "
+            "feed exponents be fitted independently.\n"
+            "- **servo step**: the feed velocity (mm/s), sampled at a constant rate (here "
+            "100 Hz) from rest, after the feed command `U` (counts: the unit of the env's "
+            "action, `0..command_max`) is stepped from 0 to `STEP` at `t = 0`."
+        ),
+        new_code_cell(
+            "import dataclasses\n\n"
+            "import matplotlib.pyplot as plt\n"
+            "import numpy as np\n"
+            "from scipy import signal\n\n"
+            "from machining_envs.plants.milling import MillingParams\n\n"
+            "nominal = MillingParams.park_yoon_1986()\n"
+            "true = dataclasses.replace(  # your machine: unknown in real use, known here\n"
+            "    nominal,\n"
+            "    torque_coefficient_kgfmm=140.0,\n"
+            "    depth_exponent=0.50,\n"
+            "    feed_exponent=0.45,\n"
+            "    servo_gain=0.024,\n"
+            "    servo_natural_freq_hz=2.2,\n"
+            "    servo_damping=0.55,\n"
+            ")\n"
+            "rng = np.random.default_rng(0)\n\n"
+            "# Test cuts: radial depth (mm), feed per tooth (mm) -> mean torque (N·mm), 2 % scatter.\n"
+            "d_mm, ft_mm = (g.ravel() for g in np.meshgrid([0.5, 1, 2, 3.5], [0.005, 0.01, 0.02, 0.04]))\n"
+            "torque_Nmm = true.steady_torque_Nmm(d_mm, ft_mm) * (1 + 0.02 * rng.standard_normal(16))\n\n"
+            "# Servo step: command 0 -> STEP counts at t = 0; feed velocity (mm/s) at 100 Hz, noisy.\n"
+            "STEP = 50.0\n"
+            "t_s = 0.01 * np.arange(300)\n"
+            "wn = true.servo_natural_freq_rad_s\n"
+            "servo_tf = ([true.servo_gain * wn**2], [1.0, 2 * true.servo_damping * wn, wn**2])\n"
+            "vf_mm_s = STEP * signal.step(servo_tf, T=t_s)[1] + 0.024 * rng.standard_normal(t_s.size)\n"
+            'print("  d (mm)  ft (mm)  torque (N·mm)")\n'
+            "for row in np.column_stack([d_mm, ft_mm, torque_Nmm])[::5]:\n"
+            '    print(f"{row[0]:8.2f} {row[1]:8.3f} {row[2]:14.0f}")\n'
+            'print(f"... {d_mm.size} cuts; servo record of {t_s.size} samples")'
+        ),
+        new_markdown_cell(
+            "## 2. Identify\n\n"
+            "`fit_milling_torque` fits the torque law `T = Ks d^l ft^m D` by least squares in "
+            "logarithms (Ks in kgf·mm as the paper gives it, D from `base`); `fit_servo_step` "
+            "fits the gain, natural frequency and damping of the second-order feed servo to the "
+            "step record. Giving the torque fit's parameter set as the servo fit's `base` "
+            "collects both in one `MillingParams`. Every other constant (tool, spindle speed, "
+            "sensor gain, reference torque, ...) keeps its nominal value: set those for your "
+            "machine with `dataclasses.replace` before fitting.\n\n"
+            "Ks is the torque extrapolated to `d = ft = 1 mm`, far outside the cuts, so its error "
+            "trades off against the exponents'; what the env uses, the torque over the range cut, "
+            "is compared with the true law in the printout."
+        ),
+        new_code_cell(
+            "from machining_envs.identification import fit_milling_torque, fit_servo_step\n\n"
+            "cuts = fit_milling_torque(d_mm, ft_mm, torque_Nmm, base=nominal)\n"
+            "servo = fit_servo_step(t_s, vf_mm_s, step=STEP, base=cuts.params)\n"
+            "fitted = servo.params\n"
+            'print(f"torque law: R^2 {cuts.r_squared:.4f}, RMS error {cuts.rms_relative_error:.1%}")\n'
+            'print(f"servo:      R^2 {servo.r_squared:.4f}, NRMSE {servo.nrmse:.1%}")\n'
+            "law_error = fitted.steady_torque_Nmm(d_mm, ft_mm) / true.steady_torque_Nmm(d_mm, ft_mm) - 1\n"
+            'print(f"fitted torque law within {abs(law_error).max():.1%} of the true one over the cuts\\n")\n'
+            "print(f\"{'constant':<26}{'true':>8}{'fitted':>8}{'error':>8}\")\n"
+            "for name in (\n"
+            '    "torque_coefficient_kgfmm",\n'
+            '    "depth_exponent",\n'
+            '    "feed_exponent",\n'
+            '    "servo_gain",\n'
+            '    "servo_natural_freq_hz",\n'
+            '    "servo_damping",\n'
+            "):\n"
+            "    a, b = getattr(true, name), getattr(fitted, name)\n"
+            '    print(f"{name:<26}{a:>8.4g}{b:>8.4g}{b / a - 1:>+8.1%}")'
+        ),
+        new_code_cell(
+            "fig, ax = plt.subplots(1, 2, figsize=(10, 4))\n"
+            "f_grid = np.geomspace(ft_mm.min(), ft_mm.max(), 50)\n"
+            "for i, depth in enumerate(np.unique(d_mm)):\n"
+            "    sel = d_mm == depth\n"
+            '    ax[0].loglog(ft_mm[sel], torque_Nmm[sel], "o", color=f"C{i}", label=f"d = {depth:g} mm")\n'
+            '    ax[0].loglog(f_grid, fitted.steady_torque_Nmm(depth, f_grid), "-", color=f"C{i}")\n'
+            'ax[0].set(xlabel="feed per tooth (mm)", ylabel="torque (N·mm)", title="test cuts and fit")\n'
+            "ax[0].legend()\n"
+            "w = servo.natural_freq_rad_s\n"
+            "fit_tf = ([servo.gain * w**2], [1.0, 2 * servo.damping * w, w**2])\n"
+            'ax[1].plot(t_s, vf_mm_s, ".", ms=3, label="measured")\n'
+            'ax[1].plot(t_s, STEP * signal.step(fit_tf, T=t_s)[1], "k-", label="fit")\n'
+            'ax[1].set(xlabel="time (s)", ylabel="feed velocity (mm/s)", title="servo step and fit")\n'
+            "ax[1].legend()\n"
+            "plt.show()"
+        ),
+        new_markdown_cell(
+            "## 3. The env on your machine, and a classical baseline\n\n"
+            "Any field of `MillingParams` is a keyword of `gym.make`, so the fitted plant is "
+            "`params=fitted` or, equally, the fields that differ from the nominal set as "
+            "overrides. The overrides are plain numbers, so they also fit in a training config "
+            "(step 4). The integral ACC of Park & Yoon is designed from the env's nominal "
+            "constants, now your fitted ones; it sets the baseline on the held-out `test` "
+            "scenarios (random workpieces, spindle speeds and references, with the true Ks and "
+            "m within ±25 % of the fitted ones)."
+        ),
+        new_code_cell(
+            "import gymnasium as gym\n\n"
+            "from agents import IntegralACC\n"
+            "from agents.harness import Evaluation, evaluate\n"
+            "from machining_envs.milling_metrics import milling_metrics\n\n"
+            'ENV_ID = "machining_envs/EndMilling-v0"\n'
+            "machine = {\n"
+            "    f.name: getattr(fitted, f.name)\n"
+            "    for f in dataclasses.fields(fitted)\n"
+            "    if getattr(fitted, f.name) != getattr(nominal, f.name)\n"
+            "}\n"
+            "env = gym.make(ENV_ID, **machine)\n"
+            "assert env.unwrapped.params == gym.make(ENV_ID, params=fitted).unwrapped.params\n"
+            "print(machine)\n\n"
+            "n = 2 if QUICK else 20\n"
+            "kw = dict(n_episodes=n, seed=1000, env_kwargs=machine, metrics_fn=milling_metrics)\n"
+            'acc = evaluate(IntegralACC.from_env, ENV_ID, ["test"], **kw)\n'
+            'COLUMNS = ["machining_time_min", "iae", "oscillation", "time_over_limit", "breakage", "finished"]\n'
+            "print(acc.to_markdown(COLUMNS))"
+        ),
+        new_markdown_cell(
+            "## 4. Train a policy on it\n\n"
+            "`agents.rl.train` reads its hyperparameters from a YAML file with one entry per "
+            "env id (layout and checks in `agents/rl.py`). Here the notebook writes its own "
+            "PPO entry, with the fitted constants in `env_kwargs`, into a temporary folder and "
+            "trains there; the run keeps the model that scored best on held-out episodes, with "
+            "its VecNormalize statistics, and `load_policy` loads both.\n\n"
+            "**Budget.** Under the tests (`MACHINING_NB_QUICK=1`) PPO gets 4 096 steps: far too "
+            "few to learn anything, so the policy below is close to its random start, breaks "
+            "the torque limit and loses to the ACC. Without that flag it gets 200 000 steps "
+            "(minutes on a laptop CPU) with settings like those of the turning entry, not tuned "
+            "for milling: read the table, not this text, to see whether it matches the ACC on "
+            "your machine."
+        ),
+        new_code_cell(
+            "import tempfile\n"
+            "from pathlib import Path\n\n"
+            "import yaml\n\n"
+            "from agents.rl import load_policy, primary_score, train\n\n"
+            "folder = Path(tempfile.mkdtemp())\n"
+            "entry = {\n"
+            '    "n_envs": 4,\n'
+            '    "normalize": {"norm_obs": True, "norm_reward": True},\n'
+            '    "env_kwargs": {"scenario": "train", **machine},\n'
+            '    "eval_freq": 25_000,\n'
+            '    "eval_episodes": 2 if QUICK else 10,\n'
+            '    "eval_scenarios": ["test"],\n'
+            '    "checkpoint_freq": 100_000,\n'
+            '    "n_steps": 512,\n'
+            '    "batch_size": 128,\n'
+            '    "gamma": 0.99,\n'
+            '    "learning_rate": 3e-4,\n'
+            '    "policy_kwargs": {"net_arch": [64, 64]},\n'
+            "}\n"
+            '(folder / "ppo.yml").write_text(yaml.safe_dump({ENV_ID: entry}))\n'
+            "run = train(\n"
+            "    ENV_ID,\n"
+            '    "ppo",\n'
+            '    folder / "run",\n'
+            "    seed=0,\n"
+            '    config_path=folder / "ppo.yml",\n'
+            "    n_timesteps=4_096 if QUICK else 200_000,\n"
+            "    progress_bar=not QUICK,\n"
+            ")"
+        ),
+        new_markdown_cell(
+            "The trained policy beside the ACC on the same held-out episodes. The primary score "
+            "is the mean machining time (s, lower is better) with every episode that breaks "
+            "the tool, spends over 2 % of its time above 1.1x the reference torque or does not "
+            "finish charged the env's time limit (1200 s); `valid` is the share of episodes "
+            "that count. A policy that cuts faster by running over the torque limit does not win."
+        ),
+        new_code_cell(
+            'policy = load_policy(run / "best_model.zip", name="PPO (your machine)")\n'
+            'ev = Evaluation.concat([acc, evaluate(policy, ENV_ID, ["test"], **kw)])\n'
+            "print(ev.to_markdown(COLUMNS))\n"
+            "limit = env.unwrapped.max_episode_time_s\n"
+            'for name in dict.fromkeys(r["agent"] for r in ev.rows):\n'
+            '    score = primary_score([r for r in ev.rows if r["agent"] == name], limit)\n'
+            '    print(f"{name}: {score}")'
+        ),
+        new_markdown_cell(
+            "To use your machine from another project, register it under an id of your own: "
+            '`gym.register(id="mylab/MyMill-v0", '
+            'entry_point="machining_envs.envs.end_milling:EndMillingEnv", '
+            'kwargs={"params": fitted})`, and pass `metrics_fn=milling_metrics` to `evaluate`.'
         ),
     ],
 }
@@ -100,6 +317,8 @@ NOTEBOOKS = {
 
 def main() -> None:
     for name, cells in NOTEBOOKS.items():
+        for i, cell in enumerate(cells):
+            cell.id = f"cell-{i}"  # stable ids: rewriting an unchanged notebook changes nothing
         nb = new_notebook(
             cells=cells,
             metadata={

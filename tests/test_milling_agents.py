@@ -64,7 +64,7 @@ def test_integral_law_matches_eq_1_to_4_by_hand():
     a, s = ag.predict(_obs(0.0))
     w0 = 0.1 * k  # W(0) = Ts E(0), E = Tr - Tc in counts
     assert s[0, 0] == pytest.approx(w0)
-    assert a[0] == pytest.approx(2 * 0.2 * w0 / p.command_max - 1, rel=1e-6)
+    assert env.unwrapped.action_to_command(a[0]) == pytest.approx(0.2 * w0, rel=1e-6)  # U = Kc W
     a, s = ag.predict(_obs(0.6), state=s)
     assert s[0, 0] == pytest.approx(w0 + 0.1 * 0.4 * k)
     # Clipped at U = 0: W restarts from 0 (W = U / Kc), no windup below the range.

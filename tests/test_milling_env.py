@@ -119,7 +119,8 @@ def test_info_keys_and_units():
     _, _, _, _, info = env.step(np.array([0.0], dtype=np.float32))
     assert DESIGN_INFO_KEYS <= set(info)
     assert info["t_s"] == pytest.approx(0.1)
-    assert info["command"] == pytest.approx(0.5 * env.unwrapped.params.command_max)
+    cmax = env.unwrapped.params.command_max
+    assert info["command"] == pytest.approx(cmax * (1000**0.5 - 1) / 999)  # log map, action 0
     assert info["spindle_rpm"] == 400.0 and info["torque_ref_Nmm"] == 3600.0
     assert info["workpiece_length_mm"] == 40.0
     assert info["workpiece_volume_mm3"] == pytest.approx(32.0 * 40.0 * 2.0)
@@ -127,11 +128,46 @@ def test_info_keys_and_units():
     assert info["feed_mm_per_rev"] == pytest.approx(60 * info["feed_velocity_mm_s"] / 400.0)
 
 
-def test_action_map_round_trip():
-    env = gym.make(MILLING).unwrapped
-    u = np.array([0.0, 20.0, 150.0])
-    np.testing.assert_allclose(env.action_to_command(env.command_to_action(u)), u)
+@pytest.mark.parametrize("action_map", ["log", "linear"])
+def test_action_map_round_trip(action_map):
+    env = gym.make(MILLING, action_map=action_map).unwrapped
+    u = np.array([0.0, 0.3, 20.0, 150.0])
+    np.testing.assert_allclose(env.action_to_command(env.command_to_action(u)), u, atol=1e-12)
     assert env.action_to_command(-1.0) == 0.0
+    assert env.action_to_command(1.0) == pytest.approx(150.0)
+    assert env.action_to_command(0.0) == pytest.approx(
+        75.0 if action_map == "linear" else 4.598, rel=1e-3
+    )
+
+
+def test_log_action_map_gives_equal_relative_steps():
+    """Above a few counts each 2/3 of action multiplies the command by ~10 (three decades)."""
+    env = gym.make(MILLING).unwrapped
+    u = env.action_to_command(np.array([-1 / 3, 1 / 3, 1.0]))
+    np.testing.assert_allclose(u[1:] / u[:-1], 10.0, rtol=0.1)
+
+
+def test_unknown_action_map_is_rejected_with_the_allowed_values():
+    with pytest.raises(ValueError, match="action_map must be one of"):
+        gym.make(MILLING, action_map="exp")
+
+
+def test_classical_agent_is_unaffected_by_the_action_map():
+    """IntegralACC goes through the env's map: same commands and torques on either map."""
+    from agents.integral import IntegralACC
+
+    runs = {}
+    for action_map in ("log", "linear"):
+        env = gym.make(MILLING, scenario="paper_step", action_map=action_map)
+        agent = IntegralACC.from_env(env)
+        obs, _ = env.reset(seed=0)
+        cmds = []
+        for _ in range(200):
+            a, _ = agent.predict(obs)
+            obs, _, term, trunc, info = env.step(a)
+            cmds.append(info["command"])
+        runs[action_map] = np.array(cmds)
+    np.testing.assert_allclose(runs["log"], runs["linear"], rtol=1e-4, atol=1e-4)
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])

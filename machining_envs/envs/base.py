@@ -21,10 +21,29 @@ __all__ = [
 ]
 
 
-class ActionMap:
-    """Affine map between the agent's ``Box(-1, 1)`` action and a physical command range."""
+ACTION_MAPS = ("linear", "log")
 
-    def __init__(self, command_min: float, command_max: float):
+
+class ActionMap:
+    """Map between the agent's ``Box(-1, 1)`` action and a physical command range.
+
+    ``scale="linear"``: the command is affine in the action. ``scale="log"``: it rises
+    exponentially over ``decades`` decades,
+    ``c = c_min + (c_max - c_min) (10^(k (a + 1) / 2) - 1) / (10^k - 1)``: action -1 is still
+    ``c_min`` and +1 ``c_max``, but every step of ``2 / k`` in the action multiplies the
+    command (above ``c_min``) by about ten, so a policy has the same relative resolution
+    at every size of command.
+
+    >>> m = ActionMap(0.0, 150.0, scale="log", decades=3.0)
+    >>> round(m.action_to_command(-1.0), 9), round(m.action_to_command(1.0), 9)
+    (0.0, 150.0)
+    >>> round(float(m.command_to_action(m.action_to_command(0.25))), 12)
+    0.25
+    """
+
+    def __init__(
+        self, command_min: float, command_max: float, scale: str = "linear", decades: float = 3.0
+    ):
         if not (
             math.isfinite(command_min) and math.isfinite(command_max) and command_max > command_min
         ):
@@ -32,18 +51,39 @@ class ActionMap:
                 f"command range must be finite with command_max > command_min, got "
                 f"[{command_min}, {command_max}]"
             )
+        if scale not in ACTION_MAPS:
+            raise ValueError(f"action map scale must be one of {list(ACTION_MAPS)}, got {scale!r}")
+        if not (isinstance(decades, (int, float)) and 0.5 <= decades <= 6):
+            raise ValueError(f"decades must be in [0.5, 6], got {decades!r}")
         self.command_min = float(command_min)
         self.command_max = float(command_max)
+        self.scale = scale
+        self.decades = float(decades)
         self._half = 0.5 * (self.command_max - self.command_min)
         self._mid = 0.5 * (self.command_max + self.command_min)
+        self._span = self.command_max - self.command_min
+        self._g = 10.0**self.decades - 1.0
+        self._c = 0.5 * math.log(10.0) * self.decades
 
     def action_to_command(self, action):
         """Physical command for an action in [-1, 1] (array or scalar)."""
-        return self._mid + self._half * np.asarray(action, dtype=np.float64)
+        if isinstance(action, float):  # the envs' step: plain floats, no array overhead
+            if self.scale == "linear":
+                return self._mid + self._half * action
+            return self.command_min + self._span * math.expm1(self._c * (action + 1.0)) / self._g
+        a = np.asarray(action, dtype=np.float64)
+        if self.scale == "linear":
+            return self._mid + self._half * a
+        return self.command_min + self._span * np.expm1(self._c * (a + 1.0)) / self._g
 
     def command_to_action(self, command):
-        """Action in [-1, 1] for a physical command (not clipped)."""
-        return (np.asarray(command, dtype=np.float64) - self._mid) / self._half
+        """Action in [-1, 1] for a physical command (not clipped; on the log map a command
+        below ``command_min`` gives an action below -1)."""
+        c = np.asarray(command, dtype=np.float64)
+        if self.scale == "linear":
+            return (c - self._mid) / self._half
+        x = np.maximum((c - self.command_min) * self._g / self._span, -1.0 + 1e-15)
+        return np.log1p(x) / self._c - 1.0
 
 
 def check_action(action, env_name: str) -> tuple[float, bool]:

@@ -151,7 +151,9 @@ class ContouringFeedEnv(gym.Env):
     The keys of ``Contouring-v0`` at the step's end (``x_mm``, ``contour_error_mm``,
     ``command``...; ``torque_sq_Nm2`` is the step's mean) plus ``peak_contour_error_mm``
     (largest over the step), ``tolerance_mm``, ``feed_override``, ``path_speed_mm_s``,
-    ``servo``, and ``machining_time_s`` (the cycle time, to the servo period) once finished.
+    ``servo``, ``programmed_time_s`` (path length over programmed feed), ``time_limit_s``
+    (this episode's truncation time), and ``machining_time_s`` (the cycle time, to the servo
+    period) once finished.
 
     ## Version History
     * v0: first version.
@@ -423,6 +425,8 @@ class ContouringFeedEnv(gym.Env):
             "path_length_mm": self._path.length,
             "segment": self._path.segment_index(self._s),
             "feed_mm_s": self._feed,
+            "programmed_time_s": self._prog_time,
+            "time_limit_s": self._t_max,
             "servo": self.servo,
             "scenario": sc.name,
         }

@@ -11,6 +11,7 @@ import numpy as np
 from gymnasium import spaces
 
 from machining_envs.envs.base import (
+    ACTION_MAPS,
     ActionMap,
     check_action,
     check_episode_time,
@@ -34,6 +35,11 @@ from machining_envs.plants.milling import SPINDLE_RPM_RANGE, MillingParams, Mill
 __all__ = ["EndMillingEnv", "MillingReward"]
 
 _HISTORY = 3
+#: Decades spanned by the command on the default logarithmic action map: the feeds that
+#: hold the torque on the test set span about two (the feed exponent m ~ 0.4 turns a 2x
+#: change of depth, Ks or reference into a ~5x change of feed), and one more keeps slow
+#: approach feeds resolvable.
+COMMAND_DECADES = 3.0
 _TORQUE_OBS = (-1.0, 10.0)
 
 
@@ -87,10 +93,16 @@ class EndMillingEnv(gym.Env):
     (Fig. 5).
 
     ## Action Space
-    ``Box(-1, 1, (1,), float32)``, mapped affinely onto the command ``U`` in
-    ``[0, command_max]`` counts (``action_to_command`` / ``command_to_action``); the servo's
-    steady feed velocity is ``servo_gain * U`` mm/s. A finite action outside the box is
-    clipped and counted in ``info["n_action_clipped"]``; NaN or inf raises ``ValueError``.
+    ``Box(-1, 1, (1,), float32)``, mapped onto the command ``U`` in ``[0, command_max]``
+    counts (``action_to_command`` / ``command_to_action``); the servo's steady feed velocity
+    is ``servo_gain * U`` mm/s. The map is logarithmic by default (``action_map="log"``):
+    ``U = command_max (1000^((a+1)/2) - 1) / 999``, so -1 holds the feed, +1 is full feed,
+    and each third of the action's range multiplies the command tenfold. The feeds that
+    hold the torque span two decades over the test set and sit in the bottom tenth of the
+    command range, where an affine map (``action_map="linear"``) leaves a learned policy
+    almost no resolution; classical agents go through ``command_to_action`` and are
+    unaffected by the choice. A finite action outside the box is clipped and counted in
+    ``info["n_action_clipped"]``; NaN or inf raises ``ValueError``.
 
     ## Observation Space
     ``Box(float32, (7,))``: only what the machine measures, normalised to order one by the
@@ -126,9 +138,10 @@ class EndMillingEnv(gym.Env):
 
     ## Arguments
     ``gym.make("machining_envs/EndMilling-v0", scenario="train", render_mode=None,
-    params=None, reward=None, max_episode_time_s=1200.0, **overrides)``: ``scenario`` is
-    the default for resets without one (a name of ``MILLING_SCENARIOS`` or a
-    ``MillingScenario``); ``params`` a ``MillingParams`` (nominal: what controllers are
+    params=None, reward=None, max_episode_time_s=1200.0, action_map="log", **overrides)``:
+    ``scenario`` is the default for resets without one (a name of ``MILLING_SCENARIOS`` or
+    a ``MillingScenario``); ``action_map`` is ``"log"`` or ``"linear"`` (Action Space);
+    ``params`` a ``MillingParams`` (nominal: what controllers are
     designed from; ``MillingParams.ahn_choi_al6061()`` for the Al6061 set); ``overrides``
     change single fields of it (``servo_gain=0.025``, ``force_model="average_force"``,
     ``spindle_rpm=500``). Unknown keywords raise ``TypeError``; out-of-range values raise
@@ -157,8 +170,9 @@ class EndMillingEnv(gym.Env):
     >>> obs, info = env.reset(seed=0)
     >>> obs.shape, info["depth_mm"], info["spindle_rpm"], info["torque_ref_Nmm"]
     ((7,), 1.0, 400.0, 3600.0)
-    >>> obs, reward, terminated, truncated, info = env.step(np.array([-0.9], dtype=np.float32))
-    >>> round(info["command"], 1), info["t_s"]
+    >>> action = np.array([env.unwrapped.command_to_action(7.5)], dtype=np.float32)
+    >>> obs, reward, terminated, truncated, info = env.step(action)
+    >>> round(info["command"], 3), info["t_s"]
     (7.5, 0.1)
     """
 
@@ -173,6 +187,7 @@ class EndMillingEnv(gym.Env):
         params: MillingParams | None = None,
         reward: MillingReward | dict | None = None,
         max_episode_time_s: float = 1200.0,
+        action_map: str = "log",
         **overrides,
     ):
         self.params = resolve_params(
@@ -184,9 +199,13 @@ class EndMillingEnv(gym.Env):
         self.default_scenario = scenario
         self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
 
-        self.command_map = ActionMap(0.0, self.params.command_max)
-        self._u_mid = 0.5 * self.params.command_max
-        self._u_half = 0.5 * self.params.command_max
+        if action_map not in ACTION_MAPS:
+            raise ValueError(
+                f"EndMillingEnv: action_map must be one of {list(ACTION_MAPS)}, got {action_map!r}"
+            )
+        self.command_map = ActionMap(
+            0.0, self.params.command_max, scale=action_map, decades=COMMAND_DECADES
+        )
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         t_lo, t_hi = _TORQUE_OBS
         low = np.array([t_lo, 0.0, -1.0, 0.0] + [t_lo] * _HISTORY, dtype=np.float32)
@@ -240,7 +259,7 @@ class EndMillingEnv(gym.Env):
             raise RuntimeError("EndMillingEnv: call reset() before step()")
         a, clipped = check_action(action, "EndMillingEnv")
         self._n_clipped += clipped
-        u = self._u_mid + self._u_half * a
+        u = self.command_map.action_to_command(a)
         noise = (
             self._noise_counts * float(self.np_random.standard_normal())
             if self._noise_counts
