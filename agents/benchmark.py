@@ -101,6 +101,7 @@ BENCHMARKS = (
             MillingConstantFeed.from_env,
             FixedGainIntegral.from_env,
             IntegralACC.from_env,
+            pretrained("end_milling_ppo"),
         ),
         ("paper_step", "paper_taper"),
         "test",
@@ -129,7 +130,7 @@ BENCHMARKS = (
     ),
     BenchmarkSpec(
         "machining_envs/MicroDrilling-v0",
-        (NoControl.from_env, PD.from_env, SlidingMode.from_env),
+        (NoControl.from_env, PD.from_env, SlidingMode.from_env, pretrained("micro_drilling_ppo")),
         ("paper_0.5", "paper_0.6", "paper_0.7", "paper_0.8"),
         "test",
         "paper_0.8",
@@ -159,7 +160,7 @@ BENCHMARKS = (
     ),
     BenchmarkSpec(
         "machining_envs/Contouring-v0",
-        (PIPosition.from_env, HInf2DOF.from_env),
+        (PIPosition.from_env, HInf2DOF.from_env, pretrained("contouring_ppo")),
         ("paper_circle", "paper_involute"),
         "test",
         "paper_circle",
@@ -188,7 +189,11 @@ BENCHMARKS = (
     ),
     BenchmarkSpec(
         "machining_envs/ContouringFeed-v0",
-        (ConstantOverride.from_env, functools.partial(ConstantOverride.from_env, override=1.0)),
+        (
+            ConstantOverride.from_env,
+            functools.partial(ConstantOverride.from_env, override=1.0),
+            pretrained("contouring_feed_ppo"),
+        ),
         ("paper_circle", "paper_involute"),
         "test",
         "paper_involute",

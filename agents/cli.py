@@ -116,17 +116,15 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         return 0
     if args.command == "evaluate":
-        from agents.rl import evaluate_policy_file, primary_score
+        from agents.rl import benchmark_spec, evaluate_policy_file
 
-        ev = evaluate_policy_file(args.model, args.env, args.scenarios, args.episodes, args.seed)
+        ev, s = evaluate_policy_file(args.model, args.env, args.scenarios, args.episodes, args.seed)
+        spec = benchmark_spec(args.env)
+        print(ev.to_markdown(spec.table_metrics if spec else ev.metric_names()))
+        k = s["scale"]
         print(
-            ev.to_markdown(
-                ["machining_time_s", "iae", "itae", "time_over_limit", "breakage", "finished"]
-            )
-        )
-        s = primary_score(ev.rows)
-        print(
-            f"\nprimary score {s['score']:.2f} s (episodes that count: {s['valid']:.0%}), ITAE {s['itae']:.2f}"
+            f"\nprimary score ({s['label']}): {s['score'] * k:.4g} (episodes that count: "
+            f"{s['valid']:.0%}); {s['secondary_label']} {s['secondary']:.4g}"
         )
         return 0
     return 2  # pragma: no cover - argparse rejects other commands

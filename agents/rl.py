@@ -299,21 +299,27 @@ def _make_vec(cfg: TrainConfig, seed: int):
     return venv
 
 
-def _evaluation_setup(env_id: str, env_kwargs: dict):
-    """The env's metrics function and primary score (its benchmark spec's, else the
-    regulation envs') and the failure cost of that score for the env."""
+def benchmark_spec(env_id: str):
+    """The benchmark spec of an env id (``agents.benchmark.BENCHMARKS``), matched by the env's
+    class so that ids registered from other projects with our env classes find theirs;
+    None for an env of another class."""
     from agents.benchmark import BENCHMARKS
-    from machining_envs.metrics import regulation_metrics
 
-    # Match by the env's class (entry point), so that ids registered from other projects
-    # with our env classes get the same metrics and score as ours.
     def entry(eid):
         e = gym.spec(eid).entry_point
         return e if isinstance(e, str) else f"{e.__module__}:{e.__qualname__}"
 
-    spec = next((b for b in BENCHMARKS if b.env_id == env_id), None) or next(
+    return next((b for b in BENCHMARKS if b.env_id == env_id), None) or next(
         (b for b in BENCHMARKS if entry(b.env_id) == entry(env_id)), None
     )
+
+
+def _evaluation_setup(env_id: str, env_kwargs: dict):
+    """The env's metrics function and primary score (its benchmark spec's, else the
+    regulation envs') and the failure cost of that score for the env."""
+    from machining_envs.metrics import regulation_metrics
+
+    spec = benchmark_spec(env_id)
     metrics_fn = spec.metrics_fn if spec else regulation_metrics
     score = spec.score if spec else REGULATION_SCORE
     env = gym.make(env_id, **dict(env_kwargs))
@@ -496,6 +502,19 @@ def train(
 
 def evaluate_policy_file(
     model_path, env_id: str, scenarios, n_episodes: int, seed: int
-) -> Evaluation:
-    """The harness on a saved policy (with its VecNormalize statistics)."""
-    return evaluate(load_policy(model_path), env_id, scenarios, n_episodes=n_episodes, seed=seed)
+) -> tuple[Evaluation, dict]:
+    """The harness on a saved policy (with its VecNormalize statistics), with the env's own
+    metrics; returns the evaluation and the env's primary score of it (``agents.scores``)."""
+    metrics_fn, score_fn, failed = _evaluation_setup(env_id, {})
+    ev = evaluate(
+        load_policy(model_path),
+        env_id,
+        scenarios,
+        n_episodes=n_episodes,
+        seed=seed,
+        metrics_fn=metrics_fn,
+    )
+    s = score_fn(ev.rows, failed)
+    s["label"], s["secondary_label"] = score_fn.label, score_fn.secondary_label
+    s["scale"] = score_fn.scale
+    return ev, s
