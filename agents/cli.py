@@ -118,13 +118,14 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "evaluate":
         from agents.rl import benchmark_spec, evaluate_policy_file
 
-        ev, s = evaluate_policy_file(args.model, args.env, args.scenarios, args.episodes, args.seed)
+        ev, s, score = evaluate_policy_file(
+            args.model, args.env, args.scenarios, args.episodes, args.seed
+        )
         spec = benchmark_spec(args.env)
         print(ev.to_markdown(spec.table_metrics if spec else ev.metric_names()))
-        k = s["scale"]
         print(
-            f"\nprimary score ({s['label']}): {s['score'] * k:.4g} (episodes that count: "
-            f"{s['valid']:.0%}); {s['secondary_label']} {s['secondary']:.4g}"
+            f"\nprimary score ({score.label}): {s['score'] * score.scale:.4g} (episodes that "
+            f"count: {s['valid']:.0%}); {score.secondary_label} {s['secondary']:.4g}"
         )
         return 0
     return 2  # pragma: no cover - argparse rejects other commands

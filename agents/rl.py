@@ -40,7 +40,7 @@ import numpy as np
 
 import machining_envs  # noqa: F401  (registers the env ids)
 from agents.harness import Evaluation, evaluate
-from agents.scores import REGULATION_SCORE
+from agents.scores import REGULATION_SCORE, PrimaryScore
 
 __all__ = [
     "ALGOS",
@@ -502,9 +502,9 @@ def train(
 
 def evaluate_policy_file(
     model_path, env_id: str, scenarios, n_episodes: int, seed: int
-) -> tuple[Evaluation, dict]:
+) -> tuple[Evaluation, dict, PrimaryScore]:
     """The harness on a saved policy (with its VecNormalize statistics), with the env's own
-    metrics; returns the evaluation and the env's primary score of it (``agents.scores``)."""
+    metrics; returns the evaluation, its primary score and the env's ``PrimaryScore``."""
     metrics_fn, score_fn, failed = _evaluation_setup(env_id, {})
     ev = evaluate(
         load_policy(model_path),
@@ -514,7 +514,4 @@ def evaluate_policy_file(
         seed=seed,
         metrics_fn=metrics_fn,
     )
-    s = score_fn(ev.rows, failed)
-    s["label"], s["secondary_label"] = score_fn.label, score_fn.secondary_label
-    s["scale"] = score_fn.scale
-    return ev, s
+    return ev, score_fn(ev.rows, failed), score_fn

@@ -220,8 +220,6 @@ class MicroDrillingEnv(gym.Env):
             self.command_map = ActionMap(0.0, p.voltage_max)
         else:
             self.command_map = ActionMap(-p.feed_speed_max_mm_s, p.feed_speed_max_mm_s)
-        self._c_mid = 0.5 * (self.command_map.command_max + self.command_map.command_min)
-        self._c_half = 0.5 * (self.command_map.command_max - self.command_map.command_min)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         t_lo, t_hi = _TORQUE_OBS
         low = np.array(
@@ -283,7 +281,7 @@ class MicroDrillingEnv(gym.Env):
             raise RuntimeError("MicroDrillingEnv: call reset() before step()")
         a, clipped = check_action(action, "MicroDrillingEnv")
         self._n_clipped += clipped
-        command = self._c_mid + self._c_half * a
+        command = self.command_map.action_to_command(a)
         p = self.params
         if self.control == "voltage":
             voltage, feed = command, self._v0

@@ -176,8 +176,6 @@ class TurningEnv(gym.Env):
         self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
 
         self.command_map = ActionMap(0.0, self.params.command_max)
-        self._u_mid = 0.5 * self.params.command_max
-        self._u_half = 0.5 * self.params.command_max
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         f_lo, f_hi = _FORCE_OBS
         low = np.array([f_lo, 0.0, -1.0, 0.0] + [f_lo] * _HISTORY, dtype=np.float32)
@@ -236,7 +234,7 @@ class TurningEnv(gym.Env):
             raise RuntimeError("TurningEnv: call reset() before step()")
         a, clipped = check_action(action, "TurningEnv")
         self._n_clipped += clipped
-        u = self._u_mid + self._u_half * a
+        u = self.command_map.action_to_command(a)
         noise = (
             self._noise_counts * float(self.np_random.standard_normal())
             if self._noise_counts
