@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import functools
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -234,6 +234,7 @@ def run_benchmark(
     for spec in BENCHMARKS:
         env_name = spec.env_id.split("/")[-1]
         spec_evals = []
+        learned = set()
         for k, factory in enumerate(spec.agents):
             for scenarios, n in (
                 (spec.paper_scenarios, n_paper),
@@ -250,8 +251,10 @@ def run_benchmark(
                 for row in ev.rows:
                     row["env_id"] = spec.env_id
                 spec_evals.append(ev)
+            name = spec_evals[-1].rows[0]["agent"]
+            if getattr(factory, "learned", False):
+                learned.add(name)
             if verbose:
-                name = spec_evals[-1].rows[0]["agent"]
                 print(
                     f"[{env_name}] {k + 1}/{len(spec.agents)} {name}: done ({time.perf_counter() - t0:.0f} s)"
                 )
@@ -259,7 +262,9 @@ def run_benchmark(
         evals.append(ev)
         table = ev.to_markdown(spec.table_metrics)
         failed = spec.score.failed_value(gym.make(spec.env_id))
-        primary = primary_score_table(ev, spec.heldout_scenario, failed, spec.score)
+        primary = primary_score_table(
+            ev, spec.heldout_scenario, failed, spec.score, learned=learned
+        )
         if primary:
             table += "\n\n" + primary
         report += [
@@ -310,12 +315,16 @@ def primary_score_table(
     scenario: str,
     failed_value: float,
     score: PrimaryScore = REGULATION_SCORE,
+    learned: Iterable[str] = (),
 ) -> str:
     """Markdown table of the primary score per agent on ``scenario`` (``agents.scores``).
 
     Score: the mean of the env's score metric with episodes that do not count charged
     ``failed_value`` (or their own ``time_limit_s``); the spread is the standard error of
-    that mean over episodes. Empty when the rows lack the needed metrics.
+    that mean over episodes. For the agents named in ``learned`` a last column gives the
+    margin over the best of the others (its score minus theirs, positive when the learned
+    agent is better) with the standard error of the episode-by-episode differences (the
+    agents meet the same seeds). Empty when the rows lack the needed metrics.
     """
     need = {score.value_key, "finished"} | ({score.over_key} if score.over_key else set())
     rows = [r for r in ev.rows if r["scenario"] == scenario]
@@ -323,25 +332,53 @@ def primary_score_table(
         return ""
     k = score.scale
     cost = "their own time limit" if "time_limit_s" in rows[0] else f"{failed_value * k:g}"
+    by_agent: dict[str, list[dict]] = {}
+    for r in rows:
+        by_agent.setdefault(r["agent"], []).append(r)
+    charged = {
+        name: {r["seed"]: score.charged(r, failed_value) * k for r in rs}
+        for name, rs in by_agent.items()
+    }
+    learned = [n for n in by_agent if n in set(learned)]
+    others = [n for n in by_agent if n not in learned]
+    best = min(others, key=lambda n: np.mean(list(charged[n].values())), default=None)
+    margin = bool(learned) and best is not None
+    head = f"| agent | score ± s.e. | episodes that count | {score.secondary_label} |"
+    rule = "|---|---|---|---|"
+    if margin:
+        head += f" margin over {best} ± s.e. |"
+        rule += "---|"
     lines = [
         f"Primary score on `{scenario}`: {score.label}, lower is better; episodes that do "
         f"not count cost {cost}:",
         "",
-        f"| agent | score ± s.e. | episodes that count | {score.secondary_label} |",
-        "|---|---|---|---|",
+        head,
+        rule,
     ]
-    by_agent: dict[str, list[dict]] = {}
-    for r in rows:
-        by_agent.setdefault(r["agent"], []).append(r)
     for name, rs in by_agent.items():
         s = score(rs, failed_value)
-        charged = [score.charged(r, failed_value) * k for r in rs]
-        se = float(np.std(charged, ddof=1) / np.sqrt(len(rs))) if len(rs) > 1 else 0.0
-        lines.append(
+        c = list(charged[name].values())
+        se = float(np.std(c, ddof=1) / np.sqrt(len(c))) if len(c) > 1 else 0.0
+        line = (
             f"| {name} | {s['score'] * k:.4g} ± {se:.2g} | {s['valid']:.0%} | "
             f"{s['secondary']:.3g} |"
         )
+        if margin:
+            line += (
+                f" {_paired_margin(charged[best], charged[name])} |" if name in learned else " |"
+            )
+        lines.append(line)
     return "\n".join(lines)
+
+
+def _paired_margin(reference: dict, agent: dict) -> str:
+    """Mean of ``reference - agent`` over the seeds both ran, ± its standard error."""
+    seeds = sorted(set(reference) & set(agent))
+    if not seeds:
+        return "n/a"
+    d = np.array([reference[s] - agent[s] for s in seeds])
+    se = float(np.std(d, ddof=1) / np.sqrt(len(d))) if len(d) > 1 else 0.0
+    return f"{d.mean():+.4g} ± {se:.2g}"
 
 
 def _plot_trajectories(spec: BenchmarkSpec, path: Path, seed: int) -> None:

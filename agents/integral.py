@@ -51,7 +51,7 @@ class MillingIO:
     sensor_gain: float
     """Ke, counts per N·mm (eq. 9)."""
     torque_scale_Nmm: float
-    """N·mm per unit of the torque observations (the nominal reference torque)."""
+    """N·mm per unit of the reference observation (the nominal reference torque)."""
     command_max: float
     """Largest command, counts; action -1 is U = 0, +1 is U = command_max."""
     sample_time_s: float
@@ -73,9 +73,10 @@ class MillingIO:
         )
 
     def torque_counts(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Measured torque Tc and reference Tr in counts, from a batch of observations."""
-        k = self.sensor_gain * self.torque_scale_Nmm
-        return k * obs[:, _I["measured"]], k * obs[:, _I["reference"]]
+        """Measured torque Tc and reference Tr in counts, from a batch of observations
+        (the torques are observed as multiples of the reference)."""
+        tr = self.sensor_gain * self.torque_scale_Nmm * obs[:, _I["reference"]]
+        return tr * obs[:, _I["measured"]], tr
 
     def spindle_rpm(self, obs: np.ndarray) -> np.ndarray:
         return np.clip(1000.0 * obs[:, _I["spindle"]], *SPINDLE_RPM_RANGE)

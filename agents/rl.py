@@ -3,9 +3,9 @@
 Hyperparameters live in YAML files in ``agents/configs/`` laid out like rl-zoo3's: one file per
 algorithm (``ppo.yml``, ``sac.yml``, ``td3.yml``), one top-level key per env id, and under it the
 training settings (``n_timesteps``, ``n_envs``, ``policy``, ``normalize``, ``env_kwargs``,
-``eval_freq``, ``eval_episodes``, ``eval_scenarios``, ``checkpoint_freq``) and any keyword of the
-algorithm's constructor (``learning_rate``, ``n_steps``, ``policy_kwargs``, ...). Unknown keys and
-wrong types are rejected before any training starts.
+``eval_freq``, ``eval_episodes``, ``eval_scenarios``, ``checkpoint_freq``, ``action_increment``,
+``hide_action``) and any keyword of the algorithm's constructor (``learning_rate``, ``n_steps``,
+``policy_kwargs``, ...). Unknown keys and wrong types are rejected before any training starts.
 
 A run folder holds everything needed to reload or continue it::
 
@@ -84,6 +84,8 @@ _SETTINGS: dict[str, tuple[type, ...]] = {
     "eval_episodes": (int,),
     "eval_scenarios": (list,),
     "checkpoint_freq": (int,),
+    "action_increment": (float, int),
+    "hide_action": (bool,),
 }
 _NORMALIZE_KEYS = {"norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon"}
 
@@ -103,6 +105,11 @@ class TrainConfig:
     eval_episodes: int = 10
     eval_scenarios: list = field(default_factory=lambda: ["test"])
     checkpoint_freq: int = 20_000
+    action_increment: float | None = None
+    """If set, the policy outputs a change of the env's action of at most this much per step
+    (``machining_envs.wrappers.IncrementalAction``); the saved policy applies it by itself."""
+    hide_action: bool = False
+    """With ``action_increment``: the policy does not see the action now applied."""
     hyperparams: dict = field(default_factory=dict)
     source: str = ""
 
@@ -161,6 +168,14 @@ def load_config(env_id: str, algo: str, path=None) -> TrainConfig:
     for key in ("n_timesteps", "n_envs", "eval_freq", "eval_episodes", "checkpoint_freq"):
         if getattr(cfg, key) < 1:
             raise ConfigError(f"{where}: {key} must be >= 1, got {getattr(cfg, key)}")
+    if cfg.action_increment is not None:
+        cfg.action_increment = float(cfg.action_increment)
+    if cfg.action_increment is not None and not 0.0 < cfg.action_increment <= 2.0:
+        raise ConfigError(
+            f"{where}: action_increment must be in (0, 2], got {cfg.action_increment}"
+        )
+    if cfg.hide_action and cfg.action_increment is None:
+        raise ConfigError(f"{where}: hide_action needs action_increment")
     if isinstance(cfg.normalize, dict):
         bad = set(cfg.normalize) - _NORMALIZE_KEYS
         if bad:
@@ -208,7 +223,11 @@ class PolicyAgent:
     """An SB3 model with its VecNormalize statistics, behind the agent protocol.
 
     Normalises each observation with the frozen statistics, then calls the model's
-    ``predict``; so the harness and SB3's ``evaluate_policy`` on raw envs both work.
+    ``predict``; so the harness and SB3's ``evaluate_policy`` on raw envs both work. A policy
+    trained with ``action_increment`` (``increment=(max_step, prev_action_index, hide_action)``)
+    outputs a change of the action; ``predict`` shows it what the wrapper showed it in
+    training and turns its output into the env's action from the raw observation
+    (``IncrementalAction``), so it runs on the plain env.
     """
 
     def __init__(
@@ -218,12 +237,14 @@ class PolicyAgent:
         clip_obs: float = 10.0,
         epsilon: float = 1e-8,
         name: str | None = None,
+        increment: tuple[float, int, bool] | None = None,
     ):
         self.model = model
         self.obs_rms = obs_rms
         self.clip_obs = clip_obs
         self.epsilon = epsilon
         self.name = name or f"{type(model).__name__} policy"
+        self.increment = increment
 
     def normalize(self, obs: np.ndarray) -> np.ndarray:
         if self.obs_rms is None:
@@ -232,10 +253,25 @@ class PolicyAgent:
         return np.clip(out, -self.clip_obs, self.clip_obs).astype(np.float32)
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        obs = self.normalize(np.asarray(observation, dtype=np.float32))
-        return self.model.predict(
-            obs, state=state, episode_start=episode_start, deterministic=deterministic
+        raw = np.asarray(observation, dtype=np.float32)
+        if self.increment is None:
+            return self.model.predict(
+                self.normalize(raw),
+                state=state,
+                episode_start=episode_start,
+                deterministic=deterministic,
+            )
+        from machining_envs.wrappers import IncrementalAction
+
+        max_step, index, hide = self.increment
+        seen = IncrementalAction.policy_observation(raw, index, hide)
+        delta, state = self.model.predict(
+            self.normalize(seen),
+            state=state,
+            episode_start=episode_start,
+            deterministic=deterministic,
         )
+        return IncrementalAction.absolute_action(raw, delta, max_step, index), state
 
 
 def load_policy(model_path, name: str | None = None, algo: str | None = None) -> PolicyAgent:
@@ -250,8 +286,15 @@ def load_policy(model_path, name: str | None = None, algo: str | None = None) ->
     if not model_path.is_file():
         raise FileNotFoundError(f"no model at {model_path}")
     meta_path = model_path.parent / "config.json"
-    if algo is None and meta_path.is_file():
-        algo = json.loads(meta_path.read_text())["algo"]
+    meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+    if algo is None:
+        algo = meta.get("algo")
+    inc = meta.get("action_increment")
+    increment = (
+        (float(inc["max_step"]), int(inc["prev_action_index"]), bool(inc.get("hide_action")))
+        if inc
+        else None
+    )
     if algo is None:
         m = re.search(r"(ppo|sac|td3)", model_path.name.lower())
         if m is None:
@@ -270,7 +313,12 @@ def load_policy(model_path, name: str | None = None, algo: str | None = None) ->
         if vn.norm_obs:
             obs_rms, clip, eps = vn.obs_rms, vn.clip_obs, vn.epsilon
     return PolicyAgent(
-        model, obs_rms, clip, eps, name=name or f"{algo.upper()} ({model_path.parent.name})"
+        model,
+        obs_rms,
+        clip,
+        eps,
+        name=name or f"{algo.upper()} ({model_path.parent.name})",
+        increment=increment,
     )
 
 
@@ -285,6 +333,7 @@ def pretrained(name: str):
         return load_policy(path, name=f"{name} (pretrained)")
 
     make.__name__ = f"pretrained_{name}"
+    make.learned = True  # the benchmark gives learned agents their margin over the classical
     return make
 
 
@@ -292,7 +341,20 @@ def _make_vec(cfg: TrainConfig, seed: int):
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import VecNormalize
 
-    venv = make_vec_env(cfg.env_id, n_envs=cfg.n_envs, seed=seed, env_kwargs=dict(cfg.env_kwargs))
+    wrapper, wrapper_kwargs = None, None
+    if cfg.action_increment is not None:
+        from machining_envs.wrappers import IncrementalAction
+
+        wrapper = IncrementalAction
+        wrapper_kwargs = {"max_step": cfg.action_increment, "hide_action": cfg.hide_action}
+    venv = make_vec_env(
+        cfg.env_id,
+        n_envs=cfg.n_envs,
+        seed=seed,
+        env_kwargs=dict(cfg.env_kwargs),
+        wrapper_class=wrapper,
+        wrapper_kwargs=wrapper_kwargs,
+    )
     if cfg.normalize:
         kw = cfg.normalize if isinstance(cfg.normalize, dict) else {}
         venv = VecNormalize(venv, **kw)
@@ -379,6 +441,10 @@ def train(
     AlgoCls = _algos()[cfg.algo]
 
     venv = _make_vec(cfg, seed)
+    increment = None
+    if cfg.action_increment is not None:
+        w = venv.venv if isinstance(venv, VecNormalize) else venv
+        increment = (cfg.action_increment, w.get_attr("prev_action_index", [0])[0], cfg.hide_action)
     if resume:
         stats = ckpt.with_name(
             ckpt.name.replace("rl_model_", "rl_model_vecnormalize_").replace(".zip", ".pkl")
@@ -407,6 +473,12 @@ def train(
             "config": asdict(cfg),
             "command": " ".join(sys.argv),
         }
+        if increment is not None:
+            meta["action_increment"] = {
+                "max_step": increment[0],
+                "prev_action_index": increment[1],
+                "hide_action": increment[2],
+            }
         (out / "config.json").write_text(json.dumps(meta, indent=2, default=str))
 
     eval_csv = out / "eval.csv"
@@ -436,7 +508,7 @@ def train(
         def evaluate_now(self) -> None:
             obs_rms = venv.obs_rms if isinstance(venv, VecNormalize) else None
             clip = venv.clip_obs if isinstance(venv, VecNormalize) else 10.0
-            agent = PolicyAgent(self.model, obs_rms, clip)
+            agent = PolicyAgent(self.model, obs_rms, clip, increment=increment)
             ev = evaluate(
                 agent,
                 env_id,

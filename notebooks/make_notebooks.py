@@ -257,7 +257,7 @@ NOTEBOOKS = {
             "**Budget.** Under the tests (`MACHINING_NB_QUICK=1`) PPO gets 4 096 steps: far too "
             "few to learn anything, so the policy below is close to its random start and loses "
             "to the ACC. Without that flag it gets the entry's full budget (800 000 steps, "
-            "about 12 minutes on one CPU core): read the table, not this text, to see whether "
+            "about 10 minutes on one CPU core): read the table, not this text, to see whether "
             "it matches the ACC on your machine."
         ),
         new_code_cell(

@@ -56,17 +56,7 @@ def _scores(spec, n_episodes=20):
 
 @pytest.mark.parametrize(
     "env_id",
-    [
-        "machining_envs/Turning-v0",
-        pytest.param(
-            "machining_envs/EndMilling-v0",
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="known: the shipped milling policy loses to the integral ACC "
-                "(README, Learned policies); strict, so a winning policy flags the README",
-            ),
-        ),
-    ],
+    ["machining_envs/Turning-v0", "machining_envs/EndMilling-v0"],
     ids=str,
 )
 def test_pretrained_policy_beats_the_best_classical_agent(env_id):

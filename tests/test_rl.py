@@ -214,3 +214,52 @@ def test_training_evaluates_with_the_envs_own_metrics(tmp_path):
     )
     rows = (run / "eval.csv").read_text().splitlines()
     assert len(rows) >= 2 and rows[0].startswith("timesteps,")
+
+
+def test_a_policy_trained_on_increments_runs_on_the_plain_env(tmp_path):
+    """``action_increment`` trains on IncrementalAction; the saved policy applies the same
+    map itself, so the benchmark runs it on the plain env and gets the wrapped env's run."""
+    import gymnasium as gym
+
+    from machining_envs.wrappers import IncrementalAction
+
+    path = tmp_path / "inc.yml"
+    path.write_text(TINY + "  action_increment: 0.3\n")
+    run = train(
+        TURNING, "ppo", tmp_path / "run", config_path=path, progress_bar=False, verbose=False
+    )
+    meta = json.loads((run / "config.json").read_text())
+    assert meta["action_increment"] == {
+        "max_step": 0.3,
+        "prev_action_index": 2,
+        "hide_action": False,
+    }
+    agent = load_policy(run / "final_model.zip")
+    assert agent.increment == (0.3, 2, False)
+    plain = gym.make(TURNING)
+    wrapped = IncrementalAction(gym.make(TURNING), max_step=0.3)
+    op, _ = plain.reset(seed=5, options={"scenario": "paper_700"})
+    ow, _ = wrapped.reset(seed=5, options={"scenario": "paper_700"})
+    for _ in range(40):
+        a, _ = agent.predict(op)
+        delta, _ = agent.model.predict(agent.normalize(ow), deterministic=True)
+        op, rp, *_ = plain.step(a)
+        ow, rw, *_ = wrapped.step(delta)
+        np.testing.assert_array_equal(op, ow)
+        assert rp == rw
+
+
+@pytest.mark.parametrize(
+    "line, message",
+    [
+        ("  action_increment: 0.0\n", r"action_increment must be in \(0, 2\]"),
+        ("  action_increment: 3.0\n", r"action_increment must be in \(0, 2\]"),
+        ("  action_increment: big\n", "action_increment must be float or int"),
+    ],
+)
+def test_bad_action_increment_fails_before_training(tmp_path, line, message):
+    path = tmp_path / "bad.yml"
+    path.write_text(TINY + line)
+    with pytest.raises(ConfigError, match=message):
+        train(TURNING, "ppo", tmp_path / "run", config_path=path, progress_bar=False, verbose=False)
+    assert not (tmp_path / "run").exists()

@@ -105,16 +105,18 @@ class EndMillingEnv(gym.Env):
     ``info["n_action_clipped"]``; NaN or inf raises ``ValueError``.
 
     ## Observation Space
-    ``Box(float32, (7,))``: only what the machine measures, normalised to order one by the
-    nominal reference torque ``Tn = params.torque_ref_Nmm``.
+    ``Box(float32, (7,))``: only what the machine measures, normalised to order one. The
+    torques are multiples of this cut's reference ``Tr``, so that holding the reference
+    looks the same at every reference; the reference itself is a multiple of the nominal
+    ``Tn = params.torque_ref_Nmm``.
 
     | index | observation | unit | range |
     |---|---|---|---|
-    | 0 | measured torque (lagged, noisy) / Tn | - | [-1, 10] |
+    | 0 | measured torque (lagged, noisy) / Tr | - | [-1, 10] |
     | 1 | reference torque / Tn | - | [0, 10] |
     | 2 | previous action (the command now applied) | - | [-1, 1] |
     | 3 | spindle speed / 1000 rpm | - | [0, 6] |
-    | 4-6 | measured torque one, two, three samples ago / Tn | - | [-1, 10] |
+    | 4-6 | measured torque one, two, three samples ago / Tr | - | [-1, 10] |
 
     The radial depth, the feed and the true process constants are hidden (they are in
     ``info``).
@@ -333,7 +335,7 @@ class EndMillingEnv(gym.Env):
 
     # ---- helpers -------------------------------------------------------------------------
     def _obs(self) -> np.ndarray:
-        sc = self._scale
+        sc = self._tr
         lo, hi = _TORQUE_OBS
         m = self._meas
         return np.array(

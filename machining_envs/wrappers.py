@@ -1,0 +1,118 @@
+"""Wrappers for training learned controllers on the machining envs.
+
+:class:`IncrementalAction` turns an env's absolute action into a change of it: the agent
+outputs ``delta`` in [-1, 1] and the env receives ``clip(a_prev + max_step * delta, -1, 1)``,
+where ``a_prev`` is the action now applied, read from the observation's ``prev_action``
+field. A policy that outputs zero holds the command, so the wrapped env is an integrating
+plant: a policy that is zero where the error is zero regulates without steady-state error,
+whatever the hidden process gain, which an absolute policy can only approximate. Because the
+new action depends only on the observation and the agent's output,
+:meth:`IncrementalAction.absolute_action` applies the same map outside the wrapper (a
+policy trained on the wrapped env runs on the plain env; see ``agents.rl.PolicyAgent``).
+
+>>> import gymnasium as gym, numpy as np
+>>> import machining_envs
+>>> from machining_envs.wrappers import IncrementalAction
+>>> env = IncrementalAction(gym.make("machining_envs/EndMilling-v0"), max_step=0.25)
+>>> obs, _ = env.reset(seed=0)
+>>> float(obs[2])                      # the previous action: -1, feed at rest
+-1.0
+>>> obs, *_ = env.step(np.array([1.0], dtype=np.float32))
+>>> float(obs[2])                      # one step up by max_step
+-0.75
+"""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+__all__ = ["IncrementalAction"]
+
+
+class IncrementalAction(gym.Wrapper):
+    """The agent's action is a change of the env's action, at most ``max_step`` per step.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        An env with a one-dimensional ``Box(-1, 1)`` action and ``OBS_INDEX["prev_action"]``
+        (Turning-v0, EndMilling-v0, MicroDrilling-v0).
+    max_step : float
+        Largest change of the env's action per step, in (0, 2].
+    hide_action : bool
+        If True, the agent's observation carries 0 in place of the action now applied (the
+        wrapper still reads it from the env): the agent can then only act on the measured
+        signals, so where its output is zero cannot depend on the command level, and the
+        loop settles where the measured signals say it should (``policy_observation``).
+    """
+
+    def __init__(self, env: gym.Env, max_step: float = 0.25, hide_action: bool = False):
+        super().__init__(env)
+        if not (
+            isinstance(max_step, (int, float))
+            and not isinstance(max_step, bool)
+            and math.isfinite(max_step)
+            and 0.0 < max_step <= 2.0
+        ):
+            raise ValueError(f"max_step must be a number in (0, 2], got {max_step!r}")
+        base = env.unwrapped
+        index = getattr(base, "OBS_INDEX", {}).get("prev_action")
+        space = env.action_space
+        if index is None or not (
+            isinstance(space, spaces.Box)
+            and space.shape == (1,)
+            and np.all(space.low == -1.0)
+            and np.all(space.high == 1.0)
+        ):
+            raise ValueError(
+                f"IncrementalAction needs an env with a Box(-1, 1, (1,)) action and an "
+                f"OBS_INDEX['prev_action'] field; {type(base).__name__} has not"
+            )
+        if not isinstance(hide_action, bool):
+            raise ValueError(f"hide_action must be True or False, got {hide_action!r}")
+        self.max_step = float(max_step)
+        self.prev_action_index = int(index)
+        self.hide_action = hide_action
+        self._obs: np.ndarray | None = None
+
+    @staticmethod
+    def absolute_action(obs, delta, max_step: float, prev_action_index: int) -> np.ndarray:
+        """The env's action for agent output ``delta`` given observation(s) ``obs``.
+
+        Works on one observation ``(n_obs,)`` with ``delta`` of shape ``(1,)``, or on a batch
+        ``(n, n_obs)`` with ``(n, 1)``. Non-finite ``delta`` raises ``ValueError``.
+        """
+        obs = np.asarray(obs, dtype=np.float64)
+        d = np.asarray(delta, dtype=np.float64)
+        if not np.all(np.isfinite(d)):
+            raise ValueError(f"IncrementalAction: action must be finite, got {delta!r}")
+        prev = obs[..., prev_action_index : prev_action_index + 1]
+        return np.clip(prev + max_step * np.clip(d, -1.0, 1.0), -1.0, 1.0).astype(np.float32)
+
+    @staticmethod
+    def policy_observation(obs, prev_action_index: int, hide_action: bool) -> np.ndarray:
+        """What the agent sees of observation(s) ``obs``: a copy with the applied action
+        zeroed if ``hide_action``, else ``obs`` itself."""
+        if not hide_action:
+            return obs
+        out = np.array(obs, dtype=np.float32, copy=True)
+        out[..., prev_action_index] = 0.0
+        return out
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        self._obs = obs
+        return self.policy_observation(obs, self.prev_action_index, self.hide_action), info
+
+    def step(self, action):
+        if self._obs is None:
+            raise RuntimeError("IncrementalAction: call reset() before step()")
+        a = self.absolute_action(self._obs, action, self.max_step, self.prev_action_index)
+        obs, reward, terminated, truncated, info = self.env.step(a)
+        self._obs = obs
+        seen = self.policy_observation(obs, self.prev_action_index, self.hide_action)
+        return seen, reward, terminated, truncated, info

@@ -1,0 +1,74 @@
+"""IncrementalAction: the agent commands a change of the env's action."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import machining_envs  # noqa: F401
+from machining_envs.wrappers import IncrementalAction
+
+MILLING = "machining_envs/EndMilling-v0"
+
+
+def _step(env, delta):
+    return env.step(np.array([delta], dtype=np.float32))
+
+
+@pytest.mark.parametrize(
+    "env_id", [MILLING, "machining_envs/Turning-v0", "machining_envs/MicroDrilling-v0"]
+)
+def test_a_step_moves_the_applied_action_by_max_step_and_zero_holds_it(env_id):
+    env = IncrementalAction(gym.make(env_id), max_step=0.3)
+    i = env.unwrapped.OBS_INDEX["prev_action"]
+    obs, _ = env.reset(seed=0)
+    a0 = float(obs[i])
+    obs = _step(env, 1.0)[0]
+    assert float(obs[i]) == pytest.approx(min(a0 + 0.3, 1.0), abs=1e-6)
+    held = float(obs[i])
+    obs = _step(env, 0.0)[0]
+    assert float(obs[i]) == pytest.approx(held, abs=1e-6)
+    obs = _step(env, -0.5)[0]
+    assert float(obs[i]) == pytest.approx(max(held - 0.15, -1.0), abs=1e-6)
+    for _ in range(20):  # saturates at the box, never leaves it
+        obs = _step(env, 1.0)[0]
+    assert float(obs[i]) == pytest.approx(1.0)
+    assert env.unwrapped._n_clipped == 0
+
+
+def test_the_wrapped_env_gets_the_same_actions_as_absolute_action_computes():
+    wrapped = IncrementalAction(gym.make(MILLING), max_step=0.25)
+    plain = gym.make(MILLING)
+    ow, _ = wrapped.reset(seed=4)
+    op, _ = plain.reset(seed=4)
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        d = rng.uniform(-1.0, 1.0, size=(1,)).astype(np.float32)
+        a = IncrementalAction.absolute_action(op, d, 0.25, 2)
+        ow, rw, *_ = wrapped.step(d)
+        op, rp, *_ = plain.step(a)
+        np.testing.assert_array_equal(ow, op)
+        assert rw == rp
+    batch = IncrementalAction.absolute_action(
+        np.stack([op, op]), np.array([[1.0], [-1.0]]), 0.25, 2
+    )
+    assert batch.shape == (2, 1)
+
+
+@pytest.mark.parametrize("max_step", [0.0, -0.1, 2.5, float("nan"), "0.3", True])
+def test_bad_max_step_names_the_parameter_and_range(max_step):
+    with pytest.raises(ValueError, match=r"max_step must be a number in \(0, 2\]"):
+        IncrementalAction(gym.make(MILLING), max_step=max_step)
+
+
+def test_envs_without_a_single_absolute_action_are_refused():
+    with pytest.raises(ValueError, match="Box\\(-1, 1, \\(1,\\)\\)"):
+        IncrementalAction(gym.make("machining_envs/Contouring-v0"))
+
+
+def test_non_finite_delta_and_step_before_reset_raise():
+    env = IncrementalAction(gym.make(MILLING))
+    with pytest.raises(RuntimeError, match="reset"):
+        _step(env, 0.0)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="finite"):
+        _step(env, float("nan"))
