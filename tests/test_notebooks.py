@@ -30,3 +30,20 @@ def test_notebook_executes(path, tmp_path, monkeypatch):
         if o.output_type == "error"
     ]
     assert not errors
+
+
+def test_notebooks_are_what_make_notebooks_writes():
+    """The .ipynb files are generated: editing ``make_notebooks.py`` without running it
+    would leave the tested notebooks behind their sources."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "make_notebooks", NOTEBOOKS[0].parent / "make_notebooks.py"
+    )
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert sorted(mod.NOTEBOOKS) == [p.name for p in NOTEBOOKS]
+    for path in NOTEBOOKS:
+        written = [(c.cell_type, c.source) for c in nbformat.read(path, as_version=4).cells]
+        sources = [(c.cell_type, c.source) for c in mod.NOTEBOOKS[path.name]]
+        assert written == sources, f"{path.name}: run python notebooks/make_notebooks.py"
