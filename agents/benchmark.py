@@ -339,7 +339,7 @@ def primary_score_table(
         name: {r["seed"]: score.charged(r, failed_value) * k for r in rs}
         for name, rs in by_agent.items()
     }
-    learned = [n for n in by_agent if n in set(learned)]
+    learned = set(learned) & set(by_agent)
     others = [n for n in by_agent if n not in learned]
     best = min(others, key=lambda n: np.mean(list(charged[n].values())), default=None)
     margin = bool(learned) and best is not None
@@ -357,8 +357,7 @@ def primary_score_table(
     ]
     for name, rs in by_agent.items():
         s = score(rs, failed_value)
-        c = list(charged[name].values())
-        se = float(np.std(c, ddof=1) / np.sqrt(len(c))) if len(c) > 1 else 0.0
+        se = _standard_error(list(charged[name].values()))
         line = (
             f"| {name} | {s['score'] * k:.4g} ± {se:.2g} | {s['valid']:.0%} | "
             f"{s['secondary']:.3g} |"
@@ -376,9 +375,13 @@ def _paired_margin(reference: dict, agent: dict) -> str:
     seeds = sorted(set(reference) & set(agent))
     if not seeds:
         return "n/a"
-    d = np.array([reference[s] - agent[s] for s in seeds])
-    se = float(np.std(d, ddof=1) / np.sqrt(len(d))) if len(d) > 1 else 0.0
-    return f"{d.mean():+.4g} ± {se:.2g}"
+    d = [reference[s] - agent[s] for s in seeds]
+    return f"{np.mean(d):+.4g} ± {_standard_error(d):.2g}"
+
+
+def _standard_error(values) -> float:
+    """Standard error of the mean of ``values`` (0 for a single value)."""
+    return float(np.std(values, ddof=1) / np.sqrt(len(values))) if len(values) > 1 else 0.0
 
 
 def _plot_trajectories(spec: BenchmarkSpec, path: Path, seed: int) -> None:

@@ -170,10 +170,10 @@ def load_config(env_id: str, algo: str, path=None) -> TrainConfig:
             raise ConfigError(f"{where}: {key} must be >= 1, got {getattr(cfg, key)}")
     if cfg.action_increment is not None:
         cfg.action_increment = float(cfg.action_increment)
-    if cfg.action_increment is not None and not 0.0 < cfg.action_increment <= 2.0:
-        raise ConfigError(
-            f"{where}: action_increment must be in (0, 2], got {cfg.action_increment}"
-        )
+        if not 0.0 < cfg.action_increment <= 2.0:
+            raise ConfigError(
+                f"{where}: action_increment must be in (0, 2], got {cfg.action_increment}"
+            )
     if cfg.hide_action and cfg.action_increment is None:
         raise ConfigError(f"{where}: hide_action needs action_increment")
     if isinstance(cfg.normalize, dict):
@@ -224,8 +224,8 @@ class PolicyAgent:
 
     Normalises each observation with the frozen statistics, then calls the model's
     ``predict``; so the harness and SB3's ``evaluate_policy`` on raw envs both work. A policy
-    trained with ``action_increment`` (``increment=(max_step, prev_action_index, hide_action)``)
-    outputs a change of the action; ``predict`` shows it what the wrapper showed it in
+    trained with ``action_increment`` (``increment``, a
+    ``machining_envs.wrappers.ActionIncrement``) outputs a change of the action; ``predict`` shows it what the wrapper showed it in
     training and turns its output into the env's action from the raw observation
     (``IncrementalAction``), so it runs on the plain env.
     """
@@ -237,7 +237,7 @@ class PolicyAgent:
         clip_obs: float = 10.0,
         epsilon: float = 1e-8,
         name: str | None = None,
-        increment: tuple[float, int, bool] | None = None,
+        increment=None,
     ):
         self.model = model
         self.obs_rms = obs_rms
@@ -261,17 +261,13 @@ class PolicyAgent:
                 episode_start=episode_start,
                 deterministic=deterministic,
             )
-        from machining_envs.wrappers import IncrementalAction
-
-        max_step, index, hide = self.increment
-        seen = IncrementalAction.policy_observation(raw, index, hide)
         delta, state = self.model.predict(
-            self.normalize(seen),
+            self.normalize(self.increment.policy_observation(raw)),
             state=state,
             episode_start=episode_start,
             deterministic=deterministic,
         )
-        return IncrementalAction.absolute_action(raw, delta, max_step, index), state
+        return self.increment.absolute_action(raw, delta), state
 
 
 def load_policy(model_path, name: str | None = None, algo: str | None = None) -> PolicyAgent:
@@ -289,12 +285,11 @@ def load_policy(model_path, name: str | None = None, algo: str | None = None) ->
     meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
     if algo is None:
         algo = meta.get("algo")
-    inc = meta.get("action_increment")
-    increment = (
-        (float(inc["max_step"]), int(inc["prev_action_index"]), bool(inc.get("hide_action")))
-        if inc
-        else None
-    )
+    increment = None
+    if meta.get("action_increment"):
+        from machining_envs.wrappers import ActionIncrement
+
+        increment = ActionIncrement(**meta["action_increment"])
     if algo is None:
         m = re.search(r"(ppo|sac|td3)", model_path.name.lower())
         if m is None:
@@ -441,10 +436,10 @@ def train(
     AlgoCls = _algos()[cfg.algo]
 
     venv = _make_vec(cfg, seed)
-    increment = None
+    increment = None  # the wrapper's ActionIncrement, for evaluation and the run record
     if cfg.action_increment is not None:
         w = venv.venv if isinstance(venv, VecNormalize) else venv
-        increment = (cfg.action_increment, w.get_attr("prev_action_index", [0])[0], cfg.hide_action)
+        increment = w.get_attr("increment", [0])[0]
     if resume:
         stats = ckpt.with_name(
             ckpt.name.replace("rl_model_", "rl_model_vecnormalize_").replace(".zip", ".pkl")
@@ -474,11 +469,7 @@ def train(
             "command": " ".join(sys.argv),
         }
         if increment is not None:
-            meta["action_increment"] = {
-                "max_step": increment[0],
-                "prev_action_index": increment[1],
-                "hide_action": increment[2],
-            }
+            meta["action_increment"] = increment._asdict()
         (out / "config.json").write_text(json.dumps(meta, indent=2, default=str))
 
     eval_csv = out / "eval.csv"

@@ -25,12 +25,30 @@ policy trained on the wrapped env runs on the plain env; see ``agents.rl.PolicyA
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-__all__ = ["IncrementalAction"]
+__all__ = ["IncrementalAction", "ActionIncrement"]
+
+
+class ActionIncrement(NamedTuple):
+    """What :class:`IncrementalAction` does, as data: enough to apply it outside the wrapper
+    (``agents.rl.PolicyAgent``) and to record it with a trained policy (``_asdict()``)."""
+
+    max_step: float
+    prev_action_index: int
+    hide_action: bool = False
+
+    def policy_observation(self, obs) -> np.ndarray:
+        """What the agent sees of ``obs``."""
+        return IncrementalAction.policy_observation(obs, self.prev_action_index, self.hide_action)
+
+    def absolute_action(self, obs, delta) -> np.ndarray:
+        """The env's action for the agent's output ``delta`` given the raw ``obs``."""
+        return IncrementalAction.absolute_action(obs, delta, self.max_step, self.prev_action_index)
 
 
 class IncrementalAction(gym.Wrapper):
@@ -74,9 +92,7 @@ class IncrementalAction(gym.Wrapper):
             )
         if not isinstance(hide_action, bool):
             raise ValueError(f"hide_action must be True or False, got {hide_action!r}")
-        self.max_step = float(max_step)
-        self.prev_action_index = int(index)
-        self.hide_action = hide_action
+        self.increment = ActionIncrement(float(max_step), int(index), hide_action)
         self._obs: np.ndarray | None = None
 
     @staticmethod
@@ -86,11 +102,10 @@ class IncrementalAction(gym.Wrapper):
         Works on one observation ``(n_obs,)`` with ``delta`` of shape ``(1,)``, or on a batch
         ``(n, n_obs)`` with ``(n, 1)``. Non-finite ``delta`` raises ``ValueError``.
         """
-        obs = np.asarray(obs, dtype=np.float64)
         d = np.asarray(delta, dtype=np.float64)
         if not np.all(np.isfinite(d)):
             raise ValueError(f"IncrementalAction: action must be finite, got {delta!r}")
-        prev = obs[..., prev_action_index : prev_action_index + 1]
+        prev = np.asarray(obs)[..., prev_action_index : prev_action_index + 1].astype(np.float64)
         return np.clip(prev + max_step * np.clip(d, -1.0, 1.0), -1.0, 1.0).astype(np.float32)
 
     @staticmethod
@@ -106,13 +121,13 @@ class IncrementalAction(gym.Wrapper):
     def reset(self, **kwargs):
         obs, info = self.env.reset(**kwargs)
         self._obs = obs
-        return self.policy_observation(obs, self.prev_action_index, self.hide_action), info
+        return self.increment.policy_observation(obs), info
 
     def step(self, action):
         if self._obs is None:
             raise RuntimeError("IncrementalAction: call reset() before step()")
-        a = self.absolute_action(self._obs, action, self.max_step, self.prev_action_index)
-        obs, reward, terminated, truncated, info = self.env.step(a)
+        obs, reward, terminated, truncated, info = self.env.step(
+            self.increment.absolute_action(self._obs, action)
+        )
         self._obs = obs
-        seen = self.policy_observation(obs, self.prev_action_index, self.hide_action)
-        return seen, reward, terminated, truncated, info
+        return self.increment.policy_observation(obs), reward, terminated, truncated, info

@@ -245,9 +245,8 @@ class EndMillingEnv(gym.Env):
         self._vmax = self._truth.max_feed_velocity_mm_s
         self._ke = self.params.sensor_gain
         self._noise_counts = self._truth.sensor_gain * self._truth.noise_std_Nmm
-        self._scale = self.params.torque_ref_Nmm
         self._meas = [0.0] * (_HISTORY + 1)  # newest first, N·mm
-        self._tr_obs = min(self._tr / self._scale, 10.0)
+        self._tr_obs = min(self._tr / self.params.torque_ref_Nmm, 10.0)
         self._rpm_obs = rpm / 1000.0
         self._prev_action = -1.0
         self._n_clipped = 0
