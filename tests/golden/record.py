@@ -1,0 +1,187 @@
+"""Golden closed-loop data: every classical agent on its env's paper scenarios and on two
+seeds of the held-out ``test`` scenario, recorded step by step.
+
+The data in this folder is the safety net for changes that must not change the physics or
+the controllers (a new layout, a faster implementation): ``test_golden.py`` replays every
+case and compares it with the recording. When the physics or a controller changes on
+purpose, regenerate the data and commit it with the change that explains it::
+
+    python -m tests.golden.record            # rewrites tests/golden/*.npz
+
+Each file holds, for one episode, the observations, actions, rewards, terminations and
+every numeric ``info`` signal (row 0 is the reset): the values at up to ``KEEP_ROWS``
+evenly spaced steps (always the last one) and a SHA-256 digest of every signal over all
+steps, so that a replay is checked bit for bit on every step while the files stay small
+(the full trajectories take about 30 MB).
+
+Only the public API is used here (env ids, ``from agents import ...``), so the cases stay
+valid whatever the modules behind them are called.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import math
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+import machining_envs  # noqa: F401  (registers the env ids)
+
+HERE = Path(__file__).resolve().parent
+#: Seeds of the held-out ``test`` scenario recorded for every agent.
+TEST_SEEDS = (1000, 1001)
+#: Seed of the paper scenarios (their sensor noise is seeded too).
+PAPER_SEED = 0
+#: Rows kept in full per signal (evenly spaced, the last always among them).
+KEEP_ROWS = 64
+
+
+def _groups():
+    """``(env id, env kwargs, paper scenarios, agent factories)`` of every recorded group."""
+    import agents as a
+
+    override_1 = functools.partial(a.ConstantOverride.from_env, override=1.0)
+    override_1.__name__ = "ConstantOverride_1.0"
+    drilling_papers = ("paper_0.5", "paper_0.6", "paper_0.7", "paper_0.8")
+    contour_papers = ("paper_corner", "paper_circle", "paper_involute")
+    return (
+        (
+            "machining_envs/Turning-v0",
+            {},
+            ("paper_245", "paper_405", "paper_700", "taper_405"),
+            (a.ConstantFeed.from_env, a.FixedGainPI.from_env, a.VariableGainPI.from_env),
+        ),
+        (
+            "machining_envs/EndMilling-v0",
+            {},
+            ("paper_step", "paper_taper"),
+            (a.MillingConstantFeed.from_env, a.FixedGainIntegral.from_env, a.IntegralACC.from_env),
+        ),
+        (
+            "machining_envs/MicroDrilling-v0",
+            {},
+            drilling_papers,
+            (a.NoControl.from_env, a.PD.from_env, a.SlidingMode.from_env),
+        ),
+        # Peck drilling commands the feed of the stage, not the valve voltage.
+        (
+            "machining_envs/MicroDrilling-v0",
+            {"control": "feed"},
+            drilling_papers,
+            (a.PeckDrilling.from_env,),
+        ),
+        (
+            "machining_envs/Contouring-v0",
+            {},
+            ("paper_step", "paper_step_load", *contour_papers, "paper_circle_load"),
+            (a.PIPosition.from_env, a.HInf2DOF.from_env),
+        ),
+        (
+            "machining_envs/ContouringFeed-v0",
+            {},
+            contour_papers,
+            (a.ConstantOverride.from_env, override_1),
+        ),
+    )
+
+
+def _factory_name(factory) -> str:
+    if isinstance(factory, functools.partial):
+        return factory.__name__
+    return factory.__qualname__.replace(".from_env", "")
+
+
+def cases():
+    """Every recorded case: ``(file stem, env id, env kwargs, agent factory, scenario, seed)``."""
+    out = []
+    for env_id, kwargs, papers, factories in _groups():
+        env_name = env_id.split("/")[1]
+        for factory in factories:
+            runs = [(sc, PAPER_SEED) for sc in papers] + [("test", s) for s in TEST_SEEDS]
+            for sc, seed in runs:
+                stem = f"{env_name}__{_factory_name(factory)}__{sc}__{seed}"
+                out.append((stem, env_id, kwargs, factory, sc, seed))
+    return out
+
+
+def run_case(env_id: str, kwargs: dict, factory, scenario: str, seed: int) -> dict:
+    """One closed-loop episode: observations, actions, rewards, terminations and every
+    numeric ``info`` signal, as arrays (row 0 is the reset)."""
+    env = gym.make(env_id, **kwargs)
+    try:
+        agent = factory(env)
+        obs, info = env.reset(seed=seed, options={"scenario": scenario})
+        n_act = env.action_space.shape
+        obs_l, act_l, rew_l, term_l, trunc_l, info_l = [obs], [], [0.0], [0], [0], [info]
+        act_l.append(np.full(n_act, np.nan, dtype=np.float32))
+        state, start, done = None, np.ones(1, dtype=bool), False
+        while not done:
+            action, state = agent.predict(obs, state=state, episode_start=start)
+            start = np.zeros(1, dtype=bool)
+            obs, reward, terminated, truncated, info = env.step(action)
+            obs_l.append(obs)
+            act_l.append(np.asarray(action, dtype=np.float32).reshape(n_act))
+            rew_l.append(float(reward))
+            term_l.append(int(terminated))
+            trunc_l.append(int(truncated))
+            info_l.append(info)
+            done = terminated or truncated
+    finally:
+        env.close()
+    out = {
+        "obs": np.array(obs_l),
+        "action": np.array(act_l),
+        "reward": np.array(rew_l, dtype=np.float64),
+        "terminated": np.array(term_l, dtype=np.int8),
+        "truncated": np.array(trunc_l, dtype=np.int8),
+    }
+    keys = sorted(k for k, v in info_l[-1].items() if isinstance(v, (bool, int, float, np.number)))
+    for k in keys:
+        out["info/" + k] = np.array([r.get(k, math.nan) for r in info_l], dtype=np.float64)
+    return out
+
+
+def digest(a: np.ndarray) -> str:
+    """SHA-256 of an array's dtype, shape and bytes."""
+    a = np.ascontiguousarray(a)
+    h = hashlib.sha256(f"{a.dtype.str}{a.shape}".encode())
+    h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def kept_rows(n: int) -> np.ndarray:
+    """The rows stored in full for an episode of ``n`` rows."""
+    return np.unique(np.linspace(0, n - 1, min(n, KEEP_ROWS)).round().astype(np.int64))
+
+
+def pack(data: dict) -> dict:
+    """What a golden file stores for one episode (see the module docstring)."""
+    n = len(data["reward"])
+    rows = kept_rows(n)
+    out = {"n_rows": np.array(n), "rows": rows}
+    for k, v in data.items():
+        out["rows/" + k] = v[rows]
+        out["sha256/" + k] = np.array(digest(v))
+    return out
+
+
+def main(argv=None) -> int:
+    for old in HERE.glob("*.npz"):
+        old.unlink()
+    total = 0
+    for stem, env_id, kwargs, factory, sc, seed in cases():
+        data = run_case(env_id, kwargs, factory, sc, seed)
+        path = HERE / f"{stem}.npz"
+        np.savez_compressed(path, **pack(data))
+        total += path.stat().st_size
+        print(f"{stem}: {len(data['reward'])} rows, {path.stat().st_size / 1024:.0f} KiB")
+    print(f"{len(cases())} cases, {total / 2**20:.2f} MiB in {HERE}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
