@@ -21,6 +21,7 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -m "not slow" -q
 
 lint: $(STAMP)
+	$(BIN)/lint-imports
 	$(BIN)/ruff check machining_envs agents tests benchmarks
 	$(BIN)/ruff format --check machining_envs agents tests benchmarks
 

@@ -6,16 +6,11 @@ SB3 models run under one harness (and under SB3's own ``evaluate_policy``)::
     action, state = agent.predict(obs, state=None, episode_start=None, deterministic=True)
 """
 
-from agents.adaptive import VariableGainPI
 from agents.base import Agent
-from agents.drilling import PD, NoControl
-from agents.feed import ConstantOverride
-from agents.hinf import HInf2DOF
-from agents.integral import FixedGainIntegral, IntegralACC, MillingConstantFeed
-from agents.peck import PeckDrilling
-from agents.pid import ConstantFeed, FixedGainPI
-from agents.position import PIPosition
-from agents.sliding_mode import SlidingMode
+from agents.contouring import ConstantOverride, HInf2DOF, PIPosition
+from agents.drilling import PD, NoControl, PeckDrilling, SlidingMode
+from agents.milling import FixedGainIntegral, IntegralACC, MillingConstantFeed
+from agents.turning import ConstantFeed, FixedGainPI, VariableGainPI
 
 __all__ = [
     "Agent",

@@ -1,8 +1,73 @@
-"""Micro-drilling baselines: no control (constant voltage or feed) and PD on the torque error.
+r"""Micro-drilling controllers: no control, PD on the torque error, sliding mode (Cheong &
+Cho) and peck drilling (the industrial baseline).
 
 Every drilling controller is built with ``from_env(env)`` from the env's nominal parameters
 (:class:`DrillingIO`) and reads only the observation: the measured torque and spindle
 frequency, the reference, the drill's position and the previous command.
+
+**Peck drilling.** The drill feeds at the nominal feed velocity for ``q`` mm, retracts at rapid speed until its
+point is out of the hole (the chips leave with it), rapids back to just above the bottom and
+feeds on; the spindle runs at the nominal voltage throughout. Safe, because the chips never
+pack deeper than ``q``; slow, because every peck costs the trip out and back.
+
+**Sliding mode** (Cheong & Cho §6, eq. 17-23, Appendix A). **The model.** With ``x1 = x_v``, ``x2 = dx_v/dt`` and ``x3 = omega`` (eq. 18-20):
+
+.. math::
+
+    \dot x_1 = x_2, \quad
+    \dot x_2 = k_1 u - 2\zeta\omega_n x_2 - \omega_n^2 x_1, \quad
+    \dot x_3 = k_2 x_1 - k_3 x_3^{n} - \frac{k_4}{I x_3}, \quad
+    y = \frac{k_4}{x_3}
+
+The last term of :math:`\dot x_3` (the drilling torque slowing the spindle) is not in the
+paper's eq. (19); it is kept here because the plant has it (``I -> inf`` gives the paper's
+model back). ``k4`` is treated as constant over a sample and estimated every sample as
+measured torque times measured speed (eq. 20 inverted), low-pass filtered.
+
+**Feedback linearisation** (the OCR'd Appendix A is garbled; derived again). Write
+:math:`a = \dot x_3`. Differentiating the output three times,
+
+.. math::
+
+    \ddot x_3 &= k_2 x_2 - n k_3 x_3^{n-1} a + \frac{k_4 a}{I x_3^2} \\
+    \dot y &= -\frac{k_4 a}{x_3^2}, \qquad
+    \ddot y = k_4\left(-\frac{\ddot x_3}{x_3^2} + \frac{2 a^2}{x_3^3}\right) \\
+    y^{(3)} &= k_4\left(-\frac{x_3^{(3)}}{x_3^2} + \frac{6 a \ddot x_3}{x_3^3}
+              - \frac{6 a^3}{x_3^4}\right) \\
+    x_3^{(3)} &= k_2 \dot x_2 - n(n-1) k_3 x_3^{n-2} a^2 - n k_3 x_3^{n-1}\ddot x_3
+              + \frac{k_4}{I}\left(\frac{\ddot x_3}{x_3^2} - \frac{2 a^2}{x_3^3}\right)
+
+and ``u`` first appears in :math:`y^{(3)}` through :math:`\dot x_2`: the relative degree
+is 3 (Appendix A). With the error ``e = x_{4d} - y`` and the surface of eq. (21)
+
+.. math:: S = \ddot e + 2\lambda\dot e + \lambda^2 e,
+          \qquad \dot S = -y^{(3)} - 2\lambda\ddot y - \lambda^2\dot y
+
+asking for :math:`\dot S = -K\,\mathrm{sat}(S/\phi)` gives the required output jerk
+:math:`y^{(3)}_* = K\,\mathrm{sat}(S/\phi) - 2\lambda\ddot y - \lambda^2\dot y`, hence the
+required spindle jerk
+:math:`x^{(3)}_{3*} = 6 a\ddot x_3/x_3 - 6a^3/x_3^2 - x_3^2 y^{(3)}_*/k_4`, and the input
+
+.. math::
+
+    u = \frac{2\zeta\omega_n x_2 + \omega_n^2 x_1}{k_1}
+        + \frac{1}{k_1 k_2}\left[x^{(3)}_{3*} + n(n-1)k_3 x_3^{n-2}a^2
+        + n k_3 x_3^{n-1}\ddot x_3
+        - \frac{k_4}{I}\left(\frac{\ddot x_3}{x_3^2} - \frac{2a^2}{x_3^3}\right)\right]
+
+The valve states are not measured: the controller runs the nominal valve model (eq. 17,
+discretised exactly) on the voltages it applied.
+
+**Two gain levels** (§7): far from the surface (``|S| > phi``) the small gain ``K_far``
+moves ``S`` towards it slowly, so that a poor model early in the cut cannot drive the input
+hard; inside the boundary layer the larger ``K_near`` makes it react to torque changes.
+Inside the layer :math:`\dot S = -(K_{near}/\phi) S + \Delta` (``Delta``: what the model
+misses, chiefly the change of ``k4`` as chips pack), so the layer is invariant while
+``K_near >= |Delta|``, and then the error, the output of
+:math:`\ddot e + 2\lambda\dot e + \lambda^2 e = S` (DC gain and impulse-response L1 norm
+both ``1/lambda^2``), obeys :math:`|e| \le \phi/\lambda^2` once the initial transient has
+decayed (Slotine & Li, §7.2). The boundary layer is set from that bound:
+``phi = epsilon T_r lambda^2``, so the torque stays within ``epsilon`` of the reference.
 """
 
 from __future__ import annotations
@@ -13,10 +78,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from agents.base import Agent, unwrap
-from machining_envs.envs.micro_drilling import MicroDrillingEnv
-from machining_envs.plants.drilling import DrillingParams
+from machining_envs.core.lti import zoh
+from machining_envs.drilling.env import MicroDrillingEnv
+from machining_envs.drilling.plant import DrillingParams
 
-__all__ = ["DrillingIO", "NoControl", "PD"]
+__all__ = ["DrillingIO", "NoControl", "PD", "PeckDrilling", "SlidingMode", "sliding_mode_input"]
 
 _I = MicroDrillingEnv.OBS_INDEX
 _OBS_DIM = 12
@@ -231,4 +297,268 @@ class PD(Agent):
         u = np.clip(u, self.min_voltage, p.voltage_max)
         state[:, 0] = ef
         state[:, 1] = 1.0
+        return io.action(u)
+
+
+_FEED, _OUT, _BACK = 0.0, 1.0, 2.0
+
+
+class PeckDrilling(Agent):
+    """Peck drilling on ``control="feed"``: feed ``q`` mm, retract out of the hole, return.
+
+    Parameters
+    ----------
+    io : DrillingIO
+    peck_diameters : float
+        Peck depth ``q`` in drill diameters (default 1: chips pack at most one diameter deep,
+        a usual choice for micro drills in steel).
+    clearance_mm : float
+        How far above the surface the point retracts, mm (default 0.1).
+    approach_gap_mm : float
+        Where the rapid return stops above the hole's bottom, mm; the rest is fed at the
+        nominal feed (default 0.05).
+    rapid_mm_s : float or None
+        Retract and return speed, mm/s (default the stage's ``feed_speed_max_mm_s``).
+    """
+
+    # [phase (0 feed, 1 out, 2 back), depth at which to retract next (mm), started]
+    state_size = 3
+    obs_dim = _OBS_DIM
+
+    def __init__(
+        self,
+        io: DrillingIO,
+        peck_diameters: float = 1.0,
+        clearance_mm: float = 0.1,
+        approach_gap_mm: float = 0.05,
+        rapid_mm_s: float | None = None,
+    ):
+        io.require("feed", "PeckDrilling")
+        self.io = io
+        p = io.params
+        self.peck_diameters = _positive("peck_diameters", peck_diameters, 100.0)
+        self.clearance_mm = _in_range("clearance_mm", clearance_mm, 0.0, p.retract_limit_mm)
+        self.approach_gap_mm = _in_range("approach_gap_mm", approach_gap_mm, 0.0, 5.0)
+        rapid = p.feed_speed_max_mm_s if rapid_mm_s is None else rapid_mm_s
+        self.rapid_mm_s = _in_range("rapid_mm_s", rapid, 1e-3, p.feed_speed_max_mm_s)
+        self.feed_mm_s = p.feed_velocity_mm_s
+        self.name = f"peck q={peck_diameters:g}D"
+
+    @classmethod
+    def from_env(cls, env, **kwargs) -> PeckDrilling:
+        return cls(DrillingIO.from_env(env), **kwargs)
+
+    def _act(self, obs, state):
+        io = self.io
+        ts = io.sample_time_s
+        pos, depth, _ = io.lengths_mm(obs)
+        q = self.peck_diameters * io.diameter_mm(obs)
+        first = state[:, 2] == 0.0
+        state[:, 1] = np.where(first, depth + q, state[:, 1])
+        phase = np.where(first, _FEED, state[:, 0])
+        # Transitions, then the command of the phase.
+        to_out = (phase == _FEED) & (depth >= state[:, 1] - 1e-9)
+        phase = np.where(to_out, _OUT, phase)
+        to_back = (phase == _OUT) & (pos <= -self.clearance_mm + 1e-9)
+        phase = np.where(to_back, _BACK, phase)
+        state[:, 1] = np.where(to_back, depth + q, state[:, 1])
+        stop = depth - self.approach_gap_mm
+        to_feed = (phase == _BACK) & (pos >= stop - 1e-9)
+        phase = np.where(to_feed, _FEED, phase)
+        back = np.minimum(self.rapid_mm_s, np.maximum((stop - pos) / ts, self.feed_mm_s))
+        v = np.where(
+            phase == _FEED,
+            self.feed_mm_s,
+            np.where(
+                phase == _OUT,
+                -np.minimum(self.rapid_mm_s, (pos + self.clearance_mm) / ts + 1e-3),
+                back,
+            ),
+        )
+        state[:, 0] = phase
+        state[:, 2] = 1.0
+        return io.action(v)
+
+
+_TWO_PI = 2.0 * math.pi
+
+
+def sliding_mode_input(x1, x2, x3, k4, y_ref, lam, phi, k_near, k_far, params):
+    r"""The feedback-linearising sliding-mode voltage and the surface, vectorised.
+
+    Parameters
+    ----------
+    x1, x2 : array
+        Valve spool opening and its rate (model states).
+    x3 : array
+        Spindle speed, rad/s (> 0).
+    k4 : array
+        Torque constant, N·mm·rad/s (> 0).
+    y_ref : array
+        Torque reference x4d, N·mm.
+    lam : float
+        lambda of the surface, rad/s.
+    phi : array
+        Boundary-layer width, N·mm/s^2.
+    k_near, k_far : array
+        K inside and outside the boundary layer, N·mm/s^3.
+    params : DrillingParams
+        The nominal model.
+
+    Returns
+    -------
+    u, S, e : arrays
+        Unclipped voltage (V), the surface and the modelled torque error ``x4d - k4/x3``.
+    """
+    p = params
+    k1, k2, k3, n = p.k1, p.spindle_drive_gain, p.spindle_friction, p.spindle_friction_exponent
+    wn, z = p.valve_natural_freq_rad_s, p.valve_damping
+    c = k4 / p.spindle_inertia_Nmm_s2  # k4 / I
+    x3n1 = x3 ** (n - 1.0)
+    a = k2 * x1 - k3 * x3n1 * x3 - c / x3
+    x3dd = k2 * x2 - n * k3 * x3n1 * a + c * a / x3**2
+    y = k4 / x3
+    yd = -k4 * a / x3**2
+    ydd = k4 * (-x3dd / x3**2 + 2.0 * a**2 / x3**3)
+    e = y_ref - y
+    s = -ydd - 2.0 * lam * yd + lam**2 * e
+    ratio = s / phi
+    gain = np.where(np.abs(ratio) <= 1.0, k_near, k_far)
+    y3 = gain * np.clip(ratio, -1.0, 1.0) - 2.0 * lam * ydd - lam**2 * yd
+    x3ddd = 6.0 * a * x3dd / x3 - 6.0 * a**3 / x3**2 - x3**2 * y3 / k4
+    bracket = (
+        x3ddd
+        + n * (n - 1.0) * k3 * x3n1 / x3 * a**2
+        + n * k3 * x3n1 * x3dd
+        - c * (x3dd / x3**2 - 2.0 * a**2 / x3**3)
+    )
+    u = (2.0 * z * wn * x2 + wn**2 * x1) / k1 + bracket / (k1 * k2)
+    return u, s, e
+
+
+class SlidingMode(Agent):
+    r"""Sliding-mode torque regulation by the valve voltage (see the module docstring).
+
+    Parameters
+    ----------
+    io : DrillingIO
+    lam : float
+        lambda of the surface ``S = e'' + 2 lambda e' + lambda^2 e``, rad/s. Not given in
+        the paper: 12 rad/s, three times the spindle's own 4 rad/s and a quarter of the
+        valve's 50 rad/s, which the feedback linearisation inverts, so the valve model's
+        errors stay small at the loop's speed.
+    epsilon : float
+        Torque-error bound inside the boundary layer as a share of the reference:
+        ``phi = epsilon T_r lambda^2`` (default 3 %).
+    near_rate : float
+        ``K_near / phi``, 1/s: how fast ``S`` decays inside the layer (default 35/s, a third
+        of the 100 Hz sample rate, so the sampled loop stays well damped).
+    far_ratio : float
+        ``K_far / K_near`` (default 0.25: the paper's small gain outside the layer).
+    k4_filter_s : float
+        Time constant of the low-pass on the ``k4`` estimate, s (default 0.02 s).
+    min_voltage : float or None
+        Lowest voltage commanded, V (default nominal: speed up only, as in the paper's
+        Fig. 22, where the spindle stays near 545 Hz until chips raise the torque).
+    engage_fraction : float
+        The law runs once the estimated torque passes this share of the reference (the
+        drill is cutting); before, and whenever the estimate falls below it, the voltage is
+        ``min_voltage`` (``k4 -> 0`` makes the inverse meaningless).
+    """
+
+    # [x1_hat, x2_hat, k4_hat, S, e, started, near(0/1), u]
+    state_size = 8
+    obs_dim = _OBS_DIM
+    STATE = {"x1": 0, "x2": 1, "k4": 2, "S": 3, "e": 4, "started": 5, "near": 6, "u": 7}
+
+    def __init__(
+        self,
+        io: DrillingIO,
+        lam: float = 12.0,
+        epsilon: float = 0.03,
+        near_rate: float = 35.0,
+        far_ratio: float = 0.25,
+        k4_filter_s: float = 0.02,
+        min_voltage: float | None = None,
+        engage_fraction: float = 0.3,
+    ):
+        io.require("voltage", "SlidingMode")
+        self.io = io
+        p = io.params
+        self.lam = _positive("lam", lam, 1e3)
+        self.epsilon = _positive("epsilon", epsilon, 1.0)
+        self.near_rate = _positive("near_rate", near_rate, 1e4)
+        self.far_ratio = _positive("far_ratio", far_ratio, 1e3)
+        self.k4_filter_s = _in_range("k4_filter_s", k4_filter_s, 0.0, 10.0)
+        lo = p.nominal_voltage if min_voltage is None else min_voltage
+        self.min_voltage = _in_range("min_voltage", lo, 0.0, p.voltage_max)
+        self.engage_fraction = _in_range("engage_fraction", engage_fraction, 0.0, 1.0)
+        ts = p.sample_time_s
+        a = np.array(
+            [
+                [0.0, 1.0],
+                [
+                    -(p.valve_natural_freq_rad_s**2),
+                    -2.0 * p.valve_damping * p.valve_natural_freq_rad_s,
+                ],
+            ]
+        )
+        b = np.array([[0.0], [p.k1]])
+        phi, gam = zoh(a, b, ts)
+        self._phi = phi
+        self._gam = gam[:, 0]
+        self._alpha = 1.0 - math.exp(-ts / self.k4_filter_s) if self.k4_filter_s > 0 else 1.0
+        self.name = f"sliding mode lambda={lam:g}"
+
+    @classmethod
+    def from_env(cls, env, **kwargs) -> SlidingMode:
+        return cls(DrillingIO.from_env(env), **kwargs)
+
+    def boundary_layer(self, torque_ref_Nmm):
+        """phi, N·mm/s^2, for a reference torque."""
+        return self.epsilon * np.asarray(torque_ref_Nmm) * self.lam**2
+
+    def error_bound(self, torque_ref_Nmm):
+        """|e| <= phi / lambda^2 = epsilon T_r inside the layer, N·mm."""
+        return self.boundary_layer(torque_ref_Nmm) / self.lam**2
+
+    def initial_state(self, n, obs):
+        st = np.zeros((n, self.state_size))
+        u = self.io.previous_command(obs)
+        st[:, 0] = self.io.params.valve_static_gain_per_V * u  # the valve has settled
+        st[:, 7] = u
+        return st
+
+    def _act(self, obs, state):
+        io = self.io
+        p = io.params
+        x1, x2 = state[:, 0].copy(), state[:, 1].copy()
+        started = state[:, 5] > 0.0
+        u_prev = io.previous_command(obs)
+        # Valve model: advance over the sample just applied (not on an episode's first call).
+        nx1 = self._phi[0, 0] * x1 + self._phi[0, 1] * x2 + self._gam[0] * u_prev
+        nx2 = self._phi[1, 0] * x1 + self._phi[1, 1] * x2 + self._gam[1] * u_prev
+        x1 = np.where(started, nx1, x1)
+        x2 = np.where(started, nx2, x2)
+        tm, tr = io.torque(obs)
+        tr = np.maximum(tr, 1e-9)
+        x3 = _TWO_PI * np.maximum(io.speed_hz(obs), 50.0)
+        k4_raw = np.maximum(tm, 0.0) * x3
+        k4 = np.where(started, state[:, 2] + self._alpha * (k4_raw - state[:, 2]), k4_raw)
+        active = k4 > self.engage_fraction * tr * x3
+        phi = self.boundary_layer(tr)
+        k_near = self.near_rate * phi
+        k4_safe = np.where(active, k4, tr * x3)
+        u, s, e = sliding_mode_input(
+            x1, x2, x3, k4_safe, tr, self.lam, phi, k_near, self.far_ratio * k_near, p
+        )
+        near = np.abs(s) <= phi
+        u = np.where(active, u, self.min_voltage)
+        u = np.clip(u, self.min_voltage, p.voltage_max)
+        state[:, 0], state[:, 1], state[:, 2] = x1, x2, k4
+        state[:, 3] = np.where(active, s, 0.0)
+        state[:, 4] = np.where(active, e, tr - tm)
+        state[:, 5] = 1.0
+        state[:, 6] = near
+        state[:, 7] = u
         return io.action(u)

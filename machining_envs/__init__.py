@@ -12,21 +12,39 @@ from __future__ import annotations
 
 from gymnasium.envs.registration import register, registry
 
-from machining_envs.contouring_scenarios import CONTOURING_SCENARIOS, ContouringScenario
-from machining_envs.drilling_scenarios import DRILLING_SCENARIOS, DrillingScenario
-from machining_envs.envs.contouring import ContouringEnv, ContouringReward
-from machining_envs.envs.contouring_feed import ContouringFeedEnv, FeedReward
-from machining_envs.envs.end_milling import EndMillingEnv, MillingReward
-from machining_envs.envs.micro_drilling import DrillingReward, MicroDrillingEnv
-from machining_envs.envs.turning import TurningEnv, TurningReward
-from machining_envs.milling_scenarios import MILLING_SCENARIOS, MillingScenario
-from machining_envs.paths import Path
-from machining_envs.plants.contouring import ContouringParams
-from machining_envs.plants.drilling import DrillingParams
-from machining_envs.plants.milling import MillingParams
-from machining_envs.plants.turning import TurningParams
-from machining_envs.scenarios import TURNING_SCENARIOS, TurningScenario
-from machining_envs.workpieces import DepthProfile
+from machining_envs import contouring, drilling, milling, turning
+from machining_envs.contouring import (
+    CONTOURING_SCENARIOS,
+    ContouringEnv,
+    ContouringFeedEnv,
+    ContouringParams,
+    ContouringReward,
+    ContouringScenario,
+    FeedReward,
+    Path,
+)
+from machining_envs.core.workpieces import DepthProfile
+from machining_envs.drilling import (
+    DRILLING_SCENARIOS,
+    DrillingParams,
+    DrillingReward,
+    DrillingScenario,
+    MicroDrillingEnv,
+)
+from machining_envs.milling import (
+    MILLING_SCENARIOS,
+    EndMillingEnv,
+    MillingParams,
+    MillingReward,
+    MillingScenario,
+)
+from machining_envs.turning import (
+    TURNING_SCENARIOS,
+    TurningEnv,
+    TurningParams,
+    TurningReward,
+    TurningScenario,
+)
 
 __all__ = [
     "CONTOURING_SCENARIOS",
@@ -57,13 +75,12 @@ __all__ = [
 ]
 __version__ = "0.1.0"
 
-#: Every env id this package registers, with its entry point (one line per env).
+#: Every env id this package registers, with its entry point (each process declares its own).
 _ENTRY_POINTS = {
-    "machining_envs/Turning-v0": "machining_envs.envs.turning:TurningEnv",
-    "machining_envs/EndMilling-v0": "machining_envs.envs.end_milling:EndMillingEnv",
-    "machining_envs/MicroDrilling-v0": "machining_envs.envs.micro_drilling:MicroDrillingEnv",
-    "machining_envs/Contouring-v0": "machining_envs.envs.contouring:ContouringEnv",
-    "machining_envs/ContouringFeed-v0": "machining_envs.envs.contouring_feed:ContouringFeedEnv",
+    **turning.ENTRY_POINTS,
+    **milling.ENTRY_POINTS,
+    **drilling.ENTRY_POINTS,
+    **contouring.ENTRY_POINTS,
 }
 ENV_IDS = tuple(_ENTRY_POINTS)
 

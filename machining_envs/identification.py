@@ -49,8 +49,8 @@ import numpy as np
 from scipy.linalg import expm
 from scipy.optimize import least_squares
 
-from machining_envs.plants.milling import KGF, MillingParams, mean_forces
-from machining_envs.plants.turning import TurningParams
+from machining_envs.milling.plant import KGF, MillingParams, mean_forces
+from machining_envs.turning.plant import TurningParams
 
 __all__ = [
     "IdentificationError",

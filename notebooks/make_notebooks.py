@@ -25,7 +25,7 @@ NOTEBOOKS = {
         new_code_cell(
             "import gymnasium as gym\nimport matplotlib.pyplot as plt\n\n"
             "import machining_envs  # noqa: F401  (registers the env ids)\n"
-            "from agents import ConstantFeed, VariableGainPI\nfrom agents.harness import rollout"
+            "from agents import ConstantFeed, VariableGainPI\nfrom agents.eval import rollout"
         ),
         new_code_cell(
             'env = gym.make("machining_envs/Turning-v0", scenario="paper_405")\n'
@@ -53,13 +53,13 @@ NOTEBOOKS = {
     "02_train_sb3.ipynb": [
         new_markdown_cell(
             "# Train a feed-rate policy with Stable-Baselines3\n\nPPO with the hyperparameters of "
-            "`agents/configs/ppo.yml`, VecNormalize kept with the model, evaluated on the held-out "
+            "`agents/rl/configs/ppo.yml`, VecNormalize kept with the model, evaluated on the held-out "
             "scenarios by the same harness as the classical controllers."
         ),
         new_code_cell(QUICK),
         new_code_cell(
             "import tempfile\nfrom pathlib import Path\n\n"
-            "from agents import VariableGainPI\nfrom agents.harness import evaluate\n"
+            "from agents import VariableGainPI\nfrom agents.eval import evaluate\n"
             "from agents.rl import load_policy, primary_score, train\n\n"
             'out = Path(tempfile.mkdtemp()) / "ppo_turning"\n'
             "run = train(\n"
@@ -86,7 +86,7 @@ NOTEBOOKS = {
         new_code_cell(QUICK),
         new_code_cell(
             "from agents import ConstantFeed, FixedGainPI, VariableGainPI\n"
-            "from agents.harness import Evaluation, evaluate\n\n"
+            "from agents.eval import Evaluation, evaluate\n\n"
             "n = 2 if QUICK else 20\n"
             "ev = Evaluation.concat(\n"
             '    evaluate(f, "machining_envs/Turning-v0", ["test"], n_episodes=n, seed=1000)\n'
@@ -103,11 +103,11 @@ NOTEBOOKS = {
         ),
         new_code_cell(
             "import tempfile\nfrom pathlib import Path\n\nfrom IPython.display import Image, display\n\n"
-            "from agents.cli import REPRODUCTIONS, reproduction\n\n"
+            "from agents.bench.declarations import PROCESSES\n\n"
             "out = Path(tempfile.mkdtemp())\n"
-            "for process in REPRODUCTIONS:\n"
-            "    results = reproduction(process)(out)\n"
-            '    display(Image(filename=str(out / f"reproduce_{process}.png")))'
+            "for process in PROCESSES:\n"
+            "    results = process.reproduce(out)\n"
+            '    display(Image(filename=str(out / f"reproduce_{process.name}.png")))'
         ),
     ],
     "05_identify_your_machine.ipynb": [
@@ -137,7 +137,7 @@ NOTEBOOKS = {
             "import matplotlib.pyplot as plt\n"
             "import numpy as np\n"
             "from scipy import signal\n\n"
-            "from machining_envs.plants.milling import MillingParams\n\n"
+            "from machining_envs.milling.plant import MillingParams\n\n"
             "nominal = MillingParams.park_yoon_1986()\n"
             "true = dataclasses.replace(  # your machine: unknown in real use, known here\n"
             "    nominal,\n"
@@ -227,8 +227,8 @@ NOTEBOOKS = {
         new_code_cell(
             "import gymnasium as gym\n\n"
             "from agents import IntegralACC\n"
-            "from agents.harness import Evaluation, evaluate\n"
-            "from machining_envs.milling_metrics import milling_metrics\n\n"
+            "from agents.eval import Evaluation, evaluate\n"
+            "from machining_envs.milling.metrics import milling_metrics\n\n"
             'ENV_ID = "machining_envs/EndMilling-v0"\n'
             "machine = {\n"
             "    f.name: getattr(fitted, f.name)\n"
@@ -252,7 +252,7 @@ NOTEBOOKS = {
             "trains there; the run keeps the model that scored best on held-out episodes, with "
             "its VecNormalize statistics, and `load_policy` loads both.\n\n"
             "The hyperparameters and reward are the shipped EndMilling-v0 entry of "
-            "`agents/configs/ppo.yml` (the one that trained `agents/pretrained/end_milling_ppo`); "
+            "`agents/rl/configs/ppo.yml` (the one that trained `agents/rl/pretrained/end_milling_ppo`); "
             "only the plant constants and the budget change.\n\n"
             "**Budget.** Under the tests (`MACHINING_NB_QUICK=1`) PPO gets 4 096 steps: far too "
             "few to learn anything, so the policy below is close to its random start and loses "
@@ -300,7 +300,7 @@ NOTEBOOKS = {
         new_markdown_cell(
             "To use your machine from another project, register it under an id of your own: "
             '`gym.register(id="mylab/MyMill-v0", '
-            'entry_point="machining_envs.envs.end_milling:EndMillingEnv", '
+            'entry_point="machining_envs.milling.env:EndMillingEnv", '
             'kwargs={"params": fitted})`, and pass `metrics_fn=milling_metrics` to `evaluate`.'
         ),
     ],

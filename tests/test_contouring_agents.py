@@ -8,12 +8,12 @@ import pytest
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
-import machining_envs.servo as servo
+import machining_envs.contouring.servo as servo
 from agents import ConstantOverride, HInf2DOF, PIPosition
-from agents.harness import rollout
-from machining_envs.contouring_scenarios import PAPER_LOAD_TIME_S, PAPER_STEP_MM
-from machining_envs.plants.contouring import ContouringParams
-from machining_envs.servo import ServoLoop, closed_loop, hinf_2dof_design, pi_design
+from agents.eval import rollout
+from machining_envs.contouring.plant import ContouringParams
+from machining_envs.contouring.scenarios import PAPER_LOAD_TIME_S, PAPER_STEP_MM
+from machining_envs.contouring.servo import ServoLoop, closed_loop, hinf_2dof_design, pi_design
 
 CONTOURING = "machining_envs/Contouring-v0"
 FEED = "machining_envs/ContouringFeed-v0"
@@ -203,7 +203,7 @@ def test_agents_refuse_other_envs():
 def test_block_loop_matches_period_by_period_simulation():
     """ContouringFeed-v0's block update equals the plant stepped period by period under
     the agent's controller (same designs, same commands), with and without clipping."""
-    from machining_envs.plants.contouring import ContouringPlant
+    from machining_envs.contouring.plant import ContouringPlant
 
     designs = tuple(hinf_2dof_design(P, ax) for ax in "xy")
     truth = P.replace(inertia_y_kgm2=P.inertia_y_kgm2 * 1.2)

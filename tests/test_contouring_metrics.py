@@ -6,10 +6,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from agents.feed import BASELINE_OVERRIDE, CALIBRATION_SEEDS, ConstantOverride, _max_error
-from machining_envs.contouring_metrics import circle_radius_errors, contouring_metrics
-from machining_envs.paths import Arc, Path
-from machining_envs.plants.lti import zoh
+from agents.contouring import BASELINE_OVERRIDE, CALIBRATION_SEEDS, ConstantOverride, _max_error
+from machining_envs.contouring.metrics import circle_radius_errors, contouring_metrics
+from machining_envs.contouring.paths import Arc, Path
+from machining_envs.core.lti import zoh
 
 
 def _first_order_circle(feed, radius, tau, ts=2e-4):
@@ -149,5 +149,5 @@ def test_constant_override_baseline_keeps_the_tolerance_on_training_paths(servo,
 
 
 #: The calibration paths whose bisection set the stored override (from ``python -m
-#: agents.feed``'s log).
+#: agents.contouring``'s log).
 BINDING_SEEDS = {"pi": (7,), "hinf": (197,)}

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from machining_envs.paths import Arc, Involute, Line, Path
+from machining_envs.contouring.paths import Arc, Involute, Line, Path
 
 
 def _brute(path: Path, px, py, n=200_001):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from machining_envs.plants.contouring import ContouringParams, ContouringPlant
+from machining_envs.contouring.plant import ContouringParams, ContouringPlant
 
 P = ContouringParams()
 

@@ -11,11 +11,11 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
 from agents import PD, NoControl, PeckDrilling, SlidingMode
-from agents.harness import rollout
-from agents.reproduce_drilling import drilling_comparison
-from agents.sliding_mode import sliding_mode_input
+from agents.bench.drilling import drilling_comparison
+from agents.drilling import sliding_mode_input
+from agents.eval import rollout
 from machining_envs import DrillingParams, DrillingScenario
-from machining_envs.drilling_metrics import drilling_metrics
+from machining_envs.drilling.metrics import drilling_metrics
 
 DRILLING = "machining_envs/MicroDrilling-v0"
 P = DrillingParams()

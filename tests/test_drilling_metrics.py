@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from agents.drilling import NoControl
-from agents.harness import evaluate, rollout
-from machining_envs.drilling_metrics import drilling_mask, drilling_metrics
+from agents.eval import evaluate, rollout
+from machining_envs.drilling.metrics import drilling_mask, drilling_metrics
 
 
 def _traj():

@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
-from machining_envs.plants.drilling import (
+from machining_envs.drilling.plant import (
     DrillingParams,
     DrillingPlant,
     _filter_weights,

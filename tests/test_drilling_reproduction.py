@@ -1,12 +1,12 @@
 """`machining-bench reproduce drilling`: runs, prints paper vs ours, saves the figure."""
 
-from agents.cli import REPRODUCTIONS, main, reproduction
-from agents.reproduce_drilling import reproduce_drilling
+from agents.bench.cli import main
+from agents.bench.declarations import process
+from agents.bench.drilling import reproduce_drilling
 
 
 def test_cli_reproduce_drilling(tmp_path, capsys):
-    assert reproduction("drilling") is reproduce_drilling
-    assert "drilling" in REPRODUCTIONS
+    assert process("drilling").reproduce is reproduce_drilling
     code = main(["reproduce", "drilling", "--out", str(tmp_path)])
     out = capsys.readouterr().out
     assert (tmp_path / "reproduce_drilling.png").stat().st_size > 10_000

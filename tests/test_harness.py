@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from agents import FixedGainPI, VariableGainPI
-from agents.cli import main
-from agents.harness import Evaluation, evaluate
-from machining_envs.metrics import regulation_metrics
+from agents.bench.cli import main
+from agents.eval import Evaluation, evaluate
+from machining_envs.core.metrics import regulation_metrics
 from tests.conftest import TURNING
 
 
@@ -100,7 +100,7 @@ def test_cli_reproduce_turning(tmp_path, capsys):
 
 def test_cli_benchmark_quick_writes_report(tmp_path):
     out = subprocess.run(
-        [sys.executable, "-m", "agents.cli", "benchmark", "--quick", "--out", str(tmp_path)],
+        [sys.executable, "-m", "agents.bench.cli", "benchmark", "--quick", "--out", str(tmp_path)],
         capture_output=True,
         text=True,
         check=True,
@@ -125,7 +125,7 @@ def test_cli_rejects_bad_arguments():
 
 
 def test_primary_score_table_gives_learned_agents_a_paired_margin():
-    from agents.benchmark import primary_score_table
+    from agents.eval import primary_score_table
 
     def row(agent, seed, t, over=0.0):
         return {

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from machining_envs import MillingParams
+from machining_envs.core.workpieces import DepthProfile
 from machining_envs.identification import (
     SEED_002_C,
     SEED_002_CUTS,
@@ -24,9 +25,8 @@ from machining_envs.identification import (
     fit_servo_step,
     fit_turning_force,
 )
-from machining_envs.plants.milling import MillingPlant, mean_forces
-from machining_envs.plants.turning import TurningParams
-from machining_envs.workpieces import DepthProfile
+from machining_envs.milling.plant import MillingPlant, mean_forces
+from machining_envs.turning.plant import TurningParams
 
 # The paper's cut design (seed 000 §3.1): d = 1, 2, 3 mm x ft = 0.025-0.1 mm, 3 replicates.
 _D, _F = (g.ravel() for g in np.meshgrid([1.0, 2.0, 3.0], [0.025, 0.05, 0.075, 0.1]))

@@ -9,7 +9,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
 from agents import FixedGainIntegral, IntegralACC, MillingConstantFeed
-from agents.harness import rollout
+from agents.eval import rollout
 from machining_envs import MillingParams
 
 MILLING = "machining_envs/EndMilling-v0"

@@ -13,8 +13,8 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import machining_envs
 from machining_envs import EndMillingEnv, MillingParams, MillingScenario
-from machining_envs.milling_scenarios import cut_area_mm2
-from machining_envs.workpieces import DepthProfile
+from machining_envs.core.workpieces import DepthProfile
+from machining_envs.milling.scenarios import cut_area_mm2
 
 MILLING = "machining_envs/EndMilling-v0"
 
@@ -154,7 +154,7 @@ def test_unknown_action_map_is_rejected_with_the_allowed_values():
 
 def test_classical_agent_is_unaffected_by_the_action_map():
     """IntegralACC goes through the env's map: same commands and torques on either map."""
-    from agents.integral import IntegralACC
+    from agents.milling import IntegralACC
 
     runs = {}
     for action_map in ("log", "linear"):

@@ -15,21 +15,22 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from agents.cli import REPRODUCTIONS, build_parser, reproduction
-from agents.harness import rollout
-from agents.integral import FixedGainIntegral
-from agents.reproduce_milling import (
+from agents.bench.cli import build_parser
+from agents.bench.declarations import process
+from agents.bench.milling import (
     PAPER_TABLE_1,
     critical_controller_gain,
     critical_servo_gain,
     hold_check,
     reproduce_milling,
 )
+from agents.eval import rollout
+from agents.milling import FixedGainIntegral
 from machining_envs import MillingScenario
-from machining_envs.metrics import oscillation_amplitude
-from machining_envs.milling_metrics import milling_metrics
-from machining_envs.milling_scenarios import paper_step_profile, paper_taper_profile
-from machining_envs.workpieces import DepthProfile
+from machining_envs.core.metrics import oscillation_amplitude
+from machining_envs.core.workpieces import DepthProfile
+from machining_envs.milling.metrics import milling_metrics
+from machining_envs.milling.scenarios import paper_step_profile, paper_taper_profile
 
 MILLING = "machining_envs/EndMilling-v0"
 
@@ -112,7 +113,7 @@ def test_ac_time_is_near_the_papers_on_the_step(repro):
 def test_ac_holds_on_other_noise_draws(seed):
     for scenario in ("paper_step", "paper_taper"):
         env = gym.make(MILLING, scenario=scenario)
-        from agents.integral import IntegralACC
+        from agents.milling import IntegralACC
 
         traj = rollout(IntegralACC.from_env(env), env, seed=seed)
         assert hold_check(traj)["held"]
@@ -127,7 +128,7 @@ def test_all_reproduction_rows_match_and_the_figure_is_written(repro):
     failed = [k for k, r in rows.items() if not r["match"]]
     assert not failed, failed
     assert (out / "reproduce_milling.png").stat().st_size > 10_000
-    assert "milling" in REPRODUCTIONS and reproduction("milling") is reproduce_milling
+    assert process("milling").reproduce is reproduce_milling
     args = build_parser().parse_args(["reproduce", "milling", "--out", str(out)])
     assert args.process == "milling"
 

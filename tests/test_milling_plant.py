@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.integrate import quad, solve_ivp
 
-from machining_envs.plants.milling import (
+from machining_envs.core.workpieces import DepthProfile
+from machining_envs.milling.plant import (
     KGF,
     MillingParams,
     MillingPlant,
@@ -14,7 +15,6 @@ from machining_envs.plants.milling import (
     mean_forces,
     mean_torque_average_force,
 )
-from machining_envs.workpieces import DepthProfile
 
 PROFILE = DepthProfile((0.0, 0.6, 1.4, 30.0), (1.0, 1.0, 3.0), (1.0, 2.5, 3.0))
 

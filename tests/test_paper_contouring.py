@@ -6,8 +6,9 @@ paper's five tests) feeds every assertion here.
 
 import pytest
 
-from agents.cli import REPRODUCTIONS, main, reproduction
-from agents.reproduce_contouring import CONTOUR_RATIO, reproduce_contouring
+from agents.bench.cli import main
+from agents.bench.contouring import CONTOUR_RATIO, reproduce_contouring
+from agents.bench.declarations import process
 
 
 @pytest.fixture(scope="module")
@@ -50,8 +51,7 @@ def test_every_experiment_matches_and_the_figure_is_written(repro):
 
 
 def test_cli_registry_names_the_reproduction():
-    assert "contouring" in REPRODUCTIONS
-    assert reproduction("contouring") is reproduce_contouring
+    assert process("contouring").reproduce is reproduce_contouring
     with pytest.raises(SystemExit):
         main(["reproduce", "contouring", "--sensor-gain", "15"])
 
@@ -64,8 +64,8 @@ def test_pi_circle_matches_the_papers_ellipse_formula(repro):
     and (a - b)/2 (within 2 %: the discrete set point and the finite run)."""
     import numpy as np
 
-    from machining_envs.plants.contouring import ContouringParams
-    from machining_envs.servo import closed_loop, pi_design
+    from machining_envs.contouring.plant import ContouringParams
+    from machining_envs.contouring.servo import closed_loop, pi_design
 
     p = ContouringParams()
     w = 50.0 / 10.0

@@ -1,6 +1,6 @@
 """Noh, Kim & Kim (1992): the five observations of Fig. 8-15 and the adaptive PI's accuracy.
 
-Criteria (module ``agents.reproduce``): unstable = breakage or a sustained oscillation above
+Criteria (module ``agents.bench.turning``): unstable = breakage or a sustained oscillation above
 10 % of the reference on a plateau; slow = first entry into the 5 % band later than 3 s.
 The fast runs enter the band in 0.4-2.3 s and the slow ones in 4-11 s, the stable ones
 oscillate by at most 4 % and the unstable ones by 100 % or more, so the thresholds sit in
@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from agents import VariableGainPI
-from agents.harness import rollout
-from agents.reproduce import reproduce_turning
-from machining_envs.metrics import regulation_metrics
+from agents.bench.turning import reproduce_turning
+from agents.eval import rollout
+from machining_envs.core.metrics import regulation_metrics
 from tests.conftest import TURNING
 
 

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from agents.reproduce import critical_gain_turning
-from machining_envs.plants.lti import butterworth_lowpass, critical_gain, zoh
-from machining_envs.plants.turning import TurningParams, TurningPlant
-from machining_envs.workpieces import DepthProfile
+from agents.bench.turning import critical_gain_turning
+from machining_envs.core.lti import butterworth_lowpass, critical_gain, zoh
+from machining_envs.core.workpieces import DepthProfile
+from machining_envs.turning.plant import TurningParams, TurningPlant
 
 
 def test_zoh_reproduces_eq14_at_405_rpm():

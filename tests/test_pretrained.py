@@ -8,8 +8,8 @@ import gymnasium as gym
 import pytest
 
 import machining_envs
-from agents.benchmark import BENCHMARKS
-from agents.harness import evaluate
+from agents.bench.declarations import BENCHMARKS
+from agents.eval import evaluate
 from agents.rl import PRETRAINED_DIR
 
 FOLDERS = sorted(p for p in PRETRAINED_DIR.iterdir() if p.is_dir())
@@ -39,7 +39,7 @@ def test_each_pretrained_policy_has_its_regeneration_command_and_is_small(folder
 
 def _scores(spec, n_episodes=20):
     """Primary score of every agent of ``spec`` on its held-out episodes (seeds 1000...)."""
-    failed = spec.score.failed_value(gym.make(spec.env_id))
+    failed = spec.task.score.failed_value(gym.make(spec.env_id))
     out = {}
     for factory in spec.agents:
         ev = evaluate(
@@ -50,7 +50,7 @@ def _scores(spec, n_episodes=20):
             seed=1000,
             metrics_fn=spec.metrics_fn,
         )
-        out[ev.rows[0]["agent"]] = (spec.score(ev.rows, failed), ev.rows)
+        out[ev.rows[0]["agent"]] = (spec.task.score(ev.rows, failed), ev.rows)
     return out
 
 
@@ -74,7 +74,7 @@ def test_pretrained_policy_beats_the_best_classical_agent(env_id):
 
 @pytest.mark.parametrize("folder", FOLDERS, ids=lambda p: p.name)
 def test_recorded_configuration_is_the_shipped_config_entry(folder):
-    """The regeneration command trains with ``agents/configs/<algo>.yml``: its entry must
+    """The regeneration command trains with ``agents/rl/configs/<algo>.yml``: its entry must
     still be the configuration the shipped policy was trained with."""
     from dataclasses import asdict, fields
 

@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from agents.cli import main
-from agents.harness import evaluate
+from agents.bench.cli import main
+from agents.eval import evaluate
 from agents.rl import ConfigError, load_config, load_policy, primary_score, train
 from tests.conftest import TURNING
 

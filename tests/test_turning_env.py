@@ -12,7 +12,7 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from machining_envs import TurningEnv, TurningScenario
-from machining_envs.workpieces import DepthProfile
+from machining_envs.core.workpieces import DepthProfile
 from tests.conftest import TURNING, random_rollout
 
 DESIGN_INFO_KEYS = {

@@ -1,0 +1,315 @@
+"""Contouring controllers (Choi et al.): a PI position loop per axis, the paper's H-infinity
+two-degree-of-freedom loop (``Contouring-v0``), and the constant feed override, the
+baseline of ``ContouringFeed-v0``.
+
+Every controller here is a discrete linear system per axis from the set point and the
+measured position to the velocity command, designed once from the env's nominal parameters
+(``machining_envs.contouring.servo``) and run as difference equations in ``predict``. It reads only the
+observation: the set point and the tracking error (the table's position is their
+difference).
+
+**H-infinity 2-DOF.** The design (``machining_envs.contouring.servo.hinf_2dof_design``) is synthesised once per axis model
+with python-control's ``hinfsyn`` and cached; ``predict`` only runs its difference
+equations (``agents.contouring.LinearServoAgent``).
+
+**Constant feed override.** A process planner's choice: one override for every path, the largest that keeps the contour
+error within the tolerance on the training paths. :func:`calibrate_constant_override` finds
+it by bisection over rollouts; :data:`BASELINE_OVERRIDE` holds the values it gives for the
+env's defaults (regenerate with ``python -m agents.contouring``).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import gymnasium as gym
+import numpy as np
+from scipy.linalg import block_diag
+
+from agents.base import Agent, unwrap
+from machining_envs.contouring.env import ERROR_SCALE_MM, POSITION_SCALE_MM, ContouringEnv
+from machining_envs.contouring.feed_env import DEFAULT_TOLERANCE_MM, ContouringFeedEnv
+from machining_envs.contouring.plant import AXES, ContouringParams
+from machining_envs.contouring.servo import HINF_RHO, ServoDesign, hinf_2dof_design, pi_design
+
+__all__ = [
+    "LinearServoAgent",
+    "PIPosition",
+    "contouring_params",
+    "HInf2DOF",
+    "ConstantOverride",
+    "calibrate_constant_override",
+    "BASELINE_OVERRIDE",
+    "CALIBRATION_SEEDS",
+]
+
+_I = ContouringEnv.OBS_INDEX
+
+
+def contouring_params(env) -> ContouringParams:
+    """The nominal parameters of a (possibly wrapped) ``ContouringEnv``."""
+    base = unwrap(env)
+    if not isinstance(base, ContouringEnv):
+        raise TypeError(f"a contouring controller needs a ContouringEnv, got {type(base).__name__}")
+    return base.params
+
+
+class LinearServoAgent(Agent):
+    """Runs one discrete controller per axis (``ServoDesign``) on Contouring-v0 observations.
+
+    State per env: both axes' controller states, then the table's position at the episode's
+    start (the origin the controllers' inputs are taken from; see ``machining_envs.contouring.servo``).
+    """
+
+    obs_dim = 14
+
+    def __init__(
+        self, designs: tuple[ServoDesign, ServoDesign], command_max_mm_s: float, name: str
+    ):
+        if len(designs) != 2:
+            raise ValueError(f"designs must hold one ServoDesign per axis, got {len(designs)}")
+        self.designs = tuple(designs)
+        self.name = name
+        self.command_max_mm_s = float(command_max_mm_s)
+        self._nx = sum(d.n_states for d in designs)
+        self.state_size = self._nx + 2
+        # Both axes as one block-diagonal system on inputs [r_x, y_x, r_y, y_y], as one
+        # matrix: [xi, inputs] @ M = [next xi, commands].
+        a = block_diag(*(d.a for d in designs))
+        b = block_diag(*(d.b for d in designs))
+        c = block_diag(*(d.c for d in designs))
+        d = block_diag(*(d.d for d in designs))
+        self._m = np.block([[a.T, c.T], [b.T, d.T]])
+
+    @staticmethod
+    def _positions(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Set points and table positions (n, 2), mm, from a batch of observations."""
+        i, j = _I["reference"], _I["error"]
+        r = obs[:, i : i + 2] * POSITION_SCALE_MM
+        return r, r - obs[:, j : j + 2] * ERROR_SCALE_MM
+
+    def initial_state(self, n: int, obs: np.ndarray) -> np.ndarray:
+        st = np.zeros((n, self.state_size))
+        st[:, self._nx :] = self._positions(obs)[1]
+        return st
+
+    def _act(self, obs, state):
+        r, y = self._positions(obs)
+        nx = self._nx
+        origin = state[:, nx:]
+        z = np.empty((obs.shape[0], nx + 4))
+        z[:, :nx] = state[:, :nx]
+        z[:, nx::2] = r - origin
+        z[:, nx + 1 :: 2] = y - origin
+        out = z @ self._m
+        state[:, :nx] = out[:, :nx]
+        return out[:, nx:] / self.command_max_mm_s
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        """As :meth:`Agent.predict`; one env's observation with a carried state and no new
+        episode takes a shorter path (the servo runs 5000 times a simulated second)."""
+        if (
+            state is not None
+            and isinstance(observation, np.ndarray)
+            and observation.shape == (self.obs_dim,)
+            and isinstance(state, np.ndarray)
+            and state.shape == (1, self.state_size)
+            and (
+                episode_start is None
+                or (
+                    isinstance(episode_start, np.ndarray)
+                    and episode_start.size == 1
+                    and not episode_start.item()
+                )
+            )
+        ):
+            nx = self._nx
+            o = observation.tolist()
+            i, j = _I["reference"], _I["error"]
+            st = state.copy()
+            ox, oy = st[0, nx:].tolist()
+            rx, ry = o[i] * POSITION_SCALE_MM, o[i + 1] * POSITION_SCALE_MM
+            yx, yy = rx - o[j] * ERROR_SCALE_MM, ry - o[j + 1] * ERROR_SCALE_MM
+            z = np.concatenate([st[0, :nx], (rx - ox, yx - ox, ry - oy, yy - oy)])
+            out = z @ self._m
+            st[0, :nx] = out[:nx]
+            umax = self.command_max_mm_s
+            ux, uy = (out[nx:] / umax).tolist()
+            act = [min(max(ux, -1.0), 1.0), min(max(uy, -1.0), 1.0)]
+            return np.array(act, dtype=np.float32), st
+        return super().predict(observation, state, episode_start, deterministic)
+
+
+class PIPosition(LinearServoAgent):
+    """PI position controller per axis, tuned by pole placement without overshoot.
+
+    ``u = Kp (b r - y) + Ki int(r - y)`` with ``Kp = a/3``, ``Ki = a^2/27``, ``b = 1/3``
+    for the axis ``a / (s (s + a))``: the three closed-loop poles at ``-a/3`` (the fastest
+    critically damped placement) and the set-point weight that cancels one of them, so the
+    step response is ``p^2 / (s + p)^2`` (no overshoot); see ``machining_envs.contouring.servo.pi_design``.
+    Designed from the env's nominal parameters; discretised by Tustin at the servo rate.
+    """
+
+    @classmethod
+    def from_env(cls, env) -> PIPosition:
+        p = contouring_params(env)
+        designs = tuple(pi_design(p, ax) for ax in AXES)
+        return cls(designs, p.command_max_mm_s, "PI position")
+
+
+class HInf2DOF(LinearServoAgent):
+    """Hoyle-Hyde-Limebeer 2-DOF H-infinity loop-shaping controller per axis (paper §4).
+
+    Feedforward ``K1`` on the set point and feedback ``K2`` on the measured position,
+    designed together so that the loop follows the reference model ``M0 = 500/(s + 500)``
+    robustly, with the paper's loop-shaping weight ``W = 1e6/(s + 1e-3)``; the constant
+    prefilter makes the steady state exact. ``gammas`` holds the achieved H-infinity norm
+    of each axis's design (X, Y).
+
+    >>> import gymnasium as gym
+    >>> import machining_envs
+    >>> agent = HInf2DOF.from_env(gym.make("machining_envs/Contouring-v0"))
+    >>> [round(g, 2) for g in agent.gammas]
+    [5.83, 6.01]
+    """
+
+    @classmethod
+    def from_env(cls, env, rho: float = HINF_RHO) -> HInf2DOF:
+        p = contouring_params(env)
+        designs = tuple(hinf_2dof_design(p, ax, rho=rho) for ax in AXES)
+        return cls(designs, p.command_max_mm_s, "H-inf 2-DOF")
+
+    @property
+    def gammas(self) -> tuple[float, float]:
+        """Achieved gamma of the X and Y designs."""
+        return tuple(float(d.gamma) for d in self.designs)
+
+
+#: Training paths the baseline is calibrated on: ``train`` scenarios drawn with these seeds.
+CALIBRATION_SEEDS = tuple(range(200))
+
+#: servo -> the largest constant override keeping the default tolerance on every path of
+#: ``CALIBRATION_SEEDS`` (default parameters, tolerance and decision interval), rounded down
+#: to 0.01. Regenerate: ``python -m agents.contouring``.
+BASELINE_OVERRIDE = {"pi": 0.08, "hinf": 0.37}
+
+
+def _max_error(env, scenario, override: float) -> float:
+    base = unwrap(env)
+    action = np.array([base.command_to_action(override)], dtype=np.float32)
+    env.reset(seed=0, options={"scenario": scenario})
+    peak = 0.0
+    while True:
+        _, _, term, trunc, info = env.step(action)
+        peak = max(peak, info["peak_contour_error_mm"])
+        if peak > base.tolerance_mm or term or trunc:
+            return peak
+
+
+def calibrate_constant_override(
+    env_kwargs: dict | None = None,
+    seeds=CALIBRATION_SEEDS,
+    resolution: float = 0.01,
+    verbose: bool = False,
+) -> float:
+    """Largest override (a multiple of ``resolution``) whose runs keep the env's tolerance
+    on the ``train`` paths drawn with ``seeds``.
+
+    Paths are taken in turn: each is run at the best override so far, and bisected below it
+    when it breaks the tolerance. A run stops as soon as its contour error passes the
+    tolerance, so failing candidates are cheap.
+    """
+    env = gym.make("machining_envs/ContouringFeed-v0", **(env_kwargs or {}))
+    try:
+        base = unwrap(env)
+        seeds = list(seeds)
+        scenarios = []
+        for s in seeds:
+            base.reset(seed=int(s), options={"scenario": "train"})
+            scenarios.append(base.scenario)
+        hi = base.override_max
+        for k, sc in enumerate(scenarios):
+            if _max_error(env, sc, hi) <= base.tolerance_mm:
+                continue
+            lo_ok, hi_bad = 0.0, hi
+            while hi_bad - lo_ok > resolution:
+                mid = 0.5 * (lo_ok + hi_bad)
+                if _max_error(env, sc, mid) <= base.tolerance_mm:
+                    lo_ok = mid
+                else:
+                    hi_bad = mid
+            hi = math.floor(lo_ok / resolution + 1e-9) * resolution
+            if verbose:
+                print(f"path {k} (seed {seeds[k]}): override <= {hi:.2f}", flush=True)
+        return float(hi)
+    finally:
+        env.close()
+
+
+@functools.lru_cache(maxsize=16)
+def _calibrated(servo: str, tolerance: float, params, decision: float, omax: float) -> float:
+    kwargs = {
+        "servo": servo,
+        "tolerance_mm": tolerance,
+        "params": params,
+        "decision_interval_s": decision,
+        "override_max": omax,
+    }
+    return calibrate_constant_override(kwargs)
+
+
+class ConstantOverride(Agent):
+    """The same feed override all along every path (no feedback).
+
+    ``from_env`` takes the override from :data:`BASELINE_OVERRIDE` when the env has the
+    default parameters, tolerance and decision interval, and calibrates it on the training
+    paths otherwise (once per setting and process; a few minutes).
+    """
+
+    state_size = 0
+    obs_dim = 16
+
+    def __init__(self, override: float, override_max: float):
+        if not (isinstance(override, (int, float)) and math.isfinite(override)):
+            raise ValueError(f"override must be a finite number, got {override!r}")
+        if not 0.0 < override <= override_max:
+            raise ValueError(f"override must be in (0, {override_max}], got {override!r}")
+        self.override = float(override)
+        self.override_max = float(override_max)
+        self.name = f"constant override {override:.2f}"
+
+    @classmethod
+    def from_env(cls, env, override: float | None = None) -> ConstantOverride:
+        base = unwrap(env)
+        if not isinstance(base, ContouringFeedEnv):
+            raise TypeError(
+                f"ConstantOverride needs a ContouringFeedEnv, got {type(base).__name__}"
+            )
+        if override is None:
+            default = (
+                base.tolerance_mm == DEFAULT_TOLERANCE_MM[base.servo]
+                and base.params == type(base.params)()
+                and base.decision_interval_s == 0.01
+                and base.override_max == 2.0
+            )
+            if default and BASELINE_OVERRIDE[base.servo] > 0:
+                override = BASELINE_OVERRIDE[base.servo]
+            else:
+                override = _calibrated(
+                    base.servo,
+                    base.tolerance_mm,
+                    base.params,
+                    base.decision_interval_s,
+                    base.override_max,
+                )
+        return cls(override, base.override_max)
+
+    def _act(self, obs, state):
+        a = 2.0 * self.override / self.override_max - 1.0
+        return np.full((obs.shape[0], 1), a)
+
+
+if __name__ == "__main__":  # pragma: no cover - regenerates BASELINE_OVERRIDE
+    for servo in ("pi", "hinf"):
+        print(servo, calibrate_constant_override({"servo": servo}, verbose=True))

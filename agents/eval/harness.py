@@ -1,0 +1,188 @@
+"""One evaluation harness for every agent on every env: same scenarios, seeds and metrics."""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+
+import gymnasium as gym
+import numpy as np
+
+import machining_envs  # noqa: F401  (registers the env ids)
+from machining_envs.core.metrics import regulation_metrics
+from machining_envs.core.score import REGULATION_SCORE, Task
+
+__all__ = ["rollout", "evaluate", "Evaluation", "agent_name", "task_of"]
+
+#: The task of an env that declares none (an env of another library): the regulation
+#: metrics and the machining-time score.
+DEFAULT_TASK = Task(regulation_metrics, REGULATION_SCORE)
+
+
+def task_of(env) -> Task:
+    """The task an env (or env class) is judged by: its class's ``task`` (episode metrics
+    and primary score), found through any wrappers; ``DEFAULT_TASK`` for an env that
+    declares none.
+
+    Ids registered from other projects with our env classes find their task this way.
+    """
+    base = env if isinstance(env, type) else getattr(env, "unwrapped", env)
+    task = getattr(base, "task", None)
+    return task if isinstance(task, Task) else DEFAULT_TASK
+
+
+def agent_name(agent) -> str:
+    """The agent's ``name`` attribute, else its class name (SB3 models: ``PPO`` etc.)."""
+    return str(getattr(agent, "name", type(agent).__name__))
+
+
+def rollout(agent, env: gym.Env, scenario=None, seed: int | None = None) -> dict[str, np.ndarray]:
+    """Run one episode and return its ``info`` trajectory (plus ``reward``) as arrays.
+
+    Entry 0 is the reset's info (reward 0). ``machining_time_s`` is NaN until the cut ends.
+    """
+    options = {"scenario": scenario} if scenario is not None else None
+    obs, info = env.reset(seed=seed, options=options)
+    rows = [info]
+    rewards = [0.0]
+    state = None
+    start = np.ones(1, dtype=bool)
+    done = False
+    while not done:
+        action, state = agent.predict(obs, state=state, episode_start=start, deterministic=True)
+        start = np.zeros(1, dtype=bool)
+        obs, reward, terminated, truncated, info = env.step(action)
+        rows.append(info)
+        rewards.append(float(reward))
+        done = terminated or truncated
+    keys = [k for k, v in rows[-1].items() if isinstance(v, (bool, int, float, np.number))]
+    traj = {k: np.array([r.get(k, math.nan) for r in rows]) for k in keys}
+    traj["reward"] = np.array(rewards)
+    traj["scenario"] = rows[0].get("scenario")
+    return traj
+
+
+@dataclass
+class Evaluation:
+    """Per-episode metrics (``rows``) and, when kept, the trajectories they came from."""
+
+    rows: list[dict] = field(default_factory=list)
+    trajectories: list[dict] = field(default_factory=list)
+
+    @staticmethod
+    def concat(evals: Iterable[Evaluation]) -> Evaluation:
+        out = Evaluation()
+        for ev in evals:
+            out.rows.extend(ev.rows)
+            out.trajectories.extend(ev.trajectories)
+        return out
+
+    def metric_names(self) -> list[str]:
+        skip = {"agent", "scenario", "episode", "seed", "env_id"}
+        return [k for k in self.rows[0] if k not in skip] if self.rows else []
+
+    def summary(
+        self, metrics: Sequence[str] | None = None, by: Sequence[str] = ("agent", "scenario")
+    ):
+        """Mean, standard deviation and count of each metric per group."""
+        metrics = list(metrics or self.metric_names())
+        groups: dict[tuple, list[dict]] = {}
+        for r in self.rows:
+            groups.setdefault(tuple(r[k] for k in by), []).append(r)
+        out = []
+        for key, rs in groups.items():
+            row = dict(zip(by, key, strict=True))
+            row["n"] = len(rs)
+            for m in metrics:
+                v = np.array([r[m] for r in rs], dtype=np.float64)
+                row[m] = float(np.mean(v))
+                row[m + "_std"] = float(np.std(v))
+            out.append(row)
+        return out
+
+    def to_markdown(
+        self, metrics: Sequence[str] | None = None, by: Sequence[str] = ("agent", "scenario")
+    ) -> str:
+        """Markdown table of ``mean ± std`` per group (breakage and finished as counts)."""
+        metrics = list(metrics or self.metric_names())
+        summ = self.summary(metrics, by)
+        head = [*by, "n", *metrics]
+        lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for row in summ:
+            cells = [str(row[k]) for k in by] + [str(row["n"])]
+            for m in metrics:
+                if m in ("breakage", "finished", "diverged"):
+                    cells.append(f"{round(row[m] * row['n'])}/{row['n']}")
+                else:
+                    cells.append(f"{row[m]:.3g} ± {row[m + '_std']:.2g}")
+            lines.append("| " + " | ".join(cells) + " |")
+        return "\n".join(lines)
+
+    def to_csv(self, path) -> None:
+        """One line per episode; the columns are every metric any row has (rows from envs
+        with different metrics leave the others' cells empty)."""
+        if not self.rows:
+            raise ValueError("no rows to write")
+        fields = list(dict.fromkeys(k for row in self.rows for k in row))
+        with open(path, "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=fields, restval="")
+            w.writeheader()
+            w.writerows(self.rows)
+
+
+def evaluate(
+    agent,
+    env_id: str,
+    scenarios: Sequence,
+    n_episodes: int = 1,
+    seed: int = 0,
+    env_kwargs: dict | None = None,
+    keep_trajectories: bool = False,
+    metrics_fn: Callable[[dict], dict] | None = None,
+) -> Evaluation:
+    """Evaluate ``agent`` on ``env_id`` over ``scenarios`` x ``n_episodes``.
+
+    Parameters
+    ----------
+    agent
+        Anything with SB3's ``predict``, or a factory ``env -> agent`` (such as
+        ``VariableGainPI.from_env``) called once with the evaluation env.
+    env_id : str
+        A registered id, e.g. ``"machining_envs/Turning-v0"``.
+    scenarios : sequence
+        Scenario names or objects, passed to ``reset(options={"scenario": ...})``.
+    n_episodes : int
+        Episodes per scenario; episode ``i`` uses seed ``seed + i``, so every agent meets the
+        same workpieces and noise.
+    metrics_fn : callable, optional
+        Trajectory -> metrics of one episode; by default the env's own (``task_of``).
+    """
+    if not isinstance(n_episodes, int) or n_episodes < 1:
+        raise ValueError(f"n_episodes must be an integer >= 1, got {n_episodes!r}")
+    env = gym.make(env_id, **(env_kwargs or {}))
+    try:
+        if metrics_fn is None:
+            metrics_fn = task_of(env).metrics
+        if not hasattr(agent, "predict") and callable(agent):
+            agent = agent(env)
+        name = agent_name(agent)
+        ev = Evaluation()
+        for sc in scenarios:
+            for i in range(n_episodes):
+                traj = rollout(agent, env, sc, seed + i)
+                row = {
+                    "agent": name,
+                    "scenario": sc if isinstance(sc, str) else getattr(sc, "name", str(sc)),
+                    "episode": i,
+                    "seed": seed + i,
+                }
+                row.update(metrics_fn(traj))
+                ev.rows.append(row)
+                if keep_trajectories:
+                    traj["agent"] = name
+                    ev.trajectories.append(traj)
+        return ev
+    finally:
+        env.close()

@@ -1,0 +1,288 @@
+r"""End-milling controllers of Park & Yoon (1986): integral torque control, fixed or adaptive.
+
+All three are built from the env's nominal parameters only (``from_env``) and read only the
+observation: the measured torque, the reference and the spindle speed. Torques are handled
+in sensor counts, ``Tc = Ke T`` (eq. 9), the units of the paper's gains.
+
+- :class:`FixedGainIntegral`: eq. (1)-(4), ``U = Kc W``, ``W(i) = W(i-1) + Ts E(i)``.
+- :class:`IntegralACC`: the same law with ``Kc`` set on line by the Koren-Masory
+  variable-gain estimator, eq. (12)-(19).
+- :class:`MillingConstantFeed`: no torque feedback; one programmed feed (the "without AC"
+  rows of Table 1).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from agents.base import Agent, unwrap
+from machining_envs.core.env import ActionMap
+from machining_envs.milling.env import EndMillingEnv
+from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams
+from machining_envs.milling.scenarios import PAPER_CONSTANT_FEED_MM_MIN
+
+__all__ = ["MillingIO", "FixedGainIntegral", "IntegralACC", "MillingConstantFeed"]
+
+_I = EndMillingEnv.OBS_INDEX
+
+
+def _positive(name: str, value, hi: float = 1e9) -> float:
+    if not (
+        isinstance(value, (int, float, np.integer, np.floating))
+        and not isinstance(value, bool)
+        and math.isfinite(value)
+        and 0 < value <= hi
+    ):
+        raise ValueError(f"{name} must be in (0, {hi:g}], got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class MillingIO:
+    """What a milling controller knows of the machine: its nominal calibration constants.
+
+    Converts the normalised observation to sensor counts (the units of the paper's gains)
+    and commands in counts back to actions.
+    """
+
+    sensor_gain: float
+    """Ke, counts per N·mm (eq. 9)."""
+    torque_scale_Nmm: float
+    """N·mm per unit of the reference observation (the nominal reference torque)."""
+    command_max: float
+    """Largest command, counts; action -1 is U = 0, +1 is U = command_max."""
+    sample_time_s: float
+    params: MillingParams
+    """The nominal plant, for model-based initial values."""
+    command_map: ActionMap | None = None
+    """The env's action map (its ``command_map``); None: affine over [0, command_max]."""
+
+    @classmethod
+    def from_env(cls, env) -> MillingIO:
+        base = unwrap(env)
+        if not isinstance(base, EndMillingEnv):
+            raise TypeError(
+                f"a milling controller needs an EndMillingEnv, got {type(base).__name__}"
+            )
+        p = base.params
+        return cls(
+            p.sensor_gain, p.torque_ref_Nmm, p.command_max, p.sample_time_s, p, base.command_map
+        )
+
+    def torque_counts(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Measured torque Tc and reference Tr in counts, from a batch of observations
+        (the torques are observed as multiples of the reference)."""
+        tr = self.sensor_gain * self.torque_scale_Nmm * obs[:, _I["reference"]]
+        return tr * obs[:, _I["measured"]], tr
+
+    def spindle_rpm(self, obs: np.ndarray) -> np.ndarray:
+        return np.clip(1000.0 * obs[:, _I["spindle"]], *SPINDLE_RPM_RANGE)
+
+    def reference_Nmm(self, obs: np.ndarray) -> np.ndarray:
+        tr = self.torque_scale_Nmm * obs[:, _I["reference"]]
+        return np.where(tr > 0, tr, self.torque_scale_Nmm)
+
+    def action(self, command: np.ndarray) -> np.ndarray:
+        """Actions (n, 1) for commands (n,) in counts."""
+        if self.command_map is not None:
+            return self.command_map.command_to_action(command)[:, None]
+        return (2.0 * command / self.command_max - 1.0)[:, None]
+
+
+class FixedGainIntegral(Agent):
+    r"""Integral torque controller of Park & Yoon (1986), eq. (1)-(4), with a fixed gain.
+
+    .. math:: E(i) = T_r - T_c(i),\quad W(i) = W(i-1) + T_s E(i),\quad U(i) = K_c W(i)
+
+    ``U`` is clipped to the command range; when it is, ``W`` is reset to ``U / Kc`` (the
+    paper's own ``W = U / Kc``), which is also the anti-windup. Because the process gain
+    ``Tc / U`` grows with the radial depth, a ``Kc`` that is well damped on a shallow cut
+    rings or goes unstable on a deep one (Fig. 5).
+
+    Parameters
+    ----------
+    io : MillingIO
+    kc : float
+        Controller gain Kc, counts of command per (count of torque x s) (paper: 0.2).
+    """
+
+    state_size = 1  # [W]
+    obs_dim = 7
+
+    def __init__(self, io: MillingIO, kc: float = 0.2):
+        self.io = io
+        self.kc = _positive("kc", kc, 1e6)
+        self.name = f"fixed integral Kc={kc:g}"
+
+    @classmethod
+    def from_env(cls, env, kc: float = 0.2) -> FixedGainIntegral:
+        return cls(MillingIO.from_env(env), kc)
+
+    def _act(self, obs, state):
+        tc, tr = self.io.torque_counts(obs)
+        w = state[:, 0] + self.io.sample_time_s * (tr - tc)
+        u = np.clip(self.kc * w, 0.0, self.io.command_max)
+        state[:, 0] = u / self.kc
+        return self.io.action(u)
+
+
+class IntegralACC(Agent):
+    r"""Integral ACC with the Koren-Masory variable-gain estimator (Park & Yoon eq. 12-19).
+
+    Every sample, with ``U`` the command that was held while ``Tc`` was produced:
+
+    .. math::
+
+        E_m &= T_c - U K_m, & K_m &\leftarrow K_m + C_1 E_m \quad \text{(eq. 14-15)} \\
+        E_c &= T_s K - K_c K_m, & K_c &\leftarrow K_c + C_2 E_c \quad \text{(eq. 18-19)}
+
+    then the integral law of :class:`FixedGainIntegral` with the new ``Kc``. ``Km``
+    tracks the process gain ``Kp = Tc / U`` without a division (eq. 12-13) and ``Kc``
+    keeps the open-loop gain ``Kc Km / Ts`` at the designed ``K`` (eq. 16-17), so the loop
+    does not stiffen as the radial depth grows. (The paper writes eq. 14 with ``U(i)``, the
+    command computed at sample ``i``; the command that produced ``Tc(i)`` is the causal
+    reading, and the two agree in steady state.)
+
+    Design, from the nominal plant only: ``K`` defaults to the gain at which the paper's
+    ``Kc = 0.2`` is already the adapted value at ``design_depth_mm`` (1 mm, the first step
+    of the paper's workpiece): ``K = 0.2 Km / Ts`` with ``Km`` the nominal ``Tc / U`` there
+    at the reference torque. The discrete loop gain is then ``m K Ts^2 = 0.43`` at every
+    depth, a gain margin of 3.5. Each episode starts from ``Km`` = the nominal process
+    gain at ``design_depth_mm``, the observed spindle speed and reference, and ``Kc`` at
+    its matching value ``Ts K / Km``.
+
+    Guards against the estimator's "overflow" the paper warns about (§4): the gains are
+    held while the measured torque is below ``min_torque_fraction`` of the reference or no
+    feed is commanded (cutting air gives ``Tc = 0``, which would drive ``Km`` to 0 and
+    ``Kc`` without bound); ``Km`` is kept above 0.1 % of its initial value and ``Kc``
+    within 0.1 % to 1000 times its initial value.
+
+    Parameters
+    ----------
+    io : MillingIO
+    k : float or None
+        Designed open-loop gain K (eq. 16), 1/s; ``None`` for the default design above.
+    c1, c2 : float
+        Estimator gains C1, C2 (paper: 0.001 both).
+    kc_design : float
+        The Kc that K is designed around (paper: 0.2).
+    design_depth_mm : float
+        Radial depth at which ``kc_design`` is the adapted gain.
+    min_torque_fraction : float
+        Below this share of the reference the estimator is held.
+    """
+
+    state_size = 6  # [W, Km, Kc, U held, Km at start, Kc at start]
+    obs_dim = 7
+
+    def __init__(
+        self,
+        io: MillingIO,
+        k: float | None = None,
+        c1: float = 1e-3,
+        c2: float = 1e-3,
+        kc_design: float = 0.2,
+        design_depth_mm: float = 1.0,
+        min_torque_fraction: float = 0.2,
+    ):
+        self.io = io
+        self.c1 = _positive("c1", c1, 10.0)
+        self.c2 = _positive("c2", c2, 10.0)
+        self.kc_design = _positive("kc_design", kc_design, 1e6)
+        self.design_depth_mm = _positive("design_depth_mm", design_depth_mm, 100.0)
+        self.min_torque_fraction = _positive("min_torque_fraction", min_torque_fraction, 1.0)
+        if k is None:
+            km = float(io.params.process_gain(self.design_depth_mm))
+            k = self.kc_design * km / io.sample_time_s
+        self.k = _positive("k", k, 1e9)
+        self.name = f"integral ACC K={self.k:.3g}"
+
+    @classmethod
+    def from_env(cls, env, k: float | None = None, **kwargs) -> IntegralACC:
+        return cls(MillingIO.from_env(env), k, **kwargs)
+
+    def nominal_process_gain(self, spindle_rpm: np.ndarray, torque_ref_Nmm: np.ndarray):
+        """Nominal ``Tc / U`` at ``design_depth_mm`` for these speeds and references."""
+        return self.io.params.process_gain(self.design_depth_mm, torque_ref_Nmm, spindle_rpm)
+
+    def initial_state(self, n, obs):
+        st = np.zeros((n, self.state_size))
+        km = self.nominal_process_gain(self.io.spindle_rpm(obs), self.io.reference_Nmm(obs))
+        st[:, 1] = st[:, 4] = km
+        st[:, 2] = st[:, 5] = self.io.sample_time_s * self.k / km
+        return st
+
+    def _act(self, obs, state):
+        ts = self.io.sample_time_s
+        tc, tr = self.io.torque_counts(obs)
+        w, km, kc, u_held = state[:, 0], state[:, 1], state[:, 2], state[:, 3]
+        km0, kc0 = state[:, 4], state[:, 5]
+        adapt = (tc >= self.min_torque_fraction * tr) & (u_held > 0.0)
+        km_new = np.maximum(km + self.c1 * (tc - u_held * km), 1e-3 * km0)  # eq. 14-15
+        kc_new = np.clip(kc + self.c2 * (ts * self.k - kc * km), 1e-3 * kc0, 1e3 * kc0)  # 18-19
+        km = np.where(adapt, km_new, km)
+        kc = np.where(adapt, kc_new, kc)
+        w = w + ts * (tr - tc)  # eq. 1, 3
+        u = np.clip(kc * w, 0.0, self.io.command_max)  # eq. 2-4
+        state[:, 0] = u / kc
+        state[:, 1] = km
+        state[:, 2] = kc
+        state[:, 3] = u
+        return self.io.action(u)
+
+
+class MillingConstantFeed(Agent):
+    """Baseline without AC: one programmed feed velocity for the whole cut.
+
+    By default the feed is chosen, as a process planner would, so that the nominal torque
+    law gives the reference torque at the deepest cut expected (``design_depth_mm``) at
+    the nominal spindle speed; shallower parts are then cut below the reference, wasting
+    time. :meth:`paper` gives the feeds of Table 1's "without AC" rows. The command is
+    ``U = Vf / Kn`` with the nominal servo gain (eq. 5).
+    """
+
+    state_size = 0
+    obs_dim = 7
+
+    def __init__(self, io: MillingIO, feed_mm_per_min: float):
+        self.io = io
+        self.feed_mm_per_min = _positive("feed_mm_per_min", feed_mm_per_min, 1e5)
+        self.command = self.feed_mm_per_min / 60.0 / io.params.servo_gain
+        if self.command > io.command_max:
+            raise ValueError(
+                f"feed_mm_per_min must be at most {60.0 * io.params.max_feed_velocity_mm_s:g} "
+                f"(the servo's top feed), got {feed_mm_per_min!r}"
+            )
+        self.name = f"constant feed {self.feed_mm_per_min:.3g} mm/min"
+
+    @classmethod
+    def from_env(
+        cls,
+        env,
+        feed_mm_per_min: float | None = None,
+        design_depth_mm: float = 3.0,
+    ) -> MillingConstantFeed:
+        io = MillingIO.from_env(env)
+        if feed_mm_per_min is None:
+            p = io.params
+            ft = p.feed_per_tooth_for_torque(
+                p.torque_ref_Nmm, _positive("design_depth_mm", design_depth_mm, 100.0)
+            )
+            feed_mm_per_min = 60.0 * float(p.feed_velocity_for_feed(ft))
+        return cls(io, feed_mm_per_min)
+
+    @classmethod
+    def paper(cls, env, workpiece: str) -> MillingConstantFeed:
+        """The constant feed of Table 1's "without AC" row for ``"paper_step"`` or
+        ``"paper_taper"`` (3.39 and 2.51 mm/min)."""
+        if workpiece not in PAPER_CONSTANT_FEED_MM_MIN:
+            raise ValueError(
+                f"workpiece must be one of {sorted(PAPER_CONSTANT_FEED_MM_MIN)}, got {workpiece!r}"
+            )
+        return cls(MillingIO.from_env(env), PAPER_CONSTANT_FEED_MM_MIN[workpiece])
+
+    def _act(self, obs, state):
+        return self.io.action(np.full(obs.shape[0], self.command))

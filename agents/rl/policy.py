@@ -1,0 +1,127 @@
+"""Saved policies behind the agent protocol: a model with its VecNormalize statistics
+(``load_policy``) and the policies shipped in ``agents/rl/pretrained/`` (``pretrained``)."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+
+from agents.rl.config import ALGOS, _algos
+
+__all__ = ["PolicyAgent", "load_policy", "pretrained", "PRETRAINED_DIR"]
+
+
+class PolicyAgent:
+    """An SB3 model with its VecNormalize statistics, behind the agent protocol.
+
+    Normalises each observation with the frozen statistics, then calls the model's
+    ``predict``; so the harness and SB3's ``evaluate_policy`` on raw envs both work. A policy
+    trained with ``action_increment`` (``increment``, a
+    ``machining_envs.wrappers.ActionIncrement``) outputs a change of the action; ``predict`` shows it what the wrapper showed it in
+    training and turns its output into the env's action from the raw observation
+    (``IncrementalAction``), so it runs on the plain env.
+    """
+
+    def __init__(
+        self,
+        model,
+        obs_rms=None,
+        clip_obs: float = 10.0,
+        epsilon: float = 1e-8,
+        name: str | None = None,
+        increment=None,
+    ):
+        self.model = model
+        self.obs_rms = obs_rms
+        self.clip_obs = clip_obs
+        self.epsilon = epsilon
+        self.name = name or f"{type(model).__name__} policy"
+        self.increment = increment
+
+    def normalize(self, obs: np.ndarray) -> np.ndarray:
+        if self.obs_rms is None:
+            return obs
+        out = (obs - self.obs_rms.mean) / np.sqrt(self.obs_rms.var + self.epsilon)
+        return np.clip(out, -self.clip_obs, self.clip_obs).astype(np.float32)
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        raw = np.asarray(observation, dtype=np.float32)
+        if self.increment is None:
+            return self.model.predict(
+                self.normalize(raw),
+                state=state,
+                episode_start=episode_start,
+                deterministic=deterministic,
+            )
+        delta, state = self.model.predict(
+            self.normalize(self.increment.policy_observation(raw)),
+            state=state,
+            episode_start=episode_start,
+            deterministic=deterministic,
+        )
+        return self.increment.absolute_action(raw, delta), state
+
+
+def load_policy(model_path, name: str | None = None, algo: str | None = None) -> PolicyAgent:
+    """Load ``*.zip`` and, if present, the VecNormalize statistics saved beside it.
+
+    The algorithm comes from ``algo``, else the run's ``config.json`` beside the model, else
+    the file name (``ppo``, ``sac`` or ``td3`` in it); otherwise ``ValueError``.
+    """
+    import pickle
+
+    model_path = Path(model_path)
+    if not model_path.is_file():
+        raise FileNotFoundError(f"no model at {model_path}")
+    meta_path = model_path.parent / "config.json"
+    meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+    if algo is None:
+        algo = meta.get("algo")
+    increment = None
+    if meta.get("action_increment"):
+        from machining_envs.wrappers import ActionIncrement
+
+        increment = ActionIncrement(**meta["action_increment"])
+    if algo is None:
+        m = re.search(r"(ppo|sac|td3)", model_path.name.lower())
+        if m is None:
+            raise ValueError(
+                f"cannot tell the algorithm of {model_path}: pass algo= one of {list(ALGOS)}"
+            )
+        algo = m.group(1)
+    if algo not in ALGOS:
+        raise ValueError(f"algo must be one of {list(ALGOS)}, got {algo!r}")
+    model = _algos()[algo].load(model_path, device="cpu")
+    stats = model_path.with_name(model_path.stem.replace("model", "vecnormalize") + ".pkl")
+    obs_rms, clip, eps = None, 10.0, 1e-8
+    if stats.is_file():
+        with open(stats, "rb") as fh:
+            vn = pickle.load(fh)
+        if vn.norm_obs:
+            obs_rms, clip, eps = vn.obs_rms, vn.clip_obs, vn.epsilon
+    return PolicyAgent(
+        model,
+        obs_rms,
+        clip,
+        eps,
+        name=name or f"{algo.upper()} ({model_path.parent.name})",
+        increment=increment,
+    )
+
+
+PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
+
+
+def pretrained(name: str):
+    """Factory ``env -> agent`` for a shipped policy ``agents/rl/pretrained/<name>/best_model.zip``."""
+    path = PRETRAINED_DIR / name / "best_model.zip"
+
+    def make(env=None) -> PolicyAgent:
+        return load_policy(path, name=f"{name} (pretrained)")
+
+    make.__name__ = f"pretrained_{name}"
+    make.learned = True  # the benchmark gives learned agents their margin over the classical
+    return make

@@ -1,0 +1,272 @@
+"""Training a Stable-Baselines3 policy on a machining env (``train``), with held-out
+evaluation by the env's own task (metrics and primary score), checkpoints and resuming."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import re
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import gymnasium as gym
+
+import machining_envs  # noqa: F401  (registers the env ids)
+from agents.eval import Evaluation, evaluate, task_of
+from agents.rl.config import ConfigError, TrainConfig, _algos, load_config
+from agents.rl.policy import PolicyAgent, load_policy
+from machining_envs.core.score import REGULATION_SCORE, PrimaryScore
+
+__all__ = ["train", "evaluate_policy_file", "primary_score", "FAILED_EPISODE_TIME_S"]
+
+
+#: What an episode that does not count costs in the primary score, s: Turning-v0's time
+#: limit, i.e. the cut is charged as if it had used the whole budget.
+FAILED_EPISODE_TIME_S = 200.0
+
+
+def primary_score(rows: list[dict], failed_time_s: float = FAILED_EPISODE_TIME_S) -> dict:
+    """The primary score of a set of regulation episodes (Turning-v0, EndMilling-v0).
+
+    An episode *counts* if it finished the workpiece, the tool did not break, and the
+    regulated signal spent under 2 % of the time above 1.1x its reference. Score: mean
+    machining time (s, lower is better) with every episode that does not count charged
+    ``failed_time_s``, so no policy can win by breaking the constraint. Returns ``score``,
+    ``valid`` (share of episodes that counted) and ``itae`` (mean) for the table. The other
+    envs' scores are their tasks' (``machining_envs.core.score``).
+    """
+    return REGULATION_SCORE(rows, failed_time_s)
+
+
+def _make_vec(cfg: TrainConfig, seed: int):
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    wrapper, wrapper_kwargs = None, None
+    if cfg.action_increment is not None:
+        from machining_envs.wrappers import IncrementalAction
+
+        wrapper = IncrementalAction
+        wrapper_kwargs = {"max_step": cfg.action_increment, "hide_action": cfg.hide_action}
+    venv = make_vec_env(
+        cfg.env_id,
+        n_envs=cfg.n_envs,
+        seed=seed,
+        env_kwargs=dict(cfg.env_kwargs),
+        wrapper_class=wrapper,
+        wrapper_kwargs=wrapper_kwargs,
+    )
+    if cfg.normalize:
+        kw = cfg.normalize if isinstance(cfg.normalize, dict) else {}
+        venv = VecNormalize(venv, **kw)
+    return venv
+
+
+def _evaluation_setup(env_id: str, env_kwargs: dict):
+    """The env's task (its metrics function and primary score, ``agents.eval.task_of``) and
+    the failure cost of that score for the env."""
+    env = gym.make(env_id, **dict(env_kwargs))
+    try:
+        task = task_of(env)
+        failed = task.score.failed_value(env)
+    finally:
+        env.close()
+    if not math.isfinite(failed):
+        failed = FAILED_EPISODE_TIME_S
+    return task.metrics, task.score, failed
+
+
+def _latest_checkpoint(folder: Path):
+    best, steps = None, -1
+    for p in folder.glob("rl_model_*_steps.zip"):
+        m = re.search(r"_(\d+)_steps", p.name)
+        if m and int(m.group(1)) > steps:
+            best, steps = p, int(m.group(1))
+    return best, steps
+
+
+def train(
+    env_id: str,
+    algo: str = "ppo",
+    out_dir="runs/run",
+    seed: int = 0,
+    config_path=None,
+    n_timesteps: int | None = None,
+    resume: bool = False,
+    progress_bar: bool = True,
+    verbose: bool = True,
+) -> Path:
+    """Train ``algo`` on ``env_id``; returns the run folder. See the module docstring."""
+    import torch
+    from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    cfg = load_config(env_id, algo, config_path)  # all validation before anything starts
+    if n_timesteps is not None:
+        if n_timesteps < 1:
+            raise ConfigError(f"n_timesteps must be >= 1, got {n_timesteps}")
+        cfg.n_timesteps = int(n_timesteps)
+    if progress_bar:
+        try:
+            import rich  # noqa: F401
+            import tqdm  # noqa: F401
+        except ImportError:
+            progress_bar = False
+    out = Path(out_dir)
+    ckpt_dir = out / "checkpoints"
+    if resume:
+        ckpt, done_steps = _latest_checkpoint(ckpt_dir)
+        if ckpt is None:
+            raise FileNotFoundError(f"--resume: no checkpoint in {ckpt_dir}")
+    elif out.exists() and any(out.iterdir()):
+        raise FileExistsError(f"{out} is not empty: choose another --out or pass --resume")
+    out.mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(1)
+    AlgoCls = _algos()[cfg.algo]
+
+    venv = _make_vec(cfg, seed)
+    increment = None  # the wrapper's ActionIncrement, for evaluation and the run record
+    if cfg.action_increment is not None:
+        w = venv.venv if isinstance(venv, VecNormalize) else venv
+        increment = w.get_attr("increment", [0])[0]
+    if resume:
+        stats = ckpt.with_name(
+            ckpt.name.replace("rl_model_", "rl_model_vecnormalize_").replace(".zip", ".pkl")
+        )
+        if isinstance(venv, VecNormalize) and stats.is_file():
+            venv = VecNormalize.load(str(stats), venv.venv)
+        model = AlgoCls.load(ckpt, env=venv, device="cpu", tensorboard_log=str(out / "tb"))
+        remaining = max(0, cfg.n_timesteps - model.num_timesteps)
+        if verbose:
+            print(f"resuming {ckpt.name} at {model.num_timesteps} steps; {remaining} to go")
+    else:
+        model = AlgoCls(
+            cfg.policy,
+            venv,
+            seed=seed,
+            device="cpu",
+            tensorboard_log=str(out / "tb"),
+            verbose=0,
+            **cfg.hyperparams,
+        )
+        remaining = cfg.n_timesteps
+        meta = {
+            "env_id": env_id,
+            "algo": cfg.algo,
+            "seed": seed,
+            "config": asdict(cfg),
+            "command": " ".join(sys.argv),
+        }
+        if increment is not None:
+            meta["action_increment"] = increment._asdict()
+        (out / "config.json").write_text(json.dumps(meta, indent=2, default=str))
+
+    eval_csv = out / "eval.csv"
+    metrics_fn, score_fn, failed_value = _evaluation_setup(env_id, cfg.env_kwargs)
+
+    class HeldOutEval(BaseCallback):
+        """Every ``eval_freq`` env steps: the harness on the held-out scenarios; keep the best."""
+
+        def __init__(self):
+            super().__init__()
+            self.best = math.inf
+            self.next_at = 0
+
+        def _on_training_start(self) -> None:
+            self.next_at = self.model.num_timesteps + cfg.eval_freq
+            if eval_csv.is_file():
+                with open(eval_csv) as fh:
+                    scores = [float(r["score"]) for r in csv.DictReader(fh)]
+                self.best = min(scores, default=math.inf)
+
+        def _on_step(self) -> bool:
+            if self.model.num_timesteps >= self.next_at:
+                self.next_at += cfg.eval_freq
+                self.evaluate_now()
+            return True
+
+        def evaluate_now(self) -> None:
+            obs_rms = venv.obs_rms if isinstance(venv, VecNormalize) else None
+            clip = venv.clip_obs if isinstance(venv, VecNormalize) else 10.0
+            agent = PolicyAgent(self.model, obs_rms, clip, increment=increment)
+            ev = evaluate(
+                agent,
+                env_id,
+                cfg.eval_scenarios,
+                n_episodes=cfg.eval_episodes,
+                seed=10_000,
+                env_kwargs=dict(cfg.env_kwargs),
+                metrics_fn=metrics_fn,
+            )
+            s = score_fn(ev.rows, failed_value)
+            sec = score_fn.secondary_key or "secondary"
+            s = {"score": s["score"], "valid": s["valid"], sec: s["secondary"]}
+            new = not eval_csv.is_file()
+            with open(eval_csv, "a", newline="") as fh:
+                w = csv.DictWriter(fh, fieldnames=["timesteps", "wall_s", "score", "valid", sec])
+                if new:
+                    w.writeheader()
+                w.writerow(
+                    {
+                        "timesteps": self.model.num_timesteps,
+                        "wall_s": round(time.perf_counter() - t0, 1),
+                        **s,
+                    }
+                )
+            self.logger.record("eval/score", s["score"])
+            self.logger.record("eval/valid", s["valid"])
+            if s["score"] < self.best:
+                self.best = s["score"]
+                self.model.save(out / "best_model.zip")
+                if isinstance(venv, VecNormalize):
+                    venv.save(str(out / "best_vecnormalize.pkl"))
+
+    ckpt_cb = CheckpointCallback(
+        max(1, cfg.checkpoint_freq // cfg.n_envs),
+        str(ckpt_dir),
+        save_vecnormalize=bool(cfg.normalize),
+    )
+    eval_cb = HeldOutEval()
+    t0 = time.perf_counter()
+    model.learn(
+        remaining,
+        callback=CallbackList([ckpt_cb, eval_cb]),
+        progress_bar=progress_bar,
+        reset_num_timesteps=not resume,
+        tb_log_name=cfg.algo,
+    )
+    model.save(out / "final_model.zip")
+    if isinstance(venv, VecNormalize):
+        venv.save(str(out / "final_vecnormalize.pkl"))
+    eval_cb.evaluate_now()
+    if not (out / "best_model.zip").is_file():  # e.g. every evaluation scored inf
+        model.save(out / "best_model.zip")
+        if isinstance(venv, VecNormalize):
+            venv.save(str(out / "best_vecnormalize.pkl"))
+    venv.close()
+    if verbose:
+        print(
+            f"trained {cfg.algo} on {env_id} for {model.num_timesteps} steps in "
+            f"{time.perf_counter() - t0:.0f} s; run folder {out}"
+        )
+    return out
+
+
+def evaluate_policy_file(
+    model_path, env_id: str, scenarios, n_episodes: int, seed: int
+) -> tuple[Evaluation, dict, PrimaryScore]:
+    """The harness on a saved policy (with its VecNormalize statistics), with the env's own
+    metrics; returns the evaluation, its primary score and the env's ``PrimaryScore``."""
+    metrics_fn, score_fn, failed = _evaluation_setup(env_id, {})
+    ev = evaluate(
+        load_policy(model_path),
+        env_id,
+        scenarios,
+        n_episodes=n_episodes,
+        seed=seed,
+        metrics_fn=metrics_fn,
+    )
+    return ev, score_fn(ev.rows, failed), score_fn

@@ -1,0 +1,247 @@
+"""Turning controllers of Noh, Kim & Kim (1992): the fixed-gain PI (eq. 12-13), the
+variable-gain (adaptive) PI after Masory & Koren (eq. 15-16) and the constant-feed baseline.
+
+All are designed from the env's nominal parameters only (``from_env``), and read only the
+observation: the measured force, the reference and the spindle speed.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from agents.base import Agent, unwrap
+from machining_envs.turning.env import TurningEnv
+from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams
+
+__all__ = ["FixedGainPI", "ConstantFeed", "TurningIO", "VariableGainPI"]
+
+_I = TurningEnv.OBS_INDEX
+
+
+def _positive(name: str, value: float, hi: float = 1e9) -> float:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and 0 < value <= hi):
+        raise ValueError(f"{name} must be in (0, {hi:g}], got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class TurningIO:
+    """What a turning controller knows of the machine: its nominal calibration constants.
+
+    Converts the normalised observation to ADC counts (the units of the paper's gains) and
+    servo commands in DAC counts back to actions.
+    """
+
+    sensor_gain: float
+    """Ke, counts per newton (eq. 10)."""
+    force_scale_N: float
+    """Newtons per unit of the force observations."""
+    command_max: float
+    """Largest servo command, counts; action -1 is U = 0, +1 is U = command_max."""
+    sample_time_s: float
+    params: TurningParams
+    """The nominal plant, for model-based initial values."""
+
+    @classmethod
+    def from_env(cls, env) -> TurningIO:
+        base = unwrap(env)
+        if not isinstance(base, TurningEnv):
+            raise TypeError(f"a turning controller needs a TurningEnv, got {type(base).__name__}")
+        p = base.params
+        return cls(p.sensor_gain, p.force_scale_N, p.command_max, p.sample_time_s, p)
+
+    def force_counts(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Measured force and reference in counts, from a batch of observations."""
+        k = self.sensor_gain * self.force_scale_N
+        return k * obs[:, _I["measured"]], k * obs[:, _I["reference"]]
+
+    def spindle_rpm(self, obs: np.ndarray) -> np.ndarray:
+        return 1000.0 * obs[:, _I["spindle"]]
+
+    def action(self, command: np.ndarray) -> np.ndarray:
+        """Actions (n, 1) for servo commands (n,) in counts."""
+        return (2.0 * command / self.command_max - 1.0)[:, None]
+
+
+class FixedGainPI(Agent):
+    r"""Fixed-gain PI force controller of Noh, Kim & Kim (1992), eq. (12)-(13).
+
+    .. math:: C(z) = K_h + \frac{K_g}{1 - z^{-1}} = \frac{K_h (K_{gh} - z^{-1})}{1 - z^{-1}},
+              \qquad K_{gh} = 1 + K_g / K_h
+
+    run in velocity form on the force error in counts, ``E = Ke (Fr - Fm)``:
+    ``U_k = U_{k-1} + Kh (Kgh E_k - E_{k-1})``, clipped to the servo's range (the clip is
+    also the anti-windup). Sample time Ts = 0.1 s, the env's.
+
+    Parameters
+    ----------
+    io : TurningIO
+    kh : float
+        Proportional gain Kh, command counts per force count (paper: 0.006, 0.02, 0.04).
+    kgh : float
+        Kgh = 1 + Kg/Kh (paper: 1.9, from Ziegler-Nichols then hand tuning).
+    """
+
+    state_size = 2  # [U_{k-1} (counts), E_{k-1} (counts)]
+    obs_dim = 7
+
+    def __init__(self, io: TurningIO, kh: float = 0.02, kgh: float = 1.9):
+        self.io = io
+        self.kh = _positive("kh", kh)
+        self.kgh = _positive("kgh", kgh, 100.0)
+        self.name = f"fixed PI Kh={kh:g}"
+
+    @classmethod
+    def from_env(cls, env, kh: float = 0.02, kgh: float = 1.9) -> FixedGainPI:
+        return cls(TurningIO.from_env(env), kh, kgh)
+
+    def _act(self, obs, state):
+        fm, fr = self.io.force_counts(obs)
+        e = fr - fm
+        u = np.clip(state[:, 0] + self.kh * (self.kgh * e - state[:, 1]), 0.0, self.io.command_max)
+        state[:, 0] = u
+        state[:, 1] = e
+        return self.io.action(u)
+
+
+class ConstantFeed(Agent):
+    """Industrial baseline: one feed per revolution for the whole cut, no force feedback.
+
+    The feed is chosen, as a process planner would, so that the nominal force law gives the
+    reference force at the deepest cut expected (``design_depth_mm``); shallower parts of
+    the workpiece are then cut below the reference, wasting time. The command follows the
+    spindle speed so that the feed per revolution stays constant: ``U = f n / (60 Ks Km)``.
+    """
+
+    state_size = 0
+    obs_dim = 7
+
+    def __init__(self, io: TurningIO, feed_mm_per_rev: float):
+        self.io = io
+        self.feed_mm_per_rev = _positive("feed_mm_per_rev", feed_mm_per_rev, 10.0)
+        self.name = f"constant feed {feed_mm_per_rev:.3f} mm/rev"
+
+    @classmethod
+    def from_env(
+        cls,
+        env,
+        feed_mm_per_rev: float | None = None,
+        design_depth_mm: float = 3.0,
+        force_ref_N: float | None = None,
+    ) -> ConstantFeed:
+        io = TurningIO.from_env(env)
+        if feed_mm_per_rev is None:
+            fr = force_ref_N if force_ref_N is not None else io.force_scale_N
+            feed_mm_per_rev = io.params.feed_for_force(
+                fr, _positive("design_depth_mm", design_depth_mm, 10.0)
+            )
+        return cls(io, feed_mm_per_rev)
+
+    def _act(self, obs, state):
+        p = self.io.params
+        u = self.feed_mm_per_rev * self.io.spindle_rpm(obs) / (60.0 * p.servo_gain * p.gear_ratio)
+        return self.io.action(np.clip(u, 0.0, self.io.command_max))
+
+
+@functools.lru_cache(maxsize=512)
+def _unit_plant(params: TurningParams, spindle_rpm: float) -> np.ndarray:
+    """``[b1, b2, b3, a1, a2, a3]`` of the unit-gain discrete plant of eq. (14) at this speed."""
+    numd, dend = params.discrete_open_loop(spindle_rpm)
+    numd = np.pad(numd, (0, 4 - numd.size))
+    dend = np.pad(dend, (0, 4 - dend.size))
+    return np.concatenate([numd[1:4], dend[1:4]])
+
+
+class VariableGainPI(Agent):
+    r"""PI controller whose gain holds the open-loop gain ``K = Kh Kp`` constant, eq. (15)-(16).
+
+    .. math:: K_h = K / \hat K_p, \qquad \hat K_p = F_c / \hat U
+
+    The paper estimates ``Kp = Fc / U``, which holds in steady state (eq. 16). Here ``U`` is
+    replaced by ``U_hat``, the command passed through the paper's own unit-gain plant model
+    (eq. 11 discretised as eq. 14 at the observed spindle speed): in steady state
+    ``U_hat = U`` and the estimate is the paper's; during the start-up ramp and after a step
+    it also accounts for the 2-4 samples the force lags the command, which the plain ratio
+    does not (there ``Fc / U`` underestimates ``Kp`` several times over, ``Kh`` comes out
+    too large and the first overshoot can break the tool at low spindle speed).
+    The PI law is that of :class:`~agents.turning.FixedGainPI` with ``Kh`` recomputed every
+    sample.
+
+    Start-up guard: while ``U_hat`` is below ``min_command_fraction`` of the command range or
+    the force below ``min_force_fraction`` of the reference, the ratio is 0/0-like, so the
+    previous estimate is kept; the first comes from the nominal model, eq. (11) at the
+    reference force, the observed spindle speed and ``design_depth_mm``.
+
+    Parameters
+    ----------
+    io : TurningIO
+    k : float
+        Designed open-loop gain K (paper: 0.5, inside the stable range 0 < K < 0.807).
+    kgh : float
+        Kgh = 1 + Kg/Kh (paper: 1.9).
+    """
+
+    # [E_{k-1}, Kp_hat, U_{k-1..k-3}, U_hat_{k-1..k-3}, b1..b3, a1..a3]
+    state_size = 14
+    obs_dim = 7
+
+    def __init__(
+        self,
+        io: TurningIO,
+        k: float = 0.5,
+        kgh: float = 1.9,
+        design_depth_mm: float = 2.0,
+        min_command_fraction: float = 0.01,
+        min_force_fraction: float = 0.05,
+    ):
+        self.io = io
+        self.k = _positive("k", k, 100.0)
+        self.kgh = _positive("kgh", kgh, 100.0)
+        self.design_depth_mm = _positive("design_depth_mm", design_depth_mm, 10.0)
+        self.min_command = (
+            _positive("min_command_fraction", min_command_fraction, 1.0) * io.command_max
+        )
+        self.min_force_fraction = _positive("min_force_fraction", min_force_fraction, 1.0)
+        self.name = f"adaptive PI K={k:g}"
+
+    @classmethod
+    def from_env(cls, env, k: float = 0.5, kgh: float = 1.9, **kwargs) -> VariableGainPI:
+        return cls(TurningIO.from_env(env), k, kgh, **kwargs)
+
+    def nominal_process_gain(self, spindle_rpm: np.ndarray, force_ref_N: np.ndarray) -> np.ndarray:
+        """Kp of eq. (11) for the nominal plant at the reference force and the design depth."""
+        p = self.io.params
+        feed = p.feed_for_force(force_ref_N, self.design_depth_mm)
+        return p.process_gain(spindle_rpm, self.design_depth_mm, feed)
+
+    def initial_state(self, n, obs):
+        st = np.zeros((n, self.state_size))
+        rpm = np.clip(self.io.spindle_rpm(obs), *SPINDLE_RPM_RANGE)
+        fr_N = self.io.force_scale_N * obs[:, 1]
+        fr_N = np.where(fr_N > 0, fr_N, self.io.force_scale_N)
+        st[:, 1] = self.nominal_process_gain(rpm, fr_N)
+        for i in range(n):  # the model at each env's spindle speed (cached per speed)
+            st[i, 8:14] = _unit_plant(self.io.params, round(float(rpm[i]), 6))
+        return st
+
+    def _act(self, obs, state):
+        fm, fr = self.io.force_counts(obs)
+        u_hist = state[:, 2:5]
+        y_hist = state[:, 5:8]
+        y = np.sum(state[:, 8:11] * u_hist, axis=1) - np.sum(state[:, 11:14] * y_hist, axis=1)
+        ok = (y >= self.min_command) & (fm >= self.min_force_fraction * fr)
+        kp_hat = np.where(ok, fm / np.where(ok, y, 1.0), state[:, 1])
+        kh = self.k / kp_hat
+        e = fr - fm
+        u = np.clip(u_hist[:, 0] + kh * (self.kgh * e - state[:, 0]), 0.0, self.io.command_max)
+        state[:, 0] = e
+        state[:, 1] = kp_hat
+        state[:, 3:5] = u_hist[:, 0:2].copy()
+        state[:, 2] = u
+        state[:, 6:8] = y_hist[:, 0:2].copy()
+        state[:, 5] = y
+        return self.io.action(u)

@@ -1,0 +1,251 @@
+r"""Two-axis contouring servo of Choi et al. (seed 004): velocity loop, motor, table.
+
+Each feed axis of the machining centre's XY table is a motor with a proportional velocity
+loop (the servo pack), driving the table through a ball screw. With the velocity command
+``u`` and the table position ``x`` both expressed at the table (mm/s and mm, through the
+screw lead), and the load torque ``T_L`` at the motor shaft entering as a disturbance:
+
+.. math::
+
+    J \dot\omega &= K_{sp} K_t (\omega_{ref} - \omega) - T_L \qquad
+        \omega = \tfrac{2\pi}{\ell} \dot x,\ \omega_{ref} = \tfrac{2\pi}{\ell} u \\
+    \ddot x &= a (u - \dot x) - \frac{\ell}{2\pi} \frac{T_L}{J}, \qquad a = \frac{K_{sp} K_t}{J}
+
+so that with ``T_L = 0`` the command-to-position transfer function is the paper's
+
+.. math:: G(s) = \frac{K_{sp} K_t}{J s^2 + K_{sp} K_t s} = \frac{a}{s (s + a)}
+
+(paper §2; the OCR'd equation puts ``T_L`` inside the transfer function; here it is an
+input). Both inputs are held over each servo period and the axes are discretised exactly
+(ZOH) once; a step is then eight multiply-adds per axis.
+
+This module imports numpy and scipy only; it knows nothing of gymnasium.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from machining_envs.core.lti import zoh
+
+__all__ = ["ContouringParams", "ContouringPlant", "ContouringStep", "AXES"]
+
+#: The two feed axes, in the order every array of this package uses.
+AXES = ("x", "y")
+
+
+def _check(name: str, value, lo: float, hi: float, *, lo_open: bool = False) -> None:
+    """Raise ``ValueError`` naming ``name`` unless ``lo <= value <= hi`` (``lo < value``)."""
+    ok = isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool)
+    ok = ok and math.isfinite(value)
+    if ok:
+        ok = (value > lo if lo_open else value >= lo) and value <= hi
+    if not ok:
+        left = "(" if lo_open else "["
+        raise ValueError(f"{name} must be in {left}{lo}, {hi}], got {value!r}")
+
+
+@dataclass(frozen=True)
+class ContouringParams:
+    """Identified parameters of one XY table (Choi et al., seed 004, Table 1).
+
+    Every field is a physical constant with its unit; derived quantities (the velocity-loop
+    pole ``a``, discrete matrices, the command limit in mm/s) are computed from the fields.
+    """
+
+    velocity_loop_gain: float = 1.3
+    """Ksp, proportional gain of the servo pack's velocity loop, A per rad/s (Table 1)."""
+
+    torque_constant_Nm_per_A: float = 1.2054
+    """Kt, motor torque constant, N m / A (Table 1)."""
+
+    inertia_x_kgm2: float = 2.29 * 0.00376
+    """Jx, X motor plus table inertia at the motor shaft, kg m^2 (Table 1: 2.29 x 0.00376)."""
+
+    inertia_y_kgm2: float = 3.04 * 0.00376
+    """Jy, Y motor plus table inertia at the motor shaft, kg m^2 (Table 1: 3.04 x 0.00376)."""
+
+    screw_lead_mm: float = 10.0
+    """Ball-screw lead, table mm per motor revolution. Not given in the paper: 10 mm is the
+    usual lead of a 40-taper vertical machining centre's directly coupled X/Y screws. It only
+    scales the load torque's effect (1 N m is 628 N of feed force at 10 mm) and the command
+    limit; the command-to-position dynamics G(s) do not depend on it."""
+
+    motor_max_rpm: float = 2000.0
+    """Top motor speed, rpm: the limit of the velocity command. Not given in the paper:
+    2000 rpm is the top speed of the 0.85 kW-class AC servo motors of the period (the paper's
+    Yaskawa USAMED-09); with the 10 mm lead it is 333 mm/s (20 m/min) at the table."""
+
+    sample_time_s: float = 2e-4
+    """Servo period (position-loop sample time), s: 5 kHz. Chosen so that the H-infinity
+    design of the paper, whose loop crosses over near 560 rad/s, keeps its continuous-time
+    behaviour once discretised: at 5 kHz (Tustin) its step response overshoots 0.5 % and
+    settles (2 %) in 8.4 ms like the continuous loop's 9.0 ms; at 1 kHz the same design
+    overshoots 10 % and rings for 40 ms, at 2 kHz it overshoots 2 % (see docs/contouring.md)."""
+
+    def __post_init__(self) -> None:
+        _check("velocity_loop_gain", self.velocity_loop_gain, 0.0, 1e4, lo_open=True)
+        _check("torque_constant_Nm_per_A", self.torque_constant_Nm_per_A, 0.0, 1e3, lo_open=True)
+        _check("inertia_x_kgm2", self.inertia_x_kgm2, 0.0, 10.0, lo_open=True)
+        _check("inertia_y_kgm2", self.inertia_y_kgm2, 0.0, 10.0, lo_open=True)
+        _check("screw_lead_mm", self.screw_lead_mm, 0.0, 1e3, lo_open=True)
+        _check("motor_max_rpm", self.motor_max_rpm, 0.0, 1e5, lo_open=True)
+        _check("sample_time_s", self.sample_time_s, 0.0, 0.01, lo_open=True)
+
+    @classmethod
+    def choi_et_al(cls) -> ContouringParams:
+        """The TNV-40 machining centre's X/Y axes of the paper's Table 1 (the defaults)."""
+        return cls()
+
+    def replace(self, **changes) -> ContouringParams:
+        """A copy with fields changed; unknown names raise ``TypeError``."""
+        return dataclasses.replace(self, **changes)
+
+    # ---- derived quantities (never stored) -------------------------------------------------
+    def inertia_kgm2(self, axis: str) -> float:
+        """J of ``axis`` ('x' or 'y'), kg m^2."""
+        if axis == "x":
+            return self.inertia_x_kgm2
+        if axis == "y":
+            return self.inertia_y_kgm2
+        raise ValueError(f"axis must be 'x' or 'y', got {axis!r}")
+
+    @property
+    def loop_gain_Nms(self) -> float:
+        """Ksp Kt, N m per rad/s of velocity error."""
+        return self.velocity_loop_gain * self.torque_constant_Nm_per_A
+
+    def velocity_pole(self, axis: str) -> float:
+        """a = Ksp Kt / J, 1/s: the closed velocity loop's bandwidth (pole of G at -a)."""
+        return self.loop_gain_Nms / self.inertia_kgm2(axis)
+
+    def time_constant_s(self, axis: str) -> float:
+        """1/a, s: the velocity loop's time constant (5.5 ms on X, 7.3 ms on Y)."""
+        return 1.0 / self.velocity_pole(axis)
+
+    @property
+    def mm_per_rad(self) -> float:
+        """Table travel per radian of motor rotation, mm."""
+        return self.screw_lead_mm / (2.0 * math.pi)
+
+    @property
+    def command_max_mm_s(self) -> float:
+        """Largest velocity command, mm/s at the table: top motor speed through the lead."""
+        return self.motor_max_rpm / 60.0 * self.screw_lead_mm
+
+    def transfer_function(self, axis: str) -> tuple[list[float], list[float]]:
+        """``(num, den)`` of G(s) = Ksp Kt / (J s^2 + Ksp Kt s), command mm/s to position mm."""
+        j = self.inertia_kgm2(axis)
+        kk = self.loop_gain_Nms
+        return [kk], [j, kk, 0.0]
+
+    def continuous_axis(self, axis: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(A, B)`` of one axis, state ``[x mm, v mm/s]``, inputs ``[u mm/s, T_L N m]``."""
+        a = self.velocity_pole(axis)
+        load = -self.mm_per_rad / self.inertia_kgm2(axis)
+        return np.array([[0.0, 1.0], [0.0, -a]]), np.array([[0.0, 0.0], [a, load]])
+
+    def discrete_axis(self, axis: str) -> tuple[np.ndarray, np.ndarray]:
+        """Exact ZOH ``(Phi, Gamma)`` of one axis over ``sample_time_s`` (cached)."""
+        return _axis_zoh(
+            self.velocity_pole(axis), -self.mm_per_rad / self.inertia_kgm2(axis), self.sample_time_s
+        )
+
+
+@functools.lru_cache(maxsize=64)
+def _axis_zoh(a: float, load_gain: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    phi, gam = zoh(np.array([[0.0, 1.0], [0.0, -a]]), np.array([[0.0, 0.0], [a, load_gain]]), dt)
+    phi.setflags(write=False)
+    gam.setflags(write=False)
+    return phi, gam
+
+
+class ContouringStep(NamedTuple):
+    """Signals of one servo period, at its end unless stated."""
+
+    x_mm: float
+    y_mm: float
+    vx_mm_s: float
+    vy_mm_s: float
+    torque_x_Nm: float
+    """Mean motor torque of X over the period, N m: J dw/dt + T_L (exact for the ZOH step)."""
+    torque_y_Nm: float
+
+
+class ContouringPlant:
+    """Both axes of the XY table; numpy-free per step (eight multiply-adds per axis).
+
+    Parameters
+    ----------
+    params : ContouringParams
+        The table's true parameters.
+
+    The state is ``[x, vx, y, vy]`` (mm, mm/s). :meth:`step` holds the velocity commands
+    (clipped to ``+-command_max_mm_s``) and load torques over one servo period.
+    :meth:`step_batch` is the same update on arrays of states, for vectorised use.
+    """
+
+    def __init__(self, params: ContouringParams) -> None:
+        if not isinstance(params, ContouringParams):
+            raise ValueError(f"params must be a ContouringParams, got {type(params).__name__}")
+        self.params = params
+        phx, gax = params.discrete_axis("x")
+        phy, gay = params.discrete_axis("y")
+        # Block form on z = [x, vx, y, vy] and w = [ux, TLx, uy, TLy].
+        self.phi = np.zeros((4, 4))
+        self.gamma = np.zeros((4, 4))
+        self.phi[:2, :2], self.phi[2:, 2:] = phx, phy
+        self.gamma[:2, :2], self.gamma[2:, 2:] = gax, gay
+        self._cx = [float(v) for v in (*phx.ravel(), *gax.ravel())]
+        self._cy = [float(v) for v in (*phy.ravel(), *gay.ravel())]
+        self._umax = params.command_max_mm_s
+        # Torque from the velocity change: J (2 pi / lead) dv / Ts.
+        k = 1.0 / (params.mm_per_rad * params.sample_time_s)
+        self._tq = (params.inertia_x_kgm2 * k, params.inertia_y_kgm2 * k)
+        self.reset()
+
+    def reset(self, x0_mm: float = 0.0, y0_mm: float = 0.0) -> None:
+        """Table at rest at ``(x0, y0)``."""
+        self.z = [float(x0_mm), 0.0, float(y0_mm), 0.0]
+        self.t_s = 0.0
+
+    @property
+    def state(self) -> np.ndarray:
+        """``[x mm, vx mm/s, y mm, vy mm/s]`` now."""
+        return np.array(self.z)
+
+    def step(
+        self, ux: float, uy: float, load_x_Nm: float = 0.0, load_y_Nm: float = 0.0
+    ) -> ContouringStep:
+        """Hold the commands (mm/s, clipped) and load torques (N m) for one servo period."""
+        m = self._umax
+        ux = m if ux > m else (-m if ux < -m else ux)
+        uy = m if uy > m else (-m if uy < -m else uy)
+        x, vx, y, vy = self.z
+        p00, p01, p10, p11, g00, g01, g10, g11 = self._cx
+        xn = p00 * x + p01 * vx + g00 * ux + g01 * load_x_Nm
+        vxn = p10 * x + p11 * vx + g10 * ux + g11 * load_x_Nm
+        p00, p01, p10, p11, g00, g01, g10, g11 = self._cy
+        yn = p00 * y + p01 * vy + g00 * uy + g01 * load_y_Nm
+        vyn = p10 * y + p11 * vy + g10 * uy + g11 * load_y_Nm
+        self.z = [xn, vxn, yn, vyn]
+        self.t_s += self.params.sample_time_s
+        tx = self._tq[0] * (vxn - vx) + load_x_Nm
+        ty = self._tq[1] * (vyn - vy) + load_y_Nm
+        return ContouringStep(xn, yn, vxn, vyn, tx, ty)
+
+    def step_batch(self, z: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """States ``z`` (n, 4) after one period under inputs ``w`` (n, 4) = [ux, TLx, uy, TLy].
+
+        Commands are clipped like :meth:`step`; returns the new states (n, 4).
+        """
+        w = np.array(w, dtype=np.float64, copy=True)
+        np.clip(w[:, 0], -self._umax, self._umax, out=w[:, 0])
+        np.clip(w[:, 2], -self._umax, self._umax, out=w[:, 2])
+        return z @ self.phi.T + w @ self.gamma.T

@@ -1,0 +1,225 @@
+"""Named contouring scenarios: the paper's tests, a training distribution, a held-out one.
+
+A scenario fixes the path, the programmed feed, the load-torque steps the cutting puts on
+the axes and the table's true inertias (as multiples of the nominal ones: the workpiece and
+fixture on the table change them, and no controller is told). Pass a name or a
+:class:`ContouringScenario` to ``env.reset(options={"scenario": ...})``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from machining_envs.contouring.paths import PAPER_CORNER_FEED_MM_S, PAPER_FEED_MM_S, Path
+from machining_envs.contouring.plant import ContouringParams
+
+__all__ = [
+    "ContouringScenario",
+    "CONTOURING_SCENARIOS",
+    "contouring_scenario",
+    "PAPER_STEP_MM",
+    "PAPER_LOAD_TORQUE_NM",
+    "PAPER_LOAD_TIME_S",
+    "FEED_RANGE_MM_S",
+]
+
+#: Size of the step of the paper's step-response tests (Fig. 4-5), mm. The paper plots a
+#: unit step of its linear model; the loop is linear as long as no command reaches the
+#: drive's limit, and the H-infinity loop asks for 6.5 mm/s per um of step at its peak, so
+#: 0.1 mm (65 mm/s) keeps both controllers linear; responses are shown normalised.
+PAPER_STEP_MM = 0.1
+#: Load torque of the disturbance tests, N m at the motor shaft. Not given in the paper:
+#: 1 N m is about 630 N of feed force through the 10 mm lead (a heavy milling cut) and 20 %
+#: of a 0.85 kW motor's rated 5.4 N m.
+PAPER_LOAD_TORQUE_NM = 1.0
+#: When the load torque steps on in the step test (after both loops have settled), s.
+PAPER_LOAD_TIME_S = 0.15
+#: Programmed feeds a scenario accepts, mm/s (``math.inf`` marks a step command).
+FEED_RANGE_MM_S = (0.01, 1000.0)
+
+
+def _in_range(name: str, value, lo: float, hi: float) -> float:
+    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+    if not (ok and math.isfinite(value) and lo <= value <= hi):
+        raise ValueError(f"{name} must be in [{lo}, {hi}], got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class ContouringScenario:
+    """One contouring run: path, feed, load torques and the table's hidden inertias.
+
+    Parameters
+    ----------
+    name : str
+    path : Path
+        The toolpath; the table starts at rest at its start.
+    feed_mm_s : float
+        Programmed feed along the path, mm/s (in ``FEED_RANGE_MM_S``), or ``math.inf`` for
+        a step command: the set point jumps to the path's end at ``t = 0`` (Fig. 4-5).
+    load_steps : tuple of (t_s, load_x_Nm, load_y_Nm)
+        From time ``t_s`` on, the load torque on each axis's motor is the given value (N m,
+        ``|T| <= 20``); times ascending. Empty: no load (the paper's design condition).
+    inertia_scale : (float, float)
+        True Jx, Jy as multiples of the nominal ones (0.5 to 2).
+    dwell_s : float
+        The run continues at least this long after the reference reaches the path's end
+        (0 to 10 s), e.g. to watch a load step after a step response settles.
+    """
+
+    name: str
+    path: Path
+    feed_mm_s: float
+    load_steps: tuple[tuple[float, float, float], ...] = ()
+    inertia_scale: tuple[float, float] = (1.0, 1.0)
+    dwell_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.path, Path):
+            raise ValueError(f"path must be a Path, got {type(self.path).__name__}")
+        if not (isinstance(self.feed_mm_s, (int, float)) and self.feed_mm_s == math.inf):
+            _in_range("feed_mm_s", self.feed_mm_s, *FEED_RANGE_MM_S)
+        try:
+            steps = tuple((float(t), float(a), float(b)) for t, a, b in self.load_steps)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"load_steps must be a sequence of (t_s, load_x_Nm, load_y_Nm), got {self.load_steps!r}"
+            ) from None
+        prev = -math.inf
+        for t, a, b in steps:
+            _in_range("load_steps time", t, 0.0, 1e4)
+            _in_range("load_steps torque", a, -20.0, 20.0)
+            _in_range("load_steps torque", b, -20.0, 20.0)
+            if t < prev:
+                raise ValueError(f"load_steps times must ascend, got {self.load_steps!r}")
+            prev = t
+        object.__setattr__(self, "load_steps", steps)
+        try:
+            sx, sy = self.inertia_scale
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"inertia_scale must be a pair (x, y), got {self.inertia_scale!r}"
+            ) from None
+        object.__setattr__(
+            self,
+            "inertia_scale",
+            (_in_range("inertia_scale", sx, 0.5, 2.0), _in_range("inertia_scale", sy, 0.5, 2.0)),
+        )
+        _in_range("dwell_s", self.dwell_s, 0.0, 10.0)
+
+    @property
+    def is_step(self) -> bool:
+        """True for a step command (``feed_mm_s = inf``)."""
+        return self.feed_mm_s == math.inf
+
+    @property
+    def reference_time_s(self) -> float:
+        """When the reference reaches the path's end, s (0 for a step)."""
+        return 0.0 if self.is_step else self.path.length / self.feed_mm_s
+
+    def true_params(self, nominal: ContouringParams) -> ContouringParams:
+        """The table this run really has (hidden from controllers)."""
+        sx, sy = self.inertia_scale
+        if sx == 1.0 and sy == 1.0:
+            return nominal
+        return nominal.replace(
+            inertia_x_kgm2=nominal.inertia_x_kgm2 * sx, inertia_y_kgm2=nominal.inertia_y_kgm2 * sy
+        )
+
+
+def _step(load: bool) -> Callable[[np.random.Generator], ContouringScenario]:
+    def make(rng: np.random.Generator) -> ContouringScenario:
+        loads = ((PAPER_LOAD_TIME_S, PAPER_LOAD_TORQUE_NM, 0.0),) if load else ()
+        return ContouringScenario(
+            "paper_step_load" if load else "paper_step",
+            Path.line((0.0, 0.0), (PAPER_STEP_MM, 0.0), name="step X"),
+            math.inf,
+            loads,
+            dwell_s=0.4 if load else 0.1,
+        )
+
+    return make
+
+
+def _paper(name: str, path: Callable[[], Path], feed: float, loads=()):
+    def make(rng: np.random.Generator) -> ContouringScenario:
+        return ContouringScenario(name, path(), feed, loads)
+
+    return make
+
+
+def _random(
+    name: str,
+    segments: tuple[int, int],
+    line: tuple[float, float],
+    radius: tuple[float, float],
+    sweep: tuple[float, float],
+    feed: tuple[float, float],
+    inertia: tuple[float, float],
+    load_max: float,
+):
+    def make(rng: np.random.Generator) -> ContouringScenario:
+        path = Path.random_smooth(
+            rng,
+            n_segments=segments,
+            line_mm=line,
+            radius_mm=radius,
+            sweep_deg=sweep,
+            name=f"{name} path",
+        )
+        f = float(np.exp(rng.uniform(np.log(feed[0]), np.log(feed[1]))))
+        sx, sy = (float(v) for v in np.exp(rng.uniform(np.log(inertia[0]), np.log(inertia[1]), 2)))
+        loads = ()
+        if rng.random() < 0.5:
+            t = float(rng.uniform(0.0, path.length / f))
+            a, b = (float(v) for v in rng.uniform(-load_max, load_max, 2))
+            loads = ((t, a, b),)
+        return ContouringScenario(name, path, f, loads, (sx, sy))
+
+    return make
+
+
+#: name -> factory drawing a scenario from the env's generator. The paper's tests:
+#: ``paper_step`` / ``paper_step_load`` (Fig. 4-5: a 0.1 mm X step; with a 1 N m load step at
+#: 0.15 s), ``paper_corner`` (Fig. 6, 5 mm/s), ``paper_circle`` (Fig. 7, R 10 mm at 50 mm/s),
+#: ``paper_involute`` (Fig. 8, R 50 mm at 50 mm/s) and ``paper_circle_load`` (the circle with
+#: 1 N m on both axes from 0.5 s). ``train``: 3-5 random tangent-continuous lines (5-20 mm)
+#: and arcs (radius 3-30 mm, 30-180 degrees), feed log-uniform 20-60 mm/s, inertias
+#: log-uniform x0.8-1.25, half the runs with one load step of up to 1.5 N m per axis at a
+#: random time. ``test`` (held out, wider): 3-6 segments, lines 3-20 mm, radius 2-40 mm,
+#: 20-240 degrees, feed 15-90 mm/s, inertias x0.7-1.4, loads up to 2 N m.
+CONTOURING_SCENARIOS: dict[str, Callable[[np.random.Generator], ContouringScenario]] = {
+    "paper_step": _step(False),
+    "paper_step_load": _step(True),
+    "paper_corner": _paper("paper_corner", Path.paper_corner, PAPER_CORNER_FEED_MM_S),
+    "paper_circle": _paper("paper_circle", Path.paper_circle, PAPER_FEED_MM_S),
+    "paper_involute": _paper("paper_involute", Path.paper_involute, PAPER_FEED_MM_S),
+    "paper_circle_load": _paper(
+        "paper_circle_load",
+        Path.paper_circle,
+        PAPER_FEED_MM_S,
+        ((0.5, PAPER_LOAD_TORQUE_NM, PAPER_LOAD_TORQUE_NM),),
+    ),
+    "train": _random(
+        "train", (3, 5), (5.0, 20.0), (3.0, 30.0), (30.0, 180.0), (20.0, 60.0), (0.8, 1.25), 1.5
+    ),
+    "test": _random(
+        "test", (3, 6), (3.0, 20.0), (2.0, 40.0), (20.0, 240.0), (15.0, 90.0), (0.7, 1.4), 2.0
+    ),
+}
+
+
+def contouring_scenario(spec, rng: np.random.Generator) -> ContouringScenario:
+    """Resolve a scenario name or object; unknown names raise ``ValueError``."""
+    if isinstance(spec, ContouringScenario):
+        return spec
+    if isinstance(spec, str) and spec in CONTOURING_SCENARIOS:
+        return CONTOURING_SCENARIOS[spec](rng)
+    raise ValueError(
+        f"scenario must be a ContouringScenario or one of {sorted(CONTOURING_SCENARIOS)}, "
+        f"got {spec!r}"
+    )

@@ -1,0 +1,119 @@
+"""Episode metrics computed from recorded ``info`` trajectories, independent of any reward.
+
+Every function takes a trajectory: a dict of equal-length arrays keyed by ``info`` names,
+the reset's info first, one entry per step after it (see ``agents.eval.rollout``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "regulation_metrics",
+    "segment_bounds",
+    "oscillation_amplitude",
+    "SETTLE_BAND",
+    "OVER_LIMIT",
+    "OSC_WINDOW_S",
+]
+
+#: Half-width of the band around the reference that counts as settled (5 % of the reference).
+SETTLE_BAND = 0.05
+#: Force (or torque) above this multiple of the reference counts as over the limit.
+OVER_LIMIT = 1.1
+#: Window of the moving mean removed before measuring oscillation, s.
+OSC_WINDOW_S = 1.0
+
+
+def segment_bounds(segment: np.ndarray) -> list[tuple[int, int]]:
+    """``[(start, stop), ...]`` index ranges over which ``segment`` is constant."""
+    seg = np.asarray(segment)
+    if seg.size == 0:
+        return []
+    cuts = np.flatnonzero(np.diff(seg) != 0) + 1
+    edges = [0, *cuts.tolist(), seg.size]
+    return [(edges[i], edges[i + 1]) for i in range(len(edges) - 1)]
+
+
+def oscillation_amplitude(e: np.ndarray, window: int) -> float:
+    """Half the peak-to-peak of ``e`` less its moving mean, over the segment's second half."""
+    if e.size < 2 * window + 4:
+        return 0.0
+    mean = np.convolve(e, np.ones(window) / window, mode="same")
+    r = (e - mean)[window:-window]
+    r = r[r.size // 2 :]
+    return float(0.5 * np.ptp(r)) if r.size else 0.0
+
+
+def regulation_metrics(
+    traj: dict, signal: str = "force_N", reference: str = "force_ref_N"
+) -> dict[str, float]:
+    """Metrics of one regulation episode.
+
+    With the normalised error ``e = (y - r) / r`` of the regulated signal ``y`` (true force or
+    torque) against its reference ``r``, sampled every ``dt``:
+
+    - ``iae``: sum |e| dt (s); ``itae``: sum t |e| dt (s^2);
+    - ``max_overshoot``: largest e after the first entry into the 5 % band (0 if none), so the
+      unavoidable jump when the tool enters a deeper step counts, a slow start does not;
+    - ``settling_time_s``: mean over the start and every segment change of the time until
+      |e| stays within 5 % for the rest of that segment (the segment's length when it never
+      does; ``n_unsettled`` counts those);
+    - ``steady_state_error``: mean over segments of |mean e| over the last 30 % of each;
+    - ``oscillation``: largest over segments of half the peak-to-peak of e less its 1 s
+      moving mean, over the segment's second half (sustained oscillation, not slow drift);
+    - ``time_over_limit``: share of samples with y above 1.1 r;
+    - ``machining_time_s``: when the workpiece was finished (the episode's length if not);
+    - ``finished``, ``breakage``, ``diverged`` (1.0 / 0.0); ``n_steps``.
+    """
+    t = np.asarray(traj["t_s"], dtype=np.float64)
+    y = np.asarray(traj[signal], dtype=np.float64)
+    r = np.asarray(traj[reference], dtype=np.float64)
+    e = (y - r) / r
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    # Sample 0 is the reset (t = 0, nothing cut yet); errors are scored from the first step,
+    # and only while the tool is in the workpiece (the last sample of a finished cut is air).
+    cutting = np.asarray(traj.get("depth_mm", np.ones(t.size)), dtype=np.float64)[1:] > 0
+    te, ee = t[1:][cutting], e[1:][cutting]
+    y, r = y[1:][cutting], r[1:][cutting]
+    ae = np.abs(ee)
+    out: dict[str, float] = {
+        "iae": float(np.sum(ae) * dt),
+        "itae": float(np.sum(te * ae) * dt),
+    }
+    inside = np.flatnonzero(ae <= SETTLE_BAND)
+    out["max_overshoot"] = float(max(0.0, ee[inside[0] :].max())) if inside.size else 0.0
+
+    window = max(1, int(round(OSC_WINDOW_S / dt))) if dt > 0 else 1
+    seg = np.asarray(traj.get("segment", np.zeros(t.size)))[1:][cutting]
+    settle, sse, osc = [], [], []
+    unsettled = 0
+    for a, b in segment_bounds(seg):
+        es = ee[a:b]
+        bad = np.flatnonzero(np.abs(es) > SETTLE_BAND)
+        if bad.size and bad[-1] == es.size - 1:
+            unsettled += 1
+            settle.append(es.size * dt)
+        else:
+            settle.append((bad[-1] + 1) * dt if bad.size else 0.0)
+        tail = es[int(0.7 * es.size) :]
+        sse.append(abs(float(tail.mean())) if tail.size else 0.0)
+        osc.append(oscillation_amplitude(es, window))
+    out["settling_time_s"] = float(np.mean(settle)) if settle else 0.0
+    out["n_unsettled"] = float(unsettled)
+    out["steady_state_error"] = float(np.mean(sse)) if sse else 0.0
+    out["oscillation"] = float(max(osc)) if osc else 0.0
+    out["time_over_limit"] = float(np.mean(y > OVER_LIMIT * r)) if y.size else 0.0
+    finished = bool(np.any(np.asarray(traj["finished"], dtype=bool)))
+    mt = traj.get("machining_time_s")
+    if finished and mt is not None:
+        vals = np.asarray(mt, dtype=np.float64)
+        vals = vals[np.isfinite(vals)]
+        out["machining_time_s"] = float(vals[0]) if vals.size else float(t[-1])
+    else:
+        out["machining_time_s"] = float(t[-1])
+    out["finished"] = float(finished)
+    out["breakage"] = float(np.any(np.asarray(traj["breakage"], dtype=bool)))
+    out["diverged"] = float(np.any(np.asarray(traj["diverged"], dtype=bool)))
+    out["n_steps"] = float(t.size - 1)
+    return out

@@ -1,0 +1,851 @@
+r"""Micro-drilling plant of Cheong & Cho: valve, air-turbine spindle, drilling torque and thrust.
+
+The chain from the valve voltage ``u`` to the torque on the drill (their §3 and §6):
+
+.. math::
+
+    \ddot x_v + 2\zeta\omega_n \dot x_v + \omega_n^2 x_v &= k_1 u
+        \quad &\text{(eq. 1, 17: pneumatic proportional valve)} \\
+    \dot\omega &= k_2 x_v - k_3 \omega^{0.608} - T / I
+        \quad &\text{(eq. 2-4, 19: air-turbine spindle)} \\
+    T &= k_4 / \omega \quad &\text{(eq. 20: drilling torque at a fixed feed velocity)}
+
+with ``x_v`` the spool displacement (as a fraction of full opening), ``\omega`` the spindle
+speed (rad/s) and ``k_4`` the torque constant of the current cut:
+
+.. math::
+
+    k_4 = 2\pi\, c_T(D)\, v_f\, \epsilon(z)\, \bigl(1 + g(L)\,(1 + \sigma_c \xi_c)\bigr)
+          (1 + \sigma_0 \xi_0)
+
+- ``c_T(D)`` (N·mm per mm/rev) comes from the cutting model of §3.2, evaluated once per drill:
+  the main lips in oblique cutting (eq. 6-9), the chisel edge as a secondary cutting edge
+  (eq. 10-13) and the indentation zone (eq. 14); see :func:`cutting_coefficients`. The
+  feed per revolution is ``f = 2\pi v_f / \omega``, so torque is ``k_4 / \omega`` (eq. 20);
+- ``\epsilon(z)`` is the share of the lips engaged while the drill point enters the work;
+- ``g(L) = g_0 (e^{L / (\ell D)} - 1)`` is the friction of the chips packed in the flutes,
+  growing with the length ``L`` drilled since the chips were last cleared (Fig. 12, §5.1);
+  leaving the hole (a peck) clears them;
+- ``\xi_c``, ``\xi_0`` are unit Ornstein-Uhlenbeck processes: the chip packing is irregular.
+
+The paper's eq. (19) leaves out the drilling torque acting back on the spindle; here it is
+kept as ``-T / I`` (the spindle slows under load, their Fig. 8(c)). Thrust follows the same
+cutting model. The valve is linear and integrated exactly (ZOH, matrices computed once);
+the spindle is integrated with fixed RK4 sub-steps in which the valve position comes from
+the exact solution. This module imports numpy and scipy only; it knows nothing of gymnasium.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from machining_envs.core.lti import zoh
+
+__all__ = [
+    "DrillingParams",
+    "DrillingPlant",
+    "DrillingStep",
+    "CuttingCoefficients",
+    "cutting_coefficients",
+    "DIAMETER_RANGE_MM",
+]
+
+#: Drill diameters the plant accepts, mm: the paper's micro drills (0.5-0.8 mm, Table 1 and
+#: Fig. 18-21) with some room either side. Outside it the size-effect shear stress and the
+#: breakage law below are no longer plausible.
+DIAMETER_RANGE_MM = (0.3, 1.0)
+
+_TWO_PI = 2.0 * math.pi
+
+
+def _check(name: str, value, lo: float, hi: float, *, lo_open: bool = False) -> None:
+    """Raise ``ValueError`` naming ``name`` unless ``lo <= value <= hi`` (``lo < value``)."""
+    ok = isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool)
+    ok = ok and math.isfinite(value)
+    if ok:
+        ok = (value > lo if lo_open else value >= lo) and value <= hi
+    if not ok:
+        left = "(" if lo_open else "["
+        raise ValueError(f"{name} must be in {left}{lo}, {hi}], got {value!r}")
+
+
+@dataclass(frozen=True)
+class DrillingParams:
+    """Parameters of the micro-drilling plant (Cheong & Cho, seed 003).
+
+    The paper identifies the valve-spindle constants and the shear and friction angles by a
+    genetic algorithm but prints none of them; every such value here is chosen, with the
+    reason beside it. Derived quantities (``k1``, the free spindle speed, the cutting
+    coefficients, the breakage torque) are computed from the fields, never stored.
+    """
+
+    # ---- valve (eq. 1, 17) -------------------------------------------------------------
+    valve_natural_freq_hz: float = 8.0
+    """wn of the pneumatic proportional valve, Hz (eq. 17). Not given: 8 Hz (50 rad/s), a
+    response time of about 0.1 s, typical of proportional pressure valves of this size."""
+
+    valve_damping: float = 0.7
+    """zeta of the valve (eq. 17). Not given: 0.7, a well-damped spool."""
+
+    valve_static_gain_per_V: float = 0.1
+    """Steady spool opening per volt, ``k1 / wn^2`` (eq. 17), 1/V. Chosen so that the spool
+    is fully open (x_v = 1) at ``voltage_max`` = 10 V; ``k1`` follows as a property."""
+
+    voltage_max: float = 10.0
+    """Largest valve voltage, V (a 0-10 V proportional valve); commands are clipped to
+    [0, voltage_max]."""
+
+    nominal_voltage: float = 5.0
+    """Voltage of the nominal cut, V, at which the unloaded spindle runs at 545 Hz (Table 1's
+    initial spindle frequency). Chosen mid-range so controllers can speed the spindle up
+    about threefold (to 1700 Hz at 10 V) and also slow it."""
+
+    # ---- air spindle (eq. 2-4, 19) -----------------------------------------------------
+    spindle_friction_exponent: float = 0.608
+    """n of the air friction ``theta_dot^n`` (eq. 4, 19), identified in the paper."""
+
+    spindle_drive_gain: float = 45057.05
+    """k2 = Kv A N r_av / I, rad/s^2 per unit spool opening (eq. 19). Not given: chosen with
+    ``spindle_friction`` so that the unloaded spindle settles at 545 Hz at the nominal 5 V
+    (k2 x_v = k3 w^n at w = 2 pi 545) with a time constant of 0.25 s there
+    (1 / (n k3 w^(n-1)) = 0.25 s: an air turbine reaches speed in about a second)."""
+
+    spindle_friction: float = 159.849
+    """k3, air friction coefficient, (rad/s^2) / (rad/s)^n (eq. 19). Chosen with
+    ``spindle_drive_gain`` (see there)."""
+
+    spindle_inertia_Nmm_s2: float = 1.0e-3
+    """I, rotor inertia, N·mm·s^2 (1e-6 kg·m^2: a turbine rotor of about 15 g and 12 mm with
+    its collet). Not given; it sets how much the drilling torque slows the spindle (the
+    paper's eq. 19 leaves that term out). The turbine then gives 22.5 N·mm, about 77 W, at
+    545 Hz, and a 1 N·mm load slows it by 7 %."""
+
+    # ---- drill geometry and cutting model (§3.2) ---------------------------------------
+    point_angle_deg: float = 118.0
+    """Point angle 2 kappa, degrees. Not given: the standard 118 degrees of twist drills."""
+
+    helix_angle_deg: float = 30.0
+    """Helix angle at the drill's periphery, degrees. Not given: 30 degrees, usual for micro
+    drills for steel."""
+
+    web_ratio: float = 0.15
+    """Web thickness over drill diameter, 2w/D. Not given: 0.15, chosen with
+    ``chisel_rake_deg`` so that the chisel edge carries 35 % of the thrust, inside the
+    30-40 % the paper cites (§3.2)."""
+
+    friction_angle_deg: float = 35.0
+    """Normal friction angle beta_n on the lips (eq. 7-9), degrees. Identified by GA in the
+    paper, value not given: 35 degrees, typical of steel on carbide."""
+
+    chisel_rake_deg: float = -45.0
+    """Static rake angle of the chisel edge, degrees (eq. 10-11). Not given: -45 degrees,
+    within the -30 to -60 degrees of twist-drill chisel edges."""
+
+    shear_stress_MPa: float = 3000.0
+    """Effective shear flow stress tau of SS40 (SS400) in eq. (6)-(11), N/mm^2. Identified
+    by GA in the paper, value not given. At the paper's 0.32 mm/s and 545 Hz the chip per
+    lip is 0.15 um thick, far below the edge radius of a micro drill, where the specific
+    cutting energy of steel is several times its macroscopic value (size effect); 3000 MPa,
+    about seven times the macroscopic shear flow stress, gives 0.41 N·mm and 1.4 N of
+    thrust for the 0.8 mm drill in the nominal cut."""
+
+    indentation_coeff_MPa: float = 1200.0
+    """k_c of the indentation thrust k_c f^2 tan(alpha_w) (eq. 14), N/mm^2 (about 3x the
+    Brinell hardness of SS400). At micro-drilling feeds its thrust is below 0.1 %."""
+
+    indentation_wedge_deg: float = 60.0
+    """Half wedge angle alpha_w of the indenting chisel centre (eq. 14), degrees."""
+
+    # ---- chips packed in the flutes (§5.1, Fig. 12) ------------------------------------
+    chip_friction: float = 0.235
+    """g0 of the chip friction ratio g(L) = g0 (exp(L / (l D)) - 1). Not given: with
+    ``chip_length_diameters`` = 5 the torque of a hole drilled in one pass has grown 2.5x by
+    an aspect ratio of 10 (Fig. 12 shows a steady rise with depth; chip evacuation forces
+    grow exponentially with hole depth)."""
+
+    chip_length_diameters: float = 5.0
+    """l, the packed length (in drill diameters) over which chip friction grows e-fold."""
+
+    chip_fluctuation: float = 0.2
+    """sigma_c, relative standard deviation of the chip friction (chips pack and release
+    irregularly). Not given; scaled by a scenario's ``fluctuation_scale``."""
+
+    chip_fluctuation_time_s: float = 0.2
+    """Correlation time of the chip-friction fluctuation, s (an Ornstein-Uhlenbeck process)."""
+
+    cutting_fluctuation: float = 0.03
+    """sigma_0, relative standard deviation of the chip-free cutting torque and thrust
+    (material and edge irregularity); correlation time ``cutting_fluctuation_time_s``."""
+
+    cutting_fluctuation_time_s: float = 0.05
+    """Correlation time of the cutting fluctuation, s."""
+
+    # ---- drill strength ------------------------------------------------------------------
+    breakage_coeff_N_per_mm2: float = 5.0
+    """c_b of the breakage torque T_b = c_b D^3 (N·mm, D in mm). The torsional strength of a
+    drill's section grows as D^3; the paper gives no strength data. Micro drills rarely fail
+    by static torsion (chip clogging, bending from wandering and fatigue break them far
+    below it), so the constant is set by the process instead: the paper's holes (aspect
+    ratio 10, nominal chips) drilled in one pass without control peak at 55-90 % of it over
+    seeds, so none breaks, while deeper or more chip-clogged holes do.
+    T_b = 0.625, 1.08, 1.715, 2.56 N·mm for 0.5, 0.6, 0.7, 0.8 mm: 3.9x to 6.2x the
+    chip-free nominal torque (small drills are closer to breaking)."""
+
+    # ---- feed (micro-stepping motor) -----------------------------------------------------
+    feed_velocity_mm_s: float = 0.32
+    """Feed velocity of the paper's runs, mm/s (Table 1)."""
+
+    feed_speed_max_mm_s: float = 3.0
+    """Largest feed or retract speed of the stage, mm/s (``control="feed"`` maps actions onto
+    [-feed_speed_max_mm_s, feed_speed_max_mm_s]). Not given: 3 mm/s, a rapid traverse
+    of a micro-stepping stage; the stage follows the command within a sample."""
+
+    retract_limit_mm: float = 2.0
+    """Highest the drill point can be above the work surface, mm (the stage's travel)."""
+
+    # ---- sensors -------------------------------------------------------------------------
+    sensor_cutoff_hz: float = 50.0
+    """Cut-off of the first-order low-pass of the torque and thrust amplifiers, Hz (anti-alias
+    filter below the 50 Hz Nyquist rate of the 100 Hz loop). Not given."""
+
+    torque_noise_Nmm: float = 0.01
+    """Standard deviation of the torque sensor noise, N·mm: 2.5 % of the 0.8 mm drill's
+    nominal torque but 6 % of the 0.5 mm drill's, the signal-to-noise problem of §7. Not
+    given; scaled by a scenario's ``noise_scale``."""
+
+    thrust_noise_N: float = 0.02
+    """Standard deviation of the thrust (Kistler 9001 washer) noise, N. Not given."""
+
+    speed_noise_hz: float = 0.5
+    """Standard deviation of the fibre-optic spindle-speed measurement, Hz. Not given."""
+
+    # ---- timing --------------------------------------------------------------------------
+    sample_time_s: float = 0.01
+    """Controller sample time, s (100 Hz). Not given: ten times faster than the valve's
+    response and 25 times faster than the spindle's."""
+
+    substeps: int = 2
+    """RK4 sub-steps per sample for the spindle (h = 5 ms, 1/50 of the spindle's time
+    constant); ``tests/test_drilling_plant`` checks the step size against 64 sub-steps."""
+
+    # ---- observation scales ----------------------------------------------------------------
+    torque_scale_Nmm: float = 1.0
+    """Normalisation of torques in observations, N·mm."""
+
+    thrust_scale_N: float = 2.0
+    """Normalisation of thrusts in observations, N."""
+
+    def __post_init__(self) -> None:
+        _check("valve_natural_freq_hz", self.valve_natural_freq_hz, 0.0, 1e3, lo_open=True)
+        _check("valve_damping", self.valve_damping, 0.0, 10.0, lo_open=True)
+        _check("valve_static_gain_per_V", self.valve_static_gain_per_V, 0.0, 10.0, lo_open=True)
+        _check("voltage_max", self.voltage_max, 0.0, 1e3, lo_open=True)
+        _check("nominal_voltage", self.nominal_voltage, 0.0, self.voltage_max, lo_open=True)
+        _check("spindle_friction_exponent", self.spindle_friction_exponent, 0.1, 1.0)
+        _check("spindle_drive_gain", self.spindle_drive_gain, 0.0, 1e9, lo_open=True)
+        _check("spindle_friction", self.spindle_friction, 0.0, 1e9, lo_open=True)
+        _check("spindle_inertia_Nmm_s2", self.spindle_inertia_Nmm_s2, 0.0, 1e6, lo_open=True)
+        _check("point_angle_deg", self.point_angle_deg, 60.0, 170.0)
+        _check("helix_angle_deg", self.helix_angle_deg, 0.0, 50.0)
+        _check("web_ratio", self.web_ratio, 0.0, 0.5, lo_open=True)
+        _check("friction_angle_deg", self.friction_angle_deg, 0.0, 60.0)
+        _check("chisel_rake_deg", self.chisel_rake_deg, -70.0, 0.0)
+        _check("shear_stress_MPa", self.shear_stress_MPa, 0.0, 1e5, lo_open=True)
+        _check("indentation_coeff_MPa", self.indentation_coeff_MPa, 0.0, 1e5)
+        _check("indentation_wedge_deg", self.indentation_wedge_deg, 0.0, 89.0)
+        _check("chip_friction", self.chip_friction, 0.0, 100.0)
+        _check("chip_length_diameters", self.chip_length_diameters, 0.0, 1e3, lo_open=True)
+        _check("chip_fluctuation", self.chip_fluctuation, 0.0, 2.0)
+        _check("chip_fluctuation_time_s", self.chip_fluctuation_time_s, 0.0, 100.0, lo_open=True)
+        _check("cutting_fluctuation", self.cutting_fluctuation, 0.0, 0.5)
+        _check(
+            "cutting_fluctuation_time_s", self.cutting_fluctuation_time_s, 0.0, 100.0, lo_open=True
+        )
+        _check("breakage_coeff_N_per_mm2", self.breakage_coeff_N_per_mm2, 0.0, 1e6, lo_open=True)
+        _check("feed_velocity_mm_s", self.feed_velocity_mm_s, 0.0, 100.0, lo_open=True)
+        _check("feed_speed_max_mm_s", self.feed_speed_max_mm_s, 0.0, 100.0, lo_open=True)
+        _check("retract_limit_mm", self.retract_limit_mm, 0.0, 100.0)
+        _check("sensor_cutoff_hz", self.sensor_cutoff_hz, 0.0, 1e4, lo_open=True)
+        _check("torque_noise_Nmm", self.torque_noise_Nmm, 0.0, 100.0)
+        _check("thrust_noise_N", self.thrust_noise_N, 0.0, 1e3)
+        _check("speed_noise_hz", self.speed_noise_hz, 0.0, 1e3)
+        _check("sample_time_s", self.sample_time_s, 0.0, 1.0, lo_open=True)
+        if (
+            not isinstance(self.substeps, (int, np.integer))
+            or isinstance(self.substeps, bool)
+            or not 1 <= self.substeps <= 1000
+        ):
+            raise ValueError(f"substeps must be an integer in [1, 1000], got {self.substeps!r}")
+        _check("torque_scale_Nmm", self.torque_scale_Nmm, 0.0, 1e6, lo_open=True)
+        _check("thrust_scale_N", self.thrust_scale_N, 0.0, 1e6, lo_open=True)
+
+    @classmethod
+    def cheong_cho(cls) -> DrillingParams:
+        """The micro-drilling machine of Cheong & Cho, SS40 mild steel (the defaults)."""
+        return cls()
+
+    def replace(self, **changes) -> DrillingParams:
+        """A copy with fields changed; unknown names raise ``TypeError``."""
+        return dataclasses.replace(self, **changes)
+
+    # ---- derived quantities (never stored) -------------------------------------------------
+    @property
+    def valve_natural_freq_rad_s(self) -> float:
+        """wn in rad/s."""
+        return _TWO_PI * self.valve_natural_freq_hz
+
+    @property
+    def k1(self) -> float:
+        """k1 of eq. (17), 1/(V s^2): static gain times wn^2."""
+        return self.valve_static_gain_per_V * self.valve_natural_freq_rad_s**2
+
+    def free_speed_rad_s(self, voltage: float, load_torque_Nmm: float = 0.0) -> float:
+        r"""Steady spindle speed at a held voltage and a constant load torque, rad/s.
+
+        Solves :math:`k_2 x_v = k_3 \omega^n + T / I` with ``x_v`` the valve's steady opening;
+        without load it is :math:`(k_2 x_v / k_3)^{1/n}`.
+        """
+        drive = self.spindle_drive_gain * self.valve_static_gain_per_V * voltage
+        drive -= load_torque_Nmm / self.spindle_inertia_Nmm_s2
+        if drive <= 0.0:
+            return 0.0
+        return (drive / self.spindle_friction) ** (1.0 / self.spindle_friction_exponent)
+
+    def free_speed_hz(self, voltage: float) -> float:
+        """Unloaded steady spindle frequency at ``voltage``, Hz."""
+        return self.free_speed_rad_s(voltage) / _TWO_PI
+
+    def voltage_for_speed(self, speed_hz: float) -> float:
+        """Voltage at which the unloaded spindle settles at ``speed_hz``, V."""
+        w = _TWO_PI * speed_hz
+        return (
+            self.spindle_friction
+            * w**self.spindle_friction_exponent
+            / (self.spindle_drive_gain * self.valve_static_gain_per_V)
+        )
+
+    def spindle_time_constant_s(self, speed_hz: float) -> float:
+        """Time constant of the unloaded spindle linearised at ``speed_hz``, s."""
+        w = _TWO_PI * speed_hz
+        n = self.spindle_friction_exponent
+        return 1.0 / (n * self.spindle_friction * w ** (n - 1.0))
+
+    def breakage_torque_Nmm(self, diameter_mm: float) -> float:
+        """Torque at which a drill of ``diameter_mm`` breaks, N·mm: ``c_b D^3``."""
+        return self.breakage_coeff_N_per_mm2 * diameter_mm**3
+
+    def chip_friction_ratio(self, packed_mm: float, diameter_mm: float) -> float:
+        """g(L): chip friction over cutting torque after ``packed_mm`` drilled without clearing."""
+        return self.chip_friction * (
+            math.exp(packed_mm / (self.chip_length_diameters * diameter_mm)) - 1.0
+        )
+
+    def coefficients(self, diameter_mm: float) -> CuttingCoefficients:
+        """Torque and thrust per feed of a drill of ``diameter_mm`` (see :func:`cutting_coefficients`)."""
+        _check("diameter_mm", diameter_mm, *DIAMETER_RANGE_MM)
+        return cutting_coefficients(_GeometryKey.of(self), float(diameter_mm))
+
+    def chip_free_torque_Nmm(
+        self, diameter_mm: float, speed_hz: float, feed_velocity_mm_s: float | None = None
+    ) -> float:
+        """Torque of the fully engaged drill without packed chips, N·mm (eq. 20)."""
+        v = self.feed_velocity_mm_s if feed_velocity_mm_s is None else feed_velocity_mm_s
+        return self.coefficients(diameter_mm).torque_per_feed * v / speed_hz
+
+    def nominal_torque_Nmm(self, diameter_mm: float) -> float:
+        """Chip-free torque at the nominal voltage's free speed and the nominal feed, N·mm:
+        the default torque reference (the spindle then stays near 545 Hz, their Fig. 22)."""
+        return self.chip_free_torque_Nmm(diameter_mm, self.free_speed_hz(self.nominal_voltage))
+
+
+@dataclass(frozen=True)
+class _GeometryKey:
+    """The fields the cutting coefficients depend on (cached per drill diameter)."""
+
+    point_angle_deg: float
+    helix_angle_deg: float
+    web_ratio: float
+    friction_angle_deg: float
+    chisel_rake_deg: float
+    shear_stress_MPa: float
+    indentation_coeff_MPa: float
+    indentation_wedge_deg: float
+    feed_velocity_mm_s: float
+    nominal_speed_hz: float
+
+    @classmethod
+    def of(cls, p: DrillingParams) -> _GeometryKey:
+        return cls(
+            p.point_angle_deg,
+            p.helix_angle_deg,
+            p.web_ratio,
+            p.friction_angle_deg,
+            p.chisel_rake_deg,
+            p.shear_stress_MPa,
+            p.indentation_coeff_MPa,
+            p.indentation_wedge_deg,
+            p.feed_velocity_mm_s,
+            p.free_speed_hz(p.nominal_voltage),
+        )
+
+
+@dataclass(frozen=True)
+class CuttingCoefficients:
+    """Torque and thrust of one drill per unit feed per revolution ``f`` (mm/rev).
+
+    ``T = torque_per_feed f`` (N·mm), ``H = thrust_per_feed f + indentation_per_feed2 f^2`` (N).
+    The arrays give the engaged share of torque and thrust against the drill point's depth.
+    """
+
+    torque_per_feed: float
+    """c_T, N·mm per mm/rev: main lips (eq. 6-9) plus chisel edge (eq. 10-13)."""
+    thrust_per_feed: float
+    """N per mm/rev: lips plus chisel edge."""
+    indentation_per_feed2: float
+    """N per (mm/rev)^2: the indentation thrust of eq. (14)."""
+    lip_torque_per_feed: float
+    lip_thrust_per_feed: float
+    chisel_torque_per_feed: float
+    chisel_thrust_per_feed: float
+    engage_depth_mm: np.ndarray
+    """Depth of the drill point below the surface, mm (ascending, from 0 to full engagement)."""
+    engage_torque: np.ndarray
+    """Engaged share of the torque at those depths (0 to 1)."""
+    engage_thrust: np.ndarray
+    """Engaged share of the thrust at those depths (0 to 1)."""
+
+    @property
+    def full_engagement_mm(self) -> float:
+        """Depth at which the whole lips cut, ``R / tan(kappa)``, mm."""
+        return float(self.engage_depth_mm[-1])
+
+    @property
+    def chisel_thrust_share(self) -> float:
+        """Share of the chip-free thrust carried by the chisel edge (paper: 30-40 %)."""
+        return self.chisel_thrust_per_feed / self.thrust_per_feed
+
+
+_N_LIP = 64
+_N_CHISEL = 24
+
+
+@functools.lru_cache(maxsize=64)
+def cutting_coefficients(key: _GeometryKey, diameter_mm: float) -> CuttingCoefficients:
+    r"""The cutting model of §3.2 for one drill, per unit feed per revolution.
+
+    **Main lips (eq. 6-9).** Each lip runs from the web (radius ``w``) to the periphery
+    ``R = D/2`` and is cut into elements of radial width ``dr``. At radius ``r`` with web angle
+    :math:`\omega_w = \arcsin(w/r)` and local helix angle
+    :math:`\tan\psi_r = (r/R)\tan\psi`, the element's inclination and normal rake are
+
+    .. math::
+
+        \sin i = \frac{w}{r}\sin\kappa, \qquad
+        \tan\alpha_n = \frac{\tan\psi_r\cos\omega_w}{\sin\kappa} - \sin\omega_w\cos\kappa
+
+    (about +30 degrees at the periphery, about -26 degrees next to the web). The chip per lip
+    is ``t = (f/2) sin(kappa)`` thick and ``b = dr / sin(kappa)`` wide. The chip flows at
+    :math:`\eta_c = i` (Stabler's rule), the shear angle follows
+    :math:`\phi_n = \pi/4 - (\beta_n - \alpha_n)/2` (Merchant; the paper identified it by
+    GA as a function of rake and inclination), and eq. (7)-(8) give the force along the
+    cutting velocity ``F_P`` and the force normal to the edge ``F_Q``:
+
+    .. math::
+
+        F_P &= \frac{\tau b t}{\sin\phi_n}
+              \frac{\cos(\beta_n-\alpha_n) + \tan i \tan\eta_c \sin\beta_n}{Q}, \quad
+        F_Q = \frac{\tau b t}{\sin\phi_n \cos i} \frac{\sin(\beta_n-\alpha_n)}{Q}, \\
+        Q &= \sqrt{\cos^2(\phi_n+\beta_n-\alpha_n) + \tan^2\eta_c\sin^2\beta_n}
+
+    Torque ``2 r F_P`` and thrust ``2 F_Q sin(kappa)`` per element pair. The radial parts of
+    ``F_Q`` and the edge-wise force ``F_R`` (eq. 9) cancel between the two symmetric lips;
+    the axial part of ``F_R`` (small: ``i`` is near zero over most of the lip) is left out.
+
+    **Chisel edge, secondary cutting (eq. 10-13)** over radii from the indentation zone to
+    ``w``: each element of width ``W_c = dr`` cuts at the feed angle
+    :math:`\beta_i = \arctan(v_f / (2\pi n r_i))` with dynamic rake
+    :math:`\alpha_{dc} = \alpha_{sc} + \beta_i` and shear angle
+    :math:`\phi_c = \pi/4 + \alpha_{dc}/2`:
+
+    .. math::
+
+        F'_c = \frac{k_c f W_c \cos\alpha_{dc}\cos\beta_i}{2\sin\phi_c\cos(\phi_c-\alpha_{dc})},
+        \quad
+        F'_t = \frac{k_c f W_c (-\sin\alpha_{dc})\cos\beta_i}{2\sin\phi_c\cos(\phi_c-\alpha_{dc})}
+
+    (``-sin``: the OCR's ``sin`` with the sign that makes the thrust of the negative rake
+    positive), torque :math:`2\sum r_i (F'_c\cos\beta_i + F'_t\sin\beta_i)` and thrust
+    :math:`2\sum (F'_c\sin\beta_i + F'_t\cos\beta_i)`. The feed angle is evaluated at the
+    nominal speed and feed; it is below 0.2 degrees everywhere, so the coefficients are
+    constant and torque is exactly ``k4 / omega`` (eq. 20).
+
+    **Indentation (eq. 14)**: ``k_c f^2 tan(alpha_w)`` inside the radius where the feed
+    velocity is 20 % of the cutting velocity (the paper's transition).
+
+    The engagement tables follow the drill point into the work: at a point depth ``z`` the
+    lips cut out to radius ``z tan(kappa)``.
+    """
+    k = math.radians(key.point_angle_deg / 2.0)
+    sk, ck = math.sin(k), math.cos(k)
+    radius = diameter_mm / 2.0
+    w = key.web_ratio * radius
+    tau = key.shear_stress_MPa
+    # Main lips.
+    dr = (radius - w) / _N_LIP
+    r = w + dr * (np.arange(_N_LIP) + 0.5)
+    web = np.arcsin(w / r)
+    incl = np.arcsin(w / r * sk)
+    tan_psi = r / radius * math.tan(math.radians(key.helix_angle_deg))
+    alpha = np.arctan(tan_psi * np.cos(web) / sk - np.sin(web) * ck)
+    beta = math.radians(key.friction_angle_deg)
+    phi = np.maximum(0.25 * math.pi - 0.5 * (beta - alpha), math.radians(5.0))
+    eta = incl
+    bt = 0.5 * dr  # b t per unit feed: (dr / sin k) (1/2 sin k)
+    q = np.sqrt(np.cos(phi + beta - alpha) ** 2 + np.tan(eta) ** 2 * math.sin(beta) ** 2)
+    fp = (
+        tau
+        * bt
+        / np.sin(phi)
+        * (np.cos(beta - alpha) + np.tan(incl) * np.tan(eta) * math.sin(beta))
+        / q
+    )
+    fq = tau * bt / (np.sin(phi) * np.cos(incl)) * np.sin(beta - alpha) / q
+    lip_t = 2.0 * r * fp
+    lip_h = 2.0 * fq * sk
+    # Chisel edge: secondary cutting between the indentation zone and the web.
+    v_f = key.feed_velocity_mm_s
+    n_rev = key.nominal_speed_hz
+    r_ind = min(v_f / (0.2 * _TWO_PI * n_rev), w)
+    dc = (w - r_ind) / _N_CHISEL
+    rc = r_ind + dc * (np.arange(_N_CHISEL) + 0.5)
+    b_i = np.arctan(v_f / (_TWO_PI * n_rev * rc))
+    a_dc = math.radians(key.chisel_rake_deg) + b_i
+    phi_c = 0.25 * math.pi + 0.5 * a_dc
+    den = 2.0 * np.sin(phi_c) * np.cos(phi_c - a_dc)
+    fc = tau * dc * np.cos(a_dc) * np.cos(b_i) / den
+    ft = tau * dc * (-np.sin(a_dc)) * np.cos(b_i) / den
+    ch_t = 2.0 * rc * (fc * np.cos(b_i) + ft * np.sin(b_i))
+    ch_h = 2.0 * (fc * np.sin(b_i) + ft * np.cos(b_i))
+    indent = key.indentation_coeff_MPa * math.tan(math.radians(key.indentation_wedge_deg))
+
+    # Engagement against point depth: the chisel cuts from the first touch (its height is
+    # w / tan(kappa), a few microns), the lips out to radius z tan(kappa).
+    radii = np.concatenate([[0.0, w], w + dr * np.arange(1, _N_LIP + 1)])
+    cum_t = np.concatenate([[0.0, ch_t.sum()], ch_t.sum() + np.cumsum(lip_t)])
+    cum_h = np.concatenate([[0.0, ch_h.sum()], ch_h.sum() + np.cumsum(lip_h)])
+    depth = radii / math.tan(k)
+    return CuttingCoefficients(
+        torque_per_feed=float(cum_t[-1]),
+        thrust_per_feed=float(cum_h[-1]),
+        indentation_per_feed2=float(indent),
+        lip_torque_per_feed=float(lip_t.sum()),
+        lip_thrust_per_feed=float(lip_h.sum()),
+        chisel_torque_per_feed=float(ch_t.sum()),
+        chisel_thrust_per_feed=float(ch_h.sum()),
+        engage_depth_mm=depth,
+        engage_torque=cum_t / cum_t[-1],
+        engage_thrust=cum_h / cum_h[-1],
+    )
+
+
+@functools.lru_cache(maxsize=32)
+def _valve_matrices(wn: float, zeta: float, k1: float, ts: float, m: int):
+    """Exact valve transitions: spool positions at every half sub-step, and the next state.
+
+    Returns ``(half, step)``: ``half`` (2m+1, 3) maps ``[x1, x2, u]`` to ``x_v`` at
+    ``t + j h / 2``; ``step`` (2, 3) maps it to the state at ``t + Ts``.
+    """
+    a = np.array([[0.0, 1.0], [-(wn**2), -2.0 * zeta * wn]])
+    b = np.array([[0.0], [k1]])
+    phi_half, gam_half = zoh(a, b, ts / (2 * m))
+    half = np.empty((2 * m + 1, 3))
+    p, g = np.eye(2), np.zeros(2)
+    for j in range(2 * m + 1):
+        half[j, :2] = p[0]
+        half[j, 2] = g[0]
+        g = phi_half @ g + gam_half[:, 0]
+        p = phi_half @ p
+    phi, gam = zoh(a, b, ts)
+    step = np.hstack([phi, gam])
+    return half, step
+
+
+@functools.lru_cache(maxsize=32)
+def _filter_weights(cutoff_hz: float, ts: float, m: int) -> tuple[float, tuple[float, ...]]:
+    """First-order sensor filter over one sample: ``y+ = a y + sum_j w_j T_j`` (j = 0..m).
+
+    Exact for an input that is linear between the sub-step values ``T_j``: over a sub-step
+    of length ``h`` with ``a_h = exp(-h / tau)``, a ramp from ``x0`` to ``x1`` moves the
+    output to ``a_h y + (1 - a_h - c) x0 + c x1`` with ``c = 1 - (tau / h)(1 - a_h)``.
+    """
+    tau = 1.0 / (_TWO_PI * cutoff_hz)
+    h = ts / m
+    a_h = math.exp(-h / tau)
+    c = 1.0 - (tau / h) * (1.0 - a_h)
+    w = [0.0] * (m + 1)
+    for j in range(1, m + 1):
+        decay = a_h ** (m - j)  # from the end of sub-step j to the end of the sample
+        w[j - 1] += (1.0 - a_h - c) * decay
+        w[j] += c * decay
+    return a_h**m, tuple(w)
+
+
+@dataclass(slots=True)
+class DrillingStep:
+    """Signals of one control period, at its end (the sample instant) unless stated."""
+
+    torque_Nmm: float
+    """Torque on the drill at the sample instant, N·mm."""
+    peak_torque_Nmm: float
+    """Largest torque over the period's sub-steps, N·mm."""
+    thrust_N: float
+    measured_torque_Nmm: float
+    """Filtered, noisy torque sensor output, N·mm."""
+    measured_thrust_N: float
+    measured_speed_hz: float
+    speed_hz: float
+    """True spindle frequency, Hz."""
+    valve_opening: float
+    """Spool opening x_v (1 = fully open)."""
+    feed_velocity_mm_s: float
+    """Commanded feed velocity of the stage, mm/s (negative: retracting)."""
+    cutting_feed_mm_s: float
+    """Rate at which the hole deepened over the period, mm/s."""
+    feed_mm_per_rev: float
+    position_mm: float
+    """Drill point position below the work surface, mm (negative: above it)."""
+    depth_mm: float
+    """Hole depth, mm."""
+    packed_mm: float
+    """Length drilled since the chips were last cleared, mm."""
+    chip_ratio: float
+    """Chip friction over cutting torque, g(L) with its fluctuation."""
+    cutting: bool
+    engagement: float
+    """Engaged share of the drill's full torque (1 once the point is fully in the work)."""
+    finish_time_s: float | None = None
+
+
+class DrillingPlant:
+    """Simulates one hole: valve, spindle, drill point and chips; numpy and floats only.
+
+    Parameters
+    ----------
+    params : DrillingParams
+        The plant's true parameters for this hole.
+    diameter_mm : float
+        Drill diameter (``DIAMETER_RANGE_MM``).
+    target_depth_mm : float
+        Hole depth at which the hole is finished, mm.
+    start_position_mm : float
+        Drill point position at the start, mm (negative: above the surface; default 0,
+        touching it).
+    """
+
+    def __init__(
+        self,
+        params: DrillingParams,
+        diameter_mm: float,
+        target_depth_mm: float,
+        start_position_mm: float = 0.0,
+    ) -> None:
+        _check("diameter_mm", diameter_mm, *DIAMETER_RANGE_MM)
+        _check("target_depth_mm", target_depth_mm, 0.0, 100.0, lo_open=True)
+        _check("start_position_mm", start_position_mm, -params.retract_limit_mm, 0.0)
+        self.params = params
+        self.diameter_mm = float(diameter_mm)
+        self.target_depth_mm = float(target_depth_mm)
+        self.start_position_mm = float(start_position_mm)
+        p = params
+        self.coeffs = p.coefficients(diameter_mm)
+        m = p.substeps
+        half, vstep = _valve_matrices(
+            p.valve_natural_freq_rad_s, p.valve_damping, p.k1, p.sample_time_s, m
+        )
+        # Rows as float tuples: three products each beat a numpy call at this size.
+        self._half = [tuple(float(v) for v in row) for row in half]
+        self._vstep = [tuple(float(v) for v in row) for row in vstep]
+        self._fa, self._fw = _filter_weights(p.sensor_cutoff_hz, p.sample_time_s, m)
+        self._ou_c = math.exp(-p.sample_time_s / p.chip_fluctuation_time_s)
+        self._ou_c_in = math.sqrt(1.0 - self._ou_c**2)
+        self._ou_0 = math.exp(-p.sample_time_s / p.cutting_fluctuation_time_s)
+        self._ou_0_in = math.sqrt(1.0 - self._ou_0**2)
+        self._kt = _TWO_PI * self.coeffs.torque_per_feed
+        self._kh = _TWO_PI * self.coeffs.thrust_per_feed
+        self._kh2 = _TWO_PI**2 * self.coeffs.indentation_per_feed2
+        self._full = self.coeffs.full_engagement_mm
+        self.breakage_torque_Nmm = p.breakage_torque_Nmm(diameter_mm)
+        self.reset()
+
+    def reset(self, speed_hz: float | None = None, voltage: float | None = None) -> None:
+        """Spindle running free at ``voltage`` (default nominal), valve settled, drill at start."""
+        p = self.params
+        u = p.nominal_voltage if voltage is None else float(voltage)
+        self.voltage = u
+        self.x1 = p.valve_static_gain_per_V * u
+        self.x2 = 0.0
+        w = p.free_speed_rad_s(u) if speed_hz is None else _TWO_PI * speed_hz
+        self.omega = w
+        self.t_s = 0.0
+        self.position_mm = self.start_position_mm
+        self.depth_mm = 0.0
+        self.packed_mm = 0.0
+        self.xi_chip = 0.0
+        self.xi_cut = 0.0
+        self.torque_filt = 0.0
+        self.thrust_filt = 0.0
+        self.torque_Nmm = 0.0
+        self.thrust_N = 0.0
+        self.finished = False
+
+    @property
+    def state(self) -> np.ndarray:
+        """``[x_v, dx_v/dt, omega (rad/s)]``: the paper's x1, x2, x3 (eq. 18-19)."""
+        return np.array([self.x1, self.x2, self.omega])
+
+    def engagement(self, depth_mm: float) -> tuple[float, float]:
+        """Engaged share of torque and thrust with the point ``depth_mm`` below the surface."""
+        if depth_mm >= self._full:
+            return 1.0, 1.0
+        if depth_mm <= 0.0:
+            return 0.0, 0.0
+        c = self.coeffs
+        return (
+            float(np.interp(depth_mm, c.engage_depth_mm, c.engage_torque)),
+            float(np.interp(depth_mm, c.engage_depth_mm, c.engage_thrust)),
+        )
+
+    def step(
+        self,
+        voltage: float,
+        feed_velocity_mm_s: float,
+        noise: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0),
+    ) -> DrillingStep:
+        """Hold ``voltage`` (V) and ``feed_velocity_mm_s`` for one sample and advance.
+
+        ``noise`` holds five standard normal draws: the chip and cutting fluctuation
+        innovations and the torque, thrust and speed sensor noises.
+        """
+        p = self.params
+        m = p.substeps
+        ts = p.sample_time_s
+        h = ts / m
+        u = min(max(voltage, 0.0), p.voltage_max)
+        vmax = p.feed_speed_max_mm_s
+        v = min(max(feed_velocity_mm_s, -vmax), vmax)
+        self.voltage = u
+        n_chip, n_cut, n_tq, n_th, n_sp = noise
+
+        # Fluctuations (Ornstein-Uhlenbeck, unit variance), then the hole over this period.
+        self.xi_chip = self._ou_c * self.xi_chip + self._ou_c_in * n_chip
+        self.xi_cut = self._ou_0 * self.xi_cut + self._ou_0_in * n_cut
+        z0 = self.position_mm
+        z1 = z0 + v * ts
+        if z1 < -p.retract_limit_mm:
+            z1 = -p.retract_limit_mm
+        bottom = self.depth_mm
+        cut_len = z1 - bottom if (v > 0.0 and z1 > bottom) else 0.0
+        cutting = cut_len > 0.0
+        d = self.diameter_mm
+        if cutting:
+            v_cut = cut_len / ts
+            mid = bottom + 0.5 * cut_len
+            eng_t, eng_h = self.engagement(mid)
+            packed = self.packed_mm + 0.5 * cut_len
+            g = p.chip_friction * (math.exp(packed / (p.chip_length_diameters * d)) - 1.0)
+            g *= max(0.0, 1.0 + p.chip_fluctuation * self.xi_chip)
+            load = (1.0 + g) * max(0.0, 1.0 + p.cutting_fluctuation * self.xi_cut)
+            k4 = self._kt * v_cut * eng_t * load
+            kh = self._kh * v_cut * eng_h * load
+            kh2 = self._kh2 * (v_cut * eng_h) ** 2
+        else:
+            v_cut = 0.0
+            g = 0.0
+            eng_t = 0.0
+            k4 = kh = kh2 = 0.0
+
+        # Valve exactly at every half sub-step; spindle by RK4 with the load k4 / omega.
+        x1, x2 = self.x1, self.x2
+        xv = [a * x1 + b * x2 + c * u for a, b, c in self._half]
+        k2, k3, n = p.spindle_drive_gain, p.spindle_friction, p.spindle_friction_exponent
+        load_c = k4 / p.spindle_inertia_Nmm_s2
+        w_floor = _TWO_PI  # 1 Hz: below it the torque law is not evaluated (the drill stalls)
+        w = self.omega
+        ws = [w]
+        for j in range(m):
+            xa, xb, xc = xv[2 * j], xv[2 * j + 1], xv[2 * j + 2]
+            wa = w if w > 0.0 else 0.0
+            f1 = k2 * xa - k3 * wa**n - load_c / (wa if wa > w_floor else w_floor)
+            wb = w + 0.5 * h * f1
+            wb = wb if wb > 0.0 else 0.0
+            f2 = k2 * xb - k3 * wb**n - load_c / (wb if wb > w_floor else w_floor)
+            wb = w + 0.5 * h * f2
+            wb = wb if wb > 0.0 else 0.0
+            f3 = k2 * xb - k3 * wb**n - load_c / (wb if wb > w_floor else w_floor)
+            wc = w + h * f3
+            wc = wc if wc > 0.0 else 0.0
+            f4 = k2 * xc - k3 * wc**n - load_c / (wc if wc > w_floor else w_floor)
+            w = w + h / 6.0 * (f1 + 2.0 * f2 + 2.0 * f3 + f4)
+            if w < 0.0:
+                w = 0.0
+            ws.append(w)
+        (a1, b1, c1), (a2, b2, c2) = self._vstep
+        self.x1 = a1 * x1 + b1 * x2 + c1 * u
+        self.x2 = a2 * x1 + b2 * x2 + c2 * u
+        self.omega = w
+
+        # Torque and thrust at the sub-step instants; the sensors filter them.
+        fa, fw = self._fa, self._fw
+        tq_f = self.torque_filt * fa
+        th_f = self.thrust_filt * fa
+        peak = 0.0
+        for j in range(m + 1):
+            wj = ws[j] if ws[j] > w_floor else w_floor
+            tq = k4 / wj
+            th = kh / wj + kh2 / (wj * wj)
+            if tq > peak:
+                peak = tq
+            tq_f += fw[j] * tq
+            th_f += fw[j] * th
+        self.torque_filt, self.thrust_filt = tq_f, th_f
+        self.torque_Nmm, self.thrust_N = tq, th
+
+        # The drill point and the chips.
+        self.position_mm = z1
+        if cutting:
+            self.depth_mm = z1
+            self.packed_mm += cut_len
+        if z1 < 0.0:
+            self.packed_mm = 0.0  # the point left the hole: the flutes are cleared
+        finish = None
+        if not self.finished and self.depth_mm >= self.target_depth_mm:
+            frac = (self.target_depth_mm - bottom) / cut_len if cut_len > 0 else 1.0
+            finish = self.t_s + min(max(frac, 0.0), 1.0) * ts
+            self.finished = True
+        self.t_s += ts
+        speed_hz = w / _TWO_PI
+        return DrillingStep(
+            torque_Nmm=tq,
+            peak_torque_Nmm=peak,
+            thrust_N=th,
+            measured_torque_Nmm=tq_f + p.torque_noise_Nmm * n_tq,
+            measured_thrust_N=th_f + p.thrust_noise_N * n_th,
+            measured_speed_hz=speed_hz + p.speed_noise_hz * n_sp,
+            speed_hz=speed_hz,
+            valve_opening=self.x1,
+            feed_velocity_mm_s=v,
+            cutting_feed_mm_s=v_cut,
+            feed_mm_per_rev=(v_cut / speed_hz) if speed_hz > 1.0 else 0.0,
+            position_mm=z1,
+            depth_mm=self.depth_mm,
+            packed_mm=self.packed_mm,
+            chip_ratio=g,
+            cutting=cutting,
+            engagement=eng_t,
+            finish_time_s=finish,
+        )

@@ -1,0 +1,166 @@
+"""Named micro-drilling scenarios: the paper's holes, a training distribution, a held-out set.
+
+A scenario fixes the drill, the hole and what a controller cannot see: the true cutting
+constant of this drill and material, how strongly chips pack in the flutes, how irregular
+that is, and the sensor noise (as scale factors on the nominal parameters). Pass a name or
+an object to ``env.reset(options={"scenario": ...})``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from machining_envs.drilling.plant import DIAMETER_RANGE_MM, DrillingParams
+
+__all__ = [
+    "DrillingScenario",
+    "DRILLING_SCENARIOS",
+    "drilling_scenario",
+    "PAPER_DIAMETERS_MM",
+    "PAPER_ASPECT_RATIO",
+]
+
+#: The drill diameters of the paper's experiments, mm (Fig. 18-21).
+PAPER_DIAMETERS_MM = (0.5, 0.6, 0.7, 0.8)
+#: Hole depth over diameter of the paper's holes: "aspect ratio larger than 10" (abstract).
+PAPER_ASPECT_RATIO = 10.0
+
+
+def _in_range(name: str, value, lo: float, hi: float) -> None:
+    if not (
+        isinstance(value, (int, float, np.integer, np.floating))
+        and not isinstance(value, bool)
+        and math.isfinite(value)
+        and lo <= value <= hi
+    ):
+        raise ValueError(f"{name} must be in [{lo}, {hi}], got {value!r}")
+
+
+@dataclass(frozen=True)
+class DrillingScenario:
+    """One hole: drill, depth, reference and the hidden process truth.
+
+    Parameters
+    ----------
+    name : str
+    diameter_mm : float
+        Drill diameter, mm (``DIAMETER_RANGE_MM``); known to the controller.
+    aspect_ratio : float
+        Hole depth over diameter (1 to 20); the hole is finished at ``aspect_ratio * D``.
+    torque_ref_Nmm : float or None
+        Torque reference, N·mm. ``None``: the nominal chip-free torque of this drill at the
+        nominal voltage's 545 Hz and the nominal feed, from the nominal parameters (what a
+        process planner would set).
+    cutting_scale : float
+        True effective shear stress as a multiple of the nominal (0.5 to 2): drill wear,
+        material batch.
+    chip_scale : float
+        True chip friction ``g0`` as a multiple of the nominal (0 to 5): how badly chips
+        pack in this hole.
+    fluctuation_scale : float
+        Multiple of the nominal chip and cutting fluctuations (0 to 3).
+    noise_scale : float
+        Multiple of the nominal sensor noises (0 to 10).
+    """
+
+    name: str
+    diameter_mm: float
+    aspect_ratio: float = PAPER_ASPECT_RATIO
+    torque_ref_Nmm: float | None = None
+    cutting_scale: float = 1.0
+    chip_scale: float = 1.0
+    fluctuation_scale: float = 1.0
+    noise_scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        _in_range("diameter_mm", self.diameter_mm, *DIAMETER_RANGE_MM)
+        _in_range("aspect_ratio", self.aspect_ratio, 1.0, 20.0)
+        if self.torque_ref_Nmm is not None:
+            _in_range("torque_ref_Nmm", self.torque_ref_Nmm, 1e-4, 100.0)
+        _in_range("cutting_scale", self.cutting_scale, 0.5, 2.0)
+        _in_range("chip_scale", self.chip_scale, 0.0, 5.0)
+        _in_range("fluctuation_scale", self.fluctuation_scale, 0.0, 3.0)
+        _in_range("noise_scale", self.noise_scale, 0.0, 10.0)
+
+    @property
+    def target_depth_mm(self) -> float:
+        """Depth at which the hole is finished, mm."""
+        return self.aspect_ratio * self.diameter_mm
+
+    def reference_Nmm(self, nominal: DrillingParams) -> float:
+        """The torque reference of this hole, N·mm (from the nominal parameters)."""
+        if self.torque_ref_Nmm is not None:
+            return float(self.torque_ref_Nmm)
+        return nominal.nominal_torque_Nmm(self.diameter_mm)
+
+    def true_params(self, nominal: DrillingParams) -> DrillingParams:
+        """The plant parameters this hole really has (hidden from controllers)."""
+        f = self.fluctuation_scale
+        n = self.noise_scale
+        return nominal.replace(
+            shear_stress_MPa=nominal.shear_stress_MPa * self.cutting_scale,
+            chip_friction=nominal.chip_friction * self.chip_scale,
+            chip_fluctuation=nominal.chip_fluctuation * f,
+            cutting_fluctuation=nominal.cutting_fluctuation * f,
+            torque_noise_Nmm=nominal.torque_noise_Nmm * n,
+            thrust_noise_N=nominal.thrust_noise_N * n,
+            speed_noise_hz=nominal.speed_noise_hz * n,
+        )
+
+
+def _paper(d: float) -> Callable[[np.random.Generator], DrillingScenario]:
+    def make(rng: np.random.Generator) -> DrillingScenario:
+        return DrillingScenario(f"paper_{d:g}", d)
+
+    return make
+
+
+def _random(
+    name: str,
+    aspect: tuple[float, float],
+    cutting: tuple[float, float],
+    chips: tuple[float, float],
+    fluct: tuple[float, float],
+    noise: tuple[float, float],
+):
+    def make(rng: np.random.Generator) -> DrillingScenario:
+        u = rng.random(6).tolist()
+        d = 0.5 + 0.3 * u[0]
+        ar = aspect[0] + (aspect[1] - aspect[0]) * u[1]
+        cs = cutting[0] + (cutting[1] - cutting[0]) * u[2]
+        ch = math.exp(math.log(chips[0]) + (math.log(chips[1]) - math.log(chips[0])) * u[3])
+        fl = fluct[0] + (fluct[1] - fluct[0]) * u[4]
+        ns = noise[0] + (noise[1] - noise[0]) * u[5]
+        return DrillingScenario(name, d, ar, None, cs, ch, fl, ns)
+
+    return make
+
+
+#: name -> factory drawing a scenario from the env's generator.
+#:
+#: - ``paper_0.5`` ... ``paper_0.8``: Table 1 (545 Hz, 0.32 mm/s, SS40) with the paper's
+#:   drills, aspect ratio 10, nominal chips; only the fluctuations and noise vary by seed.
+#: - ``train``: diameter uniform 0.5-0.8 mm, aspect ratio 6-12, cutting constant +-15 %,
+#:   chip friction 0.6-1.6x (log-uniform), fluctuation 0.5-1.5x, noise 0.5-2x.
+#: - ``test`` (held out, wider): aspect ratio 8-14, cutting constant +-20 %, chip friction
+#:   0.5-2x, fluctuation 0.5-2x, noise 0.5-3x.
+DRILLING_SCENARIOS: dict[str, Callable[[np.random.Generator], DrillingScenario]] = {
+    **{f"paper_{d:g}": _paper(d) for d in PAPER_DIAMETERS_MM},
+    "train": _random("train", (6.0, 12.0), (0.85, 1.15), (0.6, 1.6), (0.5, 1.5), (0.5, 2.0)),
+    "test": _random("test", (8.0, 14.0), (0.8, 1.2), (0.5, 2.0), (0.5, 2.0), (0.5, 3.0)),
+}
+
+
+def drilling_scenario(spec, rng: np.random.Generator) -> DrillingScenario:
+    """Resolve a scenario name or object; unknown names raise ``ValueError``."""
+    if isinstance(spec, DrillingScenario):
+        return spec
+    if isinstance(spec, str) and spec in DRILLING_SCENARIOS:
+        return DRILLING_SCENARIOS[spec](rng)
+    raise ValueError(
+        f"scenario must be a DrillingScenario or one of {sorted(DRILLING_SCENARIOS)}, got {spec!r}"
+    )

@@ -1,0 +1,694 @@
+r"""End-milling plant of Park & Yoon (1986): CNC feed servo, feed per tooth, torque, sensor.
+
+The chain of their Fig. 2, from the AC unit's command ``U`` to the measured torque ``Tc``:
+
+.. math::
+
+    \ddot V_f + 2\xi\omega_n \dot V_f + \omega_n^2 V_f &= \omega_n^2 K_n U
+        \quad &\text{(eq. 5-7, CNC feed servo, mm/s)} \\
+    f = \frac{60}{N} V_f,\quad f_t &= f / P \quad &\text{(eq. 6, feed per rev and per tooth)} \\
+    T_s &= K_s\, d^{\,l} f_t^{\,m} D \quad &\text{(eq. 8, torque law)} \\
+    \tau \dot T + T &= T_s \quad &\text{(eq. 10, process lag)} \\
+    T_c &= K_e T + \text{noise} \quad &\text{(eq. 9, sensor, counts)}
+
+``force_model="average_force"`` replaces eq. (8) by the mean torque of Altintas' average
+cutting-force model for flat end mills (Ahn & Choi, seed 002, eq. 1):
+
+.. math::
+
+    \bar T = R \cdot \frac{N_f a f_t K_t}{2\pi}\,(\cos\phi_{st} - \cos\phi_{ex})
+           = \frac{N_f K_t a f_t d_r}{2\pi}
+
+(the tangential force ``K_t a h`` on each tooth, ``h = f_t \sin\phi``, times the radius,
+averaged over a revolution; the immersion angles of up- and down-milling give the same
+``\cos\phi_{st} - \cos\phi_{ex} = d_r / R``). :func:`mean_forces` gives the three mean
+force components of the same model.
+
+The servo and the tool position form one linear system driven by the held command; it is
+discretised exactly (ZOH) on a sub-step grid once, at construction. The torque law is
+evaluated at the sub-step points and drives the process lag, whose update is exact for an
+input linear between sub-step points (first-order hold). All of a sample's sub-steps are a
+few small matrix products.
+
+This module imports numpy and scipy only; it knows nothing of gymnasium.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from machining_envs.core.lti import zoh, zoh_tf
+
+__all__ = [
+    "MillingParams",
+    "MillingPlant",
+    "MillingStep",
+    "FORCE_MODELS",
+    "KGF",
+    "SPINDLE_RPM_RANGE",
+    "immersion_angles",
+    "mean_forces",
+    "mean_torque_average_force",
+]
+
+#: Newtons per kilogram-force: Park & Yoon give torques in kgf·mm; the library uses N·mm.
+KGF = 9.80665
+
+#: Torque laws the plant can use (``MillingParams.force_model``).
+FORCE_MODELS = ("power_law", "average_force")
+
+#: Spindle speeds the plant accepts, rpm: a vertical machining centre of the VA-40's class
+#: runs from a few tens of rpm to about 6000 rpm.
+SPINDLE_RPM_RANGE = (20.0, 6000.0)
+
+
+def _check(name: str, value, lo: float, hi: float, *, lo_open: bool = False) -> None:
+    """Raise ``ValueError`` naming ``name`` unless ``lo <= value <= hi`` (``lo < value``)."""
+    ok = (
+        isinstance(value, (int, float, np.floating, np.integer))
+        and not isinstance(value, bool)
+        and math.isfinite(value)
+    )
+    if ok:
+        ok = (value > lo if lo_open else value >= lo) and value <= hi
+    if not ok:
+        left = "(" if lo_open else "["
+        raise ValueError(f"{name} must be in {left}{lo}, {hi}], got {value!r}")
+
+
+@dataclass(frozen=True)
+class MillingParams:
+    """Identified parameters of the end-milling plant.
+
+    The defaults are Park & Yoon (1986, seed 000): HSS end mill, SM45C steel, power-law
+    torque. :meth:`ahn_choi_al6061` gives the average-force set of seed 002. Every field is
+    a physical constant with its unit; derived quantities (process lag in seconds, discrete
+    matrices, process gains) are computed from the fields.
+    """
+
+    # ---- tool and set-up -----------------------------------------------------------------
+    tool_diameter_mm: float = 16.0
+    """D, end-mill diameter, mm (paper §3.1: HSS, phi 16)."""
+
+    n_teeth: int = 4
+    """P (N_f in seed 002), number of teeth (paper §3.1: p = 4)."""
+
+    helix_angle_deg: float = 30.0
+    """Helix angle, degrees (paper Fig. 4: 30°). Mean torque and mean forces do not depend
+    on it; kept to describe the tool."""
+
+    axial_depth_mm: float = 32.0
+    """w, axial depth of cut, mm (paper §3.1 and Fig. 4)."""
+
+    spindle_rpm: float = 400.0
+    """N, nominal spindle speed, rpm (paper §3.1). Scenarios may scale it."""
+
+    # ---- torque law ----------------------------------------------------------------------
+    force_model: str = "power_law"
+    """``"power_law"`` (eq. 8 of seed 000) or ``"average_force"`` (eq. 1 of seed 002)."""
+
+    torque_coefficient_kgfmm: float = 118.0
+    """Ks of eq. (8), kgf·mm per (mm^l · mm^m · mm): T = Ks d^l f_t^m D with d and f_t in
+    mm. Fitted by multiple regression on the paper's central-composite cuts (§4; the text
+    calls it "K_c = 118"). In kgf·mm as published; the plant converts to N·mm."""
+
+    depth_exponent: float = 0.4236
+    """l, radial-depth exponent of eq. (8) (§4)."""
+
+    feed_exponent: float = 0.3999
+    """m, feed-per-tooth exponent of eq. (8) (§4). The feed in eq. (8) is per tooth: the
+    regression cuts were set as feed per tooth, 0.025-0.1 mm (§3.1)."""
+
+    tangential_coefficient_N_mm2: float = 3220.0
+    """Kt of the average-force model, N/mm². Used when ``force_model="average_force"``.
+    For SM45C it is not measured in either paper: chosen so that the average-force torque
+    equals eq. (8) at the centre of Park & Yoon's cut design (d = 2 mm, f_t = 0.0625 mm)."""
+
+    radial_coefficient_N_mm2: float = 1290.0
+    """Kr of the average-force model, N/mm² (SM45C: not measured; 0.4 Kt, typical of a
+    steel cut with an HSS tool of small rake)."""
+
+    axial_coefficient_N_mm2: float = 645.0
+    """Ka of the average-force model, N/mm² (SM45C: not measured; 0.2 Kt, typical of a 30°
+    helix)."""
+
+    milling_mode: str = "up"
+    """``"up"`` (phi_st = 0, phi_ex = arccos(1 - d/R)) or ``"down"`` (phi_st = arccos(d/R - 1),
+    phi_ex = pi, seed 002 eq. 5). Park & Yoon milled up (§2.4). The mean torque is the same
+    for both; the mean forces differ."""
+
+    # ---- CNC feed servo, eq. (5)-(7) -----------------------------------------------------
+    servo_gain: float = 0.02
+    """Kn, steady feed velocity per command count, mm/s per count (eq. 5; paper: 0.02 and
+    0.025)."""
+
+    servo_natural_freq_hz: float = 3.0
+    """wn of the CNC servo loop, Hz (eq. 7). Not given: the AC command reaches the axis
+    through the CNC's feed override, its cutting-feed acceleration filter (tens of ms) and
+    the position loop (gain about 30 1/s on drives of the period); together they answer
+    like a pair near 3 Hz, the order of the 2.66 Hz feed servo identified in seed 001."""
+
+    servo_damping: float = 0.7
+    """xi of the CNC servo loop (eq. 7). Not given: 0.7, the usual tuning of a position
+    loop (about 5 % overshoot)."""
+
+    # ---- process and sensor, eq. (9)-(10) ------------------------------------------------
+    process_lag_rev: float = 0.5
+    """tau of eq. (10), in spindle revolutions (tau = 60 * process_lag_rev / N s). Not
+    given ("a revolution or less"): the torque the sensor reports is the mean over a
+    revolution (tooth-passing and run-out ripple removed), and a one-revolution moving
+    mean is, to first order, a lag of half a revolution (0.075 s at 400 rpm)."""
+
+    sensor_gain: float = 0.30
+    """Ke, counts per N·mm (eq. 9). Not given: chosen so that the fixed-gain integral
+    controller at the paper's Kc = 0.2 is stable at Kn = 0.02 and unstable at Kn = 0.025 on
+    the 3 mm step, as Fig. 5 reports (larger Kn, faster but unstable as the depth grows).
+    The linearised loop puts the critical Kn at 3 mm between the two for Ke from 0.29 to
+    0.36 counts per N·mm; 0.30 is taken because the torque law's gain rises as the feed
+    falls, so an oscillation at 3 mm sustains itself a little below the linear bound: with
+    0.30 and the nominal noise, Kn = 0.025 oscillates by about 60 % of the reference and
+    Kn = 0.02 by under 8 % (``machining-bench reproduce milling``). The reference torque
+    then reads about 1100 counts: a 12-bit converter spanning about twice the reference."""
+
+    noise_std_Nmm: float = 36.0
+    """Standard deviation of white measurement noise, N·mm (1 % of the reference torque).
+    Not given; scaled by a scenario's ``noise_scale``."""
+
+    # ---- AC unit timing and limits -------------------------------------------------------
+    sample_time_s: float = 0.1
+    """Ts, sample time of the AC unit, s. Not given: 0.1 s, as for the turning AC of
+    seed 001; about two-thirds of a revolution at 400 rpm, and three samples per period of
+    the servo."""
+
+    substeps: int = 10
+    """Sub-steps per sample at which the torque law is evaluated. Chosen: h = 10 ms, under a
+    seventh of the 75 ms process lag and of the servo's 76 ms decay time 1/(xi wn); the
+    torque then stays within 0.1 % of a fine ODE solution (``tests/test_milling_plant``)."""
+
+    command_max: float = 150.0
+    """Largest command U, counts; commands are clipped to [0, command_max] (the feed does
+    not reverse). Not given: with Kn = 0.02 it is 3 mm/s = 180 mm/min, 0.11 mm per tooth at
+    400 rpm, just above the paper's largest test feed (0.1 mm per tooth)."""
+
+    torque_ref_Nmm: float = 3600.0
+    """Tr, the reference (constraint) torque, N·mm (367 kgf·mm). Not given: chosen so that
+    holding Tr at every depth of the step workpiece takes, by eq. (20), the paper's
+    machining time with AC (3.117 min, Table 1): 3613 N·mm exactly, rounded to 3600
+    (3.145 min). Observations are normalised by it."""
+
+    breakage_torque_Nmm: float = 15000.0
+    """Torque at which the tool is taken to break, N·mm (1530 kgf·mm). Not given: above the
+    ~1200 kgf·mm that the paper's own regression cuts reached without failure (3 mm,
+    0.1 mm/tooth), and about half the transverse rupture strength of HSS in bending at the
+    flutes of the 152 mm overhang. The episode terminates past it."""
+
+    def __post_init__(self) -> None:
+        _check("tool_diameter_mm", self.tool_diameter_mm, 0.0, 200.0, lo_open=True)
+        if (
+            not isinstance(self.n_teeth, (int, np.integer))
+            or isinstance(self.n_teeth, bool)
+            or not 1 <= self.n_teeth <= 50
+        ):
+            raise ValueError(f"n_teeth must be an integer in [1, 50], got {self.n_teeth!r}")
+        _check("helix_angle_deg", self.helix_angle_deg, 0.0, 80.0)
+        _check("axial_depth_mm", self.axial_depth_mm, 0.0, 500.0, lo_open=True)
+        _check("spindle_rpm", self.spindle_rpm, *SPINDLE_RPM_RANGE)
+        if self.force_model not in FORCE_MODELS:
+            raise ValueError(f"force_model must be one of {FORCE_MODELS}, got {self.force_model!r}")
+        _check("torque_coefficient_kgfmm", self.torque_coefficient_kgfmm, 0.0, 1e7, lo_open=True)
+        _check("depth_exponent", self.depth_exponent, 0.0, 2.0, lo_open=True)
+        _check("feed_exponent", self.feed_exponent, 0.0, 2.0, lo_open=True)
+        _check(
+            "tangential_coefficient_N_mm2",
+            self.tangential_coefficient_N_mm2,
+            0.0,
+            1e6,
+            lo_open=True,
+        )
+        _check("radial_coefficient_N_mm2", self.radial_coefficient_N_mm2, 0.0, 1e6)
+        _check("axial_coefficient_N_mm2", self.axial_coefficient_N_mm2, 0.0, 1e6)
+        if self.milling_mode not in ("up", "down"):
+            raise ValueError(f"milling_mode must be 'up' or 'down', got {self.milling_mode!r}")
+        _check("servo_gain", self.servo_gain, 0.0, 1e6, lo_open=True)
+        _check("servo_natural_freq_hz", self.servo_natural_freq_hz, 0.0, 1e3, lo_open=True)
+        _check("servo_damping", self.servo_damping, 0.0, 10.0, lo_open=True)
+        _check("process_lag_rev", self.process_lag_rev, 0.0, 100.0, lo_open=True)
+        _check("sensor_gain", self.sensor_gain, 0.0, 1e6, lo_open=True)
+        _check("noise_std_Nmm", self.noise_std_Nmm, 0.0, 1e6)
+        _check("sample_time_s", self.sample_time_s, 0.0, 10.0, lo_open=True)
+        if (
+            not isinstance(self.substeps, (int, np.integer))
+            or isinstance(self.substeps, bool)
+            or not 1 <= self.substeps <= 10000
+        ):
+            raise ValueError(f"substeps must be an integer in [1, 10000], got {self.substeps!r}")
+        _check("command_max", self.command_max, 0.0, 1e9, lo_open=True)
+        _check("torque_ref_Nmm", self.torque_ref_Nmm, 0.0, 1e8, lo_open=True)
+        _check("breakage_torque_Nmm", self.breakage_torque_Nmm, 0.0, 1e9, lo_open=True)
+
+    # ---- parameter sets ------------------------------------------------------------------
+    @classmethod
+    def park_yoon_1986(cls) -> MillingParams:
+        """Park & Yoon (1986): HSS 16 mm 4-tooth end mill, SM45C, 400 rpm (the defaults)."""
+        return cls()
+
+    @classmethod
+    def ahn_choi_al6061(cls) -> MillingParams:
+        """Ahn & Choi (seed 002): 12 mm 2-flute carbide flat end mill, Al6061, 1000 rpm.
+
+        Average-force model with down-milling immersion (their eq. 5). The paper reports
+        only the fitted [C] matrix, not Kt, Kr, Ka: Kt = 700 N/mm² sits in the middle of
+        the 0.4-1.1 J/mm³ specific cutting energy tabulated for aluminium alloys; Kr and
+        Ka are 0.3 and 0.2 of it, usual for a sharp positive-rake (11°), 42° helix
+        carbide tool. The reference torque is the model's torque at the centre of their
+        cut design (f_t = 0.05 mm, a = 10 mm) at 2 mm radial depth; the sensor gain maps
+        it to the same ~1200 counts as the SM45C set (a range matched to the cut).
+        """
+        kt = 700.0
+        ref = 2 * kt * 10.0 * 0.05 * 2.0 / (2 * math.pi)
+        return cls(
+            tool_diameter_mm=12.0,
+            n_teeth=2,
+            helix_angle_deg=42.0,
+            axial_depth_mm=10.0,
+            spindle_rpm=1000.0,
+            force_model="average_force",
+            tangential_coefficient_N_mm2=kt,
+            radial_coefficient_N_mm2=0.3 * kt,
+            axial_coefficient_N_mm2=0.2 * kt,
+            milling_mode="down",
+            sensor_gain=round(1200.0 / ref, 2),
+            noise_std_Nmm=round(0.01 * ref, 2),
+            torque_ref_Nmm=round(ref, 1),
+            breakage_torque_Nmm=round(4.0 * ref, 0),
+        )
+
+    def replace(self, **changes) -> MillingParams:
+        """A copy with fields changed; unknown names raise ``TypeError``."""
+        return dataclasses.replace(self, **changes)
+
+    # ---- derived quantities (never stored) -----------------------------------------------
+    @property
+    def tool_radius_mm(self) -> float:
+        return 0.5 * self.tool_diameter_mm
+
+    @property
+    def servo_natural_freq_rad_s(self) -> float:
+        return 2.0 * math.pi * self.servo_natural_freq_hz
+
+    def process_lag_s(self, spindle_rpm: float | None = None) -> float:
+        """tau of eq. (10) in seconds at ``spindle_rpm`` (default: the nominal speed)."""
+        n = self.spindle_rpm if spindle_rpm is None else spindle_rpm
+        return 60.0 * self.process_lag_rev / n
+
+    @property
+    def max_feed_velocity_mm_s(self) -> float:
+        """Steady feed velocity at ``command_max``, mm/s (eq. 5)."""
+        return self.servo_gain * self.command_max
+
+    def torque_gain(self, depth_mm) -> np.ndarray:
+        """``c(d)`` with steady torque ``T = c(d) f_t^e`` in N·mm (f_t in mm per tooth).
+
+        Power law: ``c = Ks D d^l`` (kgf·mm converted), ``e = m``; average force:
+        ``c = N_f K_t a d / (2 pi)``, ``e = 1``.
+        """
+        d = np.asarray(depth_mm, dtype=np.float64)
+        if self.force_model == "power_law":
+            return (
+                KGF * self.torque_coefficient_kgfmm * self.tool_diameter_mm * d**self.depth_exponent
+            )
+        return (
+            self.n_teeth
+            * self.tangential_coefficient_N_mm2
+            * self.axial_depth_mm
+            * d
+            / (2.0 * math.pi)
+        )
+
+    @property
+    def torque_feed_exponent(self) -> float:
+        """Exponent of the feed per tooth in the active torque law (m, or 1)."""
+        return self.feed_exponent if self.force_model == "power_law" else 1.0
+
+    def steady_torque_Nmm(self, depth_mm, feed_per_tooth_mm) -> np.ndarray:
+        """Torque of the active law at steady feed, N·mm (eq. 8 or seed 002 eq. 1)."""
+        f = np.maximum(np.asarray(feed_per_tooth_mm, dtype=np.float64), 0.0)
+        return self.torque_gain(depth_mm) * f**self.torque_feed_exponent
+
+    def feed_per_tooth_for_torque(self, torque_Nmm, depth_mm) -> np.ndarray:
+        """Feed per tooth (mm) at which the active law gives ``torque_Nmm`` at ``depth_mm``."""
+        return (np.asarray(torque_Nmm, dtype=np.float64) / self.torque_gain(depth_mm)) ** (
+            1.0 / self.torque_feed_exponent
+        )
+
+    def feed_velocity_for_feed(self, feed_per_tooth_mm, spindle_rpm=None) -> np.ndarray:
+        """Feed velocity Vf (mm/s) of a feed per tooth: ``Vf = f_t P N / 60`` (eq. 6)."""
+        n = self.spindle_rpm if spindle_rpm is None else spindle_rpm
+        return np.asarray(feed_per_tooth_mm, dtype=np.float64) * self.n_teeth * n / 60.0
+
+    def command_for_torque(self, torque_Nmm, depth_mm, spindle_rpm=None) -> np.ndarray:
+        """Steady command U (counts) at which the nominal plant gives ``torque_Nmm``."""
+        ft = self.feed_per_tooth_for_torque(torque_Nmm, depth_mm)
+        return self.feed_velocity_for_feed(ft, spindle_rpm) / self.servo_gain
+
+    def process_gain(self, depth_mm, torque_Nmm=None, spindle_rpm=None) -> np.ndarray:
+        r"""Steady ratio ``Kp = Tc / U`` at the feed that gives ``torque_Nmm`` (counts/count).
+
+        The gain the variable-gain estimator of eq. (12)-(15) tracks (``Km -> Kp``).
+        Through eq. (5)-(9), ``Tc = K_e c(d) (60 K_n U / (N P))^e``, so
+
+        .. math:: K_p = \frac{T_c}{U} = \frac{K_e\,T_r}{U_r}
+
+        with ``U_r`` the command that gives the reference torque ``T_r``. The loop's
+        incremental gain ``dTc/dU`` is ``e`` times it (``e = m`` for the power law).
+        """
+        t = self.torque_ref_Nmm if torque_Nmm is None else torque_Nmm
+        return (
+            self.sensor_gain
+            * np.asarray(t, dtype=np.float64)
+            / self.command_for_torque(t, depth_mm, spindle_rpm)
+        )
+
+    def open_loop_tf(self, spindle_rpm: float | None = None) -> tuple[list[float], list[float]]:
+        r"""Unit-gain linear dynamics from command to torque, ``wn^2 / ((s^2 + 2 xi wn s + wn^2)(tau s + 1))``."""
+        wn = self.servo_natural_freq_rad_s
+        tau = self.process_lag_s(spindle_rpm)
+        den = np.polymul([1.0, 2.0 * self.servo_damping * wn, wn**2], [tau, 1.0])
+        return [wn**2], list(den)
+
+    def discrete_open_loop(self, spindle_rpm: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """ZOH discretisation of :meth:`open_loop_tf` at ``sample_time_s``, in powers of z^-1."""
+        num, den = self.open_loop_tf(spindle_rpm)
+        return zoh_tf(num, den, self.sample_time_s)
+
+
+# ---- average cutting-force model (seed 002) ----------------------------------------------
+def immersion_angles(radial_depth_mm, tool_radius_mm: float, mode: str = "down"):
+    """Start and exit angles (rad) of a flat end mill's cut, measured from the +y axis.
+
+    ``"down"``: ``phi_st = arccos(d/R - 1)``, ``phi_ex = pi`` (seed 002 eq. 5);
+    ``"up"``: ``phi_st = 0``, ``phi_ex = arccos(1 - d/R)``. Radial depths outside
+    ``[0, 2R]`` raise ``ValueError``.
+    """
+    d = np.asarray(radial_depth_mm, dtype=np.float64)
+    if not (tool_radius_mm > 0 and np.all(np.isfinite(d))):
+        raise ValueError(
+            f"tool_radius_mm must be > 0 and radial depths finite, got {tool_radius_mm!r}"
+        )
+    if np.any(d < 0) or np.any(d > 2.0 * tool_radius_mm):
+        raise ValueError(
+            f"radial_depth_mm must lie in [0, {2.0 * tool_radius_mm:g}] (the tool diameter), "
+            f"got {radial_depth_mm!r}"
+        )
+    r = d / tool_radius_mm
+    if mode == "down":
+        return np.arccos(np.clip(r - 1.0, -1.0, 1.0)), np.full_like(r, math.pi)
+    if mode == "up":
+        return np.zeros_like(r), np.arccos(np.clip(1.0 - r, -1.0, 1.0))
+    raise ValueError(f"mode must be 'up' or 'down', got {mode!r}")
+
+
+def mean_forces(
+    radial_depth_mm,
+    axial_depth_mm,
+    feed_per_tooth_mm,
+    *,
+    kt: float,
+    kr: float,
+    ka: float,
+    n_flutes: int,
+    tool_radius_mm: float,
+    mode: str = "down",
+) -> np.ndarray:
+    r"""Mean cutting forces ``[Fx, Fy, Fz]`` (N) of a flat end mill (seed 002 eq. 1-4).
+
+    .. math::
+
+        \bar F_x &= \Big\{\frac{N_f a f_t}{8\pi}\big[K_t\cos 2\phi - K_r(2\phi - \sin 2\phi)\big]\Big\}_{\phi_{st}}^{\phi_{ex}} \\
+        \bar F_y &= \Big\{\frac{N_f a f_t}{8\pi}\big[K_t(2\phi - \sin 2\phi) + K_r\cos 2\phi\big]\Big\}_{\phi_{st}}^{\phi_{ex}} \\
+        \bar F_z &= \Big\{\frac{N_f a f_t}{2\pi}\,K_a\cos\phi\Big\}_{\phi_{st}}^{\phi_{ex}}
+
+    (the OCR of seed 002 swaps Kt and Kr in ``F_x``; this is Altintas' form). The sign of
+    ``F_z`` follows seed 002's own eq. (3)-(4), ``F_z = N a f_t C_3 K_a / (8 pi)`` with
+    ``C_3 = 4 (cos phi_ex - cos phi_st)``, and its measurements (the fitted [C] gives
+    ``F_z < 0`` for every cut): the axial force on the workpiece points along ``-z``. (The
+    OCR of eq. 1 carries a minus sign before ``K_a``, which would flip it.) Inputs
+    broadcast; the result has a trailing axis of length 3.
+    """
+    st, ex = immersion_angles(radial_depth_mm, tool_radius_mm, mode)
+    a = np.asarray(axial_depth_mm, dtype=np.float64)
+    ft = np.asarray(feed_per_tooth_mm, dtype=np.float64)
+    k = n_flutes * a * ft / (8.0 * math.pi)
+    c1 = np.cos(2 * ex) - np.cos(2 * st)
+    c2 = 2 * (ex - st) - (np.sin(2 * ex) - np.sin(2 * st))
+    c3 = np.cos(ex) - np.cos(st)
+    fx = k * (kt * c1 - kr * c2)
+    fy = k * (kt * c2 + kr * c1)
+    fz = 4.0 * k * ka * c3
+    return np.stack(np.broadcast_arrays(fx, fy, fz), axis=-1)
+
+
+def mean_torque_average_force(
+    radial_depth_mm, axial_depth_mm, feed_per_tooth_mm, *, kt: float, n_flutes: int
+) -> np.ndarray:
+    """Mean torque (N·mm) of the average-force model: ``N_f K_t a f_t d_r / (2 pi)``."""
+    return (
+        n_flutes
+        * kt
+        * np.asarray(axial_depth_mm, dtype=np.float64)
+        * np.asarray(feed_per_tooth_mm, dtype=np.float64)
+        * np.asarray(radial_depth_mm, dtype=np.float64)
+        / (2.0 * math.pi)
+    )
+
+
+# ---- discrete-time machinery -------------------------------------------------------------
+class _ServoKey(NamedTuple):
+    """The fields the servo's discretisation depends on (not the spindle or torque law)."""
+
+    servo_gain: float
+    wn: float
+    damping: float
+    sample_time_s: float
+    substeps: int
+
+    @classmethod
+    def of(cls, p: MillingParams) -> _ServoKey:
+        return cls(
+            p.servo_gain, p.servo_natural_freq_rad_s, p.servo_damping, p.sample_time_s, p.substeps
+        )
+
+
+@functools.lru_cache(maxsize=64)
+def _servo_matrix(key: _ServoKey) -> np.ndarray:
+    """``big @ [Vf, dVf/dt, x, U]``: the feed velocity at the M sub-step points, the position
+    at the M sub-step points and the next state (3 rows), all exact (ZOH)."""
+    m = key.substeps
+    h = key.sample_time_s / m
+    wn, z = key.wn, key.damping
+    a = np.array([[0.0, 1.0, 0.0], [-(wn**2), -2.0 * z * wn, 0.0], [1.0, 0.0, 0.0]])
+    b = np.array([[0.0], [key.servo_gain * wn**2], [0.0]])
+    phi_h, gam_h = zoh(a, b, h)
+    big = np.zeros((2 * m + 3, 4))
+    phi, gam = np.eye(3), np.zeros(3)
+    for j in range(m):
+        phi = phi_h @ phi
+        gam = phi_h @ gam + gam_h[:, 0]
+        big[j, :3], big[j, 3] = phi[0], gam[0]
+        big[m + j, :3], big[m + j, 3] = phi[2], gam[2]
+    big[2 * m :, :3], big[2 * m :, 3] = phi, gam
+    return big
+
+
+@functools.lru_cache(maxsize=256)
+def _lag_matrix(substeps: int, h: float, lag_s: float) -> np.ndarray:
+    """``lag @ [T_0, u_0, ..., u_M]``: the lagged torque at the M sub-step points for a static
+    torque ``u`` linear between sub-step points (exact first-order hold of eq. 10)."""
+    m = substeps
+    r = h / lag_s
+    alpha = math.exp(-r)
+    if r < 1e-6:  # series, to avoid cancellation
+        b1 = b0 = 0.5 * r
+    else:
+        b1 = 1.0 - (1.0 - alpha) / r
+        b0 = (1.0 - alpha) / r - alpha
+    lag = np.zeros((m, m + 2))
+    row = np.zeros(m + 2)
+    row[0] = 1.0  # T_0
+    for j in range(m):
+        row = alpha * row
+        row[1 + j] += b0
+        row[2 + j] += b1
+        lag[j] = row
+    return lag
+
+
+@dataclass(slots=True)
+class MillingStep:
+    """Signals of one sample period, at its end (the sample instant) unless stated."""
+
+    torque_Nmm: float
+    """Cutting torque (after the process lag) at the sample instant, N·mm."""
+    peak_torque_Nmm: float
+    """Largest cutting torque over the period's sub-steps, N·mm."""
+    measured_counts: float
+    """Sensor output Tc = Ke T + noise, counts (eq. 9)."""
+    feed_velocity_mm_s: float
+    """Feed velocity Vf at the sample instant, mm/s."""
+    feed_mm_per_rev: float
+    """Feed per revolution 60 Vf / N at the sample instant, mm/rev (eq. 6)."""
+    mean_feed_mm_per_rev: float
+    """Mean feed per revolution over the period, mm/rev: distance fed / revolutions turned."""
+    position_mm: float
+    """Distance fed along the workpiece since the start, mm."""
+    depth_mm: float
+    """Radial depth of cut at the sample instant, mm (0 outside the workpiece)."""
+    segment: int
+    """Index of the workpiece segment the tool is in (``DepthProfile`` segment)."""
+    finish_time_s: float | None = None
+    """Time at which ``position_mm`` first reached the workpiece length, if in this period
+    (linear between sub-step points)."""
+
+
+class MillingPlant:
+    """Simulates one cut at a constant spindle speed; numpy only.
+
+    Parameters
+    ----------
+    params : MillingParams
+        The plant's true parameters for this cut.
+    spindle_rpm : float
+        Spindle speed N, rpm, held for the whole cut.
+    profile : DepthProfile
+        Radial depth of cut along the workpiece; zero outside it. Reaching its length
+        finishes the cut.
+    """
+
+    def __init__(self, params: MillingParams, spindle_rpm: float, profile) -> None:
+        _check("spindle_rpm", spindle_rpm, *SPINDLE_RPM_RANGE)
+        if profile.max_depth_mm > params.tool_diameter_mm:
+            raise ValueError(
+                f"radial depth of the workpiece must be at most the tool diameter "
+                f"{params.tool_diameter_mm:g} mm, got {profile.max_depth_mm:g} mm"
+            )
+        self.params = params
+        self.spindle_rpm = float(spindle_rpm)
+        self.profile = profile
+        self.length_mm = profile.length_mm
+        self._h = params.sample_time_s / params.substeps
+        self._big = _servo_matrix(_ServoKey.of(params))
+        self._lag = _lag_matrix(params.substeps, self._h, params.process_lag_s(self.spindle_rpm))
+        self._ft_per_vf = 60.0 / (self.spindle_rpm * params.n_teeth)
+        self._rev_per_s = self.spindle_rpm / 60.0
+        self._exp = params.torque_feed_exponent
+        self._power = params.force_model == "power_law"
+        if self._power:
+            self._c = KGF * params.torque_coefficient_kgfmm * params.tool_diameter_mm
+            self._l = params.depth_exponent
+        else:
+            self._c = params.torque_gain(1.0).item()
+            self._l = 1.0
+        edges = np.asarray(profile.edges_mm, dtype=np.float64)
+        self._edges = edges
+        self._edge_list = [float(v) for v in edges]
+        self._d0_list = [float(v) for v in profile.start_depths_mm]
+        self._slope_list = [
+            (float(e1) - float(d0)) / (b - a)
+            for d0, e1, a, b in zip(
+                profile.start_depths_mm,
+                profile.end_depths_mm,
+                self._edge_list[:-1],
+                self._edge_list[1:],
+                strict=True,
+            )
+        ]
+        self.reset()
+
+    def reset(self) -> None:
+        """Tool at rest at the workpiece's start: no feed, no torque."""
+        self.t_s = 0.0
+        self.z = np.zeros(4)  # [Vf, dVf/dt, x, U]
+        self._buf = np.zeros(self._lag.shape[1])  # [T_0, u_0, u_1..u_M]
+        self.finished = False
+        self._seg = 0
+
+    @property
+    def state(self) -> np.ndarray:
+        """``[Vf (mm/s), dVf/dt (mm/s^2), position (mm), torque (N·mm)]`` now."""
+        return np.array([self.z[0], self.z[1], self.z[2], self._buf[0]])
+
+    def _depth(self, x: np.ndarray) -> tuple[np.ndarray | float, float]:
+        """Depth at the sub-step positions (a float when constant) and at the last one."""
+        e = self._edge_list
+        i = self._seg
+        if e[i] <= float(x.min()) and float(x.max()) < e[i + 1]:  # all in the current segment
+            slope = self._slope_list[i]
+            if slope == 0.0:
+                return self._d0_list[i], self._d0_list[i]
+            d = (x - e[i]) * slope + self._d0_list[i]
+            return d, float(d[-1])
+        d = self.profile(x)
+        self._seg = min(
+            max(int(np.searchsorted(self._edges, float(x[-1]), side="right")) - 1, 0), len(e) - 2
+        )
+        return d, float(d[-1])
+
+    def step(self, command: float, noise_counts: float = 0.0) -> MillingStep:
+        """Hold ``command`` (counts; clipped to [0, command_max]) for one sample and advance."""
+        prm = self.params
+        m = prm.substeps
+        z = self.z
+        z[3] = min(max(command, 0.0), prm.command_max)
+        y = self._big @ z
+        x = y[m : 2 * m]
+        p_start = float(z[2])
+        p_end = float(x[-1])
+        buf = self._buf
+        u = buf[2:]  # static torque at the M sub-step points (a view)
+        np.maximum(y[:m], 0.0, out=u)
+        u *= self._ft_per_vf
+        np.power(u, self._exp, out=u)
+        depth, depth_end = self._depth(x)
+        if self._power:
+            if isinstance(depth, float):
+                u *= self._c * depth**self._l
+            else:
+                u *= self._c * np.power(depth, self._l)
+        else:
+            u *= self._c * depth
+        torques = self._lag @ buf
+        t_end = float(torques[-1])
+        peak = float(torques.max())
+        buf[0] = t_end
+        buf[1] = buf[-1]
+        z[:3] = y[2 * m :]
+        measured = prm.sensor_gain * t_end + noise_counts
+
+        finish = None
+        if not self.finished and p_end >= self.length_mm:
+            j = int(np.argmax(x >= self.length_mm))
+            x_prev = float(x[j - 1]) if j > 0 else p_start
+            frac = (self.length_mm - x_prev) / (float(x[j]) - x_prev) if x[j] > x_prev else 1.0
+            finish = self.t_s + (j + min(max(frac, 0.0), 1.0)) * self._h
+            self.finished = True
+        dt = prm.sample_time_s
+        self.t_s += dt
+        vf = float(z[0])
+        return MillingStep(
+            t_end,
+            peak,
+            measured,
+            vf,
+            vf * 60.0 / self.spindle_rpm,
+            (p_end - p_start) / (self._rev_per_s * dt),
+            p_end,
+            depth_end,
+            self._seg,
+            finish,
+        )

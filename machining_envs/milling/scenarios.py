@@ -1,0 +1,237 @@
+"""Named end-milling scenarios: Park & Yoon's workpieces, a training and a held-out set.
+
+A scenario fixes what changes from one cut to the next and what a controller cannot see:
+the workpiece's radial-depth profile, the spindle speed and reference torque (as multiples
+of the nominal ones in ``MillingParams``) and the true process constants (as multiples of
+the nominal torque coefficient and feed exponent). Pass a name or a scenario object to
+``env.reset(options={"scenario": ...})``.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from machining_envs.core.workpieces import DepthProfile
+from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams
+
+__all__ = [
+    "MillingScenario",
+    "MILLING_SCENARIOS",
+    "milling_scenario",
+    "PAPER_LENGTH_MM",
+    "PAPER_STEP_DEPTHS_MM",
+    "PAPER_TAPER_DEPTHS_MM",
+    "PAPER_CONSTANT_FEED_MM_MIN",
+    "paper_step_profile",
+    "paper_taper_profile",
+    "cut_area_mm2",
+    "CutArea",
+]
+
+#: Workpiece length L, mm (Park & Yoon §4: L = 40, cut in 200 samples).
+PAPER_LENGTH_MM = 40.0
+#: Radial depths of the step workpiece, three equal steps, mm (Fig. 4a).
+PAPER_STEP_DEPTHS_MM = (1.0, 2.0, 3.0)
+#: Radial depth of the taper workpiece at its start and end, mm (Fig. 4b: rising linearly to
+#: the step's 3 mm). Table 1's metal removal rates imply a mean depth of 1.5 mm, i.e. a
+#: taper from 0 (MRR = (L / T_m) w mean(d) with w = 32 mm).
+PAPER_TAPER_DEPTHS_MM = (0.0, 3.0)
+#: The constant feed velocities, mm/min, that Table 1's "without AC" rows imply through
+#: eq. (20): L / T_m = 40 mm / 11.797 min (step) and 40 mm / 15.914 min (taper). The paper
+#: does not say how they were chosen.
+PAPER_CONSTANT_FEED_MM_MIN = {"paper_step": 40.0 / 11.797, "paper_taper": 40.0 / 15.914}
+
+
+def _in_range(name: str, value, lo: float, hi: float) -> None:
+    if not (
+        isinstance(value, (int, float, np.integer, np.floating))
+        and not isinstance(value, bool)
+        and math.isfinite(value)
+        and lo <= value <= hi
+    ):
+        raise ValueError(f"{name} must be in [{lo}, {hi}], got {value!r}")
+
+
+@dataclass(frozen=True)
+class MillingScenario:
+    """One end-milling cut: workpiece, spindle speed, reference and the hidden process truth.
+
+    Parameters
+    ----------
+    name : str
+    profile : DepthProfile
+        Radial depth of cut along the workpiece; its length is the cut's length.
+    spindle_scale : float
+        Spindle speed as a multiple of the nominal ``MillingParams.spindle_rpm`` (0.25 to 4).
+    torque_ref_scale : float
+        Reference torque as a multiple of the nominal ``MillingParams.torque_ref_Nmm``
+        (0.25 to 4).
+    torque_coefficient_scale : float
+        True Ks (power law) or Kt (average force) as a multiple of the nominal (0.5 to 2):
+        the material, tool or wear differ from what the controller was designed for.
+    feed_exponent_scale : float
+        True feed exponent m as a multiple of the nominal (0.5 to 2; power law only).
+    noise_scale : float
+        Multiple of the nominal sensor noise (0 to 10).
+    """
+
+    name: str
+    profile: DepthProfile
+    spindle_scale: float = 1.0
+    torque_ref_scale: float = 1.0
+    torque_coefficient_scale: float = 1.0
+    feed_exponent_scale: float = 1.0
+    noise_scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.profile, DepthProfile):
+            raise ValueError(f"profile must be a DepthProfile, got {type(self.profile).__name__}")
+        _in_range("spindle_scale", self.spindle_scale, 0.25, 4.0)
+        _in_range("torque_ref_scale", self.torque_ref_scale, 0.25, 4.0)
+        _in_range("torque_coefficient_scale", self.torque_coefficient_scale, 0.5, 2.0)
+        _in_range("feed_exponent_scale", self.feed_exponent_scale, 0.5, 2.0)
+        _in_range("noise_scale", self.noise_scale, 0.0, 10.0)
+
+    def spindle_rpm(self, nominal: MillingParams) -> float:
+        """Spindle speed of this cut, rpm (``ValueError`` outside ``SPINDLE_RPM_RANGE``)."""
+        rpm = float(nominal.spindle_rpm * self.spindle_scale)
+        lo, hi = SPINDLE_RPM_RANGE
+        if not lo <= rpm <= hi:
+            raise ValueError(
+                f"spindle_scale {self.spindle_scale} gives {rpm:g} rpm, outside the "
+                f"spindle_rpm range [{lo}, {hi}]"
+            )
+        return rpm
+
+    def torque_ref_Nmm(self, nominal: MillingParams) -> float:
+        """Reference torque of this cut, N·mm."""
+        return float(nominal.torque_ref_Nmm * self.torque_ref_scale)
+
+    def true_params(self, nominal: MillingParams) -> MillingParams:
+        """The plant parameters this cut really has (hidden from controllers)."""
+        return nominal.replace(
+            torque_coefficient_kgfmm=nominal.torque_coefficient_kgfmm
+            * self.torque_coefficient_scale,
+            tangential_coefficient_N_mm2=nominal.tangential_coefficient_N_mm2
+            * self.torque_coefficient_scale,
+            feed_exponent=nominal.feed_exponent * self.feed_exponent_scale,
+            noise_std_Nmm=nominal.noise_std_Nmm * self.noise_scale,
+        )
+
+
+def paper_step_profile() -> DepthProfile:
+    """Park & Yoon's step workpiece (Fig. 4a): 1, 2, 3 mm over three thirds of 40 mm."""
+    return DepthProfile.steps(
+        PAPER_STEP_DEPTHS_MM, PAPER_LENGTH_MM / len(PAPER_STEP_DEPTHS_MM), name="step 1-2-3 mm"
+    )
+
+
+def paper_taper_profile() -> DepthProfile:
+    """Park & Yoon's taper workpiece (Fig. 4b): 0 to 3 mm linearly over 40 mm."""
+    lo, hi = PAPER_TAPER_DEPTHS_MM
+    return DepthProfile.taper(lo, hi, PAPER_LENGTH_MM, name="taper 0-3 mm")
+
+
+class CutArea:
+    """Area under a radial-depth profile from 0 to ``x`` (clipped to the workpiece), mm².
+
+    Times the axial depth it is the volume removed when the tool has reached ``x``. Exact
+    for the piecewise-linear profile (trapezoids between its edges); the areas up to each
+    edge are summed once, so a call costs one bisection.
+    """
+
+    def __init__(self, profile: DepthProfile):
+        self.edges = [float(v) for v in profile.edges_mm]
+        self.d0 = [float(v) for v in profile.start_depths_mm]
+        self.slope = [
+            (float(d1) - float(d0)) / (b - a)
+            for d0, d1, a, b in zip(
+                profile.start_depths_mm,
+                profile.end_depths_mm,
+                self.edges[:-1],
+                self.edges[1:],
+                strict=True,
+            )
+        ]
+        acc = [0.0]
+        for i in range(len(self.d0)):
+            w = self.edges[i + 1] - self.edges[i]
+            acc.append(acc[-1] + w * (self.d0[i] + 0.5 * self.slope[i] * w))
+        self.cumulative = acc
+
+    @property
+    def total(self) -> float:
+        return self.cumulative[-1]
+
+    def __call__(self, x_mm: float) -> float:
+        e = self.edges
+        if x_mm <= 0.0:
+            return 0.0
+        if x_mm >= e[-1]:
+            return self.cumulative[-1]
+        i = bisect.bisect_right(e, x_mm) - 1
+        w = x_mm - e[i]
+        return self.cumulative[i] + w * (self.d0[i] + 0.5 * self.slope[i] * w)
+
+
+def cut_area_mm2(profile: DepthProfile, x_mm: float) -> float:
+    """Area under the radial-depth profile from 0 to ``x_mm``, mm² (see :class:`CutArea`)."""
+    return CutArea(profile)(float(x_mm))
+
+
+def _fixed(name: str, profile: Callable[[], DepthProfile]):
+    def make(rng: np.random.Generator) -> MillingScenario:
+        return MillingScenario(name, profile())
+
+    return make
+
+
+def _random(
+    name: str,
+    depth: tuple[float, float],
+    segments: tuple[int, int],
+    spindle: tuple[float, float],
+    ref: tuple[float, float],
+    truth: float,
+):
+    def make(rng: np.random.Generator) -> MillingScenario:
+        prof = DepthProfile.random(rng, depth, segments, (5.0, 12.0), 0.3, name=f"{name} profile")
+        sp = float(np.exp(rng.uniform(np.log(spindle[0]), np.log(spindle[1]))))
+        tr = float(np.exp(rng.uniform(np.log(ref[0]), np.log(ref[1]))))
+        ks, m = rng.uniform(1.0 - truth, 1.0 + truth, size=2)
+        noise = rng.uniform(0.5, 2.0)
+        return MillingScenario(name, prof, sp, tr, float(ks), float(m), float(noise))
+
+    return make
+
+
+#: name -> factory drawing a scenario from the env's generator.
+#:
+#: - ``paper_step``, ``paper_taper``: Park & Yoon's workpieces (Fig. 4) at the nominal
+#:   400 rpm and reference, exact nominal process.
+#: - ``train``: 2-5 random plateaus and tapers of 0.5-3 mm radial depth, 5-12 mm each;
+#:   spindle 0.8-1.25x nominal, reference 0.8-1.25x, Ks and m within +-20 %, noise 0.5-2x.
+#: - ``test`` (held out): wider, 0.4-3.5 mm, 2-6 segments, spindle 0.7-1.4x, reference
+#:   0.7-1.4x, Ks and m within +-25 %, so a policy is judged partly outside what it trained on.
+MILLING_SCENARIOS: dict[str, Callable[[np.random.Generator], MillingScenario]] = {
+    "paper_step": _fixed("paper_step", paper_step_profile),
+    "paper_taper": _fixed("paper_taper", paper_taper_profile),
+    "train": _random("train", (0.5, 3.0), (2, 5), (0.8, 1.25), (0.8, 1.25), 0.2),
+    "test": _random("test", (0.4, 3.5), (2, 6), (0.7, 1.4), (0.7, 1.4), 0.25),
+}
+
+
+def milling_scenario(spec, rng: np.random.Generator) -> MillingScenario:
+    """Resolve a scenario name or object; unknown names raise ``ValueError``."""
+    if isinstance(spec, MillingScenario):
+        return spec
+    if isinstance(spec, str) and spec in MILLING_SCENARIOS:
+        return MILLING_SCENARIOS[spec](rng)
+    raise ValueError(
+        f"scenario must be a MillingScenario or one of {sorted(MILLING_SCENARIOS)}, got {spec!r}"
+    )

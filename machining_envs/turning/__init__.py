@@ -1,0 +1,16 @@
+"""Turning: hold the cutting force by the feed (Noh, Kim & Kim 1992).
+
+``plant`` (feed servo, force law, sensor), ``scenarios`` (stepped and tapered bars, the
+train/test distributions), ``metrics`` (the task: metrics and primary score), ``env``
+(``Turning-v0``).
+"""
+
+from machining_envs.turning.env import TurningEnv, TurningReward
+from machining_envs.turning.plant import TurningParams, TurningPlant
+from machining_envs.turning.scenarios import TURNING_SCENARIOS, TurningScenario
+
+__all__ = ["TurningEnv", "TurningReward", "TurningParams", "TurningPlant", "TurningScenario"]
+__all__ += ["TURNING_SCENARIOS", "ENTRY_POINTS"]
+
+#: The env ids of this process and their entry points (registered by ``machining_envs``).
+ENTRY_POINTS = {"machining_envs/Turning-v0": "machining_envs.turning.env:TurningEnv"}

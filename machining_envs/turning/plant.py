@@ -1,0 +1,490 @@
+r"""Turning plant of Noh, Kim & Kim (1992): feed servo, feed per revolution, force, sensor.
+
+The chain of their Fig. 1, from the controller's command ``U`` to the measured force ``Fc``:
+
+.. math::
+
+    V_s(s) &= \frac{K_s \omega_n^2}{s^2 + 2\zeta\omega_n s + \omega_n^2} U(s)
+        \quad &\text{(eq. 1, feed servo)} \\
+    V_f &= K_m V_s \quad &\text{(eq. 2, gear train, mm/s)} \\
+    f(t) &= \int_{t-T}^{t} V_f(z)\,dz,\quad T = 60/n \quad &\text{(eq. 4, feed per rev)} \\
+    F &= K_f f^{p} a \quad &\text{(eq. 8, cutting force, N)} \\
+    F_c &= K_e \, \mathrm{LPF}_{10\,Hz}(F) \quad &\text{(eq. 10, sensor, counts)}
+
+The moving integral of eq. (4) is simulated exactly, not through the Padé form of eq. (7):
+the servo and the running integral ``I(t) = \int_0^t V_f`` form one linear system driven by
+the held command, discretised exactly on a sub-step grid ``h = Ts / substeps``; the value
+``I(t - T)`` between grid points comes from the exact transition over the fractional offset.
+Only the force law and the sensor filter input are evaluated on the sub-step grid.
+
+This module imports numpy and scipy only; it knows nothing of gymnasium.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
+
+__all__ = ["TurningParams", "TurningPlant", "TurningStep", "SPINDLE_RPM_RANGE"]
+
+#: Spindle speeds the plant accepts, rpm. A conventional lathe of the paper's size (2.2 kW
+#: spindle) runs from a few tens to a few thousand rpm; outside this the moving-integral
+#: history (T = 60/n) or the 10 Hz sensor filter would no longer describe the machine.
+SPINDLE_RPM_RANGE = (50.0, 3000.0)
+
+
+def _check(name: str, value, lo: float, hi: float, *, lo_open: bool = False) -> None:
+    """Raise ``ValueError`` naming ``name`` unless ``lo <= value <= hi`` (``lo < value``)."""
+    ok = isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(value)
+    if ok:
+        ok = (value > lo if lo_open else value >= lo) and value <= hi
+    if not ok:
+        left = "(" if lo_open else "["
+        raise ValueError(f"{name} must be in {left}{lo}, {hi}], got {value!r}")
+
+
+@dataclass(frozen=True)
+class TurningParams:
+    """Identified parameters of the turning plant (Noh, Kim & Kim 1992, seed 001).
+
+    Every field is a physical constant with its unit; derived quantities (rad/s, the
+    process gain ``Kp`` of eq. 11, discrete matrices) are computed from the fields.
+    """
+
+    servo_gain: float = 0.66
+    """Ks, servo gain from command counts to feed-rod speed, eq. (1); Fig. 2 Bode fit.
+    (The OCR'd text calls it "K_f = 0.66"; it is the servo gain.)"""
+
+    servo_natural_freq_hz: float = 2.66
+    """wn of the feed servo, Hz, eq. (1); Fig. 2 (2.66 Hz = 16.71 rad/s)."""
+
+    servo_damping: float = 0.43
+    """zeta of the feed servo, eq. (1); Fig. 2."""
+
+    gear_ratio: float = 0.0021414
+    """Km, gear train from feed-rod speed to tool feed velocity, eq. (2)."""
+
+    force_coefficient: float = 1822.0
+    """Kf, N per (mm/rev)^p per mm of depth, eq. (8); log-linear least squares, Fig. 3."""
+
+    feed_exponent: float = 0.7525
+    """p, feed exponent of the force law, eq. (8); Fig. 3."""
+
+    sensor_gain: float = 17.0
+    """Ke, ADC counts per newton, eq. (10). Not given in the paper: calibrated here as one
+    value for which the simulation shows all five behaviours of Fig. 8-15 under the criteria
+    of ``agents.bench.turning`` (unstable: breakage or oscillation over 10 % of Fr; slow: first
+    entry into the 5 % band later than 3 s after the start). On the 15 mm-per-step bar the
+    strict reading ("Kh = 0.04 unstable from 2 mm on") holds for Ke from 17 to 19 counts/N;
+    17 is taken. ``machining-bench reproduce turning --sensor-gain K`` explores others."""
+
+    sensor_cutoff_hz: float = 10.0
+    """Cut-off of the dynamometer amplifier's low-pass filter, Hz (paper §4.1)."""
+
+    sensor_filter_order: int = 2
+    """Order of that filter. Not given: 2 (Butterworth, -12 dB/oct) is the usual filter of a
+    strain amplifier such as the Kyowa DPM-310B the paper used."""
+
+    sample_time_s: float = 0.1
+    """Ts, controller sample time, s (paper §4.1: above the algorithm's run time, below the
+    0.188 s the servo's natural frequency allows)."""
+
+    substeps: int = 50
+    """Sub-steps per sample on which force and filter input are evaluated (h = 2 ms: 8x finer
+    than the 16 ms time constant of the 10 Hz filter). Chosen; see ``tests/test_plants``."""
+
+    command_max: float = 4095.0
+    """Largest servo command U, DAC counts. Not given: a 12-bit DAC; with eq. (1)-(2) it
+    gives a top feed velocity of 5.79 mm/s (0.86 mm/rev at 405 rpm). Commands are clipped
+    to [0, command_max]: the feed does not reverse."""
+
+    breakage_force_N: float = 3000.0
+    """Cutting force at which the carbide insert is taken to break, N. Not given: 3x the
+    paper's 1 kN reference, about the limit of its 2.2 kW spindle at 405 rpm on a 100 mm
+    bar. The episode terminates when the force exceeds it."""
+
+    noise_std_N: float = 10.0
+    """Standard deviation of the white measurement noise at the ADC, in newtons (1 % of the
+    1 kN reference). Not given; scaled by a scenario's ``noise_scale``."""
+
+    force_scale_N: float = 1000.0
+    """Normalisation of forces in observations, N (the paper's reference force)."""
+
+    def __post_init__(self) -> None:
+        _check("servo_gain", self.servo_gain, 0.0, 1e6, lo_open=True)
+        _check("servo_natural_freq_hz", self.servo_natural_freq_hz, 0.0, 1e3, lo_open=True)
+        _check("servo_damping", self.servo_damping, 0.0, 10.0, lo_open=True)
+        _check("gear_ratio", self.gear_ratio, 0.0, 1e3, lo_open=True)
+        _check("force_coefficient", self.force_coefficient, 0.0, 1e6, lo_open=True)
+        _check("feed_exponent", self.feed_exponent, 0.0, 2.0, lo_open=True)
+        _check("sensor_gain", self.sensor_gain, 0.0, 1e6, lo_open=True)
+        _check("sensor_cutoff_hz", self.sensor_cutoff_hz, 0.0, 1e4, lo_open=True)
+        if self.sensor_filter_order not in (1, 2):
+            raise ValueError(
+                f"sensor_filter_order must be 1 or 2, got {self.sensor_filter_order!r}"
+            )
+        _check("sample_time_s", self.sample_time_s, 0.0, 10.0, lo_open=True)
+        if not isinstance(self.substeps, (int, np.integer)) or not 1 <= self.substeps <= 10000:
+            raise ValueError(f"substeps must be an integer in [1, 10000], got {self.substeps!r}")
+        _check("command_max", self.command_max, 0.0, 1e9, lo_open=True)
+        _check("breakage_force_N", self.breakage_force_N, 0.0, 1e7, lo_open=True)
+        _check("noise_std_N", self.noise_std_N, 0.0, 1e5)
+        _check("force_scale_N", self.force_scale_N, 0.0, 1e7, lo_open=True)
+
+    @classmethod
+    def noh_kim_kim_1992(cls) -> TurningParams:
+        """The lathe of Noh, Kim & Kim (1992), SM45C with a carbide tool (the defaults)."""
+        return cls()
+
+    def replace(self, **changes) -> TurningParams:
+        """A copy with fields changed; unknown names raise ``TypeError``."""
+        return dataclasses.replace(self, **changes)
+
+    # ---- derived quantities (never stored) -------------------------------------------------
+    @property
+    def servo_natural_freq_rad_s(self) -> float:
+        """wn in rad/s."""
+        return 2.0 * math.pi * self.servo_natural_freq_hz
+
+    @property
+    def max_feed_velocity_mm_s(self) -> float:
+        """Steady feed velocity at ``command_max``, mm/s: Ks Km U_max (eq. 1-2)."""
+        return self.servo_gain * self.gear_ratio * self.command_max
+
+    def feed_for_force(self, force_N: float, depth_mm: float) -> float:
+        """Feed per revolution (mm/rev) at which eq. (8) gives ``force_N`` at ``depth_mm``."""
+        return (force_N / (self.force_coefficient * depth_mm)) ** (1.0 / self.feed_exponent)
+
+    def command_for_feed(self, feed_mm_per_rev: float, spindle_rpm: float) -> float:
+        """Steady command U giving ``feed_mm_per_rev`` at ``spindle_rpm``: f = Ks Km U T."""
+        return feed_mm_per_rev / (self.servo_gain * self.gear_ratio * 60.0 / spindle_rpm)
+
+    def process_gain(self, spindle_rpm: float, depth_mm: float, feed_mm_per_rev: float) -> float:
+        r"""Open-loop plant gain Kp of eq. (11), counts of force per count of command.
+
+        .. math:: K_p = K_s K_m \frac{60}{n} K_f f^{p-1} a K_e
+        """
+        return (
+            self.servo_gain
+            * self.gear_ratio
+            * (60.0 / spindle_rpm)
+            * self.force_coefficient
+            * feed_mm_per_rev ** (self.feed_exponent - 1.0)
+            * depth_mm
+            * self.sensor_gain
+        )
+
+    def open_loop_tf(self, spindle_rpm: float) -> tuple[list[float], list[float]]:
+        r"""Unit-gain continuous plant of eq. (11), ``wn^2 / ((s^2 + 2 zeta wn s + wn^2)(tau s + 1))``.
+
+        ``tau = 30 / n`` is the Padé time constant of eq. (7). Returns ``(num, den)``.
+        """
+        wn = self.servo_natural_freq_rad_s
+        tau = 30.0 / spindle_rpm
+        den = np.polymul([1.0, 2.0 * self.servo_damping * wn, wn**2], [tau, 1.0])
+        return [wn**2], list(den)
+
+    def discrete_open_loop(self, spindle_rpm: float) -> tuple[np.ndarray, np.ndarray]:
+        """ZOH discretisation of :meth:`open_loop_tf` at ``sample_time_s`` (eq. 14), in z^-1."""
+        num, den = self.open_loop_tf(spindle_rpm)
+        return zoh_tf(num, den, self.sample_time_s)
+
+
+@dataclass(frozen=True)
+class _Matrices:
+    """Everything the per-step update needs, computed once per (params, spindle speed).
+
+    The memory of the cut is one vector ``z = [x_k, u_k, x_{k-1}, u_{k-1}, ..., x_{k-L},
+    u_{k-L}]`` of servo states ``x = [Vf, dVf/dt, I]`` at the last ``L + 1`` sample instants
+    and the commands held after each. Since the command is constant over each sample, the
+    servo state at any instant is an exact linear function of one pair ``(x_i, u_i)``, so
+    the tool position ``I(t_j)``, the feed per revolution ``I(t_j) - I(t_j - T)`` at every
+    sub-step ``t_j`` of the coming sample, and the next state ``x_{k+1}`` are all rows of one
+    matrix applied to ``z``.
+    """
+
+    big: np.ndarray  # (2M + 3, 4(L + 1)): rows = positions, feeds, next state
+    lags: int  # L
+    filt_step: np.ndarray  # (n_f, n_f + M + 1): next filter state from [state, F_1..F_M, F_0]
+
+
+class _LinearKey(NamedTuple):
+    """The fields the linear blocks depend on (not Kf, p or noise, which vary per cut)."""
+
+    servo_gain: float
+    servo_natural_freq_rad_s: float
+    servo_damping: float
+    gear_ratio: float
+    sensor_cutoff_hz: float
+    sensor_filter_order: int
+    sample_time_s: float
+    substeps: int
+
+    @classmethod
+    def of(cls, p: TurningParams) -> _LinearKey:
+        return cls(
+            p.servo_gain,
+            p.servo_natural_freq_rad_s,
+            p.servo_damping,
+            p.gear_ratio,
+            p.sensor_cutoff_hz,
+            p.sensor_filter_order,
+            p.sample_time_s,
+            p.substeps,
+        )
+
+
+def _servo_system(params: _LinearKey) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous servo + running integral, state ``[Vf, dVf/dt, I]``, input U (counts)."""
+    wn = params.servo_natural_freq_rad_s
+    z = params.servo_damping
+    a = np.array([[0.0, 1.0, 0.0], [-(wn**2), -2.0 * z * wn, 0.0], [1.0, 0.0, 0.0]])
+    b = np.array([[0.0], [params.servo_gain * params.gear_ratio * wn**2], [0.0]])
+    return a, b
+
+
+@functools.lru_cache(maxsize=16)
+def _speed_free(params: _LinearKey):
+    """Parts that do not depend on the spindle speed: servo transitions over i*h, filter."""
+    m = params.substeps
+    h = params.sample_time_s / m
+    a, b = _servo_system(params)
+    phi_h, gam_h = zoh(a, b, h)
+    phis = np.empty((m + 1, 3, 3))
+    gams = np.empty((m + 1, 3))
+    phis[0], gams[0] = np.eye(3), 0.0
+    for i in range(1, m + 1):
+        phis[i] = phi_h @ phis[i - 1]
+        gams[i] = phi_h @ gams[i - 1] + gam_h[:, 0]
+
+    fa, fb, fc = butterworth_lowpass(params.sensor_cutoff_hz, params.sensor_filter_order)
+    fphi, fgam = zoh(fa, fb, h)
+    n_f = fphi.shape[0]
+    held = np.empty((n_f, m))  # response at the sample's end to the force held over sub-step j
+    acc = np.eye(n_f)
+    for j in range(m - 1, -1, -1):
+        held[:, j] = (acc @ fgam)[:, 0]
+        acc = fphi @ acc
+    # The input over each sub-step is the trapezoidal mean of the force at its two ends.
+    filt_h = 0.5 * held
+    filt_h[:, :-1] += 0.5 * held[:, 1:]
+    return phis, gams, acc, filt_h, 0.5 * held[:, 0], fc
+
+
+@functools.lru_cache(maxsize=16)
+def _velocity_bound(params: _LinearKey, command_max: float) -> float:
+    """Largest |Vf| (mm/s) any command sequence in [0, command_max] can produce from rest.
+
+    BIBO bound: Ks Km U_max times the L1 norm of the servo's unit impulse response, which
+    for zeta = 0.43 is about 1.6 (the overshoot and ring-down add to the steady speed);
+    5 % is added for safety.
+    Integrated on a grid 1/50 of the damped period, over 40 decay time constants.
+    """
+    wn, z = params.servo_natural_freq_rad_s, params.servo_damping
+    a = np.array([[0.0, 1.0], [-(wn**2), -2.0 * z * wn]])
+    b = np.array([[0.0], [wn**2]])
+    horizon = 40.0 / (z * wn)
+    dt = min(2 * np.pi / (wn * 50.0), horizon / 2000.0)
+    phi, _ = zoh(a, b, dt)
+    x = b[:, 0].copy()  # state just after a unit impulse
+    l1 = 0.0
+    for _ in range(int(horizon / dt)):
+        x_next = phi @ x
+        l1 += 0.5 * (abs(x[0]) + abs(x_next[0])) * dt
+        x = x_next
+    return 1.05 * params.servo_gain * params.gear_ratio * command_max * l1
+
+
+@functools.lru_cache(maxsize=16)
+def _speed_free_rows(params: _LinearKey) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of the step matrix on the current pair ``(x_k, u_k)`` and the filter's matrix."""
+    m = params.substeps
+    phis, gams, filt_a_m, filt_h, filt_prev, filt_c = _speed_free(params)
+    base = np.zeros((2 * m + 3, 4))
+    base[:m, 0:3] = phis[1:, 2]  # positions I(t_j), j = 1..M
+    base[:m, 3] = gams[1:, 2]
+    base[m : 2 * m] = base[:m]  # feeds start from the same, less the delayed value
+    base[2 * m :, 0:3] = phis[m]  # next state
+    base[2 * m :, 3] = gams[m]
+    # The filter's output is its first state (both orders): y = x_f[0].
+    assert filt_c[0] == 1.0 and not np.any(filt_c[1:])
+    filt_step = np.hstack([filt_a_m, filt_h, filt_prev[:, None]])
+    return base, filt_step
+
+
+@functools.lru_cache(maxsize=256)
+def _matrices(params: _LinearKey, spindle_rpm: float) -> _Matrices:
+    m = params.substeps
+    ts = params.sample_time_s
+    h = ts / m
+    phis, gams = _speed_free(params)[:2]
+    base, filt_step = _speed_free_rows(params)
+    period = 60.0 / spindle_rpm
+    lags = int(math.ceil(period / ts + 1e-12)) + 1
+    big = np.zeros((2 * m + 3, 4 * (lags + 1)))
+    big[:, 0:4] = base
+    # Every delayed instant t_j - T sits the same fraction rho of a sub-step past a sub-step
+    # point, so one exponential over rho and the powers over i*h give all of them exactly.
+    rho = (-period) % h
+    if rho > h - 1e-12 * h:
+        rho = 0.0
+    if rho > 0:
+        phi_r, gam_r = zoh(*_servo_system(params), rho)
+    else:
+        phi_r, gam_r = np.eye(3), np.zeros((3, 1))
+    back = np.arange(1, m + 1) * h - period  # t_j - T relative to t_k
+    lag = np.where(back < 0, np.ceil(-back / ts - 1e-9), 0).astype(int)
+    i = np.rint((back + lag * ts - rho) / h).astype(int)  # offset = i h + rho in [0, Ts)
+    delayed = np.empty((m, 4))
+    delayed[:, 0:3] = phi_r[2] @ phis[i]  # I-row of Phi(rho) Phi(i h)
+    delayed[:, 3] = gams[i] @ phi_r[2] + gam_r[2, 0]  # I-entry of Phi(rho) Gamma(i h) + Gamma(rho)
+    # Each feed row has one delayed block; where it is block 0 it overlaps the terms above.
+    cols = 4 * lag[:, None] + np.arange(4)
+    big[np.arange(m, 2 * m)[:, None], cols] -= delayed
+    return _Matrices(big, lags, filt_step)
+
+
+@dataclass(slots=True)
+class TurningStep:
+    """Signals of one control period, at its end (the sample instant) unless stated."""
+
+    force_N: float
+    """Cutting force Kf f^p a at the sample instant, N."""
+    peak_force_N: float
+    """Largest cutting force over the period's sub-steps, N."""
+    measured_counts: float
+    """Filtered, noisy sensor output Fc, counts (eq. 10)."""
+    feed_mm_per_rev: float
+    feed_velocity_mm_s: float
+    position_mm: float
+    """Distance fed along the workpiece since the start, mm."""
+    depth_mm: float
+    segment: int
+    """Index of the workpiece segment the tool is in (``DepthProfile`` segment)."""
+    finish_time_s: float | None = None
+    """Time at which ``position_mm`` first reached the workpiece length, if in this period."""
+
+
+class TurningPlant:
+    """Simulates one cut at a constant spindle speed; numpy only.
+
+    Parameters
+    ----------
+    params : TurningParams
+        The plant's true parameters for this cut.
+    spindle_rpm : float
+        Spindle speed n, rpm, held for the whole cut.
+    profile : DepthProfile
+        Depth of cut along the workpiece; zero past its end. Reaching its length finishes
+        the cut.
+    """
+
+    def __init__(self, params: TurningParams, spindle_rpm: float, profile) -> None:
+        _check("spindle_rpm", spindle_rpm, *SPINDLE_RPM_RANGE)
+        self.params = params
+        self.spindle_rpm = float(spindle_rpm)
+        self.profile = profile
+        self.length_mm = profile.length_mm
+        key = _LinearKey.of(params)
+        self._mx = _matrices(key, self.spindle_rpm)
+        self._margin = _velocity_bound(key, params.command_max) * params.sample_time_s
+        self._edges = np.asarray(profile.edges_mm, dtype=np.float64)
+        d0 = np.asarray(profile.start_depths_mm, dtype=np.float64)
+        self._d0 = d0
+        self._slope = (np.asarray(profile.end_depths_mm, dtype=np.float64) - d0) / np.diff(
+            self._edges
+        )
+        self.reset()
+
+    def reset(self) -> None:
+        """Machine at rest at the workpiece's start: no feed, no force, filter settled at 0."""
+        mx = self._mx
+        self.t_s = 0.0
+        self.z = np.zeros(4 * (mx.lags + 1))
+        n_f = mx.filt_step.shape[0]
+        # [filter state (n_f), force at the M sub-steps of this sample, force at its start]
+        self._buf = np.zeros(mx.filt_step.shape[1])
+        self._n_f = n_f
+        self.finished = False
+        self._seg = 0
+        self._edge_list = [float(v) for v in self._edges]
+        self._d0_list = [float(v) for v in self._d0]
+        self._slope_list = [float(v) for v in self._slope]
+
+    @property
+    def state(self) -> np.ndarray:
+        """Servo state ``[Vf (mm/s), dVf/dt (mm/s^2), position (mm)]`` now."""
+        return self.z[:3].copy()
+
+    def step(self, command: float, noise_counts: float = 0.0) -> TurningStep:
+        """Hold ``command`` (counts; clipped to [0, command_max]) for one sample and advance."""
+        prm = self.params
+        m = prm.substeps
+        z = self.z
+        z[3] = min(max(command, 0.0), prm.command_max)
+        y = self._mx.big @ z
+        position = y[:m]
+        p_start = float(z[2])
+        p_end = float(position[-1])
+        buf = self._buf
+        n_f = self._n_f
+        force = buf[n_f : n_f + m]  # a view: the force is written into the filter's input
+        np.maximum(y[m : 2 * m], 0.0, out=force)
+        feed_end = float(y[2 * m - 1])
+        np.power(force, prm.feed_exponent, out=force)
+        # Depth at the sub-steps: one segment (almost always) or the general lookup. Within a
+        # sample the tool stays within ``margin`` of the span of its end positions (|Vf| is
+        # at most its BIBO bound), so far from the edges the ends decide; near an edge the
+        # sub-step positions themselves are checked.
+        e = self._edge_list
+        i = self._seg
+        lo, hi = (p_start, p_end) if p_start <= p_end else (p_end, p_start)
+        margin = self._margin
+        one_segment = e[i] <= lo - margin and hi + margin < e[i + 1]
+        if not one_segment and e[i] <= lo and hi < e[i + 1]:
+            one_segment = e[i] <= float(position.min()) and float(position.max()) < e[i + 1]
+        if one_segment:
+            slope = self._slope_list[i]
+            if slope == 0.0:
+                depth_end = self._d0_list[i]
+                force *= prm.force_coefficient * depth_end
+            else:
+                depth = (position - e[i]) * slope + self._d0_list[i]
+                depth_end = float(depth[-1])
+                force *= depth
+                force *= prm.force_coefficient
+        else:
+            depth = self.profile(position)
+            self._seg = min(
+                max(int(np.searchsorted(self._edges, p_end, side="right")) - 1, 0), len(e) - 2
+            )
+            depth_end = float(depth[-1])
+            force *= depth
+            force *= prm.force_coefficient
+        filt = self._mx.filt_step @ buf
+        buf[:n_f] = filt
+        measured = prm.sensor_gain * float(filt[0]) + noise_counts
+        f_end = float(force[-1])
+        peak = float(force.max())
+        buf[-1] = f_end
+        # Shift the memory one sample back; the new state leads, its command is set next step.
+        z[4:] = z[:-4]
+        z[:3] = y[2 * m :]
+        z[3] = 0.0
+
+        finish = None
+        if not self.finished and p_end >= self.length_mm:
+            j = int(np.argmax(position >= self.length_mm))
+            finish = self.t_s + (j + 1) * prm.sample_time_s / m
+            self.finished = True
+        self.t_s += prm.sample_time_s
+        return TurningStep(
+            f_end, peak, measured, feed_end, float(z[0]), p_end, depth_end, self._seg, finish
+        )
