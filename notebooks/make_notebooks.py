@@ -247,7 +247,7 @@ NOTEBOOKS = {
         new_markdown_cell(
             "## 4. Train a policy on it\n\n"
             "`agents.rl.train` reads its hyperparameters from a YAML file with one entry per "
-            "env id (layout and checks in `agents/rl.py`). Here the notebook writes its own "
+            "env id (layout and checks in `agents/rl/config.py`). Here the notebook writes its own "
             "PPO entry, with the fitted constants in `env_kwargs`, into a temporary folder and "
             "trains there; the run keeps the model that scored best on held-out episodes, with "
             "its VecNormalize statistics, and `load_policy` loads both.\n\n"
