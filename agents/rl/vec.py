@@ -1,0 +1,124 @@
+"""A Gymnasium vector env presented as a Stable-Baselines3 ``VecEnv``.
+
+SB3 trains on its own ``VecEnv`` interface: ``step`` returns ``(obs, reward, done, infos)``
+with one info dict per env, an env that ends is reset in the same step, and its last
+observation travels in ``infos[i]["terminal_observation"]``. A Gymnasium
+``gymnasium.vector.VectorEnv`` with ``metadata["autoreset_mode"] == AutoresetMode.SAME_STEP``
+does the same reset and passes the last observation as ``info["final_obs"]``; this adapter
+translates one into the other, so ``VecNormalize``, ``VecMonitor``, ``evaluate_policy`` and
+every SB3 algorithm work on a native batched env unchanged.
+
+>>> import gymnasium as gym
+>>> from agents.rl.vec import SB3VecEnv
+>>> venv = SB3VecEnv(gym.make_vec("CartPole-v1", num_envs=2, vectorization_mode="sync",
+...                               vector_kwargs={"autoreset_mode": gym.vector.AutoresetMode.SAME_STEP}))
+>>> venv.seed(0)
+[0, 1]
+>>> venv.reset().shape
+(2, 4)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AutoresetMode
+from stable_baselines3.common.vec_env import VecEnv
+
+__all__ = ["SB3VecEnv"]
+
+
+class SB3VecEnv(VecEnv):
+    """Present a Gymnasium ``VectorEnv`` with same-step autoreset as an SB3 ``VecEnv``.
+
+    Parameters
+    ----------
+    venv : gymnasium.vector.VectorEnv
+        Its ``metadata["autoreset_mode"]`` must be ``AutoresetMode.SAME_STEP``.
+    info_keys : iterable of str, optional
+        The ``info`` entries copied into the per-env info dicts (all by default). Training
+        that needs none of them (``VecMonitor`` counts episodes itself) passes ``()``: the
+        terminal observation and ``TimeLimit.truncated`` are always given.
+    """
+
+    def __init__(self, venv: gym.vector.VectorEnv, info_keys: Iterable[str] | None = None):
+        mode = venv.metadata.get("autoreset_mode")
+        if mode != AutoresetMode.SAME_STEP:
+            raise ValueError(
+                "SB3VecEnv needs a vector env with metadata['autoreset_mode'] == "
+                f"AutoresetMode.SAME_STEP, got {mode!r}"
+            )
+        self.venv = venv
+        self.info_keys = None if info_keys is None else tuple(info_keys)
+        super().__init__(venv.num_envs, venv.single_observation_space, venv.single_action_space)
+        self.render_mode = getattr(venv, "render_mode", None)
+        self._actions: np.ndarray | None = None
+
+    # ---- the VecEnv interface --------------------------------------------------------------
+    def reset(self):
+        seeds = self._seeds
+        # Gymnasium seeds a vector env with one int (lane i gets seed + i) or a list.
+        seed = None if all(s is None for s in seeds) else list(seeds)
+        options = self._options[0] if self._options and self._options[0] else None
+        obs, info = self.venv.reset(seed=seed, options=options)
+        self._reset_seeds()
+        self._reset_options()
+        self.reset_infos = self._split(info, np.zeros(self.num_envs, dtype=bool))
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = actions
+
+    def step_wait(self):
+        obs, reward, terminated, truncated, info = self.venv.step(self._actions)
+        done = np.logical_or(terminated, truncated)
+        infos = self._split(info, done)
+        if done.any():
+            # An env that ended reports its last step's info (SB3's convention), not the
+            # info of the reset that followed it.
+            last = self._split(info.get("final_info", {}), ~done)
+            final = info["final_obs"]
+            for i in np.flatnonzero(done):
+                infos[i] = last[i]
+                infos[i]["terminal_observation"] = final[i]
+                infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
+        return obs, np.asarray(reward, dtype=np.float32), done, infos
+
+    def close(self) -> None:
+        self.venv.close()
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        return [None] * self.num_envs
+
+    def get_attr(self, attr_name: str, indices=None) -> list[Any]:
+        value = getattr(self.venv, attr_name)
+        return [value for _ in self._get_indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
+        setattr(self.venv, attr_name, value)
+
+    def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs):
+        out = getattr(self.venv, method_name)(*method_args, **method_kwargs)
+        return [out for _ in self._get_indices(indices)]
+
+    def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
+        return [False for _ in self._get_indices(indices)]
+
+    # ---- helpers ---------------------------------------------------------------------------
+    def _split(self, info: dict, skip: np.ndarray) -> list[dict]:
+        """Gymnasium's dict of arrays (with ``_key`` masks) -> one dict per env (empty for the
+        envs in ``skip``)."""
+        out: list[dict] = [{} for _ in range(self.num_envs)]
+        keys = info if self.info_keys is None else [k for k in self.info_keys if k in info]
+        for key in keys:
+            if key.startswith("_") or key in ("final_obs", "final_info"):
+                continue
+            values = info[key]
+            mask = info.get("_" + key)
+            for i in range(self.num_envs):
+                if not skip[i] and (mask is None or mask[i]):
+                    out[i][key] = values[i]
+        return out

@@ -1,0 +1,62 @@
+"""``agents.rl.vec.SB3VecEnv``: a Gymnasium vector env with same-step autoreset behaves, to
+SB3, exactly like SB3's own ``DummyVecEnv`` over the same envs."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode
+from stable_baselines3.common.env_util import make_vec_env
+
+import machining_envs  # noqa: F401
+from agents.rl.vec import SB3VecEnv
+
+
+def _pair(env_id: str, n: int, seed: int, **kwargs):
+    native = SB3VecEnv(
+        gym.make_vec(
+            env_id,
+            num_envs=n,
+            vectorization_mode="sync",
+            vector_kwargs={"autoreset_mode": AutoresetMode.SAME_STEP},
+            **kwargs,
+        )
+    )
+    dummy = make_vec_env(env_id, n_envs=n, env_kwargs=kwargs)
+    native.seed(seed)
+    dummy.seed(seed)
+    return native, dummy
+
+
+@pytest.mark.parametrize("env_id", ["machining_envs/Turning-v0", "CartPole-v1"])
+def test_same_as_dummy_vec_env_across_resets(env_id):
+    native, dummy = _pair(env_id, 3, 7)
+    o1, o2 = native.reset(), dummy.reset()
+    np.testing.assert_array_equal(o1, o2)
+    rng = np.random.default_rng(0)
+    n_done = 0
+    for _ in range(300):
+        a = np.stack([native.action_space.sample() for _ in range(3)])
+        if env_id.startswith("machining"):
+            a = rng.uniform(-1, 1, size=(3, 1)).astype(np.float32)
+        r1, r2 = native.step(a), dummy.step(a)
+        np.testing.assert_array_equal(r1[0], r2[0])
+        np.testing.assert_array_equal(r1[1], r2[1])
+        np.testing.assert_array_equal(r1[2], r2[2])
+        for i1, i2 in zip(r1[3], r2[3], strict=True):
+            if "terminal_observation" in i2:
+                n_done += 1
+                np.testing.assert_array_equal(
+                    i1["terminal_observation"], i2["terminal_observation"]
+                )
+                assert i1["TimeLimit.truncated"] == i2["TimeLimit.truncated"]
+            for key in set(i2) - {"terminal_observation", "TimeLimit.truncated", "episode"}:
+                assert np.all(i1[key] == i2[key]), key
+    assert n_done > 0  # the comparison went through resets
+
+
+def test_refuses_next_step_autoreset():
+    venv = gym.make_vec("CartPole-v1", num_envs=2, vectorization_mode="sync")
+    with pytest.raises(ValueError, match="SAME_STEP"):
+        SB3VecEnv(venv)
