@@ -82,8 +82,10 @@ _ENTRY_POINTS = {
     **drilling.ENTRY_POINTS,
     **contouring.ENTRY_POINTS,
 }
+#: Native vector envs of the ids that have one (``gym.make_vec(id, num_envs=N)``).
+_VECTOR_ENTRY_POINTS = {**turning.VECTOR_ENTRY_POINTS}
 ENV_IDS = tuple(_ENTRY_POINTS)
 
 for _id, _entry in _ENTRY_POINTS.items():
     if _id not in registry:
-        register(id=_id, entry_point=_entry)
+        register(id=_id, entry_point=_entry, vector_entry_point=_VECTOR_ENTRY_POINTS.get(_id))

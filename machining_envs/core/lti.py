@@ -29,8 +29,27 @@ def zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray
     block = np.zeros((n + m, n + m))
     block[:n, :n] = a
     block[:n, n:] = b
-    e = expm(block * dt)
+    with _one_blas_thread():
+        e = expm(block * dt)
     return e[:n, :n], e[:n, n:]
+
+
+_BLAS = None
+
+
+def _one_blas_thread():
+    """Run the enclosed BLAS calls on one thread.
+
+    The matrices here are a few rows square; OpenBLAS's threads only add synchronisation,
+    which on a busy machine makes a 4x4 exponential take milliseconds instead of tens of
+    microseconds (every reset of an env at a new spindle speed pays it).
+    """
+    global _BLAS
+    if _BLAS is None:
+        from threadpoolctl import ThreadpoolController
+
+        _BLAS = ThreadpoolController()
+    return _BLAS.limit(limits=1, user_api="blas")
 
 
 def zoh_tf(num, den, dt: float) -> tuple[np.ndarray, np.ndarray]:

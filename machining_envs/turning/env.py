@@ -7,6 +7,7 @@ import math
 from dataclasses import dataclass
 
 import gymnasium as gym
+import numba
 import numpy as np
 from gymnasium import spaces
 
@@ -23,13 +24,18 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
+from machining_envs.core.vector import LaneVectorEnv
 from machining_envs.turning.metrics import TURNING_TASK
-from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams, TurningPlant
+from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningLanes, TurningParams, step_lane
 from machining_envs.turning.scenarios import TURNING_SCENARIOS, TurningScenario, turning_scenario
 
-__all__ = ["TurningEnv", "TurningReward"]
+__all__ = ["TurningEnv", "TurningVectorEnv", "TurningReward"]
 
 _HISTORY = 3
+#: From this many lanes on, a step spreads the lanes over the cores (same arithmetic).
+_PARALLEL_LANES = 64
+#: Standard normals drawn at a time for the sensor noise of a lane.
+_NORMAL_BLOCK = 64
 _FORCE_OBS = (-1.0, 10.0)
 
 
@@ -59,6 +65,345 @@ class TurningReward:
             v = getattr(self, f.name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"reward weight {f.name} must be a finite number >= 0, got {v!r}")
+
+
+@numba.njit(cache=True)
+def _env_lane(k, out, finish, t, gain, fs, meas, fr, vmax, brk, max_t, w, prev_action, fr_obs,
+              rpm_obs, obs, reward, flags):  # fmt: skip
+    """Reward, observation and episode flags of lane ``k`` from the plant's signals.
+
+    ``w`` = ``[tracking, overforce, overforce_threshold, progress, breakage]``;
+    ``flags[k]`` = ``[diverged, breakage, finished, terminated, truncated]``.
+    """
+    lo, hi = _FORCE_OBS
+    force, peak, counts, pos = out[k, 0], out[k, 1], out[k, 2], out[k, 5]
+    diverged = not (np.isfinite(force) and np.isfinite(counts) and np.isfinite(pos))
+    if diverged:  # never seen; kept so that no NaN can reach an observation or a reward
+        force = 0.0
+        peak = 0.0
+        counts = 0.0
+        out[k, 0] = 0.0
+        out[k, 1] = 0.0
+        out[k, 2] = 0.0
+    m = meas[k]
+    for i in range(m.size - 1, 0, -1):
+        m[i] = m[i - 1]
+    m[0] = counts / gain
+    breakage = peak > brk[k]
+    finished = not np.isnan(finish[k])
+    terminated = diverged or breakage or finished
+    truncated = (not terminated) and t[k] >= max_t - 1e-9
+    e = force / fr[k]
+    r = -w[0] * abs(e - 1.0) - w[1] * max(0.0, e - w[2])
+    if w[3]:
+        r += w[3] * out[k, 4] / vmax[k]
+    if breakage or diverged:
+        r -= w[4]
+    reward[k] = r
+    flags[k, 0] = diverged
+    flags[k, 1] = breakage
+    flags[k, 2] = finished
+    flags[k, 3] = terminated
+    flags[k, 4] = truncated
+    o = obs[k]
+    o[0] = min(max(m[0] / fs, lo), hi)
+    o[1] = fr_obs[k]
+    o[2] = prev_action[k]
+    o[3] = rpm_obs[k]
+    for i in range(1, m.size):
+        o[3 + i] = min(max(m[i] / fs, lo), hi)
+
+
+@numba.njit(cache=True)
+def _step(actions, clipped, commands, noise, big, cols, filt, z, buf, edges, d0, slope, nseg,
+          seg, lane_f, finished, m, n_f, out, out_seg, out_finish, gain, fs, meas, fr, vmax,
+          brk, max_t, w, prev_action, fr_obs, rpm_obs, obs, reward, flags, n_clipped,
+          last_clipped, last_command):  # fmt: skip
+    """One step of every lane: the actions' bookkeeping, the plant, the env's outputs."""
+    t = lane_f[:, 5]
+    for k in range(z.shape[0]):
+        prev_action[k] = actions[k]
+        last_command[k] = commands[k]
+        last_clipped[k] = clipped[k]
+        n_clipped[k] += clipped[k]
+        step_lane(
+            k, big, cols, filt, z, buf, edges, d0, slope, nseg, seg, lane_f, finished, m, n_f,
+            commands[k], noise[k], out, out_seg, out_finish,
+        )  # fmt: skip
+        _env_lane(k, out, out_finish, t, gain, fs, meas, fr, vmax, brk, max_t, w, prev_action,
+                  fr_obs, rpm_obs, obs, reward, flags)  # fmt: skip
+
+
+@numba.njit(cache=True, parallel=True)
+def _step_parallel(actions, clipped, commands, noise, big, cols, filt, z, buf, edges, d0, slope, nseg,
+          seg, lane_f, finished, m, n_f, out, out_seg, out_finish, gain, fs, meas, fr, vmax,
+          brk, max_t, w, prev_action, fr_obs, rpm_obs, obs, reward, flags, n_clipped,
+          last_clipped, last_command):  # fmt: skip
+    """:func:`_step` with the lanes spread over the cores (for many lanes)."""
+    t = lane_f[:, 5]
+    for k in numba.prange(z.shape[0]):
+        prev_action[k] = actions[k]
+        last_command[k] = commands[k]
+        last_clipped[k] = clipped[k]
+        n_clipped[k] += clipped[k]
+        step_lane(
+            k, big, cols, filt, z, buf, edges, d0, slope, nseg, seg, lane_f, finished, m, n_f,
+            commands[k], noise[k], out, out_seg, out_finish,
+        )  # fmt: skip
+        _env_lane(k, out, out_finish, t, gain, fs, meas, fr, vmax, brk, max_t, w, prev_action,
+                  fr_obs, rpm_obs, obs, reward, flags)  # fmt: skip
+
+
+class _TurningCore:
+    """The state and arithmetic of N turning episodes, shared by ``TurningEnv`` (one lane)
+    and ``TurningVectorEnv`` (N lanes): the plant (:class:`TurningLanes`) and the reward,
+    observation and episode end computed for all lanes by one compiled function, so that a
+    lane of the vector env and the single env agree to the last bit."""
+
+    def __init__(self, owner, n, scenario, params, spindle_rpm, reward, max_episode_time_s,
+                 overrides):  # fmt: skip
+        self.params = resolve_params(
+            owner, params, TurningParams, TurningParams.noh_kim_kim_1992, overrides
+        )
+        if spindle_rpm is not None:
+            lo, hi = SPINDLE_RPM_RANGE
+            ok = isinstance(spindle_rpm, (int, float)) and math.isfinite(spindle_rpm)
+            if not (ok and lo <= spindle_rpm <= hi):
+                raise ValueError(f"spindle_rpm must be in [{lo}, {hi}], got {spindle_rpm!r}")
+            spindle_rpm = float(spindle_rpm)
+        self.spindle_rpm_override = spindle_rpm
+        self.reward_weights = resolve_reward(reward, TurningReward)
+        w = self.reward_weights
+        self._w = np.array([w.tracking, w.overforce, w.overforce_threshold, w.progress, w.breakage])
+        self.max_episode_time_s = check_episode_time(max_episode_time_s)
+        check_scenario_spec(scenario, TurningScenario, TURNING_SCENARIOS)
+        self._gain = float(self.params.sensor_gain)
+        self._fs = float(self.params.force_scale_N)
+        self.command_map = ActionMap(0.0, self.params.command_max)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        f_lo, f_hi = _FORCE_OBS
+        low = np.array([f_lo, 0.0, -1.0, 0.0] + [f_lo] * _HISTORY, dtype=np.float32)
+        high = np.array(
+            [f_hi, 10.0, 1.0, SPINDLE_RPM_RANGE[1] / 1000.0] + [f_hi] * _HISTORY, dtype=np.float32
+        )
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.n = n
+        self.lanes = TurningLanes(self.params, n)
+        self.scenarios: list[TurningScenario | None] = [None] * n
+        self.force_ref = np.ones(n)
+        self.vmax = np.ones(n)
+        self.breakage_force = np.ones(n)
+        self.noise_counts = np.zeros(n)
+        self.meas = np.zeros((n, _HISTORY + 1))  # newest first, N
+        self.fr_obs = np.zeros(n)
+        self.rpm_obs = np.zeros(n)
+        self.prev_action = np.full(n, -1.0)
+        self.n_clipped = np.zeros(n, dtype=np.int64)
+        self.command = np.zeros(n)
+        self.clipped = np.zeros(n, dtype=bool)
+        self.obs = np.zeros((n, 4 + _HISTORY), dtype=np.float32)
+        self.reward = np.zeros(n)
+        self.flags = np.zeros((n, 5), dtype=np.bool_)
+        self.normals = np.zeros((n, _NORMAL_BLOCK))
+        self.normal_i = np.full(n, _NORMAL_BLOCK)
+        self.spindle = np.zeros(n)
+        self.length = np.zeros(n)
+        self.names = np.full(n, "", dtype=object)
+        self.in_action = np.zeros(n)
+        self.in_clipped = np.zeros(n, dtype=np.bool_)
+        self.in_command = np.zeros(n)
+        self.in_noise = np.zeros(n)
+        self._args: tuple | None = None
+        self._args_version = -1
+
+    def start(self, lane: int, spec, rng: np.random.Generator) -> dict:
+        """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
+        first observation goes to ``obs[lane]``; returns its reset info."""
+        sc = turning_scenario(spec, rng)
+        if self.spindle_rpm_override is not None:
+            sc = dataclasses.replace(sc, spindle_rpm=self.spindle_rpm_override)
+        self.scenarios[lane] = sc
+        truth = sc.true_params(self.params)
+        self.lanes.start(lane, truth, sc.spindle_rpm, sc.profile)
+        self.force_ref[lane] = float(sc.force_ref_N)
+        self.vmax[lane] = truth.max_feed_velocity_mm_s
+        self.breakage_force[lane] = truth.breakage_force_N
+        self.noise_counts[lane] = truth.sensor_gain * truth.noise_std_N
+        self.meas[lane] = 0.0
+        self.fr_obs[lane] = min(self.force_ref[lane] / self.params.force_scale_N, 10.0)
+        self.rpm_obs[lane] = sc.spindle_rpm / 1000.0
+        self.prev_action[lane] = -1.0
+        self.n_clipped[lane] = 0
+        self.normal_i[lane] = _NORMAL_BLOCK  # a new episode draws a new block
+        self.spindle[lane] = float(sc.spindle_rpm)
+        self.length[lane] = sc.profile.length_mm
+        self.names[lane] = sc.name
+        o = self.obs[lane]
+        o[:] = (0.0, self.fr_obs[lane], -1.0, self.rpm_obs[lane], 0.0, 0.0, 0.0)
+        return {
+            "t_s": 0.0,
+            "command": 0.0,
+            "action_clipped": False,
+            "n_action_clipped": 0,
+            "breakage": False,
+            "diverged": False,
+            "finished": False,
+            "force_N": 0.0,
+            "force_ref_N": float(self.force_ref[lane]),
+            "measured": 0.0,
+            "measured_counts": 0.0,
+            "spindle_rpm": float(sc.spindle_rpm),
+            "workpiece_length_mm": sc.profile.length_mm,
+            "scenario": sc.name,
+            "feed_mm_per_rev": 0.0,
+            "feed_velocity_mm_s": 0.0,
+            "position_mm": 0.0,
+            "depth_mm": float(sc.profile.start_depths_mm[0]),
+            "peak_force_N": 0.0,
+            "segment": 0,
+        }
+
+    def draw_noise(self, rngs) -> None:
+        """Sensor noise of this step into ``in_noise``: lane ``k`` takes the next standard
+        normal of its generator ``rngs[k]`` (drawn in blocks, the same numbers in the same
+        order as one at a time), times its noise level; lanes without noise draw nothing."""
+        if self.n == 1:  # the single env: the same, without array bookkeeping
+            nc = float(self.noise_counts[0])
+            if nc:
+                i = int(self.normal_i[0])
+                if i >= _NORMAL_BLOCK:
+                    self.normals[0] = rngs[0].standard_normal(_NORMAL_BLOCK)
+                    i = 0
+                self.in_noise[0] = nc * self.normals[0, i]
+                self.normal_i[0] = i + 1
+            else:
+                self.in_noise[0] = 0.0
+            return
+        noisy = self.noise_counts != 0.0
+        need = np.flatnonzero(noisy & (self.normal_i >= _NORMAL_BLOCK))
+        for k in need:
+            self.normals[k] = rngs[k].standard_normal(_NORMAL_BLOCK)
+            self.normal_i[k] = 0
+        lanes = np.arange(self.n)
+        z = self.normals[lanes, np.minimum(self.normal_i, _NORMAL_BLOCK - 1)]
+        self.in_noise[:] = np.where(noisy, self.noise_counts * z, 0.0)
+        self.normal_i += noisy
+
+    def _kernel_args(self) -> tuple:
+        """The arguments of :func:`_step`, in order (rebuilt when the plant's arrays are)."""
+        lanes = self.lanes
+        if self._args is None or self._args_version != lanes.version:
+            self._args = (
+                self.in_action,
+                self.in_clipped,
+                self.in_command,
+                self.in_noise,
+                lanes.big,
+                lanes.cols,
+                lanes.filt,
+                lanes.z,
+                lanes.buf,
+                lanes.edges,
+                lanes.d0,
+                lanes.slope,
+                lanes.nseg,
+                lanes.seg,
+                lanes.lane_f,
+                lanes.finished,
+                lanes.m,
+                lanes.n_f,
+                lanes.out,
+                lanes.out_segment,
+                lanes.out_finish,
+                self._gain,
+                self._fs,
+                self.meas,
+                self.force_ref,
+                self.vmax,
+                self.breakage_force,
+                self.max_episode_time_s,
+                self._w,
+                self.prev_action,
+                self.fr_obs,
+                self.rpm_obs,
+                self.obs,
+                self.reward,
+                self.flags,
+                self.n_clipped,
+                self.clipped,
+                self.command,
+            )
+            self._args_version = lanes.version
+        return self._args
+
+    def step(self) -> None:
+        """Advance every lane with the inputs in ``in_action`` (clipped to the box),
+        ``in_clipped`` (whether it was clipped), ``in_command`` (the command it maps to) and
+        ``in_noise`` (sensor noise, counts)."""
+        kernel = _step_parallel if self.n >= _PARALLEL_LANES else _step
+        kernel(*self._kernel_args())
+
+    def lane_info(self, k: int) -> dict:
+        """The step info of lane ``k`` (after :meth:`step`)."""
+        force, peak, counts, feed, vel, pos, depth = self.lanes.out[k].tolist()
+        diverged, breakage, finished = self.flags[k, :3].tolist()
+        sc = self.scenarios[k]
+        info = {
+            "t_s": float(self.lanes.lane_f[k, 5]),
+            "command": float(self.command[k]),
+            "action_clipped": bool(self.clipped[k]),
+            "n_action_clipped": int(self.n_clipped[k]),
+            "breakage": breakage,
+            "diverged": diverged,
+            "finished": finished,
+            "force_N": force,
+            "force_ref_N": float(self.force_ref[k]),
+            "measured": float(self.meas[k, 0]),
+            "measured_counts": counts,
+            "peak_force_N": peak,
+            "feed_mm_per_rev": feed if not diverged else 0.0,
+            "feed_velocity_mm_s": vel if not diverged else 0.0,
+            "position_mm": pos if not diverged else 0.0,
+            "depth_mm": depth,
+            "segment": int(self.lanes.out_segment[k]),
+            "spindle_rpm": float(sc.spindle_rpm),
+            "workpiece_length_mm": sc.profile.length_mm,
+            "scenario": sc.name,
+        }
+        if finished:
+            info["machining_time_s"] = float(self.lanes.out_finish[k])
+        return info
+
+    def info_arrays(self) -> dict:
+        """The step info of every lane, as arrays (``machining_time_s`` with its mask)."""
+        o = self.lanes.out
+        f = self.flags
+        ok = ~f[:, 0]
+        info = {
+            "t_s": self.lanes.lane_f[:, 5].copy(),
+            "command": self.command.copy(),
+            "action_clipped": self.clipped.copy(),
+            "n_action_clipped": self.n_clipped.copy(),
+            "breakage": f[:, 1].copy(),
+            "diverged": f[:, 0].copy(),
+            "finished": f[:, 2].copy(),
+            "force_N": o[:, 0].copy(),
+            "force_ref_N": self.force_ref.copy(),
+            "measured": self.meas[:, 0].copy(),
+            "measured_counts": o[:, 2].copy(),
+            "peak_force_N": o[:, 1].copy(),
+            "feed_mm_per_rev": np.where(ok, o[:, 3], 0.0),
+            "feed_velocity_mm_s": np.where(ok, o[:, 4], 0.0),
+            "position_mm": np.where(ok, o[:, 5], 0.0),
+            "depth_mm": o[:, 6].copy(),
+            "segment": self.lanes.out_segment.copy(),
+            "spindle_rpm": self.spindle.copy(),
+            "workpiece_length_mm": self.length.copy(),
+            "scenario": self.names.copy(),
+            "machining_time_s": np.where(f[:, 2], self.lanes.out_finish, np.nan),
+            "_machining_time_s": f[:, 2].copy(),
+        }
+        return info
 
 
 class TurningEnv(gym.Env):
@@ -162,32 +507,33 @@ class TurningEnv(gym.Env):
         max_episode_time_s: float = 200.0,
         **overrides,
     ):
-        self.params = resolve_params(
-            type(self).__name__, params, TurningParams, TurningParams.noh_kim_kim_1992, overrides
+        self._core = _TurningCore(
+            type(self).__name__,
+            1,
+            scenario,
+            params,
+            spindle_rpm,
+            reward,
+            max_episode_time_s,
+            overrides,
         )
-        if spindle_rpm is not None:
-            lo, hi = SPINDLE_RPM_RANGE
-            ok = isinstance(spindle_rpm, (int, float)) and math.isfinite(spindle_rpm)
-            if not (ok and lo <= spindle_rpm <= hi):
-                raise ValueError(f"spindle_rpm must be in [{lo}, {hi}], got {spindle_rpm!r}")
-            spindle_rpm = float(spindle_rpm)
-        self.spindle_rpm_override = spindle_rpm
-        self.reward_weights = resolve_reward(reward, TurningReward)
-        self.max_episode_time_s = check_episode_time(max_episode_time_s)
-        check_scenario_spec(scenario, TurningScenario, TURNING_SCENARIOS)
+        core = self._core
+        self.params = core.params
+        self.spindle_rpm_override = core.spindle_rpm_override
+        self.reward_weights = core.reward_weights
+        self.max_episode_time_s = core.max_episode_time_s
         self.default_scenario = scenario
         self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
-
-        self.command_map = ActionMap(0.0, self.params.command_max)
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
-        f_lo, f_hi = _FORCE_OBS
-        low = np.array([f_lo, 0.0, -1.0, 0.0] + [f_lo] * _HISTORY, dtype=np.float32)
-        high = np.array(
-            [f_hi, 10.0, 1.0, SPINDLE_RPM_RANGE[1] / 1000.0] + [f_hi] * _HISTORY, dtype=np.float32
-        )
-        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.command_map = core.command_map
+        self.action_space = core.action_space
+        self.observation_space = core.observation_space
         self.scenario: TurningScenario | None = None
-        self.plant: TurningPlant | None = None
+        self.plant: TurningLanes | None = None
+
+    @property
+    def _n_clipped(self) -> int:
+        """Actions clipped so far this episode (``info["n_action_clipped"]``)."""
+        return int(self._core.n_clipped[0])
 
     # ---- the command map, for classical agents -----------------------------------------
     def action_to_command(self, action):
@@ -201,142 +547,35 @@ class TurningEnv(gym.Env):
     # ---- gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        spec = scenario_option(options, self.default_scenario)
-        sc = turning_scenario(spec, self.np_random)
-        if self.spindle_rpm_override is not None:
-            sc = dataclasses.replace(sc, spindle_rpm=self.spindle_rpm_override)
-        self.scenario = sc
-        self._truth = sc.true_params(self.params)
-        self.plant = TurningPlant(self._truth, sc.spindle_rpm, sc.profile)
-        self._fr = float(sc.force_ref_N)
-        self._length = sc.profile.length_mm
-        self._vmax = self._truth.max_feed_velocity_mm_s
-        self._noise_counts = self._truth.sensor_gain * self._truth.noise_std_N
-        self._meas = [0.0] * (_HISTORY + 1)  # newest first, N
-        self._normals: list[float] = []
-        self._fr_obs = min(self._fr / self.params.force_scale_N, 10.0)
-        self._rpm_obs = sc.spindle_rpm / 1000.0
-        self._prev_action = -1.0
-        self._n_clipped = 0
-        self._done = False
+        core = self._core
+        info = core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        self.scenario = core.scenarios[0]
+        self.plant = core.lanes
+        self._rngs = (self.np_random,)
         self._log = {k: [] for k in ("t", "force", "measured", "feed", "depth")}
-        info = self._info(0.0, 0.0, 0.0, False, False, False)
-        info.update(
-            feed_mm_per_rev=0.0,
-            feed_velocity_mm_s=0.0,
-            position_mm=0.0,
-            depth_mm=float(sc.profile.start_depths_mm[0]),
-            peak_force_N=0.0,
-            segment=0,
-        )
         self._record(info)
-        return self._obs(), info
+        return core.obs[0].copy(), info
 
     def step(self, action):
         if self.plant is None:
             raise RuntimeError("TurningEnv: call reset() before step()")
+        core = self._core
         a, clipped = check_action(action, "TurningEnv")
-        self._n_clipped += clipped
         u = self.command_map.action_to_command(a)
-        noise = (
-            self._noise_counts * float(self.np_random.standard_normal())
-            if self._noise_counts
-            else 0.0
-        )
-        s = self.plant.step(u, noise)
-        t = self.plant.t_s
-        force, peak, counts = s.force_N, s.peak_force_N, s.measured_counts
-        diverged = not (
-            math.isfinite(force) and math.isfinite(counts) and math.isfinite(s.position_mm)
-        )
-        if diverged:  # never seen; kept so that no NaN can reach an observation or a reward
-            force = peak = counts = 0.0
-        measured_N = counts / self.params.sensor_gain
-        meas = self._meas
-        meas.pop()
-        meas.insert(0, measured_N)
-        self._prev_action = a
-        breakage = peak > self._truth.breakage_force_N
-        finished = s.finish_time_s is not None
-        terminated = diverged or breakage or finished
-        truncated = (not terminated) and t >= self.max_episode_time_s - 1e-9
-
-        w = self.reward_weights
-        e = force / self._fr
-        reward = -w.tracking * abs(e - 1.0) - w.overforce * max(0.0, e - w.overforce_threshold)
-        if w.progress:
-            reward += w.progress * s.feed_velocity_mm_s / self._vmax
-        if breakage or diverged:
-            reward -= w.breakage
-
-        sc = self.scenario
-        info = {
-            "t_s": t,
-            "command": u,
-            "action_clipped": clipped,
-            "n_action_clipped": self._n_clipped,
-            "breakage": breakage,
-            "diverged": diverged,
-            "finished": finished,
-            "force_N": force,
-            "force_ref_N": self._fr,
-            "measured": measured_N,
-            "measured_counts": counts,
-            "peak_force_N": peak,
-            "feed_mm_per_rev": s.feed_mm_per_rev if not diverged else 0.0,
-            "feed_velocity_mm_s": s.feed_velocity_mm_s if not diverged else 0.0,
-            "position_mm": s.position_mm if not diverged else 0.0,
-            "depth_mm": s.depth_mm,
-            "segment": s.segment,
-            "spindle_rpm": sc.spindle_rpm,
-            "workpiece_length_mm": self._length,
-            "scenario": sc.name,
-        }
-        if finished:
-            info["machining_time_s"] = s.finish_time_s
+        core.in_action[0] = a
+        core.in_clipped[0] = clipped
+        core.in_command[0] = u
+        core.draw_noise(self._rngs)
+        core.step()
+        info = core.lane_info(0)
         if self.render_mode is not None:
             self._record(info)
             if self.render_mode == "human":
                 self.render()
-        return self._obs(), float(reward), terminated, truncated, info
+        flags = core.flags[0]
+        return core.obs[0].copy(), float(core.reward[0]), bool(flags[3]), bool(flags[4]), info
 
     # ---- helpers -------------------------------------------------------------------------
-    def _obs(self) -> np.ndarray:
-        fs = self.params.force_scale_N
-        lo, hi = _FORCE_OBS
-        m = self._meas
-        return np.array(
-            (
-                min(max(m[0] / fs, lo), hi),
-                self._fr_obs,
-                self._prev_action,
-                self._rpm_obs,
-                min(max(m[1] / fs, lo), hi),
-                min(max(m[2] / fs, lo), hi),
-                min(max(m[3] / fs, lo), hi),
-            ),
-            dtype=np.float32,
-        )
-
-    def _info(self, t, command, measured, clipped, breakage, diverged) -> dict:
-        sc = self.scenario
-        return {
-            "t_s": float(t),
-            "command": float(command),
-            "action_clipped": bool(clipped),
-            "n_action_clipped": self._n_clipped,
-            "breakage": bool(breakage),
-            "diverged": bool(diverged),
-            "finished": False,
-            "force_N": 0.0,
-            "force_ref_N": float(self._fr),
-            "measured": float(measured),
-            "measured_counts": float(measured * self.params.sensor_gain),
-            "spindle_rpm": float(sc.spindle_rpm),
-            "workpiece_length_mm": sc.profile.length_mm,
-            "scenario": sc.name,
-        }
-
     def _record(self, info: dict) -> None:
         log = self._log
         log["t"].append(info["t_s"])
@@ -358,7 +597,7 @@ class TurningEnv(gym.Env):
                     [
                         ("cutting force", log["force"], "C0-"),
                         ("measured", log["measured"], "C1-"),
-                        ("reference", [self._fr] * len(t), "k--"),
+                        ("reference", [self._core.force_ref[0]] * len(t), "k--"),
                     ],
                 ),
                 ("feed (mm/rev)", [("feed", log["feed"], "C2-")]),
@@ -367,3 +606,70 @@ class TurningEnv(gym.Env):
             f"Turning-v0 | {self.scenario.name} | {self.scenario.spindle_rpm:.0f} rpm",
         )
         return present_frame(img, self.render_mode, "Turning-v0")
+
+
+class TurningVectorEnv(LaneVectorEnv):
+    """``machining_envs/Turning-v0`` as a native vector env: N lathes stepped as arrays.
+
+    ``gym.make_vec("machining_envs/Turning-v0", num_envs=N, **kwargs)`` takes the keyword
+    arguments of :class:`TurningEnv` (but not ``render_mode``). Lane ``i`` after
+    ``reset(seed=s)`` runs exactly the episode ``TurningEnv.reset(seed=s + i)`` runs, with
+    the same observations, rewards and ``info`` (here a dict of arrays); every lane draws
+    its own scenario from its own generator. Finished lanes are reset in the same step
+    (``metadata["autoreset_mode"]``): see ``machining_envs.core.vector``.
+    """
+
+    env_name = "TurningEnv"
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        scenario: str | TurningScenario = "train",
+        params: TurningParams | None = None,
+        spindle_rpm: float | None = None,
+        reward: TurningReward | dict | None = None,
+        max_episode_time_s: float = 200.0,
+        **overrides,
+    ):
+        self._core = _TurningCore(
+            type(self).__name__,
+            num_envs if isinstance(num_envs, int) and num_envs >= 1 else 1,
+            scenario,
+            params,
+            spindle_rpm,
+            reward,
+            max_episode_time_s,
+            overrides,
+        )
+        super().__init__(num_envs, self._core.observation_space, self._core.action_space)
+        self.default_scenario = scenario
+        self.params = self._core.params
+        self.command_map = self._core.command_map
+        self.max_episode_time_s = self._core.max_episode_time_s
+
+    def _reset_lanes(self, lanes, options):
+        core = self._core
+        spec = scenario_option(options, self.default_scenario)
+        infos = [core.start(int(i), spec, self.lane_rngs[i]) for i in lanes]
+        part = {k: np.array([d[k] for d in infos]) for k in infos[0]}
+        return core.obs[lanes].copy(), part
+
+    def _step_lanes(self, actions):
+        core = self._core
+        a = actions[:, 0]
+        clipped = (a < -1.0) | (a > 1.0)
+        a = np.clip(a, -1.0, 1.0)
+        u = self.command_map.action_to_command(a)
+        core.draw_noise(self.lane_rngs)
+        core.in_action[:] = a
+        core.in_clipped[:] = clipped
+        core.in_command[:] = u
+        core.step()
+        f = core.flags
+        return (
+            core.obs.copy(),
+            core.reward.copy(),
+            f[:, 3].copy(),
+            f[:, 4].copy(),
+            core.info_arrays(),
+        )

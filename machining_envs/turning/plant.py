@@ -28,6 +28,7 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
@@ -372,8 +373,262 @@ class TurningStep:
     """Time at which ``position_mm`` first reached the workpiece length, if in this period."""
 
 
+# ---- the batched physics: N cuts stepped as arrays, one kernel for one lane or many --------
+
+
+@numba.njit(cache=True)
+def _depth_at(x, edges, d0, slope, nseg):
+    """Depth (mm) at ``x`` of a profile given by its arrays; zero outside ``[0, length)``
+    (``DepthProfile.__call__`` for one position)."""
+    if not (x >= 0.0 and x < edges[nseg]):
+        return 0.0
+    i = np.searchsorted(edges[: nseg + 1], x, side="right") - 1
+    i = min(max(i, 0), nseg - 1)
+    return d0[i] + slope[i] * (x - edges[i])
+
+
+@numba.njit(cache=True)
+def _step_lanes(
+    big, cols, filt, z, buf, edges, d0, slope, nseg, seg, lane_f, finished, m, n_f,
+    commands, noise, out_f, out_seg, out_finish,
+):  # fmt: skip
+    """Advance every lane by one sample (:func:`step_lane` on each)."""
+    for k in range(z.shape[0]):
+        step_lane(
+            k, big, cols, filt, z, buf, edges, d0, slope, nseg, seg, lane_f, finished, m, n_f,
+            commands[k], noise[k], out_f, out_seg, out_finish,
+        )  # fmt: skip
+
+
+@numba.njit(cache=True)
+def step_lane(
+    k, big, cols, filt, z, buf, edges, d0, slope, nseg, seg, lane_f, finished, m, n_f,
+    command, noise, out_f, out_seg, out_finish,
+):  # fmt: skip
+    """Advance lane ``k`` by one sample (see :class:`TurningLanes` for the layout).
+
+    ``lane_f[k]`` holds ``[Kf, p, Ke, U_max, length, t, margin, Ts]``; ``out_f[k]`` gets
+    ``[force, peak force, measured counts, feed per rev, feed velocity, position, depth]``.
+    The arithmetic is that of one cut, whatever the number of lanes.
+    """
+    n_rows = 2 * m + 3
+    kf, pexp, gain, cmax, length, t, margin, ts = lane_f[k]
+    c = cols[k]
+    zk = z[k, :c]
+    zk[3] = min(max(command, 0.0), cmax)
+    y = np.dot(big[k, : n_rows * c].reshape(n_rows, c), zk)
+    p_start = zk[2]
+    p_end = y[m - 1]
+    b = buf[k]
+    force = b[n_f : n_f + m]
+    for j in range(m):
+        force[j] = max(y[m + j], 0.0) ** pexp
+    e = edges[k]
+    i = seg[k]
+    lo, hi = (p_start, p_end) if p_start <= p_end else (p_end, p_start)
+    one_segment = e[i] <= lo - margin and hi + margin < e[i + 1]
+    if not one_segment and e[i] <= lo and hi < e[i + 1]:
+        one_segment = e[i] <= y[:m].min() and y[:m].max() < e[i + 1]
+    if one_segment:
+        sl = slope[k, i]
+        if sl == 0.0:
+            depth_end = d0[k, i]
+            scale = kf * depth_end
+            for j in range(m):
+                force[j] *= scale
+        else:
+            for j in range(m):
+                depth = (y[j] - e[i]) * sl + d0[k, i]
+                force[j] = force[j] * depth * kf
+            depth_end = (y[m - 1] - e[i]) * sl + d0[k, i]
+    else:
+        depth = 0.0
+        for j in range(m):
+            depth = _depth_at(y[j], e, d0[k], slope[k], nseg[k])
+            force[j] = force[j] * depth * kf
+        depth_end = depth
+        i = np.searchsorted(e[: nseg[k] + 1], p_end, side="right") - 1
+        i = min(max(i, 0), nseg[k] - 1)
+        seg[k] = i
+    fl = filt[k, : n_f * b.shape[0]].reshape(n_f, b.shape[0])
+    fo = np.dot(fl, b)
+    b[:n_f] = fo
+    f_end = force[m - 1]
+    out = out_f[k]
+    out[0] = f_end
+    out[1] = force.max()
+    out[2] = gain * fo[0] + noise
+    out[3] = y[2 * m - 1]
+    b[b.shape[0] - 1] = f_end
+    for q in range(c - 1, 3, -1):
+        zk[q] = zk[q - 4]
+    zk[0] = y[2 * m]
+    zk[1] = y[2 * m + 1]
+    zk[2] = y[2 * m + 2]
+    zk[3] = 0.0
+    out[4] = zk[0]
+    out[5] = p_end
+    out[6] = depth_end
+    out_seg[k] = seg[k]
+    out_finish[k] = np.nan
+    if not finished[k] and p_end >= length:
+        j = 0
+        while y[j] < length:
+            j += 1
+        out_finish[k] = t + (j + 1) * ts / m
+        finished[k] = True
+    lane_f[k, 5] = t + ts
+
+
+#: Fields of ``TurningLanes.out`` (one row per lane after each step).
+LANE_SIGNALS = (
+    "force_N",
+    "peak_force_N",
+    "measured_counts",
+    "feed_mm_per_rev",
+    "feed_velocity_mm_s",
+    "position_mm",
+    "depth_mm",
+)
+
+
+class TurningLanes:
+    """N independent cuts stepped together: the physics of every turning env.
+
+    Each lane has its own true parameters, spindle speed and workpiece
+    (:meth:`start`); :meth:`step` advances every lane by one sample with one compiled
+    kernel whose arithmetic per lane is exactly that of a single cut, so lane ``i`` of a
+    batch and a batch of one give the same numbers to the last bit. All lanes share the
+    parameters the linear blocks depend on (servo, filter, sample time, sub-steps): those
+    of the ``params`` given here; ``start`` refuses a lane whose parameters differ in them.
+
+    Parameters
+    ----------
+    params : TurningParams
+        Parameters of the linear blocks (and the defaults of every lane).
+    n : int
+        Number of lanes.
+    """
+
+    def __init__(self, params: TurningParams, n: int = 1) -> None:
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f"n must be an integer >= 1, got {n!r}")
+        self.n = int(n)
+        self.params = params
+        self._key = _LinearKey.of(params)
+        m = params.substeps
+        lags_max = int(math.ceil(60.0 / SPINDLE_RPM_RANGE[0] / params.sample_time_s + 1e-12)) + 1
+        c_max = 4 * (lags_max + 1)
+        filt = _speed_free_rows(self._key)[1]
+        self.m, self.n_f = m, filt.shape[0]
+        self.big = np.zeros((self.n, (2 * m + 3) * c_max))
+        self.cols = np.full(self.n, 4, dtype=np.int64)
+        self.filt = np.tile(filt.ravel(), (self.n, 1))
+        self.z = np.zeros((self.n, c_max))
+        self.buf = np.zeros((self.n, filt.shape[1]))
+        self._s_max = 1
+        #: Counts replacements of the lane arrays (by a profile with more segments).
+        self.version = 0
+        self.edges = np.zeros((self.n, 2))
+        self.d0 = np.zeros((self.n, 1))
+        self.slope = np.zeros((self.n, 1))
+        self.nseg = np.ones(self.n, dtype=np.int64)
+        self.seg = np.zeros(self.n, dtype=np.int64)
+        #: Per lane ``[Kf, p, Ke, U_max, length, t, margin, Ts]``.
+        self.lane_f = np.zeros((self.n, 8))
+        self.finished = np.zeros(self.n, dtype=np.bool_)
+        self.spindle_rpm = np.zeros(self.n)
+        self.lane_params: list[TurningParams] = [params] * self.n
+        self.profiles: list = [None] * self.n
+        #: Signals of the last step, one row per lane (columns: ``LANE_SIGNALS``).
+        self.out = np.zeros((self.n, len(LANE_SIGNALS)))
+        self.out_segment = np.zeros(self.n, dtype=np.int64)
+        #: Time at which each lane finished its workpiece in the last step (NaN if not).
+        self.out_finish = np.full(self.n, np.nan)
+
+    def start(self, lane: int, params: TurningParams, spindle_rpm: float, profile) -> None:
+        """Start a new cut in ``lane``: machine at rest at the workpiece's start."""
+        _check("spindle_rpm", spindle_rpm, *SPINDLE_RPM_RANGE)
+        if _LinearKey.of(params) != self._key:
+            raise ValueError(
+                "a lane's servo, filter, sample time and sub-steps must be those of the "
+                f"batch ({self._key}), got {_LinearKey.of(params)}"
+            )
+        mx = _matrices(self._key, float(spindle_rpm))
+        c = mx.big.shape[1]
+        self.big[lane, : mx.big.size] = mx.big.ravel()
+        self.cols[lane] = c
+        self.z[lane] = 0.0
+        self.buf[lane] = 0.0
+        edges = np.asarray(profile.edges_mm, dtype=np.float64)
+        d0 = np.asarray(profile.start_depths_mm, dtype=np.float64)
+        slope = (np.asarray(profile.end_depths_mm, dtype=np.float64) - d0) / np.diff(edges)
+        ns = d0.size
+        if ns > self._s_max:
+            grow = ns - self._s_max
+            self.edges = np.pad(self.edges, ((0, 0), (0, grow)), mode="edge")
+            self.d0 = np.pad(self.d0, ((0, 0), (0, grow)))
+            self.slope = np.pad(self.slope, ((0, 0), (0, grow)))
+            self._s_max = ns
+            self.version += 1  # the arrays were replaced: cached references are stale
+        self.edges[lane, : ns + 1] = edges
+        self.edges[lane, ns + 1 :] = edges[-1]
+        self.d0[lane] = 0.0
+        self.d0[lane, :ns] = d0
+        self.slope[lane] = 0.0
+        self.slope[lane, :ns] = slope
+        self.nseg[lane] = ns
+        self.seg[lane] = 0
+        margin = _velocity_bound(self._key, params.command_max) * params.sample_time_s
+        self.lane_f[lane] = (
+            params.force_coefficient,
+            params.feed_exponent,
+            params.sensor_gain,
+            params.command_max,
+            float(edges[-1]),
+            0.0,
+            margin,
+            params.sample_time_s,
+        )
+        self.finished[lane] = False
+        self.spindle_rpm[lane] = float(spindle_rpm)
+        self.lane_params[lane] = params
+        self.profiles[lane] = profile
+
+    def step(self, commands: np.ndarray, noise_counts: np.ndarray) -> None:
+        """Hold ``commands[k]`` (counts; clipped to [0, U_max]) in every lane for one sample,
+        with ``noise_counts[k]`` added to lane ``k``'s measurement; results in ``out``,
+        ``out_segment`` and ``out_finish``."""
+        _step_lanes(
+            self.big,
+            self.cols,
+            self.filt,
+            self.z,
+            self.buf,
+            self.edges,
+            self.d0,
+            self.slope,
+            self.nseg,
+            self.seg,
+            self.lane_f,
+            self.finished,
+            self.m,
+            self.n_f,
+            np.asarray(commands, dtype=np.float64),
+            np.asarray(noise_counts, dtype=np.float64),
+            self.out,
+            self.out_segment,
+            self.out_finish,
+        )
+
+    @property
+    def t_s(self) -> np.ndarray:
+        """Time of each lane since its cut started, s."""
+        return self.lane_f[:, 5]
+
+
 class TurningPlant:
-    """Simulates one cut at a constant spindle speed; numpy only.
+    """Simulates one cut at a constant spindle speed: a :class:`TurningLanes` of one lane.
 
     Parameters
     ----------
@@ -392,31 +647,25 @@ class TurningPlant:
         self.spindle_rpm = float(spindle_rpm)
         self.profile = profile
         self.length_mm = profile.length_mm
-        key = _LinearKey.of(params)
-        self._mx = _matrices(key, self.spindle_rpm)
-        self._margin = _velocity_bound(key, params.command_max) * params.sample_time_s
-        self._edges = np.asarray(profile.edges_mm, dtype=np.float64)
-        d0 = np.asarray(profile.start_depths_mm, dtype=np.float64)
-        self._d0 = d0
-        self._slope = (np.asarray(profile.end_depths_mm, dtype=np.float64) - d0) / np.diff(
-            self._edges
+        self._lanes = TurningLanes(params, 1)
+        self._margin = float(_velocity_bound(_LinearKey.of(params), params.command_max)) * (
+            params.sample_time_s
         )
         self.reset()
 
     def reset(self) -> None:
         """Machine at rest at the workpiece's start: no feed, no force, filter settled at 0."""
-        mx = self._mx
-        self.t_s = 0.0
-        self.z = np.zeros(4 * (mx.lags + 1))
-        n_f = mx.filt_step.shape[0]
-        # [filter state (n_f), force at the M sub-steps of this sample, force at its start]
-        self._buf = np.zeros(mx.filt_step.shape[1])
-        self._n_f = n_f
+        self._lanes.start(0, self.params, self.spindle_rpm, self.profile)
         self.finished = False
-        self._seg = 0
-        self._edge_list = [float(v) for v in self._edges]
-        self._d0_list = [float(v) for v in self._d0]
-        self._slope_list = [float(v) for v in self._slope]
+
+    @property
+    def t_s(self) -> float:
+        return float(self._lanes.lane_f[0, 5])
+
+    @property
+    def z(self) -> np.ndarray:
+        """The cut's memory (see ``_Matrices``)."""
+        return self._lanes.z[0, : self._lanes.cols[0]]
 
     @property
     def state(self) -> np.ndarray:
@@ -425,66 +674,20 @@ class TurningPlant:
 
     def step(self, command: float, noise_counts: float = 0.0) -> TurningStep:
         """Hold ``command`` (counts; clipped to [0, command_max]) for one sample and advance."""
-        prm = self.params
-        m = prm.substeps
-        z = self.z
-        z[3] = min(max(command, 0.0), prm.command_max)
-        y = self._mx.big @ z
-        position = y[:m]
-        p_start = float(z[2])
-        p_end = float(position[-1])
-        buf = self._buf
-        n_f = self._n_f
-        force = buf[n_f : n_f + m]  # a view: the force is written into the filter's input
-        np.maximum(y[m : 2 * m], 0.0, out=force)
-        feed_end = float(y[2 * m - 1])
-        np.power(force, prm.feed_exponent, out=force)
-        # Depth at the sub-steps: one segment (almost always) or the general lookup. Within a
-        # sample the tool stays within ``margin`` of the span of its end positions (|Vf| is
-        # at most its BIBO bound), so far from the edges the ends decide; near an edge the
-        # sub-step positions themselves are checked.
-        e = self._edge_list
-        i = self._seg
-        lo, hi = (p_start, p_end) if p_start <= p_end else (p_end, p_start)
-        margin = self._margin
-        one_segment = e[i] <= lo - margin and hi + margin < e[i + 1]
-        if not one_segment and e[i] <= lo and hi < e[i + 1]:
-            one_segment = e[i] <= float(position.min()) and float(position.max()) < e[i + 1]
-        if one_segment:
-            slope = self._slope_list[i]
-            if slope == 0.0:
-                depth_end = self._d0_list[i]
-                force *= prm.force_coefficient * depth_end
-            else:
-                depth = (position - e[i]) * slope + self._d0_list[i]
-                depth_end = float(depth[-1])
-                force *= depth
-                force *= prm.force_coefficient
-        else:
-            depth = self.profile(position)
-            self._seg = min(
-                max(int(np.searchsorted(self._edges, p_end, side="right")) - 1, 0), len(e) - 2
-            )
-            depth_end = float(depth[-1])
-            force *= depth
-            force *= prm.force_coefficient
-        filt = self._mx.filt_step @ buf
-        buf[:n_f] = filt
-        measured = prm.sensor_gain * float(filt[0]) + noise_counts
-        f_end = float(force[-1])
-        peak = float(force.max())
-        buf[-1] = f_end
-        # Shift the memory one sample back; the new state leads, its command is set next step.
-        z[4:] = z[:-4]
-        z[:3] = y[2 * m :]
-        z[3] = 0.0
-
-        finish = None
-        if not self.finished and p_end >= self.length_mm:
-            j = int(np.argmax(position >= self.length_mm))
-            finish = self.t_s + (j + 1) * prm.sample_time_s / m
-            self.finished = True
-        self.t_s += prm.sample_time_s
+        lanes = self._lanes
+        lanes.step(np.array([command], dtype=np.float64), np.array([noise_counts]))
+        o = lanes.out[0]
+        fin = float(lanes.out_finish[0])
+        finish = None if math.isnan(fin) else fin
+        self.finished = bool(lanes.finished[0])
         return TurningStep(
-            f_end, peak, measured, feed_end, float(z[0]), p_end, depth_end, self._seg, finish
+            float(o[0]),
+            float(o[1]),
+            float(o[2]),
+            float(o[3]),
+            float(o[4]),
+            float(o[5]),
+            float(o[6]),
+            int(lanes.out_segment[0]),
+            finish,
         )

@@ -1,0 +1,178 @@
+"""What every native vector env shares: N lanes of one process stepped as arrays.
+
+A process's vector env subclasses :class:`LaneVectorEnv` and implements two methods over
+its batched physics:
+
+- ``_reset_lanes(lanes, options)``: start new episodes in the lanes ``lanes`` (an index
+  array), drawing each lane's scenario from its own generator ``self.lane_rngs[i]``;
+  return their observations ``(len(lanes), *obs_shape)`` and their reset info as a dict
+  of arrays of length ``len(lanes)``;
+- ``_step_lanes(actions)``: advance every lane by one control period with the checked
+  actions ``(num_envs, *action_shape)``; return observations, rewards, terminations,
+  truncations and the step info as a dict of arrays of length ``num_envs`` (a key that
+  only some lanes have comes with a boolean mask under ``"_" + key``).
+
+This base checks the actions (a non-finite action in any lane raises ``ValueError``
+naming the lane, and nothing is stepped), seeds lane ``i`` with ``seed + i`` exactly as
+``env.reset(seed=seed + i)`` seeds the single env, and resets finished lanes in the same
+step (``AutoresetMode.SAME_STEP``, declared in ``metadata["autoreset_mode"]``): the
+returned observation of such a lane is its new episode's first, its last observation and
+info are in ``info["final_obs"]`` and ``info["final_info"]``, exactly as Gymnasium's
+``SyncVectorEnv(..., autoreset_mode=AutoresetMode.SAME_STEP)`` reports them.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode
+from gymnasium.vector.utils import batch_space
+
+__all__ = ["LaneVectorEnv", "merge_lane_info"]
+
+
+def merge_lane_info(info: dict, lanes: np.ndarray, part: dict, num_envs: int) -> None:
+    """Write ``part`` (arrays over ``lanes``) into ``info`` (arrays over all lanes, with
+    ``_key`` masks), in place."""
+    for key, values in part.items():
+        if key.startswith("_"):
+            continue
+        values = np.asarray(values)
+        if values.dtype.kind in "US":  # strings of any length (scenario names)
+            values = values.astype(object)
+        if key not in info:
+            info[key] = np.zeros((num_envs, *values.shape[1:]), dtype=values.dtype)
+            info["_" + key] = np.zeros(num_envs, dtype=bool)
+        else:
+            info["_" + key] = info["_" + key].copy()  # masks may be shared between keys
+            if info[key].dtype != values.dtype and info[key].dtype != object:
+                info[key] = info[key].astype(np.result_type(info[key], values))
+        mask = part.get("_" + key)
+        sel = lanes if mask is None else lanes[np.asarray(mask, dtype=bool)]
+        src = values if mask is None else values[np.asarray(mask, dtype=bool)]
+        info[key][sel] = src
+        info["_" + key][sel] = True
+
+
+class LaneVectorEnv(gym.vector.VectorEnv):
+    """Base of the native vector envs (see the module docstring)."""
+
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+    #: Name used in error messages (the single env's class name, say).
+    env_name: str = "LaneVectorEnv"
+
+    def __init__(
+        self,
+        num_envs: int,
+        single_observation_space: gym.Space,
+        single_action_space: gym.Space,
+    ) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
+            raise TypeError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs}")
+        self.num_envs = int(num_envs)
+        self.single_observation_space = single_observation_space
+        self.single_action_space = single_action_space
+        self.observation_space = batch_space(single_observation_space, self.num_envs)
+        self.action_space = batch_space(single_action_space, self.num_envs)
+        self.render_mode = None
+        self.lane_rngs: list[np.random.Generator] = [
+            seeding.np_random()[0] for _ in range(self.num_envs)
+        ]
+        self._started = False
+
+    # ---- to implement -----------------------------------------------------------------------
+    def _reset_lanes(self, lanes: np.ndarray, options: dict | None) -> tuple[np.ndarray, dict]:
+        raise NotImplementedError  # pragma: no cover - every process implements it
+
+    def _step_lanes(self, actions: np.ndarray):
+        raise NotImplementedError  # pragma: no cover - every process implements it
+
+    # ---- the VectorEnv interface ------------------------------------------------------------
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ):
+        """Start a new episode in every lane; ``seed`` (int: lane ``i`` gets ``seed + i``;
+        or one seed per lane) and ``options`` (e.g. ``{"scenario": ...}``) as for the single
+        env."""
+        if options is not None and not isinstance(options, dict):
+            raise TypeError(f"options must be a dict or None, got {type(options).__name__}")
+        if seed is not None:
+            if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+                seeds = [int(seed) + i for i in range(self.num_envs)]
+            elif isinstance(seed, (list, tuple)) and len(seed) == self.num_envs:
+                seeds = list(seed)
+            else:
+                raise ValueError(
+                    f"seed must be None, an int or a list of {self.num_envs} seeds, got {seed!r}"
+                )
+            for i, s in enumerate(seeds):
+                if s is not None:
+                    self.lane_rngs[i] = seeding.np_random(s)[0]
+        lanes = np.arange(self.num_envs)
+        obs, part = self._reset_lanes(lanes, options)
+        info: dict = {}
+        merge_lane_info(info, lanes, part, self.num_envs)
+        self._started = True
+        return obs, info
+
+    def step(self, actions):
+        if not self._started:
+            raise RuntimeError(f"{self.env_name} (vector): call reset() before step()")
+        shape = (self.num_envs, *self.single_action_space.shape)
+        try:
+            a = np.asarray(actions, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"{self.env_name} (vector): actions must be real numbers of shape {shape}"
+            ) from None
+        if a.shape != shape:
+            if a.size == math.prod(shape):
+                a = a.reshape(shape)
+            else:
+                raise ValueError(
+                    f"{self.env_name} (vector): actions must have shape {shape}, got {a.shape}"
+                )
+        finite = np.isfinite(a).reshape(self.num_envs, -1).all(axis=1)
+        if not finite.all():
+            lane = int(np.flatnonzero(~finite)[0])
+            raise ValueError(
+                f"{self.env_name} (vector): the action of lane {lane} is {a[lane].tolist()} "
+                "(not finite); no lane was stepped"
+            )
+        obs, reward, terminated, truncated, info = self._step_lanes(a)
+        every = np.ones(self.num_envs, dtype=bool)
+        info = {
+            **info,
+            **{"_" + k: every for k in info if not k.startswith("_") and "_" + k not in info},
+        }
+        done = np.logical_or(terminated, truncated)
+        if done.any():
+            lanes = np.flatnonzero(done)
+            final_obs = np.full(self.num_envs, None, dtype=object)
+            for i in lanes:
+                final_obs[i] = obs[i].copy()
+            final_info: dict = {}
+            top: dict = {}
+            for k, v in info.items():
+                if k.startswith("_"):
+                    continue
+                mask = info["_" + k]
+                final_info[k], final_info["_" + k] = v, mask & done
+                top[k], top["_" + k] = v.copy(), mask & ~done
+            new_obs, part = self._reset_lanes(lanes, None)
+            obs = obs.copy()
+            obs[lanes] = new_obs
+            merge_lane_info(top, lanes, part, self.num_envs)
+            top["final_obs"], top["_final_obs"] = final_obs, done.copy()
+            top["final_info"], top["_final_info"] = final_info, done.copy()
+            info = top
+        return obs, reward, terminated, truncated, info
+
+    def close_extras(self, **kwargs) -> None:
+        return None
