@@ -1,4 +1,5 @@
-"""Single-env step throughput of the machining envs against Gymnasium's Pendulum-v1.
+"""Step throughput of the machining envs: single envs against Gymnasium's Pendulum-v1, native
+vector envs against the single env, SyncVectorEnv and Gymnasium's CartPoleVectorEnv.
 
 Both envs are made with ``gym.make`` (same default wrappers) and stepped in the same process,
 interleaved over several rounds, with uniformly random actions drawn beforehand from a
@@ -9,7 +10,14 @@ seeded generator so that action sampling is not timed. Two rates per env:
   within about 50 steps, so Turning-v0 resets every ~50 steps (each reset draws a workpiece
   and discretises the plant at a new spindle speed, ~0.5 ms), Pendulum-v1 every 200.
 
-    python benchmarks/throughput.py [--steps 20000] [--rounds 5]
+The second table steps each id's native vector env (``gym.make_vec(id, num_envs=N)``) at
+N = 1, 64, 1024 and 8192 with random actions (finished lanes reset in the same step), and
+gives the rate at N = 1024 as a ratio to the single env's rate (with resets) and to
+Gymnasium's ``SyncVectorEnv`` of N copies of the single env in the same run; the memory
+per lane is what ``tracemalloc`` counts for making and resetting the N = 1024 env, over
+1024. Gymnasium's ``CartPoleVectorEnv`` at N = 1024 is the reference row.
+
+    python benchmarks/throughput.py [--steps 20000] [--rounds 5] [--lanes 1 64 1024 8192]
 """
 
 from __future__ import annotations
@@ -17,6 +25,7 @@ from __future__ import annotations
 import argparse
 import platform
 import time
+import tracemalloc
 
 import gymnasium as gym
 import numpy as np
@@ -32,6 +41,8 @@ def steps_per_second(env_id: str, n_steps: int, seed: int) -> tuple[float, float
     rng = np.random.default_rng(seed)
     low, high = env.action_space.low, env.action_space.high
     actions = rng.uniform(low, high, size=(n_steps, *env.action_space.shape)).astype(np.float32)
+    env.reset(seed=seed)
+    env.step(actions[0])  # first call: compiled kernels are loaded (once per process)
     env.reset(seed=seed)
     clock = time.perf_counter
     in_step = 0.0
@@ -49,10 +60,75 @@ def steps_per_second(env_id: str, n_steps: int, seed: int) -> tuple[float, float
     return n_steps / in_step, n_steps / total, resets
 
 
+def vector_steps_per_second(
+    env_id: str, num_envs: int, env_steps: int, seed: int, mode: str | None = None
+) -> float:
+    """Env-steps per second of ``gym.make_vec(env_id, num_envs)`` over about ``env_steps``
+    env-steps (at least 5 batched steps) with random actions drawn beforehand."""
+    kwargs = {} if mode is None else {"vectorization_mode": mode}
+    venv = gym.make_vec(env_id, num_envs=num_envs, **kwargs)
+    n = max(5, env_steps // num_envs)
+    rng = np.random.default_rng(seed)
+    space = venv.single_action_space
+    if isinstance(space, gym.spaces.Discrete):
+        actions = rng.integers(space.n, size=(n, num_envs))
+    else:
+        actions = rng.uniform(space.low, space.high, size=(n, num_envs, *space.shape))
+        actions = actions.astype(space.dtype)
+    venv.reset(seed=seed)
+    venv.step(actions[0])  # first call: compiled kernels are loaded
+    t0 = time.perf_counter()
+    for a in actions:
+        venv.step(a)
+    rate = n * num_envs / (time.perf_counter() - t0)
+    venv.close()
+    return rate
+
+
+def bytes_per_lane(env_id: str, num_envs: int) -> float:
+    """Memory allocated to make and reset the native vector env, per lane (tracemalloc)."""
+    tracemalloc.start()
+    base = tracemalloc.get_traced_memory()[0]
+    venv = gym.make_vec(env_id, num_envs=num_envs)
+    venv.reset(seed=0)
+    used = tracemalloc.get_traced_memory()[0] - base
+    tracemalloc.stop()
+    venv.close()
+    return used / num_envs
+
+
+def vector_table(lanes: list[int], env_steps: int, sync_steps: int) -> None:
+    ref_n = 1024 if 1024 in lanes else lanes[-1]
+    print(
+        f"\nnative vector envs: env-steps/s with random actions; ratios at N = {ref_n}; "
+        f"memory per lane from N = {ref_n}"
+    )
+    head = f"{'env':34s}" + "".join(f" {f'N={n}':>10s}" for n in lanes)
+    print(head + f" {'x single':>9s} {'x sync':>7s} {'kB/lane':>8s}")
+    cart = vector_steps_per_second("CartPole-v1", ref_n, env_steps, 0, "vector_entry_point")
+    print(f"{'CartPoleVectorEnv (reference)':34s}" + "".join(
+        f" {cart:10.0f}" if n == ref_n else f" {'':>10s}" for n in lanes
+    ))  # fmt: skip
+    for env_id in machining_envs.ENV_IDS:
+        if gym.spec(env_id).vector_entry_point is None:
+            print(f"{env_id:34s} no native vector env yet")
+            continue
+        rates = {n: vector_steps_per_second(env_id, n, env_steps, 0) for n in lanes}
+        single = steps_per_second(env_id, max(2000, env_steps // 20), 0)[1]
+        sync = vector_steps_per_second(env_id, ref_n, sync_steps, 0, "sync")
+        kb = bytes_per_lane(env_id, ref_n) / 1024
+        row = f"{env_id:34s}" + "".join(f" {rates[n]:10.0f}" for n in lanes)
+        print(row + f" {rates[ref_n] / single:9.1f} {rates[ref_n] / sync:7.1f} {kb:8.1f}")
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--steps", type=int, default=20_000)
     ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--lanes", type=int, nargs="+", default=[1, 64, 1024, 8192])
+    ap.add_argument("--vector-steps", type=int, default=200_000, help="env-steps per vector rate")
+    ap.add_argument("--sync-steps", type=int, default=20_000, help="env-steps of SyncVectorEnv")
+    ap.add_argument("--no-vector", action="store_true", help="single envs only")
     args = ap.parse_args(argv)
     ids = [PEER, *machining_envs.ENV_IDS]
     rates = {i: [] for i in ids}
@@ -72,6 +148,8 @@ def main(argv=None) -> None:
         print(
             f"{env_id:34s} {s:9.0f} {s / med[PEER][0]:6.2f} {w:14.0f} {w / med[PEER][1]:6.2f} {n:7.0f}"
         )
+    if not args.no_vector:
+        vector_table(sorted(args.lanes), args.vector_steps, args.sync_steps)
 
 
 if __name__ == "__main__":

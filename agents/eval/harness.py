@@ -14,7 +14,7 @@ import machining_envs  # noqa: F401  (registers the env ids)
 from machining_envs.core.metrics import regulation_metrics
 from machining_envs.core.score import REGULATION_SCORE, Task
 
-__all__ = ["rollout", "evaluate", "Evaluation", "agent_name", "task_of"]
+__all__ = ["rollout", "rollout_batch", "evaluate", "Evaluation", "agent_name", "task_of"]
 
 #: The task of an env that declares none (an env of another library): the regulation
 #: metrics and the machining-time score.
@@ -62,6 +62,78 @@ def rollout(agent, env: gym.Env, scenario=None, seed: int | None = None) -> dict
     traj["reward"] = np.array(rewards)
     traj["scenario"] = rows[0].get("scenario")
     return traj
+
+
+def rollout_batch(agent, venv, scenario, seeds: Sequence[int]) -> list[dict[str, np.ndarray]]:
+    """One episode in each lane of a native vector env (``num_envs == len(seeds)``), the
+    agent acting on the whole batch; returns one trajectory per lane, exactly as
+    :func:`rollout` returns it for the same seed.
+
+    Lane ``i`` is reset with seed ``seeds[i]``; a lane that finishes is reset by the vector
+    env and its later steps are ignored until every lane has finished.
+    """
+    n = venv.num_envs
+    if len(seeds) != n:
+        raise ValueError(f"seeds must hold one seed per lane ({n}), got {len(seeds)}")
+    options = {"scenario": scenario} if scenario is not None else None
+    obs, info = venv.reset(seed=[int(s) for s in seeds], options=options)
+    infos, rewards = [info], [np.zeros(n)]
+    length = np.zeros(n, dtype=np.int64)
+    done = np.zeros(n, dtype=bool)
+    state, start = None, np.ones(n, dtype=bool)
+    while not done.all():
+        action, state = agent.predict(obs, state=state, episode_start=start, deterministic=True)
+        obs, reward, terminated, truncated, info = venv.step(action)
+        ended = np.logical_or(terminated, truncated)
+        infos.append(info)
+        rewards.append(np.asarray(reward, dtype=np.float64))
+        length[ended & ~done] = len(infos) - 1
+        done |= ended
+        start = ended
+    return _lane_trajectories(infos, rewards, length)
+
+
+def _lane_trajectories(infos: list[dict], rewards: list, length: np.ndarray) -> list[dict]:
+    """Per-lane trajectories (as :func:`rollout` gives them) from a vector env's infos:
+    lane ``i``'s rows are the infos of steps ``0 .. length[i] - 1`` and the ``final_info``
+    of step ``length[i]``."""
+    n_steps, n = len(infos), len(length)
+    finals = [info.get("final_info", {}) for info in infos]
+    keys = {k for info in (*infos, *finals) for k in info if not k.startswith("_")}
+    keys -= {"final_obs", "final_info"}
+    columns = {}
+    for key in keys:
+        sample = next(np.asarray(d[key]) for d in (*infos, *finals) if key in d)  # the key's dtype
+        if sample.dtype.kind not in "biuf":
+            continue
+        top = np.full((n_steps, n), np.nan)
+        top_ok = np.zeros((n_steps, n), dtype=bool)
+        fin = np.full((n_steps, n), np.nan)
+        fin_ok = np.zeros((n_steps, n), dtype=bool)
+        for t in range(n_steps):
+            for src, vals, ok in ((infos[t], top, top_ok), (finals[t], fin, fin_ok)):
+                if key in src:
+                    vals[t] = src[key]
+                    ok[t] = src.get("_" + key, True)
+        columns[key] = (top, top_ok, fin, fin_ok, sample.dtype)
+    reward = np.array(rewards)
+    scenario = infos[0].get("scenario")
+    trajs = []
+    for i in range(n):
+        last = int(length[i])
+        traj = {}
+        for key, (top, top_ok, fin, fin_ok, dtype) in columns.items():
+            if not fin_ok[last, i]:
+                continue  # not in the lane's last row: rollout leaves such keys out
+            col = np.where(top_ok[:last, i], top[:last, i], np.nan)
+            col = np.append(col, fin[last, i])
+            if dtype.kind in "biu" and not np.isnan(col).any():
+                col = col.astype(dtype if dtype.kind == "b" else np.int64)
+            traj[key] = col
+        traj["reward"] = np.concatenate(([0.0], reward[1 : last + 1, i]))
+        traj["scenario"] = None if scenario is None else scenario[i]
+        trajs.append(traj)
+    return trajs
 
 
 @dataclass
@@ -141,6 +213,7 @@ def evaluate(
     env_kwargs: dict | None = None,
     keep_trajectories: bool = False,
     metrics_fn: Callable[[dict], dict] | None = None,
+    batched: bool | None = None,
 ) -> Evaluation:
     """Evaluate ``agent`` on ``env_id`` over ``scenarios`` x ``n_episodes``.
 
@@ -158,10 +231,21 @@ def evaluate(
         same workpieces and noise.
     metrics_fn : callable, optional
         Trajectory -> metrics of one episode; by default the env's own (``task_of``).
+    batched : bool, optional
+        Run the ``n_episodes`` of a scenario as the lanes of the env's native vector env
+        (``gym.make_vec``), the agent predicting for all of them at once; the rows are the
+        same as episode by episode. By default batched where the id has a native vector env
+        and more than one episode is asked for.
     """
     if not isinstance(n_episodes, int) or n_episodes < 1:
         raise ValueError(f"n_episodes must be an integer >= 1, got {n_episodes!r}")
+    has_vector = gym.spec(env_id).vector_entry_point is not None
+    if batched is None:
+        batched = has_vector and n_episodes > 1
+    elif batched and not has_vector:
+        raise ValueError(f"batched=True: {env_id} has no native vector env")
     env = gym.make(env_id, **(env_kwargs or {}))
+    venv = None
     try:
         if metrics_fn is None:
             metrics_fn = task_of(env).metrics
@@ -169,9 +253,15 @@ def evaluate(
             agent = agent(env)
         name = agent_name(agent)
         ev = Evaluation()
+        if batched:
+            venv = gym.make_vec(env_id, num_envs=n_episodes, **(env_kwargs or {}))
         for sc in scenarios:
-            for i in range(n_episodes):
-                traj = rollout(agent, env, sc, seed + i)
+            seeds = [seed + i for i in range(n_episodes)]
+            if batched:
+                trajs = rollout_batch(agent, venv, sc, seeds)
+            else:
+                trajs = [rollout(agent, env, sc, s) for s in seeds]
+            for i, traj in enumerate(trajs):
                 row = {
                     "agent": name,
                     "scenario": sc if isinstance(sc, str) else getattr(sc, "name", str(sc)),
@@ -186,3 +276,5 @@ def evaluate(
         return ev
     finally:
         env.close()
+        if venv is not None:
+            venv.close()

@@ -54,7 +54,8 @@ def _one_blas_thread():
 
 def zoh_tf(num, den, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """ZOH-discretise a transfer function; coefficients in powers of ``z^-1``, ``den[0] = 1``."""
-    numd, dend, _ = cont2discrete((num, den), dt, method="zoh")
+    with _one_blas_thread():
+        numd, dend, _ = cont2discrete((num, den), dt, method="zoh")
     numd = np.atleast_1d(np.squeeze(numd))
     dend = np.atleast_1d(np.squeeze(dend))
     return numd / dend[0], dend / dend[0]

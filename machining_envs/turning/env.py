@@ -32,8 +32,6 @@ from machining_envs.turning.scenarios import TURNING_SCENARIOS, TurningScenario,
 __all__ = ["TurningEnv", "TurningVectorEnv", "TurningReward"]
 
 _HISTORY = 3
-#: From this many lanes on, a step spreads the lanes over the cores (same arithmetic).
-_PARALLEL_LANES = 64
 #: Standard normals drawn at a time for the sensor noise of a lane.
 _NORMAL_BLOCK = 64
 _FORCE_OBS = (-1.0, 10.0)
@@ -122,26 +120,6 @@ def _step(actions, clipped, commands, noise, big, cols, filt, z, buf, edges, d0,
     """One step of every lane: the actions' bookkeeping, the plant, the env's outputs."""
     t = lane_f[:, 5]
     for k in range(z.shape[0]):
-        prev_action[k] = actions[k]
-        last_command[k] = commands[k]
-        last_clipped[k] = clipped[k]
-        n_clipped[k] += clipped[k]
-        step_lane(
-            k, big, cols, filt, z, buf, edges, d0, slope, nseg, seg, lane_f, finished, m, n_f,
-            commands[k], noise[k], out, out_seg, out_finish,
-        )  # fmt: skip
-        _env_lane(k, out, out_finish, t, gain, fs, meas, fr, vmax, brk, max_t, w, prev_action,
-                  fr_obs, rpm_obs, obs, reward, flags)  # fmt: skip
-
-
-@numba.njit(cache=True, parallel=True)
-def _step_parallel(actions, clipped, commands, noise, big, cols, filt, z, buf, edges, d0, slope, nseg,
-          seg, lane_f, finished, m, n_f, out, out_seg, out_finish, gain, fs, meas, fr, vmax,
-          brk, max_t, w, prev_action, fr_obs, rpm_obs, obs, reward, flags, n_clipped,
-          last_clipped, last_command):  # fmt: skip
-    """:func:`_step` with the lanes spread over the cores (for many lanes)."""
-    t = lane_f[:, 5]
-    for k in numba.prange(z.shape[0]):
         prev_action[k] = actions[k]
         last_command[k] = commands[k]
         last_clipped[k] = clipped[k]
@@ -340,8 +318,7 @@ class _TurningCore:
         """Advance every lane with the inputs in ``in_action`` (clipped to the box),
         ``in_clipped`` (whether it was clipped), ``in_command`` (the command it maps to) and
         ``in_noise`` (sensor noise, counts)."""
-        kernel = _step_parallel if self.n >= _PARALLEL_LANES else _step
-        kernel(*self._kernel_args())
+        _step(*self._kernel_args())
 
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""
