@@ -1,6 +1,5 @@
-"""Servo designs (PI, H-infinity 2-DOF) and the contouring agents under the SB3 protocol."""
-
-import math
+"""The contouring agents (PI position, H-infinity 2-DOF, constant override): their laws by hand,
+the load step, the cached synthesis and the SB3 protocol."""
 
 import gymnasium as gym
 import numpy as np
@@ -8,91 +7,15 @@ import pytest
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
-import machining_envs.contouring.servo as servo
 from agents import ConstantOverride, HInf2DOF, PIPosition
 from agents.eval import rollout
 from machining_envs.contouring.plant import ContouringParams
 from machining_envs.contouring.scenarios import PAPER_LOAD_TIME_S, PAPER_STEP_MM
-from machining_envs.contouring.servo import ServoLoop, closed_loop, hinf_2dof_design, pi_design
+from machining_envs.contouring.servo import hinf_2dof_design, pi_design
 
 CONTOURING = "machining_envs/Contouring-v0"
 FEED = "machining_envs/ContouringFeed-v0"
 P = ContouringParams()
-M0 = 500.0
-
-
-def _step(params, design, t_end=0.1):
-    """Unit step response of the discrete closed loop (position after each period)."""
-    a, b, cy, _, _ = closed_loop(params, design)
-    n = int(round(t_end / params.sample_time_s))
-    z = np.zeros(a.shape[0])
-    y = np.empty(n)
-    for k in range(n):
-        z = a @ z + b[:, 0]
-        y[k] = cy[0] @ z
-    return (np.arange(n) + 1) * params.sample_time_s, y
-
-
-def _settling(t, y, band=0.02):
-    bad = np.flatnonzero(np.abs(y - 1.0) > band)
-    return t[bad[-1] + 1]
-
-
-@pytest.mark.parametrize("axis", ["x", "y"])
-def test_hinf_gamma_is_finite_and_reported(axis):
-    d = hinf_2dof_design(P, axis)
-    assert math.isfinite(d.gamma) and 1.0 < d.gamma < 20.0
-    assert d.details["epsilon"] == pytest.approx(1.0 / d.gamma)
-    print(f"H-inf 2-DOF gamma, axis {axis}: {d.gamma:.4f}")
-    agent = HInf2DOF.from_env(gym.make(CONTOURING))
-    assert agent.gammas[0 if axis == "x" else 1] == d.gamma
-
-
-@pytest.mark.parametrize("axis", ["x", "y"])
-@pytest.mark.parametrize("scale", [1.0, 0.7, 1.4])
-def test_hinf_closed_loop_stable_at_the_servo_rate(axis, scale):
-    """Spectral radius < 1 with the ZOH plant at 5 kHz: nominal, and with the inertia of the
-    held-out scenarios' extremes (the design never sees them)."""
-    d = hinf_2dof_design(P, axis)
-    truth = P.replace(**{f"inertia_{axis}_kgm2": P.inertia_kgm2(axis) * scale})
-    a = closed_loop(truth, d, axis)[0]
-    assert np.max(np.abs(np.linalg.eigvals(a))) < 1.0
-
-
-@pytest.mark.parametrize("axis", ["x", "y"])
-def test_hinf_step_response_follows_m0(axis):
-    """No overshoot beyond 2 %, exact steady state (the prefilter), settling (2 %) within
-    25 % of M0's 7.8 ms, and the frequency response within 1 % of M0's over the contouring
-    band (up to 50 rad/s: 50 mm/s on a 1 mm radius)."""
-    d = hinf_2dof_design(P, axis)
-    t, y = _step(P, d)
-    assert y.max() - 1.0 <= 0.02
-    assert y[-1] == pytest.approx(1.0, abs=1e-9)
-    ts_m0 = math.log(50.0) / M0  # 1 - exp(-500 t) = 0.98: 7.8 ms
-    assert abs(_settling(t, y) - ts_m0) <= 0.25 * ts_m0
-    a, b, cy, _, _ = closed_loop(P, d)
-    ts = P.sample_time_s
-    for w in (1.0, 5.0, 20.0, 50.0):
-        z = np.exp(1j * w * ts)
-        t_jw = (cy @ np.linalg.solve(z * np.eye(a.shape[0]) - a, b[:, :1]))[0, 0]
-        assert abs(t_jw) == pytest.approx(abs(M0 / (1j * w + M0)), rel=0.01)
-
-
-@pytest.mark.parametrize("axis", ["x", "y"])
-def test_pi_design_is_critically_damped_without_overshoot(axis):
-    d = pi_design(P, axis)
-    a_pole = P.velocity_pole(axis)
-    kp, ki = d.details["kp_per_s"], d.details["ki_per_s2"]
-    # Characteristic polynomial s^3 + a s^2 + a Kp s + a Ki: a triple pole at -a/3.
-    roots = np.roots([1.0, a_pole, a_pole * kp, a_pole * ki])
-    np.testing.assert_allclose(roots.real, -a_pole / 3.0, rtol=1e-3)
-    assert np.max(np.abs(roots.imag)) < 1e-3 * a_pole
-    t, y = _step(P, d, t_end=0.5)
-    assert y.max() - 1.0 <= 1e-3  # no overshoot (to the discretisation's 0.1 %)
-    assert y[-1] == pytest.approx(1.0, abs=1e-6)
-    # H-infinity is the faster loop (Fig. 4).
-    th, yh = _step(P, hinf_2dof_design(P, axis))
-    assert _settling(th, yh) < 0.2 * _settling(t, y)
 
 
 def test_pi_first_command_by_hand():
@@ -198,42 +121,3 @@ def test_agents_refuse_other_envs():
         ConstantOverride(3.0, 2.0)
     with pytest.raises(ValueError, match="rho"):
         hinf_2dof_design(P, "x", rho=-1.0)
-
-
-def test_block_loop_matches_period_by_period_simulation():
-    """ContouringFeed-v0's block update equals the plant stepped period by period under
-    the agent's controller (same designs, same commands), with and without clipping."""
-    from machining_envs.contouring.plant import ContouringPlant
-
-    designs = tuple(hinf_2dof_design(P, ax) for ax in "xy")
-    truth = P.replace(inertia_y_kgm2=P.inertia_y_kgm2 * 1.2)
-    loop = ServoLoop(truth, designs, 50)
-    rng = np.random.default_rng(0)
-    for amplitude in (0.05, 5.0):  # 5 mm jumps ask for more than the 333 mm/s limit
-        state = loop.initial_state()
-        plant = ContouringPlant(truth)
-        xi = [np.zeros(d.n_states) for d in designs]
-        ref = np.cumsum(rng.normal(0, amplitude, (50, 2)), axis=0)
-        load = np.repeat(rng.uniform(-1, 1, (1, 2)), 50, axis=0)
-        pos, vel, cmd, torque, clipped = loop.run(state, ref, load)
-        assert clipped == (amplitude > 1.0)
-        for j in range(50):
-            u = []
-            for k, d in enumerate(designs):
-                inp = np.array([ref[j, k], plant.z[2 * k]])
-                u.append(float(d.c[0] @ xi[k] + d.d[0] @ inp))
-                xi[k] = d.a @ xi[k] + d.b @ inp
-            s = plant.step(u[0], u[1], load[j, 0], load[j, 1])
-            np.testing.assert_allclose([s.x_mm, s.y_mm], pos[j], rtol=1e-9, atol=1e-9)
-            np.testing.assert_allclose(
-                [s.torque_x_Nm, s.torque_y_Nm], torque[j], rtol=1e-7, atol=1e-7
-            )
-            umax = P.command_max_mm_s
-            np.testing.assert_allclose(np.clip(u, -umax, umax), cmd[j], rtol=1e-9, atol=1e-9)
-
-
-def test_servo_design_by_name():
-    assert servo.servo_design("pi", P, "y").kind == "pi"
-    assert servo.servo_design("hinf", P, "y").kind == "hinf"
-    with pytest.raises(ValueError, match="servo"):
-        servo.servo_design("lqr", P, "x")
