@@ -19,6 +19,8 @@ MILLING = "machining_envs/EndMilling-v0"
 DRILLING = "machining_envs/MicroDrilling-v0"
 CONTOURING = "machining_envs/Contouring-v0"
 CONTOURING_FEED = "machining_envs/ContouringFeed-v0"
+#: The random scenario sets every env has: training draws and held-out ones.
+TRAIN_TEST = ("train", "test")
 
 
 def random_action(rng: np.random.Generator, env: gym.Env, bound: float = 1.0) -> np.ndarray:
@@ -120,3 +122,29 @@ def assert_batched_predict_equals_single(
             )
             np.testing.assert_allclose(act, batch_act[i], rtol=rtol, atol=atol)
             obs[i] = envs[i].step(act)[0]
+
+
+def drawn_scenarios(env: gym.Env, name: str, n: int) -> list:
+    """The scenarios ``env`` draws for the random set ``name`` on resets with seeds 0 to n-1."""
+    drawn = []
+    for seed in range(n):
+        env.reset(seed=seed, options={"scenario": name})
+        drawn.append(env.unwrapped.scenario)
+    return drawn
+
+
+def agents_built_on_train_and_test(factory: Callable, env_id: str) -> tuple:
+    """The agents ``factory`` builds from one env reset to a training draw, then to a
+    held-out one: an agent designed from nominal parameters only builds the same twice."""
+    env = gym.make(env_id)
+    env.reset(seed=0, options={"scenario": "train"})
+    a = factory(env)
+    env.reset(seed=5, options={"scenario": "test"})
+    return a, factory(env)
+
+
+def assert_test_reaches_beyond_train(values: dict, low: float, high: float) -> None:
+    """``values["train"]`` stay within ``[low, high]``; ``values["test"]`` (the held-out
+    draws) reach below ``low`` and above ``high``."""
+    assert low <= min(values["train"]) and max(values["train"]) <= high
+    assert min(values["test"]) < low and max(values["test"]) > high

@@ -6,7 +6,7 @@ import pytest
 
 from agents import FixedGainPI, VariableGainPI
 from agents.eval import Evaluation, evaluate
-from tests.conftest import TURNING
+from tests.helpers import TURNING
 
 
 def test_evaluate_table_and_csv(tmp_path):

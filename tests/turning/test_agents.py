@@ -9,7 +9,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
 from agents import ConstantFeed, FixedGainPI, VariableGainPI
-from tests.conftest import TURNING
+from tests.helpers import TURNING
 
 FACTORIES = [ConstantFeed.from_env, FixedGainPI.from_env, VariableGainPI.from_env]
 

@@ -16,7 +16,7 @@ from agents.bench.cli import main
 from agents.bench.turning import reproduce_turning
 from agents.eval import rollout
 from machining_envs.core.metrics import regulation_metrics
-from tests.conftest import TURNING
+from tests.helpers import TURNING
 
 
 def test_all_five_observations_hold_with_one_sensor_gain():
