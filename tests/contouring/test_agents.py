@@ -4,17 +4,21 @@ the load step, the cached synthesis and the SB3 protocol."""
 import gymnasium as gym
 import numpy as np
 import pytest
-from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
 
 from agents import ConstantOverride, HInf2DOF, PIPosition
 from agents.eval import rollout
 from machining_envs.contouring.plant import ContouringParams
 from machining_envs.contouring.scenarios import PAPER_LOAD_TIME_S, PAPER_STEP_MM
 from machining_envs.contouring.servo import hinf_2dof_design, pi_design
+from tests.helpers import (
+    CONTOURING,
+    CONTOURING_FEED,
+    TURNING,
+    assert_batched_predict_equals_single,
+    assert_sb3_evaluate_policy_runs,
+)
 
-CONTOURING = "machining_envs/Contouring-v0"
-FEED = "machining_envs/ContouringFeed-v0"
+FEED = CONTOURING_FEED
 P = ContouringParams()
 
 
@@ -66,39 +70,24 @@ def test_synthesis_is_cached_and_never_runs_in_predict(monkeypatch):
         hinf_2dof_design(P.replace(inertia_x_kgm2=0.0123), "x")
 
 
-@pytest.mark.parametrize("factory", [PIPosition.from_env, HInf2DOF.from_env])
-def test_sb3_evaluate_policy_runs_agents_unchanged(factory):
-    venv = make_vec_env(CONTOURING, n_envs=2, seed=0, env_kwargs={"scenario": "paper_step"})
-    agent = factory(venv.envs[0])
-    mean, std = evaluate_policy(agent, venv, n_eval_episodes=2, deterministic=True)
-    assert np.isfinite(mean) and np.isfinite(std)
-    venv.close()
-    venv = make_vec_env(FEED, n_envs=2, seed=0, env_kwargs={"scenario": "paper_circle"})
-    baseline = ConstantOverride.from_env(venv.envs[0])
-    mean, _ = evaluate_policy(baseline, venv, n_eval_episodes=2, deterministic=True)
-    assert np.isfinite(mean)
-    venv.close()
+@pytest.mark.parametrize(
+    "factory,env_id,scenario",
+    [
+        (PIPosition.from_env, CONTOURING, "paper_step"),
+        (HInf2DOF.from_env, CONTOURING, "paper_step"),
+        (ConstantOverride.from_env, FEED, "paper_circle"),
+    ],
+)
+def test_sb3_evaluate_policy_runs_agents_unchanged(factory, env_id, scenario):
+    assert_sb3_evaluate_policy_runs(factory, env_id, {"scenario": scenario})
 
 
 @pytest.mark.parametrize("factory", [PIPosition.from_env, HInf2DOF.from_env])
 def test_batched_predict_equals_single(factory):
-    env = gym.make(CONTOURING)
-    agent = factory(env)
-    envs = [gym.make(CONTOURING) for _ in range(3)]
-    obs = [e.reset(seed=s)[0] for s, e in enumerate(envs)]
-    singles = [None] * 3
-    batch_state = None
-    for k in range(60):
-        starts = np.full(3, k == 0)
-        batch_act, batch_state = agent.predict(
-            np.stack(obs), state=batch_state, episode_start=starts
-        )
-        for i in range(3):
-            act, singles[i] = agent.predict(
-                obs[i], state=singles[i], episode_start=np.array([k == 0])
-            )
-            np.testing.assert_allclose(act, batch_act[i], rtol=1e-6, atol=1e-9)
-            obs[i] = envs[i].step(act)[0]
+    agent = factory(gym.make(CONTOURING))
+    assert_batched_predict_equals_single(
+        agent, lambda: gym.make(CONTOURING), n_steps=60, rtol=1e-6, atol=1e-9
+    )
 
 
 def test_episode_start_resets_the_controller_state():
@@ -114,7 +103,7 @@ def test_episode_start_resets_the_controller_state():
 
 def test_agents_refuse_other_envs():
     with pytest.raises(TypeError, match="ContouringEnv"):
-        PIPosition.from_env(gym.make("machining_envs/Turning-v0"))
+        PIPosition.from_env(gym.make(TURNING))
     with pytest.raises(TypeError, match="ContouringFeedEnv"):
         ConstantOverride.from_env(gym.make(CONTOURING))
     with pytest.raises(ValueError, match="override"):
