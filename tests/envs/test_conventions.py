@@ -255,13 +255,17 @@ def test_registered_and_listed(case):
 
 
 @cases
-def test_checkers_pass_without_warnings(case):
+def test_checkers_pass_without_warnings_on_the_declared_spaces(case):
     variants = [{}, *({"scenario": s} for s in case.scenarios), *case.checker_variants]
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         for kwargs in variants:
             gym_check_env(case.make(**kwargs).unwrapped)
         sb3_check_env(case.make().unwrapped, warn=True)
+    env = case.make()
+    assert env.observation_space.shape == (case.obs_dim,)
+    assert env.action_space.shape == (case.act_dim,)
+    assert np.all(env.action_space.low == -1.0) and np.all(env.action_space.high == 1.0)
 
 
 @pytest.fixture(scope="module")
