@@ -1,5 +1,6 @@
-"""What several test folders share: the env ids, random rollouts, a fresh interpreter and the
-agent-protocol checks (SB3's ``evaluate_policy``, batched ``predict``)."""
+"""What several test files share: the env ids, random rollouts and runs to the end of an
+episode, a fresh interpreter, scenario draws, and the agent-protocol checks (SB3's
+``evaluate_policy``, batched ``predict``, design from nominal parameters)."""
 
 from __future__ import annotations
 
