@@ -1,12 +1,10 @@
 """Using the envs from another project: ids with the module prefix, overrides, own ids, SB3."""
 
-import subprocess
-import sys
-
 import gymnasium as gym
 from stable_baselines3.common.env_util import make_vec_env
 
 from machining_envs import TurningEnv, TurningParams
+from tests.helpers import TURNING, run_python
 
 
 def test_register_own_id_with_own_machine():
@@ -36,12 +34,11 @@ def test_module_prefix_and_make_vec_env_in_a_fresh_interpreter():
         "obs = venv.reset()\n"
         "print(obs.shape, venv.get_attr('spindle_rpm_override')[0])\n"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "(2, 7) 245.0"
+    assert run_python(code) == "(2, 7) 245.0"
 
 
 def test_make_vec_env_on_our_id():
-    venv = make_vec_env("machining_envs/Turning-v0", n_envs=3, seed=1)
+    venv = make_vec_env(TURNING, n_envs=3, seed=1)
     obs = venv.reset()
     assert obs.shape == (3, 7)
     venv.close()

@@ -18,4 +18,7 @@ def test_throughput_script_reports_every_env():
     ).stdout
     for env_id in ("Pendulum-v1", *machining_envs.ENV_IDS):
         line = next(row for row in out.splitlines() if row.startswith(env_id))
-        assert float(line.split()[2]) > 0  # the step-rate ratio
+        rate, ratio = (float(x) for x in line.split()[1:3])
+        # A rate, and its ratio to Pendulum's printed to two decimals (a slow env on a busy
+        # machine may print 0.00: the numbers are not judged).
+        assert rate > 0 and ratio >= 0

@@ -4,19 +4,15 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import machining_envs  # noqa: F401
 from machining_envs.wrappers import IncrementalAction
-
-MILLING = "machining_envs/EndMilling-v0"
+from tests.helpers import CONTOURING, DRILLING, MILLING, TURNING
 
 
 def _step(env, delta):
     return env.step(np.array([delta], dtype=np.float32))
 
 
-@pytest.mark.parametrize(
-    "env_id", [MILLING, "machining_envs/Turning-v0", "machining_envs/MicroDrilling-v0"]
-)
+@pytest.mark.parametrize("env_id", [MILLING, TURNING, DRILLING])
 def test_a_step_moves_the_applied_action_by_max_step_and_zero_holds_it(env_id):
     env = IncrementalAction(gym.make(env_id), max_step=0.3)
     i = env.unwrapped.OBS_INDEX["prev_action"]
@@ -62,7 +58,7 @@ def test_bad_max_step_names_the_parameter_and_range(max_step):
 
 def test_envs_without_a_single_absolute_action_are_refused():
     with pytest.raises(ValueError, match="Box\\(-1, 1, \\(1,\\)\\)"):
-        IncrementalAction(gym.make("machining_envs/Contouring-v0"))
+        IncrementalAction(gym.make(CONTOURING))
 
 
 def test_non_finite_delta_and_step_before_reset_raise():

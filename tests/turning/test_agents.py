@@ -5,42 +5,27 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
-from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
 
 from agents import ConstantFeed, FixedGainPI, VariableGainPI
-from tests.conftest import TURNING
+from tests.helpers import (
+    TURNING,
+    agents_built_on_train_and_test,
+    assert_batched_predict_equals_single,
+    assert_sb3_evaluate_policy_runs,
+)
 
 FACTORIES = [ConstantFeed.from_env, FixedGainPI.from_env, VariableGainPI.from_env]
 
 
 @pytest.mark.parametrize("factory", FACTORIES)
 def test_sb3_evaluate_policy_runs_agents_unchanged(factory):
-    venv = make_vec_env(TURNING, n_envs=2, seed=0, env_kwargs={"scenario": "paper_700"})
-    agent = factory(venv.envs[0])
-    mean, std = evaluate_policy(agent, venv, n_eval_episodes=2, deterministic=True)
-    assert np.isfinite(mean) and np.isfinite(std)
-    venv.close()
+    assert_sb3_evaluate_policy_runs(factory, TURNING, {"scenario": "paper_700"})
 
 
 @pytest.mark.parametrize("factory", FACTORIES)
 def test_batched_predict_equals_single(factory):
-    env = gym.make(TURNING)
-    agent = factory(env)
-    envs = [gym.make(TURNING) for _ in range(3)]
-    obs = [e.reset(seed=s)[0] for s, e in enumerate(envs)]
-    singles = [None] * 3
-    batch_state = None
-    for k in range(40):
-        batch_obs = np.stack(obs)
-        starts = np.full(3, k == 0)
-        batch_act, batch_state = agent.predict(batch_obs, state=batch_state, episode_start=starts)
-        for i in range(3):
-            act, singles[i] = agent.predict(
-                obs[i], state=singles[i], episode_start=np.array([k == 0])
-            )
-            np.testing.assert_array_equal(act, batch_act[i])
-            obs[i] = envs[i].step(act)[0]
+    agent = factory(gym.make(TURNING))
+    assert_batched_predict_equals_single(agent, lambda: gym.make(TURNING), n_steps=40)
 
 
 def test_state_carries_the_integrator_and_episode_start_resets_it():
@@ -114,11 +99,7 @@ def test_from_env_accepts_wrapped_envs_and_rejects_others():
 
 def test_agents_read_nominal_parameters_only():
     """A scenario's hidden Kf does not change what from_env builds."""
-    env = gym.make(TURNING)
-    env.reset(seed=0, options={"scenario": "train"})
-    a = VariableGainPI.from_env(env)
-    env.reset(seed=5, options={"scenario": "test"})
-    b = VariableGainPI.from_env(env)
+    a, b = agents_built_on_train_and_test(VariableGainPI.from_env, TURNING)
     assert a.io == b.io
 
 

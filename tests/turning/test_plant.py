@@ -5,7 +5,6 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from agents.bench.turning import critical_gain_turning
-from machining_envs.core.lti import butterworth_lowpass, critical_gain, zoh
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.turning.plant import TurningParams, TurningPlant
 
@@ -35,25 +34,6 @@ def test_critical_gain_within_5_percent_of_paper():
     d = np.convolve([1.0, -1.0], den)
     assert max(abs(np.roots(d + k * n))) == pytest.approx(1.0, abs=1e-6)
     assert max(abs(np.roots(d + 0.99 * k * n))) < 1.0
-
-
-def test_critical_gain_of_a_known_loop():
-    # L(z) = K z^-1 / (1 - 0.5 z^-1): pole 0.5 - K, unstable past K = 1.5.
-    assert critical_gain([0.0, 1.0], [1.0, -0.5]) == pytest.approx(1.5, rel=1e-8)
-
-
-def test_zoh_matches_scalar_closed_form():
-    phi, gam = zoh(np.array([[-2.0]]), np.array([[3.0]]), 0.1)
-    assert phi[0, 0] == pytest.approx(np.exp(-0.2))
-    assert gam[0, 0] == pytest.approx(1.5 * (1 - np.exp(-0.2)))
-
-
-def test_butterworth_half_power_at_cutoff():
-    a, b, c = butterworth_lowpass(10.0, 2)
-    w = 2 * np.pi * 10.0
-    h = c @ np.linalg.solve(1j * w * np.eye(2) - a, b)
-    assert abs(h[0]) == pytest.approx(1 / np.sqrt(2), rel=1e-9)
-    assert abs(c @ np.linalg.solve(-a, b))[0] == pytest.approx(1.0)
 
 
 @pytest.mark.parametrize("rpm", [245.0, 405.0, 700.0, 1234.5])
@@ -126,24 +106,6 @@ def test_bad_params_name_the_parameter(field, value):
 def test_plant_rejects_bad_spindle_speed():
     with pytest.raises(ValueError, match="spindle_rpm"):
         TurningPlant(TurningParams(), -405.0, DepthProfile.steps())
-
-
-def test_depth_profiles():
-    prof = DepthProfile.steps((1.0, 2.0, 3.0), 10.0)
-    np.testing.assert_allclose(prof([-1.0, 0.0, 9.99, 10.0, 25.0, 30.0]), [0, 1, 1, 2, 3, 0])
-    assert prof.change_positions_mm() == (10.0, 20.0)
-    taper = DepthProfile.taper(1.0, 3.0, 40.0)
-    assert taper(20.0) == pytest.approx(2.0)
-    rng = np.random.default_rng(1)
-    for _ in range(200):
-        r = DepthProfile.random(rng)
-        ends = np.array(r.end_depths_mm[:-1])
-        starts = np.array(r.start_depths_mm[1:])
-        assert np.all(np.maximum(starts / ends, ends / starts) <= 2.5 + 1e-12)
-    with pytest.raises(ValueError, match="edges_mm"):
-        DepthProfile((0.0, 5.0, 3.0), (1.0, 1.0), (1.0, 1.0))
-    with pytest.raises(ValueError, match="start_depths_mm"):
-        DepthProfile((0.0, 5.0), (-1.0,), (1.0,))
 
 
 def test_position_excursion_bound_holds():

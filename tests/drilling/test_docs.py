@@ -3,7 +3,7 @@
 import re
 from pathlib import Path
 
-DOC = Path(__file__).resolve().parents[1] / "docs" / "drilling.md"
+DOC = Path(__file__).resolve().parents[2] / "docs" / "drilling.md"
 
 
 def test_docs_example_runs(capsys):

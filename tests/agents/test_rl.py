@@ -8,7 +8,7 @@ import pytest
 from agents.bench.cli import main
 from agents.eval import evaluate
 from agents.rl import ConfigError, load_config, load_policy, primary_score, train
-from tests.conftest import TURNING
+from tests.helpers import TURNING
 
 TINY = """
 machining_envs/Turning-v0:

@@ -5,14 +5,18 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
-from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
 
 from agents import FixedGainIntegral, IntegralACC, MillingConstantFeed
 from agents.eval import rollout
 from machining_envs import MillingParams
+from tests.helpers import (
+    MILLING,
+    TURNING,
+    agents_built_on_train_and_test,
+    assert_batched_predict_equals_single,
+    assert_sb3_evaluate_policy_runs,
+)
 
-MILLING = "machining_envs/EndMilling-v0"
 FACTORIES = [MillingConstantFeed.from_env, FixedGainIntegral.from_env, IntegralACC.from_env]
 
 
@@ -24,36 +28,15 @@ def _obs(measured: float, reference: float = 1.0, rpm: float = 400.0) -> np.ndar
 
 @pytest.mark.parametrize("factory", FACTORIES)
 def test_sb3_evaluate_policy_runs_agents_unchanged(factory):
-    venv = make_vec_env(
-        MILLING,
-        n_envs=2,
-        seed=0,
-        env_kwargs={"scenario": "train", "max_episode_time_s": 60.0},
+    assert_sb3_evaluate_policy_runs(
+        factory, MILLING, {"scenario": "train", "max_episode_time_s": 60.0}
     )
-    agent = factory(venv.envs[0])
-    mean, std = evaluate_policy(agent, venv, n_eval_episodes=2, deterministic=True)
-    assert np.isfinite(mean) and np.isfinite(std)
-    venv.close()
 
 
 @pytest.mark.parametrize("factory", FACTORIES)
 def test_batched_predict_equals_single(factory):
-    env = gym.make(MILLING)
-    agent = factory(env)
-    envs = [gym.make(MILLING) for _ in range(3)]
-    obs = [e.reset(seed=s)[0] for s, e in enumerate(envs)]
-    singles = [None] * 3
-    batch_state = None
-    for k in range(60):
-        batch_obs = np.stack(obs)
-        starts = np.full(3, k == 0)
-        batch_act, batch_state = agent.predict(batch_obs, state=batch_state, episode_start=starts)
-        for i in range(3):
-            act, singles[i] = agent.predict(
-                obs[i], state=singles[i], episode_start=np.array([k == 0])
-            )
-            np.testing.assert_array_equal(act, batch_act[i])
-            obs[i] = envs[i].step(act)[0]
+    agent = factory(gym.make(MILLING))
+    assert_batched_predict_equals_single(agent, lambda: gym.make(MILLING), n_steps=60)
 
 
 def test_integral_law_matches_eq_1_to_4_by_hand():
@@ -139,7 +122,7 @@ def test_from_env_accepts_wrapped_envs_and_rejects_others():
     wrapped = gym.wrappers.RecordEpisodeStatistics(gym.make(MILLING))
     assert FixedGainIntegral.from_env(wrapped).io.sensor_gain == MillingParams().sensor_gain
     with pytest.raises(TypeError, match="EndMillingEnv"):
-        IntegralACC.from_env(gym.make("machining_envs/Turning-v0"))
+        IntegralACC.from_env(gym.make(TURNING))
     with pytest.raises(ValueError, match="kc"):
         FixedGainIntegral.from_env(gym.make(MILLING), kc=0.0)
     with pytest.raises(ValueError, match="c1"):
@@ -152,11 +135,7 @@ def test_from_env_accepts_wrapped_envs_and_rejects_others():
 
 def test_agents_read_nominal_parameters_only():
     """A scenario's hidden Ks does not change what from_env builds."""
-    env = gym.make(MILLING)
-    env.reset(seed=0, options={"scenario": "train"})
-    a = IntegralACC.from_env(env)
-    env.reset(seed=5, options={"scenario": "test"})
-    b = IntegralACC.from_env(env)
+    a, b = agents_built_on_train_and_test(IntegralACC.from_env, MILLING)
     assert a.io == b.io and a.k == b.k
 
 

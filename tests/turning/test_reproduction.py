@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 
 from agents import VariableGainPI
+from agents.bench.cli import main
 from agents.bench.turning import reproduce_turning
 from agents.eval import rollout
 from machining_envs.core.metrics import regulation_metrics
-from tests.conftest import TURNING
+from tests.helpers import TURNING
 
 
 def test_all_five_observations_hold_with_one_sensor_gain():
@@ -54,3 +55,10 @@ def test_adaptive_pi_holds_5_percent_after_settling(rpm, seed):
         settle = (t[bad[-1]] - t[idx[0]] + 0.1) if bad.size else 0.0
         assert settle <= 2.0, (s, settle)
         assert t[idx[-1]] - t[idx[0]] - settle >= 1.0
+
+
+def test_cli_reproduce_turning(tmp_path, capsys):
+    assert main(["reproduce", "turning", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "8/8 runs" in out and "paper 0.807" in out
+    assert (tmp_path / "reproduce_turning.png").stat().st_size > 10_000

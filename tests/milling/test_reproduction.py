@@ -31,8 +31,7 @@ from machining_envs.core.metrics import oscillation_amplitude
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.milling.metrics import milling_metrics
 from machining_envs.milling.scenarios import paper_step_profile, paper_taper_profile
-
-MILLING = "machining_envs/EndMilling-v0"
+from tests.helpers import MILLING
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Drilling agents: protocol, the sliding-mode derivation, and the paper's ranking."""
+"""Drilling agents: protocol, the sliding-mode derivation, breakage on held-out holes, pecking."""
 
 import math
 
@@ -7,17 +7,19 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
-from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
 
 from agents import PD, NoControl, PeckDrilling, SlidingMode
-from agents.bench.drilling import drilling_comparison
 from agents.drilling import sliding_mode_input
 from agents.eval import rollout
 from machining_envs import DrillingParams, DrillingScenario
 from machining_envs.drilling.metrics import drilling_metrics
+from tests.helpers import (
+    DRILLING,
+    TURNING,
+    assert_batched_predict_equals_single,
+    assert_sb3_evaluate_policy_runs,
+)
 
-DRILLING = "machining_envs/MicroDrilling-v0"
 P = DrillingParams()
 SHORT = DrillingScenario("short", 0.6, aspect_ratio=2.0)
 VOLTAGE_AGENTS = [NoControl.from_env, PD.from_env, SlidingMode.from_env]
@@ -32,33 +34,15 @@ def _factories():
 
 @pytest.mark.parametrize("factory,control", _factories())
 def test_sb3_evaluate_policy_runs_agents_unchanged(factory, control):
-    venv = make_vec_env(
-        DRILLING, n_envs=2, seed=0, env_kwargs={"scenario": SHORT, "control": control}
-    )
-    agent = factory(venv.envs[0])
-    mean, std = evaluate_policy(agent, venv, n_eval_episodes=2, deterministic=True)
-    assert np.isfinite(mean) and np.isfinite(std)
-    venv.close()
+    assert_sb3_evaluate_policy_runs(factory, DRILLING, {"scenario": SHORT, "control": control})
 
 
 @pytest.mark.parametrize("factory,control", _factories())
 def test_batched_predict_equals_single(factory, control):
     agent = factory(gym.make(DRILLING, control=control))
-    envs = [gym.make(DRILLING, control=control, scenario="paper_0.7") for _ in range(3)]
-    obs = [e.reset(seed=s)[0] for s, e in enumerate(envs)]
-    singles = [None] * 3
-    batch_state = None
-    for k in range(400):
-        starts = np.full(3, k == 0)
-        batch_act, batch_state = agent.predict(
-            np.stack(obs), state=batch_state, episode_start=starts
-        )
-        for i in range(3):
-            act, singles[i] = agent.predict(
-                obs[i], state=singles[i], episode_start=np.array([k == 0])
-            )
-            np.testing.assert_array_equal(act, batch_act[i])
-            obs[i] = envs[i].step(act)[0]
+    assert_batched_predict_equals_single(
+        agent, lambda: gym.make(DRILLING, control=control, scenario="paper_0.7"), n_steps=400
+    )
 
 
 def test_agents_refuse_the_wrong_env_or_mode_and_bad_gains():
@@ -71,7 +55,7 @@ def test_agents_refuse_the_wrong_env_or_mode_and_bad_gains():
     with pytest.raises(ValueError, match="control='feed'"):
         PeckDrilling.from_env(volt)
     with pytest.raises(TypeError, match="MicroDrillingEnv"):
-        PD.from_env(gym.make("machining_envs/Turning-v0"))
+        PD.from_env(gym.make(TURNING))
     with pytest.raises(ValueError, match="lam"):
         SlidingMode.from_env(volt, lam=-1.0)
     with pytest.raises(ValueError, match="loop_gain"):
@@ -272,21 +256,6 @@ def test_sliding_surface_converges_into_the_boundary_layer_and_error_stays_bound
     err = np.abs(rec["torque"][after] - tr)
     assert err.max() <= bound, (err.max() / tr, bound / tr)
     assert bound / tr < 0.05  # and the bound itself is tight enough to mean something
-
-
-def test_ranking_of_the_paper_for_06_07_08_mm_over_seeds():
-    """Fig. 19-21: per seed, sliding mode < PD < no control in mean torque and in its
-    standard deviation; over the seeds, the same for thrust; and no drill breaks."""
-    comp = drilling_comparison((0.6, 0.7, 0.8), seeds=(0, 1, 2, 3))
-    for d, c in comp.items():
-        nc, pd, sm = (c[a]["rows"] for a in ("no control", "PD", "sliding mode"))
-        for i in range(4):
-            for k in ("torque_mean_Nmm", "torque_std_Nmm"):
-                assert sm[i][k] < pd[i][k] < nc[i][k], (d, i, k)
-            assert nc[i]["breakage"] == pd[i]["breakage"] == sm[i]["breakage"] == 0.0
-        for k in ("thrust_mean_N", "thrust_std_N"):
-            m = [np.mean([r[k] for r in rows]) for rows in (sm, pd, nc)]
-            assert m[0] < m[1] < m[2], (d, k)
 
 
 def test_no_controller_breaks_a_drill_no_control_would_not_and_peck_never_breaks(capsys):

@@ -3,7 +3,7 @@
 import re
 from pathlib import Path
 
-DOC = Path(__file__).resolve().parents[1] / "docs" / "milling.md"
+DOC = Path(__file__).resolve().parents[2] / "docs" / "milling.md"
 
 
 def test_milling_quickstart_runs(capsys):

@@ -1,0 +1,28 @@
+"""Contouring scenarios: by name or object, training and held-out sets, bad scenarios refused."""
+
+import gymnasium as gym
+import pytest
+
+from machining_envs import ContouringScenario, Path
+from tests.helpers import CONTOURING, TRAIN_TEST, assert_test_reaches_beyond_train, drawn_scenarios
+
+
+def test_scenarios_by_name_and_object_and_train_vs_test():
+    env = gym.make(CONTOURING)
+    _, info = env.reset(seed=0, options={"scenario": "paper_corner"})
+    assert info["scenario"] == "paper_corner" and info["path_length_mm"] == pytest.approx(100.0)
+    sc = ContouringScenario("mine", Path.line((1.0, 1.0), (5.0, 4.0)), feed_mm_s=20.0)
+    _, info = env.reset(options={"scenario": sc})
+    assert info["scenario"] == "mine" and (info["x_mm"], info["y_mm"]) == (1.0, 1.0)
+    # train and test differ: the held-out set reaches feeds the training set never does.
+    feeds = {name: [s.feed_mm_s for s in drawn_scenarios(env, name, 100)] for name in TRAIN_TEST}
+    assert_test_reaches_beyond_train(feeds, 20.0, 60.0)
+
+
+def test_bad_scenarios_name_the_field():
+    with pytest.raises(ValueError, match="feed_mm_s"):
+        ContouringScenario("x", Path.paper_circle(), feed_mm_s=-5.0)
+    with pytest.raises(ValueError, match="inertia_scale"):
+        ContouringScenario("x", Path.paper_circle(), 50.0, inertia_scale=(3.0, 1.0))
+    with pytest.raises(ValueError, match="load_steps"):
+        ContouringScenario("x", Path.paper_circle(), 50.0, load_steps=((0.1, 50.0, 0.0),))

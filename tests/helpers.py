@@ -1,0 +1,151 @@
+"""What several test files share: the env ids, random rollouts and runs to the end of an
+episode, a fresh interpreter, scenario draws, and the agent-protocol checks (SB3's
+``evaluate_policy``, batched ``predict``, design from nominal parameters)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections.abc import Callable, Sequence
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+
+import machining_envs  # noqa: F401  (registers the env ids)
+
+TURNING = "machining_envs/Turning-v0"
+MILLING = "machining_envs/EndMilling-v0"
+DRILLING = "machining_envs/MicroDrilling-v0"
+CONTOURING = "machining_envs/Contouring-v0"
+CONTOURING_FEED = "machining_envs/ContouringFeed-v0"
+#: The random scenario sets every env has: training draws and held-out ones.
+TRAIN_TEST = ("train", "test")
+
+
+def random_action(rng: np.random.Generator, env: gym.Env, bound: float = 1.0) -> np.ndarray:
+    """A uniform action in ``[-bound, bound]`` of the env's action shape (float32)."""
+    return rng.uniform(-bound, bound, size=env.action_space.shape).astype(np.float32)
+
+
+def random_rollout(env: gym.Env, n_steps: int, seed: int, signal: str):
+    """Random in-box actions from a seeded generator, resetting on episode end.
+
+    Returns the observations, rewards and the ``info[signal]`` of every step as arrays.
+    """
+    rng = np.random.default_rng(seed)
+    obs, _ = env.reset(seed=seed)
+    out_obs, out_rew, out_signal = [obs], [], []
+    for _ in range(n_steps):
+        obs, r, term, trunc, info = env.step(random_action(rng, env))
+        out_obs.append(obs)
+        out_rew.append(r)
+        out_signal.append(info[signal])
+        if term or trunc:
+            obs, _ = env.reset()
+            out_obs.append(obs)
+    return np.array(out_obs), np.array(out_rew), np.array(out_signal)
+
+
+def random_steps(env: gym.Env, n_steps: int, seed: int, scenarios: Sequence[str]):
+    """Random actions in [-1.5, 1.5] (so sometimes clipped), a random scenario at each reset.
+
+    Returns ``(bad, resets)``: the steps whose observation, reward or a numeric info value
+    was not finite or whose observation left the observation space, and the resets made.
+    """
+    rng = np.random.default_rng(seed)
+    env.reset(seed=seed)
+    bad = resets = 0
+    for _ in range(n_steps):
+        obs, r, term, trunc, info = env.step(random_action(rng, env, 1.5))
+        nums = [v for v in info.values() if isinstance(v, (float, int, np.number))]
+        if not (
+            np.all(np.isfinite(obs))
+            and env.observation_space.contains(obs)
+            and np.isfinite(r)
+            and np.all(np.isfinite(nums))
+        ):
+            bad += 1
+        if term or trunc:
+            env.reset(options={"scenario": scenarios[int(rng.integers(len(scenarios)))]})
+            resets += 1
+    return bad, resets
+
+
+def run_until_done(env: gym.Env, action) -> tuple[int, bool, bool, dict, float]:
+    """Step ``action`` until the episode ends: ``(steps, terminated, truncated, info, reward)``
+    of the last step."""
+    action = np.asarray(action, dtype=np.float32)
+    n, done = 0, False
+    while not done:
+        _, r, term, trunc, info = env.step(action)
+        n += 1
+        done = term or trunc
+    return n, term, trunc, info, r
+
+
+def run_python(code: str) -> str:
+    """Run ``code`` in a fresh interpreter (nothing imported beforehand); return its stdout."""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return out.stdout.strip()
+
+
+def assert_sb3_evaluate_policy_runs(factory: Callable, env_id: str, env_kwargs: dict) -> None:
+    """SB3's ``evaluate_policy`` runs the agent unchanged on a two-env VecEnv."""
+    venv = make_vec_env(env_id, n_envs=2, seed=0, env_kwargs=env_kwargs)
+    try:
+        agent = factory(venv.envs[0])
+        mean, std = evaluate_policy(agent, venv, n_eval_episodes=2, deterministic=True)
+        assert np.isfinite(mean) and np.isfinite(std)
+    finally:
+        venv.close()
+
+
+def assert_batched_predict_equals_single(
+    agent, make_env: Callable[[], gym.Env], n_steps: int, rtol: float = 0.0, atol: float = 0.0
+) -> None:
+    """Three envs (seeds 0, 1, 2) driven by one batched ``predict``: each row of the batch
+    equals what the agent returns for that env alone (bit for bit unless a tolerance is
+    given), episode starts and states included."""
+    envs = [make_env() for _ in range(3)]
+    obs = [e.reset(seed=s)[0] for s, e in enumerate(envs)]
+    singles = [None] * 3
+    batch_state = None
+    for k in range(n_steps):
+        starts = np.full(3, k == 0)
+        batch_act, batch_state = agent.predict(
+            np.stack(obs), state=batch_state, episode_start=starts
+        )
+        for i in range(3):
+            act, singles[i] = agent.predict(
+                obs[i], state=singles[i], episode_start=np.array([k == 0])
+            )
+            np.testing.assert_allclose(act, batch_act[i], rtol=rtol, atol=atol)
+            obs[i] = envs[i].step(act)[0]
+
+
+def drawn_scenarios(env: gym.Env, name: str, n: int) -> list:
+    """The scenarios ``env`` draws for the random set ``name`` on resets with seeds 0 to n-1."""
+    drawn = []
+    for seed in range(n):
+        env.reset(seed=seed, options={"scenario": name})
+        drawn.append(env.unwrapped.scenario)
+    return drawn
+
+
+def agents_built_on_train_and_test(factory: Callable, env_id: str) -> tuple:
+    """The agents ``factory`` builds from one env reset to a training draw, then to a
+    held-out one: an agent designed from nominal parameters only builds the same twice."""
+    env = gym.make(env_id)
+    env.reset(seed=0, options={"scenario": "train"})
+    a = factory(env)
+    env.reset(seed=5, options={"scenario": "test"})
+    return a, factory(env)
+
+
+def assert_test_reaches_beyond_train(values: dict, low: float, high: float) -> None:
+    """``values["train"]`` stay within ``[low, high]``; ``values["test"]`` (the held-out
+    draws) reach below ``low`` and above ``high``."""
+    assert low <= min(values["train"]) and max(values["train"]) <= high
+    assert min(values["test"]) < low and max(values["test"]) > high

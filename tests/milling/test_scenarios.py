@@ -1,0 +1,44 @@
+"""Milling scenarios: by name or object, training and held-out sets, the cut area of a
+profile, bad scenarios refused."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from machining_envs import MillingScenario
+from machining_envs.core.workpieces import DepthProfile
+from machining_envs.milling.scenarios import cut_area_mm2
+from tests.helpers import MILLING, TRAIN_TEST, assert_test_reaches_beyond_train, drawn_scenarios
+
+
+def test_scenarios_by_name_and_object():
+    env = gym.make(MILLING)
+    _, info = env.reset(seed=0, options={"scenario": "paper_taper"})
+    assert info["scenario"] == "paper_taper" and info["workpiece_length_mm"] == 40.0
+    assert info["workpiece_volume_mm3"] == pytest.approx(32.0 * 40.0 * 1.5)
+    sc = MillingScenario("mine", DepthProfile.steps((0.5, 1.5), 5.0), spindle_scale=1.5)
+    _, info = env.reset(options={"scenario": sc})
+    assert info["scenario"] == "mine" and info["spindle_rpm"] == 600.0
+    # train and test differ: the held-out set reaches depths and speeds training never does.
+    draws = {name: drawn_scenarios(env, name, 200) for name in TRAIN_TEST}
+    rpm = {k: [s.spindle_scale for s in v] for k, v in draws.items()}
+    depth = {k: [s.profile.max_depth_mm for s in v] for k, v in draws.items()}
+    assert_test_reaches_beyond_train(rpm, 0.8, 1.25)
+    assert max(depth["train"]) <= 3.0 < max(depth["test"])
+
+
+def test_cut_area_is_the_integral_of_the_profile():
+    prof = DepthProfile((0.0, 3.0, 7.0, 12.0), (1.0, 0.5, 2.0), (2.0, 0.5, 3.0))
+    for end in (0.0, 1.7, 3.0, 6.2, 12.0, 20.0):
+        stop = min(end, 12.0)
+        mid = (np.arange(200_000) + 0.5) * stop / 200_000  # midpoint rule
+        numeric = float(np.sum(prof(mid)) * stop / 200_000)
+        # The midpoint rule errs by up to a cell times a jump of depth (6e-5 mm x 1.5 mm).
+        assert cut_area_mm2(prof, end) == pytest.approx(numeric, abs=1e-4)
+
+
+def test_bad_scenarios_name_the_field():
+    with pytest.raises(ValueError, match="spindle_scale"):
+        MillingScenario("x", DepthProfile.steps(), spindle_scale=-1.0)
+    with pytest.raises(ValueError, match="profile"):
+        MillingScenario("x", [1.0, 2.0])
