@@ -228,7 +228,7 @@ class PD(Agent):
     crossover at about 12 rad/s, the bandwidth ``lambda`` of the sliding-mode design, so the
     two are compared at equal speed of response; there the linearised loop (valve, loaded
     spindle, sensor, half a sample of delay) has about 96 degrees of phase margin and a gain
-    margin of 5.5 (``tests/test_drilling_agents.py``). A PD has no integral action: it
+    margin of 5.5 (``tests/drilling/test_agents.py``). A PD has no integral action: it
     leaves ``1/(1+L)``, a quarter, of a slow torque rise as steady error.
 
     ``min_voltage`` (default: the nominal voltage) makes it a speed-up-only regulator, as

@@ -231,7 +231,7 @@ class DrillingParams:
 
     substeps: int = 2
     """RK4 sub-steps per sample for the spindle (h = 5 ms, 1/50 of the spindle's time
-    constant); ``tests/test_drilling_plant`` checks the step size against 64 sub-steps."""
+    constant); ``tests/drilling/test_plant.py`` checks the step size against 64 sub-steps."""
 
     # ---- observation scales ----------------------------------------------------------------
     torque_scale_Nmm: float = 1.0

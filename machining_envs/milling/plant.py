@@ -189,7 +189,7 @@ class MillingParams:
     substeps: int = 10
     """Sub-steps per sample at which the torque law is evaluated. Chosen: h = 10 ms, under a
     seventh of the 75 ms process lag and of the servo's 76 ms decay time 1/(xi wn); the
-    torque then stays within 0.1 % of a fine ODE solution (``tests/test_milling_plant``)."""
+    torque then stays within 0.1 % of a fine ODE solution (``tests/milling/test_plant.py``)."""
 
     command_max: float = 150.0
     """Largest command U, counts; commands are clipped to [0, command_max] (the feed does

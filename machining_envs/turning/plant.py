@@ -99,7 +99,7 @@ class TurningParams:
 
     substeps: int = 50
     """Sub-steps per sample on which force and filter input are evaluated (h = 2 ms: 8x finer
-    than the 16 ms time constant of the 10 Hz filter). Chosen; see ``tests/test_plants``."""
+    than the 16 ms time constant of the 10 Hz filter). Chosen; see ``tests/turning/test_plant.py``."""
 
     command_max: float = 4095.0
     """Largest servo command U, DAC counts. Not given: a 12-bit DAC; with eq. (1)-(2) it
