@@ -2,10 +2,12 @@
 
 import csv
 
+import numpy as np
 import pytest
 
-from agents import FixedGainPI, VariableGainPI
+from agents import ConstantFeed, FixedGainPI, VariableGainPI
 from agents.eval import Evaluation, evaluate
+from agents.rl import pretrained
 from tests.helpers import TURNING
 
 
@@ -36,3 +38,52 @@ def test_same_seeds_give_every_agent_the_same_workpieces():
     for ta, tb in zip(a.trajectories, b.trajectories, strict=True):
         assert ta["workpiece_length_mm"][0] == tb["workpiece_length_mm"][0]
         assert ta["spindle_rpm"][0] == tb["spindle_rpm"][0]
+
+
+@pytest.mark.parametrize(
+    "factory",
+    [VariableGainPI.from_env, FixedGainPI.from_env, ConstantFeed.from_env],
+    ids=["adaptive PI", "fixed PI", "constant feed"],
+)
+def test_batched_evaluation_gives_the_episode_by_episode_rows(factory):
+    """N episodes of one agent as the lanes of the native vector env: the same metrics and
+    trajectories (values and dtypes, to the last bit) as one episode after another with the
+    same seeds."""
+    kw = dict(n_episodes=6, seed=1000, keep_trajectories=True)
+    scenarios = ["test", "paper_405"]
+    one = evaluate(factory, "machining_envs/Turning-v0", scenarios, batched=False, **kw)
+    batch = evaluate(factory, "machining_envs/Turning-v0", scenarios, batched=True, **kw)
+    assert len(one.rows) == len(batch.rows) == 12
+    for a, b in zip(one.rows, batch.rows, strict=True):
+        assert a.keys() == b.keys()
+        for k in a:
+            assert a[k] == b[k] or (a[k] != a[k] and b[k] != b[k]), k
+    for a, b in zip(one.trajectories, batch.trajectories, strict=True):
+        assert a.keys() == b.keys()
+        for k, v in a.items():
+            if isinstance(v, np.ndarray):
+                assert v.dtype == b[k].dtype, k
+                np.testing.assert_array_equal(v, b[k], err_msg=k)
+            else:
+                assert v == b[k], k
+
+
+def test_batched_evaluation_needs_a_native_vector_env():
+    with pytest.raises(ValueError, match="no native vector env"):
+        evaluate(ConstantFeed.from_env, "Pendulum-v1", [None], n_episodes=2, batched=True)
+
+
+def test_batched_evaluation_of_a_network_policy_agrees_to_float32_rounding():
+    """A torch policy evaluated on a batch multiplies its matrices in another order than on
+    one observation (float32), so its actions, and the episodes, agree to about 1e-7
+    relative, not to the last bit; the metrics agree to 1e-5."""
+    kw = dict(n_episodes=4, seed=1000)
+    one = evaluate(pretrained("turning_ppo"), TURNING, ["test"], batched=False, **kw)
+    batch = evaluate(pretrained("turning_ppo"), TURNING, ["test"], batched=True, **kw)
+    for a, b in zip(one.rows, batch.rows, strict=True):
+        assert a.keys() == b.keys()
+        for k, v in a.items():
+            if isinstance(v, float):
+                assert b[k] == pytest.approx(v, rel=1e-5, abs=1e-9, nan_ok=True), k
+            else:
+                assert v == b[k], k

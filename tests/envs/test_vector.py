@@ -1,0 +1,175 @@
+"""The native vector envs (``gym.make_vec(id, num_envs=N)``): every lane is the single env,
+and the vector env keeps Gymnasium's vector conventions.
+
+Parametrised over every id registered with a ``vector_entry_point``.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode
+from gymnasium.vector.utils import batch_space
+
+import machining_envs
+
+VECTOR_IDS = [i for i in machining_envs.ENV_IDS if gym.spec(i).vector_entry_point is not None]
+#: Steps of the lane-by-lane comparison, and how far random actions reach (below +1 the
+#: turning tool still breaks within some tens of steps, so lanes autoreset often).
+N_STEPS = 2000
+ACTION_BOUND = {"machining_envs/Turning-v0": (-1.0, 0.3)}
+
+
+def _actions(rng, env_id: str, space, n: int) -> np.ndarray:
+    lo, hi = ACTION_BOUND.get(env_id, (-1.0, 1.0))
+    return rng.uniform(lo, hi, size=(n, *space.shape)).astype(np.float32)
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, float) and np.isnan(a):
+        return isinstance(b, (float, np.floating)) and np.isnan(b)
+    return a == b
+
+
+def test_turning_has_a_native_vector_env():
+    assert "machining_envs/Turning-v0" in VECTOR_IDS
+    venv = gym.make_vec("machining_envs/Turning-v0", num_envs=3)
+    assert isinstance(venv, gym.vector.VectorEnv)
+    assert type(venv).__name__ == "TurningVectorEnv"
+
+
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_every_lane_is_the_single_env_across_autoresets(env_id):
+    """Lane i after reset(seed=s) runs what the single env runs after reset(seed=s + i):
+    observations, rewards, terminations and every info signal, bit for bit, for 2000 steps;
+    a lane that ends is compared with the single env's last step (``final_obs``,
+    ``final_info``) and then with the single env's next episode."""
+    n, seed = 4, 11
+    venv = gym.make_vec(env_id, num_envs=n)
+    singles = [gym.make(env_id) for _ in range(n)]
+    obs, info = venv.reset(seed=seed)
+    for i, env in enumerate(singles):
+        o, inf = env.reset(seed=seed + i)
+        np.testing.assert_array_equal(obs[i], o)
+        for k, v in inf.items():
+            assert info["_" + k][i] and _same(info[k][i], v), k
+    rng = np.random.default_rng(0)
+    ends = 0
+    for step in range(N_STEPS):
+        actions = _actions(rng, env_id, venv.single_action_space, n)
+        obs, reward, terminated, truncated, info = venv.step(actions)
+        for i, env in enumerate(singles):
+            o, r, te, tr, inf = env.step(actions[i])
+            assert (r, te, tr) == (reward[i], terminated[i], truncated[i]), (step, i)
+            if te or tr:
+                ends += 1
+                np.testing.assert_array_equal(info["final_obs"][i], o)
+                final = info["final_info"]
+                for k, v in inf.items():
+                    assert final["_" + k][i] and _same(final[k][i], v), (step, i, k)
+                o, inf = env.reset()
+            np.testing.assert_array_equal(obs[i], o, err_msg=f"step {step}, lane {i}")
+            for k, v in inf.items():
+                assert info["_" + k][i] and _same(info[k][i], v), (step, i, k)
+    assert ends >= 10, "the comparison should cross several autoresets"
+
+
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_vector_conventions(env_id):
+    """Batched spaces, declared autoreset mode, dtypes, info as a dict of arrays with masks,
+    observations inside the space."""
+    n = 5
+    venv = gym.make_vec(env_id, num_envs=n)
+    single = gym.make(env_id)
+    assert venv.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
+    assert venv.num_envs == n
+    assert venv.single_observation_space == single.observation_space
+    assert venv.single_action_space == single.action_space
+    assert venv.observation_space == batch_space(single.observation_space, n)
+    assert venv.action_space == batch_space(single.action_space, n)
+    obs, info = venv.reset(seed=3)
+    assert obs.dtype == venv.single_observation_space.dtype and obs.shape[0] == n
+    assert venv.observation_space.contains(obs)
+    for key, value in info.items():
+        assert isinstance(value, np.ndarray) and value.shape[0] == n, key
+    rng = np.random.default_rng(1)
+    for _ in range(300):
+        obs, reward, terminated, truncated, info = venv.step(
+            _actions(rng, env_id, venv.single_action_space, n)
+        )
+        assert venv.observation_space.contains(obs)
+        assert reward.shape == terminated.shape == truncated.shape == (n,)
+        assert terminated.dtype == truncated.dtype == np.bool_
+        assert np.all(np.isfinite(reward))
+        for key, value in info.items():
+            if key not in ("final_obs", "final_info"):
+                assert isinstance(value, np.ndarray) and value.shape[0] == n, key
+                if not key.startswith("_"):
+                    assert info["_" + key].dtype == np.bool_
+
+
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_seeding_reproduces_and_distinguishes(env_id):
+    def run(seed):
+        venv = gym.make_vec(env_id, num_envs=3)
+        obs, _ = venv.reset(seed=seed)
+        out = [obs]
+        rng = np.random.default_rng(5)
+        for _ in range(100):
+            out.append(venv.step(_actions(rng, env_id, venv.single_action_space, 3))[0])
+        return np.array(out)
+
+    np.testing.assert_array_equal(run(7), run(7))
+    assert not np.array_equal(run(7), run(8))
+
+
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_a_non_finite_action_names_its_lane_and_nothing_is_stepped(env_id):
+    a_env = gym.make_vec(env_id, num_envs=3)
+    b_env = gym.make_vec(env_id, num_envs=3)
+    a_env.reset(seed=0)
+    b_env.reset(seed=0)
+    good = np.zeros((3, *a_env.single_action_space.shape), dtype=np.float32)
+    bad = good.copy()
+    bad[2] = np.nan
+    with pytest.raises(ValueError, match="lane 2"):
+        a_env.step(bad)
+    bad[2] = 0.0
+    bad[1] = np.inf
+    with pytest.raises(ValueError, match="lane 1"):
+        a_env.step(bad)
+    for _ in range(5):  # the failed calls changed nothing: the two envs still agree
+        np.testing.assert_array_equal(a_env.step(good)[0], b_env.step(good)[0])
+
+
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_reset_options_apply_to_every_lane_and_are_checked(env_id):
+    venv = gym.make_vec(env_id, num_envs=3)
+    name = "paper_405" if "Turning" in env_id else "test"
+    _, info = venv.reset(seed=0, options={"scenario": name})
+    assert list(info["scenario"]) == [name] * 3
+    with pytest.raises(TypeError, match="options"):
+        venv.reset(options="train")
+    with pytest.raises(ValueError, match="seed"):
+        venv.reset(seed=[1, 2])
+    with pytest.raises((TypeError, ValueError), match="num_envs"):
+        gym.make_vec(env_id, num_envs=0)
+
+
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_sb3_trains_and_evaluates_through_the_adapter(env_id):
+    """SB3VecEnv over the native env works under VecMonitor, VecNormalize, PPO and
+    evaluate_policy."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.evaluation import evaluate_policy
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    from agents.rl.vec import SB3VecEnv
+
+    venv = VecNormalize(VecMonitor(SB3VecEnv(gym.make_vec(env_id, num_envs=4))))
+    venv.seed(0)
+    model = PPO("MlpPolicy", venv, n_steps=64, batch_size=64, n_epochs=1, seed=0, device="cpu")
+    model.learn(256)
+    mean, _ = evaluate_policy(model, venv, n_eval_episodes=2)
+    assert np.isfinite(mean)
