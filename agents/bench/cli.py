@@ -56,6 +56,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     t.add_argument("--resume", action="store_true", help="continue from the run's last checkpoint")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
+    t.add_argument(
+        "--vec",
+        choices=["native", "subproc", "dummy"],
+        default=None,
+        help="how the envs run: the native batched vector env (default where the id has one), "
+        "SB3's SubprocVecEnv or DummyVecEnv (default otherwise)",
+    )
 
     e = sub.add_parser("evaluate", help="the harness on a saved policy")
     e.add_argument(
@@ -96,6 +103,7 @@ def main(argv: list[str] | None = None) -> int:
                 n_timesteps=args.timesteps,
                 resume=args.resume,
                 progress_bar=not args.no_progress,
+                vec=args.vec,
             )
         except (ConfigError, FileExistsError, FileNotFoundError) as exc:
             print(f"machining-bench train: {exc}", file=sys.stderr)

@@ -41,28 +41,67 @@ def primary_score(rows: list[dict], failed_time_s: float = FAILED_EPISODE_TIME_S
     return REGULATION_SCORE(rows, failed_time_s)
 
 
-def _make_vec(cfg: TrainConfig, seed: int):
+#: How training runs the envs: the native batched vector env (ids that have one), SB3's
+#: ``SubprocVecEnv`` (one process per env) or ``DummyVecEnv`` (one after another).
+VEC_KINDS = ("native", "subproc", "dummy")
+
+
+def _vec_kind(env_id: str, vec: str | None) -> str:
+    """``vec`` checked (``ConfigError`` otherwise), or the default for ``env_id``."""
+    has_native = gym.spec(env_id).vector_entry_point is not None
+    if vec is None:
+        return "native" if has_native else "dummy"
+    if vec not in VEC_KINDS:
+        raise ConfigError(f"vec must be one of {list(VEC_KINDS)}, got {vec!r}")
+    if vec == "native" and not has_native:
+        raise ConfigError(f"vec='native': {env_id} has no native vector env")
+    return vec
+
+
+def _make_vec(cfg: TrainConfig, seed: int, vec: str | None = None):
+    """The training VecEnv of ``cfg`` and the ``ActionIncrement`` it applies (or None).
+
+    ``vec`` is one of ``VEC_KINDS``; by default ``native`` where the id has a native vector
+    env, else ``dummy``. All three give every env ``seed + i`` at the first reset, so they
+    run the same episodes.
+    """
     from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.vec_env import VecNormalize
+    from stable_baselines3.common.vec_env import SubprocVecEnv, VecMonitor, VecNormalize
 
-    wrapper, wrapper_kwargs = None, None
+    from machining_envs.wrappers import IncrementalAction
+
+    vec = _vec_kind(cfg.env_id, vec)
+    wrapper_kwargs = None
     if cfg.action_increment is not None:
-        from machining_envs.wrappers import IncrementalAction
-
-        wrapper = IncrementalAction
         wrapper_kwargs = {"max_step": cfg.action_increment, "hide_action": cfg.hide_action}
-    venv = make_vec_env(
-        cfg.env_id,
-        n_envs=cfg.n_envs,
-        seed=seed,
-        env_kwargs=dict(cfg.env_kwargs),
-        wrapper_class=wrapper,
-        wrapper_kwargs=wrapper_kwargs,
-    )
+    if vec == "native":
+        from agents.rl.vec import SB3VecEnv, VecIncrementalAction
+
+        venv = VecMonitor(
+            SB3VecEnv(gym.make_vec(cfg.env_id, num_envs=cfg.n_envs, **dict(cfg.env_kwargs)))
+        )
+        increment = None
+        if wrapper_kwargs is not None:
+            probe = gym.make(cfg.env_id, **dict(cfg.env_kwargs))
+            increment = IncrementalAction(probe, **wrapper_kwargs).increment
+            probe.close()
+            venv = VecIncrementalAction(venv, increment)
+        venv.seed(seed)
+    else:
+        venv = make_vec_env(
+            cfg.env_id,
+            n_envs=cfg.n_envs,
+            seed=seed,
+            env_kwargs=dict(cfg.env_kwargs),
+            wrapper_class=IncrementalAction if wrapper_kwargs is not None else None,
+            wrapper_kwargs=wrapper_kwargs,
+            vec_env_cls=SubprocVecEnv if vec == "subproc" else None,
+        )
+        increment = venv.get_attr("increment", [0])[0] if wrapper_kwargs is not None else None
     if cfg.normalize:
         kw = cfg.normalize if isinstance(cfg.normalize, dict) else {}
         venv = VecNormalize(venv, **kw)
-    return venv
+    return venv, increment
 
 
 def _evaluation_setup(env_id: str, env_kwargs: dict):
@@ -98,6 +137,7 @@ def train(
     resume: bool = False,
     progress_bar: bool = True,
     verbose: bool = True,
+    vec: str | None = None,
 ) -> Path:
     """Train ``algo`` on ``env_id``; returns the run folder. See the module docstring."""
     import torch
@@ -105,6 +145,7 @@ def train(
     from stable_baselines3.common.vec_env import VecNormalize
 
     cfg = load_config(env_id, algo, config_path)  # all validation before anything starts
+    vec_kind = _vec_kind(env_id, vec)
     if n_timesteps is not None:
         if n_timesteps < 1:
             raise ConfigError(f"n_timesteps must be >= 1, got {n_timesteps}")
@@ -127,11 +168,8 @@ def train(
     torch.set_num_threads(1)
     AlgoCls = _algos()[cfg.algo]
 
-    venv = _make_vec(cfg, seed)
-    increment = None  # the wrapper's ActionIncrement, for evaluation and the run record
-    if cfg.action_increment is not None:
-        w = venv.venv if isinstance(venv, VecNormalize) else venv
-        increment = w.get_attr("increment", [0])[0]
+    # ``increment``: the wrapper's ActionIncrement, for evaluation and the run record.
+    venv, increment = _make_vec(cfg, seed, vec_kind)
     if resume:
         stats = ckpt.with_name(
             ckpt.name.replace("rl_model_", "rl_model_vecnormalize_").replace(".zip", ".pkl")
@@ -159,6 +197,7 @@ def train(
             "seed": seed,
             "config": asdict(cfg),
             "command": " ".join(sys.argv),
+            "vec": vec_kind,
         }
         if increment is not None:
             meta["action_increment"] = increment._asdict()
@@ -238,6 +277,7 @@ def train(
         reset_num_timesteps=not resume,
         tb_log_name=cfg.algo,
     )
+    learn_s = time.perf_counter() - t0
     model.save(out / "final_model.zip")
     if isinstance(venv, VecNormalize):
         venv.save(str(out / "final_vecnormalize.pkl"))
@@ -250,7 +290,8 @@ def train(
     if verbose:
         print(
             f"trained {cfg.algo} on {env_id} for {model.num_timesteps} steps in "
-            f"{time.perf_counter() - t0:.0f} s; run folder {out}"
+            f"{learn_s:.0f} s ({remaining / max(learn_s, 1e-9):.0f} env-steps/s of learn(), "
+            f"held-out evaluations included; {vec_kind} envs); run folder {out}"
         )
     return out
 

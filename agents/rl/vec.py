@@ -26,9 +26,11 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode
-from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
-__all__ = ["SB3VecEnv"]
+from machining_envs.wrappers import ActionIncrement
+
+__all__ = ["SB3VecEnv", "VecIncrementalAction"]
 
 
 class SB3VecEnv(VecEnv):
@@ -122,3 +124,32 @@ class SB3VecEnv(VecEnv):
                 if not skip[i] and (mask is None or mask[i]):
                     out[i][key] = values[i]
         return out
+
+
+class VecIncrementalAction(VecEnvWrapper):
+    """``machining_envs.wrappers.IncrementalAction`` for a whole SB3 ``VecEnv``: the agent
+    outputs changes of the env's action, at most ``increment.max_step`` per step, and (with
+    ``increment.hide_action``) does not see the action now applied. The same map as the
+    per-env wrapper, applied to the batch, so a policy trained on either runs on both."""
+
+    def __init__(self, venv: VecEnv, increment: ActionIncrement):
+        super().__init__(venv)
+        self.increment = increment
+        self._raw: np.ndarray | None = None
+
+    def reset(self):
+        self._raw = self.venv.reset()
+        return self.increment.policy_observation(self._raw)
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self.venv.step_async(self.increment.absolute_action(self._raw, actions))
+
+    def step_wait(self):
+        obs, reward, done, infos = self.venv.step_wait()
+        self._raw = obs
+        for info in infos:
+            if "terminal_observation" in info:
+                info["terminal_observation"] = self.increment.policy_observation(
+                    info["terminal_observation"]
+                )
+        return self.increment.policy_observation(obs), reward, done, infos
