@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 
@@ -18,6 +19,7 @@ from machining_envs.contouring.scenarios import (
     ContouringScenario,
     contouring_scenario,
 )
+from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
 from machining_envs.core.env import (
     ActionMap,
     check_render_mode,
@@ -128,11 +130,9 @@ class ContouringReward:
                 )
 
 
-def _positive(name: str, value, lo: float, hi: float) -> float:
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-    if not (ok and lo < value <= hi):
-        raise ValueError(f"{name} must be in ({lo}, {hi}], got {value!r}")
-    return float(value)
+#: ``_positive(name, value, lo, hi)``: ``value`` as a float if it is a Python number in
+#: ``(lo, hi]``, else ``ValueError`` (the contouring envs' keyword checks).
+_positive = functools.partial(check_range, lo_open=True, types=PY_NUMBER_TYPES)
 
 
 def _circle_info(path: Path) -> dict:

@@ -10,12 +10,12 @@ the nominal torque coefficient and feed exponent). Pass a name or a scenario obj
 from __future__ import annotations
 
 import bisect
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
+from machining_envs.core.checks import check_range
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams
 
@@ -45,16 +45,6 @@ PAPER_TAPER_DEPTHS_MM = (0.0, 3.0)
 #: eq. (20): L / T_m = 40 mm / 11.797 min (step) and 40 mm / 15.914 min (taper). The paper
 #: does not say how they were chosen.
 PAPER_CONSTANT_FEED_MM_MIN = {"paper_step": 40.0 / 11.797, "paper_taper": 40.0 / 15.914}
-
-
-def _in_range(name: str, value, lo: float, hi: float) -> None:
-    if not (
-        isinstance(value, (int, float, np.integer, np.floating))
-        and not isinstance(value, bool)
-        and math.isfinite(value)
-        and lo <= value <= hi
-    ):
-        raise ValueError(f"{name} must be in [{lo}, {hi}], got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -91,11 +81,11 @@ class MillingScenario:
     def __post_init__(self) -> None:
         if not isinstance(self.profile, DepthProfile):
             raise ValueError(f"profile must be a DepthProfile, got {type(self.profile).__name__}")
-        _in_range("spindle_scale", self.spindle_scale, 0.25, 4.0)
-        _in_range("torque_ref_scale", self.torque_ref_scale, 0.25, 4.0)
-        _in_range("torque_coefficient_scale", self.torque_coefficient_scale, 0.5, 2.0)
-        _in_range("feed_exponent_scale", self.feed_exponent_scale, 0.5, 2.0)
-        _in_range("noise_scale", self.noise_scale, 0.0, 10.0)
+        check_range("spindle_scale", self.spindle_scale, 0.25, 4.0)
+        check_range("torque_ref_scale", self.torque_ref_scale, 0.25, 4.0)
+        check_range("torque_coefficient_scale", self.torque_coefficient_scale, 0.5, 2.0)
+        check_range("feed_exponent_scale", self.feed_exponent_scale, 0.5, 2.0)
+        check_range("noise_scale", self.noise_scale, 0.0, 10.0)
 
     def spindle_rpm(self, nominal: MillingParams) -> float:
         """Spindle speed of this cut, rpm (``ValueError`` outside ``SPINDLE_RPM_RANGE``)."""

@@ -30,6 +30,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from machining_envs.core.checks import check_integer, check_range
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
 
 __all__ = ["TurningParams", "TurningPlant", "TurningStep", "SPINDLE_RPM_RANGE"]
@@ -40,14 +41,9 @@ __all__ = ["TurningParams", "TurningPlant", "TurningStep", "SPINDLE_RPM_RANGE"]
 SPINDLE_RPM_RANGE = (50.0, 3000.0)
 
 
-def _check(name: str, value, lo: float, hi: float, *, lo_open: bool = False) -> None:
-    """Raise ``ValueError`` naming ``name`` unless ``lo <= value <= hi`` (``lo < value``)."""
-    ok = isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(value)
-    if ok:
-        ok = (value > lo if lo_open else value >= lo) and value <= hi
-    if not ok:
-        left = "(" if lo_open else "["
-        raise ValueError(f"{name} must be in {left}{lo}, {hi}], got {value!r}")
+#: The range check of this process's parameters and scenarios. Unlike the other processes'
+#: it takes a bool as the number 0 or 1; kept so that no value accepted before is refused.
+_check = functools.partial(check_range, allow_bool=True)
 
 
 @dataclass(frozen=True)
@@ -131,8 +127,7 @@ class TurningParams:
                 f"sensor_filter_order must be 1 or 2, got {self.sensor_filter_order!r}"
             )
         _check("sample_time_s", self.sample_time_s, 0.0, 10.0, lo_open=True)
-        if not isinstance(self.substeps, (int, np.integer)) or not 1 <= self.substeps <= 10000:
-            raise ValueError(f"substeps must be an integer in [1, 10000], got {self.substeps!r}")
+        check_integer("substeps", self.substeps, 1, 10000, allow_bool=True)
         _check("command_max", self.command_max, 0.0, 1e9, lo_open=True)
         _check("breakage_force_N", self.breakage_force_N, 0.0, 1e7, lo_open=True)
         _check("noise_std_N", self.noise_std_N, 0.0, 1e5)
