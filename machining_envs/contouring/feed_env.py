@@ -3,7 +3,6 @@ CNC's own position loop (PI or H-infinity) drives the axes."""
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 from dataclasses import dataclass
@@ -31,6 +30,7 @@ from machining_envs.contouring.servo import SERVO_KINDS, ServoLoop, servo_design
 from machining_envs.core.env import (
     ActionMap,
     check_render_mode,
+    check_reward_weights,
     check_scenario_spec,
     present_frame,
     resolve_params,
@@ -78,10 +78,7 @@ class FeedReward:
     """w_d, one-off penalty when the run diverges."""
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise ValueError(f"reward weight {f.name} must be a finite number >= 0, got {v!r}")
+        check_reward_weights(self, allow_bool=True)
 
 
 @functools.lru_cache(maxsize=16)

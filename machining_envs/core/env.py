@@ -18,6 +18,7 @@ __all__ = [
     "check_episode_time",
     "check_scenario_spec",
     "scenario_option",
+    "check_reward_weights",
 ]
 
 
@@ -233,6 +234,27 @@ def resolve_reward(reward, reward_cls: type):
             f"reward must be a {reward_cls.__name__} or a dict, got {type(reward).__name__}"
         )
     return reward
+
+
+def check_reward_weights(reward, *, allow_bool: bool = False) -> None:
+    """``ValueError`` unless every field of the reward dataclass ``reward`` is a finite
+    number >= 0 (the first that is not is named: ``"reward weight {name} must be a finite
+    number >= 0, got {value!r}"``). Call it from the dataclass's ``__post_init__``.
+
+    ``allow_bool``: take ``True`` and ``False`` as 1 and 0, as ``TurningReward`` and
+    ``FeedReward`` always have (the other rewards refuse them).
+    """
+    import dataclasses
+
+    for f in dataclasses.fields(reward):
+        v = getattr(reward, f.name)
+        if not (
+            isinstance(v, (int, float))
+            and (allow_bool or not isinstance(v, bool))
+            and math.isfinite(v)
+            and v >= 0
+        ):
+            raise ValueError(f"reward weight {f.name} must be a finite number >= 0, got {v!r}")
 
 
 def ready_to_render(env, owner: str) -> bool:

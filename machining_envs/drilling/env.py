@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -15,6 +14,7 @@ from machining_envs.core.env import (
     check_action,
     check_episode_time,
     check_render_mode,
+    check_reward_weights,
     check_scenario_spec,
     present_frame,
     ready_to_render,
@@ -62,15 +62,7 @@ class DrillingReward:
     """w_b, one-off penalty when the drill breaks."""
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if not (
-                isinstance(v, (int, float))
-                and not isinstance(v, bool)
-                and math.isfinite(v)
-                and v >= 0
-            ):
-                raise ValueError(f"reward weight {f.name} must be a finite number >= 0, got {v!r}")
+        check_reward_weights(self)
 
 
 class MicroDrillingEnv(gym.Env):

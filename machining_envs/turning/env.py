@@ -15,6 +15,7 @@ from machining_envs.core.env import (
     check_action,
     check_episode_time,
     check_render_mode,
+    check_reward_weights,
     check_scenario_spec,
     present_frame,
     ready_to_render,
@@ -55,10 +56,7 @@ class TurningReward:
     """w_b, one-off penalty when the tool breaks."""
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise ValueError(f"reward weight {f.name} must be a finite number >= 0, got {v!r}")
+        check_reward_weights(self, allow_bool=True)
 
 
 class TurningEnv(gym.Env):
