@@ -19,6 +19,8 @@ __all__ = [
     "check_scenario_spec",
     "scenario_option",
     "check_reward_weights",
+    "EpisodeLog",
+    "record_step",
 ]
 
 
@@ -257,8 +259,48 @@ def check_reward_weights(reward, *, allow_bool: bool = False) -> None:
             raise ValueError(f"reward weight {f.name} must be a finite number >= 0, got {v!r}")
 
 
-def ready_to_render(env, owner: str) -> bool:
-    """False (with a warning) without a render mode; ``RuntimeError`` before the first reset."""
+class EpisodeLog:
+    """The signals an env keeps for ``render()``: a list per name, each fed by one ``info`` key.
+
+    Parameters
+    ----------
+    fields : dict of str to str
+        Name of each signal -> the ``info`` key it is read from.
+
+    >>> log = EpisodeLog({"t": "t_s", "force": "force_N"})
+    >>> log.record({"t_s": 0.1, "force_N": 950.0, "scenario": "train"})
+    >>> log["t"], log["force"]
+    ([0.1], [950.0])
+    """
+
+    def __init__(self, fields: dict[str, str]) -> None:
+        self.fields = dict(fields)
+        self._signals: dict[str, list] = {name: [] for name in self.fields}
+
+    def record(self, info: dict) -> None:
+        """Append this step's value of every signal from its ``info``."""
+        signals = self._signals
+        for name, key in self.fields.items():
+            signals[name].append(info[key])
+
+    def __getitem__(self, name: str) -> list:
+        return self._signals[name]
+
+
+def record_step(env, log: EpisodeLog, info: dict) -> None:
+    """The end of every env's ``step``: with a render mode, ``info`` goes into ``log``, and in
+    ``"human"`` mode the window is drawn again."""
+    if env.render_mode is not None:
+        log.record(info)
+        if env.render_mode == "human":
+            env.render()
+
+
+def ready_to_render(env, owner: str, started: bool | None = None) -> bool:
+    """False (with a warning) without a render mode; ``RuntimeError`` before the first reset.
+
+    ``started`` says whether ``reset()`` has run; by default, whether ``env.plant`` is set.
+    """
     if env.render_mode is None:
         import gymnasium as gym
 
@@ -266,6 +308,6 @@ def ready_to_render(env, owner: str) -> bool:
             f"{owner}.render() called without a render_mode; pass render_mode='rgb_array'"
         )
         return False
-    if env.plant is None:
+    if not (env.plant is not None if started is None else started):
         raise RuntimeError(f"{owner}: call reset() before render()")
     return True

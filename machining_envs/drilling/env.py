@@ -11,6 +11,7 @@ from gymnasium import spaces
 
 from machining_envs.core.env import (
     ActionMap,
+    EpisodeLog,
     check_action,
     check_episode_time,
     check_render_mode,
@@ -18,6 +19,7 @@ from machining_envs.core.env import (
     check_scenario_spec,
     present_frame,
     ready_to_render,
+    record_step,
     render_signals,
     resolve_params,
     resolve_reward,
@@ -38,6 +40,15 @@ _TORQUE_OBS = (-1.0, 10.0)
 _NOISE_BLOCK = 256
 #: What the action commands: the valve voltage (the paper's loop) or the feed velocity.
 CONTROL_MODES = ("voltage", "feed")
+#: The signals render() draws: name -> the info key each is read from.
+_LOG_FIELDS = {
+    "t": "t_s",
+    "torque": "torque_Nmm",
+    "measured": "measured",
+    "speed": "spindle_hz",
+    "depth": "depth_mm",
+    "position": "position_mm",
+}
 
 
 @dataclass(frozen=True)
@@ -266,9 +277,9 @@ class MicroDrillingEnv(gym.Env):
             min(sc.target_depth_mm / self.LENGTH_SCALE_MM, 2.0),
             sc.diameter_mm,
         )
-        self._log = {k: [] for k in ("t", "torque", "measured", "speed", "depth", "position")}
+        self._log = EpisodeLog(_LOG_FIELDS)
         info = self._info_reset()
-        self._record(info)
+        self._log.record(info)
         return self._obs(), info
 
     def step(self, action):
@@ -359,10 +370,7 @@ class MicroDrillingEnv(gym.Env):
         if finished:
             info["drilling_time_s"] = s.finish_time_s
             info["machining_time_s"] = s.finish_time_s
-        if self.render_mode is not None:
-            self._record(info)
-            if self.render_mode == "human":
-                self.render()
+        record_step(self, self._log, info)
         return self._obs(), float(reward), terminated, truncated, info
 
     # ---- helpers -------------------------------------------------------------------------
@@ -430,15 +438,6 @@ class MicroDrillingEnv(gym.Env):
             "segment": 0,
             "scenario": sc.name,
         }
-
-    def _record(self, info: dict) -> None:
-        log = self._log
-        log["t"].append(info["t_s"])
-        log["torque"].append(info["torque_Nmm"])
-        log["measured"].append(info["measured"])
-        log["speed"].append(info["spindle_hz"])
-        log["depth"].append(info["depth_mm"])
-        log["position"].append(info["position_mm"])
 
     def render(self):
         if not ready_to_render(self, "MicroDrillingEnv"):

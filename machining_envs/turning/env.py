@@ -12,6 +12,7 @@ from gymnasium import spaces
 
 from machining_envs.core.env import (
     ActionMap,
+    EpisodeLog,
     check_action,
     check_episode_time,
     check_render_mode,
@@ -19,6 +20,7 @@ from machining_envs.core.env import (
     check_scenario_spec,
     present_frame,
     ready_to_render,
+    record_step,
     render_signals,
     resolve_params,
     resolve_reward,
@@ -32,6 +34,14 @@ __all__ = ["TurningEnv", "TurningReward"]
 
 _HISTORY = 3
 _FORCE_OBS = (-1.0, 10.0)
+#: The signals render() draws: name -> the info key each is read from.
+_LOG_FIELDS = {
+    "t": "t_s",
+    "force": "force_N",
+    "measured": "measured",
+    "feed": "feed_mm_per_rev",
+    "depth": "depth_mm",
+}
 
 
 @dataclass(frozen=True)
@@ -217,7 +227,7 @@ class TurningEnv(gym.Env):
         self._prev_action = -1.0
         self._n_clipped = 0
         self._done = False
-        self._log = {k: [] for k in ("t", "force", "measured", "feed", "depth")}
+        self._log = EpisodeLog(_LOG_FIELDS)
         info = self._info(0.0, 0.0, 0.0, False, False, False)
         info.update(
             feed_mm_per_rev=0.0,
@@ -227,7 +237,7 @@ class TurningEnv(gym.Env):
             peak_force_N=0.0,
             segment=0,
         )
-        self._record(info)
+        self._log.record(info)
         return self._obs(), info
 
     def step(self, action):
@@ -292,10 +302,7 @@ class TurningEnv(gym.Env):
         }
         if finished:
             info["machining_time_s"] = s.finish_time_s
-        if self.render_mode is not None:
-            self._record(info)
-            if self.render_mode == "human":
-                self.render()
+        record_step(self, self._log, info)
         return self._obs(), float(reward), terminated, truncated, info
 
     # ---- helpers -------------------------------------------------------------------------
@@ -334,14 +341,6 @@ class TurningEnv(gym.Env):
             "workpiece_length_mm": sc.profile.length_mm,
             "scenario": sc.name,
         }
-
-    def _record(self, info: dict) -> None:
-        log = self._log
-        log["t"].append(info["t_s"])
-        log["force"].append(info["force_N"])
-        log["measured"].append(info["measured"])
-        log["feed"].append(info["feed_mm_per_rev"])
-        log["depth"].append(info["depth_mm"])
 
     def render(self):
         if not ready_to_render(self, "TurningEnv"):
