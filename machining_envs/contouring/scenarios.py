@@ -17,6 +17,7 @@ import numpy as np
 from machining_envs.contouring.paths import PAPER_CORNER_FEED_MM_S, PAPER_FEED_MM_S, Path
 from machining_envs.contouring.plant import ContouringParams
 from machining_envs.core.checks import check_range
+from machining_envs.core.env import resolve_scenario
 
 __all__ = [
     "ContouringScenario",
@@ -212,11 +213,4 @@ CONTOURING_SCENARIOS: dict[str, Callable[[np.random.Generator], ContouringScenar
 
 def contouring_scenario(spec, rng: np.random.Generator) -> ContouringScenario:
     """Resolve a scenario name or object; unknown names raise ``ValueError``."""
-    if isinstance(spec, ContouringScenario):
-        return spec
-    if isinstance(spec, str) and spec in CONTOURING_SCENARIOS:
-        return CONTOURING_SCENARIOS[spec](rng)
-    raise ValueError(
-        f"scenario must be a ContouringScenario or one of {sorted(CONTOURING_SCENARIOS)}, "
-        f"got {spec!r}"
-    )
+    return resolve_scenario(spec, rng, ContouringScenario, CONTOURING_SCENARIOS)

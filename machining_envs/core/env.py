@@ -17,6 +17,7 @@ __all__ = [
     "check_render_mode",
     "check_episode_time",
     "check_scenario_spec",
+    "resolve_scenario",
     "scenario_option",
     "check_reward_weights",
     "EpisodeLog",
@@ -187,12 +188,26 @@ def check_episode_time(max_episode_time_s) -> float:
     return float(max_episode_time_s)
 
 
+def _scenario_error(spec, scenario_cls: type, names) -> ValueError:
+    return ValueError(
+        f"scenario must be a {scenario_cls.__name__} or one of {sorted(names)}, got {spec!r}"
+    )
+
+
 def check_scenario_spec(spec, scenario_cls: type, names) -> None:
     """``ValueError`` unless ``spec`` is a ``scenario_cls`` or one of the scenario ``names``."""
     if not isinstance(spec, scenario_cls) and spec not in names:
-        raise ValueError(
-            f"scenario must be a {scenario_cls.__name__} or one of {sorted(names)}, got {spec!r}"
-        )
+        raise _scenario_error(spec, scenario_cls, names)
+
+
+def resolve_scenario(spec, rng: np.random.Generator, scenario_cls: type, factories: dict):
+    """The scenario ``spec`` asks for: a ``scenario_cls`` as it is, a name of ``factories``
+    drawn from ``rng`` (``factories[spec](rng)``); anything else raises ``ValueError``."""
+    if isinstance(spec, scenario_cls):
+        return spec
+    if isinstance(spec, str) and spec in factories:
+        return factories[spec](rng)
+    raise _scenario_error(spec, scenario_cls, factories)
 
 
 def scenario_option(options: dict | None, default):

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from machining_envs.core.checks import check_range
+from machining_envs.core.env import resolve_scenario
 from machining_envs.drilling.plant import DIAMETER_RANGE_MM, DrillingParams
 
 __all__ = [
@@ -148,10 +149,4 @@ DRILLING_SCENARIOS: dict[str, Callable[[np.random.Generator], DrillingScenario]]
 
 def drilling_scenario(spec, rng: np.random.Generator) -> DrillingScenario:
     """Resolve a scenario name or object; unknown names raise ``ValueError``."""
-    if isinstance(spec, DrillingScenario):
-        return spec
-    if isinstance(spec, str) and spec in DRILLING_SCENARIOS:
-        return DRILLING_SCENARIOS[spec](rng)
-    raise ValueError(
-        f"scenario must be a DrillingScenario or one of {sorted(DRILLING_SCENARIOS)}, got {spec!r}"
-    )
+    return resolve_scenario(spec, rng, DrillingScenario, DRILLING_SCENARIOS)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from machining_envs.core.checks import check_range
+from machining_envs.core.env import resolve_scenario
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams
 
@@ -218,10 +219,4 @@ MILLING_SCENARIOS: dict[str, Callable[[np.random.Generator], MillingScenario]] =
 
 def milling_scenario(spec, rng: np.random.Generator) -> MillingScenario:
     """Resolve a scenario name or object; unknown names raise ``ValueError``."""
-    if isinstance(spec, MillingScenario):
-        return spec
-    if isinstance(spec, str) and spec in MILLING_SCENARIOS:
-        return MILLING_SCENARIOS[spec](rng)
-    raise ValueError(
-        f"scenario must be a MillingScenario or one of {sorted(MILLING_SCENARIOS)}, got {spec!r}"
-    )
+    return resolve_scenario(spec, rng, MillingScenario, MILLING_SCENARIOS)

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from machining_envs.core.env import resolve_scenario
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams, _check
 
@@ -122,10 +123,4 @@ TURNING_SCENARIOS: dict[str, Callable[[np.random.Generator], TurningScenario]] =
 
 def turning_scenario(spec, rng: np.random.Generator) -> TurningScenario:
     """Resolve a scenario name or object; unknown names raise ``ValueError``."""
-    if isinstance(spec, TurningScenario):
-        return spec
-    if isinstance(spec, str) and spec in TURNING_SCENARIOS:
-        return TURNING_SCENARIOS[spec](rng)
-    raise ValueError(
-        f"scenario must be a TurningScenario or one of {sorted(TURNING_SCENARIOS)}, got {spec!r}"
-    )
+    return resolve_scenario(spec, rng, TurningScenario, TURNING_SCENARIOS)
