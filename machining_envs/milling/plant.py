@@ -573,20 +573,8 @@ class MillingPlant:
         else:
             self._c = params.torque_gain(1.0).item()
             self._l = 1.0
-        edges = np.asarray(profile.edges_mm, dtype=np.float64)
-        self._edges = edges
-        self._edge_list = [float(v) for v in edges]
-        self._d0_list = [float(v) for v in profile.start_depths_mm]
-        self._slope_list = [
-            (float(e1) - float(d0)) / (b - a)
-            for d0, e1, a, b in zip(
-                profile.start_depths_mm,
-                profile.end_depths_mm,
-                self._edge_list[:-1],
-                self._edge_list[1:],
-                strict=True,
-            )
-        ]
+        self._edges = np.asarray(profile.edges_mm, dtype=np.float64)
+        self._edge_list, self._d0_list, self._slope_list = profile.segment_table()
         self.reset()
 
     def reset(self) -> None:

@@ -137,18 +137,7 @@ class CutArea:
     """
 
     def __init__(self, profile: DepthProfile):
-        self.edges = [float(v) for v in profile.edges_mm]
-        self.d0 = [float(v) for v in profile.start_depths_mm]
-        self.slope = [
-            (float(d1) - float(d0)) / (b - a)
-            for d0, d1, a, b in zip(
-                profile.start_depths_mm,
-                profile.end_depths_mm,
-                self.edges[:-1],
-                self.edges[1:],
-                strict=True,
-            )
-        ]
+        self.edges, self.d0, self.slope = profile.segment_table()
         acc = [0.0]
         for i in range(len(self.d0)):
             w = self.edges[i + 1] - self.edges[i]

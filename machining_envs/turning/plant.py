@@ -391,11 +391,7 @@ class TurningPlant:
         self._mx = _matrices(key, self.spindle_rpm)
         self._margin = _velocity_bound(key, params.command_max) * params.sample_time_s
         self._edges = np.asarray(profile.edges_mm, dtype=np.float64)
-        d0 = np.asarray(profile.start_depths_mm, dtype=np.float64)
-        self._d0 = d0
-        self._slope = (np.asarray(profile.end_depths_mm, dtype=np.float64) - d0) / np.diff(
-            self._edges
-        )
+        self._edge_list, self._d0_list, self._slope_list = profile.segment_table()
         self.reset()
 
     def reset(self) -> None:
@@ -409,9 +405,6 @@ class TurningPlant:
         self._n_f = n_f
         self.finished = False
         self._seg = 0
-        self._edge_list = [float(v) for v in self._edges]
-        self._d0_list = [float(v) for v in self._d0]
-        self._slope_list = [float(v) for v in self._slope]
 
     @property
     def state(self) -> np.ndarray:
