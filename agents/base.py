@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from machining_envs.core.checks import REAL_TYPES, check_range
+from machining_envs.core.checks import check_range
 
 __all__ = ["Agent", "unwrap", "unwrap_as", "check_setting", "check_positive"]
 
@@ -47,42 +47,17 @@ def unwrap_as(env, env_cls: type, who: str):
     return base
 
 
-def check_setting(
-    name: str,
-    value,
-    lo: float,
-    hi: float,
-    *,
-    lo_open: bool = False,
-    types: tuple[type, ...] = REAL_TYPES,
-    allow_bool: bool = False,
-) -> float:
+def check_setting(name: str, value, lo: float, hi: float, **kind) -> float:
     """A controller setting as a float if it is a finite number in ``[lo, hi]``.
 
-    ``machining_envs.core.checks.check_range`` (``lo_open``, ``types`` and ``allow_bool``
-    as there) with the bounds printed by ``:g``: ``ValueError`` ``"{name} must be in
+    ``machining_envs.core.checks.check_range`` with the bounds printed by ``:g``; ``kind``
+    is its ``lo_open``, ``types`` and ``allow_bool``. ``ValueError``: ``"{name} must be in
     [lo, hi], got {value!r}"``.
     """
-    return check_range(
-        name,
-        value,
-        lo,
-        hi,
-        lo_open=lo_open,
-        types=types,
-        allow_bool=allow_bool,
-        bound_format="g",
-    )
+    return check_range(name, value, lo, hi, bound_format="g", **kind)
 
 
-def check_positive(
-    name: str,
-    value,
-    hi: float = 1e9,
-    *,
-    types: tuple[type, ...] = REAL_TYPES,
-    allow_bool: bool = False,
-) -> float:
+def check_positive(name: str, value, hi: float = 1e9, **kind) -> float:
     """A controller setting (a gain, a time) as a float if it is a finite number in ``(0, hi]``.
 
     See :func:`check_setting`; the message is ``"{name} must be in (0, hi], got {value!r}"``.
@@ -94,7 +69,7 @@ def check_positive(
     ...
     ValueError: kc must be in (0, 1e+06], got 0
     """
-    return check_setting(name, value, 0, hi, lo_open=True, types=types, allow_bool=allow_bool)
+    return check_setting(name, value, 0, hi, lo_open=True, **kind)
 
 
 class Agent:
