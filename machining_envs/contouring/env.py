@@ -142,6 +142,20 @@ class ContouringReward:
 _positive = functools.partial(check_range, lo_open=True, types=PY_NUMBER_TYPES)
 
 
+def _run_limits(
+    max_episode_time_s, in_position_mm, divergence_mm
+) -> tuple[float | None, float, float]:
+    """The keywords that end a contouring run, checked: ``(max_episode_time_s or None,
+    in_position_mm, divergence_mm)`` as floats."""
+    return (
+        None
+        if max_episode_time_s is None
+        else _positive("max_episode_time_s", max_episode_time_s, 0.0, 1e4),
+        _positive("in_position_mm", in_position_mm, 0.0, 10.0),
+        _positive("divergence_mm", divergence_mm, 0.0, 1e4),
+    )
+
+
 def _circle_info(path: Path) -> dict:
     """The circle's centre and radius for a one-arc path (a circle test), else nothing."""
     c = path.circle()
@@ -261,13 +275,9 @@ class ContouringEnv(gym.Env):
             type(self).__name__, params, ContouringParams, ContouringParams.choi_et_al, overrides
         )
         self.reward_weights = resolve_reward(reward, ContouringReward)
-        self.max_episode_time_s = (
-            None
-            if max_episode_time_s is None
-            else _positive("max_episode_time_s", max_episode_time_s, 0.0, 1e4)
+        self.max_episode_time_s, self.in_position_mm, self.divergence_mm = _run_limits(
+            max_episode_time_s, in_position_mm, divergence_mm
         )
-        self.in_position_mm = _positive("in_position_mm", in_position_mm, 0.0, 10.0)
-        self.divergence_mm = _positive("divergence_mm", divergence_mm, 0.0, 1e4)
         check_scenario_spec(scenario, ContouringScenario, CONTOURING_SCENARIOS)
         self.default_scenario = scenario
         self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])

@@ -17,6 +17,7 @@ from machining_envs.contouring.env import (
     VELOCITY_SCALE_MM_S,
     _circle_info,
     _positive,
+    _run_limits,
     check_action_vector,
     render_trace,
 )
@@ -212,13 +213,9 @@ class ContouringFeedEnv(gym.Env):
         self.decision_interval_s = dec
         self._n_sub = n_sub
         self.override_max = _positive("override_max", override_max, 0.0, 10.0)
-        self.max_episode_time_s = (
-            None
-            if max_episode_time_s is None
-            else _positive("max_episode_time_s", max_episode_time_s, 0.0, 1e4)
+        self.max_episode_time_s, self.in_position_mm, self.divergence_mm = _run_limits(
+            max_episode_time_s, in_position_mm, divergence_mm
         )
-        self.in_position_mm = _positive("in_position_mm", in_position_mm, 0.0, 10.0)
-        self.divergence_mm = _positive("divergence_mm", divergence_mm, 0.0, 1e4)
         check_scenario_spec(scenario, ContouringScenario, CONTOURING_SCENARIOS)
         self.default_scenario = scenario
         self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
