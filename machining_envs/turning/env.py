@@ -10,6 +10,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
@@ -174,11 +175,9 @@ class TurningEnv(gym.Env):
             type(self).__name__, params, TurningParams, TurningParams.noh_kim_kim_1992, overrides
         )
         if spindle_rpm is not None:
-            lo, hi = SPINDLE_RPM_RANGE
-            ok = isinstance(spindle_rpm, (int, float)) and math.isfinite(spindle_rpm)
-            if not (ok and lo <= spindle_rpm <= hi):
-                raise ValueError(f"spindle_rpm must be in [{lo}, {hi}], got {spindle_rpm!r}")
-            spindle_rpm = float(spindle_rpm)
+            spindle_rpm = check_range(
+                "spindle_rpm", spindle_rpm, *SPINDLE_RPM_RANGE, types=PY_NUMBER_TYPES
+            )
         self.spindle_rpm_override = spindle_rpm
         self.reward_weights = resolve_reward(reward, TurningReward)
         self.max_episode_time_s = check_episode_time(max_episode_time_s)
