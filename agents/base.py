@@ -11,12 +11,65 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["Agent", "unwrap"]
+from machining_envs.core.checks import check_range
+
+__all__ = ["Agent", "unwrap", "unwrap_as", "check_setting", "check_positive"]
 
 
 def unwrap(env):
     """The innermost env of a (possibly wrapped) gymnasium env."""
     return getattr(env, "unwrapped", env)
+
+
+def unwrap_as(env, env_cls: type, who: str):
+    """The innermost env of ``env``, which must be an ``env_cls``.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        The env, possibly wrapped.
+    env_cls : type
+        The env class the controller is built for.
+    who : str
+        The controller, for the message (``"a turning controller"``).
+
+    Raises
+    ------
+    TypeError
+        ``"{who} needs a {env_cls}, got {class of the innermost env}"`` (``an`` before a
+        vowel).
+    """
+    base = unwrap(env)
+    if not isinstance(base, env_cls):
+        name = env_cls.__name__
+        article = "an" if name[:1] in "AEIOU" else "a"
+        raise TypeError(f"{who} needs {article} {name}, got {type(base).__name__}")
+    return base
+
+
+def check_setting(name: str, value, lo: float, hi: float, **kind) -> float:
+    """A controller setting as a float if it is a finite number in ``[lo, hi]``.
+
+    ``machining_envs.core.checks.check_range`` with the bounds printed by ``:g``; ``kind``
+    is its ``lo_open``, ``types`` and ``allow_bool``. ``ValueError``: ``"{name} must be in
+    [lo, hi], got {value!r}"``.
+    """
+    return check_range(name, value, lo, hi, bound_format="g", **kind)
+
+
+def check_positive(name: str, value, hi: float = 1e9, **kind) -> float:
+    """A controller setting (a gain, a time) as a float if it is a finite number in ``(0, hi]``.
+
+    See :func:`check_setting`; the message is ``"{name} must be in (0, hi], got {value!r}"``.
+
+    >>> check_positive("kc", 0.2, 1e6)
+    0.2
+    >>> check_positive("kc", 0, 1e6)
+    Traceback (most recent call last):
+    ...
+    ValueError: kc must be in (0, 1e+06], got 0
+    """
+    return check_setting(name, value, 0, hi, lo_open=True, **kind)
 
 
 class Agent:

@@ -27,7 +27,7 @@ import gymnasium as gym
 import numpy as np
 from scipy.linalg import block_diag
 
-from agents.base import Agent, unwrap
+from agents.base import Agent, unwrap, unwrap_as
 from machining_envs.contouring.env import ERROR_SCALE_MM, POSITION_SCALE_MM, ContouringEnv
 from machining_envs.contouring.feed_env import DEFAULT_TOLERANCE_MM, ContouringFeedEnv
 from machining_envs.contouring.plant import AXES, ContouringParams
@@ -49,10 +49,7 @@ _I = ContouringEnv.OBS_INDEX
 
 def contouring_params(env) -> ContouringParams:
     """The nominal parameters of a (possibly wrapped) ``ContouringEnv``."""
-    base = unwrap(env)
-    if not isinstance(base, ContouringEnv):
-        raise TypeError(f"a contouring controller needs a ContouringEnv, got {type(base).__name__}")
-    return base.params
+    return unwrap_as(env, ContouringEnv, "a contouring controller").params
 
 
 class LinearServoAgent(Agent):
@@ -281,11 +278,7 @@ class ConstantOverride(Agent):
 
     @classmethod
     def from_env(cls, env, override: float | None = None) -> ConstantOverride:
-        base = unwrap(env)
-        if not isinstance(base, ContouringFeedEnv):
-            raise TypeError(
-                f"ConstantOverride needs a ContouringFeedEnv, got {type(base).__name__}"
-            )
+        base = unwrap_as(env, ContouringFeedEnv, "ConstantOverride")
         if override is None:
             default = (
                 base.tolerance_mm == DEFAULT_TOLERANCE_MM[base.servo]

@@ -72,12 +72,14 @@ decayed (Slotine & Li, §7.2). The boundary layer is set from that bound:
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from agents.base import Agent, unwrap
+from agents.base import Agent, check_positive, check_setting, unwrap_as
+from machining_envs.core.checks import PY_NUMBER_TYPES
 from machining_envs.core.lti import zoh
 from machining_envs.drilling.env import MicroDrillingEnv
 from machining_envs.drilling.plant import DrillingParams
@@ -88,26 +90,10 @@ _I = MicroDrillingEnv.OBS_INDEX
 _OBS_DIM = 12
 
 
-def _positive(name: str, value, hi: float = 1e9) -> float:
-    if not (
-        isinstance(value, (int, float))
-        and not isinstance(value, bool)
-        and math.isfinite(value)
-        and 0 < value <= hi
-    ):
-        raise ValueError(f"{name} must be in (0, {hi:g}], got {value!r}")
-    return float(value)
-
-
-def _in_range(name: str, value, lo: float, hi: float) -> float:
-    if not (
-        isinstance(value, (int, float))
-        and not isinstance(value, bool)
-        and math.isfinite(value)
-        and lo <= value <= hi
-    ):
-        raise ValueError(f"{name} must be in [{lo:g}, {hi:g}], got {value!r}")
-    return float(value)
+#: The drilling controllers' settings are Python numbers (a numpy scalar other than
+#: ``np.float64`` is refused, as it always was).
+_positive = functools.partial(check_positive, types=PY_NUMBER_TYPES)
+_in_range = functools.partial(check_setting, types=PY_NUMBER_TYPES)
 
 
 @dataclass(frozen=True)
@@ -128,11 +114,7 @@ class DrillingIO:
 
     @classmethod
     def from_env(cls, env) -> DrillingIO:
-        base = unwrap(env)
-        if not isinstance(base, MicroDrillingEnv):
-            raise TypeError(
-                f"a drilling controller needs a MicroDrillingEnv, got {type(base).__name__}"
-            )
+        base = unwrap_as(env, MicroDrillingEnv, "a drilling controller")
         m = base.command_map
         return cls(
             base.params,

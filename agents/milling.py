@@ -13,12 +13,11 @@ in sensor counts, ``Tc = Ke T`` (eq. 9), the units of the paper's gains.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from agents.base import Agent, unwrap
+from agents.base import Agent, check_positive, unwrap_as
 from machining_envs.core.env import ActionMap
 from machining_envs.milling.env import EndMillingEnv
 from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams
@@ -27,17 +26,6 @@ from machining_envs.milling.scenarios import PAPER_CONSTANT_FEED_MM_MIN
 __all__ = ["MillingIO", "FixedGainIntegral", "IntegralACC", "MillingConstantFeed"]
 
 _I = EndMillingEnv.OBS_INDEX
-
-
-def _positive(name: str, value, hi: float = 1e9) -> float:
-    if not (
-        isinstance(value, (int, float, np.integer, np.floating))
-        and not isinstance(value, bool)
-        and math.isfinite(value)
-        and 0 < value <= hi
-    ):
-        raise ValueError(f"{name} must be in (0, {hi:g}], got {value!r}")
-    return float(value)
 
 
 @dataclass(frozen=True)
@@ -62,11 +50,7 @@ class MillingIO:
 
     @classmethod
     def from_env(cls, env) -> MillingIO:
-        base = unwrap(env)
-        if not isinstance(base, EndMillingEnv):
-            raise TypeError(
-                f"a milling controller needs an EndMillingEnv, got {type(base).__name__}"
-            )
+        base = unwrap_as(env, EndMillingEnv, "a milling controller")
         p = base.params
         return cls(
             p.sensor_gain, p.torque_ref_Nmm, p.command_max, p.sample_time_s, p, base.command_map
@@ -114,7 +98,7 @@ class FixedGainIntegral(Agent):
 
     def __init__(self, io: MillingIO, kc: float = 0.2):
         self.io = io
-        self.kc = _positive("kc", kc, 1e6)
+        self.kc = check_positive("kc", kc, 1e6)
         self.name = f"fixed integral Kc={kc:g}"
 
     @classmethod
@@ -189,15 +173,15 @@ class IntegralACC(Agent):
         min_torque_fraction: float = 0.2,
     ):
         self.io = io
-        self.c1 = _positive("c1", c1, 10.0)
-        self.c2 = _positive("c2", c2, 10.0)
-        self.kc_design = _positive("kc_design", kc_design, 1e6)
-        self.design_depth_mm = _positive("design_depth_mm", design_depth_mm, 100.0)
-        self.min_torque_fraction = _positive("min_torque_fraction", min_torque_fraction, 1.0)
+        self.c1 = check_positive("c1", c1, 10.0)
+        self.c2 = check_positive("c2", c2, 10.0)
+        self.kc_design = check_positive("kc_design", kc_design, 1e6)
+        self.design_depth_mm = check_positive("design_depth_mm", design_depth_mm, 100.0)
+        self.min_torque_fraction = check_positive("min_torque_fraction", min_torque_fraction, 1.0)
         if k is None:
             km = float(io.params.process_gain(self.design_depth_mm))
             k = self.kc_design * km / io.sample_time_s
-        self.k = _positive("k", k, 1e9)
+        self.k = check_positive("k", k, 1e9)
         self.name = f"integral ACC K={self.k:.3g}"
 
     @classmethod
@@ -249,7 +233,7 @@ class MillingConstantFeed(Agent):
 
     def __init__(self, io: MillingIO, feed_mm_per_min: float):
         self.io = io
-        self.feed_mm_per_min = _positive("feed_mm_per_min", feed_mm_per_min, 1e5)
+        self.feed_mm_per_min = check_positive("feed_mm_per_min", feed_mm_per_min, 1e5)
         self.command = self.feed_mm_per_min / 60.0 / io.params.servo_gain
         if self.command > io.command_max:
             raise ValueError(
@@ -269,7 +253,7 @@ class MillingConstantFeed(Agent):
         if feed_mm_per_min is None:
             p = io.params
             ft = p.feed_per_tooth_for_torque(
-                p.torque_ref_Nmm, _positive("design_depth_mm", design_depth_mm, 100.0)
+                p.torque_ref_Nmm, check_positive("design_depth_mm", design_depth_mm, 100.0)
             )
             feed_mm_per_min = 60.0 * float(p.feed_velocity_for_feed(ft))
         return cls(io, feed_mm_per_min)

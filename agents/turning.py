@@ -8,12 +8,12 @@ observation: the measured force, the reference and the spindle speed.
 from __future__ import annotations
 
 import functools
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from agents.base import Agent, unwrap
+from agents.base import Agent, check_positive, unwrap_as
+from machining_envs.core.checks import PY_NUMBER_TYPES
 from machining_envs.turning.env import TurningEnv
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams
 
@@ -22,10 +22,9 @@ __all__ = ["FixedGainPI", "ConstantFeed", "TurningIO", "VariableGainPI"]
 _I = TurningEnv.OBS_INDEX
 
 
-def _positive(name: str, value: float, hi: float = 1e9) -> float:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and 0 < value <= hi):
-        raise ValueError(f"{name} must be in (0, {hi:g}], got {value!r}")
-    return float(value)
+#: The turning controllers' settings are Python numbers, and (unlike the other processes')
+#: a bool passes as 0 or 1; kept so that no setting accepted before is refused.
+_positive = functools.partial(check_positive, types=PY_NUMBER_TYPES, allow_bool=True)
 
 
 @dataclass(frozen=True)
@@ -48,10 +47,7 @@ class TurningIO:
 
     @classmethod
     def from_env(cls, env) -> TurningIO:
-        base = unwrap(env)
-        if not isinstance(base, TurningEnv):
-            raise TypeError(f"a turning controller needs a TurningEnv, got {type(base).__name__}")
-        p = base.params
+        p = unwrap_as(env, TurningEnv, "a turning controller").params
         return cls(p.sensor_gain, p.force_scale_N, p.command_max, p.sample_time_s, p)
 
     def force_counts(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 
@@ -18,12 +19,15 @@ from machining_envs.contouring.scenarios import (
     ContouringScenario,
     contouring_scenario,
 )
+from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
 from machining_envs.core.env import (
     ActionMap,
+    EpisodeLog,
     check_render_mode,
     check_scenario_spec,
     present_frame,
     ready_to_render,
+    record_step,
     resolve_params,
     resolve_reward,
     scenario_option,
@@ -34,6 +38,8 @@ __all__ = [
     "ContouringReward",
     "check_action_vector",
     "render_xy",
+    "render_trace",
+    "TRACE_LOG_FIELDS",
     "ERROR_SCALE_MM",
     "POSITION_SCALE_MM",
     "VELOCITY_SCALE_MM_S",
@@ -50,6 +56,9 @@ VELOCITY_SCALE_MM_S = 100.0
 #: at 5 kHz), as the mean reference velocity over each horizon.
 PREVIEW_TICKS = (1, 10, 50)
 _P0, _P1, _P2 = PREVIEW_TICKS
+
+#: The signals the contouring envs' render() draws: name -> the info key each is read from.
+TRACE_LOG_FIELDS = {"t": "t_s", "x": "x_mm", "y": "y_mm", "eps": "contour_error_mm"}
 
 _CHUNK = 4096
 _ERR_LIM = 100.0
@@ -128,11 +137,23 @@ class ContouringReward:
                 )
 
 
-def _positive(name: str, value, lo: float, hi: float) -> float:
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-    if not (ok and lo < value <= hi):
-        raise ValueError(f"{name} must be in ({lo}, {hi}], got {value!r}")
-    return float(value)
+#: ``_positive(name, value, lo, hi)``: ``value`` as a float if it is a Python number in
+#: ``(lo, hi]``, else ``ValueError`` (the contouring envs' keyword checks).
+_positive = functools.partial(check_range, lo_open=True, types=PY_NUMBER_TYPES)
+
+
+def _run_limits(
+    max_episode_time_s, in_position_mm, divergence_mm
+) -> tuple[float | None, float, float]:
+    """The keywords that end a contouring run, checked: ``(max_episode_time_s or None,
+    in_position_mm, divergence_mm)`` as floats."""
+    return (
+        None
+        if max_episode_time_s is None
+        else _positive("max_episode_time_s", max_episode_time_s, 0.0, 1e4),
+        _positive("in_position_mm", in_position_mm, 0.0, 10.0),
+        _positive("divergence_mm", divergence_mm, 0.0, 1e4),
+    )
 
 
 def _circle_info(path: Path) -> dict:
@@ -254,13 +275,9 @@ class ContouringEnv(gym.Env):
             type(self).__name__, params, ContouringParams, ContouringParams.choi_et_al, overrides
         )
         self.reward_weights = resolve_reward(reward, ContouringReward)
-        self.max_episode_time_s = (
-            None
-            if max_episode_time_s is None
-            else _positive("max_episode_time_s", max_episode_time_s, 0.0, 1e4)
+        self.max_episode_time_s, self.in_position_mm, self.divergence_mm = _run_limits(
+            max_episode_time_s, in_position_mm, divergence_mm
         )
-        self.in_position_mm = _positive("in_position_mm", in_position_mm, 0.0, 10.0)
-        self.divergence_mm = _positive("divergence_mm", divergence_mm, 0.0, 1e4)
         check_scenario_spec(scenario, ContouringScenario, CONTOURING_SCENARIOS)
         self.default_scenario = scenario
         self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
@@ -319,10 +336,10 @@ class ContouringEnv(gym.Env):
         self._n_clipped = 0
         self._circle = _circle_info(path)
         self._pre_scale = [1.0 / (k * ts * VELOCITY_SCALE_MM_S) for k in PREVIEW_TICKS]
-        self._log = {k: [] for k in ("t", "x", "y", "eps")}
+        self._log = EpisodeLog(TRACE_LOG_FIELDS)
         info = self._info(0.0, 0.0, 0.0, x0, y0, 0.0, 0.0, 0.0, 0.0, False, False, False)
         if self.render_mode is not None:
-            self._record(info)
+            self._log.record(info)
         return self._obs(x0, y0, 0.0, 0.0), info
 
     def _extend(self, n_needed: int) -> None:
@@ -404,10 +421,7 @@ class ContouringEnv(gym.Env):
         info["tracking_error_mm"] = etrack
         if finished:
             info["machining_time_s"] = t
-        if self.render_mode is not None:
-            self._record(info)
-            if self.render_mode == "human":
-                self.render()
+        record_step(self, self._log, info)
         return self._obs(x, y, vx, vy), float(reward), terminated, truncated, info
 
     # ---- helpers -------------------------------------------------------------------------
@@ -475,26 +489,23 @@ class ContouringEnv(gym.Env):
         info.update(self._circle)
         return info
 
-    def _record(self, info: dict) -> None:
-        log = self._log
-        log["t"].append(info["t_s"])
-        log["x"].append(info["x_mm"])
-        log["y"].append(info["y_mm"])
-        log["eps"].append(info["contour_error_mm"])
-
     def render(self):
         if not ready_to_render(self, "ContouringEnv"):
             return None
-        log = self._log
-        img = render_xy(
-            self._path,
-            np.array(log["x"]),
-            np.array(log["y"]),
-            np.array(log["t"]),
-            np.array(log["eps"]),
-            f"Contouring-v0 | {self.scenario.name}",
-        )
+        img = render_trace(self._path, self._log, f"Contouring-v0 | {self.scenario.name}")
         return present_frame(img, self.render_mode, "Contouring-v0")
+
+
+def render_trace(path: Path, log: EpisodeLog, title: str) -> np.ndarray:
+    """:func:`render_xy` of an episode recorded with :data:`TRACE_LOG_FIELDS`."""
+    return render_xy(
+        path,
+        np.array(log["x"]),
+        np.array(log["y"]),
+        np.array(log["t"]),
+        np.array(log["eps"]),
+        title,
+    )
 
 
 def render_xy(path: Path, x, y, t, eps, title: str) -> np.ndarray:

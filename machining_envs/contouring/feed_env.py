@@ -3,7 +3,6 @@ CNC's own position loop (PI or H-infinity) drives the axes."""
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 from dataclasses import dataclass
@@ -14,11 +13,13 @@ from gymnasium import spaces
 
 from machining_envs.contouring.env import (
     ERROR_SCALE_MM,
+    TRACE_LOG_FIELDS,
     VELOCITY_SCALE_MM_S,
     _circle_info,
     _positive,
+    _run_limits,
     check_action_vector,
-    render_xy,
+    render_trace,
 )
 from machining_envs.contouring.metrics import FEED_TASK
 from machining_envs.contouring.plant import AXES, ContouringParams
@@ -30,9 +31,13 @@ from machining_envs.contouring.scenarios import (
 from machining_envs.contouring.servo import SERVO_KINDS, ServoLoop, servo_design
 from machining_envs.core.env import (
     ActionMap,
+    EpisodeLog,
     check_render_mode,
+    check_reward_weights,
     check_scenario_spec,
     present_frame,
+    ready_to_render,
+    record_step,
     resolve_params,
     resolve_reward,
     scenario_option,
@@ -78,10 +83,7 @@ class FeedReward:
     """w_d, one-off penalty when the run diverges."""
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise ValueError(f"reward weight {f.name} must be a finite number >= 0, got {v!r}")
+        check_reward_weights(self, allow_bool=True)
 
 
 @functools.lru_cache(maxsize=16)
@@ -211,13 +213,9 @@ class ContouringFeedEnv(gym.Env):
         self.decision_interval_s = dec
         self._n_sub = n_sub
         self.override_max = _positive("override_max", override_max, 0.0, 10.0)
-        self.max_episode_time_s = (
-            None
-            if max_episode_time_s is None
-            else _positive("max_episode_time_s", max_episode_time_s, 0.0, 1e4)
+        self.max_episode_time_s, self.in_position_mm, self.divergence_mm = _run_limits(
+            max_episode_time_s, in_position_mm, divergence_mm
         )
-        self.in_position_mm = _positive("in_position_mm", in_position_mm, 0.0, 10.0)
-        self.divergence_mm = _positive("divergence_mm", divergence_mm, 0.0, 1e4)
         check_scenario_spec(scenario, ContouringScenario, CONTOURING_SCENARIOS)
         self.default_scenario = scenario
         self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
@@ -273,11 +271,11 @@ class ContouringFeedEnv(gym.Env):
         self._load_t = np.array([t for t, _, _ in sc.load_steps] or [math.inf])
         self._load_v = np.array([[0.0, 0.0]] + [[a, b] for _, a, b in sc.load_steps])
         self._circle = _circle_info(path)
-        self._log = {k: [] for k in ("t", "x", "y", "eps")}
+        self._log = EpisodeLog(TRACE_LOG_FIELDS)
         info = self._info(0.0, (0.0, 0.0), self._x0, self._y0, (0.0, 0.0), 0.0, 0.0, 0.0, 0.0)
         info.update(diverged=False, finished=False, action_clipped=False)
         if self.render_mode is not None:
-            self._record(info)
+            self._log.record(info)
         return self._obs(0.0, 0.0, 0.0, 0.0, 0.0, 0.0), info
 
     def step(self, action):
@@ -355,10 +353,7 @@ class ContouringFeedEnv(gym.Env):
         )
         if finished:
             info["machining_time_s"] = float((self._k - n + hit[0] + 1) * ts)
-        if self.render_mode is not None:
-            self._record(info)
-            if self.render_mode == "human":
-                self.render()
+        record_step(self, self._log, info)
         obs = self._obs(
             float(eps[-1]), float(eps.max()), rxe - x, rye - y, info["vx_mm_s"], info["vy_mm_s"]
         )
@@ -436,28 +431,12 @@ class ContouringFeedEnv(gym.Env):
         info.update(self._circle)
         return info
 
-    def _record(self, info: dict) -> None:
-        log = self._log
-        log["t"].append(info["t_s"])
-        log["x"].append(info["x_mm"])
-        log["y"].append(info["y_mm"])
-        log["eps"].append(info["contour_error_mm"])
-
     def render(self):
-        if self.render_mode is None:
-            gym.logger.warn(
-                "ContouringFeedEnv.render() called without a render_mode; pass render_mode='rgb_array'"
-            )
+        if not ready_to_render(self, "ContouringFeedEnv", started=self.loop is not None):
             return None
-        if self.loop is None:
-            raise RuntimeError("ContouringFeedEnv: call reset() before render()")
-        log = self._log
-        img = render_xy(
+        img = render_trace(
             self._path,
-            np.array(log["x"]),
-            np.array(log["y"]),
-            np.array(log["t"]),
-            np.array(log["eps"]),
+            self._log,
             f"ContouringFeed-v0 | {self.scenario.name} | servo {self.servo}",
         )
         return present_frame(img, self.render_mode, "ContouringFeed-v0")

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from machining_envs.core.metrics import episode_flag, finish_time
 from machining_envs.core.score import PrimaryScore, Task
 
 __all__ = [
@@ -93,14 +94,8 @@ def contouring_metrics(traj: dict) -> dict[str, float]:
     dr, ell = circle_radius_errors(traj)
     out["radius_reduction_mm"] = dr
     out["ellipse_mm"] = ell
-    finished = bool(np.any(np.asarray(traj["finished"], dtype=bool)))
-    mt = traj.get("machining_time_s")
-    out["cycle_time_s"] = float(t[-1])
-    if finished and mt is not None:
-        vals = np.asarray(mt, dtype=np.float64)
-        vals = vals[np.isfinite(vals)]
-        if vals.size:
-            out["cycle_time_s"] = float(vals[0])
+    finished = episode_flag(traj, "finished")
+    out["cycle_time_s"] = finish_time(traj, "machining_time_s", finished, t)
     tsq = np.asarray(traj["torque_sq_Nm2"], dtype=np.float64)[1:]
     out["effort_rms_Nm"] = float(np.sqrt(np.mean(tsq))) if tsq.size else 0.0
     cmd = [np.asarray(traj[k], dtype=np.float64)[1:] for k in ("command_x_mm_s", "command_y_mm_s")]
@@ -113,7 +108,7 @@ def contouring_metrics(traj: dict) -> dict[str, float]:
     if "time_limit_s" in traj:
         out["time_limit_s"] = float(np.asarray(traj["time_limit_s"], dtype=np.float64)[0])
     out["finished"] = float(finished)
-    out["diverged"] = float(np.any(np.asarray(traj["diverged"], dtype=bool)))
+    out["diverged"] = float(episode_flag(traj, "diverged"))
     out["n_steps"] = float(t.size - 1)
     return out
 

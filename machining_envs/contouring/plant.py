@@ -32,23 +32,13 @@ from typing import NamedTuple
 
 import numpy as np
 
+from machining_envs.core.checks import check_range
 from machining_envs.core.lti import zoh
 
 __all__ = ["ContouringParams", "ContouringPlant", "ContouringStep", "AXES"]
 
 #: The two feed axes, in the order every array of this package uses.
 AXES = ("x", "y")
-
-
-def _check(name: str, value, lo: float, hi: float, *, lo_open: bool = False) -> None:
-    """Raise ``ValueError`` naming ``name`` unless ``lo <= value <= hi`` (``lo < value``)."""
-    ok = isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool)
-    ok = ok and math.isfinite(value)
-    if ok:
-        ok = (value > lo if lo_open else value >= lo) and value <= hi
-    if not ok:
-        left = "(" if lo_open else "["
-        raise ValueError(f"{name} must be in {left}{lo}, {hi}], got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -90,13 +80,15 @@ class ContouringParams:
     overshoots 10 % and rings for 40 ms, at 2 kHz it overshoots 2 % (see docs/contouring.md)."""
 
     def __post_init__(self) -> None:
-        _check("velocity_loop_gain", self.velocity_loop_gain, 0.0, 1e4, lo_open=True)
-        _check("torque_constant_Nm_per_A", self.torque_constant_Nm_per_A, 0.0, 1e3, lo_open=True)
-        _check("inertia_x_kgm2", self.inertia_x_kgm2, 0.0, 10.0, lo_open=True)
-        _check("inertia_y_kgm2", self.inertia_y_kgm2, 0.0, 10.0, lo_open=True)
-        _check("screw_lead_mm", self.screw_lead_mm, 0.0, 1e3, lo_open=True)
-        _check("motor_max_rpm", self.motor_max_rpm, 0.0, 1e5, lo_open=True)
-        _check("sample_time_s", self.sample_time_s, 0.0, 0.01, lo_open=True)
+        check_range("velocity_loop_gain", self.velocity_loop_gain, 0.0, 1e4, lo_open=True)
+        check_range(
+            "torque_constant_Nm_per_A", self.torque_constant_Nm_per_A, 0.0, 1e3, lo_open=True
+        )
+        check_range("inertia_x_kgm2", self.inertia_x_kgm2, 0.0, 10.0, lo_open=True)
+        check_range("inertia_y_kgm2", self.inertia_y_kgm2, 0.0, 10.0, lo_open=True)
+        check_range("screw_lead_mm", self.screw_lead_mm, 0.0, 1e3, lo_open=True)
+        check_range("motor_max_rpm", self.motor_max_rpm, 0.0, 1e5, lo_open=True)
+        check_range("sample_time_s", self.sample_time_s, 0.0, 0.01, lo_open=True)
 
     @classmethod
     def choi_et_al(cls) -> ContouringParams:

@@ -16,6 +16,8 @@ import numpy as np
 
 from machining_envs.contouring.paths import PAPER_CORNER_FEED_MM_S, PAPER_FEED_MM_S, Path
 from machining_envs.contouring.plant import ContouringParams
+from machining_envs.core.checks import check_range
+from machining_envs.core.env import resolve_scenario
 
 __all__ = [
     "ContouringScenario",
@@ -40,13 +42,6 @@ PAPER_LOAD_TORQUE_NM = 1.0
 PAPER_LOAD_TIME_S = 0.15
 #: Programmed feeds a scenario accepts, mm/s (``math.inf`` marks a step command).
 FEED_RANGE_MM_S = (0.01, 1000.0)
-
-
-def _in_range(name: str, value, lo: float, hi: float) -> float:
-    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
-    if not (ok and math.isfinite(value) and lo <= value <= hi):
-        raise ValueError(f"{name} must be in [{lo}, {hi}], got {value!r}")
-    return float(value)
 
 
 @dataclass(frozen=True)
@@ -82,7 +77,7 @@ class ContouringScenario:
         if not isinstance(self.path, Path):
             raise ValueError(f"path must be a Path, got {type(self.path).__name__}")
         if not (isinstance(self.feed_mm_s, (int, float)) and self.feed_mm_s == math.inf):
-            _in_range("feed_mm_s", self.feed_mm_s, *FEED_RANGE_MM_S)
+            check_range("feed_mm_s", self.feed_mm_s, *FEED_RANGE_MM_S)
         try:
             steps = tuple((float(t), float(a), float(b)) for t, a, b in self.load_steps)
         except (TypeError, ValueError):
@@ -91,9 +86,9 @@ class ContouringScenario:
             ) from None
         prev = -math.inf
         for t, a, b in steps:
-            _in_range("load_steps time", t, 0.0, 1e4)
-            _in_range("load_steps torque", a, -20.0, 20.0)
-            _in_range("load_steps torque", b, -20.0, 20.0)
+            check_range("load_steps time", t, 0.0, 1e4)
+            check_range("load_steps torque", a, -20.0, 20.0)
+            check_range("load_steps torque", b, -20.0, 20.0)
             if t < prev:
                 raise ValueError(f"load_steps times must ascend, got {self.load_steps!r}")
             prev = t
@@ -107,9 +102,12 @@ class ContouringScenario:
         object.__setattr__(
             self,
             "inertia_scale",
-            (_in_range("inertia_scale", sx, 0.5, 2.0), _in_range("inertia_scale", sy, 0.5, 2.0)),
+            (
+                check_range("inertia_scale", sx, 0.5, 2.0),
+                check_range("inertia_scale", sy, 0.5, 2.0),
+            ),
         )
-        _in_range("dwell_s", self.dwell_s, 0.0, 10.0)
+        check_range("dwell_s", self.dwell_s, 0.0, 10.0)
 
     @property
     def is_step(self) -> bool:
@@ -215,11 +213,4 @@ CONTOURING_SCENARIOS: dict[str, Callable[[np.random.Generator], ContouringScenar
 
 def contouring_scenario(spec, rng: np.random.Generator) -> ContouringScenario:
     """Resolve a scenario name or object; unknown names raise ``ValueError``."""
-    if isinstance(spec, ContouringScenario):
-        return spec
-    if isinstance(spec, str) and spec in CONTOURING_SCENARIOS:
-        return CONTOURING_SCENARIOS[spec](rng)
-    raise ValueError(
-        f"scenario must be a ContouringScenario or one of {sorted(CONTOURING_SCENARIOS)}, "
-        f"got {spec!r}"
-    )
+    return resolve_scenario(spec, rng, ContouringScenario, CONTOURING_SCENARIOS)

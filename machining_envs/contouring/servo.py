@@ -37,6 +37,7 @@ from scipy.linalg import schur, solve_continuous_are
 from scipy.signal import cont2discrete
 
 from machining_envs.contouring.plant import AXES, ContouringParams
+from machining_envs.core.checks import PY_NUMBER_TYPES, check_integer, check_range
 
 __all__ = [
     "ServoDesign",
@@ -338,8 +339,7 @@ def hinf_2dof_design(
         ("weight_gain", weight_gain, 1e-6, 1e12),
         ("weight_pole", weight_pole, 0.0, 1e6),
     ):
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and lo <= v <= hi):
-            raise ValueError(f"{name} must be in [{lo}, {hi}], got {v!r}")
+        check_range(name, v, lo, hi, types=PY_NUMBER_TYPES, allow_bool=True)
     return _hinf(
         params.velocity_pole(axis),
         params.sample_time_s,
@@ -385,8 +385,7 @@ class ServoLoop:
     """
 
     def __init__(self, truth: ContouringParams, designs, block: int) -> None:
-        if not (isinstance(block, int) and 1 <= block <= 10000):
-            raise ValueError(f"block must be an integer in [1, 10000], got {block!r}")
+        check_integer("block", block, 1, 10000, types=(int,), allow_bool=True)
         self.truth = truth
         self.designs = tuple(designs)
         self.block = block

@@ -17,7 +17,11 @@ __all__ = [
     "check_render_mode",
     "check_episode_time",
     "check_scenario_spec",
+    "resolve_scenario",
     "scenario_option",
+    "check_reward_weights",
+    "EpisodeLog",
+    "record_step",
 ]
 
 
@@ -184,12 +188,26 @@ def check_episode_time(max_episode_time_s) -> float:
     return float(max_episode_time_s)
 
 
+def _scenario_error(spec, scenario_cls: type, names) -> ValueError:
+    return ValueError(
+        f"scenario must be a {scenario_cls.__name__} or one of {sorted(names)}, got {spec!r}"
+    )
+
+
 def check_scenario_spec(spec, scenario_cls: type, names) -> None:
     """``ValueError`` unless ``spec`` is a ``scenario_cls`` or one of the scenario ``names``."""
     if not isinstance(spec, scenario_cls) and spec not in names:
-        raise ValueError(
-            f"scenario must be a {scenario_cls.__name__} or one of {sorted(names)}, got {spec!r}"
-        )
+        raise _scenario_error(spec, scenario_cls, names)
+
+
+def resolve_scenario(spec, rng: np.random.Generator, scenario_cls: type, factories: dict):
+    """The scenario ``spec`` asks for: a ``scenario_cls`` as it is, a name of ``factories``
+    drawn from ``rng`` (``factories[spec](rng)``); anything else raises ``ValueError``."""
+    if isinstance(spec, scenario_cls):
+        return spec
+    if isinstance(spec, str) and spec in factories:
+        return factories[spec](rng)
+    raise _scenario_error(spec, scenario_cls, factories)
 
 
 def scenario_option(options: dict | None, default):
@@ -235,8 +253,69 @@ def resolve_reward(reward, reward_cls: type):
     return reward
 
 
-def ready_to_render(env, owner: str) -> bool:
-    """False (with a warning) without a render mode; ``RuntimeError`` before the first reset."""
+def check_reward_weights(reward, *, allow_bool: bool = False) -> None:
+    """``ValueError`` unless every field of the reward dataclass ``reward`` is a finite
+    number >= 0 (the first that is not is named: ``"reward weight {name} must be a finite
+    number >= 0, got {value!r}"``). Call it from the dataclass's ``__post_init__``.
+
+    ``allow_bool``: take ``True`` and ``False`` as 1 and 0, as ``TurningReward`` and
+    ``FeedReward`` always have (the other rewards refuse them).
+    """
+    import dataclasses
+
+    for f in dataclasses.fields(reward):
+        v = getattr(reward, f.name)
+        if not (
+            isinstance(v, (int, float))
+            and (allow_bool or not isinstance(v, bool))
+            and math.isfinite(v)
+            and v >= 0
+        ):
+            raise ValueError(f"reward weight {f.name} must be a finite number >= 0, got {v!r}")
+
+
+class EpisodeLog:
+    """The signals an env keeps for ``render()``: a list per name, each fed by one ``info`` key.
+
+    Parameters
+    ----------
+    fields : dict of str to str
+        Name of each signal -> the ``info`` key it is read from.
+
+    >>> log = EpisodeLog({"t": "t_s", "force": "force_N"})
+    >>> log.record({"t_s": 0.1, "force_N": 950.0, "scenario": "train"})
+    >>> log["t"], log["force"]
+    ([0.1], [950.0])
+    """
+
+    def __init__(self, fields: dict[str, str]) -> None:
+        self.fields = dict(fields)
+        self._signals: dict[str, list] = {name: [] for name in self.fields}
+
+    def record(self, info: dict) -> None:
+        """Append this step's value of every signal from its ``info``."""
+        signals = self._signals
+        for name, key in self.fields.items():
+            signals[name].append(info[key])
+
+    def __getitem__(self, name: str) -> list:
+        return self._signals[name]
+
+
+def record_step(env, log: EpisodeLog, info: dict) -> None:
+    """The end of every env's ``step``: with a render mode, ``info`` goes into ``log``, and in
+    ``"human"`` mode the window is drawn again."""
+    if env.render_mode is not None:
+        log.record(info)
+        if env.render_mode == "human":
+            env.render()
+
+
+def ready_to_render(env, owner: str, started: bool | None = None) -> bool:
+    """False (with a warning) without a render mode; ``RuntimeError`` before the first reset.
+
+    ``started`` says whether ``reset()`` has run; by default, whether ``env.plant`` is set.
+    """
     if env.render_mode is None:
         import gymnasium as gym
 
@@ -244,6 +323,6 @@ def ready_to_render(env, owner: str) -> bool:
             f"{owner}.render() called without a render_mode; pass render_mode='rgb_array'"
         )
         return False
-    if env.plant is None:
+    if not (env.plant is not None if started is None else started):
         raise RuntimeError(f"{owner}: call reset() before render()")
     return True

@@ -12,6 +12,8 @@ __all__ = [
     "regulation_metrics",
     "segment_bounds",
     "oscillation_amplitude",
+    "episode_flag",
+    "finish_time",
     "SETTLE_BAND",
     "OVER_LIMIT",
     "OSC_WINDOW_S",
@@ -23,6 +25,25 @@ SETTLE_BAND = 0.05
 OVER_LIMIT = 1.1
 #: Window of the moving mean removed before measuring oscillation, s.
 OSC_WINDOW_S = 1.0
+
+
+def episode_flag(traj: dict, key: str) -> bool:
+    """Whether the boolean ``info[key]`` (``finished``, ``breakage``, ...) was set at any
+    sample of the trajectory."""
+    return bool(np.any(np.asarray(traj[key], dtype=bool)))
+
+
+def finish_time(traj: dict, key: str, finished: bool, t: np.ndarray) -> float:
+    """When the episode finished: the first finite ``traj[key]`` (the time the env reports
+    once the work is done) if ``finished``; else, or if there is none, the episode's length
+    ``t[-1]``."""
+    mt = traj.get(key)
+    if finished and mt is not None:
+        vals = np.asarray(mt, dtype=np.float64)
+        vals = vals[np.isfinite(vals)]
+        if vals.size:
+            return float(vals[0])
+    return float(t[-1])
 
 
 def segment_bounds(segment: np.ndarray) -> list[tuple[int, int]]:
@@ -104,16 +125,10 @@ def regulation_metrics(
     out["steady_state_error"] = float(np.mean(sse)) if sse else 0.0
     out["oscillation"] = float(max(osc)) if osc else 0.0
     out["time_over_limit"] = float(np.mean(y > OVER_LIMIT * r)) if y.size else 0.0
-    finished = bool(np.any(np.asarray(traj["finished"], dtype=bool)))
-    mt = traj.get("machining_time_s")
-    if finished and mt is not None:
-        vals = np.asarray(mt, dtype=np.float64)
-        vals = vals[np.isfinite(vals)]
-        out["machining_time_s"] = float(vals[0]) if vals.size else float(t[-1])
-    else:
-        out["machining_time_s"] = float(t[-1])
+    finished = episode_flag(traj, "finished")
+    out["machining_time_s"] = finish_time(traj, "machining_time_s", finished, t)
     out["finished"] = float(finished)
-    out["breakage"] = float(np.any(np.asarray(traj["breakage"], dtype=bool)))
-    out["diverged"] = float(np.any(np.asarray(traj["diverged"], dtype=bool)))
+    out["breakage"] = float(episode_flag(traj, "breakage"))
+    out["diverged"] = float(episode_flag(traj, "diverged"))
     out["n_steps"] = float(t.size - 1)
     return out

@@ -158,6 +158,22 @@ class DepthProfile:
     def max_depth_mm(self) -> float:
         return float(max(max(self.start_depths_mm), max(self.end_depths_mm)))
 
+    def segment_table(self) -> tuple[list[float], list[float], list[float]]:
+        """The segments as lists of floats, for loops that look one segment up at a time.
+
+        Returns
+        -------
+        edges : list of float
+            Segment boundaries, mm (``edges_mm``).
+        start_depths : list of float
+            Depth at the start of each segment, mm.
+        slopes : list of float
+            Depth change per mm along each segment (0 for a plateau): the depth at ``x``
+            in segment ``i`` is ``start_depths[i] + slopes[i] * (x - edges[i])``, as
+            :meth:`__call__` evaluates it.
+        """
+        return self._e.tolist(), self._d0.tolist(), self._slope.tolist()
+
     def __call__(self, x_mm) -> np.ndarray:
         """Depth (mm) at positions ``x_mm`` (array); zero outside ``[0, length_mm)``."""
         x = np.asarray(x_mm, dtype=np.float64)

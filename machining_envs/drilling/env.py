@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -12,12 +11,15 @@ from gymnasium import spaces
 
 from machining_envs.core.env import (
     ActionMap,
+    EpisodeLog,
     check_action,
     check_episode_time,
     check_render_mode,
+    check_reward_weights,
     check_scenario_spec,
     present_frame,
     ready_to_render,
+    record_step,
     render_signals,
     resolve_params,
     resolve_reward,
@@ -38,6 +40,15 @@ _TORQUE_OBS = (-1.0, 10.0)
 _NOISE_BLOCK = 256
 #: What the action commands: the valve voltage (the paper's loop) or the feed velocity.
 CONTROL_MODES = ("voltage", "feed")
+#: The signals render() draws: name -> the info key each is read from.
+_LOG_FIELDS = {
+    "t": "t_s",
+    "torque": "torque_Nmm",
+    "measured": "measured",
+    "speed": "spindle_hz",
+    "depth": "depth_mm",
+    "position": "position_mm",
+}
 
 
 @dataclass(frozen=True)
@@ -62,15 +73,7 @@ class DrillingReward:
     """w_b, one-off penalty when the drill breaks."""
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if not (
-                isinstance(v, (int, float))
-                and not isinstance(v, bool)
-                and math.isfinite(v)
-                and v >= 0
-            ):
-                raise ValueError(f"reward weight {f.name} must be a finite number >= 0, got {v!r}")
+        check_reward_weights(self)
 
 
 class MicroDrillingEnv(gym.Env):
@@ -274,9 +277,9 @@ class MicroDrillingEnv(gym.Env):
             min(sc.target_depth_mm / self.LENGTH_SCALE_MM, 2.0),
             sc.diameter_mm,
         )
-        self._log = {k: [] for k in ("t", "torque", "measured", "speed", "depth", "position")}
+        self._log = EpisodeLog(_LOG_FIELDS)
         info = self._info_reset()
-        self._record(info)
+        self._log.record(info)
         return self._obs(), info
 
     def step(self, action):
@@ -367,10 +370,7 @@ class MicroDrillingEnv(gym.Env):
         if finished:
             info["drilling_time_s"] = s.finish_time_s
             info["machining_time_s"] = s.finish_time_s
-        if self.render_mode is not None:
-            self._record(info)
-            if self.render_mode == "human":
-                self.render()
+        record_step(self, self._log, info)
         return self._obs(), float(reward), terminated, truncated, info
 
     # ---- helpers -------------------------------------------------------------------------
@@ -438,15 +438,6 @@ class MicroDrillingEnv(gym.Env):
             "segment": 0,
             "scenario": sc.name,
         }
-
-    def _record(self, info: dict) -> None:
-        log = self._log
-        log["t"].append(info["t_s"])
-        log["torque"].append(info["torque_Nmm"])
-        log["measured"].append(info["measured"])
-        log["speed"].append(info["spindle_hz"])
-        log["depth"].append(info["depth_mm"])
-        log["position"].append(info["position_mm"])
 
     def render(self):
         if not ready_to_render(self, "MicroDrillingEnv"):

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from machining_envs.core.metrics import OVER_LIMIT
+from machining_envs.core.metrics import OVER_LIMIT, episode_flag, finish_time
 from machining_envs.core.score import PrimaryScore, Task
 
 __all__ = ["DRILLING_SCORE", "DRILLING_TASK", "drilling_metrics", "drilling_mask"]
@@ -86,21 +86,15 @@ def drilling_metrics(traj: dict) -> dict[str, float]:
     out["peak_torque_Nmm"] = float(np.max(peak))
     tb = np.asarray(traj["breakage_torque_Nmm"], dtype=np.float64)
     out["peak_torque_rel"] = out["peak_torque_Nmm"] / float(tb[0])
-    finished = bool(np.any(np.asarray(traj["finished"], dtype=bool)))
-    dt_key = traj.get("drilling_time_s")
-    if finished and dt_key is not None:
-        vals = np.asarray(dt_key, dtype=np.float64)
-        vals = vals[np.isfinite(vals)]
-        out["drilling_time_s"] = float(vals[0]) if vals.size else float(t[-1])
-    else:
-        out["drilling_time_s"] = float(t[-1])
+    finished = episode_flag(traj, "finished")
+    out["drilling_time_s"] = finish_time(traj, "drilling_time_s", finished, t)
     pos = np.asarray(traj["position_mm"], dtype=np.float64)
     depth = np.asarray(traj["depth_mm"], dtype=np.float64)
     out_of_hole = (pos < 0.0) & (depth > 0.0)
     out["n_retracts"] = float(np.sum(out_of_hole[1:] & ~out_of_hole[:-1]))
     out["finished"] = float(finished)
-    out["breakage"] = float(np.any(np.asarray(traj["breakage"], dtype=bool)))
-    out["diverged"] = float(np.any(np.asarray(traj["diverged"], dtype=bool)))
+    out["breakage"] = float(episode_flag(traj, "breakage"))
+    out["diverged"] = float(episode_flag(traj, "diverged"))
     out["n_steps"] = float(t.size - 1)
     return out
 

@@ -44,6 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from machining_envs.core.checks import check_integer, check_range
 from machining_envs.core.lti import zoh
 
 __all__ = [
@@ -61,17 +62,6 @@ __all__ = [
 DIAMETER_RANGE_MM = (0.3, 1.0)
 
 _TWO_PI = 2.0 * math.pi
-
-
-def _check(name: str, value, lo: float, hi: float, *, lo_open: bool = False) -> None:
-    """Raise ``ValueError`` naming ``name`` unless ``lo <= value <= hi`` (``lo < value``)."""
-    ok = isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool)
-    ok = ok and math.isfinite(value)
-    if ok:
-        ok = (value > lo if lo_open else value >= lo) and value <= hi
-    if not ok:
-        left = "(" if lo_open else "["
-        raise ValueError(f"{name} must be in {left}{lo}, {hi}], got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -241,48 +231,49 @@ class DrillingParams:
     """Normalisation of thrusts in observations, N."""
 
     def __post_init__(self) -> None:
-        _check("valve_natural_freq_hz", self.valve_natural_freq_hz, 0.0, 1e3, lo_open=True)
-        _check("valve_damping", self.valve_damping, 0.0, 10.0, lo_open=True)
-        _check("valve_static_gain_per_V", self.valve_static_gain_per_V, 0.0, 10.0, lo_open=True)
-        _check("voltage_max", self.voltage_max, 0.0, 1e3, lo_open=True)
-        _check("nominal_voltage", self.nominal_voltage, 0.0, self.voltage_max, lo_open=True)
-        _check("spindle_friction_exponent", self.spindle_friction_exponent, 0.1, 1.0)
-        _check("spindle_drive_gain", self.spindle_drive_gain, 0.0, 1e9, lo_open=True)
-        _check("spindle_friction", self.spindle_friction, 0.0, 1e9, lo_open=True)
-        _check("spindle_inertia_Nmm_s2", self.spindle_inertia_Nmm_s2, 0.0, 1e6, lo_open=True)
-        _check("point_angle_deg", self.point_angle_deg, 60.0, 170.0)
-        _check("helix_angle_deg", self.helix_angle_deg, 0.0, 50.0)
-        _check("web_ratio", self.web_ratio, 0.0, 0.5, lo_open=True)
-        _check("friction_angle_deg", self.friction_angle_deg, 0.0, 60.0)
-        _check("chisel_rake_deg", self.chisel_rake_deg, -70.0, 0.0)
-        _check("shear_stress_MPa", self.shear_stress_MPa, 0.0, 1e5, lo_open=True)
-        _check("indentation_coeff_MPa", self.indentation_coeff_MPa, 0.0, 1e5)
-        _check("indentation_wedge_deg", self.indentation_wedge_deg, 0.0, 89.0)
-        _check("chip_friction", self.chip_friction, 0.0, 100.0)
-        _check("chip_length_diameters", self.chip_length_diameters, 0.0, 1e3, lo_open=True)
-        _check("chip_fluctuation", self.chip_fluctuation, 0.0, 2.0)
-        _check("chip_fluctuation_time_s", self.chip_fluctuation_time_s, 0.0, 100.0, lo_open=True)
-        _check("cutting_fluctuation", self.cutting_fluctuation, 0.0, 0.5)
-        _check(
+        check_range("valve_natural_freq_hz", self.valve_natural_freq_hz, 0.0, 1e3, lo_open=True)
+        check_range("valve_damping", self.valve_damping, 0.0, 10.0, lo_open=True)
+        check_range(
+            "valve_static_gain_per_V", self.valve_static_gain_per_V, 0.0, 10.0, lo_open=True
+        )
+        check_range("voltage_max", self.voltage_max, 0.0, 1e3, lo_open=True)
+        check_range("nominal_voltage", self.nominal_voltage, 0.0, self.voltage_max, lo_open=True)
+        check_range("spindle_friction_exponent", self.spindle_friction_exponent, 0.1, 1.0)
+        check_range("spindle_drive_gain", self.spindle_drive_gain, 0.0, 1e9, lo_open=True)
+        check_range("spindle_friction", self.spindle_friction, 0.0, 1e9, lo_open=True)
+        check_range("spindle_inertia_Nmm_s2", self.spindle_inertia_Nmm_s2, 0.0, 1e6, lo_open=True)
+        check_range("point_angle_deg", self.point_angle_deg, 60.0, 170.0)
+        check_range("helix_angle_deg", self.helix_angle_deg, 0.0, 50.0)
+        check_range("web_ratio", self.web_ratio, 0.0, 0.5, lo_open=True)
+        check_range("friction_angle_deg", self.friction_angle_deg, 0.0, 60.0)
+        check_range("chisel_rake_deg", self.chisel_rake_deg, -70.0, 0.0)
+        check_range("shear_stress_MPa", self.shear_stress_MPa, 0.0, 1e5, lo_open=True)
+        check_range("indentation_coeff_MPa", self.indentation_coeff_MPa, 0.0, 1e5)
+        check_range("indentation_wedge_deg", self.indentation_wedge_deg, 0.0, 89.0)
+        check_range("chip_friction", self.chip_friction, 0.0, 100.0)
+        check_range("chip_length_diameters", self.chip_length_diameters, 0.0, 1e3, lo_open=True)
+        check_range("chip_fluctuation", self.chip_fluctuation, 0.0, 2.0)
+        check_range(
+            "chip_fluctuation_time_s", self.chip_fluctuation_time_s, 0.0, 100.0, lo_open=True
+        )
+        check_range("cutting_fluctuation", self.cutting_fluctuation, 0.0, 0.5)
+        check_range(
             "cutting_fluctuation_time_s", self.cutting_fluctuation_time_s, 0.0, 100.0, lo_open=True
         )
-        _check("breakage_coeff_N_per_mm2", self.breakage_coeff_N_per_mm2, 0.0, 1e6, lo_open=True)
-        _check("feed_velocity_mm_s", self.feed_velocity_mm_s, 0.0, 100.0, lo_open=True)
-        _check("feed_speed_max_mm_s", self.feed_speed_max_mm_s, 0.0, 100.0, lo_open=True)
-        _check("retract_limit_mm", self.retract_limit_mm, 0.0, 100.0)
-        _check("sensor_cutoff_hz", self.sensor_cutoff_hz, 0.0, 1e4, lo_open=True)
-        _check("torque_noise_Nmm", self.torque_noise_Nmm, 0.0, 100.0)
-        _check("thrust_noise_N", self.thrust_noise_N, 0.0, 1e3)
-        _check("speed_noise_hz", self.speed_noise_hz, 0.0, 1e3)
-        _check("sample_time_s", self.sample_time_s, 0.0, 1.0, lo_open=True)
-        if (
-            not isinstance(self.substeps, (int, np.integer))
-            or isinstance(self.substeps, bool)
-            or not 1 <= self.substeps <= 1000
-        ):
-            raise ValueError(f"substeps must be an integer in [1, 1000], got {self.substeps!r}")
-        _check("torque_scale_Nmm", self.torque_scale_Nmm, 0.0, 1e6, lo_open=True)
-        _check("thrust_scale_N", self.thrust_scale_N, 0.0, 1e6, lo_open=True)
+        check_range(
+            "breakage_coeff_N_per_mm2", self.breakage_coeff_N_per_mm2, 0.0, 1e6, lo_open=True
+        )
+        check_range("feed_velocity_mm_s", self.feed_velocity_mm_s, 0.0, 100.0, lo_open=True)
+        check_range("feed_speed_max_mm_s", self.feed_speed_max_mm_s, 0.0, 100.0, lo_open=True)
+        check_range("retract_limit_mm", self.retract_limit_mm, 0.0, 100.0)
+        check_range("sensor_cutoff_hz", self.sensor_cutoff_hz, 0.0, 1e4, lo_open=True)
+        check_range("torque_noise_Nmm", self.torque_noise_Nmm, 0.0, 100.0)
+        check_range("thrust_noise_N", self.thrust_noise_N, 0.0, 1e3)
+        check_range("speed_noise_hz", self.speed_noise_hz, 0.0, 1e3)
+        check_range("sample_time_s", self.sample_time_s, 0.0, 1.0, lo_open=True)
+        check_integer("substeps", self.substeps, 1, 1000)
+        check_range("torque_scale_Nmm", self.torque_scale_Nmm, 0.0, 1e6, lo_open=True)
+        check_range("thrust_scale_N", self.thrust_scale_N, 0.0, 1e6, lo_open=True)
 
     @classmethod
     def cheong_cho(cls) -> DrillingParams:
@@ -347,7 +338,7 @@ class DrillingParams:
 
     def coefficients(self, diameter_mm: float) -> CuttingCoefficients:
         """Torque and thrust per feed of a drill of ``diameter_mm`` (see :func:`cutting_coefficients`)."""
-        _check("diameter_mm", diameter_mm, *DIAMETER_RANGE_MM)
+        check_range("diameter_mm", diameter_mm, *DIAMETER_RANGE_MM)
         return cutting_coefficients(_GeometryKey.of(self), float(diameter_mm))
 
     def chip_free_torque_Nmm(
@@ -654,9 +645,9 @@ class DrillingPlant:
         target_depth_mm: float,
         start_position_mm: float = 0.0,
     ) -> None:
-        _check("diameter_mm", diameter_mm, *DIAMETER_RANGE_MM)
-        _check("target_depth_mm", target_depth_mm, 0.0, 100.0, lo_open=True)
-        _check("start_position_mm", start_position_mm, -params.retract_limit_mm, 0.0)
+        check_range("diameter_mm", diameter_mm, *DIAMETER_RANGE_MM)
+        check_range("target_depth_mm", target_depth_mm, 0.0, 100.0, lo_open=True)
+        check_range("start_position_mm", start_position_mm, -params.retract_limit_mm, 0.0)
         self.params = params
         self.diameter_mm = float(diameter_mm)
         self.target_depth_mm = float(target_depth_mm)

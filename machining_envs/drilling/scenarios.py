@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from machining_envs.core.checks import check_range
+from machining_envs.core.env import resolve_scenario
 from machining_envs.drilling.plant import DIAMETER_RANGE_MM, DrillingParams
 
 __all__ = [
@@ -28,16 +30,6 @@ __all__ = [
 PAPER_DIAMETERS_MM = (0.5, 0.6, 0.7, 0.8)
 #: Hole depth over diameter of the paper's holes: "aspect ratio larger than 10" (abstract).
 PAPER_ASPECT_RATIO = 10.0
-
-
-def _in_range(name: str, value, lo: float, hi: float) -> None:
-    if not (
-        isinstance(value, (int, float, np.integer, np.floating))
-        and not isinstance(value, bool)
-        and math.isfinite(value)
-        and lo <= value <= hi
-    ):
-        raise ValueError(f"{name} must be in [{lo}, {hi}], got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -77,14 +69,14 @@ class DrillingScenario:
     noise_scale: float = 1.0
 
     def __post_init__(self) -> None:
-        _in_range("diameter_mm", self.diameter_mm, *DIAMETER_RANGE_MM)
-        _in_range("aspect_ratio", self.aspect_ratio, 1.0, 20.0)
+        check_range("diameter_mm", self.diameter_mm, *DIAMETER_RANGE_MM)
+        check_range("aspect_ratio", self.aspect_ratio, 1.0, 20.0)
         if self.torque_ref_Nmm is not None:
-            _in_range("torque_ref_Nmm", self.torque_ref_Nmm, 1e-4, 100.0)
-        _in_range("cutting_scale", self.cutting_scale, 0.5, 2.0)
-        _in_range("chip_scale", self.chip_scale, 0.0, 5.0)
-        _in_range("fluctuation_scale", self.fluctuation_scale, 0.0, 3.0)
-        _in_range("noise_scale", self.noise_scale, 0.0, 10.0)
+            check_range("torque_ref_Nmm", self.torque_ref_Nmm, 1e-4, 100.0)
+        check_range("cutting_scale", self.cutting_scale, 0.5, 2.0)
+        check_range("chip_scale", self.chip_scale, 0.0, 5.0)
+        check_range("fluctuation_scale", self.fluctuation_scale, 0.0, 3.0)
+        check_range("noise_scale", self.noise_scale, 0.0, 10.0)
 
     @property
     def target_depth_mm(self) -> float:
@@ -157,10 +149,4 @@ DRILLING_SCENARIOS: dict[str, Callable[[np.random.Generator], DrillingScenario]]
 
 def drilling_scenario(spec, rng: np.random.Generator) -> DrillingScenario:
     """Resolve a scenario name or object; unknown names raise ``ValueError``."""
-    if isinstance(spec, DrillingScenario):
-        return spec
-    if isinstance(spec, str) and spec in DRILLING_SCENARIOS:
-        return DRILLING_SCENARIOS[spec](rng)
-    raise ValueError(
-        f"scenario must be a DrillingScenario or one of {sorted(DRILLING_SCENARIOS)}, got {spec!r}"
-    )
+    return resolve_scenario(spec, rng, DrillingScenario, DRILLING_SCENARIOS)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -13,12 +12,15 @@ from gymnasium import spaces
 from machining_envs.core.env import (
     ACTION_MAPS,
     ActionMap,
+    EpisodeLog,
     check_action,
     check_episode_time,
     check_render_mode,
+    check_reward_weights,
     check_scenario_spec,
     present_frame,
     ready_to_render,
+    record_step,
     render_signals,
     resolve_params,
     resolve_reward,
@@ -42,6 +44,14 @@ _HISTORY = 3
 #: approach feeds resolvable.
 COMMAND_DECADES = 3.0
 _TORQUE_OBS = (-1.0, 10.0)
+#: The signals render() draws: name -> the info key each is read from.
+_LOG_FIELDS = {
+    "t": "t_s",
+    "torque": "torque_Nmm",
+    "measured": "measured",
+    "feed": "feed_mm_per_rev",
+    "depth": "depth_mm",
+}
 
 
 @dataclass(frozen=True)
@@ -66,15 +76,7 @@ class MillingReward:
     """w_b, one-off penalty when the tool breaks."""
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if not (
-                isinstance(v, (int, float))
-                and not isinstance(v, bool)
-                and math.isfinite(v)
-                and v >= 0
-            ):
-                raise ValueError(f"reward weight {f.name} must be a finite number >= 0, got {v!r}")
+        check_reward_weights(self)
 
 
 class EndMillingEnv(gym.Env):
@@ -253,9 +255,9 @@ class EndMillingEnv(gym.Env):
         self._rpm_obs = rpm / 1000.0
         self._prev_action = -1.0
         self._n_clipped = 0
-        self._log = {k: [] for k in ("t", "torque", "measured", "feed", "depth")}
+        self._log = EpisodeLog(_LOG_FIELDS)
         info = self._info_reset()
-        self._record(info)
+        self._log.record(info)
         return self._obs(), info
 
     def step(self, action):
@@ -329,10 +331,7 @@ class EndMillingEnv(gym.Env):
         }
         if finished:
             info["machining_time_s"] = s.finish_time_s
-        if self.render_mode is not None:
-            self._record(info)
-            if self.render_mode == "human":
-                self.render()
+        record_step(self, self._log, info)
         return self._obs(), float(reward), terminated, truncated, info
 
     # ---- helpers -------------------------------------------------------------------------
@@ -381,14 +380,6 @@ class EndMillingEnv(gym.Env):
             "workpiece_volume_mm3": self._volume,
             "scenario": sc.name,
         }
-
-    def _record(self, info: dict) -> None:
-        log = self._log
-        log["t"].append(info["t_s"])
-        log["torque"].append(info["torque_Nmm"])
-        log["measured"].append(info["measured"])
-        log["feed"].append(info["feed_mm_per_rev"])
-        log["depth"].append(info["depth_mm"])
 
     def render(self):
         if not ready_to_render(self, "EndMillingEnv"):

@@ -43,6 +43,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from machining_envs.core.checks import check_integer, check_range
 from machining_envs.core.lti import zoh, zoh_tf
 
 __all__ = [
@@ -66,20 +67,6 @@ FORCE_MODELS = ("power_law", "average_force")
 #: Spindle speeds the plant accepts, rpm: a vertical machining centre of the VA-40's class
 #: runs from a few tens of rpm to about 6000 rpm.
 SPINDLE_RPM_RANGE = (20.0, 6000.0)
-
-
-def _check(name: str, value, lo: float, hi: float, *, lo_open: bool = False) -> None:
-    """Raise ``ValueError`` naming ``name`` unless ``lo <= value <= hi`` (``lo < value``)."""
-    ok = (
-        isinstance(value, (int, float, np.floating, np.integer))
-        and not isinstance(value, bool)
-        and math.isfinite(value)
-    )
-    if ok:
-        ok = (value > lo if lo_open else value >= lo) and value <= hi
-    if not ok:
-        left = "(" if lo_open else "["
-        raise ValueError(f"{name} must be in {left}{lo}, {hi}], got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -209,48 +196,40 @@ class MillingParams:
     flutes of the 152 mm overhang. The episode terminates past it."""
 
     def __post_init__(self) -> None:
-        _check("tool_diameter_mm", self.tool_diameter_mm, 0.0, 200.0, lo_open=True)
-        if (
-            not isinstance(self.n_teeth, (int, np.integer))
-            or isinstance(self.n_teeth, bool)
-            or not 1 <= self.n_teeth <= 50
-        ):
-            raise ValueError(f"n_teeth must be an integer in [1, 50], got {self.n_teeth!r}")
-        _check("helix_angle_deg", self.helix_angle_deg, 0.0, 80.0)
-        _check("axial_depth_mm", self.axial_depth_mm, 0.0, 500.0, lo_open=True)
-        _check("spindle_rpm", self.spindle_rpm, *SPINDLE_RPM_RANGE)
+        check_range("tool_diameter_mm", self.tool_diameter_mm, 0.0, 200.0, lo_open=True)
+        check_integer("n_teeth", self.n_teeth, 1, 50)
+        check_range("helix_angle_deg", self.helix_angle_deg, 0.0, 80.0)
+        check_range("axial_depth_mm", self.axial_depth_mm, 0.0, 500.0, lo_open=True)
+        check_range("spindle_rpm", self.spindle_rpm, *SPINDLE_RPM_RANGE)
         if self.force_model not in FORCE_MODELS:
             raise ValueError(f"force_model must be one of {FORCE_MODELS}, got {self.force_model!r}")
-        _check("torque_coefficient_kgfmm", self.torque_coefficient_kgfmm, 0.0, 1e7, lo_open=True)
-        _check("depth_exponent", self.depth_exponent, 0.0, 2.0, lo_open=True)
-        _check("feed_exponent", self.feed_exponent, 0.0, 2.0, lo_open=True)
-        _check(
+        check_range(
+            "torque_coefficient_kgfmm", self.torque_coefficient_kgfmm, 0.0, 1e7, lo_open=True
+        )
+        check_range("depth_exponent", self.depth_exponent, 0.0, 2.0, lo_open=True)
+        check_range("feed_exponent", self.feed_exponent, 0.0, 2.0, lo_open=True)
+        check_range(
             "tangential_coefficient_N_mm2",
             self.tangential_coefficient_N_mm2,
             0.0,
             1e6,
             lo_open=True,
         )
-        _check("radial_coefficient_N_mm2", self.radial_coefficient_N_mm2, 0.0, 1e6)
-        _check("axial_coefficient_N_mm2", self.axial_coefficient_N_mm2, 0.0, 1e6)
+        check_range("radial_coefficient_N_mm2", self.radial_coefficient_N_mm2, 0.0, 1e6)
+        check_range("axial_coefficient_N_mm2", self.axial_coefficient_N_mm2, 0.0, 1e6)
         if self.milling_mode not in ("up", "down"):
             raise ValueError(f"milling_mode must be 'up' or 'down', got {self.milling_mode!r}")
-        _check("servo_gain", self.servo_gain, 0.0, 1e6, lo_open=True)
-        _check("servo_natural_freq_hz", self.servo_natural_freq_hz, 0.0, 1e3, lo_open=True)
-        _check("servo_damping", self.servo_damping, 0.0, 10.0, lo_open=True)
-        _check("process_lag_rev", self.process_lag_rev, 0.0, 100.0, lo_open=True)
-        _check("sensor_gain", self.sensor_gain, 0.0, 1e6, lo_open=True)
-        _check("noise_std_Nmm", self.noise_std_Nmm, 0.0, 1e6)
-        _check("sample_time_s", self.sample_time_s, 0.0, 10.0, lo_open=True)
-        if (
-            not isinstance(self.substeps, (int, np.integer))
-            or isinstance(self.substeps, bool)
-            or not 1 <= self.substeps <= 10000
-        ):
-            raise ValueError(f"substeps must be an integer in [1, 10000], got {self.substeps!r}")
-        _check("command_max", self.command_max, 0.0, 1e9, lo_open=True)
-        _check("torque_ref_Nmm", self.torque_ref_Nmm, 0.0, 1e8, lo_open=True)
-        _check("breakage_torque_Nmm", self.breakage_torque_Nmm, 0.0, 1e9, lo_open=True)
+        check_range("servo_gain", self.servo_gain, 0.0, 1e6, lo_open=True)
+        check_range("servo_natural_freq_hz", self.servo_natural_freq_hz, 0.0, 1e3, lo_open=True)
+        check_range("servo_damping", self.servo_damping, 0.0, 10.0, lo_open=True)
+        check_range("process_lag_rev", self.process_lag_rev, 0.0, 100.0, lo_open=True)
+        check_range("sensor_gain", self.sensor_gain, 0.0, 1e6, lo_open=True)
+        check_range("noise_std_Nmm", self.noise_std_Nmm, 0.0, 1e6)
+        check_range("sample_time_s", self.sample_time_s, 0.0, 10.0, lo_open=True)
+        check_integer("substeps", self.substeps, 1, 10000)
+        check_range("command_max", self.command_max, 0.0, 1e9, lo_open=True)
+        check_range("torque_ref_Nmm", self.torque_ref_Nmm, 0.0, 1e8, lo_open=True)
+        check_range("breakage_torque_Nmm", self.breakage_torque_Nmm, 0.0, 1e9, lo_open=True)
 
     # ---- parameter sets ------------------------------------------------------------------
     @classmethod
@@ -571,7 +550,7 @@ class MillingPlant:
     """
 
     def __init__(self, params: MillingParams, spindle_rpm: float, profile) -> None:
-        _check("spindle_rpm", spindle_rpm, *SPINDLE_RPM_RANGE)
+        check_range("spindle_rpm", spindle_rpm, *SPINDLE_RPM_RANGE)
         if profile.max_depth_mm > params.tool_diameter_mm:
             raise ValueError(
                 f"radial depth of the workpiece must be at most the tool diameter "
@@ -594,20 +573,8 @@ class MillingPlant:
         else:
             self._c = params.torque_gain(1.0).item()
             self._l = 1.0
-        edges = np.asarray(profile.edges_mm, dtype=np.float64)
-        self._edges = edges
-        self._edge_list = [float(v) for v in edges]
-        self._d0_list = [float(v) for v in profile.start_depths_mm]
-        self._slope_list = [
-            (float(e1) - float(d0)) / (b - a)
-            for d0, e1, a, b in zip(
-                profile.start_depths_mm,
-                profile.end_depths_mm,
-                self._edge_list[:-1],
-                self._edge_list[1:],
-                strict=True,
-            )
-        ]
+        self._edges = np.asarray(profile.edges_mm, dtype=np.float64)
+        self._edge_list, self._d0_list, self._slope_list = profile.segment_table()
         self.reset()
 
     def reset(self) -> None:

@@ -10,12 +10,13 @@ the nominal torque coefficient and feed exponent). Pass a name or a scenario obj
 from __future__ import annotations
 
 import bisect
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
+from machining_envs.core.checks import check_range
+from machining_envs.core.env import resolve_scenario
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams
 
@@ -45,16 +46,6 @@ PAPER_TAPER_DEPTHS_MM = (0.0, 3.0)
 #: eq. (20): L / T_m = 40 mm / 11.797 min (step) and 40 mm / 15.914 min (taper). The paper
 #: does not say how they were chosen.
 PAPER_CONSTANT_FEED_MM_MIN = {"paper_step": 40.0 / 11.797, "paper_taper": 40.0 / 15.914}
-
-
-def _in_range(name: str, value, lo: float, hi: float) -> None:
-    if not (
-        isinstance(value, (int, float, np.integer, np.floating))
-        and not isinstance(value, bool)
-        and math.isfinite(value)
-        and lo <= value <= hi
-    ):
-        raise ValueError(f"{name} must be in [{lo}, {hi}], got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -91,11 +82,11 @@ class MillingScenario:
     def __post_init__(self) -> None:
         if not isinstance(self.profile, DepthProfile):
             raise ValueError(f"profile must be a DepthProfile, got {type(self.profile).__name__}")
-        _in_range("spindle_scale", self.spindle_scale, 0.25, 4.0)
-        _in_range("torque_ref_scale", self.torque_ref_scale, 0.25, 4.0)
-        _in_range("torque_coefficient_scale", self.torque_coefficient_scale, 0.5, 2.0)
-        _in_range("feed_exponent_scale", self.feed_exponent_scale, 0.5, 2.0)
-        _in_range("noise_scale", self.noise_scale, 0.0, 10.0)
+        check_range("spindle_scale", self.spindle_scale, 0.25, 4.0)
+        check_range("torque_ref_scale", self.torque_ref_scale, 0.25, 4.0)
+        check_range("torque_coefficient_scale", self.torque_coefficient_scale, 0.5, 2.0)
+        check_range("feed_exponent_scale", self.feed_exponent_scale, 0.5, 2.0)
+        check_range("noise_scale", self.noise_scale, 0.0, 10.0)
 
     def spindle_rpm(self, nominal: MillingParams) -> float:
         """Spindle speed of this cut, rpm (``ValueError`` outside ``SPINDLE_RPM_RANGE``)."""
@@ -146,18 +137,7 @@ class CutArea:
     """
 
     def __init__(self, profile: DepthProfile):
-        self.edges = [float(v) for v in profile.edges_mm]
-        self.d0 = [float(v) for v in profile.start_depths_mm]
-        self.slope = [
-            (float(d1) - float(d0)) / (b - a)
-            for d0, d1, a, b in zip(
-                profile.start_depths_mm,
-                profile.end_depths_mm,
-                self.edges[:-1],
-                self.edges[1:],
-                strict=True,
-            )
-        ]
+        self.edges, self.d0, self.slope = profile.segment_table()
         acc = [0.0]
         for i in range(len(self.d0)):
             w = self.edges[i + 1] - self.edges[i]
@@ -228,10 +208,4 @@ MILLING_SCENARIOS: dict[str, Callable[[np.random.Generator], MillingScenario]] =
 
 def milling_scenario(spec, rng: np.random.Generator) -> MillingScenario:
     """Resolve a scenario name or object; unknown names raise ``ValueError``."""
-    if isinstance(spec, MillingScenario):
-        return spec
-    if isinstance(spec, str) and spec in MILLING_SCENARIOS:
-        return MILLING_SCENARIOS[spec](rng)
-    raise ValueError(
-        f"scenario must be a MillingScenario or one of {sorted(MILLING_SCENARIOS)}, got {spec!r}"
-    )
+    return resolve_scenario(spec, rng, MillingScenario, MILLING_SCENARIOS)

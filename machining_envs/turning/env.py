@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 
 import gymnasium as gym
@@ -11,14 +10,18 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
+from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
 from machining_envs.core.env import (
     ActionMap,
+    EpisodeLog,
     check_action,
     check_episode_time,
     check_render_mode,
+    check_reward_weights,
     check_scenario_spec,
     present_frame,
     ready_to_render,
+    record_step,
     render_signals,
     resolve_params,
     resolve_reward,
@@ -35,6 +38,14 @@ _HISTORY = 3
 #: Standard normals drawn at a time for the sensor noise of a lane.
 _NORMAL_BLOCK = 64
 _FORCE_OBS = (-1.0, 10.0)
+#: The signals render() draws: name -> the info key each is read from.
+_LOG_FIELDS = {
+    "t": "t_s",
+    "force": "force_N",
+    "measured": "measured",
+    "feed": "feed_mm_per_rev",
+    "depth": "depth_mm",
+}
 
 
 @dataclass(frozen=True)
@@ -59,10 +70,7 @@ class TurningReward:
     """w_b, one-off penalty when the tool breaks."""
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise ValueError(f"reward weight {f.name} must be a finite number >= 0, got {v!r}")
+        check_reward_weights(self, allow_bool=True)
 
 
 @numba.njit(cache=True)
@@ -144,11 +152,9 @@ class _TurningCore:
             owner, params, TurningParams, TurningParams.noh_kim_kim_1992, overrides
         )
         if spindle_rpm is not None:
-            lo, hi = SPINDLE_RPM_RANGE
-            ok = isinstance(spindle_rpm, (int, float)) and math.isfinite(spindle_rpm)
-            if not (ok and lo <= spindle_rpm <= hi):
-                raise ValueError(f"spindle_rpm must be in [{lo}, {hi}], got {spindle_rpm!r}")
-            spindle_rpm = float(spindle_rpm)
+            spindle_rpm = check_range(
+                "spindle_rpm", spindle_rpm, *SPINDLE_RPM_RANGE, types=PY_NUMBER_TYPES
+            )
         self.spindle_rpm_override = spindle_rpm
         self.reward_weights = resolve_reward(reward, TurningReward)
         w = self.reward_weights
@@ -529,8 +535,8 @@ class TurningEnv(gym.Env):
         self.scenario = core.scenarios[0]
         self.plant = core.lanes
         self._rngs = (self.np_random,)
-        self._log = {k: [] for k in ("t", "force", "measured", "feed", "depth")}
-        self._record(info)
+        self._log = EpisodeLog(_LOG_FIELDS)
+        self._log.record(info)
         return core.obs[0].copy(), info
 
     def step(self, action):
@@ -545,21 +551,9 @@ class TurningEnv(gym.Env):
         core.draw_noise(self._rngs)
         core.step()
         info = core.lane_info(0)
-        if self.render_mode is not None:
-            self._record(info)
-            if self.render_mode == "human":
-                self.render()
+        record_step(self, self._log, info)
         flags = core.flags[0]
         return core.obs[0].copy(), float(core.reward[0]), bool(flags[3]), bool(flags[4]), info
-
-    # ---- helpers -------------------------------------------------------------------------
-    def _record(self, info: dict) -> None:
-        log = self._log
-        log["t"].append(info["t_s"])
-        log["force"].append(info["force_N"])
-        log["measured"].append(info["measured"])
-        log["feed"].append(info["feed_mm_per_rev"])
-        log["depth"].append(info["depth_mm"])
 
     def render(self):
         if not ready_to_render(self, "TurningEnv"):

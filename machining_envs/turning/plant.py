@@ -31,6 +31,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from machining_envs.core.checks import check_integer, check_range
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
 
 __all__ = ["TurningParams", "TurningPlant", "TurningStep", "SPINDLE_RPM_RANGE"]
@@ -41,14 +42,9 @@ __all__ = ["TurningParams", "TurningPlant", "TurningStep", "SPINDLE_RPM_RANGE"]
 SPINDLE_RPM_RANGE = (50.0, 3000.0)
 
 
-def _check(name: str, value, lo: float, hi: float, *, lo_open: bool = False) -> None:
-    """Raise ``ValueError`` naming ``name`` unless ``lo <= value <= hi`` (``lo < value``)."""
-    ok = isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(value)
-    if ok:
-        ok = (value > lo if lo_open else value >= lo) and value <= hi
-    if not ok:
-        left = "(" if lo_open else "["
-        raise ValueError(f"{name} must be in {left}{lo}, {hi}], got {value!r}")
+#: The range check of this process's parameters and scenarios. Unlike the other processes'
+#: it takes a bool as the number 0 or 1; kept so that no value accepted before is refused.
+_check = functools.partial(check_range, allow_bool=True)
 
 
 @dataclass(frozen=True)
@@ -132,8 +128,7 @@ class TurningParams:
                 f"sensor_filter_order must be 1 or 2, got {self.sensor_filter_order!r}"
             )
         _check("sample_time_s", self.sample_time_s, 0.0, 10.0, lo_open=True)
-        if not isinstance(self.substeps, (int, np.integer)) or not 1 <= self.substeps <= 10000:
-            raise ValueError(f"substeps must be an integer in [1, 10000], got {self.substeps!r}")
+        check_integer("substeps", self.substeps, 1, 10000, allow_bool=True)
         _check("command_max", self.command_max, 0.0, 1e9, lo_open=True)
         _check("breakage_force_N", self.breakage_force_N, 0.0, 1e7, lo_open=True)
         _check("noise_std_N", self.noise_std_N, 0.0, 1e5)
@@ -511,8 +506,7 @@ class TurningLanes:
     """
 
     def __init__(self, params: TurningParams, n: int = 1) -> None:
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise ValueError(f"n must be an integer >= 1, got {n!r}")
+        check_integer("n", n, 1, 1 << 24)
         self.n = int(n)
         self.params = params
         self._key = _LinearKey.of(params)
@@ -560,9 +554,7 @@ class TurningLanes:
         self.cols[lane] = c
         self.z[lane] = 0.0
         self.buf[lane] = 0.0
-        edges = np.asarray(profile.edges_mm, dtype=np.float64)
-        d0 = np.asarray(profile.start_depths_mm, dtype=np.float64)
-        slope = (np.asarray(profile.end_depths_mm, dtype=np.float64) - d0) / np.diff(edges)
+        edges, d0, slope = (np.array(v) for v in profile.segment_table())
         ns = d0.size
         if ns > self._s_max:
             grow = ns - self._s_max

@@ -8,14 +8,14 @@ constants (as scale factors on the nominal parameters). Pass a name or a scenari
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
+from machining_envs.core.env import resolve_scenario
 from machining_envs.core.workpieces import DepthProfile
-from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams
+from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams, _check
 
 __all__ = [
     "TurningScenario",
@@ -28,15 +28,6 @@ __all__ = [
 #: 15 mm keeps every plateau longer than the start-up and step transients of all five
 #: experiments (3 s at 700 rpm on the 1 mm plateau, 36 s at 245 rpm on the 3 mm one).
 PAPER_STEP_SEGMENT_MM = 15.0
-
-
-def _in_range(name: str, value, lo: float, hi: float) -> None:
-    if not (
-        isinstance(value, (int, float, np.integer, np.floating))
-        and math.isfinite(value)
-        and lo <= value <= hi
-    ):
-        raise ValueError(f"{name} must be in [{lo}, {hi}], got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -70,11 +61,11 @@ class TurningScenario:
     def __post_init__(self) -> None:
         if not isinstance(self.profile, DepthProfile):
             raise ValueError(f"profile must be a DepthProfile, got {type(self.profile).__name__}")
-        _in_range("spindle_rpm", self.spindle_rpm, *SPINDLE_RPM_RANGE)
-        _in_range("force_ref_N", self.force_ref_N, 1.0, 1e5)
-        _in_range("force_coefficient_scale", self.force_coefficient_scale, 0.5, 2.0)
-        _in_range("feed_exponent_scale", self.feed_exponent_scale, 0.5, 2.0)
-        _in_range("noise_scale", self.noise_scale, 0.0, 10.0)
+        _check("spindle_rpm", self.spindle_rpm, *SPINDLE_RPM_RANGE)
+        _check("force_ref_N", self.force_ref_N, 1.0, 1e5)
+        _check("force_coefficient_scale", self.force_coefficient_scale, 0.5, 2.0)
+        _check("feed_exponent_scale", self.feed_exponent_scale, 0.5, 2.0)
+        _check("noise_scale", self.noise_scale, 0.0, 10.0)
 
     def true_params(self, nominal: TurningParams) -> TurningParams:
         """The plant parameters this cut really has (hidden from controllers)."""
@@ -132,10 +123,4 @@ TURNING_SCENARIOS: dict[str, Callable[[np.random.Generator], TurningScenario]] =
 
 def turning_scenario(spec, rng: np.random.Generator) -> TurningScenario:
     """Resolve a scenario name or object; unknown names raise ``ValueError``."""
-    if isinstance(spec, TurningScenario):
-        return spec
-    if isinstance(spec, str) and spec in TURNING_SCENARIOS:
-        return TURNING_SCENARIOS[spec](rng)
-    raise ValueError(
-        f"scenario must be a TurningScenario or one of {sorted(TURNING_SCENARIOS)}, got {spec!r}"
-    )
+    return resolve_scenario(spec, rng, TurningScenario, TURNING_SCENARIOS)
