@@ -459,8 +459,17 @@ class TurningEnv(gym.Env):
     ``position_mm``, ``segment`` (index of the workpiece segment being cut),
     ``workpiece_length_mm``, ``scenario``, and ``machining_time_s`` once the cut is finished.
 
+    ## Vector env
+    ``gym.make_vec("machining_envs/Turning-v0", num_envs=N)`` gives a
+    :class:`TurningVectorEnv`: N lathes stepped by one compiled kernel, lane ``i`` after
+    ``reset(seed=s)`` exactly this env after ``reset(seed=s + i)``.
+
     ## Version History
-    * v0: first version.
+    * v0: first version. The physics now runs as a batched kernel shared with the vector
+      env (same numbers to the last bit); the sensor noise is drawn in blocks of 64 from
+      ``np_random`` (the same normals in the same order within an episode; after an
+      episode the unused rest of a block is skipped, so later episodes of an unseeded
+      reset differ from the first implementation's).
 
     ## Example
     >>> import gymnasium as gym
