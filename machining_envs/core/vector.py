@@ -86,13 +86,6 @@ class LaneVectorEnv(gym.vector.VectorEnv):
         ]
         self._started = False
 
-    # ---- to implement -----------------------------------------------------------------------
-    def _reset_lanes(self, lanes: np.ndarray, options: dict | None) -> tuple[np.ndarray, dict]:
-        raise NotImplementedError  # pragma: no cover - every process implements it
-
-    def _step_lanes(self, actions: np.ndarray):
-        raise NotImplementedError  # pragma: no cover - every process implements it
-
     # ---- the VectorEnv interface ------------------------------------------------------------
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
