@@ -32,7 +32,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-__all__ = ["LaneVectorEnv", "merge_lane_info"]
+__all__ = ["LaneVectorEnv", "check_num_envs", "merge_lane_info"]
 
 
 def merge_lane_info(info: dict, lanes: np.ndarray, part: dict, num_envs: int) -> None:
@@ -58,6 +58,15 @@ def merge_lane_info(info: dict, lanes: np.ndarray, part: dict, num_envs: int) ->
         info["_" + key][sel] = True
 
 
+def check_num_envs(num_envs) -> int:
+    """``num_envs`` as an int >= 1 (``TypeError`` / ``ValueError`` naming it otherwise)."""
+    if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
+        raise TypeError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+    if num_envs < 1:
+        raise ValueError(f"num_envs must be an integer >= 1, got {num_envs}")
+    return int(num_envs)
+
+
 class LaneVectorEnv(gym.vector.VectorEnv):
     """Base of the native vector envs (see the module docstring)."""
 
@@ -71,11 +80,7 @@ class LaneVectorEnv(gym.vector.VectorEnv):
         single_observation_space: gym.Space,
         single_action_space: gym.Space,
     ) -> None:
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
-            raise TypeError(f"num_envs must be an integer >= 1, got {num_envs!r}")
-        if num_envs < 1:
-            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs}")
-        self.num_envs = int(num_envs)
+        self.num_envs = check_num_envs(num_envs)
         self.single_observation_space = single_observation_space
         self.single_action_space = single_action_space
         self.observation_space = batch_space(single_observation_space, self.num_envs)

@@ -27,7 +27,7 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
-from machining_envs.core.vector import LaneVectorEnv
+from machining_envs.core.vector import LaneVectorEnv, check_num_envs
 from machining_envs.turning.metrics import TURNING_TASK
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningLanes, TurningParams, step_lane
 from machining_envs.turning.scenarios import TURNING_SCENARIOS, TurningScenario, turning_scenario
@@ -190,6 +190,7 @@ class _TurningCore:
         self.flags = np.zeros((n, 5), dtype=np.bool_)
         self.normals = np.zeros((n, _NORMAL_BLOCK))
         self.normal_i = np.full(n, _NORMAL_BLOCK)
+        self._lane_index = np.arange(n)
         self.spindle = np.zeros(n)
         self.length = np.zeros(n)
         self.names = np.full(n, "", dtype=object)
@@ -268,8 +269,7 @@ class _TurningCore:
         for k in need:
             self.normals[k] = rngs[k].standard_normal(_NORMAL_BLOCK)
             self.normal_i[k] = 0
-        lanes = np.arange(self.n)
-        z = self.normals[lanes, np.minimum(self.normal_i, _NORMAL_BLOCK - 1)]
+        z = self.normals[self._lane_index, np.minimum(self.normal_i, _NORMAL_BLOCK - 1)]
         self.in_noise[:] = np.where(noisy, self.noise_counts * z, 0.0)
         self.normal_i += noisy
 
@@ -613,7 +613,7 @@ class TurningVectorEnv(LaneVectorEnv):
     ):
         self._core = _TurningCore(
             type(self).__name__,
-            num_envs if isinstance(num_envs, int) and num_envs >= 1 else 1,
+            check_num_envs(num_envs),
             scenario,
             params,
             spindle_rpm,

@@ -640,9 +640,6 @@ class TurningPlant:
         self.profile = profile
         self.length_mm = profile.length_mm
         self._lanes = TurningLanes(params, 1)
-        self._margin = float(_velocity_bound(_LinearKey.of(params), params.command_max)) * (
-            params.sample_time_s
-        )
         self.reset()
 
     def reset(self) -> None:
@@ -653,6 +650,11 @@ class TurningPlant:
     @property
     def t_s(self) -> float:
         return float(self._lanes.lane_f[0, 5])
+
+    @property
+    def _margin(self) -> float:
+        """Farthest the tool can move in one sample, mm (the kernel's one-segment test)."""
+        return float(self._lanes.lane_f[0, 6])
 
     @property
     def z(self) -> np.ndarray:
