@@ -13,7 +13,44 @@ import numpy as np
 
 from machining_envs.core.checks import check_range
 
-__all__ = ["Agent", "unwrap", "unwrap_as", "check_setting", "check_positive"]
+__all__ = [
+    "Agent",
+    "unwrap",
+    "unwrap_as",
+    "check_setting",
+    "check_positive",
+    "check_observation",
+    "observation_field",
+]
+
+
+def observation_field(index: int, obs_index: dict | None) -> str:
+    """The name of entry ``index`` of an observation whose fields start at the indices of
+    ``obs_index`` (an env's ``OBS_INDEX``): ``"observation[5] (history[1])"``, or
+    ``"observation[5]"`` without names."""
+    if not obs_index:
+        return f"observation[{index}]"
+    starts = sorted((i, name) for name, i in obs_index.items() if i <= index)
+    if not starts:
+        return f"observation[{index}]"
+    start, name = starts[-1]
+    width = sorted(i for i in obs_index.values() if i > start)
+    single = bool(width) and width[0] == start + 1
+    field = name if single else f"{name}[{index - start}]"
+    return f"observation[{index}] ({field})"
+
+
+def check_observation(who: str, obs: np.ndarray, obs_index: dict | None = None) -> None:
+    """``ValueError`` naming ``who`` and the first non-finite entry of ``obs`` (a batch
+    ``(n, obs_dim)``), so that NaN or inf never reaches a controller's state."""
+    bad = ~np.isfinite(obs)
+    if bad.any():
+        lane, index = (int(v) for v in np.argwhere(bad)[0])
+        where = f" of env {lane}" if obs.shape[0] > 1 else ""
+        raise ValueError(
+            f"{who}: {observation_field(index, obs_index)}{where} is {obs[lane, index]!r} "
+            "(not finite); the state passed in is left unchanged"
+        )
 
 
 def unwrap(env):
@@ -83,6 +120,8 @@ class Agent:
     name: str = "agent"
     state_size: int = 0
     obs_dim: int | None = None
+    #: The env's ``OBS_INDEX`` (field name -> first index), for error messages.
+    obs_index: dict | None = None
 
     def initial_state(self, n: int, obs: np.ndarray) -> np.ndarray:
         """State of ``n`` fresh episodes whose first observations are ``obs`` (n, obs_dim)."""
@@ -95,9 +134,44 @@ class Agent:
         """SB3-compatible: ``(action, state) = predict(obs, state, episode_start, deterministic)``.
 
         ``deterministic`` is accepted for compatibility; classical controllers are always
-        deterministic.
+        deterministic. The state passed in is never modified (a new one is returned).
+
+        Raises
+        ------
+        ValueError
+            The observation is not real numbers of shape ``(obs_dim,)`` or ``(n_envs,
+            obs_dim)``, an entry is NaN or infinite (the message names the entry), or
+            ``state`` / ``episode_start`` do not fit the observations or ``state`` is not
+            finite.
         """
-        obs = np.asarray(observation, dtype=np.float64)
+        batch, single = self._observations(observation)
+        n = batch.shape[0]
+        if state is None:
+            st = self.initial_state(n, batch)
+        else:
+            st = self._state(state, n)
+            if episode_start is not None:
+                starts = self._starts(episode_start, n)
+                if starts.any():
+                    st[starts] = self.initial_state(int(starts.sum()), batch[starts])
+        action = np.clip(self._act(batch, st), -1.0, 1.0).astype(np.float32)
+        return (action[0] if single else action), st
+
+    def _observations(self, observation) -> tuple[np.ndarray, bool]:
+        """The observations as a float batch ``(n, obs_dim)``, checked, and whether one env's
+        observation was given."""
+        if isinstance(observation, (str, bytes)):
+            raise ValueError(f"{self.name}: observation must be real numbers, got {observation!r}")
+        try:
+            obs = np.asarray(observation)
+            if obs.dtype.kind not in "biuf":
+                raise TypeError
+            obs = obs.astype(np.float64, copy=False)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"{self.name}: observation must be real numbers of shape ({self.obs_dim},) or "
+                f"(n_envs, {self.obs_dim}), got {observation!r:.80}"
+            ) from None
         single = obs.ndim == 1
         batch = obs[None, :] if single else obs
         if batch.ndim != 2 or (self.obs_dim is not None and batch.shape[1] != self.obs_dim):
@@ -105,21 +179,37 @@ class Agent:
                 f"{self.name}: observation must have shape ({self.obs_dim},) or "
                 f"(n_envs, {self.obs_dim}), got {obs.shape}"
             )
-        n = batch.shape[0]
-        if state is None:
-            st = self.initial_state(n, batch)
-        else:
-            st = np.array(state, dtype=np.float64, copy=True).reshape(n, self.state_size)
-            if episode_start is not None:
-                starts = np.asarray(episode_start, dtype=bool).reshape(-1)
-                if starts.size != n:
-                    raise ValueError(
-                        f"{self.name}: episode_start has {starts.size} entries for {n} observations"
-                    )
-                if starts.any():
-                    st[starts] = self.initial_state(int(starts.sum()), batch[starts])
-        action = np.clip(self._act(batch, st), -1.0, 1.0).astype(np.float32)
-        return (action[0] if single else action), st
+        check_observation(self.name, batch, self.obs_index)
+        return batch, single
+
+    def _state(self, state, n: int) -> np.ndarray:
+        """A checked copy of the state passed in, shape ``(n, state_size)``."""
+        try:
+            st = np.array(state, dtype=np.float64, copy=True)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"{self.name}: state must be the array predict() returned, got {state!r:.80}"
+            ) from None
+        if st.size != n * self.state_size:
+            raise ValueError(
+                f"{self.name}: state must have shape ({n}, {self.state_size}) for {n} "
+                f"observation(s), got {st.shape}"
+            )
+        st = st.reshape(n, self.state_size)
+        if not np.isfinite(st).all():
+            lane, index = (int(v) for v in np.argwhere(~np.isfinite(st))[0])
+            raise ValueError(
+                f"{self.name}: state[{lane}, {index}] is {st[lane, index]!r} (not finite)"
+            )
+        return st
+
+    def _starts(self, episode_start, n: int) -> np.ndarray:
+        starts = np.asarray(episode_start, dtype=bool).reshape(-1)
+        if starts.size != n:
+            raise ValueError(
+                f"{self.name}: episode_start has {starts.size} entries for {n} observations"
+            )
+        return starts
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.name!r})"

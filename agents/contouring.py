@@ -60,6 +60,7 @@ class LinearServoAgent(Agent):
     """
 
     obs_dim = 14
+    obs_index = _I
 
     def __init__(
         self, designs: tuple[ServoDesign, ServoDesign], command_max_mm_s: float, name: str
@@ -78,6 +79,17 @@ class LinearServoAgent(Agent):
         c = block_diag(*(d.c for d in designs))
         d = block_diag(*(d.d for d in designs))
         self._m = np.block([[a.T, c.T], [b.T, d.T]])
+        # Anti-windup by conditioning (Hanus): while an axis's command passes the drive's
+        # limit, its controller is updated with the set point that would have produced the
+        # limited command, r + (u_sat - u) / d_r; so the states follow what the drive does.
+        self._aw = [
+            np.asarray(des.b[:, 0] / des.d[0, 0], dtype=np.float64) for des in self.designs
+        ]
+        self._aw_slices = []
+        k = 0
+        for des in self.designs:
+            self._aw_slices.append(slice(k, k + des.n_states))
+            k += des.n_states
 
     @staticmethod
     def _positions(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -101,7 +113,13 @@ class LinearServoAgent(Agent):
         z[:, nx + 1 :: 2] = y - origin
         out = z @ self._m
         state[:, :nx] = out[:, :nx]
-        return out[:, nx:] / self.command_max_mm_s
+        u = out[:, nx:]
+        umax = self.command_max_mm_s
+        excess = np.clip(u, -umax, umax) - u
+        if excess.any():
+            for axis, sl in enumerate(self._aw_slices):
+                state[:, sl] += excess[:, axis : axis + 1] * self._aw[axis]
+        return u / umax
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
         """As :meth:`Agent.predict`; one env's observation with a carried state and no new
@@ -110,6 +128,7 @@ class LinearServoAgent(Agent):
             state is not None
             and isinstance(observation, np.ndarray)
             and observation.shape == (self.obs_dim,)
+            and observation.dtype.kind == "f"
             and isinstance(state, np.ndarray)
             and state.shape == (1, self.state_size)
             and (
@@ -123,8 +142,10 @@ class LinearServoAgent(Agent):
         ):
             nx = self._nx
             o = observation.tolist()
-            i, j = _I["reference"], _I["error"]
             st = state.copy()
+            if not (math.isfinite(sum(o)) and math.isfinite(float(st.sum()))):
+                return super().predict(observation, state, episode_start, deterministic)
+            i, j = _I["reference"], _I["error"]
             ox, oy = st[0, nx:].tolist()
             rx, ry = o[i] * POSITION_SCALE_MM, o[i + 1] * POSITION_SCALE_MM
             yx, yy = rx - o[j] * ERROR_SCALE_MM, ry - o[j + 1] * ERROR_SCALE_MM
@@ -132,7 +153,13 @@ class LinearServoAgent(Agent):
             out = z @ self._m
             st[0, :nx] = out[:nx]
             umax = self.command_max_mm_s
-            ux, uy = (out[nx:] / umax).tolist()
+            ux, uy = out[nx:].tolist()
+            if not (-umax <= ux <= umax and -umax <= uy <= umax):
+                for axis, u in enumerate((ux, uy)):
+                    excess = min(max(u, -umax), umax) - u
+                    if excess:
+                        st[0, self._aw_slices[axis]] += excess * self._aw[axis]
+            ux, uy = ux / umax, uy / umax
             act = [min(max(ux, -1.0), 1.0), min(max(uy, -1.0), 1.0)]
             return np.array(act, dtype=np.float32), st
         return super().predict(observation, state, episode_start, deterministic)

@@ -172,6 +172,7 @@ class NoControl(Agent):
 
     state_size = 0
     obs_dim = _OBS_DIM
+    obs_index = _I
 
     def __init__(self, io: DrillingIO, voltage: float | None = None):
         self.io = io
@@ -233,6 +234,7 @@ class PD(Agent):
 
     state_size = 2  # [filtered error e^f_{k-1} (N·mm), started (0/1)]
     obs_dim = _OBS_DIM
+    obs_index = _I
 
     def __init__(
         self,
@@ -306,6 +308,7 @@ class PeckDrilling(Agent):
     # [phase (0 feed, 1 out, 2 back), depth at which to retract next (mm), started]
     state_size = 3
     obs_dim = _OBS_DIM
+    obs_index = _I
 
     def __init__(
         self,
@@ -451,6 +454,7 @@ class SlidingMode(Agent):
     # [x1_hat, x2_hat, k4_hat, S, e, started, near(0/1), u]
     state_size = 8
     obs_dim = _OBS_DIM
+    obs_index = _I
     STATE = {"x1": 0, "x2": 1, "k4": 2, "S": 3, "e": 4, "started": 5, "near": 6, "u": 7}
 
     def __init__(

@@ -95,6 +95,7 @@ class FixedGainIntegral(Agent):
 
     state_size = 1  # [W]
     obs_dim = 7
+    obs_index = _I
 
     def __init__(self, io: MillingIO, kc: float = 0.2):
         self.io = io
@@ -141,7 +142,8 @@ class IntegralACC(Agent):
     Guards against the estimator's "overflow" the paper warns about (§4): the gains are
     held while the measured torque is below ``min_torque_fraction`` of the reference or no
     feed is commanded (cutting air gives ``Tc = 0``, which would drive ``Km`` to 0 and
-    ``Kc`` without bound); ``Km`` is kept above 0.1 % of its initial value and ``Kc``
+    ``Kc`` without bound), and while the command is held at the top of its range
+    (anti-windup: the estimator is frozen while the feed saturates); ``Km`` is kept above 0.1 % of its initial value and ``Kc``
     within 0.1 % to 1000 times its initial value.
 
     Parameters
@@ -161,6 +163,7 @@ class IntegralACC(Agent):
 
     state_size = 6  # [W, Km, Kc, U held, Km at start, Kc at start]
     obs_dim = 7
+    obs_index = _I
 
     def __init__(
         self,
@@ -204,7 +207,13 @@ class IntegralACC(Agent):
         tc, tr = self.io.torque_counts(obs)
         w, km, kc, u_held = state[:, 0], state[:, 1], state[:, 2], state[:, 3]
         km0, kc0 = state[:, 4], state[:, 5]
-        adapt = (tc >= self.min_torque_fraction * tr) & (u_held > 0.0)
+        # Held while the command is at either end of its range (anti-windup: a clipped
+        # command says nothing new about the process gain), or while cutting air.
+        adapt = (
+            (tc >= self.min_torque_fraction * tr)
+            & (u_held > 0.0)
+            & (u_held < self.io.command_max)
+        )
         km_new = np.maximum(km + self.c1 * (tc - u_held * km), 1e-3 * km0)  # eq. 14-15
         kc_new = np.clip(kc + self.c2 * (ts * self.k - kc * km), 1e-3 * kc0, 1e3 * kc0)  # 18-19
         km = np.where(adapt, km_new, km)
@@ -230,6 +239,7 @@ class MillingConstantFeed(Agent):
 
     state_size = 0
     obs_dim = 7
+    obs_index = _I
 
     def __init__(self, io: MillingIO, feed_mm_per_min: float):
         self.io = io

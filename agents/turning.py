@@ -84,6 +84,7 @@ class FixedGainPI(Agent):
 
     state_size = 2  # [U_{k-1} (counts), E_{k-1} (counts)]
     obs_dim = 7
+    obs_index = _I
 
     def __init__(self, io: TurningIO, kh: float = 0.02, kgh: float = 1.9):
         self.io = io
@@ -115,6 +116,7 @@ class ConstantFeed(Agent):
 
     state_size = 0
     obs_dim = 7
+    obs_index = _I
 
     def __init__(self, io: TurningIO, feed_mm_per_rev: float):
         self.io = io
@@ -184,6 +186,7 @@ class VariableGainPI(Agent):
     # [E_{k-1}, Kp_hat, U_{k-1..k-3}, U_hat_{k-1..k-3}, b1..b3, a1..a3]
     state_size = 14
     obs_dim = 7
+    obs_index = _I
 
     def __init__(
         self,

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.base import check_observation
 from agents.rl.config import ALGOS, _algos
 
 __all__ = ["PolicyAgent", "load_policy", "pretrained", "PRETRAINED_DIR"]
@@ -47,8 +48,39 @@ class PolicyAgent:
         out = (obs - self.obs_rms.mean) / np.sqrt(self.obs_rms.var + self.epsilon)
         return np.clip(out, -self.clip_obs, self.clip_obs).astype(np.float32)
 
+    def _observations(self, observation) -> np.ndarray:
+        """The observation as float32 of shape ``(obs_dim,)`` or ``(n_envs, obs_dim)``,
+        checked: real numbers, the model's shape, finite (``ValueError`` naming the entry)."""
+        shape = tuple(self.model.observation_space.shape)
+        try:
+            raw = np.asarray(observation)
+            if raw.dtype.kind not in "biuf":
+                raise TypeError
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"{self.name}: observation must be real numbers of shape {shape} or "
+                f"(n_envs, *{shape}), got {observation!r:.80}"
+            ) from None
+        if raw.shape != shape and raw.shape[1:] != shape:
+            raise ValueError(
+                f"{self.name}: observation must have shape {shape} or (n_envs, *{shape}), "
+                f"got {raw.shape}"
+            )
+        raw = raw.astype(np.float32, copy=False)
+        batch = raw.reshape(-1, int(np.prod(shape, dtype=int)))
+        check_observation(self.name, batch)
+        return raw
+
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        raw = np.asarray(observation, dtype=np.float32)
+        """SB3's ``predict`` on the raw observation (normalised here).
+
+        Raises
+        ------
+        ValueError
+            The observation is not real numbers of the model's observation shape (one env's
+            or a batch), or an entry is NaN or infinite (the message names the entry).
+        """
+        raw = self._observations(observation)
         if self.increment is None:
             return self.model.predict(
                 self.normalize(raw),
