@@ -82,9 +82,7 @@ class LinearServoAgent(Agent):
         # Anti-windup by conditioning (Hanus): while an axis's command passes the drive's
         # limit, its controller is updated with the set point that would have produced the
         # limited command, r + (u_sat - u) / d_r; so the states follow what the drive does.
-        self._aw = [
-            np.asarray(des.b[:, 0] / des.d[0, 0], dtype=np.float64) for des in self.designs
-        ]
+        self._aw = [np.asarray(des.b[:, 0] / des.d[0, 0], dtype=np.float64) for des in self.designs]
         self._aw_slices = []
         k = 0
         for des in self.designs:

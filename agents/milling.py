@@ -210,9 +210,7 @@ class IntegralACC(Agent):
         # Held while the command is at either end of its range (anti-windup: a clipped
         # command says nothing new about the process gain), or while cutting air.
         adapt = (
-            (tc >= self.min_torque_fraction * tr)
-            & (u_held > 0.0)
-            & (u_held < self.io.command_max)
+            (tc >= self.min_torque_fraction * tr) & (u_held > 0.0) & (u_held < self.io.command_max)
         )
         km_new = np.maximum(km + self.c1 * (tc - u_held * km), 1e-3 * km0)  # eq. 14-15
         kc_new = np.clip(kc + self.c2 * (ts * self.k - kc * km), 1e-3 * kc0, 1e3 * kc0)  # 18-19
