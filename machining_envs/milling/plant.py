@@ -41,6 +41,7 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from machining_envs.core.checks import check_integer, check_range
@@ -485,11 +486,11 @@ def _servo_matrix(key: _ServoKey) -> np.ndarray:
     return big
 
 
-@functools.lru_cache(maxsize=256)
-def _lag_matrix(substeps: int, h: float, lag_s: float) -> np.ndarray:
-    """``lag @ [T_0, u_0, ..., u_M]``: the lagged torque at the M sub-step points for a static
-    torque ``u`` linear between sub-step points (exact first-order hold of eq. 10)."""
-    m = substeps
+@numba.njit(cache=True)
+def lag_rows(m, h, lag_s, out):
+    """Fill ``out`` (``(m, m + 2)``) with the lag matrix: ``out @ [T_0, u_0, ..., u_M]`` is
+    the lagged torque at the M sub-step points for a static torque ``u`` linear between
+    sub-step points (exact first-order hold of eq. 10)."""
     r = h / lag_s
     alpha = math.exp(-r)
     if r < 1e-6:  # series, to avoid cancellation
@@ -497,15 +498,22 @@ def _lag_matrix(substeps: int, h: float, lag_s: float) -> np.ndarray:
     else:
         b1 = 1.0 - (1.0 - alpha) / r
         b0 = (1.0 - alpha) / r - alpha
-    lag = np.zeros((m, m + 2))
-    row = np.zeros(m + 2)
+    n = m + 2
+    row = np.zeros(n)
     row[0] = 1.0  # T_0
     for j in range(m):
-        row = alpha * row
+        for q in range(n):
+            row[q] = alpha * row[q]
         row[1 + j] += b0
         row[2 + j] += b1
-        lag[j] = row
-    return lag
+        out[j, :] = row
+
+
+def _lag_matrix(substeps: int, h: float, lag_s: float) -> np.ndarray:
+    """The lag matrix of :func:`lag_rows` as a new ``(substeps, substeps + 2)`` array."""
+    out = np.empty((substeps, substeps + 2))
+    lag_rows(substeps, h, lag_s, out)
+    return out
 
 
 @dataclass(slots=True)
@@ -535,8 +543,344 @@ class MillingStep:
     (linear between sub-step points)."""
 
 
+# ---- the batched physics: N cuts stepped as arrays, one kernel for one lane or many --------
+
+#: Columns of ``MillingLanes.lane_f`` (per-lane constants, and the lane's clock).
+LANE_CONSTANTS = (
+    "command_max",  # U_max, counts
+    "ft_per_vf",  # 60 / (N P): feed per tooth per feed velocity, mm per (mm/s)
+    "feed_exponent",  # exponent of f_t in the torque law (m, or 1)
+    "torque_gain",  # c of T = c d^l f_t^e (N·mm)
+    "depth_exponent",  # l (power law; 1 for the average-force model)
+    "power_law",  # 1.0 for the power law, 0.0 for the average-force model
+    "sensor_gain",  # Ke, counts per N·mm
+    "length_mm",  # workpiece length
+    "t_s",  # time since the cut started
+    "substep_s",  # h = Ts / M
+    "sample_time_s",  # Ts
+    "spindle_rpm",  # N
+    "rev_per_s",  # N / 60
+)
+_T = LANE_CONSTANTS.index("t_s")
+
+#: Fields of ``MillingLanes.out`` (one row per lane after each step).
+LANE_SIGNALS = (
+    "torque_Nmm",
+    "peak_torque_Nmm",
+    "measured_counts",
+    "feed_velocity_mm_s",
+    "feed_mm_per_rev",
+    "mean_feed_mm_per_rev",
+    "position_mm",
+    "depth_mm",
+)
+
+
+@numba.njit(cache=True)
+def _depth_at(x, edges, d0, slope, nseg):
+    """Radial depth (mm) at ``x`` of a profile given by its segment arrays; zero outside
+    ``[0, length)`` (``DepthProfile.__call__`` at one position)."""
+    if not (x >= 0.0 and x < edges[nseg]):
+        return 0.0
+    i = np.searchsorted(edges[: nseg + 1], x, side="right") - 1
+    i = min(max(i, 0), nseg - 1)
+    return d0[i] + slope[i] * (x - edges[i])
+
+
+@numba.njit(cache=True)
+def step_lane(
+    k, big, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, command, noise,
+    out, out_seg, out_finish,
+):  # fmt: skip
+    """Advance lane ``k`` by one sample (see :class:`MillingLanes` for the layout).
+
+    Holds ``command`` (counts, clipped to ``[0, U_max]``): the servo and position at the M
+    sub-step points and the next state are one product with ``big``; the torque law at the
+    sub-step points drives the process lag (one product with the lane's ``lag``); the
+    sensor reads ``Ke T + noise``. ``out[k]`` gets the signals of ``LANE_SIGNALS``,
+    ``out_seg[k]`` the workpiece segment and ``out_finish[k]`` the time the tool reached
+    the workpiece's end in this sample (NaN if it did not).
+    """
+    lf = lane_f[k]
+    cmax = lf[0]
+    ftpv = lf[1]
+    fexp = lf[2]
+    c = lf[3]
+    dexp = lf[4]
+    power = lf[5] != 0.0
+    gain = lf[6]
+    length = lf[7]
+    t = lf[8]
+    h = lf[9]
+    dt = lf[10]
+    rpm = lf[11]
+    rps = lf[12]
+    zk = z[k]
+    u = command
+    if 0.0 > u:
+        u = 0.0
+    if cmax < u:
+        u = cmax
+    zk[3] = u
+    y = np.dot(big, zk)  # [Vf at the sub-steps, x at the sub-steps, next Vf, dVf/dt, x]
+    p_start = zk[2]
+    p_end = y[2 * m - 1]
+    b = buf[k]  # [T_0, u_0, u_1 .. u_M]
+    for j in range(m):
+        v = y[j]
+        if v <= 0.0:  # no reverse feed (NaN passes, and is caught by the env)
+            v = 0.0
+        b[2 + j] = (v * ftpv) ** fexp
+    e = edges[k]
+    i = seg[k]
+    lo = y[m]
+    hi = y[m]
+    for j in range(m, 2 * m):
+        if y[j] < lo:
+            lo = y[j]
+        elif y[j] > hi:
+            hi = y[j]
+        elif y[j] != y[j]:  # NaN: no segment holds it
+            lo = hi = np.nan
+            break
+    if e[i] <= lo and hi < e[i + 1]:  # every sub-step in the current segment
+        sl = slope[k, i]
+        if sl == 0.0:
+            depth_end = d0[k, i]
+            scale = c * depth_end**dexp if power else c * depth_end
+            for j in range(m):
+                b[2 + j] *= scale
+        else:
+            depth_end = 0.0
+            for j in range(m):
+                depth_end = (y[m + j] - e[i]) * sl + d0[k, i]
+                b[2 + j] *= c * depth_end**dexp if power else c * depth_end
+    else:
+        n_s = nseg[k]
+        depth_end = 0.0
+        for j in range(m):
+            depth_end = _depth_at(y[m + j], e, d0[k], slope[k], n_s)
+            b[2 + j] *= c * depth_end**dexp if power else c * depth_end
+        i = np.searchsorted(e[: n_s + 1], p_end, side="right") - 1
+        seg[k] = min(max(i, 0), n_s - 1)
+    torques = np.dot(lag[k], b)
+    t_end = torques[m - 1]
+    peak = torques[0]
+    for j in range(1, m):
+        if torques[j] > peak or torques[j] != torques[j]:  # NaN propagates, as in max()
+            peak = torques[j]
+    b[0] = t_end
+    b[1] = b[m + 1]
+    zk[0] = y[2 * m]
+    zk[1] = y[2 * m + 1]
+    zk[2] = y[2 * m + 2]
+    o = out[k]
+    o[0] = t_end
+    o[1] = peak
+    o[2] = gain * t_end + noise
+    vf = zk[0]
+    o[3] = vf
+    o[4] = vf * 60.0 / rpm
+    o[5] = (p_end - p_start) / (rps * dt)
+    o[6] = p_end
+    o[7] = depth_end
+    out_seg[k] = seg[k]
+    out_finish[k] = np.nan
+    if not finished[k] and p_end >= length:
+        j = 0
+        while not y[m + j] >= length:
+            j += 1
+        x_prev = y[m + j - 1] if j > 0 else p_start
+        frac = (length - x_prev) / (y[m + j] - x_prev) if y[m + j] > x_prev else 1.0
+        if 0.0 > frac:
+            frac = 0.0
+        if 1.0 < frac:
+            frac = 1.0
+        out_finish[k] = t + (j + frac) * h
+        finished[k] = True
+    lf[8] = t + dt
+
+
+@numba.njit(cache=True)
+def _step_lanes(
+    big, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, commands, noise,
+    out, out_seg, out_finish,
+):  # fmt: skip
+    """Advance every lane by one sample (:func:`step_lane` on each)."""
+    for k in range(z.shape[0]):
+        step_lane(
+            k, big, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m,
+            commands[k], noise[k], out, out_seg, out_finish,
+        )  # fmt: skip
+
+
+class MillingLanes:
+    """N independent cuts stepped together: the physics of every end-milling env.
+
+    Each lane has its own true parameters (torque law and its coefficients, sensor gain),
+    spindle speed and workpiece (:meth:`start`); :meth:`step` advances every lane by one
+    sample with one compiled kernel (:func:`step_lane`) whose arithmetic per lane is that
+    of a single cut, so lane ``i`` of a batch and a batch of one give the same numbers to
+    the last bit. All lanes share the servo's discretisation (servo gain, natural
+    frequency, damping, sample time, sub-steps): that of the ``params`` given here;
+    :meth:`start` refuses a lane whose parameters differ in them. The process lag's matrix
+    depends on the spindle speed and is built per lane when the lane starts.
+
+    Parameters
+    ----------
+    params : MillingParams
+        Parameters of the shared servo (and the defaults of every lane).
+    n : int
+        Number of lanes.
+
+    Attributes
+    ----------
+    z : ndarray, shape (n, 4)
+        ``[Vf, dVf/dt, position, U]`` of every lane.
+    buf : ndarray, shape (n, M + 2)
+        ``[T, u_0, u_1 .. u_M]``: the lagged torque now and the static torque of the last
+        sample's sub-steps (``u_0`` the one before them).
+    lane_f : ndarray, shape (n, len(LANE_CONSTANTS))
+        Per-lane constants and clock (columns ``LANE_CONSTANTS``).
+    out, out_segment, out_finish : ndarray
+        Signals of the last step (``LANE_SIGNALS``), segment, finish time (NaN if none).
+    """
+
+    def __init__(self, params: MillingParams, n: int = 1) -> None:
+        check_integer("n", n, 1, 1 << 24)
+        self.n = int(n)
+        self.params = params
+        self._key = _ServoKey.of(params)
+        m = params.substeps
+        self.m = m
+        self.big = _servo_matrix(self._key)
+        self.lag = np.zeros((self.n, m, m + 2))
+        self.z = np.zeros((self.n, 4))
+        self.buf = np.zeros((self.n, m + 2))
+        self.lane_f = np.zeros((self.n, len(LANE_CONSTANTS)))
+        self._s_max = 1
+        #: Counts replacements of the lane arrays (by a profile with more segments).
+        self.version = 0
+        self.edges = np.zeros((self.n, 2))
+        self.d0 = np.zeros((self.n, 1))
+        self.slope = np.zeros((self.n, 1))
+        self.nseg = np.ones(self.n, dtype=np.int64)
+        self.seg = np.zeros(self.n, dtype=np.int64)
+        self.finished = np.zeros(self.n, dtype=np.bool_)
+        self.lane_params: list[MillingParams] = [params] * self.n
+        self.profiles: list = [None] * self.n
+        self.out = np.zeros((self.n, len(LANE_SIGNALS)))
+        self.out_segment = np.zeros(self.n, dtype=np.int64)
+        self.out_finish = np.full(self.n, np.nan)
+        self._lag_cache: dict[tuple[float, float], np.ndarray] = {}
+
+    def start(self, lane: int, params: MillingParams, spindle_rpm: float, profile) -> None:
+        """Start a new cut in ``lane``: tool at rest at the workpiece's start, no torque.
+
+        ``ValueError`` for a spindle speed outside ``SPINDLE_RPM_RANGE``, a workpiece deeper
+        than the tool is wide, or servo parameters other than the batch's.
+        """
+        check_range("spindle_rpm", spindle_rpm, *SPINDLE_RPM_RANGE)
+        if profile.max_depth_mm > params.tool_diameter_mm:
+            raise ValueError(
+                f"radial depth of the workpiece must be at most the tool diameter "
+                f"{params.tool_diameter_mm:g} mm, got {profile.max_depth_mm:g} mm"
+            )
+        if params is not self.params and _ServoKey.of(params) != self._key:
+            raise ValueError(
+                "a lane's servo gain, natural frequency, damping, sample time and sub-steps "
+                f"must be those of the batch ({self._key}), got {_ServoKey.of(params)}"
+            )
+        rpm = float(spindle_rpm)
+        m = self.m
+        h = params.sample_time_s / params.substeps
+        lag_s = params.process_lag_s(rpm)
+        lag = self._lag_cache.get((h, lag_s))
+        if lag is None:
+            if len(self._lag_cache) >= 4096:
+                self._lag_cache.clear()
+            lag = self._lag_cache[(h, lag_s)] = _lag_matrix(m, h, lag_s)
+        self.lag[lane] = lag
+        self.z[lane] = 0.0
+        self.buf[lane] = 0.0
+        edges, d0, slope = profile.segment_table()
+        ns = len(d0)
+        if ns > self._s_max:
+            grow = ns - self._s_max
+            self.edges = np.pad(self.edges, ((0, 0), (0, grow)), mode="edge")
+            self.d0 = np.pad(self.d0, ((0, 0), (0, grow)))
+            self.slope = np.pad(self.slope, ((0, 0), (0, grow)))
+            self._s_max = ns
+            self.version += 1  # the arrays were replaced: cached references are stale
+        row = self.edges[lane]
+        row[: ns + 1] = edges
+        row[ns + 1 :] = edges[-1]
+        row = self.d0[lane]
+        row[:ns] = d0
+        row[ns:] = 0.0
+        row = self.slope[lane]
+        row[:ns] = slope
+        row[ns:] = 0.0
+        self.nseg[lane] = ns
+        self.seg[lane] = 0
+        power = params.force_model == "power_law"
+        if power:
+            c = KGF * params.torque_coefficient_kgfmm * params.tool_diameter_mm
+            dexp = params.depth_exponent
+        else:
+            c = params.torque_gain(1.0).item()
+            dexp = 1.0
+        self.lane_f[lane] = (
+            params.command_max,
+            60.0 / (rpm * params.n_teeth),
+            params.torque_feed_exponent,
+            c,
+            dexp,
+            1.0 if power else 0.0,
+            params.sensor_gain,
+            edges[-1],
+            0.0,
+            h,
+            params.sample_time_s,
+            rpm,
+            rpm / 60.0,
+        )
+        self.finished[lane] = False
+        self.lane_params[lane] = params
+        self.profiles[lane] = profile
+
+    def step(self, commands: np.ndarray, noise_counts: np.ndarray) -> None:
+        """Hold ``commands[k]`` (counts; clipped to [0, U_max]) in every lane for one sample,
+        with ``noise_counts[k]`` added to lane ``k``'s measurement; results in ``out``,
+        ``out_segment`` and ``out_finish``."""
+        _step_lanes(
+            self.big,
+            self.lag,
+            self.z,
+            self.buf,
+            self.lane_f,
+            self.edges,
+            self.d0,
+            self.slope,
+            self.nseg,
+            self.seg,
+            self.finished,
+            self.m,
+            np.asarray(commands, dtype=np.float64),
+            np.asarray(noise_counts, dtype=np.float64),
+            self.out,
+            self.out_segment,
+            self.out_finish,
+        )
+
+    @property
+    def t_s(self) -> np.ndarray:
+        """Time of each lane since its cut started, s."""
+        return self.lane_f[:, _T]
+
+
 class MillingPlant:
-    """Simulates one cut at a constant spindle speed; numpy only.
+    """Simulates one cut at a constant spindle speed: a :class:`MillingLanes` of one lane.
 
     Parameters
     ----------
@@ -550,112 +894,46 @@ class MillingPlant:
     """
 
     def __init__(self, params: MillingParams, spindle_rpm: float, profile) -> None:
-        check_range("spindle_rpm", spindle_rpm, *SPINDLE_RPM_RANGE)
-        if profile.max_depth_mm > params.tool_diameter_mm:
-            raise ValueError(
-                f"radial depth of the workpiece must be at most the tool diameter "
-                f"{params.tool_diameter_mm:g} mm, got {profile.max_depth_mm:g} mm"
-            )
+        self._lanes = MillingLanes(params, 1)
+        self._lanes.start(0, params, spindle_rpm, profile)
         self.params = params
         self.spindle_rpm = float(spindle_rpm)
         self.profile = profile
         self.length_mm = profile.length_mm
-        self._h = params.sample_time_s / params.substeps
-        self._big = _servo_matrix(_ServoKey.of(params))
-        self._lag = _lag_matrix(params.substeps, self._h, params.process_lag_s(self.spindle_rpm))
-        self._ft_per_vf = 60.0 / (self.spindle_rpm * params.n_teeth)
-        self._rev_per_s = self.spindle_rpm / 60.0
-        self._exp = params.torque_feed_exponent
-        self._power = params.force_model == "power_law"
-        if self._power:
-            self._c = KGF * params.torque_coefficient_kgfmm * params.tool_diameter_mm
-            self._l = params.depth_exponent
-        else:
-            self._c = params.torque_gain(1.0).item()
-            self._l = 1.0
-        self._edges = np.asarray(profile.edges_mm, dtype=np.float64)
-        self._edge_list, self._d0_list, self._slope_list = profile.segment_table()
-        self.reset()
+        self.finished = False
 
     def reset(self) -> None:
         """Tool at rest at the workpiece's start: no feed, no torque."""
-        self.t_s = 0.0
-        self.z = np.zeros(4)  # [Vf, dVf/dt, x, U]
-        self._buf = np.zeros(self._lag.shape[1])  # [T_0, u_0, u_1..u_M]
+        self._lanes.start(0, self.params, self.spindle_rpm, self.profile)
         self.finished = False
-        self._seg = 0
+
+    @property
+    def t_s(self) -> float:
+        """Time since the cut started, s."""
+        return float(self._lanes.lane_f[0, _T])
 
     @property
     def state(self) -> np.ndarray:
         """``[Vf (mm/s), dVf/dt (mm/s^2), position (mm), torque (N·mm)]`` now."""
-        return np.array([self.z[0], self.z[1], self.z[2], self._buf[0]])
-
-    def _depth(self, x: np.ndarray) -> tuple[np.ndarray | float, float]:
-        """Depth at the sub-step positions (a float when constant) and at the last one."""
-        e = self._edge_list
-        i = self._seg
-        if e[i] <= float(x.min()) and float(x.max()) < e[i + 1]:  # all in the current segment
-            slope = self._slope_list[i]
-            if slope == 0.0:
-                return self._d0_list[i], self._d0_list[i]
-            d = (x - e[i]) * slope + self._d0_list[i]
-            return d, float(d[-1])
-        d = self.profile(x)
-        self._seg = min(
-            max(int(np.searchsorted(self._edges, float(x[-1]), side="right")) - 1, 0), len(e) - 2
-        )
-        return d, float(d[-1])
+        lanes = self._lanes
+        return np.array([lanes.z[0, 0], lanes.z[0, 1], lanes.z[0, 2], lanes.buf[0, 0]])
 
     def step(self, command: float, noise_counts: float = 0.0) -> MillingStep:
         """Hold ``command`` (counts; clipped to [0, command_max]) for one sample and advance."""
-        prm = self.params
-        m = prm.substeps
-        z = self.z
-        z[3] = min(max(command, 0.0), prm.command_max)
-        y = self._big @ z
-        x = y[m : 2 * m]
-        p_start = float(z[2])
-        p_end = float(x[-1])
-        buf = self._buf
-        u = buf[2:]  # static torque at the M sub-step points (a view)
-        np.maximum(y[:m], 0.0, out=u)
-        u *= self._ft_per_vf
-        np.power(u, self._exp, out=u)
-        depth, depth_end = self._depth(x)
-        if self._power:
-            if isinstance(depth, float):
-                u *= self._c * depth**self._l
-            else:
-                u *= self._c * np.power(depth, self._l)
-        else:
-            u *= self._c * depth
-        torques = self._lag @ buf
-        t_end = float(torques[-1])
-        peak = float(torques.max())
-        buf[0] = t_end
-        buf[1] = buf[-1]
-        z[:3] = y[2 * m :]
-        measured = prm.sensor_gain * t_end + noise_counts
-
-        finish = None
-        if not self.finished and p_end >= self.length_mm:
-            j = int(np.argmax(x >= self.length_mm))
-            x_prev = float(x[j - 1]) if j > 0 else p_start
-            frac = (self.length_mm - x_prev) / (float(x[j]) - x_prev) if x[j] > x_prev else 1.0
-            finish = self.t_s + (j + min(max(frac, 0.0), 1.0)) * self._h
-            self.finished = True
-        dt = prm.sample_time_s
-        self.t_s += dt
-        vf = float(z[0])
+        lanes = self._lanes
+        lanes.step(np.array([command], dtype=np.float64), np.array([noise_counts]))
+        torque, peak, counts, vf, feed, mean_feed, pos, depth = lanes.out[0].tolist()
+        fin = float(lanes.out_finish[0])
+        self.finished = bool(lanes.finished[0])
         return MillingStep(
-            t_end,
+            torque,
             peak,
-            measured,
+            counts,
             vf,
-            vf * 60.0 / self.spindle_rpm,
-            (p_end - p_start) / (self._rev_per_s * dt),
-            p_end,
-            depth_end,
-            self._seg,
-            finish,
+            feed,
+            mean_feed,
+            pos,
+            depth,
+            int(lanes.out_segment[0]),
+            None if math.isnan(fin) else fin,
         )
