@@ -33,7 +33,7 @@ from machining_envs.milling.plant import (
     SPINDLE_RPM_RANGE,
     MillingLanes,
     MillingParams,
-    step_lane,
+    step_lanes,
 )
 from machining_envs.milling.scenarios import (
     MILLING_SCENARIOS,
@@ -118,118 +118,110 @@ def _clamp(x, lo, hi):
 
 
 @numba.njit(cache=True)
-def _env_lane(k, out, out_finish, lane_f, ke, tr, brk, vmax, n_teeth, w_axial, max_t, w,
-              meas, prev_action, tr_obs, rpm_obs, edges, d0, slope, nseg, cumulative, obs,
-              reward, flags, info_f):  # fmt: skip
-    """Reward, observation, episode flags and step info of lane ``k`` from the plant's
-    signals (``out``, ``out_finish``; see ``MillingLanes``).
-
-    ``w`` = ``[tracking, overtorque, overtorque_threshold, progress, breakage]``;
-    ``flags[k]`` = ``[diverged, breakage, finished, terminated, truncated]``;
-    ``info_f[k]`` gets the columns of ``_INFO_F`` but ``command``.
-    """
-    lo, hi = _TORQUE_OBS
-    o = out[k]
-    torque, peak, counts, vf, feed, mean_feed, pos, depth = (
-        o[0], o[1], o[2], o[3], o[4], o[5], o[6], o[7]
-    )  # fmt: skip
-    diverged = not (
-        np.isfinite(torque)
-        and np.isfinite(peak)
-        and np.isfinite(counts)
-        and np.isfinite(pos)
-        and np.isfinite(mean_feed)
-    )
-    if diverged:  # never seen; kept so that no NaN can reach an observation or a reward
-        torque = 0.0
-        peak = 0.0
-        counts = 0.0
-    measured = counts / ke
-    mk = meas[k]
-    for i in range(mk.size - 1, 0, -1):
-        mk[i] = mk[i - 1]
-    mk[0] = measured
-    t = lane_f[k, 8]
-    breakage = peak > brk[k]
-    finished = not np.isnan(out_finish[k])
-    terminated = diverged or breakage or finished
-    truncated = (not terminated) and t >= max_t - 1e-9
-    e = torque / tr[k]
-    over = e - w[2]
-    r = -w[0] * abs(e - 1.0) - w[1] * (over if over > 0.0 else 0.0)
-    if w[3] != 0.0 and not diverged:
-        r += w[3] * vf / vmax[k]
-    if breakage or diverged:
-        r -= w[4]
-    reward[k] = r
-    flags[k, 0] = diverged
-    flags[k, 1] = breakage
-    flags[k, 2] = finished
-    flags[k, 3] = terminated
-    flags[k, 4] = truncated
-    if diverged:
-        feed = 0.0
-        mean_feed = 0.0
-        vf = 0.0
-        pos = 0.0
-    inf = info_f[k]
-    inf[0] = t
-    inf[2] = torque
-    inf[3] = measured
-    inf[4] = counts
-    inf[5] = peak
-    inf[6] = feed
-    inf[7] = mean_feed
-    inf[8] = feed / n_teeth[k]
-    inf[9] = vf
-    inf[10] = pos
-    inf[11] = depth
-    inf[12] = w_axial[k] * cut_area_at(pos, edges[k], d0[k], slope[k], cumulative[k], nseg[k])
-    inf[13] = out_finish[k]
-    sc = tr[k]
-    ob = obs[k]
-    ob[0] = _clamp(mk[0] / sc, lo, hi)
-    ob[1] = tr_obs[k]
-    ob[2] = prev_action[k]
-    ob[3] = rpm_obs[k]
-    for i in range(1, mk.size):
-        ob[3 + i] = _clamp(mk[i] / sc, lo, hi)
-
-
-@numba.njit(cache=True)
-def _step(actions, clipped, cmap, normals, normal_i, noise_counts, big, lag, z, buf, lane_f,
-          edges, d0, slope, nseg, seg, finished, m, out, out_seg, out_finish, ke, tr, brk,
-          vmax, n_teeth, w_axial, cumulative, max_t, w, meas, prev_action, tr_obs, rpm_obs,
-          obs, reward, flags, n_clipped, info_f):  # fmt: skip
-    """One step of every lane: the action's command and noise, the plant, the env's outputs.
+def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noise, big, lag,
+          z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, out, out_seg, out_finish,
+          ke, tr, brk, vmax, n_teeth, w_axial, cumulative, max_t, w, meas, prev_action,
+          tr_obs, rpm_obs, obs, reward, flags, n_clipped, info_f):  # fmt: skip
+    """One step of every lane: the actions' commands and the sensor noise, the plant
+    (:func:`step_lanes`), then each lane's reward, observation, episode flags and info.
 
     ``cmap`` = ``[log, command_min, span, c, g, mid, half]`` of the action map
     (:class:`machining_envs.core.env.ActionMap`): the command is
     ``command_min + span expm1(c (a + 1)) / g`` on the log map, ``mid + half a`` on the
     linear one. A lane with noise takes the next normal of its block ``normals[k]``.
+    ``w`` = ``[tracking, overtorque, overtorque_threshold, progress, breakage]``;
+    ``flags[k]`` = ``[diverged, breakage, finished, terminated, truncated]``;
+    ``info_f[k]`` gets the columns of ``_INFO_F``.
     """
-    for k in range(z.shape[0]):
+    n = z.shape[0]
+    log_map = cmap[0] != 0.0
+    for k in range(n):
         a = actions[k]
-        if cmap[0] != 0.0:
+        if log_map:
             cmd = cmap[1] + cmap[2] * math.expm1(cmap[3] * (a + 1.0)) / cmap[4]
         else:
             cmd = cmap[5] + cmap[6] * a
+        commands[k] = cmd
+        info_f[k, 1] = cmd
         nc = noise_counts[k]
-        noise = 0.0
         if nc != 0.0:
             i = normal_i[k]
-            noise = nc * normals[k, i]
+            noise[k] = nc * normals[k, i]
             normal_i[k] = i + 1
+        else:
+            noise[k] = 0.0
         prev_action[k] = a
         n_clipped[k] += clipped[k]
-        step_lane(
-            k, big, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, cmd, noise,
-            out, out_seg, out_finish,
-        )  # fmt: skip
-        _env_lane(k, out, out_finish, lane_f, ke, tr, brk, vmax, n_teeth, w_axial, max_t, w,
-                  meas, prev_action, tr_obs, rpm_obs, edges, d0, slope, nseg, cumulative, obs,
-                  reward, flags, info_f)  # fmt: skip
-        info_f[k, 1] = cmd
+    step_lanes(big, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, commands,
+               noise, out, out_seg, out_finish)  # fmt: skip
+    lo, hi = _TORQUE_OBS
+    n_meas = meas.shape[1]
+    for k in range(n):
+        torque = out[k, 0]
+        peak = out[k, 1]
+        counts = out[k, 2]
+        vf = out[k, 3]
+        feed = out[k, 4]
+        mean_feed = out[k, 5]
+        pos = out[k, 6]
+        diverged = not (
+            np.isfinite(torque)
+            and np.isfinite(peak)
+            and np.isfinite(counts)
+            and np.isfinite(pos)
+            and np.isfinite(mean_feed)
+        )
+        if diverged:  # never seen; kept so that no NaN can reach an observation or a reward
+            torque = 0.0
+            peak = 0.0
+            counts = 0.0
+        measured = counts / ke
+        for i in range(n_meas - 1, 0, -1):
+            meas[k, i] = meas[k, i - 1]
+        meas[k, 0] = measured
+        t = lane_f[k, 8]
+        breakage = peak > brk[k]
+        finished_k = not np.isnan(out_finish[k])
+        terminated = diverged or breakage or finished_k
+        truncated = (not terminated) and t >= max_t - 1e-9
+        e = torque / tr[k]
+        over = e - w[2]
+        r = -w[0] * abs(e - 1.0) - w[1] * (over if over > 0.0 else 0.0)
+        if w[3] != 0.0 and not diverged:
+            r += w[3] * vf / vmax[k]
+        if breakage or diverged:
+            r -= w[4]
+        reward[k] = r
+        flags[k, 0] = diverged
+        flags[k, 1] = breakage
+        flags[k, 2] = finished_k
+        flags[k, 3] = terminated
+        flags[k, 4] = truncated
+        if diverged:
+            feed = 0.0
+            mean_feed = 0.0
+            vf = 0.0
+            pos = 0.0
+        info_f[k, 0] = t
+        info_f[k, 2] = torque
+        info_f[k, 3] = measured
+        info_f[k, 4] = counts
+        info_f[k, 5] = peak
+        info_f[k, 6] = feed
+        info_f[k, 7] = mean_feed
+        info_f[k, 8] = feed / n_teeth[k]
+        info_f[k, 9] = vf
+        info_f[k, 10] = pos
+        info_f[k, 11] = out[k, 7]
+        info_f[k, 12] = w_axial[k] * cut_area_at(pos, edges, d0, slope, cumulative, k, nseg[k])
+        info_f[k, 13] = out_finish[k]
+        sc = tr[k]
+        obs[k, 0] = _clamp(measured / sc, lo, hi)
+        obs[k, 1] = tr_obs[k]
+        obs[k, 2] = prev_action[k]
+        obs[k, 3] = rpm_obs[k]
+        for i in range(1, n_meas):
+            obs[k, 3 + i] = _clamp(meas[k, i] / sc, lo, hi)
 
 
 def _map_constants(command_map: ActionMap) -> np.ndarray:
@@ -305,6 +297,8 @@ class _MillingCore:
         self.names = np.full(n, "", dtype=object)
         self.in_action = np.zeros(n)
         self.in_clipped = np.zeros(n, dtype=np.int64)
+        self.commands = np.zeros(n)
+        self.noise = np.zeros(n)
         self._args: tuple | None = None
         self._args_version = -1
 
@@ -403,6 +397,8 @@ class _MillingCore:
                 self.normals,
                 self.normal_i,
                 self.noise_counts,
+                self.commands,
+                self.noise,
                 lanes.big,
                 lanes.lag,
                 lanes.z,

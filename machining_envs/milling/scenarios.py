@@ -18,7 +18,7 @@ import numpy as np
 from machining_envs.core.checks import check_range
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.workpieces import DepthProfile
-from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams
+from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams, bisect_right
 
 __all__ = [
     "MillingScenario",
@@ -139,13 +139,14 @@ class CutArea:
     """
 
     def __init__(self, profile: DepthProfile):
-        edges, d0, slope = profile.segment_table()
+        self.edges, self.d0, self.slope = edges, d0, slope = profile.segment_table()
         acc = [0.0]
         for i in range(len(d0)):
             w = edges[i + 1] - edges[i]
             acc.append(acc[-1] + w * (d0[i] + 0.5 * slope[i] * w))
         self.cumulative = acc
-        self._arrays = (np.array(edges), np.array(d0), np.array(slope), np.array(acc), len(d0))
+        rows = (np.array([v]) for v in (edges, d0, slope, acc))
+        self._arrays = (*rows, 0, len(d0))
 
     @property
     def total(self) -> float:
@@ -156,17 +157,18 @@ class CutArea:
 
 
 @numba.njit(cache=True)
-def cut_area_at(x, edges, d0, slope, cumulative, nseg):
-    """Area (mm²) under the profile of ``nseg`` segments (``edges[: nseg + 1]``, start
-    depths ``d0``, slopes ``slope``; ``cumulative[i]`` the area up to edge ``i``) from 0 to
-    ``x``, clipped to the workpiece. ``x`` must not be NaN."""
+def cut_area_at(x, edges, d0, slope, cumulative, k, nseg):
+    """Area (mm²) from 0 to ``x`` under the profile in row ``k`` of the arrays (``nseg``
+    segments: ``edges[k, : nseg + 1]``, start depths ``d0[k]``, slopes ``slope[k]``;
+    ``cumulative[k, i]`` the area up to edge ``i``), clipped to the workpiece. ``x`` must
+    not be NaN."""
     if x <= 0.0:
         return 0.0
-    if x >= edges[nseg]:
-        return cumulative[nseg]
-    i = np.searchsorted(edges[: nseg + 1], x, side="right") - 1
-    w = x - edges[i]
-    return cumulative[i] + w * (d0[i] + 0.5 * slope[i] * w)
+    if x >= edges[k, nseg]:
+        return cumulative[k, nseg]
+    i = bisect_right(edges, k, nseg + 1, x) - 1
+    w = x - edges[k, i]
+    return cumulative[k, i] + w * (d0[k, i] + 0.5 * slope[k, i] * w)
 
 
 def cut_area_mm2(profile: DepthProfile, x_mm: float) -> float:
