@@ -47,7 +47,7 @@ __all__ = ["EndMillingEnv", "EndMillingVectorEnv", "MillingReward"]
 
 _HISTORY = 3
 #: Standard normals drawn at a time for the sensor noise of a lane.
-_NORMAL_BLOCK = 64
+_NORMAL_BLOCK = 256
 #: Decades spanned by the command on the default logarithmic action map: the feeds that
 #: hold the torque on the test set span about two (the feed exponent m ~ 0.4 turns a 2x
 #: change of depth, Ks or reference into a ~5x change of feed), and one more keeps slow
@@ -294,6 +294,7 @@ class _MillingCore:
         self.spindle = np.zeros(n)
         self.length = np.zeros(n)
         self.volume = np.zeros(n)
+        self.depth0 = np.zeros(n)
         self.names = np.full(n, "", dtype=object)
         self.in_action = np.zeros(n)
         self.in_clipped = np.zeros(n, dtype=np.int64)
@@ -302,15 +303,14 @@ class _MillingCore:
         self._args: tuple | None = None
         self._args_version = -1
 
-    def start(self, lane: int, spec, rng: np.random.Generator) -> dict:
+    def start(self, lane: int, spec, rng: np.random.Generator) -> None:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
-        first observation goes to ``obs[lane]``; returns its reset info."""
+        first observation goes to ``obs[lane]`` (its info: :meth:`reset_info`)."""
         sc = milling_scenario(spec, rng)
         nominal = self.params
         rpm = sc.spindle_rpm(nominal)
         truth = sc.true_params(nominal)
-        lanes = self.lanes
-        lanes.start(lane, truth, rpm, sc.profile)
+        self.lanes.start(lane, truth, rpm, sc.profile)
         self.scenarios[lane] = sc
         self.truths[lane] = truth
         tr = sc.torque_ref_Nmm(nominal)
@@ -324,8 +324,6 @@ class _MillingCore:
         row[: len(cum)] = cum
         row[len(cum) :] = cum[-1]
         w = truth.axial_depth_mm
-        volume = w * area.total
-        length = sc.profile.length_mm
         self.torque_ref[lane] = tr
         self.vmax[lane] = truth.max_feed_velocity_mm_s
         self.breakage_torque[lane] = truth.breakage_torque_Nmm
@@ -340,10 +338,14 @@ class _MillingCore:
         self.n_clipped[lane] = 0
         self.normal_i[lane] = _NORMAL_BLOCK  # a new episode draws a new block
         self.spindle[lane] = rpm
-        self.length[lane] = length
-        self.volume[lane] = volume
+        self.length[lane] = sc.profile.length_mm
+        self.volume[lane] = w * area.total
+        self.depth0[lane] = sc.profile.start_depths_mm[0]
         self.names[lane] = sc.name
         self.obs[lane] = (0.0, tr_obs, -1.0, rpm / 1000.0, 0.0, 0.0, 0.0)
+
+    def reset_info(self, k: int) -> dict:
+        """The reset info of lane ``k`` (after :meth:`start`)."""
         return {
             "t_s": 0.0,
             "command": 0.0,
@@ -353,7 +355,7 @@ class _MillingCore:
             "diverged": False,
             "finished": False,
             "torque_Nmm": 0.0,
-            "torque_ref_Nmm": float(tr),
+            "torque_ref_Nmm": float(self.torque_ref[k]),
             "measured": 0.0,
             "measured_counts": 0.0,
             "peak_torque_Nmm": 0.0,
@@ -362,13 +364,45 @@ class _MillingCore:
             "feed_per_tooth_mm": 0.0,
             "feed_velocity_mm_s": 0.0,
             "position_mm": 0.0,
-            "depth_mm": float(sc.profile.start_depths_mm[0]),
+            "depth_mm": float(self.depth0[k]),
             "segment": 0,
-            "spindle_rpm": float(rpm),
+            "spindle_rpm": float(self.spindle[k]),
             "removed_volume_mm3": 0.0,
-            "workpiece_length_mm": length,
-            "workpiece_volume_mm3": volume,
-            "scenario": sc.name,
+            "workpiece_length_mm": float(self.length[k]),
+            "workpiece_volume_mm3": float(self.volume[k]),
+            "scenario": self.names[k],
+        }
+
+    def reset_info_arrays(self, lanes: np.ndarray) -> dict:
+        """The reset info of the lanes ``lanes``, as arrays (values of :meth:`reset_info`)."""
+        n = len(lanes)
+        zero = np.zeros(n)
+        no = np.zeros(n, dtype=bool)
+        return {
+            "t_s": zero,
+            "command": zero,
+            "action_clipped": no,
+            "n_action_clipped": np.zeros(n, dtype=np.int64),
+            "breakage": no,
+            "diverged": no,
+            "finished": no,
+            "torque_Nmm": zero,
+            "torque_ref_Nmm": self.torque_ref[lanes],
+            "measured": zero,
+            "measured_counts": zero,
+            "peak_torque_Nmm": zero,
+            "feed_mm_per_rev": zero,
+            "mean_feed_mm_per_rev": zero,
+            "feed_per_tooth_mm": zero,
+            "feed_velocity_mm_s": zero,
+            "position_mm": zero,
+            "depth_mm": self.depth0[lanes],
+            "segment": np.zeros(n, dtype=np.int64),
+            "spindle_rpm": self.spindle[lanes],
+            "removed_volume_mm3": zero,
+            "workpiece_length_mm": self.length[lanes],
+            "workpiece_volume_mm3": self.volume[lanes],
+            "scenario": self.names[lanes],
         }
 
     def draw_noise(self, rngs) -> None:
@@ -605,7 +639,7 @@ class EndMillingEnv(gym.Env):
 
     ## Version History
     * v0: first version. The physics now runs as a batched kernel shared with the vector
-      env (same numbers to the last bit); the sensor noise is drawn in blocks of 64 from
+      env (same numbers to the last bit); the sensor noise is drawn in blocks of 256 from
       ``np_random`` (the same normals in the same order within an episode; after an
       episode the unused rest of a block is skipped, so later episodes of an unseeded
       reset differ from the first implementation's).
@@ -679,7 +713,8 @@ class EndMillingEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         core = self._core
-        info = core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        info = core.reset_info(0)
         self.scenario = core.scenarios[0]
         self.plant = core.lanes
         self._rngs = (self.np_random,)
@@ -778,9 +813,9 @@ class EndMillingVectorEnv(LaneVectorEnv):
     def _reset_lanes(self, lanes, options):
         core = self._core
         spec = scenario_option(options, self.default_scenario)
-        infos = [core.start(i, spec, self.lane_rngs[i]) for i in lanes.tolist()]
-        part = {k: np.array([d[k] for d in infos]) for k in infos[0]}
-        return core.obs[lanes].copy(), part
+        for i in lanes.tolist():
+            core.start(i, spec, self.lane_rngs[i])
+        return core.obs[lanes], core.reset_info_arrays(lanes)
 
     def _step_lanes(self, actions):
         core = self._core

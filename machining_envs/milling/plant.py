@@ -199,40 +199,8 @@ class MillingParams:
     flutes of the 152 mm overhang. The episode terminates past it."""
 
     def __post_init__(self) -> None:
-        check_range("tool_diameter_mm", self.tool_diameter_mm, 0.0, 200.0, lo_open=True)
-        check_integer("n_teeth", self.n_teeth, 1, 50)
-        check_range("helix_angle_deg", self.helix_angle_deg, 0.0, 80.0)
-        check_range("axial_depth_mm", self.axial_depth_mm, 0.0, 500.0, lo_open=True)
-        check_range("spindle_rpm", self.spindle_rpm, *SPINDLE_RPM_RANGE)
-        if self.force_model not in FORCE_MODELS:
-            raise ValueError(f"force_model must be one of {FORCE_MODELS}, got {self.force_model!r}")
-        check_range(
-            "torque_coefficient_kgfmm", self.torque_coefficient_kgfmm, 0.0, 1e7, lo_open=True
-        )
-        check_range("depth_exponent", self.depth_exponent, 0.0, 2.0, lo_open=True)
-        check_range("feed_exponent", self.feed_exponent, 0.0, 2.0, lo_open=True)
-        check_range(
-            "tangential_coefficient_N_mm2",
-            self.tangential_coefficient_N_mm2,
-            0.0,
-            1e6,
-            lo_open=True,
-        )
-        check_range("radial_coefficient_N_mm2", self.radial_coefficient_N_mm2, 0.0, 1e6)
-        check_range("axial_coefficient_N_mm2", self.axial_coefficient_N_mm2, 0.0, 1e6)
-        if self.milling_mode not in ("up", "down"):
-            raise ValueError(f"milling_mode must be 'up' or 'down', got {self.milling_mode!r}")
-        check_range("servo_gain", self.servo_gain, 0.0, 1e6, lo_open=True)
-        check_range("servo_natural_freq_hz", self.servo_natural_freq_hz, 0.0, 1e3, lo_open=True)
-        check_range("servo_damping", self.servo_damping, 0.0, 10.0, lo_open=True)
-        check_range("process_lag_rev", self.process_lag_rev, 0.0, 100.0, lo_open=True)
-        check_range("sensor_gain", self.sensor_gain, 0.0, 1e6, lo_open=True)
-        check_range("noise_std_Nmm", self.noise_std_Nmm, 0.0, 1e6)
-        check_range("sample_time_s", self.sample_time_s, 0.0, 10.0, lo_open=True)
-        check_integer("substeps", self.substeps, 1, 10000)
-        check_range("command_max", self.command_max, 0.0, 1e9, lo_open=True)
-        check_range("torque_ref_Nmm", self.torque_ref_Nmm, 0.0, 1e8, lo_open=True)
-        check_range("breakage_torque_Nmm", self.breakage_torque_Nmm, 0.0, 1e9, lo_open=True)
+        for name in _FIELD_RULES:
+            _check_field(name, getattr(self, name))
 
     # ---- parameter sets ------------------------------------------------------------------
     @classmethod
@@ -272,8 +240,20 @@ class MillingParams:
         )
 
     def replace(self, **changes) -> MillingParams:
-        """A copy with fields changed; unknown names raise ``TypeError``."""
-        return dataclasses.replace(self, **changes)
+        """A copy with fields changed; unknown names raise ``TypeError``.
+
+        Only the changed fields are checked (the others were when ``self`` was made), so
+        that the envs can draw a cut's true parameters at every reset cheaply.
+        """
+        if type(self) is not MillingParams or not all(k in _FIELD_RULES for k in changes):
+            return dataclasses.replace(self, **changes)
+        for name in _FIELD_RULES:
+            if name in changes:
+                _check_field(name, changes[name])
+        new = object.__new__(MillingParams)
+        new.__dict__.update(self.__dict__)
+        new.__dict__.update(changes)
+        return new
 
     # ---- derived quantities (never stored) -----------------------------------------------
     @property
@@ -368,6 +348,50 @@ class MillingParams:
         """ZOH discretisation of :meth:`open_loop_tf` at ``sample_time_s``, in powers of z^-1."""
         num, den = self.open_loop_tf(spindle_rpm)
         return zoh_tf(num, den, self.sample_time_s)
+
+
+#: How each field of :class:`MillingParams` is checked, in the order of the fields:
+#: ``(lo, hi, lo_open)`` for a number, ``("int", lo, hi)`` for an integer,
+#: ``("choice", allowed, how the message names them)`` for a choice.
+_FIELD_RULES: dict[str, tuple] = {
+    "tool_diameter_mm": (0.0, 200.0, True),
+    "n_teeth": ("int", 1, 50),
+    "helix_angle_deg": (0.0, 80.0, False),
+    "axial_depth_mm": (0.0, 500.0, True),
+    "spindle_rpm": (*SPINDLE_RPM_RANGE, False),
+    "force_model": ("choice", FORCE_MODELS, f"one of {FORCE_MODELS}"),
+    "torque_coefficient_kgfmm": (0.0, 1e7, True),
+    "depth_exponent": (0.0, 2.0, True),
+    "feed_exponent": (0.0, 2.0, True),
+    "tangential_coefficient_N_mm2": (0.0, 1e6, True),
+    "radial_coefficient_N_mm2": (0.0, 1e6, False),
+    "axial_coefficient_N_mm2": (0.0, 1e6, False),
+    "milling_mode": ("choice", ("up", "down"), "'up' or 'down'"),
+    "servo_gain": (0.0, 1e6, True),
+    "servo_natural_freq_hz": (0.0, 1e3, True),
+    "servo_damping": (0.0, 10.0, True),
+    "process_lag_rev": (0.0, 100.0, True),
+    "sensor_gain": (0.0, 1e6, True),
+    "noise_std_Nmm": (0.0, 1e6, False),
+    "sample_time_s": (0.0, 10.0, True),
+    "substeps": ("int", 1, 10000),
+    "command_max": (0.0, 1e9, True),
+    "torque_ref_Nmm": (0.0, 1e8, True),
+    "breakage_torque_Nmm": (0.0, 1e9, True),
+}
+assert tuple(_FIELD_RULES) == tuple(f.name for f in dataclasses.fields(MillingParams))
+
+
+def _check_field(name: str, value) -> None:
+    """``ValueError`` (naming the field) unless ``value`` is allowed for field ``name``."""
+    rule = _FIELD_RULES[name]
+    if rule[0] == "int":
+        check_integer(name, value, rule[1], rule[2])
+    elif rule[0] == "choice":
+        if value not in rule[1]:
+            raise ValueError(f"{name} must be {rule[2]}, got {value!r}")
+    else:
+        check_range(name, value, rule[0], rule[1], lo_open=rule[2])
 
 
 # ---- average cutting-force model (seed 002) ----------------------------------------------
@@ -562,6 +586,8 @@ LANE_CONSTANTS = (
     "sample_time_s",  # Ts
     "spindle_rpm",  # N
     "rev_per_s",  # N / 60
+    "plateau_scale",  # c d^l of the plateau the tool was last in (d constant)
+    "plateau",  # index of that plateau (-1: none yet)
 )
 _T = LANE_CONSTANTS.index("t_s")
 
@@ -590,9 +616,9 @@ def _fma(typingctx, a, b, c):
 
 
 @numba.njit(cache=True)
-def matvec(a, i, x, k, out, off):
-    """``out[off : off + n] = a[i] @ x[k]`` (``a[i]`` of shape ``(n, m)``), with numpy's
-    rounding.
+def matvec(a, i, n, m, x, k, out, off):
+    """``out[off : off + n] = A @ x[k]`` for the ``(n, m)`` matrix ``A`` stored row after
+    row in ``a[i]``, with numpy's rounding.
 
     numpy hands this product to OpenBLAS's ``dgemv`` (transposed kernel), whose x86-64
     kernels (Haswell and later) sum each row in a fixed order: rows in groups of four
@@ -604,45 +630,55 @@ def matvec(a, i, x, k, out, off):
     random matrices). Shapes outside that scheme (rows not a multiple of four long, a
     single row, 2048 columns or more) go to ``np.dot``.
     """
-    n = a.shape[1]
-    m = a.shape[2]
     if m % 4 != 0 or n < 2 or m >= 2048:
-        res = np.dot(a[i], x[k])
+        res = np.dot(a[i, : n * m].reshape(n, m), x[k, :m])
         for r in range(n):
             out[off + r] = res[r]
         return
+    if m == 4:  # one group of four columns: every kind of row gives the same sum
+        x0 = x[k, 0]
+        x1 = x[k, 1]
+        x2 = x[k, 2]
+        x3 = x[k, 3]
+        for r in range(n):
+            b = 4 * r
+            out[off + r] = 0.0 + ((a[i, b] * x0 + a[i, b + 2] * x2) + (a[i, b + 1] * x1 + a[i, b + 3] * x3))
+        return
     nb = n & ~3
     for r in range(nb):
+        b = r * m
         s0 = 0.0
         s1 = 0.0
         s2 = 0.0
         s3 = 0.0
         for q in range(0, m, 4):
-            s0 = _fma(a[i, r, q], x[k, q], s0)
-            s1 = _fma(a[i, r, q + 1], x[k, q + 1], s1)
-            s2 = _fma(a[i, r, q + 2], x[k, q + 2], s2)
-            s3 = _fma(a[i, r, q + 3], x[k, q + 3], s3)
+            s0 = _fma(a[i, b + q], x[k, q], s0)
+            s1 = _fma(a[i, b + q + 1], x[k, q + 1], s1)
+            s2 = _fma(a[i, b + q + 2], x[k, q + 2], s2)
+            s3 = _fma(a[i, b + q + 3], x[k, q + 3], s3)
         out[off + r] = 0.0 + ((s0 + s2) + (s1 + s3))
     r = nb
     if (n - nb) & 2:
         for r in range(nb, nb + 2):
+            b = r * m
             s0 = 0.0
             s1 = 0.0
             for q in range(0, m, 2):
-                s0 = s0 + a[i, r, q] * x[k, q]
-                s1 = s1 + a[i, r, q + 1] * x[k, q + 1]
+                s0 = s0 + a[i, b + q] * x[k, q]
+                s1 = s1 + a[i, b + q + 1] * x[k, q + 1]
             out[off + r] = 0.0 + (s0 + s1)
         r = nb + 2
     if (n - nb) & 1:
+        b = r * m
         s0 = 0.0
         s1 = 0.0
         s2 = 0.0
         s3 = 0.0
         for q in range(0, m, 4):
-            s0 = s0 + a[i, r, q] * x[k, q]
-            s1 = s1 + a[i, r, q + 1] * x[k, q + 1]
-            s2 = s2 + a[i, r, q + 2] * x[k, q + 2]
-            s3 = s3 + a[i, r, q + 3] * x[k, q + 3]
+            s0 = s0 + a[i, b + q] * x[k, q]
+            s1 = s1 + a[i, b + q + 1] * x[k, q + 1]
+            s2 = s2 + a[i, b + q + 2] * x[k, q + 2]
+            s3 = s3 + a[i, b + q + 3] * x[k, q + 3]
         out[off + r] = 0.0 + ((s0 + s2) + (s1 + s3))
 
 
@@ -706,7 +742,7 @@ def step_lanes(
         if cmax < u:
             u = cmax
         z[k, 3] = u
-        matvec(big, 0, z, k, work, 0)
+        matvec(big, 0, tq, 4, z, k, work, 0)
         p_start = z[k, 2]
         p_end = work[2 * m - 1]
         # buf[k] = [T_0, u_0, u_1 .. u_M]: the static torque at this sample's sub-steps
@@ -734,7 +770,12 @@ def step_lanes(
             sl = slope[k, i]
             if sl == 0.0:
                 depth_end = d0[k, i]
-                scale = c * depth_end**dexp if power else c * depth_end
+                if lane_f[k, 14] == i:
+                    scale = lane_f[k, 13]
+                else:
+                    scale = c * depth_end**dexp if power else c * depth_end
+                    lane_f[k, 13] = scale
+                    lane_f[k, 14] = i
                 for j in range(m):
                     buf[k, 2 + j] *= scale
             else:
@@ -750,7 +791,7 @@ def step_lanes(
                 buf[k, 2 + j] *= c * depth_end**dexp if power else c * depth_end
             i = bisect_right(edges, k, n_s + 1, p_end) - 1
             seg[k] = min(max(i, 0), n_s - 1)
-        matvec(lag, k, buf, k, work, tq)
+        matvec(lag, k, m, m + 2, buf, k, work, tq)
         t_end = work[tq + m - 1]
         peak = work[tq]
         for j in range(1, m):
@@ -827,8 +868,8 @@ class MillingLanes:
         self._key = _ServoKey.of(params)
         m = params.substeps
         self.m = m
-        self.big = _servo_matrix(self._key)[None]  # (1, 2M + 3, 4)
-        self.lag = np.zeros((self.n, m, m + 2))
+        self.big = _servo_matrix(self._key).reshape(1, -1)  # one (2M + 3, 4) matrix
+        self.lag = np.zeros((self.n, m * (m + 2)))  # each lane's (M, M + 2) matrix
         self.z = np.zeros((self.n, 4))
         self.buf = np.zeros((self.n, m + 2))
         self.lane_f = np.zeros((self.n, len(LANE_CONSTANTS)))
@@ -874,7 +915,7 @@ class MillingLanes:
             if len(self._lag_cache) >= 4096:
                 self._lag_cache.clear()
             lag = self._lag_cache[(h, lag_s)] = _lag_matrix(m, h, lag_s)
-        self.lag[lane] = lag
+        self.lag[lane] = lag.ravel()
         self.z[lane] = 0.0
         self.buf[lane] = 0.0
         edges, d0, slope = profile.segment_table()
@@ -918,6 +959,8 @@ class MillingLanes:
             params.sample_time_s,
             rpm,
             rpm / 60.0,
+            0.0,
+            -1.0,
         )
         self.finished[lane] = False
         self.lane_params[lane] = params

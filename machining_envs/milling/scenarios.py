@@ -145,14 +145,16 @@ class CutArea:
             w = edges[i + 1] - edges[i]
             acc.append(acc[-1] + w * (d0[i] + 0.5 * slope[i] * w))
         self.cumulative = acc
-        rows = (np.array([v]) for v in (edges, d0, slope, acc))
-        self._arrays = (*rows, 0, len(d0))
+        self._arrays = None
 
     @property
     def total(self) -> float:
         return self.cumulative[-1]
 
     def __call__(self, x_mm: float) -> float:
+        if self._arrays is None:
+            rows = (np.array([v]) for v in (self.edges, self.d0, self.slope, self.cumulative))
+            self._arrays = (*rows, 0, len(self.d0))
         return cut_area_at(float(x_mm), *self._arrays)
 
 
