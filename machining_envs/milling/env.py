@@ -62,7 +62,7 @@ _LOG_FIELDS = {
     "feed": "feed_mm_per_rev",
     "depth": "depth_mm",
 }
-#: The numeric step info computed by the compiled step, one column each (``_MillingCore.info_f``).
+#: The numeric step info computed by the compiled step, one row each (``_MillingCore.info_f``).
 _INFO_F = (
     "t_s",
     "command",
@@ -119,7 +119,7 @@ def _clamp(x, lo, hi):
 
 @numba.njit(cache=True)
 def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noise, big, lag,
-          z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, out, out_seg, out_finish,
+          z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, out, out_seg, out_finish, work,
           ke, tr, brk, vmax, n_teeth, w_axial, cumulative, max_t, w, meas, prev_action,
           tr_obs, rpm_obs, obs, reward, flags, n_clipped, info_f):  # fmt: skip
     """One step of every lane: the actions' commands and the sensor noise, the plant
@@ -131,7 +131,7 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
     linear one. A lane with noise takes the next normal of its block ``normals[k]``.
     ``w`` = ``[tracking, overtorque, overtorque_threshold, progress, breakage]``;
     ``flags[k]`` = ``[diverged, breakage, finished, terminated, truncated]``;
-    ``info_f[k]`` gets the columns of ``_INFO_F``.
+    ``info_f[:, k]`` gets the signals of ``_INFO_F``.
     """
     n = z.shape[0]
     log_map = cmap[0] != 0.0
@@ -142,7 +142,7 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
         else:
             cmd = cmap[5] + cmap[6] * a
         commands[k] = cmd
-        info_f[k, 1] = cmd
+        info_f[1, k] = cmd
         nc = noise_counts[k]
         if nc != 0.0:
             i = normal_i[k]
@@ -153,7 +153,7 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
         prev_action[k] = a
         n_clipped[k] += clipped[k]
     step_lanes(big, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, commands,
-               noise, out, out_seg, out_finish)  # fmt: skip
+               noise, out, out_seg, out_finish, work)  # fmt: skip
     lo, hi = _TORQUE_OBS
     n_meas = meas.shape[1]
     for k in range(n):
@@ -202,19 +202,19 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
             mean_feed = 0.0
             vf = 0.0
             pos = 0.0
-        info_f[k, 0] = t
-        info_f[k, 2] = torque
-        info_f[k, 3] = measured
-        info_f[k, 4] = counts
-        info_f[k, 5] = peak
-        info_f[k, 6] = feed
-        info_f[k, 7] = mean_feed
-        info_f[k, 8] = feed / n_teeth[k]
-        info_f[k, 9] = vf
-        info_f[k, 10] = pos
-        info_f[k, 11] = out[k, 7]
-        info_f[k, 12] = w_axial[k] * cut_area_at(pos, edges, d0, slope, cumulative, k, nseg[k])
-        info_f[k, 13] = out_finish[k]
+        info_f[0, k] = t
+        info_f[2, k] = torque
+        info_f[3, k] = measured
+        info_f[4, k] = counts
+        info_f[5, k] = peak
+        info_f[6, k] = feed
+        info_f[7, k] = mean_feed
+        info_f[8, k] = feed / n_teeth[k]
+        info_f[9, k] = vf
+        info_f[10, k] = pos
+        info_f[11, k] = out[k, 7]
+        info_f[12, k] = w_axial[k] * cut_area_at(pos, edges, d0, slope, cumulative, k, nseg[k])
+        info_f[13, k] = out_finish[k]
         sc = tr[k]
         obs[k, 0] = _clamp(measured / sc, lo, hi)
         obs[k, 1] = tr_obs[k]
@@ -288,7 +288,7 @@ class _MillingCore:
         self.obs = np.zeros((n, 4 + _HISTORY), dtype=np.float32)
         self.reward = np.zeros(n)
         self.flags = np.zeros((n, 5), dtype=np.bool_)
-        self.info_f = np.zeros((n, len(_INFO_F)))
+        self.info_f = np.zeros((len(_INFO_F), n))  # one row per signal
         self.normals = np.zeros((n, _NORMAL_BLOCK))
         self.normal_i = np.full(n, _NORMAL_BLOCK, dtype=np.int64)
         self.spindle = np.zeros(n)
@@ -412,12 +412,12 @@ class _MillingCore:
         nothing."""
         if self.n == 1:  # the single env: the same, without array bookkeeping
             if self.normal_i[0] >= _NORMAL_BLOCK and self.noise_counts[0] != 0.0:
-                self.normals[0] = rngs[0].standard_normal(_NORMAL_BLOCK)
+                rngs[0].standard_normal(out=self.normals[0])
                 self.normal_i[0] = 0
             return
         need = np.flatnonzero((self.normal_i >= _NORMAL_BLOCK) & (self.noise_counts != 0.0))
         for k in need.tolist():
-            self.normals[k] = rngs[k].standard_normal(_NORMAL_BLOCK)
+            rngs[k].standard_normal(out=self.normals[k])
         self.normal_i[need] = 0
 
     def _kernel_args(self) -> tuple:
@@ -448,6 +448,7 @@ class _MillingCore:
                 lanes.out,
                 lanes.out_segment,
                 lanes.out_finish,
+                lanes.work,
                 self._ke,
                 self.torque_ref,
                 self.breakage_torque,
@@ -479,7 +480,7 @@ class _MillingCore:
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""
         (t, command, torque, measured, counts, peak, feed, mean_feed, feed_tooth, vf, pos,
-         depth, removed, finish) = self.info_f[k].tolist()  # fmt: skip
+         depth, removed, finish) = self.info_f[:, k].tolist()  # fmt: skip
         diverged, breakage, finished = self.flags[k, :3].tolist()
         info = {
             "t_s": t,
@@ -514,7 +515,7 @@ class _MillingCore:
     def info_arrays(self) -> dict:
         """The step info of every lane, as arrays (``machining_time_s`` with its mask)."""
         f = self.flags
-        c = self.info_f.T.copy()
+        c = self.info_f.copy()
         info = {
             "t_s": c[0],
             "command": c[1],

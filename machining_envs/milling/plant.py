@@ -616,70 +616,77 @@ def _fma(typingctx, a, b, c):
 
 
 @numba.njit(cache=True)
-def matvec(a, i, n, m, x, k, out, off):
-    """``out[off : off + n] = A @ x[k]`` for the ``(n, m)`` matrix ``A`` stored row after
-    row in ``a[i]``, with numpy's rounding.
+def matvec(a, n, m, x, out):
+    """``out[k, :n] = A_k @ x[k, :m]`` for every row ``k`` of ``x``, with numpy's rounding.
 
-    numpy hands this product to OpenBLAS's ``dgemv`` (transposed kernel), whose x86-64
+    ``A_k`` is the ``(n, m)`` matrix stored row after row in ``a[k]``, or in ``a[0]`` for
+    every ``k`` when ``a`` holds one matrix.
+
+    numpy hands such a product to OpenBLAS's ``dgemv`` (transposed kernel), whose x86-64
     kernels (Haswell and later) sum each row in a fixed order: rows in groups of four
     accumulate four interleaved partial sums with fused multiply-adds, the rows left over
     two or one interleaved sums of rounded products; the partial sums are then added
-    pairwise, and the result is added to a zeroed output. Done here in that order, inside
-    the compiled step, the product costs a few nanoseconds instead of a library call and
-    is the number numpy gives to the last bit (``tests/milling/test_plant.py`` checks it on
-    random matrices). Shapes outside that scheme (rows not a multiple of four long, a
-    single row, 2048 columns or more) go to ``np.dot``.
+    pairwise, and the result is added to a zeroed output. Done here in that order, for
+    all the lanes in one call, the products cost a few nanoseconds each instead of a
+    library call, and are the numbers numpy gives to the last bit
+    (``tests/milling/test_plant.py`` checks them on random matrices). Shapes outside that
+    scheme (rows not a multiple of four long, a single row, 2048 columns or more) go to
+    ``np.dot``.
     """
+    shared = a.shape[0] == 1
     if m % 4 != 0 or n < 2 or m >= 2048:
-        res = np.dot(a[i, : n * m].reshape(n, m), x[k, :m])
-        for r in range(n):
-            out[off + r] = res[r]
-        return
-    if m == 4:  # one group of four columns: every kind of row gives the same sum
-        x0 = x[k, 0]
-        x1 = x[k, 1]
-        x2 = x[k, 2]
-        x3 = x[k, 3]
-        for r in range(n):
-            b = 4 * r
-            out[off + r] = 0.0 + ((a[i, b] * x0 + a[i, b + 2] * x2) + (a[i, b + 1] * x1 + a[i, b + 3] * x3))
+        for k in range(x.shape[0]):
+            i = 0 if shared else k
+            out[k, :n] = np.dot(a[i, : n * m].reshape(n, m), x[k, :m])
         return
     nb = n & ~3
-    for r in range(nb):
-        b = r * m
-        s0 = 0.0
-        s1 = 0.0
-        s2 = 0.0
-        s3 = 0.0
-        for q in range(0, m, 4):
-            s0 = _fma(a[i, b + q], x[k, q], s0)
-            s1 = _fma(a[i, b + q + 1], x[k, q + 1], s1)
-            s2 = _fma(a[i, b + q + 2], x[k, q + 2], s2)
-            s3 = _fma(a[i, b + q + 3], x[k, q + 3], s3)
-        out[off + r] = 0.0 + ((s0 + s2) + (s1 + s3))
-    r = nb
-    if (n - nb) & 2:
-        for r in range(nb, nb + 2):
+    for k in range(x.shape[0]):
+        i = 0 if shared else k
+        if m == 4:  # one group of four columns: every kind of row gives the same sum
+            x0 = x[k, 0]
+            x1 = x[k, 1]
+            x2 = x[k, 2]
+            x3 = x[k, 3]
+            for r in range(n):
+                b = 4 * r
+                p02 = a[i, b] * x0 + a[i, b + 2] * x2
+                out[k, r] = 0.0 + (p02 + (a[i, b + 1] * x1 + a[i, b + 3] * x3))
+            continue
+        for r in range(nb):
             b = r * m
             s0 = 0.0
             s1 = 0.0
-            for q in range(0, m, 2):
+            s2 = 0.0
+            s3 = 0.0
+            for q in range(0, m, 4):
+                s0 = _fma(a[i, b + q], x[k, q], s0)
+                s1 = _fma(a[i, b + q + 1], x[k, q + 1], s1)
+                s2 = _fma(a[i, b + q + 2], x[k, q + 2], s2)
+                s3 = _fma(a[i, b + q + 3], x[k, q + 3], s3)
+            out[k, r] = 0.0 + ((s0 + s2) + (s1 + s3))
+        r = nb
+        if (n - nb) & 2:
+            for r in range(nb, nb + 2):
+                b = r * m
+                s0 = 0.0
+                s1 = 0.0
+                for q in range(0, m, 2):
+                    s0 = s0 + a[i, b + q] * x[k, q]
+                    s1 = s1 + a[i, b + q + 1] * x[k, q + 1]
+                out[k, r] = 0.0 + (s0 + s1)
+            r = nb + 2
+        if (n - nb) & 1:
+            b = r * m
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            s3 = 0.0
+            for q in range(0, m, 4):
                 s0 = s0 + a[i, b + q] * x[k, q]
                 s1 = s1 + a[i, b + q + 1] * x[k, q + 1]
-            out[off + r] = 0.0 + (s0 + s1)
-        r = nb + 2
-    if (n - nb) & 1:
-        b = r * m
-        s0 = 0.0
-        s1 = 0.0
-        s2 = 0.0
-        s3 = 0.0
-        for q in range(0, m, 4):
-            s0 = s0 + a[i, b + q] * x[k, q]
-            s1 = s1 + a[i, b + q + 1] * x[k, q + 1]
-            s2 = s2 + a[i, b + q + 2] * x[k, q + 2]
-            s3 = s3 + a[i, b + q + 3] * x[k, q + 3]
-        out[off + r] = 0.0 + ((s0 + s2) + (s1 + s3))
+                s2 = s2 + a[i, b + q + 2] * x[k, q + 2]
+                s3 = s3 + a[i, b + q + 3] * x[k, q + 3]
+            out[k, r] = 0.0 + ((s0 + s2) + (s1 + s3))
 
 
 @numba.njit(cache=True)
@@ -711,7 +718,7 @@ def _depth_at(x, edges, d0, slope, k, nseg):
 @numba.njit(cache=True)
 def step_lanes(
     big, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, commands, noise,
-    out, out_seg, out_finish,
+    out, out_seg, out_finish, work,
 ):  # fmt: skip
     """Advance every lane by one sample (see :class:`MillingLanes` for the layout).
 
@@ -721,33 +728,31 @@ def step_lanes(
     lane's ``lag[k]``); the sensor reads ``Ke T + noise[k]``. ``out[k]`` gets the signals
     of ``LANE_SIGNALS``, ``out_seg[k]`` the workpiece segment and ``out_finish[k]`` the time
     the tool reached the workpiece's end in this sample (NaN if it did not). The
-    arithmetic of a lane is that of one cut, whatever the other lanes do.
+    arithmetic of a lane is that of one cut, whatever the other lanes do. ``work`` is
+    scratch space, ``(n, 3 M + 3)``: ``work[k, :2M + 3]`` gets ``big[0] @ z[k]`` (feed
+    velocity at the M sub-steps, position at the M sub-steps, next ``[Vf, dVf/dt, x]``),
+    ``work[k, 2M + 3:]`` the M lagged torques.
     """
-    # work[:2M + 3] = big[0] @ z[k]: feed velocity at the M sub-steps, position at the M
-    # sub-steps, next [Vf, dVf/dt, x]; work[2M + 3:] the M lagged torques.
-    work = np.empty(3 * m + 3)
+    n_lanes = z.shape[0]
     tq = 2 * m + 3
-    for k in range(z.shape[0]):
-        cmax = lane_f[k, 0]
+    for k in range(n_lanes):
+        u = commands[k]
+        if 0.0 > u:
+            u = 0.0
+        if lane_f[k, 0] < u:
+            u = lane_f[k, 0]
+        z[k, 3] = u
+    matvec(big, tq, 4, z, work)
+    for k in range(n_lanes):
         ftpv = lane_f[k, 1]
         fexp = lane_f[k, 2]
         c = lane_f[k, 3]
         dexp = lane_f[k, 4]
         power = lane_f[k, 5] != 0.0
-        length = lane_f[k, 7]
-        t = lane_f[k, 8]
-        u = commands[k]
-        if 0.0 > u:
-            u = 0.0
-        if cmax < u:
-            u = cmax
-        z[k, 3] = u
-        matvec(big, 0, tq, 4, z, k, work, 0)
-        p_start = z[k, 2]
-        p_end = work[2 * m - 1]
+        p_end = work[k, 2 * m - 1]
         # buf[k] = [T_0, u_0, u_1 .. u_M]: the static torque at this sample's sub-steps
         for j in range(m):
-            v = work[j]
+            v = work[k, j]
             if v <= 0.0:  # no reverse feed; pow(0, e) = 0 (NaN passes, caught by the env)
                 buf[k, 2 + j] = 0.0
             elif fexp == 1.0:
@@ -755,10 +760,10 @@ def step_lanes(
             else:
                 buf[k, 2 + j] = (v * ftpv) ** fexp
         i = seg[k]
-        lo = work[m]
-        hi = work[m]
+        lo = work[k, m]
+        hi = lo
         for j in range(m, 2 * m):
-            x = work[j]
+            x = work[k, j]
             if x < lo:
                 lo = x
             elif x > hi:
@@ -781,29 +786,34 @@ def step_lanes(
             else:
                 depth_end = 0.0
                 for j in range(m):
-                    depth_end = (work[m + j] - edges[k, i]) * sl + d0[k, i]
+                    depth_end = (work[k, m + j] - edges[k, i]) * sl + d0[k, i]
                     buf[k, 2 + j] *= c * depth_end**dexp if power else c * depth_end
         else:
             n_s = nseg[k]
             depth_end = 0.0
             for j in range(m):
-                depth_end = _depth_at(work[m + j], edges, d0, slope, k, n_s)
+                depth_end = _depth_at(work[k, m + j], edges, d0, slope, k, n_s)
                 buf[k, 2 + j] *= c * depth_end**dexp if power else c * depth_end
             i = bisect_right(edges, k, n_s + 1, p_end) - 1
             seg[k] = min(max(i, 0), n_s - 1)
-        matvec(lag, k, m, m + 2, buf, k, work, tq)
-        t_end = work[tq + m - 1]
-        peak = work[tq]
+        out[k, 7] = depth_end
+    lagged = work[:, tq:]
+    matvec(lag, m, m + 2, buf, lagged)
+    for k in range(n_lanes):
+        t_end = lagged[k, m - 1]
+        peak = lagged[k, 0]
         for j in range(1, m):
-            v = work[tq + j]
+            v = lagged[k, j]
             if v > peak or v != v:  # NaN propagates, as in max()
                 peak = v
         buf[k, 0] = t_end
         buf[k, 1] = buf[k, m + 1]
-        vf = work[2 * m]
+        p_start = z[k, 2]
+        p_end = work[k, 2 * m - 1]
+        vf = work[k, 2 * m]
         z[k, 0] = vf
-        z[k, 1] = work[2 * m + 1]
-        z[k, 2] = work[2 * m + 2]
+        z[k, 1] = work[k, 2 * m + 1]
+        z[k, 2] = work[k, 2 * m + 2]
         out[k, 0] = t_end
         out[k, 1] = peak
         out[k, 2] = lane_f[k, 6] * t_end + noise[k]
@@ -811,15 +821,17 @@ def step_lanes(
         out[k, 4] = vf * 60.0 / lane_f[k, 11]
         out[k, 5] = (p_end - p_start) / (lane_f[k, 12] * lane_f[k, 10])
         out[k, 6] = p_end
-        out[k, 7] = depth_end
         out_seg[k] = seg[k]
         out_finish[k] = np.nan
+        t = lane_f[k, 8]
+        length = lane_f[k, 7]
         if not finished[k] and p_end >= length:
             j = 0
-            while not work[m + j] >= length:
+            while not work[k, m + j] >= length:
                 j += 1
-            x_prev = work[m + j - 1] if j > 0 else p_start
-            frac = (length - x_prev) / (work[m + j] - x_prev) if work[m + j] > x_prev else 1.0
+            x_prev = work[k, m + j - 1] if j > 0 else p_start
+            x_j = work[k, m + j]
+            frac = (length - x_prev) / (x_j - x_prev) if x_j > x_prev else 1.0
             if 0.0 > frac:
                 frac = 0.0
             if 1.0 < frac:
@@ -887,6 +899,8 @@ class MillingLanes:
         self.out = np.zeros((self.n, len(LANE_SIGNALS)))
         self.out_segment = np.zeros(self.n, dtype=np.int64)
         self.out_finish = np.full(self.n, np.nan)
+        #: Scratch space of the kernel (see :func:`step_lanes`).
+        self.work = np.zeros((self.n, 3 * m + 3))
         self._lag_cache: dict[tuple[float, float], np.ndarray] = {}
 
     def start(self, lane: int, params: MillingParams, spindle_rpm: float, profile) -> None:
@@ -988,6 +1002,7 @@ class MillingLanes:
             self.out,
             self.out_segment,
             self.out_finish,
+            self.work,
         )
 
     @property
