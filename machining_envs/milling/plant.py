@@ -631,13 +631,16 @@ def matvec(a, n, m, x, out):
     library call, and are the numbers numpy gives to the last bit
     (``tests/milling/test_plant.py`` checks them on random matrices). Shapes outside that
     scheme (rows not a multiple of four long, a single row, 2048 columns or more) go to
-    ``np.dot``.
+    ``np.dot``, as numpy's own product would.
     """
     shared = a.shape[0] == 1
     if m % 4 != 0 or n < 2 or m >= 2048:
         for k in range(x.shape[0]):
             i = 0 if shared else k
-            out[k, :n] = np.dot(a[i, : n * m].reshape(n, m), x[k, :m])
+            if n == 1:  # numpy takes a one-row product as a dot product
+                out[k, 0] = np.dot(a[i, :m], x[k, :m])
+            else:
+                out[k, :n] = np.dot(a[i, : n * m].reshape(n, m), x[k, :m])
         return
     nb = n & ~3
     for k in range(x.shape[0]):

@@ -9,9 +9,11 @@ from scipy.integrate import quad, solve_ivp
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.milling.plant import (
     KGF,
+    MillingLanes,
     MillingParams,
     MillingPlant,
     immersion_angles,
+    matvec,
     mean_forces,
     mean_torque_average_force,
 )
@@ -202,3 +204,83 @@ def test_bad_parameters_raise_naming_the_field():
         MillingPlant(MillingParams(tool_diameter_mm=4.0), 400.0, DepthProfile.steps((3.0, 5.0)))
     with pytest.raises(ValueError, match="radial_depth_mm"):
         immersion_angles(13.0, 6.0)
+
+
+def _random_matrix(rng, shape):
+    """Entries over sixteen decades, both signs, with zeros and negative zeros."""
+    v = rng.standard_normal(shape) * 10.0 ** rng.uniform(-8, 8, size=shape)
+    u = rng.random(shape)
+    v[u < 0.05] = 0.0
+    v[(u >= 0.05) & (u < 0.08)] = -0.0
+    return v
+
+
+@pytest.mark.parametrize("substeps", [1, 2, 3, 6, 10, 14, 30])
+def test_matvec_rounds_as_numpy_does(substeps):
+    """The kernel's matrix-vector products equal numpy's to the last bit, for the servo's
+    (2M + 3, 4) and the lag's (M, M + 2) shapes (those numpy's order does not cover go to
+    np.dot), one matrix for all rows or one per row, with inf and NaN too."""
+    rng = np.random.default_rng(substeps)
+    for n, m in ((2 * substeps + 3, 4), (substeps, substeps + 2)):
+        for shared in (True, False):
+            rows = 50
+            a = _random_matrix(rng, (1 if shared else rows, n * m))
+            x = _random_matrix(rng, (rows, m))
+            x[7, rng.integers(m)] = np.inf
+            a[-1, rng.integers(n * m)] = np.nan
+            out = np.full((rows, n), 7.0)
+            matvec(a, n, m, x, out)
+            for k in range(rows):
+                with np.errstate(invalid="ignore"):
+                    expected = a[0 if shared else k].reshape(n, m) @ x[k]
+                assert out[k].tobytes() == expected.tobytes(), (n, m, k)
+
+
+def test_a_lane_of_a_batch_is_the_one_lane_plant():
+    """MillingPlant (one lane) and the lanes of one MillingLanes with different true
+    parameters, spindle speeds and workpieces give the same signals to the last bit."""
+    rng = np.random.default_rng(3)
+    nominal = MillingParams()
+    cuts = [
+        (nominal, 400.0, PROFILE),
+        (nominal.replace(force_model="average_force"), 520.0, DepthProfile.steps((2.0, 0.5), 3.0)),
+        (nominal.replace(feed_exponent=0.5, torque_coefficient_kgfmm=90.0), 333.0, PROFILE),
+        (nominal, 610.0, DepthProfile.taper(0.5, 3.0, 4.0)),
+    ]
+    lanes = MillingLanes(nominal, len(cuts))
+    plants = []
+    for k, (p, rpm, prof) in enumerate(cuts):
+        lanes.start(k, p, rpm, prof)
+        plants.append(MillingPlant(p, rpm, prof))
+    for _ in range(150):
+        u = rng.uniform(-5.0, 160.0, size=len(cuts))
+        noise = rng.standard_normal(len(cuts))
+        lanes.step(u, noise)
+        for k, plant in enumerate(plants):
+            s = plant.step(float(u[k]), float(noise[k]))
+            row = (s.torque_Nmm, s.peak_torque_Nmm, s.measured_counts, s.feed_velocity_mm_s,
+                   s.feed_mm_per_rev, s.mean_feed_mm_per_rev, s.position_mm, s.depth_mm)  # fmt: skip
+            assert np.array(row).tobytes() == lanes.out[k].tobytes()
+            assert s.segment == lanes.out_segment[k]
+            fin = lanes.out_finish[k]
+            assert (s.finish_time_s is None) == np.isnan(fin)
+            assert s.finish_time_s is None or s.finish_time_s == fin
+    assert np.any(lanes.finished) and not np.all(lanes.finished)
+
+
+def test_lanes_refuse_another_servo():
+    lanes = MillingLanes(MillingParams(), 2)
+    with pytest.raises(ValueError, match="servo"):
+        lanes.start(1, MillingParams(servo_gain=0.025), 400.0, PROFILE)
+
+
+def test_replace_checks_the_changed_fields():
+    p = MillingParams()
+    with pytest.raises(ValueError, match="feed_exponent"):
+        p.replace(feed_exponent=2.5)
+    with pytest.raises(ValueError, match="force_model"):
+        p.replace(force_model="linear")
+    q = p.replace(feed_exponent=0.5, noise_std_Nmm=1.0)
+    assert q == MillingParams(feed_exponent=0.5, noise_std_Nmm=1.0)
+    assert hash(q) == hash(MillingParams(feed_exponent=0.5, noise_std_Nmm=1.0))
+    assert p.feed_exponent == 0.3999  # the original is unchanged
