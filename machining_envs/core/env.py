@@ -134,9 +134,6 @@ def render_signals(
     ``panels`` is a list of ``(y label, [(legend, values, style), ...])``.
     """
     try:
-        import matplotlib
-
-        matplotlib.use("Agg", force=False)
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
     except ImportError as exc:  # pragma: no cover - matplotlib is a dependency

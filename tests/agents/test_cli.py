@@ -86,3 +86,26 @@ def test_cli_evaluates_a_model_trained_elsewhere(tmp_path, capsys):
     assert "algo" in capsys.readouterr().err
     assert main([*args, "--algo", "ppo", "--stats", str(tmp_path / "norm.json")]) == 0
     assert "primary score" in capsys.readouterr().out
+
+
+def test_plots_and_renders_leave_the_users_matplotlib_backend_alone(tmp_path):
+    """The library draws on its own Agg canvases: a notebook's backend (here svg) is not
+    switched, and no pyplot figure is left open."""
+    code = f"""
+import matplotlib
+matplotlib.use("svg")
+import gymnasium as gym
+import machining_envs
+from agents.bench.benchmark import _plot_trajectories
+from agents.bench.declarations import benchmark_spec
+env = gym.make("machining_envs/Turning-v0", render_mode="rgb_array")
+env.reset(seed=0)
+env.step(env.action_space.sample())
+assert env.render().ndim == 3
+_plot_trajectories(benchmark_spec("machining_envs/Turning-v0"), {str(tmp_path / "t.png")!r}, 0)
+import matplotlib.pyplot as plt
+assert matplotlib.get_backend() == "svg", matplotlib.get_backend()
+assert plt.get_fignums() == []
+"""
+    subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
+    assert (tmp_path / "t.png").stat().st_size > 0
