@@ -19,6 +19,15 @@ from agents.eval import Evaluation, agent_name, evaluate, primary_score_table, r
 __all__ = ["run_benchmark"]
 
 
+def _rl_installed() -> bool:
+    """Whether Stable-Baselines3 (the ``rl`` extra) is importable."""
+    try:
+        import stable_baselines3  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
 def run_benchmark(
     out_dir="results", quick: bool = False, seed: int = 1000, verbose: bool = True
 ) -> Evaluation:
@@ -35,6 +44,13 @@ def run_benchmark(
         spec_evals = []
         learned = set()
         for k, factory in enumerate(spec.agents):
+            if getattr(factory, "learned", False) and not _rl_installed():
+                if verbose:
+                    print(
+                        f"[{env_name}] {k + 1}/{len(spec.agents)} {factory.__name__}: skipped "
+                        "(learned policies need the rl extra: pip install 'machining-envs[rl]')"
+                    )
+                continue
             for scenarios, n in (
                 (spec.paper_scenarios, n_paper),
                 ((spec.heldout_scenario,), n_test),
