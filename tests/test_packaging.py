@@ -5,8 +5,11 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import tomllib
 from pathlib import Path
+
+import pytest
+
+tomllib = pytest.importorskip("tomllib")  # Python >= 3.11
 
 ROOT = Path(__file__).resolve().parents[1]
 RL_ONLY = ("torch", "stable-baselines3", "tensorboard", "rich", "tqdm", "pyyaml")
