@@ -11,6 +11,7 @@ import numpy as np
 __all__ = [
     "ActionMap",
     "check_action",
+    "real_actions",
     "check_overrides",
     "render_signals",
     "present_frame",
@@ -90,16 +91,35 @@ class ActionMap:
         return np.log1p(x) / self._c - 1.0
 
 
+def real_actions(action, env_name: str) -> np.ndarray:
+    """``action`` as a float64 array if it is made of real numbers (Python or numpy ints and
+    floats), else ``ValueError`` naming the env: strings, bytes, complex numbers, booleans
+    and objects are refused, never converted (``"0.3"`` is not an action, and ``True`` is
+    most likely a mistake)."""
+    if isinstance(action, (str, bytes, bool, np.bool_, complex, dict, set)):
+        raise ValueError(f"{env_name}: action must be real numbers, got {action!r:.60}")
+    try:
+        a = np.asarray(action)
+    except (TypeError, ValueError):
+        raise ValueError(f"{env_name}: action must be real numbers, got {action!r:.60}") from None
+    if a.dtype.kind not in "iuf":
+        raise ValueError(
+            f"{env_name}: action must be real numbers, got {action!r:.60} (dtype {a.dtype})"
+        )
+    return a.astype(np.float64, copy=False)
+
+
 def check_action(action, env_name: str) -> tuple[float, bool]:
     """Return the action as a float in [-1, 1] and whether it had to be clipped.
 
-    NaN or inf raise ``ValueError`` naming the env and the value; a finite action outside the
-    box is clipped (the caller counts it in ``info``).
+    Anything but real numbers raises ``ValueError`` naming the env (:func:`real_actions`);
+    so do NaN and inf; a finite action outside the box is clipped (the caller counts it in
+    ``info``).
     """
-    if isinstance(action, np.ndarray) and action.shape == (1,):
+    if isinstance(action, np.ndarray) and action.shape == (1,) and action.dtype.kind == "f":
         v = float(action[0])
     else:
-        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        a = real_actions(action, env_name).reshape(-1)
         if a.size != 1:
             raise ValueError(
                 f"{env_name}: action must hold one value, got shape {np.shape(action)}"
@@ -208,7 +228,13 @@ def resolve_scenario(spec, rng: np.random.Generator, scenario_cls: type, factori
 
 
 def scenario_option(options: dict | None, default):
-    """The scenario asked for in ``reset(options=...)``; any other option is a ``ValueError``."""
+    """The scenario asked for in ``reset(options=...)``; ``options`` must be a dict or None
+    (``TypeError`` naming it), and any other option is a ``ValueError``."""
+    if options is not None and not isinstance(options, dict):
+        raise TypeError(
+            f"reset options must be a dict such as {{'scenario': 'test'}} or None, "
+            f"got {type(options).__name__} {options!r:.40}"
+        )
     options = dict(options or {})
     spec = options.pop("scenario", default)
     if options:
