@@ -32,7 +32,11 @@ The paper's eq. (19) leaves out the drilling torque acting back on the spindle; 
 kept as ``-T / I`` (the spindle slows under load, their Fig. 8(c)). Thrust follows the same
 cutting model. The valve is linear and integrated exactly (ZOH, matrices computed once);
 the spindle is integrated with fixed RK4 sub-steps in which the valve position comes from
-the exact solution. This module imports numpy and scipy only; it knows nothing of gymnasium.
+the exact solution.
+
+The physics is batched: :class:`DrillingLanes` holds N holes in arrays and one compiled
+kernel (:func:`step_lane`, numba, cached on disk) advances each; :class:`DrillingPlant` is
+one such lane. This module knows nothing of gymnasium.
 """
 
 from __future__ import annotations
@@ -41,7 +45,9 @@ import dataclasses
 import functools
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from machining_envs.core.checks import check_integer, check_range
@@ -50,6 +56,8 @@ from machining_envs.core.lti import zoh
 __all__ = [
     "DrillingParams",
     "DrillingPlant",
+    "DrillingLanes",
+    "LANE_SIGNALS",
     "DrillingStep",
     "CuttingCoefficients",
     "cutting_coefficients",
@@ -384,6 +392,20 @@ class _GeometryKey:
             p.free_speed_hz(p.nominal_voltage),
         )
 
+    def shape(self) -> tuple:
+        """The fields other than the shear stress (what :func:`_cutting_geometry` needs)."""
+        return (
+            self.point_angle_deg,
+            self.helix_angle_deg,
+            self.web_ratio,
+            self.friction_angle_deg,
+            self.chisel_rake_deg,
+            self.indentation_coeff_MPa,
+            self.indentation_wedge_deg,
+            self.feed_velocity_mm_s,
+            self.nominal_speed_hz,
+        )
+
 
 @dataclass(frozen=True)
 class CuttingCoefficients:
@@ -481,64 +503,100 @@ def cutting_coefficients(key: _GeometryKey, diameter_mm: float) -> CuttingCoeffi
     The engagement tables follow the drill point into the work: at a point depth ``z`` the
     lips cut out to radius ``z tan(kappa)``.
     """
-    k = math.radians(key.point_angle_deg / 2.0)
+    return _cutting_forces(_cutting_geometry(key.shape(), diameter_mm), key.shear_stress_MPa)
+
+
+class _Geometry(NamedTuple):
+    """What the cutting model of one drill computes before the shear stress enters: the
+    element radii and widths and the angle terms of eq. (6)-(14) (see
+    :func:`cutting_coefficients`)."""
+
+    sk: float
+    bt: float
+    r: np.ndarray
+    sin_phi: np.ndarray
+    fp_angle: np.ndarray
+    fq_den: np.ndarray
+    fq_angle: np.ndarray
+    q: np.ndarray
+    dc: float
+    rc: np.ndarray
+    cos_a: np.ndarray
+    neg_sin_a: np.ndarray
+    cos_b: np.ndarray
+    sin_b: np.ndarray
+    den: np.ndarray
+    indent: float
+    depth: np.ndarray
+
+
+@functools.lru_cache(maxsize=256)
+def _cutting_geometry(shape: tuple, diameter_mm: float) -> _Geometry:
+    """The shear-stress-free part of :func:`cutting_coefficients` for one drill (``shape``:
+    ``_GeometryKey.shape()``); a drill of another shear stress reuses it."""
+    point, helix, web_ratio, friction, chisel_rake, indent_c, wedge, v_f, n_rev = shape
+    k = math.radians(point / 2.0)
     sk, ck = math.sin(k), math.cos(k)
     radius = diameter_mm / 2.0
-    w = key.web_ratio * radius
-    tau = key.shear_stress_MPa
+    w = web_ratio * radius
     # Main lips.
     dr = (radius - w) / _N_LIP
     r = w + dr * (np.arange(_N_LIP) + 0.5)
     web = np.arcsin(w / r)
     incl = np.arcsin(w / r * sk)
-    tan_psi = r / radius * math.tan(math.radians(key.helix_angle_deg))
+    tan_psi = r / radius * math.tan(math.radians(helix))
     alpha = np.arctan(tan_psi * np.cos(web) / sk - np.sin(web) * ck)
-    beta = math.radians(key.friction_angle_deg)
+    beta = math.radians(friction)
     phi = np.maximum(0.25 * math.pi - 0.5 * (beta - alpha), math.radians(5.0))
     eta = incl
+    tan_eta = np.tan(eta)
     bt = 0.5 * dr  # b t per unit feed: (dr / sin k) (1/2 sin k)
-    q = np.sqrt(np.cos(phi + beta - alpha) ** 2 + np.tan(eta) ** 2 * math.sin(beta) ** 2)
-    fp = (
-        tau
-        * bt
-        / np.sin(phi)
-        * (np.cos(beta - alpha) + np.tan(incl) * np.tan(eta) * math.sin(beta))
-        / q
-    )
-    fq = tau * bt / (np.sin(phi) * np.cos(incl)) * np.sin(beta - alpha) / q
-    lip_t = 2.0 * r * fp
-    lip_h = 2.0 * fq * sk
+    q = np.sqrt(np.cos(phi + beta - alpha) ** 2 + tan_eta**2 * math.sin(beta) ** 2)
+    sin_phi = np.sin(phi)
+    fp_angle = np.cos(beta - alpha) + tan_eta * tan_eta * math.sin(beta)
+    fq_den = sin_phi * np.cos(incl)
+    fq_angle = np.sin(beta - alpha)
     # Chisel edge: secondary cutting between the indentation zone and the web.
-    v_f = key.feed_velocity_mm_s
-    n_rev = key.nominal_speed_hz
     r_ind = min(v_f / (0.2 * _TWO_PI * n_rev), w)
     dc = (w - r_ind) / _N_CHISEL
     rc = r_ind + dc * (np.arange(_N_CHISEL) + 0.5)
     b_i = np.arctan(v_f / (_TWO_PI * n_rev * rc))
-    a_dc = math.radians(key.chisel_rake_deg) + b_i
+    a_dc = math.radians(chisel_rake) + b_i
     phi_c = 0.25 * math.pi + 0.5 * a_dc
     den = 2.0 * np.sin(phi_c) * np.cos(phi_c - a_dc)
-    fc = tau * dc * np.cos(a_dc) * np.cos(b_i) / den
-    ft = tau * dc * (-np.sin(a_dc)) * np.cos(b_i) / den
-    ch_t = 2.0 * rc * (fc * np.cos(b_i) + ft * np.sin(b_i))
-    ch_h = 2.0 * (fc * np.sin(b_i) + ft * np.cos(b_i))
-    indent = key.indentation_coeff_MPa * math.tan(math.radians(key.indentation_wedge_deg))
-
+    indent = indent_c * math.tan(math.radians(wedge))
     # Engagement against point depth: the chisel cuts from the first touch (its height is
     # w / tan(kappa), a few microns), the lips out to radius z tan(kappa).
     radii = np.concatenate([[0.0, w], w + dr * np.arange(1, _N_LIP + 1)])
-    cum_t = np.concatenate([[0.0, ch_t.sum()], ch_t.sum() + np.cumsum(lip_t)])
-    cum_h = np.concatenate([[0.0, ch_h.sum()], ch_h.sum() + np.cumsum(lip_h)])
     depth = radii / math.tan(k)
+    return _Geometry(
+        sk, bt, r, sin_phi, fp_angle, fq_den, fq_angle, q, dc, rc, np.cos(a_dc),
+        -np.sin(a_dc), np.cos(b_i), np.sin(b_i), den, indent, depth,
+    )  # fmt: skip
+
+
+def _cutting_forces(g: _Geometry, tau: float) -> CuttingCoefficients:
+    """The cutting model of one drill (its :class:`_Geometry`) at the shear stress ``tau``."""
+    fp = tau * g.bt / g.sin_phi * g.fp_angle / g.q
+    fq = tau * g.bt / g.fq_den * g.fq_angle / g.q
+    lip_t = 2.0 * g.r * fp
+    lip_h = 2.0 * fq * g.sk
+    fc = tau * g.dc * g.cos_a * g.cos_b / g.den
+    ft = tau * g.dc * g.neg_sin_a * g.cos_b / g.den
+    ch_t = 2.0 * g.rc * (fc * g.cos_b + ft * g.sin_b)
+    ch_h = 2.0 * (fc * g.sin_b + ft * g.cos_b)
+    ch_t_sum, ch_h_sum = ch_t.sum(), ch_h.sum()
+    cum_t = np.concatenate([[0.0, ch_t_sum], ch_t_sum + np.cumsum(lip_t)])
+    cum_h = np.concatenate([[0.0, ch_h_sum], ch_h_sum + np.cumsum(lip_h)])
     return CuttingCoefficients(
         torque_per_feed=float(cum_t[-1]),
         thrust_per_feed=float(cum_h[-1]),
-        indentation_per_feed2=float(indent),
+        indentation_per_feed2=float(g.indent),
         lip_torque_per_feed=float(lip_t.sum()),
         lip_thrust_per_feed=float(lip_h.sum()),
-        chisel_torque_per_feed=float(ch_t.sum()),
-        chisel_thrust_per_feed=float(ch_h.sum()),
-        engage_depth_mm=depth,
+        chisel_torque_per_feed=float(ch_t_sum),
+        chisel_thrust_per_feed=float(ch_h_sum),
+        engage_depth_mm=g.depth,
         engage_torque=cum_t / cum_t[-1],
         engage_thrust=cum_h / cum_h[-1],
     )
@@ -622,8 +680,366 @@ class DrillingStep:
     finish_time_s: float | None = None
 
 
+# ---- the batched physics: N holes stepped as arrays, one kernel for one lane or many --------
+
+#: Columns of ``DrillingLanes.par`` (one row of parameters per lane). The valve's transition
+#: rows (``_P_HALF``: 2m+1 rows of 3, then 2 rows of 3) and the filter weights (m+1) follow
+#: the scalars.
+(_P_TS, _P_UMAX, _P_VMAX, _P_RETRACT, _P_K2, _P_K3, _P_N, _P_INERTIA, _P_OU_C, _P_OU_C_IN,
+ _P_OU_0, _P_OU_0_IN, _P_FA, _P_G0, _P_CHIP_LEN, _P_SIG_C, _P_SIG_0, _P_KT, _P_KH, _P_KH2,
+ _P_FULL, _P_D, _P_TARGET, _P_NOISE_T, _P_NOISE_H, _P_NOISE_S, _P_BREAK, _P_SQUARE,
+ _P_HALF) = range(29)  # fmt: skip
+#: Columns of ``DrillingLanes.state``.
+(_S_X1, _S_X2, _S_OMEGA, _S_T, _S_POS, _S_DEPTH, _S_PACKED, _S_XI_CHIP, _S_XI_CUT, _S_TQ_F,
+ _S_TH_F, _S_TQ, _S_TH, _S_VOLT, _S_FINISHED, _N_STATE) = range(16)  # fmt: skip
+#: Fields of ``DrillingLanes.out`` (one row per lane after each step), in the order of
+#: :class:`DrillingStep`; ``cutting`` is 0 or 1 and ``finish_time_s`` NaN until the hole ends.
+LANE_SIGNALS = tuple(f.name for f in dataclasses.fields(DrillingStep))
+_N_OUT = len(LANE_SIGNALS)
+#: Rows of ``DrillingLanes.eng`` per lane: point depth, torque share, thrust share.
+_N_ENG = _N_LIP + 2
+#: Inputs per lane of :func:`step_lane`: voltage, feed velocity and the five standard normals.
+_N_IN = 7
+
+
+def _n_par(m: int) -> int:
+    """Columns of the parameter row of a lane with ``m`` sub-steps."""
+    return _P_HALF + 3 * (2 * m + 1) + 6 + (m + 1)
+
+
+@numba.njit(cache=True)
+def _pymax(a, b):
+    """``max(a, b)`` of Python for floats (``a`` unless ``b > a``)."""
+    return b if b > a else a
+
+
+@numba.njit(cache=True)
+def _pymin(a, b):
+    """``min(a, b)`` of Python for floats (``a`` unless ``b < a``)."""
+    return b if b < a else a
+
+
+@numba.njit(cache=True)
+def _interp(x, xp, fp):
+    """``np.interp(x, xp, fp)`` for one ``x`` inside ``[xp[0], xp[-1])`` (ascending ``xp``),
+    with numpy's arithmetic."""
+    lo, hi = 0, xp.size - 1  # xp[lo] <= x < xp[hi]
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if xp[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    if xp[lo] == x:
+        return fp[lo]
+    slope = (fp[lo + 1] - fp[lo]) / (xp[lo + 1] - xp[lo])
+    y = slope * (x - xp[lo]) + fp[lo]
+    if np.isnan(y):
+        y = slope * (x - xp[lo + 1]) + fp[lo + 1]
+        if np.isnan(y) and fp[lo] == fp[lo + 1]:
+            y = fp[lo]
+    return y
+
+
+@numba.njit(cache=True)
+def _engagement(eng, full, depth_mm):
+    """Engaged shares of torque and thrust with the point ``depth_mm`` below the surface
+    (``eng``: a lane's tables; ``full``: depth of full engagement)."""
+    if depth_mm >= full:
+        return 1.0, 1.0
+    if depth_mm <= 0.0:
+        return 0.0, 0.0
+    return _interp(depth_mm, eng[0], eng[1]), _interp(depth_mm, eng[0], eng[2])
+
+
+@numba.njit(cache=True)
+def step_lane(k, m, par, eng, state, voltage, feed, noise, out):
+    """Advance lane ``k`` by one sample (see :class:`DrillingLanes` for the layout).
+
+    Holds ``voltage`` (V) and ``feed`` (mm/s), both clipped to the machine's range;
+    ``noise`` holds five standard normals (chip and cutting fluctuation innovations, torque,
+    thrust and speed sensor noise). ``out[k]`` gets the signals of :class:`DrillingStep`.
+    The arithmetic is that of one hole, whatever the number of lanes.
+    """
+    p = par[k]
+    s = state[k]
+    o = out[k]
+    ts = p[_P_TS]
+    h = ts / m
+    u = _pymin(_pymax(voltage, 0.0), p[_P_UMAX])
+    vmax = p[_P_VMAX]
+    v = _pymin(_pymax(feed, -vmax), vmax)
+    s[_S_VOLT] = u
+
+    # Fluctuations (Ornstein-Uhlenbeck, unit variance), then the hole over this period.
+    xi_chip = p[_P_OU_C] * s[_S_XI_CHIP] + p[_P_OU_C_IN] * noise[0]
+    xi_cut = p[_P_OU_0] * s[_S_XI_CUT] + p[_P_OU_0_IN] * noise[1]
+    s[_S_XI_CHIP] = xi_chip
+    s[_S_XI_CUT] = xi_cut
+    z0 = s[_S_POS]
+    z1 = z0 + v * ts
+    if z1 < -p[_P_RETRACT]:
+        z1 = -p[_P_RETRACT]
+    bottom = s[_S_DEPTH]
+    cut_len = z1 - bottom if (v > 0.0 and z1 > bottom) else 0.0
+    cutting = cut_len > 0.0
+    d = p[_P_D]
+    if cutting:
+        v_cut = cut_len / ts
+        mid = bottom + 0.5 * cut_len
+        eng_t, eng_h = _engagement(eng[k], p[_P_FULL], mid)
+        packed = s[_S_PACKED] + 0.5 * cut_len
+        g = p[_P_G0] * (math.exp(packed / (p[_P_CHIP_LEN] * d)) - 1.0)
+        g *= _pymax(0.0, 1.0 + p[_P_SIG_C] * xi_chip)
+        load = (1.0 + g) * _pymax(0.0, 1.0 + p[_P_SIG_0] * xi_cut)
+        k4 = p[_P_KT] * v_cut * eng_t * load
+        kh = p[_P_KH] * v_cut * eng_h * load
+        # x ** 2 of Python calls pow(); the exponent is data so that this does too.
+        kh2 = p[_P_KH2] * math.pow(v_cut * eng_h, p[_P_SQUARE])
+    else:
+        v_cut = 0.0
+        g = 0.0
+        eng_t = 0.0
+        k4 = 0.0
+        kh = 0.0
+        kh2 = 0.0
+
+    # Valve exactly at every half sub-step; spindle by RK4 with the load k4 / omega.
+    x1 = s[_S_X1]
+    x2 = s[_S_X2]
+    hv = _P_HALF
+    k2, k3, n = p[_P_K2], p[_P_K3], p[_P_N]
+    load_c = k4 / p[_P_INERTIA]
+    w_floor = 2.0 * math.pi  # 1 Hz: below it the torque law is not evaluated (the drill stalls)
+    w = s[_S_OMEGA]
+    # Torque and thrust at the sub-step instants (j = 0..m); the sensors filter them.
+    fw = hv + 3 * (2 * m + 1) + 6
+    fa = p[_P_FA]
+    tq_f = s[_S_TQ_F] * fa
+    th_f = s[_S_TH_F] * fa
+    wj = w if w > w_floor else w_floor
+    tq = k4 / wj
+    th = kh / wj + kh2 / (wj * wj)
+    peak = tq if tq > 0.0 else 0.0
+    tq_f += p[fw] * tq
+    th_f += p[fw] * th
+    xc = p[hv] * x1 + p[hv + 1] * x2 + p[hv + 2] * u
+    for j in range(m):
+        r = hv + 6 * j
+        xa = xc
+        xb = p[r + 3] * x1 + p[r + 4] * x2 + p[r + 5] * u
+        xc = p[r + 6] * x1 + p[r + 7] * x2 + p[r + 8] * u
+        wa = w if w > 0.0 else 0.0
+        f1 = k2 * xa - k3 * wa**n - load_c / (wa if wa > w_floor else w_floor)
+        wb = w + 0.5 * h * f1
+        wb = wb if wb > 0.0 else 0.0
+        f2 = k2 * xb - k3 * wb**n - load_c / (wb if wb > w_floor else w_floor)
+        wb = w + 0.5 * h * f2
+        wb = wb if wb > 0.0 else 0.0
+        f3 = k2 * xb - k3 * wb**n - load_c / (wb if wb > w_floor else w_floor)
+        wc = w + h * f3
+        wc = wc if wc > 0.0 else 0.0
+        f4 = k2 * xc - k3 * wc**n - load_c / (wc if wc > w_floor else w_floor)
+        w = w + h / 6.0 * (f1 + 2.0 * f2 + 2.0 * f3 + f4)
+        if w < 0.0:
+            w = 0.0
+        wj = w if w > w_floor else w_floor
+        tq = k4 / wj
+        th = kh / wj + kh2 / (wj * wj)
+        if tq > peak:
+            peak = tq
+        tq_f += p[fw + j + 1] * tq
+        th_f += p[fw + j + 1] * th
+    r = fw - 6
+    s[_S_X1] = p[r] * x1 + p[r + 1] * x2 + p[r + 2] * u
+    s[_S_X2] = p[r + 3] * x1 + p[r + 4] * x2 + p[r + 5] * u
+    s[_S_OMEGA] = w
+    s[_S_TQ_F] = tq_f
+    s[_S_TH_F] = th_f
+    s[_S_TQ] = tq
+    s[_S_TH] = th
+
+    # The drill point and the chips.
+    s[_S_POS] = z1
+    if cutting:
+        s[_S_DEPTH] = z1
+        s[_S_PACKED] += cut_len
+    if z1 < 0.0:
+        s[_S_PACKED] = 0.0  # the point left the hole: the flutes are cleared
+    t = s[_S_T]
+    finish = np.nan
+    if s[_S_FINISHED] == 0.0 and s[_S_DEPTH] >= p[_P_TARGET]:
+        frac = (p[_P_TARGET] - bottom) / cut_len if cut_len > 0 else 1.0
+        finish = t + _pymin(_pymax(frac, 0.0), 1.0) * ts
+        s[_S_FINISHED] = 1.0
+    s[_S_T] = t + ts
+    speed_hz = w / (2.0 * math.pi)
+    o[0] = tq
+    o[1] = peak
+    o[2] = th
+    o[3] = tq_f + p[_P_NOISE_T] * noise[2]
+    o[4] = th_f + p[_P_NOISE_H] * noise[3]
+    o[5] = speed_hz + p[_P_NOISE_S] * noise[4]
+    o[6] = speed_hz
+    o[7] = s[_S_X1]
+    o[8] = v
+    o[9] = v_cut
+    o[10] = (v_cut / speed_hz) if speed_hz > 1.0 else 0.0
+    o[11] = z1
+    o[12] = s[_S_DEPTH]
+    o[13] = s[_S_PACKED]
+    o[14] = g
+    o[15] = 1.0 if cutting else 0.0
+    o[16] = eng_t
+    o[17] = finish
+
+
+@numba.njit(cache=True)
+def _step_lanes(m, par, eng, state, inputs, out):
+    """Advance every lane by one sample (:func:`step_lane` with the row ``inputs[k]``:
+    voltage, feed velocity, five standard normals)."""
+    for k in range(state.shape[0]):
+        row = inputs[k]
+        step_lane(k, m, par, eng, state, row[0], row[1], row[2:], out)
+
+
+class DrillingLanes:
+    """N independent holes drilled together: the physics of every drilling env.
+
+    Each lane has its own parameters, drill and hole (:meth:`start`); :meth:`step`
+    advances every lane by one sample with one compiled kernel whose arithmetic per lane is
+    exactly that of a single hole, so lane ``i`` of a batch and a batch of one give the same
+    numbers to the last bit. All lanes integrate the spindle with the same number of RK4
+    sub-steps (``params.substeps`` of the batch); everything else may differ per lane.
+
+    Layout (one row per lane): ``par`` the parameters and derived constants (the valve's
+    exact transitions, the sensor filter's weights, the drill's cutting constants),
+    ``eng`` the engagement tables of the drill (point depth, torque share, thrust share),
+    ``state`` the valve, spindle, drill point, chips, fluctuations and sensor filters,
+    ``out`` the signals of the last step (``LANE_SIGNALS``).
+
+    Parameters
+    ----------
+    params : DrillingParams
+        Parameters of every lane until :meth:`start` gives it its own; sets the sub-steps.
+    n : int
+        Number of lanes.
+    """
+
+    def __init__(self, params: DrillingParams, n: int = 1) -> None:
+        check_integer("n", n, 1, 1 << 24)
+        self.n = int(n)
+        self.params = params
+        self.m = params.substeps
+        self.par = np.zeros((self.n, _n_par(self.m)))
+        self.eng = np.zeros((self.n, 3, _N_ENG))
+        self.state = np.zeros((self.n, _N_STATE))
+        #: Signals of the last step, one row per lane (columns: ``LANE_SIGNALS``).
+        self.out = np.zeros((self.n, _N_OUT))
+        self.out[:, -1] = np.nan
+
+    def start(
+        self,
+        lane: int,
+        params: DrillingParams,
+        diameter_mm: float,
+        target_depth_mm: float,
+        start_position_mm: float = 0.0,
+        coefficients: CuttingCoefficients | None = None,
+    ) -> None:
+        """Set ``lane``'s parameters, drill and hole, and start it (:meth:`restart`).
+
+        ``coefficients``: the drill's cutting model if the caller has it
+        (``params.coefficients(diameter_mm)``).
+        """
+        if params.substeps != self.m:
+            raise ValueError(
+                f"substeps of a lane must be the batch's {self.m}, got {params.substeps}"
+            )
+        p = params
+        c = p.coefficients(diameter_mm) if coefficients is None else coefficients
+        m = self.m
+        ts = p.sample_time_s
+        half, vstep = _valve_matrices(p.valve_natural_freq_rad_s, p.valve_damping, p.k1, ts, m)
+        fa, fw = _filter_weights(p.sensor_cutoff_hz, ts, m)
+        ou_c = math.exp(-ts / p.chip_fluctuation_time_s)
+        ou_0 = math.exp(-ts / p.cutting_fluctuation_time_s)
+        row = self.par[lane]
+        row[:_P_HALF] = (
+            ts,
+            p.voltage_max,
+            p.feed_speed_max_mm_s,
+            p.retract_limit_mm,
+            p.spindle_drive_gain,
+            p.spindle_friction,
+            p.spindle_friction_exponent,
+            p.spindle_inertia_Nmm_s2,
+            ou_c,
+            math.sqrt(1.0 - ou_c**2),
+            ou_0,
+            math.sqrt(1.0 - ou_0**2),
+            fa,
+            p.chip_friction,
+            p.chip_length_diameters,
+            p.chip_fluctuation,
+            p.cutting_fluctuation,
+            _TWO_PI * c.torque_per_feed,
+            _TWO_PI * c.thrust_per_feed,
+            _TWO_PI**2 * c.indentation_per_feed2,
+            c.full_engagement_mm,
+            float(diameter_mm),
+            float(target_depth_mm),
+            p.torque_noise_Nmm,
+            p.thrust_noise_N,
+            p.speed_noise_hz,
+            p.breakage_torque_Nmm(diameter_mm),
+            2.0,
+        )
+        o = _P_HALF + half.size
+        row[_P_HALF:o] = half.ravel()
+        row[o : o + 6] = vstep.ravel()
+        row[o + 6 :] = fw
+        e = self.eng[lane]
+        e[0] = c.engage_depth_mm
+        e[1] = c.engage_torque
+        e[2] = c.engage_thrust
+        self.restart(lane, p, start_position_mm)
+
+    def restart(
+        self,
+        lane: int,
+        params: DrillingParams,
+        position_mm: float = 0.0,
+        speed_hz: float | None = None,
+        voltage: float | None = None,
+    ) -> None:
+        """Start ``lane``'s hole again: the spindle running free at ``voltage`` (default
+        nominal; or at ``speed_hz``), the valve settled, the drill point at ``position_mm``,
+        no hole, no chips, fluctuations and sensor filters at zero."""
+        u = params.nominal_voltage if voltage is None else float(voltage)
+        s = self.state[lane]
+        s[:] = 0.0
+        s[_S_VOLT] = u
+        s[_S_X1] = params.valve_static_gain_per_V * u
+        s[_S_OMEGA] = params.free_speed_rad_s(u) if speed_hz is None else _TWO_PI * speed_hz
+        s[_S_POS] = position_mm
+
+    def step(self, inputs: np.ndarray) -> None:
+        """Advance every lane by one sample; ``inputs[k]`` = voltage (V), feed velocity
+        (mm/s) and five standard normals of lane ``k``; results in ``out``."""
+        _step_lanes(self.m, self.par, self.eng, self.state, inputs, self.out)
+
+
+def _state_property(col: int, doc: str) -> property:
+    def get(self) -> float:
+        return float(self._lanes.state[0, col])
+
+    return property(get, doc=doc)
+
+
 class DrillingPlant:
-    """Simulates one hole: valve, spindle, drill point and chips; numpy and floats only.
+    """Simulates one hole: valve, spindle, drill point and chips (a :class:`DrillingLanes`
+    of one lane).
 
     Parameters
     ----------
@@ -652,64 +1068,46 @@ class DrillingPlant:
         self.diameter_mm = float(diameter_mm)
         self.target_depth_mm = float(target_depth_mm)
         self.start_position_mm = float(start_position_mm)
-        p = params
-        self.coeffs = p.coefficients(diameter_mm)
-        m = p.substeps
-        half, vstep = _valve_matrices(
-            p.valve_natural_freq_rad_s, p.valve_damping, p.k1, p.sample_time_s, m
+        self.coeffs = params.coefficients(diameter_mm)
+        self.breakage_torque_Nmm = params.breakage_torque_Nmm(diameter_mm)
+        self._lanes = DrillingLanes(params, 1)
+        self._lanes.start(
+            0, params, self.diameter_mm, self.target_depth_mm, self.start_position_mm, self.coeffs
         )
-        # Rows as float tuples: three products each beat a numpy call at this size.
-        self._half = [tuple(float(v) for v in row) for row in half]
-        self._vstep = [tuple(float(v) for v in row) for row in vstep]
-        self._fa, self._fw = _filter_weights(p.sensor_cutoff_hz, p.sample_time_s, m)
-        self._ou_c = math.exp(-p.sample_time_s / p.chip_fluctuation_time_s)
-        self._ou_c_in = math.sqrt(1.0 - self._ou_c**2)
-        self._ou_0 = math.exp(-p.sample_time_s / p.cutting_fluctuation_time_s)
-        self._ou_0_in = math.sqrt(1.0 - self._ou_0**2)
-        self._kt = _TWO_PI * self.coeffs.torque_per_feed
-        self._kh = _TWO_PI * self.coeffs.thrust_per_feed
-        self._kh2 = _TWO_PI**2 * self.coeffs.indentation_per_feed2
-        self._full = self.coeffs.full_engagement_mm
-        self.breakage_torque_Nmm = p.breakage_torque_Nmm(diameter_mm)
-        self.reset()
+        self._inputs = np.zeros((1, _N_IN))
 
     def reset(self, speed_hz: float | None = None, voltage: float | None = None) -> None:
         """Spindle running free at ``voltage`` (default nominal), valve settled, drill at start."""
-        p = self.params
-        u = p.nominal_voltage if voltage is None else float(voltage)
-        self.voltage = u
-        self.x1 = p.valve_static_gain_per_V * u
-        self.x2 = 0.0
-        w = p.free_speed_rad_s(u) if speed_hz is None else _TWO_PI * speed_hz
-        self.omega = w
-        self.t_s = 0.0
-        self.position_mm = self.start_position_mm
-        self.depth_mm = 0.0
-        self.packed_mm = 0.0
-        self.xi_chip = 0.0
-        self.xi_cut = 0.0
-        self.torque_filt = 0.0
-        self.thrust_filt = 0.0
-        self.torque_Nmm = 0.0
-        self.thrust_N = 0.0
-        self.finished = False
+        self._lanes.restart(0, self.params, self.start_position_mm, speed_hz, voltage)
+
+    x1 = _state_property(_S_X1, "Spool opening x_v.")
+    x2 = _state_property(_S_X2, "Spool velocity dx_v/dt, 1/s.")
+    omega = _state_property(_S_OMEGA, "Spindle speed, rad/s.")
+    t_s = _state_property(_S_T, "Time since the hole started, s.")
+    position_mm = _state_property(_S_POS, "Drill point below the surface, mm.")
+    depth_mm = _state_property(_S_DEPTH, "Hole depth, mm.")
+    packed_mm = _state_property(_S_PACKED, "Length drilled since the chips were cleared, mm.")
+    xi_chip = _state_property(_S_XI_CHIP, "Chip-friction fluctuation (unit OU process).")
+    xi_cut = _state_property(_S_XI_CUT, "Cutting fluctuation (unit OU process).")
+    torque_filt = _state_property(_S_TQ_F, "Torque sensor filter output, N·mm.")
+    thrust_filt = _state_property(_S_TH_F, "Thrust sensor filter output, N.")
+    torque_Nmm = _state_property(_S_TQ, "Torque at the last sample instant, N·mm.")
+    thrust_N = _state_property(_S_TH, "Thrust at the last sample instant, N.")
+    voltage = _state_property(_S_VOLT, "Valve voltage now applied, V.")
+
+    @property
+    def finished(self) -> bool:
+        """Whether the hole has reached its target depth."""
+        return bool(self._lanes.state[0, _S_FINISHED])
 
     @property
     def state(self) -> np.ndarray:
         """``[x_v, dx_v/dt, omega (rad/s)]``: the paper's x1, x2, x3 (eq. 18-19)."""
-        return np.array([self.x1, self.x2, self.omega])
+        return self._lanes.state[0, [_S_X1, _S_X2, _S_OMEGA]].copy()
 
     def engagement(self, depth_mm: float) -> tuple[float, float]:
         """Engaged share of torque and thrust with the point ``depth_mm`` below the surface."""
-        if depth_mm >= self._full:
-            return 1.0, 1.0
-        if depth_mm <= 0.0:
-            return 0.0, 0.0
-        c = self.coeffs
-        return (
-            float(np.interp(depth_mm, c.engage_depth_mm, c.engage_torque)),
-            float(np.interp(depth_mm, c.engage_depth_mm, c.engage_thrust)),
-        )
+        return _engagement(self._lanes.eng[0], self._lanes.par[0, _P_FULL], float(depth_mm))
 
     def step(
         self,
@@ -722,121 +1120,16 @@ class DrillingPlant:
         ``noise`` holds five standard normal draws: the chip and cutting fluctuation
         innovations and the torque, thrust and speed sensor noises.
         """
-        p = self.params
-        m = p.substeps
-        ts = p.sample_time_s
-        h = ts / m
-        u = min(max(voltage, 0.0), p.voltage_max)
-        vmax = p.feed_speed_max_mm_s
-        v = min(max(feed_velocity_mm_s, -vmax), vmax)
-        self.voltage = u
-        n_chip, n_cut, n_tq, n_th, n_sp = noise
-
-        # Fluctuations (Ornstein-Uhlenbeck, unit variance), then the hole over this period.
-        self.xi_chip = self._ou_c * self.xi_chip + self._ou_c_in * n_chip
-        self.xi_cut = self._ou_0 * self.xi_cut + self._ou_0_in * n_cut
-        z0 = self.position_mm
-        z1 = z0 + v * ts
-        if z1 < -p.retract_limit_mm:
-            z1 = -p.retract_limit_mm
-        bottom = self.depth_mm
-        cut_len = z1 - bottom if (v > 0.0 and z1 > bottom) else 0.0
-        cutting = cut_len > 0.0
-        d = self.diameter_mm
-        if cutting:
-            v_cut = cut_len / ts
-            mid = bottom + 0.5 * cut_len
-            eng_t, eng_h = self.engagement(mid)
-            packed = self.packed_mm + 0.5 * cut_len
-            g = p.chip_friction * (math.exp(packed / (p.chip_length_diameters * d)) - 1.0)
-            g *= max(0.0, 1.0 + p.chip_fluctuation * self.xi_chip)
-            load = (1.0 + g) * max(0.0, 1.0 + p.cutting_fluctuation * self.xi_cut)
-            k4 = self._kt * v_cut * eng_t * load
-            kh = self._kh * v_cut * eng_h * load
-            kh2 = self._kh2 * (v_cut * eng_h) ** 2
-        else:
-            v_cut = 0.0
-            g = 0.0
-            eng_t = 0.0
-            k4 = kh = kh2 = 0.0
-
-        # Valve exactly at every half sub-step; spindle by RK4 with the load k4 / omega.
-        x1, x2 = self.x1, self.x2
-        xv = [a * x1 + b * x2 + c * u for a, b, c in self._half]
-        k2, k3, n = p.spindle_drive_gain, p.spindle_friction, p.spindle_friction_exponent
-        load_c = k4 / p.spindle_inertia_Nmm_s2
-        w_floor = _TWO_PI  # 1 Hz: below it the torque law is not evaluated (the drill stalls)
-        w = self.omega
-        ws = [w]
-        for j in range(m):
-            xa, xb, xc = xv[2 * j], xv[2 * j + 1], xv[2 * j + 2]
-            wa = w if w > 0.0 else 0.0
-            f1 = k2 * xa - k3 * wa**n - load_c / (wa if wa > w_floor else w_floor)
-            wb = w + 0.5 * h * f1
-            wb = wb if wb > 0.0 else 0.0
-            f2 = k2 * xb - k3 * wb**n - load_c / (wb if wb > w_floor else w_floor)
-            wb = w + 0.5 * h * f2
-            wb = wb if wb > 0.0 else 0.0
-            f3 = k2 * xb - k3 * wb**n - load_c / (wb if wb > w_floor else w_floor)
-            wc = w + h * f3
-            wc = wc if wc > 0.0 else 0.0
-            f4 = k2 * xc - k3 * wc**n - load_c / (wc if wc > w_floor else w_floor)
-            w = w + h / 6.0 * (f1 + 2.0 * f2 + 2.0 * f3 + f4)
-            if w < 0.0:
-                w = 0.0
-            ws.append(w)
-        (a1, b1, c1), (a2, b2, c2) = self._vstep
-        self.x1 = a1 * x1 + b1 * x2 + c1 * u
-        self.x2 = a2 * x1 + b2 * x2 + c2 * u
-        self.omega = w
-
-        # Torque and thrust at the sub-step instants; the sensors filter them.
-        fa, fw = self._fa, self._fw
-        tq_f = self.torque_filt * fa
-        th_f = self.thrust_filt * fa
-        peak = 0.0
-        for j in range(m + 1):
-            wj = ws[j] if ws[j] > w_floor else w_floor
-            tq = k4 / wj
-            th = kh / wj + kh2 / (wj * wj)
-            if tq > peak:
-                peak = tq
-            tq_f += fw[j] * tq
-            th_f += fw[j] * th
-        self.torque_filt, self.thrust_filt = tq_f, th_f
-        self.torque_Nmm, self.thrust_N = tq, th
-
-        # The drill point and the chips.
-        self.position_mm = z1
-        if cutting:
-            self.depth_mm = z1
-            self.packed_mm += cut_len
-        if z1 < 0.0:
-            self.packed_mm = 0.0  # the point left the hole: the flutes are cleared
-        finish = None
-        if not self.finished and self.depth_mm >= self.target_depth_mm:
-            frac = (self.target_depth_mm - bottom) / cut_len if cut_len > 0 else 1.0
-            finish = self.t_s + min(max(frac, 0.0), 1.0) * ts
-            self.finished = True
-        self.t_s += ts
-        speed_hz = w / _TWO_PI
+        inp = self._inputs
+        inp[0, 0] = voltage
+        inp[0, 1] = feed_velocity_mm_s
+        inp[0, 2:] = noise
+        self._lanes.step(inp)
+        o = self._lanes.out[0].tolist()
+        finish = o[17]
         return DrillingStep(
-            torque_Nmm=tq,
-            peak_torque_Nmm=peak,
-            thrust_N=th,
-            measured_torque_Nmm=tq_f + p.torque_noise_Nmm * n_tq,
-            measured_thrust_N=th_f + p.thrust_noise_N * n_th,
-            measured_speed_hz=speed_hz + p.speed_noise_hz * n_sp,
-            speed_hz=speed_hz,
-            valve_opening=self.x1,
-            feed_velocity_mm_s=v,
-            cutting_feed_mm_s=v_cut,
-            feed_mm_per_rev=(v_cut / speed_hz) if speed_hz > 1.0 else 0.0,
-            position_mm=z1,
-            depth_mm=self.depth_mm,
-            packed_mm=self.packed_mm,
-            chip_ratio=g,
-            cutting=cutting,
-            engagement=eng_t,
-            finish_time_s=finish,
+            *o[:15],
+            cutting=o[15] != 0.0,
+            engagement=o[16],
+            finish_time_s=None if math.isnan(finish) else finish,
         )
