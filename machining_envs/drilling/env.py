@@ -37,11 +37,12 @@ from machining_envs.drilling.plant import (
     _S_T,
     _S_VOLT,
     _S_X1,
+    LANE_BLOCK,
     DrillingLanes,
     DrillingParams,
     _pymax,
     _pymin,
-    step_lane,
+    advance,
 )
 from machining_envs.drilling.scenarios import (
     DRILLING_SCENARIOS,
@@ -97,8 +98,7 @@ class DrillingReward:
 
 #: Columns of ``_DrillingCore.ev`` (floats of the env per lane).
 (_E_ACTION, _E_TR, _E_THRUST_MEAS, _E_SPEED_MEAS, _E_COMMAND, _E_VOLTAGE, _E_REWARD, _E_MEAS,
- ) = (0, 1, 2, 3, 4, 5, 6, 7)  # fmt: skip
-_N_EV = _E_MEAS + _HISTORY + 1  # the measured torques, newest first, N·mm
+ _N_EV) = range(9)  # fmt: skip
 #: Columns of ``_DrillingCore.flags``.
 (_F_IN_CLIPPED, _F_CLIPPED, _F_DIVERGED, _F_BREAKAGE, _F_FINISHED, _F_TERMINATED,
  _F_TRUNCATED, _N_FLAGS) = range(8)  # fmt: skip
@@ -132,8 +132,6 @@ def _env_lane(k, par, state, out, c, ev, flags, counts, obs):
         meas = 0.0
         for i in (0, 1, 2, 3, 4, 5, 6, 10):  # torques, thrusts, speeds, feed per rev
             o[i] = 0.0
-    for i in range(_E_MEAS + _HISTORY, _E_MEAS, -1):
-        e_[i] = e_[i - 1]
     e_[_E_MEAS] = meas
     e_[_E_THRUST_MEAS] = o[4]
     e_[_E_SPEED_MEAS] = o[5]
@@ -161,40 +159,52 @@ def _env_lane(k, par, state, out, c, ev, flags, counts, obs):
     ts = c[_K_TORQUE_SCALE]
     ls = c[_K_LENGTH_SCALE]
     ob = obs[k]
+    # The torque history: the measured torques of the last steps, as they were observed.
+    for i in range(8 + _HISTORY, 9, -1):
+        ob[i] = ob[i - 1]
+    ob[9] = ob[0]
     ob[0] = _pymin(_pymax(meas / ts, lo), hi)
     ob[2] = _pymin(_pymax(e_[_E_THRUST_MEAS] / c[_K_THRUST_SCALE], lo), hi)
     ob[3] = _pymin(_pymax(e_[_E_SPEED_MEAS] / c[_K_SPEED_SCALE], 0.0), 3.0)
     ob[4] = e_[_E_ACTION]
     ob[5] = _pymin(_pymax(o[11] / ls, -1.0), 2.0)
     ob[6] = _pymin(o[12] / ls, 2.0)
-    for i in range(1, _HISTORY + 1):
-        ob[8 + i] = _pymin(_pymax(e_[_E_MEAS + i] / ts, lo), hi)
 
 
 @numba.njit(cache=True)
-def _step(m, par, eng, state, out, c, ev, flags, counts, obs, normals):
+def _step(m, g, par, eng, state, out, tmp, inputs, c, ev, flags, counts, obs, normals):
     """One step of every lane: the action's command, the plant, the env's outputs.
 
     Lane ``k`` applies ``ev[k, _E_ACTION]`` (in the box; ``flags[k, _F_IN_CLIPPED]`` says
-    whether it was clipped) and takes the next five of its standard normals.
+    whether it was clipped) and takes the next five of its standard normals. The plant
+    advances ``LANE_BLOCK`` lanes at a time.
     """
     feed_mode = c[_K_FEED_MODE] != 0.0
-    for k in range(state.shape[0]):
-        a = ev[k, _E_ACTION]
-        clipped = flags[k, _F_IN_CLIPPED]
-        flags[k, _F_CLIPPED] = clipped
-        counts[k, _C_N_CLIPPED] += clipped
-        command = c[_K_MID] + c[_K_HALF] * a
-        if feed_mode:
-            voltage, feed = c[_K_U0], command
-        else:
-            voltage, feed = command, c[_K_V0]
-        ev[k, _E_COMMAND] = command
-        ev[k, _E_VOLTAGE] = voltage
-        i = counts[k, _C_NOISE]
-        counts[k, _C_NOISE] = i + 1
-        step_lane(k, m, par, eng, state, voltage, feed, normals[k, 5 * i : 5 * i + 5], out)
-        _env_lane(k, par, state, out, c, ev, flags, counts, obs)
+    n = state.shape[0]
+    for k0 in range(0, n, LANE_BLOCK):
+        k1 = min(k0 + LANE_BLOCK, n)
+        for k in range(k0, k1):
+            a = ev[k, _E_ACTION]
+            clipped = flags[k, _F_IN_CLIPPED]
+            flags[k, _F_CLIPPED] = clipped
+            counts[k, _C_N_CLIPPED] += clipped
+            command = c[_K_MID] + c[_K_HALF] * a
+            if feed_mode:
+                voltage, feed = c[_K_U0], command
+            else:
+                voltage, feed = command, c[_K_V0]
+            ev[k, _E_COMMAND] = command
+            ev[k, _E_VOLTAGE] = voltage
+            i = counts[k, _C_NOISE]
+            counts[k, _C_NOISE] = i + 1
+            row = inputs[k]
+            row[0] = voltage
+            row[1] = feed
+            for q in range(5):
+                row[2 + q] = normals[k, 5 * i + q]
+        advance(k0, k1, m, g, par, eng, state, inputs, out, tmp)
+        for k in range(k0, k1):
+            _env_lane(k, par, state, out, c, ev, flags, counts, obs)
 
 
 class _DrillingCore:
@@ -261,8 +271,11 @@ class _DrillingCore:
         #: Normals of the current block not drawn yet, per lane, and its generator.
         self.owed = [0] * n
         self.block_rng: list = [None] * n
+        self.inputs = np.zeros((n, 7))
+        lanes = self.lanes
         self._args = (
-            self.lanes.m, self.lanes.par, self.lanes.eng, self.lanes.state, self.lanes.out,
+            lanes.m, lanes.shared, lanes.par, lanes.eng, lanes.state, lanes.out, lanes.tmp,
+            self.inputs,
             self.consts, self.ev, self.flags, self.counts, self.obs, self.normals,
         )  # fmt: skip
 
@@ -406,47 +419,49 @@ class _DrillingCore:
         return info
 
     def info_arrays(self) -> dict:
-        """The step info of every lane, as arrays (the finish times with their masks)."""
-        o = self.lanes.out
-        e = self.ev
-        f = self.flags
-        par = self.lanes.par
-        done = f[:, _F_FINISHED].copy()
+        """The step info of every lane, as arrays (the finish times with their masks): views
+        of one copy of each of the core's tables, so a step copies a few blocks of memory."""
+        o = self.lanes.out.copy()
+        e = self.ev.copy()
+        f = self.flags.copy()
+        c = self.counts.copy()
+        lane = self.lanes.par[:, [_P_BREAK, _P_TARGET, _P_D]]
+        done = f[:, _F_FINISHED]
         finish = np.where(done, o[:, 17], np.nan)
         return {
             "t_s": self.lanes.state[:, _S_T].copy(),
-            "command": e[:, _E_COMMAND].copy(),
-            "action_clipped": f[:, _F_CLIPPED].copy(),
-            "n_action_clipped": self.counts[:, _C_N_CLIPPED].copy(),
-            "breakage": f[:, _F_BREAKAGE].copy(),
-            "diverged": f[:, _F_DIVERGED].copy(),
+            "command": e[:, _E_COMMAND],
+            "action_clipped": f[:, _F_CLIPPED],
+            "n_action_clipped": c[:, _C_N_CLIPPED],
+            "breakage": f[:, _F_BREAKAGE],
+            "diverged": f[:, _F_DIVERGED],
             "finished": done,
-            "torque_Nmm": o[:, 0].copy(),
-            "torque_ref_Nmm": e[:, _E_TR].copy(),
-            "measured": e[:, _E_MEAS].copy(),
-            "peak_torque_Nmm": o[:, 1].copy(),
-            "breakage_torque_Nmm": par[:, _P_BREAK].copy(),
-            "thrust_N": o[:, 2].copy(),
-            "measured_thrust_N": o[:, 4].copy(),
-            "spindle_hz": o[:, 6].copy(),
-            "measured_spindle_hz": o[:, 5].copy(),
+            "torque_Nmm": o[:, 0],
+            "torque_ref_Nmm": e[:, _E_TR],
+            "measured": e[:, _E_MEAS],
+            "peak_torque_Nmm": o[:, 1],
+            "breakage_torque_Nmm": lane[:, 0],
+            "thrust_N": o[:, 2],
+            "measured_thrust_N": o[:, 4],
+            "spindle_hz": o[:, 6],
+            "measured_spindle_hz": o[:, 5],
             "spindle_rpm": 60.0 * o[:, 6],
-            "voltage_V": e[:, _E_VOLTAGE].copy(),
-            "valve_opening": o[:, 7].copy(),
-            "feed_velocity_mm_s": o[:, 8].copy(),
-            "feed_mm_per_rev": o[:, 10].copy(),
+            "voltage_V": e[:, _E_VOLTAGE],
+            "valve_opening": o[:, 7],
+            "feed_velocity_mm_s": o[:, 8],
+            "feed_mm_per_rev": o[:, 10],
             "cutting": o[:, 15] != 0.0,
-            "engagement": o[:, 16].copy(),
-            "position_mm": o[:, 11].copy(),
-            "depth_mm": o[:, 12].copy(),
-            "target_depth_mm": par[:, _P_TARGET].copy(),
-            "packed_chip_mm": o[:, 13].copy(),
-            "chip_ratio": o[:, 14].copy(),
-            "diameter_mm": par[:, _P_D].copy(),
-            "segment": self.counts[:, _C_SEGMENT].copy(),
+            "engagement": o[:, 16],
+            "position_mm": o[:, 11],
+            "depth_mm": o[:, 12],
+            "target_depth_mm": lane[:, 1],
+            "packed_chip_mm": o[:, 13],
+            "chip_ratio": o[:, 14],
+            "diameter_mm": lane[:, 2],
+            "segment": c[:, _C_SEGMENT],
             "scenario": self.names.copy(),
             "drilling_time_s": finish,
-            "_drilling_time_s": done,
+            "_drilling_time_s": done.copy(),
             "machining_time_s": finish.copy(),
             "_machining_time_s": done.copy(),
         }

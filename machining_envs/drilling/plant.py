@@ -35,7 +35,7 @@ the spindle is integrated with fixed RK4 sub-steps in which the valve position c
 the exact solution.
 
 The physics is batched: :class:`DrillingLanes` holds N holes in arrays and one compiled
-kernel (:func:`step_lane`, numba, cached on disk) advances each; :class:`DrillingPlant` is
+kernel (:func:`advance`, numba, cached on disk) advances them; :class:`DrillingPlant` is
 one such lane. This module knows nothing of gymnasium.
 """
 
@@ -58,6 +58,8 @@ __all__ = [
     "DrillingPlant",
     "DrillingLanes",
     "LANE_SIGNALS",
+    "LANE_BLOCK",
+    "advance",
     "DrillingStep",
     "CuttingCoefficients",
     "cutting_coefficients",
@@ -682,13 +684,14 @@ class DrillingStep:
 
 # ---- the batched physics: N holes stepped as arrays, one kernel for one lane or many --------
 
-#: Columns of ``DrillingLanes.par`` (one row of parameters per lane). The valve's transition
-#: rows (``_P_HALF``: 2m+1 rows of 3, then 2 rows of 3) and the filter weights (m+1) follow
-#: the scalars.
-(_P_TS, _P_UMAX, _P_VMAX, _P_RETRACT, _P_K2, _P_K3, _P_N, _P_INERTIA, _P_OU_C, _P_OU_C_IN,
- _P_OU_0, _P_OU_0_IN, _P_FA, _P_G0, _P_CHIP_LEN, _P_SIG_C, _P_SIG_0, _P_KT, _P_KH, _P_KH2,
- _P_FULL, _P_D, _P_TARGET, _P_NOISE_T, _P_NOISE_H, _P_NOISE_S, _P_BREAK, _P_SQUARE,
- _P_HALF) = range(29)  # fmt: skip
+#: Entries of ``DrillingLanes.shared`` (the batch's constants). The valve's transition rows
+#: (``_G_HALF``: 2m+1 rows of 3, then 2 rows of 3) and the filter weights (m+1) follow the
+#: scalars.
+(_G_TS, _G_UMAX, _G_VMAX, _G_RETRACT, _G_K2, _G_K3, _G_N, _G_INERTIA, _G_OU_C, _G_OU_C_IN,
+ _G_OU_0, _G_OU_0_IN, _G_FA, _G_CHIP_LEN, _G_SQUARE, _G_HALF) = range(16)  # fmt: skip
+#: Columns of ``DrillingLanes.par`` (one row of parameters per lane).
+(_P_G0, _P_SIG_C, _P_SIG_0, _P_KT, _P_KH, _P_KH2, _P_FULL, _P_D, _P_TARGET, _P_NOISE_T,
+ _P_NOISE_H, _P_NOISE_S, _P_BREAK, _N_PAR) = range(14)  # fmt: skip
 #: Columns of ``DrillingLanes.state``.
 (_S_X1, _S_X2, _S_OMEGA, _S_T, _S_POS, _S_DEPTH, _S_PACKED, _S_XI_CHIP, _S_XI_CUT, _S_TQ_F,
  _S_TH_F, _S_TQ, _S_TH, _S_VOLT, _S_FINISHED, _N_STATE) = range(16)  # fmt: skip
@@ -698,13 +701,63 @@ LANE_SIGNALS = tuple(f.name for f in dataclasses.fields(DrillingStep))
 _N_OUT = len(LANE_SIGNALS)
 #: Rows of ``DrillingLanes.eng`` per lane: point depth, torque share, thrust share.
 _N_ENG = _N_LIP + 2
-#: Inputs per lane of :func:`step_lane`: voltage, feed velocity and the five standard normals.
+#: Inputs per lane of :func:`advance`: voltage, feed velocity and the five standard normals.
 _N_IN = 7
+#: 1 Hz, rad/s: below it the torque law is not evaluated (the drill stalls).
+_W_FLOOR = 2.0 * math.pi
 
 
-def _n_par(m: int) -> int:
-    """Columns of the parameter row of a lane with ``m`` sub-steps."""
-    return _P_HALF + 3 * (2 * m + 1) + 6 + (m + 1)
+#: The fields of ``DrillingParams`` every lane of a batch shares (``DrillingLanes.shared``).
+_SHARED_FIELDS = (
+    "valve_natural_freq_hz",
+    "valve_damping",
+    "valve_static_gain_per_V",
+    "voltage_max",
+    "spindle_friction_exponent",
+    "spindle_drive_gain",
+    "spindle_friction",
+    "spindle_inertia_Nmm_s2",
+    "chip_length_diameters",
+    "chip_fluctuation_time_s",
+    "cutting_fluctuation_time_s",
+    "feed_speed_max_mm_s",
+    "retract_limit_mm",
+    "sensor_cutoff_hz",
+    "sample_time_s",
+    "substeps",
+)
+
+
+def _shared_key(p: DrillingParams) -> tuple:
+    return tuple(getattr(p, f) for f in _SHARED_FIELDS)
+
+
+def _shared_constants(p: DrillingParams) -> np.ndarray:
+    """``DrillingLanes.shared`` of a batch with the parameters ``p``."""
+    m = p.substeps
+    ts = p.sample_time_s
+    half, vstep = _valve_matrices(p.valve_natural_freq_rad_s, p.valve_damping, p.k1, ts, m)
+    fa, fw = _filter_weights(p.sensor_cutoff_hz, ts, m)
+    ou_c = math.exp(-ts / p.chip_fluctuation_time_s)
+    ou_0 = math.exp(-ts / p.cutting_fluctuation_time_s)
+    scalars = (
+        ts,
+        p.voltage_max,
+        p.feed_speed_max_mm_s,
+        p.retract_limit_mm,
+        p.spindle_drive_gain,
+        p.spindle_friction,
+        p.spindle_friction_exponent,
+        p.spindle_inertia_Nmm_s2,
+        ou_c,
+        math.sqrt(1.0 - ou_c**2),
+        ou_0,
+        math.sqrt(1.0 - ou_0**2),
+        fa,
+        p.chip_length_diameters,
+        2.0,  # x ** 2 of Python calls pow(); the exponent is data so that the kernel does too
+    )
+    return np.concatenate([scalars, half.ravel(), vstep.ravel(), fw])
 
 
 @numba.njit(cache=True)
@@ -720,24 +773,36 @@ def _pymin(a, b):
 
 
 @numba.njit(cache=True)
-def _interp(x, xp, fp):
-    """``np.interp(x, xp, fp)`` for one ``x`` inside ``[xp[0], xp[-1])`` (ascending ``xp``),
-    with numpy's arithmetic."""
-    lo, hi = 0, xp.size - 1  # xp[lo] <= x < xp[hi]
-    while hi - lo > 1:
-        mid = (lo + hi) >> 1
-        if xp[mid] <= x:
-            lo = mid
-        else:
-            hi = mid
-    if xp[lo] == x:
-        return fp[lo]
-    slope = (fp[lo + 1] - fp[lo]) / (xp[lo + 1] - xp[lo])
-    y = slope * (x - xp[lo]) + fp[lo]
+def _interval(x, xp):
+    """The ``j`` with ``xp[j] <= x < xp[j + 1]`` for ``x`` inside ``[xp[0], xp[-1])``
+    (ascending ``xp``). The search starts where an evenly spaced table past ``xp[1]`` (the
+    lips' part of the engagement tables) would have ``x``; the comparisons make it exact."""
+    last = xp.size - 2
+    j = 0
+    if x >= xp[1]:
+        j = 1 + int(min((x - xp[1]) / (xp[2] - xp[1]), last))
+    j = min(j, last)
+    while j > 0 and xp[j] > x:
+        j -= 1
+    while j < last and xp[j + 1] <= x:
+        j += 1
+    return j
+
+
+@numba.njit(cache=True)
+def _interp(x, xp, fp, j):
+    """``np.interp(x, xp, fp)`` with numpy's arithmetic for ``x`` in the interval ``j`` of
+    ``xp`` (:func:`_interval`)."""
+    if np.isnan(x):
+        return x
+    if xp[j] == x:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    y = slope * (x - xp[j]) + fp[j]
     if np.isnan(y):
-        y = slope * (x - xp[lo + 1]) + fp[lo + 1]
-        if np.isnan(y) and fp[lo] == fp[lo + 1]:
-            y = fp[lo]
+        y = slope * (x - xp[j + 1]) + fp[j + 1]
+        if np.isnan(y) and fp[j] == fp[j + 1]:
+            y = fp[j]
     return y
 
 
@@ -749,37 +814,44 @@ def _engagement(eng, full, depth_mm):
         return 1.0, 1.0
     if depth_mm <= 0.0:
         return 0.0, 0.0
-    return _interp(depth_mm, eng[0], eng[1]), _interp(depth_mm, eng[0], eng[2])
+    if np.isnan(depth_mm):
+        return depth_mm, depth_mm
+    xp = eng[0]
+    j = _interval(depth_mm, xp)
+    return _interp(depth_mm, xp, eng[1], j), _interp(depth_mm, xp, eng[2], j)
+
+
+#: Columns of ``DrillingLanes.tmp``: what a lane carries between the stages of its step.
+(_T_U, _T_BOTTOM, _T_CUT, _T_K4, _T_KH, _T_KH2, _T_LOAD, _T_W, _T_WB, _T_F1, _T_F2, _T_F3,
+ _T_XB, _T_XC, _T_TQ_F, _T_TH_F, _T_PEAK, _T_TQ, _T_TH, _T_H, _T_H2, _T_H6,
+ _N_TMP) = range(23)  # fmt: skip
+#: Lanes whose step advances together, stage by stage (see :func:`advance`).
+LANE_BLOCK = 16
 
 
 @numba.njit(cache=True)
-def step_lane(k, m, par, eng, state, voltage, feed, noise, out):
-    """Advance lane ``k`` by one sample (see :class:`DrillingLanes` for the layout).
-
-    Holds ``voltage`` (V) and ``feed`` (mm/s), both clipped to the machine's range;
-    ``noise`` holds five standard normals (chip and cutting fluctuation innovations, torque,
-    thrust and speed sensor noise). ``out[k]`` gets the signals of :class:`DrillingStep`.
-    The arithmetic is that of one hole, whatever the number of lanes.
-    """
+def _begin(k, m, g, par, eng, state, voltage, feed, noise, out, tmp):
+    """First stage of lane ``k``'s step: the commands, the fluctuations, the hole over the
+    period and the drilling load; the torque and thrust at the period's start."""
     p = par[k]
     s = state[k]
     o = out[k]
-    ts = p[_P_TS]
-    h = ts / m
-    u = _pymin(_pymax(voltage, 0.0), p[_P_UMAX])
-    vmax = p[_P_VMAX]
+    t = tmp[k]
+    ts = g[_G_TS]
+    u = _pymin(_pymax(voltage, 0.0), g[_G_UMAX])
+    vmax = g[_G_VMAX]
     v = _pymin(_pymax(feed, -vmax), vmax)
     s[_S_VOLT] = u
 
     # Fluctuations (Ornstein-Uhlenbeck, unit variance), then the hole over this period.
-    xi_chip = p[_P_OU_C] * s[_S_XI_CHIP] + p[_P_OU_C_IN] * noise[0]
-    xi_cut = p[_P_OU_0] * s[_S_XI_CUT] + p[_P_OU_0_IN] * noise[1]
+    xi_chip = g[_G_OU_C] * s[_S_XI_CHIP] + g[_G_OU_C_IN] * noise[0]
+    xi_cut = g[_G_OU_0] * s[_S_XI_CUT] + g[_G_OU_0_IN] * noise[1]
     s[_S_XI_CHIP] = xi_chip
     s[_S_XI_CUT] = xi_cut
     z0 = s[_S_POS]
     z1 = z0 + v * ts
-    if z1 < -p[_P_RETRACT]:
-        z1 = -p[_P_RETRACT]
+    if z1 < -g[_G_RETRACT]:
+        z1 = -g[_G_RETRACT]
     bottom = s[_S_DEPTH]
     cut_len = z1 - bottom if (v > 0.0 and z1 > bottom) else 0.0
     cutting = cut_len > 0.0
@@ -789,118 +861,202 @@ def step_lane(k, m, par, eng, state, voltage, feed, noise, out):
         mid = bottom + 0.5 * cut_len
         eng_t, eng_h = _engagement(eng[k], p[_P_FULL], mid)
         packed = s[_S_PACKED] + 0.5 * cut_len
-        g = p[_P_G0] * (math.exp(packed / (p[_P_CHIP_LEN] * d)) - 1.0)
-        g *= _pymax(0.0, 1.0 + p[_P_SIG_C] * xi_chip)
-        load = (1.0 + g) * _pymax(0.0, 1.0 + p[_P_SIG_0] * xi_cut)
+        ratio = p[_P_G0] * (math.exp(packed / (g[_G_CHIP_LEN] * d)) - 1.0)
+        ratio *= _pymax(0.0, 1.0 + p[_P_SIG_C] * xi_chip)
+        load = (1.0 + ratio) * _pymax(0.0, 1.0 + p[_P_SIG_0] * xi_cut)
         k4 = p[_P_KT] * v_cut * eng_t * load
         kh = p[_P_KH] * v_cut * eng_h * load
-        # x ** 2 of Python calls pow(); the exponent is data so that this does too.
-        kh2 = p[_P_KH2] * math.pow(v_cut * eng_h, p[_P_SQUARE])
+        kh2 = p[_P_KH2] * math.pow(v_cut * eng_h, g[_G_SQUARE])
     else:
         v_cut = 0.0
-        g = 0.0
+        ratio = 0.0
         eng_t = 0.0
         k4 = 0.0
         kh = 0.0
         kh2 = 0.0
+    o[8] = v
+    o[9] = v_cut
+    o[11] = z1
+    o[14] = ratio
+    o[15] = 1.0 if cutting else 0.0
+    o[16] = eng_t
+    t[_T_U] = u
+    t[_T_BOTTOM] = bottom
+    t[_T_CUT] = cut_len
+    t[_T_K4] = k4
+    t[_T_KH] = kh
+    t[_T_KH2] = kh2
+    t[_T_LOAD] = k4 / g[_G_INERTIA]
+    h = ts / m  # the RK4 step, and the factors of its stages
+    t[_T_H] = h
+    t[_T_H2] = 0.5 * h
+    t[_T_H6] = h / 6.0
 
-    # Valve exactly at every half sub-step; spindle by RK4 with the load k4 / omega.
-    x1 = s[_S_X1]
-    x2 = s[_S_X2]
-    hv = _P_HALF
-    k2, k3, n = p[_P_K2], p[_P_K3], p[_P_N]
-    load_c = k4 / p[_P_INERTIA]
-    w_floor = 2.0 * math.pi  # 1 Hz: below it the torque law is not evaluated (the drill stalls)
-    w = s[_S_OMEGA]
     # Torque and thrust at the sub-step instants (j = 0..m); the sensors filter them.
-    fw = hv + 3 * (2 * m + 1) + 6
-    fa = p[_P_FA]
-    tq_f = s[_S_TQ_F] * fa
-    th_f = s[_S_TH_F] * fa
-    wj = w if w > w_floor else w_floor
+    w = s[_S_OMEGA]
+    fw = _G_HALF + 3 * (2 * m + 1) + 6
+    fa = g[_G_FA]
+    wj = w if w > _W_FLOOR else _W_FLOOR
     tq = k4 / wj
     th = kh / wj + kh2 / (wj * wj)
-    peak = tq if tq > 0.0 else 0.0
-    tq_f += p[fw] * tq
-    th_f += p[fw] * th
-    xc = p[hv] * x1 + p[hv + 1] * x2 + p[hv + 2] * u
-    for j in range(m):
-        r = hv + 6 * j
-        xa = xc
-        xb = p[r + 3] * x1 + p[r + 4] * x2 + p[r + 5] * u
-        xc = p[r + 6] * x1 + p[r + 7] * x2 + p[r + 8] * u
-        wa = w if w > 0.0 else 0.0
-        f1 = k2 * xa - k3 * wa**n - load_c / (wa if wa > w_floor else w_floor)
-        wb = w + 0.5 * h * f1
-        wb = wb if wb > 0.0 else 0.0
-        f2 = k2 * xb - k3 * wb**n - load_c / (wb if wb > w_floor else w_floor)
-        wb = w + 0.5 * h * f2
-        wb = wb if wb > 0.0 else 0.0
-        f3 = k2 * xb - k3 * wb**n - load_c / (wb if wb > w_floor else w_floor)
-        wc = w + h * f3
-        wc = wc if wc > 0.0 else 0.0
-        f4 = k2 * xc - k3 * wc**n - load_c / (wc if wc > w_floor else w_floor)
-        w = w + h / 6.0 * (f1 + 2.0 * f2 + 2.0 * f3 + f4)
-        if w < 0.0:
-            w = 0.0
-        wj = w if w > w_floor else w_floor
-        tq = k4 / wj
-        th = kh / wj + kh2 / (wj * wj)
-        if tq > peak:
-            peak = tq
-        tq_f += p[fw + j + 1] * tq
-        th_f += p[fw + j + 1] * th
-    r = fw - 6
-    s[_S_X1] = p[r] * x1 + p[r + 1] * x2 + p[r + 2] * u
-    s[_S_X2] = p[r + 3] * x1 + p[r + 4] * x2 + p[r + 5] * u
+    t[_T_TQ_F] = s[_S_TQ_F] * fa + g[fw] * tq
+    t[_T_TH_F] = s[_S_TH_F] * fa + g[fw] * th
+    t[_T_PEAK] = tq if tq > 0.0 else 0.0
+    t[_T_TQ] = tq
+    t[_T_TH] = th
+    t[_T_W] = w
+    # The valve's exact position at the start of the period.
+    t[_T_XC] = g[_G_HALF] * s[_S_X1] + g[_G_HALF + 1] * s[_S_X2] + g[_G_HALF + 2] * u
+
+
+@numba.njit(cache=True)
+def _end(k, m, g, par, state, noise, out, tmp):
+    """Last stage of lane ``k``'s step: the valve's and spindle's new state, the drill point,
+    the chips, the end of the hole and the sensors' outputs."""
+    p = par[k]
+    s = state[k]
+    o = out[k]
+    t = tmp[k]
+    ts = g[_G_TS]
+    u = t[_T_U]
+    x1 = s[_S_X1]
+    x2 = s[_S_X2]
+    r = _G_HALF + 3 * (2 * m + 1)
+    s[_S_X1] = g[r] * x1 + g[r + 1] * x2 + g[r + 2] * u
+    s[_S_X2] = g[r + 3] * x1 + g[r + 4] * x2 + g[r + 5] * u
+    w = t[_T_W]
     s[_S_OMEGA] = w
+    tq_f = t[_T_TQ_F]
+    th_f = t[_T_TH_F]
     s[_S_TQ_F] = tq_f
     s[_S_TH_F] = th_f
-    s[_S_TQ] = tq
-    s[_S_TH] = th
+    s[_S_TQ] = t[_T_TQ]
+    s[_S_TH] = t[_T_TH]
 
     # The drill point and the chips.
+    z1 = o[11]
+    cut_len = t[_T_CUT]
+    bottom = t[_T_BOTTOM]
     s[_S_POS] = z1
-    if cutting:
+    if cut_len > 0.0:
         s[_S_DEPTH] = z1
         s[_S_PACKED] += cut_len
     if z1 < 0.0:
         s[_S_PACKED] = 0.0  # the point left the hole: the flutes are cleared
-    t = s[_S_T]
+    time = s[_S_T]
     finish = np.nan
     if s[_S_FINISHED] == 0.0 and s[_S_DEPTH] >= p[_P_TARGET]:
         frac = (p[_P_TARGET] - bottom) / cut_len if cut_len > 0 else 1.0
-        finish = t + _pymin(_pymax(frac, 0.0), 1.0) * ts
+        finish = time + _pymin(_pymax(frac, 0.0), 1.0) * ts
         s[_S_FINISHED] = 1.0
-    s[_S_T] = t + ts
+    s[_S_T] = time + ts
     speed_hz = w / (2.0 * math.pi)
-    o[0] = tq
-    o[1] = peak
-    o[2] = th
+    v_cut = o[9]
+    o[0] = t[_T_TQ]
+    o[1] = t[_T_PEAK]
+    o[2] = t[_T_TH]
     o[3] = tq_f + p[_P_NOISE_T] * noise[2]
     o[4] = th_f + p[_P_NOISE_H] * noise[3]
     o[5] = speed_hz + p[_P_NOISE_S] * noise[4]
     o[6] = speed_hz
     o[7] = s[_S_X1]
-    o[8] = v
-    o[9] = v_cut
     o[10] = (v_cut / speed_hz) if speed_hz > 1.0 else 0.0
-    o[11] = z1
     o[12] = s[_S_DEPTH]
     o[13] = s[_S_PACKED]
-    o[14] = g
-    o[15] = 1.0 if cutting else 0.0
-    o[16] = eng_t
     o[17] = finish
 
 
 @numba.njit(cache=True)
-def _step_lanes(m, par, eng, state, inputs, out):
-    """Advance every lane by one sample (:func:`step_lane` with the row ``inputs[k]``:
-    voltage, feed velocity, five standard normals)."""
-    for k in range(state.shape[0]):
+def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
+    """Advance lanes ``k0 .. k1 - 1`` by one sample; ``inputs[k]`` = voltage (V), feed
+    velocity (mm/s) and five standard normals (chip and cutting fluctuation innovations,
+    torque, thrust and speed sensor noise) of lane ``k``; ``out[k]`` gets the signals of
+    :class:`DrillingStep`.
+
+    The lanes go through each stage of the step together (:func:`_begin`, the four stages
+    of every RK4 sub-step of the spindle, :func:`_end`), so that the slow operations of
+    different lanes (``pow`` above all) overlap in the processor; each lane's arithmetic is
+    that of one hole, whatever the number of lanes.
+    """
+    for k in range(k0, k1):
         row = inputs[k]
-        step_lane(k, m, par, eng, state, row[0], row[1], row[2:], out)
+        _begin(k, m, g, par, eng, state, row[0], row[1], row[2:], out, tmp)
+    # The spindle by RK4 with the valve exactly at every half sub-step and the load
+    # k4 / omega; the torque and thrust at the end of every sub-step.
+    fw = _G_HALF + 3 * (2 * m + 1) + 6
+    for j in range(m):
+        r = _G_HALF + 6 * j
+        for k in range(k0, k1):
+            t = tmp[k]
+            u = t[_T_U]
+            x1 = state[k, _S_X1]
+            x2 = state[k, _S_X2]
+            xa = t[_T_XC]
+            t[_T_XB] = g[r + 3] * x1 + g[r + 4] * x2 + g[r + 5] * u
+            t[_T_XC] = g[r + 6] * x1 + g[r + 7] * x2 + g[r + 8] * u
+            w = t[_T_W]
+            wa = w if w > 0.0 else 0.0
+            f = (
+                g[_G_K2] * xa
+                - g[_G_K3] * wa ** g[_G_N]
+                - t[_T_LOAD] / (wa if wa > _W_FLOOR else _W_FLOOR)
+            )
+            t[_T_F1] = f
+            wb = w + t[_T_H2] * f
+            t[_T_WB] = wb if wb > 0.0 else 0.0
+        for k in range(k0, k1):
+            t = tmp[k]
+            wb = t[_T_WB]
+            f = (
+                g[_G_K2] * t[_T_XB]
+                - g[_G_K3] * wb ** g[_G_N]
+                - t[_T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
+            )
+            t[_T_F2] = f
+            wb = t[_T_W] + t[_T_H2] * f
+            t[_T_WB] = wb if wb > 0.0 else 0.0
+        for k in range(k0, k1):
+            t = tmp[k]
+            wb = t[_T_WB]
+            f = (
+                g[_G_K2] * t[_T_XB]
+                - g[_G_K3] * wb ** g[_G_N]
+                - t[_T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
+            )
+            t[_T_F3] = f
+            wc = t[_T_W] + t[_T_H] * f
+            t[_T_WB] = wc if wc > 0.0 else 0.0
+        for k in range(k0, k1):
+            t = tmp[k]
+            wc = t[_T_WB]
+            f4 = (
+                g[_G_K2] * t[_T_XC]
+                - g[_G_K3] * wc ** g[_G_N]
+                - t[_T_LOAD] / (wc if wc > _W_FLOOR else _W_FLOOR)
+            )
+            w = t[_T_W] + t[_T_H6] * (t[_T_F1] + 2.0 * t[_T_F2] + 2.0 * t[_T_F3] + f4)
+            if w < 0.0:
+                w = 0.0
+            t[_T_W] = w
+            wj = w if w > _W_FLOOR else _W_FLOOR
+            tq = t[_T_K4] / wj
+            th = t[_T_KH] / wj + t[_T_KH2] / (wj * wj)
+            if tq > t[_T_PEAK]:
+                t[_T_PEAK] = tq
+            t[_T_TQ_F] += g[fw + j + 1] * tq
+            t[_T_TH_F] += g[fw + j + 1] * th
+            t[_T_TQ] = tq
+            t[_T_TH] = th
+    for k in range(k0, k1):
+        _end(k, m, g, par, state, inputs[k, 2:], out, tmp)
+
+
+@numba.njit(cache=True)
+def _step_lanes(m, g, par, eng, state, inputs, out, tmp):
+    """Advance every lane by one sample (:func:`advance`, ``LANE_BLOCK`` lanes at a time)."""
+    n = state.shape[0]
+    for k0 in range(0, n, LANE_BLOCK):
+        advance(k0, min(k0 + LANE_BLOCK, n), m, g, par, eng, state, inputs, out, tmp)
 
 
 class DrillingLanes:
@@ -909,12 +1065,15 @@ class DrillingLanes:
     Each lane has its own parameters, drill and hole (:meth:`start`); :meth:`step`
     advances every lane by one sample with one compiled kernel whose arithmetic per lane is
     exactly that of a single hole, so lane ``i`` of a batch and a batch of one give the same
-    numbers to the last bit. All lanes integrate the spindle with the same number of RK4
-    sub-steps (``params.substeps`` of the batch); everything else may differ per lane.
+    numbers to the last bit. The lanes share the valve, the spindle, the sensor filter, the
+    fluctuations' correlation times, the stage's limits, the sample time and the RK4
+    sub-steps (those of the ``params`` given here; :meth:`start` refuses a lane whose
+    parameters differ in them); the drill, the hole, the cutting and chip constants, the
+    fluctuations' sizes and the sensor noise are the lane's own.
 
-    Layout (one row per lane): ``par`` the parameters and derived constants (the valve's
-    exact transitions, the sensor filter's weights, the drill's cutting constants),
-    ``eng`` the engagement tables of the drill (point depth, torque share, thrust share),
+    Layout: ``shared`` the batch's constants (with the valve's exact transitions and the
+    sensor filter's weights); one row per lane of ``par`` the lane's parameters and its
+    drill's cutting constants, ``eng`` the engagement tables of the drill (point depth, torque share, thrust share),
     ``state`` the valve, spindle, drill point, chips, fluctuations and sensor filters,
     ``out`` the signals of the last step (``LANE_SIGNALS``).
 
@@ -931,12 +1090,17 @@ class DrillingLanes:
         self.n = int(n)
         self.params = params
         self.m = params.substeps
-        self.par = np.zeros((self.n, _n_par(self.m)))
+        self._key = _shared_key(params)
+        #: The batch's constants: valve, spindle, filter, fluctuation times, sample time.
+        self.shared = _shared_constants(params)
+        self.par = np.zeros((self.n, _N_PAR))
         self.eng = np.zeros((self.n, 3, _N_ENG))
         self.state = np.zeros((self.n, _N_STATE))
         #: Signals of the last step, one row per lane (columns: ``LANE_SIGNALS``).
         self.out = np.zeros((self.n, _N_OUT))
         self.out[:, -1] = np.nan
+        #: Scratch of the step kernel.
+        self.tmp = np.zeros((self.n, _N_TMP))
 
     def start(
         self,
@@ -952,35 +1116,18 @@ class DrillingLanes:
         ``coefficients``: the drill's cutting model if the caller has it
         (``params.coefficients(diameter_mm)``).
         """
-        if params.substeps != self.m:
-            raise ValueError(
-                f"substeps of a lane must be the batch's {self.m}, got {params.substeps}"
-            )
         p = params
+        if p is not self.params and _shared_key(p) != self._key:
+            own = dict(zip(_SHARED_FIELDS, _shared_key(p), strict=True))
+            batch = dict(zip(_SHARED_FIELDS, self._key, strict=True))
+            diff = {f: v for f, v in own.items() if v != batch[f]}
+            raise ValueError(
+                f"a lane's {', '.join(diff)} must be the batch's "
+                f"({', '.join(f'{f}={batch[f]!r}' for f in diff)}), got {diff}"
+            )
         c = p.coefficients(diameter_mm) if coefficients is None else coefficients
-        m = self.m
-        ts = p.sample_time_s
-        half, vstep = _valve_matrices(p.valve_natural_freq_rad_s, p.valve_damping, p.k1, ts, m)
-        fa, fw = _filter_weights(p.sensor_cutoff_hz, ts, m)
-        ou_c = math.exp(-ts / p.chip_fluctuation_time_s)
-        ou_0 = math.exp(-ts / p.cutting_fluctuation_time_s)
-        row = self.par[lane]
-        row[:_P_HALF] = (
-            ts,
-            p.voltage_max,
-            p.feed_speed_max_mm_s,
-            p.retract_limit_mm,
-            p.spindle_drive_gain,
-            p.spindle_friction,
-            p.spindle_friction_exponent,
-            p.spindle_inertia_Nmm_s2,
-            ou_c,
-            math.sqrt(1.0 - ou_c**2),
-            ou_0,
-            math.sqrt(1.0 - ou_0**2),
-            fa,
+        self.par[lane] = (
             p.chip_friction,
-            p.chip_length_diameters,
             p.chip_fluctuation,
             p.cutting_fluctuation,
             _TWO_PI * c.torque_per_feed,
@@ -993,12 +1140,7 @@ class DrillingLanes:
             p.thrust_noise_N,
             p.speed_noise_hz,
             p.breakage_torque_Nmm(diameter_mm),
-            2.0,
         )
-        o = _P_HALF + half.size
-        row[_P_HALF:o] = half.ravel()
-        row[o : o + 6] = vstep.ravel()
-        row[o + 6 :] = fw
         e = self.eng[lane]
         e[0] = c.engage_depth_mm
         e[1] = c.engage_torque
@@ -1027,7 +1169,7 @@ class DrillingLanes:
     def step(self, inputs: np.ndarray) -> None:
         """Advance every lane by one sample; ``inputs[k]`` = voltage (V), feed velocity
         (mm/s) and five standard normals of lane ``k``; results in ``out``."""
-        _step_lanes(self.m, self.par, self.eng, self.state, inputs, self.out)
+        _step_lanes(self.m, self.shared, self.par, self.eng, self.state, inputs, self.out, self.tmp)
 
 
 def _state_property(col: int, doc: str) -> property:
