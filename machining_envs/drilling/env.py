@@ -110,65 +110,61 @@ _C_N_CLIPPED, _C_SEGMENT, _C_NOISE = 0, 1, 2
 
 
 @numba.njit(cache=True)
-def _env_lane(k, par, state, out, c, ev, flags, counts, obs):
-    """Episode flags, reward and observation of lane ``k`` from the plant's signals
-    ``out[k]`` (those that are not finite after a divergence are set to zero there)."""
-    o = out[k]
-    e_ = ev[k]
-    f = flags[k]
-    torque, peak, meas = o[0], o[1], o[3]
-    diverged = not (
-        np.isfinite(torque)
-        and np.isfinite(peak)
-        and np.isfinite(meas)
-        and np.isfinite(o[2])
-        and np.isfinite(o[4])
-        and np.isfinite(o[6])
-        and np.isfinite(o[5])
-    )
-    if diverged:  # never seen; kept so that no NaN can reach an observation or a reward
-        torque = 0.0
-        peak = 0.0
-        meas = 0.0
-        for i in (0, 1, 2, 3, 4, 5, 6, 10):  # torques, thrusts, speeds, feed per rev
-            o[i] = 0.0
-    e_[_E_MEAS] = meas
-    e_[_E_THRUST_MEAS] = o[4]
-    e_[_E_SPEED_MEAS] = o[5]
-    if o[15] != 0.0:
-        counts[k, _C_SEGMENT] = 1
-    breakage = peak > par[k, _P_BREAK]
-    finished = not np.isnan(o[17])
-    terminated = diverged or breakage or finished
-    t = state[k, _S_T]
-    truncated = (not terminated) and t >= c[_K_MAX_T] - 1e-9
-    w = c[_K_W:]
-    e = torque / e_[_E_TR]
-    reward = -w[0] * abs(e - 1.0) - w[1] * _pymax(0.0, e - w[2])
-    if w[3] != 0.0:
-        reward += w[3] * o[9] / c[_K_V0]
-    if breakage or diverged:
-        reward -= w[4]
-    e_[_E_REWARD] = reward
-    f[_F_DIVERGED] = diverged
-    f[_F_BREAKAGE] = breakage
-    f[_F_FINISHED] = finished
-    f[_F_TERMINATED] = terminated
-    f[_F_TRUNCATED] = truncated
-    lo, hi = _TORQUE_OBS
-    ts = c[_K_TORQUE_SCALE]
-    ls = c[_K_LENGTH_SCALE]
-    ob = obs[k]
-    # The torque history: the measured torques of the last steps, as they were observed.
-    for i in range(8 + _HISTORY, 9, -1):
-        ob[i] = ob[i - 1]
-    ob[9] = ob[0]
-    ob[0] = _pymin(_pymax(meas / ts, lo), hi)
-    ob[2] = _pymin(_pymax(e_[_E_THRUST_MEAS] / c[_K_THRUST_SCALE], lo), hi)
-    ob[3] = _pymin(_pymax(e_[_E_SPEED_MEAS] / c[_K_SPEED_SCALE], 0.0), 3.0)
-    ob[4] = e_[_E_ACTION]
-    ob[5] = _pymin(_pymax(o[11] / ls, -1.0), 2.0)
-    ob[6] = _pymin(o[12] / ls, 2.0)
+def _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs):
+    """Episode flags, reward and observation of lanes ``k0 .. k1 - 1`` from the plant's
+    signals ``out[k]`` (those that are not finite after a divergence are set to zero there)."""
+    for k in range(k0, k1):
+        torque, peak, meas = out[k, 0], out[k, 1], out[k, 3]
+        diverged = not (
+            np.isfinite(torque)
+            and np.isfinite(peak)
+            and np.isfinite(meas)
+            and np.isfinite(out[k, 2])
+            and np.isfinite(out[k, 4])
+            and np.isfinite(out[k, 6])
+            and np.isfinite(out[k, 5])
+        )
+        if diverged:  # never seen; kept so that no NaN can reach an observation or a reward
+            torque = 0.0
+            peak = 0.0
+            meas = 0.0
+            for i in (0, 1, 2, 3, 4, 5, 6, 10):  # torques, thrusts, speeds, feed per rev
+                out[k, i] = 0.0
+        ev[k, _E_MEAS] = meas
+        ev[k, _E_THRUST_MEAS] = out[k, 4]
+        ev[k, _E_SPEED_MEAS] = out[k, 5]
+        if out[k, 15] != 0.0:
+            counts[k, _C_SEGMENT] = 1
+        breakage = peak > par[k, _P_BREAK]
+        finished = not np.isnan(out[k, 17])
+        terminated = diverged or breakage or finished
+        t = state[k, _S_T]
+        truncated = (not terminated) and t >= c[_K_MAX_T] - 1e-9
+        e = torque / ev[k, _E_TR]
+        reward = -c[_K_W + 0] * abs(e - 1.0) - c[_K_W + 1] * _pymax(0.0, e - c[_K_W + 2])
+        if c[_K_W + 3] != 0.0:
+            reward += c[_K_W + 3] * out[k, 9] / c[_K_V0]
+        if breakage or diverged:
+            reward -= c[_K_W + 4]
+        ev[k, _E_REWARD] = reward
+        flags[k, _F_DIVERGED] = diverged
+        flags[k, _F_BREAKAGE] = breakage
+        flags[k, _F_FINISHED] = finished
+        flags[k, _F_TERMINATED] = terminated
+        flags[k, _F_TRUNCATED] = truncated
+        lo, hi = _TORQUE_OBS
+        ts = c[_K_TORQUE_SCALE]
+        ls = c[_K_LENGTH_SCALE]
+        # The torque history: the measured torques of the last steps, as they were observed.
+        for i in range(8 + _HISTORY, 9, -1):
+            obs[k, i] = obs[k, i - 1]
+        obs[k, 9] = obs[k, 0]
+        obs[k, 0] = _pymin(_pymax(meas / ts, lo), hi)
+        obs[k, 2] = _pymin(_pymax(ev[k, _E_THRUST_MEAS] / c[_K_THRUST_SCALE], lo), hi)
+        obs[k, 3] = _pymin(_pymax(ev[k, _E_SPEED_MEAS] / c[_K_SPEED_SCALE], 0.0), 3.0)
+        obs[k, 4] = ev[k, _E_ACTION]
+        obs[k, 5] = _pymin(_pymax(out[k, 11] / ls, -1.0), 2.0)
+        obs[k, 6] = _pymin(out[k, 12] / ls, 2.0)
 
 
 @numba.njit(cache=True)
@@ -197,14 +193,12 @@ def _step(m, g, par, eng, state, out, tmp, inputs, c, ev, flags, counts, obs, no
             ev[k, _E_VOLTAGE] = voltage
             i = counts[k, _C_NOISE]
             counts[k, _C_NOISE] = i + 1
-            row = inputs[k]
-            row[0] = voltage
-            row[1] = feed
+            inputs[k, 0] = voltage
+            inputs[k, 1] = feed
             for q in range(5):
-                row[2 + q] = normals[k, 5 * i + q]
+                inputs[k, 2 + q] = normals[k, 5 * i + q]
         advance(k0, k1, m, g, par, eng, state, inputs, out, tmp)
-        for k in range(k0, k1):
-            _env_lane(k, par, state, out, c, ev, flags, counts, obs)
+        _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs)
 
 
 class _DrillingCore:

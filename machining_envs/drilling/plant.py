@@ -760,65 +760,70 @@ def _shared_constants(p: DrillingParams) -> np.ndarray:
     return np.concatenate([scalars, half.ravel(), vstep.ravel(), fw])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _pymax(a, b):
     """``max(a, b)`` of Python for floats (``a`` unless ``b > a``)."""
     return b if b > a else a
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _pymin(a, b):
     """``min(a, b)`` of Python for floats (``a`` unless ``b < a``)."""
     return b if b < a else a
 
 
-@numba.njit(cache=True)
-def _interval(x, xp):
-    """The ``j`` with ``xp[j] <= x < xp[j + 1]`` for ``x`` inside ``[xp[0], xp[-1])``
-    (ascending ``xp``). The search starts where an evenly spaced table past ``xp[1]`` (the
-    lips' part of the engagement tables) would have ``x``; the comparisons make it exact."""
-    last = xp.size - 2
+@numba.njit(cache=True, inline="always")
+def _interval(x, eng, k):
+    """The ``j`` with ``xp[j] <= x < xp[j + 1]`` in the depths ``xp = eng[k, 0]`` of lane
+    ``k``'s engagement tables, for ``x`` inside ``[xp[0], xp[-1])``. The search starts where
+    an evenly spaced table past ``xp[1]`` (the lips' part) would have ``x``; the comparisons
+    make it exact."""
+    last = eng.shape[2] - 2
+    x1 = eng[k, 0, 1]
     j = 0
-    if x >= xp[1]:
-        j = 1 + int(min((x - xp[1]) / (xp[2] - xp[1]), last))
+    if x >= x1:
+        j = 1 + int(min((x - x1) / (eng[k, 0, 2] - x1), last))
     j = min(j, last)
-    while j > 0 and xp[j] > x:
+    while j > 0 and eng[k, 0, j] > x:
         j -= 1
-    while j < last and xp[j + 1] <= x:
+    while j < last and eng[k, 0, j + 1] <= x:
         j += 1
     return j
 
 
-@numba.njit(cache=True)
-def _interp(x, xp, fp, j):
-    """``np.interp(x, xp, fp)`` with numpy's arithmetic for ``x`` in the interval ``j`` of
-    ``xp`` (:func:`_interval`)."""
+@numba.njit(cache=True, inline="always")
+def _interp(x, eng, k, row, j):
+    """``np.interp(x, xp, fp)`` with numpy's arithmetic, ``xp = eng[k, 0]`` and
+    ``fp = eng[k, row]``, for ``x`` in the interval ``j`` (:func:`_interval`)."""
     if np.isnan(x):
         return x
-    if xp[j] == x:
-        return fp[j]
-    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
-    y = slope * (x - xp[j]) + fp[j]
+    x0 = eng[k, 0, j]
+    y0 = eng[k, row, j]
+    if x0 == x:
+        return y0
+    x1 = eng[k, 0, j + 1]
+    y1 = eng[k, row, j + 1]
+    slope = (y1 - y0) / (x1 - x0)
+    y = slope * (x - x0) + y0
     if np.isnan(y):
-        y = slope * (x - xp[j + 1]) + fp[j + 1]
-        if np.isnan(y) and fp[j] == fp[j + 1]:
-            y = fp[j]
+        y = slope * (x - x1) + y1
+        if np.isnan(y) and y0 == y1:
+            y = y0
     return y
 
 
 @numba.njit(cache=True)
-def _engagement(eng, full, depth_mm):
-    """Engaged shares of torque and thrust with the point ``depth_mm`` below the surface
-    (``eng``: a lane's tables; ``full``: depth of full engagement)."""
+def _engagement(eng, k, full, depth_mm):
+    """Engaged shares of torque and thrust of lane ``k`` (tables ``eng[k]``) with the point
+    ``depth_mm`` below the surface (``full``: depth of full engagement)."""
     if depth_mm >= full:
         return 1.0, 1.0
     if depth_mm <= 0.0:
         return 0.0, 0.0
     if np.isnan(depth_mm):
         return depth_mm, depth_mm
-    xp = eng[0]
-    j = _interval(depth_mm, xp)
-    return _interp(depth_mm, xp, eng[1], j), _interp(depth_mm, xp, eng[2], j)
+    j = _interval(depth_mm, eng, k)
+    return _interp(depth_mm, eng, k, 1, j), _interp(depth_mm, eng, k, 2, j)
 
 
 #: Columns of ``DrillingLanes.tmp``: what a lane carries between the stages of its step.
@@ -830,225 +835,205 @@ LANE_BLOCK = 16
 
 
 @numba.njit(cache=True)
-def _begin(k, m, g, par, eng, state, voltage, feed, noise, out, tmp):
-    """First stage of lane ``k``'s step: the commands, the fluctuations, the hole over the
-    period and the drilling load; the torque and thrust at the period's start."""
-    p = par[k]
-    s = state[k]
-    o = out[k]
-    t = tmp[k]
-    ts = g[_G_TS]
-    u = _pymin(_pymax(voltage, 0.0), g[_G_UMAX])
-    vmax = g[_G_VMAX]
-    v = _pymin(_pymax(feed, -vmax), vmax)
-    s[_S_VOLT] = u
-
-    # Fluctuations (Ornstein-Uhlenbeck, unit variance), then the hole over this period.
-    xi_chip = g[_G_OU_C] * s[_S_XI_CHIP] + g[_G_OU_C_IN] * noise[0]
-    xi_cut = g[_G_OU_0] * s[_S_XI_CUT] + g[_G_OU_0_IN] * noise[1]
-    s[_S_XI_CHIP] = xi_chip
-    s[_S_XI_CUT] = xi_cut
-    z0 = s[_S_POS]
-    z1 = z0 + v * ts
-    if z1 < -g[_G_RETRACT]:
-        z1 = -g[_G_RETRACT]
-    bottom = s[_S_DEPTH]
-    cut_len = z1 - bottom if (v > 0.0 and z1 > bottom) else 0.0
-    cutting = cut_len > 0.0
-    d = p[_P_D]
-    if cutting:
-        v_cut = cut_len / ts
-        mid = bottom + 0.5 * cut_len
-        eng_t, eng_h = _engagement(eng[k], p[_P_FULL], mid)
-        packed = s[_S_PACKED] + 0.5 * cut_len
-        ratio = p[_P_G0] * (math.exp(packed / (g[_G_CHIP_LEN] * d)) - 1.0)
-        ratio *= _pymax(0.0, 1.0 + p[_P_SIG_C] * xi_chip)
-        load = (1.0 + ratio) * _pymax(0.0, 1.0 + p[_P_SIG_0] * xi_cut)
-        k4 = p[_P_KT] * v_cut * eng_t * load
-        kh = p[_P_KH] * v_cut * eng_h * load
-        kh2 = p[_P_KH2] * math.pow(v_cut * eng_h, g[_G_SQUARE])
-    else:
-        v_cut = 0.0
-        ratio = 0.0
-        eng_t = 0.0
-        k4 = 0.0
-        kh = 0.0
-        kh2 = 0.0
-    o[8] = v
-    o[9] = v_cut
-    o[11] = z1
-    o[14] = ratio
-    o[15] = 1.0 if cutting else 0.0
-    o[16] = eng_t
-    t[_T_U] = u
-    t[_T_BOTTOM] = bottom
-    t[_T_CUT] = cut_len
-    t[_T_K4] = k4
-    t[_T_KH] = kh
-    t[_T_KH2] = kh2
-    t[_T_LOAD] = k4 / g[_G_INERTIA]
-    h = ts / m  # the RK4 step, and the factors of its stages
-    t[_T_H] = h
-    t[_T_H2] = 0.5 * h
-    t[_T_H6] = h / 6.0
-
-    # Torque and thrust at the sub-step instants (j = 0..m); the sensors filter them.
-    w = s[_S_OMEGA]
-    fw = _G_HALF + 3 * (2 * m + 1) + 6
-    fa = g[_G_FA]
-    wj = w if w > _W_FLOOR else _W_FLOOR
-    tq = k4 / wj
-    th = kh / wj + kh2 / (wj * wj)
-    t[_T_TQ_F] = s[_S_TQ_F] * fa + g[fw] * tq
-    t[_T_TH_F] = s[_S_TH_F] * fa + g[fw] * th
-    t[_T_PEAK] = tq if tq > 0.0 else 0.0
-    t[_T_TQ] = tq
-    t[_T_TH] = th
-    t[_T_W] = w
-    # The valve's exact position at the start of the period.
-    t[_T_XC] = g[_G_HALF] * s[_S_X1] + g[_G_HALF + 1] * s[_S_X2] + g[_G_HALF + 2] * u
-
-
-@numba.njit(cache=True)
-def _end(k, m, g, par, state, noise, out, tmp):
-    """Last stage of lane ``k``'s step: the valve's and spindle's new state, the drill point,
-    the chips, the end of the hole and the sensors' outputs."""
-    p = par[k]
-    s = state[k]
-    o = out[k]
-    t = tmp[k]
-    ts = g[_G_TS]
-    u = t[_T_U]
-    x1 = s[_S_X1]
-    x2 = s[_S_X2]
-    r = _G_HALF + 3 * (2 * m + 1)
-    s[_S_X1] = g[r] * x1 + g[r + 1] * x2 + g[r + 2] * u
-    s[_S_X2] = g[r + 3] * x1 + g[r + 4] * x2 + g[r + 5] * u
-    w = t[_T_W]
-    s[_S_OMEGA] = w
-    tq_f = t[_T_TQ_F]
-    th_f = t[_T_TH_F]
-    s[_S_TQ_F] = tq_f
-    s[_S_TH_F] = th_f
-    s[_S_TQ] = t[_T_TQ]
-    s[_S_TH] = t[_T_TH]
-
-    # The drill point and the chips.
-    z1 = o[11]
-    cut_len = t[_T_CUT]
-    bottom = t[_T_BOTTOM]
-    s[_S_POS] = z1
-    if cut_len > 0.0:
-        s[_S_DEPTH] = z1
-        s[_S_PACKED] += cut_len
-    if z1 < 0.0:
-        s[_S_PACKED] = 0.0  # the point left the hole: the flutes are cleared
-    time = s[_S_T]
-    finish = np.nan
-    if s[_S_FINISHED] == 0.0 and s[_S_DEPTH] >= p[_P_TARGET]:
-        frac = (p[_P_TARGET] - bottom) / cut_len if cut_len > 0 else 1.0
-        finish = time + _pymin(_pymax(frac, 0.0), 1.0) * ts
-        s[_S_FINISHED] = 1.0
-    s[_S_T] = time + ts
-    speed_hz = w / (2.0 * math.pi)
-    v_cut = o[9]
-    o[0] = t[_T_TQ]
-    o[1] = t[_T_PEAK]
-    o[2] = t[_T_TH]
-    o[3] = tq_f + p[_P_NOISE_T] * noise[2]
-    o[4] = th_f + p[_P_NOISE_H] * noise[3]
-    o[5] = speed_hz + p[_P_NOISE_S] * noise[4]
-    o[6] = speed_hz
-    o[7] = s[_S_X1]
-    o[10] = (v_cut / speed_hz) if speed_hz > 1.0 else 0.0
-    o[12] = s[_S_DEPTH]
-    o[13] = s[_S_PACKED]
-    o[17] = finish
-
-
-@numba.njit(cache=True)
 def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
     """Advance lanes ``k0 .. k1 - 1`` by one sample; ``inputs[k]`` = voltage (V), feed
     velocity (mm/s) and five standard normals (chip and cutting fluctuation innovations,
     torque, thrust and speed sensor noise) of lane ``k``; ``out[k]`` gets the signals of
     :class:`DrillingStep`.
 
-    The lanes go through each stage of the step together (:func:`_begin`, the four stages
-    of every RK4 sub-step of the spindle, :func:`_end`), so that the slow operations of
-    different lanes (``pow`` above all) overlap in the processor; each lane's arithmetic is
-    that of one hole, whatever the number of lanes.
+    The lanes go through each stage of the step together (the commands, fluctuations, hole
+    and load; the four stages of every RK4 sub-step of the spindle; the new state and the
+    sensors), so that the slow operations of different lanes (``pow`` above all) overlap in
+    the processor; each lane's arithmetic is that of one hole, whatever the number of
+    lanes. (One function: the arrays are not passed on per lane.)
     """
     for k in range(k0, k1):
-        row = inputs[k]
-        _begin(k, m, g, par, eng, state, row[0], row[1], row[2:], out, tmp)
+        voltage = inputs[k, 0]
+        feed = inputs[k, 1]
+        ts = g[_G_TS]
+        u = _pymin(_pymax(voltage, 0.0), g[_G_UMAX])
+        vmax = g[_G_VMAX]
+        v = _pymin(_pymax(feed, -vmax), vmax)
+        state[k, _S_VOLT] = u
+
+        # Fluctuations (Ornstein-Uhlenbeck, unit variance), then the hole over this period.
+        xi_chip = g[_G_OU_C] * state[k, _S_XI_CHIP] + g[_G_OU_C_IN] * inputs[k, 2]
+        xi_cut = g[_G_OU_0] * state[k, _S_XI_CUT] + g[_G_OU_0_IN] * inputs[k, 3]
+        state[k, _S_XI_CHIP] = xi_chip
+        state[k, _S_XI_CUT] = xi_cut
+        z0 = state[k, _S_POS]
+        z1 = z0 + v * ts
+        if z1 < -g[_G_RETRACT]:
+            z1 = -g[_G_RETRACT]
+        bottom = state[k, _S_DEPTH]
+        cut_len = z1 - bottom if (v > 0.0 and z1 > bottom) else 0.0
+        cutting = cut_len > 0.0
+        d = par[k, _P_D]
+        if cutting:
+            v_cut = cut_len / ts
+            mid = bottom + 0.5 * cut_len
+            eng_t, eng_h = _engagement(eng, k, par[k, _P_FULL], mid)
+            packed = state[k, _S_PACKED] + 0.5 * cut_len
+            ratio = par[k, _P_G0] * (math.exp(packed / (g[_G_CHIP_LEN] * d)) - 1.0)
+            ratio *= _pymax(0.0, 1.0 + par[k, _P_SIG_C] * xi_chip)
+            load = (1.0 + ratio) * _pymax(0.0, 1.0 + par[k, _P_SIG_0] * xi_cut)
+            k4 = par[k, _P_KT] * v_cut * eng_t * load
+            kh = par[k, _P_KH] * v_cut * eng_h * load
+            kh2 = par[k, _P_KH2] * math.pow(v_cut * eng_h, g[_G_SQUARE])
+        else:
+            v_cut = 0.0
+            ratio = 0.0
+            eng_t = 0.0
+            k4 = 0.0
+            kh = 0.0
+            kh2 = 0.0
+        out[k, 8] = v
+        out[k, 9] = v_cut
+        out[k, 11] = z1
+        out[k, 14] = ratio
+        out[k, 15] = 1.0 if cutting else 0.0
+        out[k, 16] = eng_t
+        tmp[k, _T_U] = u
+        tmp[k, _T_BOTTOM] = bottom
+        tmp[k, _T_CUT] = cut_len
+        tmp[k, _T_K4] = k4
+        tmp[k, _T_KH] = kh
+        tmp[k, _T_KH2] = kh2
+        tmp[k, _T_LOAD] = k4 / g[_G_INERTIA]
+        h = ts / m  # the RK4 step, and the factors of its stages
+        tmp[k, _T_H] = h
+        tmp[k, _T_H2] = 0.5 * h
+        tmp[k, _T_H6] = h / 6.0
+
+        # Torque and thrust at the sub-step instants (j = 0..m); the sensors filter them.
+        w = state[k, _S_OMEGA]
+        fw = _G_HALF + 3 * (2 * m + 1) + 6
+        fa = g[_G_FA]
+        wj = w if w > _W_FLOOR else _W_FLOOR
+        tq = k4 / wj
+        th = kh / wj + kh2 / (wj * wj)
+        tmp[k, _T_TQ_F] = state[k, _S_TQ_F] * fa + g[fw] * tq
+        tmp[k, _T_TH_F] = state[k, _S_TH_F] * fa + g[fw] * th
+        tmp[k, _T_PEAK] = tq if tq > 0.0 else 0.0
+        tmp[k, _T_TQ] = tq
+        tmp[k, _T_TH] = th
+        tmp[k, _T_W] = w
+        # The valve's exact position at the start of the period.
+        tmp[k, _T_XC] = (
+            g[_G_HALF] * state[k, _S_X1] + g[_G_HALF + 1] * state[k, _S_X2] + g[_G_HALF + 2] * u
+        )
     # The spindle by RK4 with the valve exactly at every half sub-step and the load
     # k4 / omega; the torque and thrust at the end of every sub-step.
     fw = _G_HALF + 3 * (2 * m + 1) + 6
     for j in range(m):
         r = _G_HALF + 6 * j
         for k in range(k0, k1):
-            t = tmp[k]
-            u = t[_T_U]
+            u = tmp[k, _T_U]
             x1 = state[k, _S_X1]
             x2 = state[k, _S_X2]
-            xa = t[_T_XC]
-            t[_T_XB] = g[r + 3] * x1 + g[r + 4] * x2 + g[r + 5] * u
-            t[_T_XC] = g[r + 6] * x1 + g[r + 7] * x2 + g[r + 8] * u
-            w = t[_T_W]
+            xa = tmp[k, _T_XC]
+            tmp[k, _T_XB] = g[r + 3] * x1 + g[r + 4] * x2 + g[r + 5] * u
+            tmp[k, _T_XC] = g[r + 6] * x1 + g[r + 7] * x2 + g[r + 8] * u
+            w = tmp[k, _T_W]
             wa = w if w > 0.0 else 0.0
             f = (
                 g[_G_K2] * xa
                 - g[_G_K3] * wa ** g[_G_N]
-                - t[_T_LOAD] / (wa if wa > _W_FLOOR else _W_FLOOR)
+                - tmp[k, _T_LOAD] / (wa if wa > _W_FLOOR else _W_FLOOR)
             )
-            t[_T_F1] = f
-            wb = w + t[_T_H2] * f
-            t[_T_WB] = wb if wb > 0.0 else 0.0
+            tmp[k, _T_F1] = f
+            wb = w + tmp[k, _T_H2] * f
+            tmp[k, _T_WB] = wb if wb > 0.0 else 0.0
         for k in range(k0, k1):
-            t = tmp[k]
-            wb = t[_T_WB]
+            wb = tmp[k, _T_WB]
             f = (
-                g[_G_K2] * t[_T_XB]
+                g[_G_K2] * tmp[k, _T_XB]
                 - g[_G_K3] * wb ** g[_G_N]
-                - t[_T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
+                - tmp[k, _T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
             )
-            t[_T_F2] = f
-            wb = t[_T_W] + t[_T_H2] * f
-            t[_T_WB] = wb if wb > 0.0 else 0.0
+            tmp[k, _T_F2] = f
+            wb = tmp[k, _T_W] + tmp[k, _T_H2] * f
+            tmp[k, _T_WB] = wb if wb > 0.0 else 0.0
         for k in range(k0, k1):
-            t = tmp[k]
-            wb = t[_T_WB]
+            wb = tmp[k, _T_WB]
             f = (
-                g[_G_K2] * t[_T_XB]
+                g[_G_K2] * tmp[k, _T_XB]
                 - g[_G_K3] * wb ** g[_G_N]
-                - t[_T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
+                - tmp[k, _T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
             )
-            t[_T_F3] = f
-            wc = t[_T_W] + t[_T_H] * f
-            t[_T_WB] = wc if wc > 0.0 else 0.0
+            tmp[k, _T_F3] = f
+            wc = tmp[k, _T_W] + tmp[k, _T_H] * f
+            tmp[k, _T_WB] = wc if wc > 0.0 else 0.0
         for k in range(k0, k1):
-            t = tmp[k]
-            wc = t[_T_WB]
+            wc = tmp[k, _T_WB]
             f4 = (
-                g[_G_K2] * t[_T_XC]
+                g[_G_K2] * tmp[k, _T_XC]
                 - g[_G_K3] * wc ** g[_G_N]
-                - t[_T_LOAD] / (wc if wc > _W_FLOOR else _W_FLOOR)
+                - tmp[k, _T_LOAD] / (wc if wc > _W_FLOOR else _W_FLOOR)
             )
-            w = t[_T_W] + t[_T_H6] * (t[_T_F1] + 2.0 * t[_T_F2] + 2.0 * t[_T_F3] + f4)
+            w = tmp[k, _T_W] + tmp[k, _T_H6] * (
+                tmp[k, _T_F1] + 2.0 * tmp[k, _T_F2] + 2.0 * tmp[k, _T_F3] + f4
+            )
             if w < 0.0:
                 w = 0.0
-            t[_T_W] = w
+            tmp[k, _T_W] = w
             wj = w if w > _W_FLOOR else _W_FLOOR
-            tq = t[_T_K4] / wj
-            th = t[_T_KH] / wj + t[_T_KH2] / (wj * wj)
-            if tq > t[_T_PEAK]:
-                t[_T_PEAK] = tq
-            t[_T_TQ_F] += g[fw + j + 1] * tq
-            t[_T_TH_F] += g[fw + j + 1] * th
-            t[_T_TQ] = tq
-            t[_T_TH] = th
+            tq = tmp[k, _T_K4] / wj
+            th = tmp[k, _T_KH] / wj + tmp[k, _T_KH2] / (wj * wj)
+            if tq > tmp[k, _T_PEAK]:
+                tmp[k, _T_PEAK] = tq
+            tmp[k, _T_TQ_F] += g[fw + j + 1] * tq
+            tmp[k, _T_TH_F] += g[fw + j + 1] * th
+            tmp[k, _T_TQ] = tq
+            tmp[k, _T_TH] = th
     for k in range(k0, k1):
-        _end(k, m, g, par, state, inputs[k, 2:], out, tmp)
+        ts = g[_G_TS]
+        u = tmp[k, _T_U]
+        x1 = state[k, _S_X1]
+        x2 = state[k, _S_X2]
+        r = _G_HALF + 3 * (2 * m + 1)
+        state[k, _S_X1] = g[r] * x1 + g[r + 1] * x2 + g[r + 2] * u
+        state[k, _S_X2] = g[r + 3] * x1 + g[r + 4] * x2 + g[r + 5] * u
+        w = tmp[k, _T_W]
+        state[k, _S_OMEGA] = w
+        tq_f = tmp[k, _T_TQ_F]
+        th_f = tmp[k, _T_TH_F]
+        state[k, _S_TQ_F] = tq_f
+        state[k, _S_TH_F] = th_f
+        state[k, _S_TQ] = tmp[k, _T_TQ]
+        state[k, _S_TH] = tmp[k, _T_TH]
+
+        # The drill point and the chips.
+        z1 = out[k, 11]
+        cut_len = tmp[k, _T_CUT]
+        bottom = tmp[k, _T_BOTTOM]
+        state[k, _S_POS] = z1
+        if cut_len > 0.0:
+            state[k, _S_DEPTH] = z1
+            state[k, _S_PACKED] += cut_len
+        if z1 < 0.0:
+            state[k, _S_PACKED] = 0.0  # the point left the hole: the flutes are cleared
+        time = state[k, _S_T]
+        finish = np.nan
+        if state[k, _S_FINISHED] == 0.0 and state[k, _S_DEPTH] >= par[k, _P_TARGET]:
+            frac = (par[k, _P_TARGET] - bottom) / cut_len if cut_len > 0 else 1.0
+            finish = time + _pymin(_pymax(frac, 0.0), 1.0) * ts
+            state[k, _S_FINISHED] = 1.0
+        state[k, _S_T] = time + ts
+        speed_hz = w / (2.0 * math.pi)
+        v_cut = out[k, 9]
+        out[k, 0] = tmp[k, _T_TQ]
+        out[k, 1] = tmp[k, _T_PEAK]
+        out[k, 2] = tmp[k, _T_TH]
+        out[k, 3] = tq_f + par[k, _P_NOISE_T] * inputs[k, 4]
+        out[k, 4] = th_f + par[k, _P_NOISE_H] * inputs[k, 5]
+        out[k, 5] = speed_hz + par[k, _P_NOISE_S] * inputs[k, 6]
+        out[k, 6] = speed_hz
+        out[k, 7] = state[k, _S_X1]
+        out[k, 10] = (v_cut / speed_hz) if speed_hz > 1.0 else 0.0
+        out[k, 12] = state[k, _S_DEPTH]
+        out[k, 13] = state[k, _S_PACKED]
+        out[k, 17] = finish
 
 
 @numba.njit(cache=True)
@@ -1249,7 +1234,7 @@ class DrillingPlant:
 
     def engagement(self, depth_mm: float) -> tuple[float, float]:
         """Engaged share of torque and thrust with the point ``depth_mm`` below the surface."""
-        return _engagement(self._lanes.eng[0], self._lanes.par[0, _P_FULL], float(depth_mm))
+        return _engagement(self._lanes.eng, 0, self._lanes.par[0, _P_FULL], float(depth_mm))
 
     def step(
         self,
