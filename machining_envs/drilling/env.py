@@ -29,6 +29,7 @@ from machining_envs.core.env import (
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs
 from machining_envs.drilling.metrics import DRILLING_TASK
 from machining_envs.drilling.plant import (
+    _N_TMP,
     _P_BREAK,
     _P_D,
     _P_TARGET,
@@ -168,7 +169,7 @@ def _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs):
 
 
 @numba.njit(cache=True)
-def _step(m, g, par, eng, state, out, tmp, inputs, c, ev, flags, counts, obs, normals):
+def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, normals):
     """One step of every lane: the action's command, the plant, the env's outputs.
 
     Lane ``k`` applies ``ev[k, _E_ACTION]`` (in the box; ``flags[k, _F_IN_CLIPPED]`` says
@@ -177,6 +178,8 @@ def _step(m, g, par, eng, state, out, tmp, inputs, c, ev, flags, counts, obs, no
     """
     feed_mode = c[_K_FEED_MODE] != 0.0
     n = state.shape[0]
+    inputs = np.empty((LANE_BLOCK, 7))
+    tmp = np.empty((LANE_BLOCK, _N_TMP))
     for k0 in range(0, n, LANE_BLOCK):
         k1 = min(k0 + LANE_BLOCK, n)
         for k in range(k0, k1):
@@ -193,10 +196,10 @@ def _step(m, g, par, eng, state, out, tmp, inputs, c, ev, flags, counts, obs, no
             ev[k, _E_VOLTAGE] = voltage
             i = counts[k, _C_NOISE]
             counts[k, _C_NOISE] = i + 1
-            inputs[k, 0] = voltage
-            inputs[k, 1] = feed
+            inputs[k - k0, 0] = voltage
+            inputs[k - k0, 1] = feed
             for q in range(5):
-                inputs[k, 2 + q] = normals[k, 5 * i + q]
+                inputs[k - k0, 2 + q] = normals[k, 5 * i + q]
         advance(k0, k1, m, g, par, eng, state, inputs, out, tmp)
         _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs)
 
@@ -265,11 +268,9 @@ class _DrillingCore:
         #: Normals of the current block not drawn yet, per lane, and its generator.
         self.owed = [0] * n
         self.block_rng: list = [None] * n
-        self.inputs = np.zeros((n, 7))
         lanes = self.lanes
         self._args = (
-            lanes.m, lanes.shared, lanes.par, lanes.eng, lanes.state, lanes.out, lanes.tmp,
-            self.inputs,
+            lanes.m, lanes.shared, lanes.par, lanes.eng, lanes.state, lanes.out,
             self.consts, self.ev, self.flags, self.counts, self.obs, self.normals,
         )  # fmt: skip
 

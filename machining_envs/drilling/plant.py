@@ -445,8 +445,12 @@ class CuttingCoefficients:
         return self.chisel_thrust_per_feed / self.thrust_per_feed
 
 
-_N_LIP = 64
+_N_LIP = 64  # elements of each lip and of the chisel edge (at most 128: see _sum)
 _N_CHISEL = 24
+#: Element midpoints and lip element edges, in element widths.
+_LIP_MID = np.arange(_N_LIP) + 0.5
+_CHISEL_MID = np.arange(_N_CHISEL) + 0.5
+_LIP_EDGES = np.arange(1, _N_LIP + 1, dtype=np.float64)
 
 
 @functools.lru_cache(maxsize=64)
@@ -543,25 +547,27 @@ def _cutting_geometry(shape: tuple, diameter_mm: float) -> _Geometry:
     w = web_ratio * radius
     # Main lips.
     dr = (radius - w) / _N_LIP
-    r = w + dr * (np.arange(_N_LIP) + 0.5)
-    web = np.arcsin(w / r)
-    incl = np.arcsin(w / r * sk)
+    r = w + dr * _LIP_MID
+    w_r = w / r
+    web = np.arcsin(w_r)
+    incl = np.arcsin(w_r * sk)
     tan_psi = r / radius * math.tan(math.radians(helix))
     alpha = np.arctan(tan_psi * np.cos(web) / sk - np.sin(web) * ck)
     beta = math.radians(friction)
-    phi = np.maximum(0.25 * math.pi - 0.5 * (beta - alpha), math.radians(5.0))
+    b_a = beta - alpha
+    phi = np.maximum(0.25 * math.pi - 0.5 * b_a, math.radians(5.0))
     eta = incl
     tan_eta = np.tan(eta)
     bt = 0.5 * dr  # b t per unit feed: (dr / sin k) (1/2 sin k)
     q = np.sqrt(np.cos(phi + beta - alpha) ** 2 + tan_eta**2 * math.sin(beta) ** 2)
     sin_phi = np.sin(phi)
-    fp_angle = np.cos(beta - alpha) + tan_eta * tan_eta * math.sin(beta)
+    fp_angle = np.cos(b_a) + tan_eta * tan_eta * math.sin(beta)
     fq_den = sin_phi * np.cos(incl)
-    fq_angle = np.sin(beta - alpha)
+    fq_angle = np.sin(b_a)
     # Chisel edge: secondary cutting between the indentation zone and the web.
     r_ind = min(v_f / (0.2 * _TWO_PI * n_rev), w)
     dc = (w - r_ind) / _N_CHISEL
-    rc = r_ind + dc * (np.arange(_N_CHISEL) + 0.5)
+    rc = r_ind + dc * _CHISEL_MID
     b_i = np.arctan(v_f / (_TWO_PI * n_rev * rc))
     a_dc = math.radians(chisel_rake) + b_i
     phi_c = 0.25 * math.pi + 0.5 * a_dc
@@ -569,7 +575,7 @@ def _cutting_geometry(shape: tuple, diameter_mm: float) -> _Geometry:
     indent = indent_c * math.tan(math.radians(wedge))
     # Engagement against point depth: the chisel cuts from the first touch (its height is
     # w / tan(kappa), a few microns), the lips out to radius z tan(kappa).
-    radii = np.concatenate([[0.0, w], w + dr * np.arange(1, _N_LIP + 1)])
+    radii = np.concatenate([[0.0, w], w + dr * _LIP_EDGES])
     depth = radii / math.tan(k)
     return _Geometry(
         sk, bt, r, sin_phi, fp_angle, fq_den, fq_angle, q, dc, rc, np.cos(a_dc),
@@ -577,27 +583,96 @@ def _cutting_geometry(shape: tuple, diameter_mm: float) -> _Geometry:
     )  # fmt: skip
 
 
+@numba.njit(cache=True)
+def _sum(a):
+    """``a.sum()`` of numpy for a float64 vector of at most 128 elements, to the last bit:
+    numpy's pairwise summation, which below 128 elements keeps eight running sums."""
+    n = a.size
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[i]
+        return 0.0 + res
+    r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
+    i = 8
+    while i < n - n % 8:
+        r0 += a[i]
+        r1 += a[i + 1]
+        r2 += a[i + 2]
+        r3 += a[i + 3]
+        r4 += a[i + 4]
+        r5 += a[i + 5]
+        r6 += a[i + 6]
+        r7 += a[i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[i]
+        i += 1
+    return 0.0 + res
+
+
+@numba.njit(cache=True)
+def _forces(tau, bt, r, sin_phi, fp_angle, fq_den, fq_angle, q, sk, dc, rc, cos_a, neg_sin_a,
+            cos_b, sin_b, den, sums, cum_t, cum_h):  # fmt: skip
+    """The shear-stress part of the cutting model (eq. 6-13) of one drill: the torque and
+    thrust of every lip and chisel element per unit feed, summed as numpy sums.
+
+    ``sums`` gets ``[lip torque, lip thrust, chisel torque, chisel thrust]``; ``cum_t`` and
+    ``cum_h`` (``2 + r.size``) the torque and thrust cut out to each engagement radius.
+    """
+    n_lip, n_ch = r.size, rc.size
+    lip_t = np.empty(n_lip)
+    lip_h = np.empty(n_lip)
+    a = tau * bt
+    for i in range(n_lip):
+        fp = a / sin_phi[i] * fp_angle[i] / q[i]
+        fq = a / fq_den[i] * fq_angle[i] / q[i]
+        lip_t[i] = 2.0 * r[i] * fp
+        lip_h[i] = 2.0 * fq * sk
+    ch_t = np.empty(n_ch)
+    ch_h = np.empty(n_ch)
+    b = tau * dc
+    for i in range(n_ch):
+        fc = b * cos_a[i] * cos_b[i] / den[i]
+        ft = b * neg_sin_a[i] * cos_b[i] / den[i]
+        ch_t[i] = 2.0 * rc[i] * (fc * cos_b[i] + ft * sin_b[i])
+        ch_h[i] = 2.0 * (fc * sin_b[i] + ft * cos_b[i])
+    ch_t_sum = _sum(ch_t)
+    ch_h_sum = _sum(ch_h)
+    sums[0] = _sum(lip_t)
+    sums[1] = _sum(lip_h)
+    sums[2] = ch_t_sum
+    sums[3] = ch_h_sum
+    cum_t[0] = 0.0
+    cum_h[0] = 0.0
+    cum_t[1] = ch_t_sum
+    cum_h[1] = ch_h_sum
+    st = 0.0
+    sh = 0.0
+    for i in range(n_lip):  # np.cumsum: running sums in order
+        st = lip_t[i] if i == 0 else st + lip_t[i]
+        sh = lip_h[i] if i == 0 else sh + lip_h[i]
+        cum_t[2 + i] = ch_t_sum + st
+        cum_h[2 + i] = ch_h_sum + sh
+
+
 def _cutting_forces(g: _Geometry, tau: float) -> CuttingCoefficients:
     """The cutting model of one drill (its :class:`_Geometry`) at the shear stress ``tau``."""
-    fp = tau * g.bt / g.sin_phi * g.fp_angle / g.q
-    fq = tau * g.bt / g.fq_den * g.fq_angle / g.q
-    lip_t = 2.0 * g.r * fp
-    lip_h = 2.0 * fq * g.sk
-    fc = tau * g.dc * g.cos_a * g.cos_b / g.den
-    ft = tau * g.dc * g.neg_sin_a * g.cos_b / g.den
-    ch_t = 2.0 * g.rc * (fc * g.cos_b + ft * g.sin_b)
-    ch_h = 2.0 * (fc * g.sin_b + ft * g.cos_b)
-    ch_t_sum, ch_h_sum = ch_t.sum(), ch_h.sum()
-    cum_t = np.concatenate([[0.0, ch_t_sum], ch_t_sum + np.cumsum(lip_t)])
-    cum_h = np.concatenate([[0.0, ch_h_sum], ch_h_sum + np.cumsum(lip_h)])
+    sums = np.empty(4)
+    cum_t = np.empty(2 + g.r.size)
+    cum_h = np.empty(2 + g.r.size)
+    _forces(float(tau), g.bt, g.r, g.sin_phi, g.fp_angle, g.fq_den, g.fq_angle, g.q, g.sk, g.dc,
+            g.rc, g.cos_a, g.neg_sin_a, g.cos_b, g.sin_b, g.den, sums, cum_t, cum_h)  # fmt: skip
+    lip_t, lip_h, ch_t, ch_h = sums.tolist()
     return CuttingCoefficients(
         torque_per_feed=float(cum_t[-1]),
         thrust_per_feed=float(cum_h[-1]),
         indentation_per_feed2=float(g.indent),
-        lip_torque_per_feed=float(lip_t.sum()),
-        lip_thrust_per_feed=float(lip_h.sum()),
-        chisel_torque_per_feed=float(ch_t_sum),
-        chisel_thrust_per_feed=float(ch_h_sum),
+        lip_torque_per_feed=lip_t,
+        lip_thrust_per_feed=lip_h,
+        chisel_torque_per_feed=ch_t,
+        chisel_thrust_per_feed=ch_h,
         engage_depth_mm=g.depth,
         engage_torque=cum_t / cum_t[-1],
         engage_thrust=cum_h / cum_h[-1],
@@ -826,7 +901,7 @@ def _engagement(eng, k, full, depth_mm):
     return _interp(depth_mm, eng, k, 1, j), _interp(depth_mm, eng, k, 2, j)
 
 
-#: Columns of ``DrillingLanes.tmp``: what a lane carries between the stages of its step.
+#: Columns of the step kernel's scratch: what a lane carries between the stages of its step.
 (_T_U, _T_BOTTOM, _T_CUT, _T_K4, _T_KH, _T_KH2, _T_LOAD, _T_W, _T_WB, _T_F1, _T_F2, _T_F3,
  _T_XB, _T_XC, _T_TQ_F, _T_TH_F, _T_PEAK, _T_TQ, _T_TH, _T_H, _T_H2, _T_H6,
  _N_TMP) = range(23)  # fmt: skip
@@ -836,10 +911,10 @@ LANE_BLOCK = 16
 
 @numba.njit(cache=True)
 def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
-    """Advance lanes ``k0 .. k1 - 1`` by one sample; ``inputs[k]`` = voltage (V), feed
+    """Advance lanes ``k0 .. k1 - 1`` by one sample; ``inputs[k - k0]`` = voltage (V), feed
     velocity (mm/s) and five standard normals (chip and cutting fluctuation innovations,
     torque, thrust and speed sensor noise) of lane ``k``; ``out[k]`` gets the signals of
-    :class:`DrillingStep`.
+    :class:`DrillingStep`; ``tmp`` (at least ``k1 - k0`` rows of ``_N_TMP``) is scratch.
 
     The lanes go through each stage of the step together (the commands, fluctuations, hole
     and load; the four stages of every RK4 sub-step of the spindle; the new state and the
@@ -848,8 +923,8 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
     lanes. (One function: the arrays are not passed on per lane.)
     """
     for k in range(k0, k1):
-        voltage = inputs[k, 0]
-        feed = inputs[k, 1]
+        voltage = inputs[k - k0, 0]
+        feed = inputs[k - k0, 1]
         ts = g[_G_TS]
         u = _pymin(_pymax(voltage, 0.0), g[_G_UMAX])
         vmax = g[_G_VMAX]
@@ -857,8 +932,8 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
         state[k, _S_VOLT] = u
 
         # Fluctuations (Ornstein-Uhlenbeck, unit variance), then the hole over this period.
-        xi_chip = g[_G_OU_C] * state[k, _S_XI_CHIP] + g[_G_OU_C_IN] * inputs[k, 2]
-        xi_cut = g[_G_OU_0] * state[k, _S_XI_CUT] + g[_G_OU_0_IN] * inputs[k, 3]
+        xi_chip = g[_G_OU_C] * state[k, _S_XI_CHIP] + g[_G_OU_C_IN] * inputs[k - k0, 2]
+        xi_cut = g[_G_OU_0] * state[k, _S_XI_CUT] + g[_G_OU_0_IN] * inputs[k - k0, 3]
         state[k, _S_XI_CHIP] = xi_chip
         state[k, _S_XI_CUT] = xi_cut
         z0 = state[k, _S_POS]
@@ -893,17 +968,17 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
         out[k, 14] = ratio
         out[k, 15] = 1.0 if cutting else 0.0
         out[k, 16] = eng_t
-        tmp[k, _T_U] = u
-        tmp[k, _T_BOTTOM] = bottom
-        tmp[k, _T_CUT] = cut_len
-        tmp[k, _T_K4] = k4
-        tmp[k, _T_KH] = kh
-        tmp[k, _T_KH2] = kh2
-        tmp[k, _T_LOAD] = k4 / g[_G_INERTIA]
+        tmp[k - k0, _T_U] = u
+        tmp[k - k0, _T_BOTTOM] = bottom
+        tmp[k - k0, _T_CUT] = cut_len
+        tmp[k - k0, _T_K4] = k4
+        tmp[k - k0, _T_KH] = kh
+        tmp[k - k0, _T_KH2] = kh2
+        tmp[k - k0, _T_LOAD] = k4 / g[_G_INERTIA]
         h = ts / m  # the RK4 step, and the factors of its stages
-        tmp[k, _T_H] = h
-        tmp[k, _T_H2] = 0.5 * h
-        tmp[k, _T_H6] = h / 6.0
+        tmp[k - k0, _T_H] = h
+        tmp[k - k0, _T_H2] = 0.5 * h
+        tmp[k - k0, _T_H6] = h / 6.0
 
         # Torque and thrust at the sub-step instants (j = 0..m); the sensors filter them.
         w = state[k, _S_OMEGA]
@@ -912,14 +987,14 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
         wj = w if w > _W_FLOOR else _W_FLOOR
         tq = k4 / wj
         th = kh / wj + kh2 / (wj * wj)
-        tmp[k, _T_TQ_F] = state[k, _S_TQ_F] * fa + g[fw] * tq
-        tmp[k, _T_TH_F] = state[k, _S_TH_F] * fa + g[fw] * th
-        tmp[k, _T_PEAK] = tq if tq > 0.0 else 0.0
-        tmp[k, _T_TQ] = tq
-        tmp[k, _T_TH] = th
-        tmp[k, _T_W] = w
+        tmp[k - k0, _T_TQ_F] = state[k, _S_TQ_F] * fa + g[fw] * tq
+        tmp[k - k0, _T_TH_F] = state[k, _S_TH_F] * fa + g[fw] * th
+        tmp[k - k0, _T_PEAK] = tq if tq > 0.0 else 0.0
+        tmp[k - k0, _T_TQ] = tq
+        tmp[k - k0, _T_TH] = th
+        tmp[k - k0, _T_W] = w
         # The valve's exact position at the start of the period.
-        tmp[k, _T_XC] = (
+        tmp[k - k0, _T_XC] = (
             g[_G_HALF] * state[k, _S_X1] + g[_G_HALF + 1] * state[k, _S_X2] + g[_G_HALF + 2] * u
         )
     # The spindle by RK4 with the valve exactly at every half sub-step and the load
@@ -928,85 +1003,85 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
     for j in range(m):
         r = _G_HALF + 6 * j
         for k in range(k0, k1):
-            u = tmp[k, _T_U]
+            u = tmp[k - k0, _T_U]
             x1 = state[k, _S_X1]
             x2 = state[k, _S_X2]
-            xa = tmp[k, _T_XC]
-            tmp[k, _T_XB] = g[r + 3] * x1 + g[r + 4] * x2 + g[r + 5] * u
-            tmp[k, _T_XC] = g[r + 6] * x1 + g[r + 7] * x2 + g[r + 8] * u
-            w = tmp[k, _T_W]
+            xa = tmp[k - k0, _T_XC]
+            tmp[k - k0, _T_XB] = g[r + 3] * x1 + g[r + 4] * x2 + g[r + 5] * u
+            tmp[k - k0, _T_XC] = g[r + 6] * x1 + g[r + 7] * x2 + g[r + 8] * u
+            w = tmp[k - k0, _T_W]
             wa = w if w > 0.0 else 0.0
             f = (
                 g[_G_K2] * xa
                 - g[_G_K3] * wa ** g[_G_N]
-                - tmp[k, _T_LOAD] / (wa if wa > _W_FLOOR else _W_FLOOR)
+                - tmp[k - k0, _T_LOAD] / (wa if wa > _W_FLOOR else _W_FLOOR)
             )
-            tmp[k, _T_F1] = f
-            wb = w + tmp[k, _T_H2] * f
-            tmp[k, _T_WB] = wb if wb > 0.0 else 0.0
+            tmp[k - k0, _T_F1] = f
+            wb = w + tmp[k - k0, _T_H2] * f
+            tmp[k - k0, _T_WB] = wb if wb > 0.0 else 0.0
         for k in range(k0, k1):
-            wb = tmp[k, _T_WB]
+            wb = tmp[k - k0, _T_WB]
             f = (
-                g[_G_K2] * tmp[k, _T_XB]
+                g[_G_K2] * tmp[k - k0, _T_XB]
                 - g[_G_K3] * wb ** g[_G_N]
-                - tmp[k, _T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
+                - tmp[k - k0, _T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
             )
-            tmp[k, _T_F2] = f
-            wb = tmp[k, _T_W] + tmp[k, _T_H2] * f
-            tmp[k, _T_WB] = wb if wb > 0.0 else 0.0
+            tmp[k - k0, _T_F2] = f
+            wb = tmp[k - k0, _T_W] + tmp[k - k0, _T_H2] * f
+            tmp[k - k0, _T_WB] = wb if wb > 0.0 else 0.0
         for k in range(k0, k1):
-            wb = tmp[k, _T_WB]
+            wb = tmp[k - k0, _T_WB]
             f = (
-                g[_G_K2] * tmp[k, _T_XB]
+                g[_G_K2] * tmp[k - k0, _T_XB]
                 - g[_G_K3] * wb ** g[_G_N]
-                - tmp[k, _T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
+                - tmp[k - k0, _T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
             )
-            tmp[k, _T_F3] = f
-            wc = tmp[k, _T_W] + tmp[k, _T_H] * f
-            tmp[k, _T_WB] = wc if wc > 0.0 else 0.0
+            tmp[k - k0, _T_F3] = f
+            wc = tmp[k - k0, _T_W] + tmp[k - k0, _T_H] * f
+            tmp[k - k0, _T_WB] = wc if wc > 0.0 else 0.0
         for k in range(k0, k1):
-            wc = tmp[k, _T_WB]
+            wc = tmp[k - k0, _T_WB]
             f4 = (
-                g[_G_K2] * tmp[k, _T_XC]
+                g[_G_K2] * tmp[k - k0, _T_XC]
                 - g[_G_K3] * wc ** g[_G_N]
-                - tmp[k, _T_LOAD] / (wc if wc > _W_FLOOR else _W_FLOOR)
+                - tmp[k - k0, _T_LOAD] / (wc if wc > _W_FLOOR else _W_FLOOR)
             )
-            w = tmp[k, _T_W] + tmp[k, _T_H6] * (
-                tmp[k, _T_F1] + 2.0 * tmp[k, _T_F2] + 2.0 * tmp[k, _T_F3] + f4
+            w = tmp[k - k0, _T_W] + tmp[k - k0, _T_H6] * (
+                tmp[k - k0, _T_F1] + 2.0 * tmp[k - k0, _T_F2] + 2.0 * tmp[k - k0, _T_F3] + f4
             )
             if w < 0.0:
                 w = 0.0
-            tmp[k, _T_W] = w
+            tmp[k - k0, _T_W] = w
             wj = w if w > _W_FLOOR else _W_FLOOR
-            tq = tmp[k, _T_K4] / wj
-            th = tmp[k, _T_KH] / wj + tmp[k, _T_KH2] / (wj * wj)
-            if tq > tmp[k, _T_PEAK]:
-                tmp[k, _T_PEAK] = tq
-            tmp[k, _T_TQ_F] += g[fw + j + 1] * tq
-            tmp[k, _T_TH_F] += g[fw + j + 1] * th
-            tmp[k, _T_TQ] = tq
-            tmp[k, _T_TH] = th
+            tq = tmp[k - k0, _T_K4] / wj
+            th = tmp[k - k0, _T_KH] / wj + tmp[k - k0, _T_KH2] / (wj * wj)
+            if tq > tmp[k - k0, _T_PEAK]:
+                tmp[k - k0, _T_PEAK] = tq
+            tmp[k - k0, _T_TQ_F] += g[fw + j + 1] * tq
+            tmp[k - k0, _T_TH_F] += g[fw + j + 1] * th
+            tmp[k - k0, _T_TQ] = tq
+            tmp[k - k0, _T_TH] = th
     for k in range(k0, k1):
         ts = g[_G_TS]
-        u = tmp[k, _T_U]
+        u = tmp[k - k0, _T_U]
         x1 = state[k, _S_X1]
         x2 = state[k, _S_X2]
         r = _G_HALF + 3 * (2 * m + 1)
         state[k, _S_X1] = g[r] * x1 + g[r + 1] * x2 + g[r + 2] * u
         state[k, _S_X2] = g[r + 3] * x1 + g[r + 4] * x2 + g[r + 5] * u
-        w = tmp[k, _T_W]
+        w = tmp[k - k0, _T_W]
         state[k, _S_OMEGA] = w
-        tq_f = tmp[k, _T_TQ_F]
-        th_f = tmp[k, _T_TH_F]
+        tq_f = tmp[k - k0, _T_TQ_F]
+        th_f = tmp[k - k0, _T_TH_F]
         state[k, _S_TQ_F] = tq_f
         state[k, _S_TH_F] = th_f
-        state[k, _S_TQ] = tmp[k, _T_TQ]
-        state[k, _S_TH] = tmp[k, _T_TH]
+        state[k, _S_TQ] = tmp[k - k0, _T_TQ]
+        state[k, _S_TH] = tmp[k - k0, _T_TH]
 
         # The drill point and the chips.
         z1 = out[k, 11]
-        cut_len = tmp[k, _T_CUT]
-        bottom = tmp[k, _T_BOTTOM]
+        cut_len = tmp[k - k0, _T_CUT]
+        bottom = tmp[k - k0, _T_BOTTOM]
         state[k, _S_POS] = z1
         if cut_len > 0.0:
             state[k, _S_DEPTH] = z1
@@ -1022,12 +1097,12 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
         state[k, _S_T] = time + ts
         speed_hz = w / (2.0 * math.pi)
         v_cut = out[k, 9]
-        out[k, 0] = tmp[k, _T_TQ]
-        out[k, 1] = tmp[k, _T_PEAK]
-        out[k, 2] = tmp[k, _T_TH]
-        out[k, 3] = tq_f + par[k, _P_NOISE_T] * inputs[k, 4]
-        out[k, 4] = th_f + par[k, _P_NOISE_H] * inputs[k, 5]
-        out[k, 5] = speed_hz + par[k, _P_NOISE_S] * inputs[k, 6]
+        out[k, 0] = tmp[k - k0, _T_TQ]
+        out[k, 1] = tmp[k - k0, _T_PEAK]
+        out[k, 2] = tmp[k - k0, _T_TH]
+        out[k, 3] = tq_f + par[k, _P_NOISE_T] * inputs[k - k0, 4]
+        out[k, 4] = th_f + par[k, _P_NOISE_H] * inputs[k - k0, 5]
+        out[k, 5] = speed_hz + par[k, _P_NOISE_S] * inputs[k - k0, 6]
         out[k, 6] = speed_hz
         out[k, 7] = state[k, _S_X1]
         out[k, 10] = (v_cut / speed_hz) if speed_hz > 1.0 else 0.0
@@ -1037,11 +1112,14 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
 
 
 @numba.njit(cache=True)
-def _step_lanes(m, g, par, eng, state, inputs, out, tmp):
-    """Advance every lane by one sample (:func:`advance`, ``LANE_BLOCK`` lanes at a time)."""
+def _step_lanes(m, g, par, eng, state, inputs, out):
+    """Advance every lane by one sample (:func:`advance`, ``LANE_BLOCK`` lanes at a time;
+    ``inputs[k]`` is lane ``k``'s)."""
     n = state.shape[0]
+    tmp = np.empty((LANE_BLOCK, _N_TMP))
     for k0 in range(0, n, LANE_BLOCK):
-        advance(k0, min(k0 + LANE_BLOCK, n), m, g, par, eng, state, inputs, out, tmp)
+        k1 = min(k0 + LANE_BLOCK, n)
+        advance(k0, k1, m, g, par, eng, state, inputs[k0:k1], out, tmp)
 
 
 class DrillingLanes:
@@ -1084,8 +1162,6 @@ class DrillingLanes:
         #: Signals of the last step, one row per lane (columns: ``LANE_SIGNALS``).
         self.out = np.zeros((self.n, _N_OUT))
         self.out[:, -1] = np.nan
-        #: Scratch of the step kernel.
-        self.tmp = np.zeros((self.n, _N_TMP))
 
     def start(
         self,
@@ -1154,7 +1230,7 @@ class DrillingLanes:
     def step(self, inputs: np.ndarray) -> None:
         """Advance every lane by one sample; ``inputs[k]`` = voltage (V), feed velocity
         (mm/s) and five standard normals of lane ``k``; results in ``out``."""
-        _step_lanes(self.m, self.shared, self.par, self.eng, self.state, inputs, self.out, self.tmp)
+        _step_lanes(self.m, self.shared, self.par, self.eng, self.state, inputs, self.out)
 
 
 def _state_property(col: int, doc: str) -> property:
