@@ -172,9 +172,9 @@ def _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs):
 def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, normals):
     """One step of every lane: the action's command, the plant, the env's outputs.
 
-    Lane ``k`` applies ``ev[k, _E_ACTION]`` (in the box; ``flags[k, _F_IN_CLIPPED]`` says
-    whether it was clipped) and takes the next five of its standard normals. The plant
-    advances ``LANE_BLOCK`` lanes at a time.
+    Lane ``k`` applies ``ev[k, _E_ACTION]``, clipped to the box here (and counted as clipped,
+    as it is when ``flags[k, _F_IN_CLIPPED]`` says it was clipped before), and takes the
+    next five of its standard normals. The plant advances ``LANE_BLOCK`` lanes at a time.
     """
     feed_mode = c[_K_FEED_MODE] != 0.0
     n = state.shape[0]
@@ -185,6 +185,13 @@ def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, normals):
         for k in range(k0, k1):
             a = ev[k, _E_ACTION]
             clipped = flags[k, _F_IN_CLIPPED]
+            if a > 1.0:
+                a = 1.0
+                clipped = True
+            elif a < -1.0:
+                a = -1.0
+                clipped = True
+            ev[k, _E_ACTION] = a
             flags[k, _F_CLIPPED] = clipped
             counts[k, _C_N_CLIPPED] += clipped
             command = c[_K_MID] + c[_K_HALF] * a
@@ -361,9 +368,9 @@ class _DrillingCore:
         }
 
     def step(self) -> None:
-        """Advance every lane with its action ``ev[:, _E_ACTION]`` (in the box) and
-        ``flags[:, _F_IN_CLIPPED]`` (whether it was clipped); the lanes' normals must hold
-        a row for this step (:meth:`draw_normals`)."""
+        """Advance every lane with its action ``ev[:, _E_ACTION]`` (finite; clipped to the
+        box, ``flags[:, _F_IN_CLIPPED]`` saying whether it was clipped already); the lanes'
+        normals must hold a row for this step (:meth:`draw_normals`)."""
         _step(*self._args)
 
     def lane_info(self, k: int) -> dict:
@@ -750,9 +757,7 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
 
     def _step_lanes(self, actions):
         core = self._core
-        a = actions[:, 0]
-        core.flags[:, _F_IN_CLIPPED] = (a < -1.0) | (a > 1.0)
-        np.clip(a, -1.0, 1.0, out=core.ev[:, _E_ACTION])
+        core.ev[:, _E_ACTION] = actions[:, 0]  # clipped to the box by the kernel
         for k in np.flatnonzero(core.counts[:, _C_NOISE] == _NOISE_ROWS).tolist():
             core.draw_normals(k, core.block_rng[k])
         core.step()
