@@ -29,6 +29,7 @@ from machining_envs.core.env import (
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs
 from machining_envs.drilling.metrics import DRILLING_TASK
 from machining_envs.drilling.plant import (
+    _N_IN,
     _N_TMP,
     _P_BREAK,
     _P_D,
@@ -178,7 +179,7 @@ def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, normals):
     """
     feed_mode = c[_K_FEED_MODE] != 0.0
     n = state.shape[0]
-    inputs = np.empty((LANE_BLOCK, 7))
+    inputs = np.empty((LANE_BLOCK, _N_IN))
     tmp = np.empty((LANE_BLOCK, _N_TMP))
     for k0 in range(0, n, LANE_BLOCK):
         k1 = min(k0 + LANE_BLOCK, n)

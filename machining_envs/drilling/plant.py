@@ -774,7 +774,8 @@ class DrillingStep:
 #: :class:`DrillingStep`; ``cutting`` is 0 or 1 and ``finish_time_s`` NaN until the hole ends.
 LANE_SIGNALS = tuple(f.name for f in dataclasses.fields(DrillingStep))
 _N_OUT = len(LANE_SIGNALS)
-#: Rows of ``DrillingLanes.eng`` per lane: point depth, torque share, thrust share.
+#: Entries of each engagement table (``DrillingLanes.eng[k]``: point depth, torque share,
+#: thrust share).
 _N_ENG = _N_LIP + 2
 #: Inputs per lane of :func:`advance`: voltage, feed velocity and the five standard normals.
 _N_IN = 7
@@ -1136,9 +1137,10 @@ class DrillingLanes:
 
     Layout: ``shared`` the batch's constants (with the valve's exact transitions and the
     sensor filter's weights); one row per lane of ``par`` the lane's parameters and its
-    drill's cutting constants, ``eng`` the engagement tables of the drill (point depth, torque share, thrust share),
-    ``state`` the valve, spindle, drill point, chips, fluctuations and sensor filters,
-    ``out`` the signals of the last step (``LANE_SIGNALS``).
+    drill's cutting constants, ``eng`` the engagement tables of the drill (point depth,
+    torque share, thrust share), ``state`` the valve, spindle, drill point, chips,
+    fluctuations and sensor filters, ``out`` the signals of the last step
+    (``LANE_SIGNALS``).
 
     Parameters
     ----------
@@ -1178,6 +1180,8 @@ class DrillingLanes:
         (``params.coefficients(diameter_mm)``).
         """
         p = params
+        check_range("target_depth_mm", target_depth_mm, 0.0, 100.0, lo_open=True)
+        check_range("start_position_mm", start_position_mm, -p.retract_limit_mm, 0.0)
         if p is not self.params and _shared_key(p) != self._key:
             own = dict(zip(_SHARED_FIELDS, _shared_key(p), strict=True))
             batch = dict(zip(_SHARED_FIELDS, self._key, strict=True))
