@@ -293,6 +293,7 @@ class _DrillingCore:
     def start(self, lane: int, spec, rng: np.random.Generator) -> dict:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
         first observation goes to ``obs[lane]``; returns its reset info."""
+        check_scenario_spec(spec, DrillingScenario, DRILLING_SCENARIOS)
         if self.owed[lane] and self.block_rng[lane] is rng:
             rng.standard_normal(self.owed[lane])  # the rest of the last episode's block
         self.owed[lane] = 0

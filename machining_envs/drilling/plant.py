@@ -888,7 +888,7 @@ def _interp(x, eng, k, row, j):
     return y
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _engagement(eng, k, full, depth_mm):
     """Engaged shares of torque and thrust of lane ``k`` (tables ``eng[k]``) with the point
     ``depth_mm`` below the surface (``full``: depth of full engagement)."""
