@@ -431,7 +431,7 @@ class _DrillingCore:
         c = self.counts.copy()
         lane = self.lanes.par[:, [_P_BREAK, _P_TARGET, _P_D]]
         done = f[:, _F_FINISHED]
-        finish = np.where(done, o[:, 17], np.nan)
+        finish = o[:, 17]  # NaN unless the hole was finished in this step
         return {
             "t_s": self.lanes.state[:, _S_T].copy(),
             "command": e[:, _E_COMMAND],

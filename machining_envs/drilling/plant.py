@@ -1234,6 +1234,9 @@ class DrillingLanes:
     def step(self, inputs: np.ndarray) -> None:
         """Advance every lane by one sample; ``inputs[k]`` = voltage (V), feed velocity
         (mm/s) and five standard normals of lane ``k``; results in ``out``."""
+        inputs = np.asarray(inputs, dtype=np.float64)
+        if inputs.shape != (self.n, _N_IN):
+            raise ValueError(f"inputs must have shape ({self.n}, {_N_IN}), got {inputs.shape}")
         _step_lanes(self.m, self.shared, self.par, self.eng, self.state, inputs, self.out)
 
 

@@ -136,6 +136,12 @@ def test_a_lane_must_share_the_batchs_valve_spindle_and_timing():
         lanes.start(0, DrillingParams(valve_damping=0.5), 0.6, 5.0)
     with pytest.raises(ValueError, match="substeps"):
         lanes.start(0, DrillingParams(substeps=4), 0.6, 5.0)
+    with pytest.raises(ValueError, match="target_depth_mm"):
+        lanes.start(0, DrillingParams(), 0.6, 0.0)
+    with pytest.raises(ValueError, match="diameter_mm"):
+        lanes.start(0, DrillingParams(), 1.5, 5.0)
+    with pytest.raises(ValueError, match=r"shape \(2, 7\)"):
+        lanes.step(np.zeros((3, 7)))
 
 
 @pytest.mark.parametrize("n", [1, 5, 8, 23, 24, 64, 65, 128])
