@@ -763,7 +763,8 @@ class DrillingStep:
 #: (``_G_HALF``: 2m+1 rows of 3, then 2 rows of 3) and the filter weights (m+1) follow the
 #: scalars.
 (_G_TS, _G_UMAX, _G_VMAX, _G_RETRACT, _G_K2, _G_K3, _G_N, _G_INERTIA, _G_OU_C, _G_OU_C_IN,
- _G_OU_0, _G_OU_0_IN, _G_FA, _G_CHIP_LEN, _G_SQUARE, _G_HALF) = range(16)  # fmt: skip
+ _G_OU_0, _G_OU_0_IN, _G_FA, _G_CHIP_LEN, _G_SQUARE, _G_H, _G_H2, _G_H6,
+ _G_HALF) = range(19)  # fmt: skip
 #: Columns of ``DrillingLanes.par`` (one row of parameters per lane).
 (_P_G0, _P_SIG_C, _P_SIG_0, _P_KT, _P_KH, _P_KH2, _P_FULL, _P_D, _P_TARGET, _P_NOISE_T,
  _P_NOISE_H, _P_NOISE_S, _P_BREAK, _N_PAR) = range(14)  # fmt: skip
@@ -832,6 +833,9 @@ def _shared_constants(p: DrillingParams) -> np.ndarray:
         fa,
         p.chip_length_diameters,
         2.0,  # x ** 2 of Python calls pow(); the exponent is data so that the kernel does too
+        ts / m,  # the RK4 step, and the factors of its stages
+        0.5 * (ts / m),
+        (ts / m) / 6.0,
     )
     return np.concatenate([scalars, half.ravel(), vstep.ravel(), fw])
 
@@ -904,8 +908,7 @@ def _engagement(eng, k, full, depth_mm):
 
 #: Columns of the step kernel's scratch: what a lane carries between the stages of its step.
 (_T_U, _T_BOTTOM, _T_CUT, _T_K4, _T_KH, _T_KH2, _T_LOAD, _T_W, _T_WB, _T_F1, _T_F2, _T_F3,
- _T_XB, _T_XC, _T_TQ_F, _T_TH_F, _T_PEAK, _T_TQ, _T_TH, _T_H, _T_H2, _T_H6,
- _N_TMP) = range(23)  # fmt: skip
+ _T_XB, _T_XC, _T_TQ_F, _T_TH_F, _T_PEAK, _T_TQ, _T_TH, _N_TMP) = range(20)  # fmt: skip
 #: Lanes whose step advances together, stage by stage (see :func:`advance`).
 LANE_BLOCK = 16
 
@@ -976,10 +979,6 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
         tmp[k - k0, _T_KH] = kh
         tmp[k - k0, _T_KH2] = kh2
         tmp[k - k0, _T_LOAD] = k4 / g[_G_INERTIA]
-        h = ts / m  # the RK4 step, and the factors of its stages
-        tmp[k - k0, _T_H] = h
-        tmp[k - k0, _T_H2] = 0.5 * h
-        tmp[k - k0, _T_H6] = h / 6.0
 
         # Torque and thrust at the sub-step instants (j = 0..m); the sensors filter them.
         w = state[k, _S_OMEGA]
@@ -1018,7 +1017,7 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
                 - tmp[k - k0, _T_LOAD] / (wa if wa > _W_FLOOR else _W_FLOOR)
             )
             tmp[k - k0, _T_F1] = f
-            wb = w + tmp[k - k0, _T_H2] * f
+            wb = w + g[_G_H2] * f
             tmp[k - k0, _T_WB] = wb if wb > 0.0 else 0.0
         for k in range(k0, k1):
             wb = tmp[k - k0, _T_WB]
@@ -1028,7 +1027,7 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
                 - tmp[k - k0, _T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
             )
             tmp[k - k0, _T_F2] = f
-            wb = tmp[k - k0, _T_W] + tmp[k - k0, _T_H2] * f
+            wb = tmp[k - k0, _T_W] + g[_G_H2] * f
             tmp[k - k0, _T_WB] = wb if wb > 0.0 else 0.0
         for k in range(k0, k1):
             wb = tmp[k - k0, _T_WB]
@@ -1038,7 +1037,7 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
                 - tmp[k - k0, _T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
             )
             tmp[k - k0, _T_F3] = f
-            wc = tmp[k - k0, _T_W] + tmp[k - k0, _T_H] * f
+            wc = tmp[k - k0, _T_W] + g[_G_H] * f
             tmp[k - k0, _T_WB] = wc if wc > 0.0 else 0.0
         for k in range(k0, k1):
             wc = tmp[k - k0, _T_WB]
@@ -1047,7 +1046,7 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
                 - g[_G_K3] * wc ** g[_G_N]
                 - tmp[k - k0, _T_LOAD] / (wc if wc > _W_FLOOR else _W_FLOOR)
             )
-            w = tmp[k - k0, _T_W] + tmp[k - k0, _T_H6] * (
+            w = tmp[k - k0, _T_W] + g[_G_H6] * (
                 tmp[k - k0, _T_F1] + 2.0 * tmp[k - k0, _T_F2] + 2.0 * tmp[k - k0, _T_F3] + f4
             )
             if w < 0.0:
