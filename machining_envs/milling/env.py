@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 
 import gymnasium as gym
+import numba
 import numpy as np
 from gymnasium import spaces
 
@@ -26,18 +27,27 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
+from machining_envs.core.vector import LaneVectorEnv, check_num_envs
 from machining_envs.milling.metrics import MILLING_TASK
-from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams, MillingPlant
+from machining_envs.milling.plant import (
+    SPINDLE_RPM_RANGE,
+    MillingLanes,
+    MillingParams,
+    step_lanes,
+)
 from machining_envs.milling.scenarios import (
     MILLING_SCENARIOS,
     CutArea,
     MillingScenario,
+    cut_area_at,
     milling_scenario,
 )
 
-__all__ = ["EndMillingEnv", "MillingReward"]
+__all__ = ["EndMillingEnv", "EndMillingVectorEnv", "MillingReward"]
 
 _HISTORY = 3
+#: Standard normals drawn at a time for the sensor noise of a lane.
+_NORMAL_BLOCK = 256
 #: Decades spanned by the command on the default logarithmic action map: the feeds that
 #: hold the torque on the test set span about two (the feed exponent m ~ 0.4 turns a 2x
 #: change of depth, Ks or reference into a ~5x change of feed), and one more keeps slow
@@ -52,6 +62,23 @@ _LOG_FIELDS = {
     "feed": "feed_mm_per_rev",
     "depth": "depth_mm",
 }
+#: The numeric step info computed by the compiled step, one row each (``_MillingCore.info_f``).
+_INFO_F = (
+    "t_s",
+    "command",
+    "torque_Nmm",
+    "measured",
+    "measured_counts",
+    "peak_torque_Nmm",
+    "feed_mm_per_rev",
+    "mean_feed_mm_per_rev",
+    "feed_per_tooth_mm",
+    "feed_velocity_mm_s",
+    "position_mm",
+    "depth_mm",
+    "removed_volume_mm3",
+    "machining_time_s",
+)
 
 
 @dataclass(frozen=True)
@@ -77,6 +104,447 @@ class MillingReward:
 
     def __post_init__(self) -> None:
         check_reward_weights(self)
+
+
+
+@numba.njit(cache=True)
+def _clamp(x, lo, hi):
+    """``min(max(x, lo), hi)`` with Python's tie rules."""
+    if lo > x:
+        x = lo
+    if hi < x:
+        x = hi
+    return x
+
+
+@numba.njit(cache=True)
+def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noise, big, lag,
+          z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, out, out_seg, out_finish, work,
+          ke, tr, brk, vmax, n_teeth, w_axial, cumulative, max_t, w, meas, prev_action,
+          tr_obs, rpm_obs, obs, reward, flags, n_clipped, info_f):  # fmt: skip
+    """One step of every lane: the actions' commands and the sensor noise, the plant
+    (:func:`step_lanes`), then each lane's reward, observation, episode flags and info.
+
+    ``cmap`` = ``[log, command_min, span, c, g, mid, half]`` of the action map
+    (:class:`machining_envs.core.env.ActionMap`): the command is
+    ``command_min + span expm1(c (a + 1)) / g`` on the log map, ``mid + half a`` on the
+    linear one. A lane with noise takes the next normal of its block ``normals[k]``.
+    ``w`` = ``[tracking, overtorque, overtorque_threshold, progress, breakage]``;
+    ``flags[k]`` = ``[diverged, breakage, finished, terminated, truncated]``;
+    ``info_f[:, k]`` gets the signals of ``_INFO_F``.
+    """
+    n = z.shape[0]
+    log_map = cmap[0] != 0.0
+    for k in range(n):
+        a = actions[k]
+        if log_map:
+            cmd = cmap[1] + cmap[2] * math.expm1(cmap[3] * (a + 1.0)) / cmap[4]
+        else:
+            cmd = cmap[5] + cmap[6] * a
+        commands[k] = cmd
+        info_f[1, k] = cmd
+        nc = noise_counts[k]
+        if nc != 0.0:
+            i = normal_i[k]
+            noise[k] = nc * normals[k, i]
+            normal_i[k] = i + 1
+        else:
+            noise[k] = 0.0
+        prev_action[k] = a
+        n_clipped[k] += clipped[k]
+    step_lanes(big, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, commands,
+               noise, out, out_seg, out_finish, work)  # fmt: skip
+    lo, hi = _TORQUE_OBS
+    n_meas = meas.shape[1]
+    for k in range(n):
+        torque = out[k, 0]
+        peak = out[k, 1]
+        counts = out[k, 2]
+        vf = out[k, 3]
+        feed = out[k, 4]
+        mean_feed = out[k, 5]
+        pos = out[k, 6]
+        diverged = not (
+            np.isfinite(torque)
+            and np.isfinite(peak)
+            and np.isfinite(counts)
+            and np.isfinite(pos)
+            and np.isfinite(mean_feed)
+        )
+        if diverged:  # never seen; kept so that no NaN can reach an observation or a reward
+            torque = 0.0
+            peak = 0.0
+            counts = 0.0
+        measured = counts / ke
+        for i in range(n_meas - 1, 0, -1):
+            meas[k, i] = meas[k, i - 1]
+        meas[k, 0] = measured
+        t = lane_f[k, 8]
+        breakage = peak > brk[k]
+        finished_k = not np.isnan(out_finish[k])
+        terminated = diverged or breakage or finished_k
+        truncated = (not terminated) and t >= max_t - 1e-9
+        e = torque / tr[k]
+        over = e - w[2]
+        r = -w[0] * abs(e - 1.0) - w[1] * (over if over > 0.0 else 0.0)
+        if w[3] != 0.0 and not diverged:
+            r += w[3] * vf / vmax[k]
+        if breakage or diverged:
+            r -= w[4]
+        reward[k] = r
+        flags[k, 0] = diverged
+        flags[k, 1] = breakage
+        flags[k, 2] = finished_k
+        flags[k, 3] = terminated
+        flags[k, 4] = truncated
+        if diverged:
+            feed = 0.0
+            mean_feed = 0.0
+            vf = 0.0
+            pos = 0.0
+        info_f[0, k] = t
+        info_f[2, k] = torque
+        info_f[3, k] = measured
+        info_f[4, k] = counts
+        info_f[5, k] = peak
+        info_f[6, k] = feed
+        info_f[7, k] = mean_feed
+        info_f[8, k] = feed / n_teeth[k]
+        info_f[9, k] = vf
+        info_f[10, k] = pos
+        info_f[11, k] = out[k, 7]
+        info_f[12, k] = w_axial[k] * cut_area_at(pos, edges, d0, slope, cumulative, k, nseg[k])
+        info_f[13, k] = out_finish[k]
+        sc = tr[k]
+        obs[k, 0] = _clamp(measured / sc, lo, hi)
+        obs[k, 1] = tr_obs[k]
+        obs[k, 2] = prev_action[k]
+        obs[k, 3] = rpm_obs[k]
+        for i in range(1, n_meas):
+            obs[k, 3 + i] = _clamp(meas[k, i] / sc, lo, hi)
+
+
+def _map_constants(command_map: ActionMap) -> np.ndarray:
+    """The action map's constants as the compiled step reads them (see :func:`_step`)."""
+    cm = command_map
+    return np.array(
+        [cm.scale == "log", cm.command_min, cm._span, cm._c, cm._g, cm._mid, cm._half],
+        dtype=np.float64,
+    )
+
+
+class _MillingCore:
+    """The state and arithmetic of N end-milling episodes, shared by ``EndMillingEnv`` (one
+    lane) and ``EndMillingVectorEnv`` (N lanes): the plant (:class:`MillingLanes`) and the
+    command, noise, reward, observation, episode end and info computed for all lanes by one
+    compiled function, so that a lane of the vector env and the single env agree to the
+    last bit."""
+
+    def __init__(self, owner, n, scenario, params, reward, max_episode_time_s, action_map,
+                 overrides):  # fmt: skip
+        self.params = resolve_params(
+            owner, params, MillingParams, MillingParams.park_yoon_1986, overrides
+        )
+        self.reward_weights = resolve_reward(reward, MillingReward)
+        w = self.reward_weights
+        self._w = np.array(
+            [w.tracking, w.overtorque, w.overtorque_threshold, w.progress, w.breakage],
+            dtype=np.float64,
+        )
+        self.max_episode_time_s = check_episode_time(max_episode_time_s)
+        check_scenario_spec(scenario, MillingScenario, MILLING_SCENARIOS)
+        if action_map not in ACTION_MAPS:
+            raise ValueError(
+                f"{owner}: action_map must be one of {list(ACTION_MAPS)}, got {action_map!r}"
+            )
+        self.command_map = ActionMap(
+            0.0, self.params.command_max, scale=action_map, decades=COMMAND_DECADES
+        )
+        self._cmap = _map_constants(self.command_map)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        t_lo, t_hi = _TORQUE_OBS
+        low = np.array([t_lo, 0.0, -1.0, 0.0] + [t_lo] * _HISTORY, dtype=np.float32)
+        high = np.array(
+            [t_hi, 10.0, 1.0, SPINDLE_RPM_RANGE[1] / 1000.0] + [t_hi] * _HISTORY, dtype=np.float32
+        )
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.n = n
+        self._ke = float(self.params.sensor_gain)
+        self.lanes = MillingLanes(self.params, n)
+        self.scenarios: list[MillingScenario | None] = [None] * n
+        self.truths: list[MillingParams | None] = [None] * n
+        self.torque_ref = np.ones(n)
+        self.vmax = np.ones(n)
+        self.breakage_torque = np.ones(n)
+        self.noise_counts = np.zeros(n)
+        self.n_teeth = np.ones(n)
+        self.w_axial = np.zeros(n)
+        self.cumulative = np.zeros((n, 2))
+        self.meas = np.zeros((n, _HISTORY + 1))  # newest first, N·mm
+        self.tr_obs = np.zeros(n)
+        self.rpm_obs = np.zeros(n)
+        self.prev_action = np.full(n, -1.0)
+        self.n_clipped = np.zeros(n, dtype=np.int64)
+        self.obs = np.zeros((n, 4 + _HISTORY), dtype=np.float32)
+        self.reward = np.zeros(n)
+        self.flags = np.zeros((n, 5), dtype=np.bool_)
+        self.info_f = np.zeros((len(_INFO_F), n))  # one row per signal
+        self.normals = np.zeros((n, _NORMAL_BLOCK))
+        self.normal_i = np.full(n, _NORMAL_BLOCK, dtype=np.int64)
+        self.spindle = np.zeros(n)
+        self.length = np.zeros(n)
+        self.volume = np.zeros(n)
+        self.depth0 = np.zeros(n)
+        self.names = np.full(n, "", dtype=object)
+        self.in_action = np.zeros(n)
+        self.in_clipped = np.zeros(n, dtype=np.int64)
+        self.commands = np.zeros(n)
+        self.noise = np.zeros(n)
+        self._args: tuple | None = None
+        self._args_version = -1
+
+    def start(self, lane: int, spec, rng: np.random.Generator) -> None:
+        """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
+        first observation goes to ``obs[lane]`` (its info: :meth:`reset_info`)."""
+        sc = milling_scenario(spec, rng)
+        nominal = self.params
+        rpm = sc.spindle_rpm(nominal)
+        truth = sc.true_params(nominal)
+        self.lanes.start(lane, truth, rpm, sc.profile)
+        self.scenarios[lane] = sc
+        self.truths[lane] = truth
+        tr = sc.torque_ref_Nmm(nominal)
+        area = CutArea(sc.profile)
+        cum = area.cumulative
+        if len(cum) > self.cumulative.shape[1]:
+            grow = len(cum) - self.cumulative.shape[1]
+            self.cumulative = np.pad(self.cumulative, ((0, 0), (0, grow)), mode="edge")
+            self._args = None
+        row = self.cumulative[lane]
+        row[: len(cum)] = cum
+        row[len(cum) :] = cum[-1]
+        w = truth.axial_depth_mm
+        self.torque_ref[lane] = tr
+        self.vmax[lane] = truth.max_feed_velocity_mm_s
+        self.breakage_torque[lane] = truth.breakage_torque_Nmm
+        self.noise_counts[lane] = truth.sensor_gain * truth.noise_std_Nmm
+        self.n_teeth[lane] = truth.n_teeth
+        self.w_axial[lane] = w
+        self.meas[lane] = 0.0
+        tr_obs = min(tr / nominal.torque_ref_Nmm, 10.0)
+        self.tr_obs[lane] = tr_obs
+        self.rpm_obs[lane] = rpm / 1000.0
+        self.prev_action[lane] = -1.0
+        self.n_clipped[lane] = 0
+        self.normal_i[lane] = _NORMAL_BLOCK  # a new episode draws a new block
+        self.spindle[lane] = rpm
+        self.length[lane] = sc.profile.length_mm
+        self.volume[lane] = w * area.total
+        self.depth0[lane] = sc.profile.start_depths_mm[0]
+        self.names[lane] = sc.name
+        self.obs[lane] = (0.0, tr_obs, -1.0, rpm / 1000.0, 0.0, 0.0, 0.0)
+
+    def reset_info(self, k: int) -> dict:
+        """The reset info of lane ``k`` (after :meth:`start`)."""
+        return {
+            "t_s": 0.0,
+            "command": 0.0,
+            "action_clipped": False,
+            "n_action_clipped": 0,
+            "breakage": False,
+            "diverged": False,
+            "finished": False,
+            "torque_Nmm": 0.0,
+            "torque_ref_Nmm": float(self.torque_ref[k]),
+            "measured": 0.0,
+            "measured_counts": 0.0,
+            "peak_torque_Nmm": 0.0,
+            "feed_mm_per_rev": 0.0,
+            "mean_feed_mm_per_rev": 0.0,
+            "feed_per_tooth_mm": 0.0,
+            "feed_velocity_mm_s": 0.0,
+            "position_mm": 0.0,
+            "depth_mm": float(self.depth0[k]),
+            "segment": 0,
+            "spindle_rpm": float(self.spindle[k]),
+            "removed_volume_mm3": 0.0,
+            "workpiece_length_mm": float(self.length[k]),
+            "workpiece_volume_mm3": float(self.volume[k]),
+            "scenario": self.names[k],
+        }
+
+    def reset_info_arrays(self, lanes: np.ndarray) -> dict:
+        """The reset info of the lanes ``lanes``, as arrays (values of :meth:`reset_info`)."""
+        n = len(lanes)
+        zero = np.zeros(n)
+        no = np.zeros(n, dtype=bool)
+        return {
+            "t_s": zero,
+            "command": zero,
+            "action_clipped": no,
+            "n_action_clipped": np.zeros(n, dtype=np.int64),
+            "breakage": no,
+            "diverged": no,
+            "finished": no,
+            "torque_Nmm": zero,
+            "torque_ref_Nmm": self.torque_ref[lanes],
+            "measured": zero,
+            "measured_counts": zero,
+            "peak_torque_Nmm": zero,
+            "feed_mm_per_rev": zero,
+            "mean_feed_mm_per_rev": zero,
+            "feed_per_tooth_mm": zero,
+            "feed_velocity_mm_s": zero,
+            "position_mm": zero,
+            "depth_mm": self.depth0[lanes],
+            "segment": np.zeros(n, dtype=np.int64),
+            "spindle_rpm": self.spindle[lanes],
+            "removed_volume_mm3": zero,
+            "workpiece_length_mm": self.length[lanes],
+            "workpiece_volume_mm3": self.volume[lanes],
+            "scenario": self.names[lanes],
+        }
+
+    def draw_noise(self, rngs) -> None:
+        """Give every lane with sensor noise a standard normal for this step: a lane whose
+        block ``normals[k]`` is used up draws the next block from its generator ``rngs[k]``
+        (the same numbers in the same order as one at a time); lanes without noise draw
+        nothing."""
+        if self.n == 1:  # the single env: the same, without array bookkeeping
+            if self.normal_i[0] >= _NORMAL_BLOCK and self.noise_counts[0] != 0.0:
+                rngs[0].standard_normal(out=self.normals[0])
+                self.normal_i[0] = 0
+            return
+        need = np.flatnonzero((self.normal_i >= _NORMAL_BLOCK) & (self.noise_counts != 0.0))
+        for k in need.tolist():
+            rngs[k].standard_normal(out=self.normals[k])
+        self.normal_i[need] = 0
+
+    def _kernel_args(self) -> tuple:
+        """The arguments of :func:`_step`, in order (rebuilt when the lane arrays are)."""
+        lanes = self.lanes
+        if self._args is None or self._args_version != lanes.version:
+            self._args = (
+                self.in_action,
+                self.in_clipped,
+                self._cmap,
+                self.normals,
+                self.normal_i,
+                self.noise_counts,
+                self.commands,
+                self.noise,
+                lanes.big,
+                lanes.lag,
+                lanes.z,
+                lanes.buf,
+                lanes.lane_f,
+                lanes.edges,
+                lanes.d0,
+                lanes.slope,
+                lanes.nseg,
+                lanes.seg,
+                lanes.finished,
+                lanes.m,
+                lanes.out,
+                lanes.out_segment,
+                lanes.out_finish,
+                lanes.work,
+                self._ke,
+                self.torque_ref,
+                self.breakage_torque,
+                self.vmax,
+                self.n_teeth,
+                self.w_axial,
+                self.cumulative,
+                self.max_episode_time_s,
+                self._w,
+                self.meas,
+                self.prev_action,
+                self.tr_obs,
+                self.rpm_obs,
+                self.obs,
+                self.reward,
+                self.flags,
+                self.n_clipped,
+                self.info_f,
+            )
+            self._args_version = lanes.version
+        return self._args
+
+    def step(self) -> None:
+        """Advance every lane with the actions in ``in_action`` (inside the box) and
+        ``in_clipped`` (1 where the action was clipped to the box), after
+        :meth:`draw_noise`."""
+        _step(*self._kernel_args())
+
+    def lane_info(self, k: int) -> dict:
+        """The step info of lane ``k`` (after :meth:`step`)."""
+        (t, command, torque, measured, counts, peak, feed, mean_feed, feed_tooth, vf, pos,
+         depth, removed, finish) = self.info_f[:, k].tolist()  # fmt: skip
+        diverged, breakage, finished = self.flags[k, :3].tolist()
+        info = {
+            "t_s": t,
+            "command": command,
+            "action_clipped": bool(self.in_clipped[k]),
+            "n_action_clipped": int(self.n_clipped[k]),
+            "breakage": breakage,
+            "diverged": diverged,
+            "finished": finished,
+            "torque_Nmm": torque,
+            "torque_ref_Nmm": float(self.torque_ref[k]),
+            "measured": measured,
+            "measured_counts": counts,
+            "peak_torque_Nmm": peak,
+            "feed_mm_per_rev": feed,
+            "mean_feed_mm_per_rev": mean_feed,
+            "feed_per_tooth_mm": feed_tooth,
+            "feed_velocity_mm_s": vf,
+            "position_mm": pos,
+            "depth_mm": depth,
+            "segment": int(self.lanes.out_segment[k]),
+            "spindle_rpm": float(self.spindle[k]),
+            "removed_volume_mm3": removed,
+            "workpiece_length_mm": float(self.length[k]),
+            "workpiece_volume_mm3": float(self.volume[k]),
+            "scenario": self.names[k],
+        }
+        if finished:
+            info["machining_time_s"] = finish
+        return info
+
+    def info_arrays(self) -> dict:
+        """The step info of every lane, as arrays (``machining_time_s`` with its mask)."""
+        f = self.flags
+        c = self.info_f.copy()
+        info = {
+            "t_s": c[0],
+            "command": c[1],
+            "action_clipped": self.in_clipped.astype(bool),
+            "n_action_clipped": self.n_clipped.copy(),
+            "breakage": f[:, 1].copy(),
+            "diverged": f[:, 0].copy(),
+            "finished": f[:, 2].copy(),
+            "torque_Nmm": c[2],
+            "torque_ref_Nmm": self.torque_ref.copy(),
+            "measured": c[3],
+            "measured_counts": c[4],
+            "peak_torque_Nmm": c[5],
+            "feed_mm_per_rev": c[6],
+            "mean_feed_mm_per_rev": c[7],
+            "feed_per_tooth_mm": c[8],
+            "feed_velocity_mm_s": c[9],
+            "position_mm": c[10],
+            "depth_mm": c[11],
+            "segment": self.lanes.out_segment.copy(),
+            "spindle_rpm": self.spindle.copy(),
+            "removed_volume_mm3": c[12],
+            "workpiece_length_mm": self.length.copy(),
+            "workpiece_volume_mm3": self.volume.copy(),
+            "scenario": self.names.copy(),
+            "machining_time_s": np.where(f[:, 2], c[13], np.nan),
+            "_machining_time_s": f[:, 2].copy(),
+        }
+        return info
 
 
 class EndMillingEnv(gym.Env):
@@ -165,8 +633,17 @@ class EndMillingEnv(gym.Env):
     ``removed_volume_mm3``, ``workpiece_length_mm``, ``workpiece_volume_mm3``,
     ``scenario``, and ``machining_time_s`` once the cut is finished.
 
+    ## Vector env
+    ``gym.make_vec("machining_envs/EndMilling-v0", num_envs=N)`` gives an
+    :class:`EndMillingVectorEnv`: N machining centres stepped by one compiled kernel, lane
+    ``i`` after ``reset(seed=s)`` exactly this env after ``reset(seed=s + i)``.
+
     ## Version History
-    * v0: first version.
+    * v0: first version. The physics now runs as a batched kernel shared with the vector
+      env (same numbers to the last bit); the sensor noise is drawn in blocks of 256 from
+      ``np_random`` (the same normals in the same order within an episode; after an
+      episode the unused rest of a block is skipped, so later episodes of an unseeded
+      reset differ from the first implementation's).
 
     ## Example
     >>> import gymnasium as gym
@@ -197,31 +674,32 @@ class EndMillingEnv(gym.Env):
         action_map: str = "log",
         **overrides,
     ):
-        self.params = resolve_params(
-            type(self).__name__, params, MillingParams, MillingParams.park_yoon_1986, overrides
+        self._core = _MillingCore(
+            type(self).__name__,
+            1,
+            scenario,
+            params,
+            reward,
+            max_episode_time_s,
+            action_map,
+            overrides,
         )
-        self.reward_weights = resolve_reward(reward, MillingReward)
-        self.max_episode_time_s = check_episode_time(max_episode_time_s)
-        check_scenario_spec(scenario, MillingScenario, MILLING_SCENARIOS)
+        core = self._core
+        self.params = core.params
+        self.reward_weights = core.reward_weights
+        self.max_episode_time_s = core.max_episode_time_s
         self.default_scenario = scenario
         self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
-
-        if action_map not in ACTION_MAPS:
-            raise ValueError(
-                f"EndMillingEnv: action_map must be one of {list(ACTION_MAPS)}, got {action_map!r}"
-            )
-        self.command_map = ActionMap(
-            0.0, self.params.command_max, scale=action_map, decades=COMMAND_DECADES
-        )
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
-        t_lo, t_hi = _TORQUE_OBS
-        low = np.array([t_lo, 0.0, -1.0, 0.0] + [t_lo] * _HISTORY, dtype=np.float32)
-        high = np.array(
-            [t_hi, 10.0, 1.0, SPINDLE_RPM_RANGE[1] / 1000.0] + [t_hi] * _HISTORY, dtype=np.float32
-        )
-        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.command_map = core.command_map
+        self.action_space = core.action_space
+        self.observation_space = core.observation_space
         self.scenario: MillingScenario | None = None
-        self.plant: MillingPlant | None = None
+        self.plant: MillingLanes | None = None
+
+    @property
+    def _n_clipped(self) -> int:
+        """Actions clipped so far this episode (``info["n_action_clipped"]``)."""
+        return int(self._core.n_clipped[0])
 
     # ---- the command map, for classical agents -----------------------------------------
     def action_to_command(self, action):
@@ -235,157 +713,37 @@ class EndMillingEnv(gym.Env):
     # ---- gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        spec = scenario_option(options, self.default_scenario)
-        sc = milling_scenario(spec, self.np_random)
-        rpm = sc.spindle_rpm(self.params)
-        self.scenario = sc
-        self._truth = sc.true_params(self.params)
-        self.plant = MillingPlant(self._truth, rpm, sc.profile)
-        self._rpm = rpm
-        self._tr = sc.torque_ref_Nmm(self.params)
-        self._length = sc.profile.length_mm
-        self._w = self._truth.axial_depth_mm
-        self._area = CutArea(sc.profile)
-        self._volume = self._w * self._area.total
-        self._vmax = self._truth.max_feed_velocity_mm_s
-        self._ke = self.params.sensor_gain
-        self._noise_counts = self._truth.sensor_gain * self._truth.noise_std_Nmm
-        self._meas = [0.0] * (_HISTORY + 1)  # newest first, N·mm
-        self._tr_obs = min(self._tr / self.params.torque_ref_Nmm, 10.0)
-        self._rpm_obs = rpm / 1000.0
-        self._prev_action = -1.0
-        self._n_clipped = 0
+        core = self._core
+        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        info = core.reset_info(0)
+        self.scenario = core.scenarios[0]
+        self.plant = core.lanes
+        self._rngs = (self.np_random,)
         self._log = EpisodeLog(_LOG_FIELDS)
-        info = self._info_reset()
         self._log.record(info)
-        return self._obs(), info
+        return core.obs[0].copy(), info
 
     def step(self, action):
         if self.plant is None:
             raise RuntimeError("EndMillingEnv: call reset() before step()")
+        core = self._core
         a, clipped = check_action(action, "EndMillingEnv")
-        self._n_clipped += clipped
-        u = self.command_map.action_to_command(a)
-        noise = (
-            self._noise_counts * float(self.np_random.standard_normal())
-            if self._noise_counts
-            else 0.0
-        )
-        s = self.plant.step(u, noise)
-        t = self.plant.t_s
-        torque, peak, counts = s.torque_Nmm, s.peak_torque_Nmm, s.measured_counts
-        diverged = not (
-            math.isfinite(torque)
-            and math.isfinite(peak)
-            and math.isfinite(counts)
-            and math.isfinite(s.position_mm)
-            and math.isfinite(s.mean_feed_mm_per_rev)
-        )
-        if diverged:  # never seen; kept so that no NaN can reach an observation or a reward
-            torque = peak = counts = 0.0
-        measured = counts / self._ke
-        meas = self._meas
-        meas.pop()
-        meas.insert(0, measured)
-        self._prev_action = a
-        breakage = peak > self._truth.breakage_torque_Nmm
-        finished = s.finish_time_s is not None
-        terminated = diverged or breakage or finished
-        truncated = (not terminated) and t >= self.max_episode_time_s - 1e-9
-
-        w = self.reward_weights
-        e = torque / self._tr
-        reward = -w.tracking * abs(e - 1.0) - w.overtorque * max(0.0, e - w.overtorque_threshold)
-        if w.progress and not diverged:
-            reward += w.progress * s.feed_velocity_mm_s / self._vmax
-        if breakage or diverged:
-            reward -= w.breakage
-
-        ok = not diverged
-        position = s.position_mm if ok else 0.0
-        info = {
-            "t_s": t,
-            "command": u,
-            "action_clipped": clipped,
-            "n_action_clipped": self._n_clipped,
-            "breakage": breakage,
-            "diverged": diverged,
-            "finished": finished,
-            "torque_Nmm": torque,
-            "torque_ref_Nmm": self._tr,
-            "measured": measured,
-            "measured_counts": counts,
-            "peak_torque_Nmm": peak,
-            "feed_mm_per_rev": s.feed_mm_per_rev if ok else 0.0,
-            "mean_feed_mm_per_rev": s.mean_feed_mm_per_rev if ok else 0.0,
-            "feed_per_tooth_mm": s.feed_mm_per_rev / self._truth.n_teeth if ok else 0.0,
-            "feed_velocity_mm_s": s.feed_velocity_mm_s if ok else 0.0,
-            "position_mm": position,
-            "depth_mm": s.depth_mm,
-            "segment": s.segment,
-            "spindle_rpm": self._rpm,
-            "removed_volume_mm3": self._w * self._area(position),
-            "workpiece_length_mm": self._length,
-            "workpiece_volume_mm3": self._volume,
-            "scenario": self.scenario.name,
-        }
-        if finished:
-            info["machining_time_s"] = s.finish_time_s
+        core.in_action[0] = a
+        core.in_clipped[0] = clipped
+        core.draw_noise(self._rngs)
+        core.step()
+        info = core.lane_info(0)
         record_step(self, self._log, info)
-        return self._obs(), float(reward), terminated, truncated, info
-
-    # ---- helpers -------------------------------------------------------------------------
-    def _obs(self) -> np.ndarray:
-        sc = self._tr
-        lo, hi = _TORQUE_OBS
-        m = self._meas
-        return np.array(
-            (
-                min(max(m[0] / sc, lo), hi),
-                self._tr_obs,
-                self._prev_action,
-                self._rpm_obs,
-                min(max(m[1] / sc, lo), hi),
-                min(max(m[2] / sc, lo), hi),
-                min(max(m[3] / sc, lo), hi),
-            ),
-            dtype=np.float32,
-        )
-
-    def _info_reset(self) -> dict:
-        sc = self.scenario
-        return {
-            "t_s": 0.0,
-            "command": 0.0,
-            "action_clipped": False,
-            "n_action_clipped": 0,
-            "breakage": False,
-            "diverged": False,
-            "finished": False,
-            "torque_Nmm": 0.0,
-            "torque_ref_Nmm": float(self._tr),
-            "measured": 0.0,
-            "measured_counts": 0.0,
-            "peak_torque_Nmm": 0.0,
-            "feed_mm_per_rev": 0.0,
-            "mean_feed_mm_per_rev": 0.0,
-            "feed_per_tooth_mm": 0.0,
-            "feed_velocity_mm_s": 0.0,
-            "position_mm": 0.0,
-            "depth_mm": float(sc.profile.start_depths_mm[0]),
-            "segment": 0,
-            "spindle_rpm": float(self._rpm),
-            "removed_volume_mm3": 0.0,
-            "workpiece_length_mm": self._length,
-            "workpiece_volume_mm3": self._volume,
-            "scenario": sc.name,
-        }
+        flags = core.flags[0]
+        return core.obs[0].copy(), float(core.reward[0]), bool(flags[3]), bool(flags[4]), info
 
     def render(self):
         if not ready_to_render(self, "EndMillingEnv"):
             return None
         log = self._log
         t = log["t"]
+        tr = float(self._core.torque_ref[0])
+        rpm = float(self._core.spindle[0])
         img = render_signals(
             t,
             [
@@ -394,12 +752,84 @@ class EndMillingEnv(gym.Env):
                     [
                         ("cutting torque", log["torque"], "C0-"),
                         ("measured", log["measured"], "C1-"),
-                        ("reference", [self._tr] * len(t), "k--"),
+                        ("reference", [tr] * len(t), "k--"),
                     ],
                 ),
                 ("feed (mm/rev)", [("feed", log["feed"], "C2-")]),
                 ("radial depth (mm)", [("depth", log["depth"], "C3-")]),
             ],
-            f"EndMilling-v0 | {self.scenario.name} | {self._rpm:.0f} rpm",
+            f"EndMilling-v0 | {self.scenario.name} | {rpm:.0f} rpm",
         )
         return present_frame(img, self.render_mode, "EndMilling-v0")
+
+
+class EndMillingVectorEnv(LaneVectorEnv):
+    """``machining_envs/EndMilling-v0`` as a native vector env: N end-milling cuts stepped
+    as arrays.
+
+    ``gym.make_vec("machining_envs/EndMilling-v0", num_envs=N, **kwargs)`` takes the keyword
+    arguments of :class:`EndMillingEnv` (but not ``render_mode``). Lane ``i`` after
+    ``reset(seed=s)`` runs exactly the episode ``EndMillingEnv.reset(seed=s + i)`` runs,
+    with the same observations, rewards and ``info`` (here a dict of arrays); every lane
+    draws its own scenario from its own generator. Finished lanes are reset in the same
+    step (``metadata["autoreset_mode"]``): see ``machining_envs.core.vector``.
+    """
+
+    env_name = "EndMillingEnv"
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        scenario: str | MillingScenario = "train",
+        params: MillingParams | None = None,
+        reward: MillingReward | dict | None = None,
+        max_episode_time_s: float = 1200.0,
+        action_map: str = "log",
+        **overrides,
+    ):
+        self._core = _MillingCore(
+            type(self).__name__,
+            check_num_envs(num_envs),
+            scenario,
+            params,
+            reward,
+            max_episode_time_s,
+            action_map,
+            overrides,
+        )
+        super().__init__(num_envs, self._core.observation_space, self._core.action_space)
+        self.default_scenario = scenario
+        self.params = self._core.params
+        self.command_map = self._core.command_map
+        self.max_episode_time_s = self._core.max_episode_time_s
+
+    def action_to_command(self, action):
+        """Command U (counts) for an action in [-1, 1]."""
+        return self.command_map.action_to_command(action)
+
+    def command_to_action(self, command):
+        """Action in [-1, 1] for a command U (counts)."""
+        return self.command_map.command_to_action(command)
+
+    def _reset_lanes(self, lanes, options):
+        core = self._core
+        spec = scenario_option(options, self.default_scenario)
+        for i in lanes.tolist():
+            core.start(i, spec, self.lane_rngs[i])
+        return core.obs[lanes], core.reset_info_arrays(lanes)
+
+    def _step_lanes(self, actions):
+        core = self._core
+        a = actions[:, 0]
+        core.in_clipped[:] = (a < -1.0) | (a > 1.0)
+        np.clip(a, -1.0, 1.0, out=core.in_action)
+        core.draw_noise(self.lane_rngs)
+        core.step()
+        f = core.flags
+        return (
+            core.obs.copy(),
+            core.reward.copy(),
+            f[:, 3].copy(),
+            f[:, 4].copy(),
+            core.info_arrays(),
+        )

@@ -41,7 +41,10 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import numba
 import numpy as np
+from numba.core import types
+from numba.extending import intrinsic
 
 from machining_envs.core.checks import check_integer, check_range
 from machining_envs.core.lti import zoh, zoh_tf
@@ -196,40 +199,8 @@ class MillingParams:
     flutes of the 152 mm overhang. The episode terminates past it."""
 
     def __post_init__(self) -> None:
-        check_range("tool_diameter_mm", self.tool_diameter_mm, 0.0, 200.0, lo_open=True)
-        check_integer("n_teeth", self.n_teeth, 1, 50)
-        check_range("helix_angle_deg", self.helix_angle_deg, 0.0, 80.0)
-        check_range("axial_depth_mm", self.axial_depth_mm, 0.0, 500.0, lo_open=True)
-        check_range("spindle_rpm", self.spindle_rpm, *SPINDLE_RPM_RANGE)
-        if self.force_model not in FORCE_MODELS:
-            raise ValueError(f"force_model must be one of {FORCE_MODELS}, got {self.force_model!r}")
-        check_range(
-            "torque_coefficient_kgfmm", self.torque_coefficient_kgfmm, 0.0, 1e7, lo_open=True
-        )
-        check_range("depth_exponent", self.depth_exponent, 0.0, 2.0, lo_open=True)
-        check_range("feed_exponent", self.feed_exponent, 0.0, 2.0, lo_open=True)
-        check_range(
-            "tangential_coefficient_N_mm2",
-            self.tangential_coefficient_N_mm2,
-            0.0,
-            1e6,
-            lo_open=True,
-        )
-        check_range("radial_coefficient_N_mm2", self.radial_coefficient_N_mm2, 0.0, 1e6)
-        check_range("axial_coefficient_N_mm2", self.axial_coefficient_N_mm2, 0.0, 1e6)
-        if self.milling_mode not in ("up", "down"):
-            raise ValueError(f"milling_mode must be 'up' or 'down', got {self.milling_mode!r}")
-        check_range("servo_gain", self.servo_gain, 0.0, 1e6, lo_open=True)
-        check_range("servo_natural_freq_hz", self.servo_natural_freq_hz, 0.0, 1e3, lo_open=True)
-        check_range("servo_damping", self.servo_damping, 0.0, 10.0, lo_open=True)
-        check_range("process_lag_rev", self.process_lag_rev, 0.0, 100.0, lo_open=True)
-        check_range("sensor_gain", self.sensor_gain, 0.0, 1e6, lo_open=True)
-        check_range("noise_std_Nmm", self.noise_std_Nmm, 0.0, 1e6)
-        check_range("sample_time_s", self.sample_time_s, 0.0, 10.0, lo_open=True)
-        check_integer("substeps", self.substeps, 1, 10000)
-        check_range("command_max", self.command_max, 0.0, 1e9, lo_open=True)
-        check_range("torque_ref_Nmm", self.torque_ref_Nmm, 0.0, 1e8, lo_open=True)
-        check_range("breakage_torque_Nmm", self.breakage_torque_Nmm, 0.0, 1e9, lo_open=True)
+        for name in _FIELD_RULES:
+            _check_field(name, getattr(self, name))
 
     # ---- parameter sets ------------------------------------------------------------------
     @classmethod
@@ -269,8 +240,20 @@ class MillingParams:
         )
 
     def replace(self, **changes) -> MillingParams:
-        """A copy with fields changed; unknown names raise ``TypeError``."""
-        return dataclasses.replace(self, **changes)
+        """A copy with fields changed; unknown names raise ``TypeError``.
+
+        Only the changed fields are checked (the others were when ``self`` was made), so
+        that the envs can draw a cut's true parameters at every reset cheaply.
+        """
+        if type(self) is not MillingParams or not all(k in _FIELD_RULES for k in changes):
+            return dataclasses.replace(self, **changes)
+        for name in _FIELD_RULES:
+            if name in changes:
+                _check_field(name, changes[name])
+        new = object.__new__(MillingParams)
+        new.__dict__.update(self.__dict__)
+        new.__dict__.update(changes)
+        return new
 
     # ---- derived quantities (never stored) -----------------------------------------------
     @property
@@ -365,6 +348,50 @@ class MillingParams:
         """ZOH discretisation of :meth:`open_loop_tf` at ``sample_time_s``, in powers of z^-1."""
         num, den = self.open_loop_tf(spindle_rpm)
         return zoh_tf(num, den, self.sample_time_s)
+
+
+#: How each field of :class:`MillingParams` is checked, in the order of the fields:
+#: ``(lo, hi, lo_open)`` for a number, ``("int", lo, hi)`` for an integer,
+#: ``("choice", allowed, how the message names them)`` for a choice.
+_FIELD_RULES: dict[str, tuple] = {
+    "tool_diameter_mm": (0.0, 200.0, True),
+    "n_teeth": ("int", 1, 50),
+    "helix_angle_deg": (0.0, 80.0, False),
+    "axial_depth_mm": (0.0, 500.0, True),
+    "spindle_rpm": (*SPINDLE_RPM_RANGE, False),
+    "force_model": ("choice", FORCE_MODELS, f"one of {FORCE_MODELS}"),
+    "torque_coefficient_kgfmm": (0.0, 1e7, True),
+    "depth_exponent": (0.0, 2.0, True),
+    "feed_exponent": (0.0, 2.0, True),
+    "tangential_coefficient_N_mm2": (0.0, 1e6, True),
+    "radial_coefficient_N_mm2": (0.0, 1e6, False),
+    "axial_coefficient_N_mm2": (0.0, 1e6, False),
+    "milling_mode": ("choice", ("up", "down"), "'up' or 'down'"),
+    "servo_gain": (0.0, 1e6, True),
+    "servo_natural_freq_hz": (0.0, 1e3, True),
+    "servo_damping": (0.0, 10.0, True),
+    "process_lag_rev": (0.0, 100.0, True),
+    "sensor_gain": (0.0, 1e6, True),
+    "noise_std_Nmm": (0.0, 1e6, False),
+    "sample_time_s": (0.0, 10.0, True),
+    "substeps": ("int", 1, 10000),
+    "command_max": (0.0, 1e9, True),
+    "torque_ref_Nmm": (0.0, 1e8, True),
+    "breakage_torque_Nmm": (0.0, 1e9, True),
+}
+assert tuple(_FIELD_RULES) == tuple(f.name for f in dataclasses.fields(MillingParams))
+
+
+def _check_field(name: str, value) -> None:
+    """``ValueError`` (naming the field) unless ``value`` is allowed for field ``name``."""
+    rule = _FIELD_RULES[name]
+    if rule[0] == "int":
+        check_integer(name, value, rule[1], rule[2])
+    elif rule[0] == "choice":
+        if value not in rule[1]:
+            raise ValueError(f"{name} must be {rule[2]}, got {value!r}")
+    else:
+        check_range(name, value, rule[0], rule[1], lo_open=rule[2])
 
 
 # ---- average cutting-force model (seed 002) ----------------------------------------------
@@ -485,11 +512,11 @@ def _servo_matrix(key: _ServoKey) -> np.ndarray:
     return big
 
 
-@functools.lru_cache(maxsize=256)
-def _lag_matrix(substeps: int, h: float, lag_s: float) -> np.ndarray:
-    """``lag @ [T_0, u_0, ..., u_M]``: the lagged torque at the M sub-step points for a static
-    torque ``u`` linear between sub-step points (exact first-order hold of eq. 10)."""
-    m = substeps
+@numba.njit(cache=True)
+def lag_rows(m, h, lag_s, out):
+    """Fill ``out`` (``(m, m + 2)``) with the lag matrix: ``out @ [T_0, u_0, ..., u_M]`` is
+    the lagged torque at the M sub-step points for a static torque ``u`` linear between
+    sub-step points (exact first-order hold of eq. 10)."""
     r = h / lag_s
     alpha = math.exp(-r)
     if r < 1e-6:  # series, to avoid cancellation
@@ -497,15 +524,22 @@ def _lag_matrix(substeps: int, h: float, lag_s: float) -> np.ndarray:
     else:
         b1 = 1.0 - (1.0 - alpha) / r
         b0 = (1.0 - alpha) / r - alpha
-    lag = np.zeros((m, m + 2))
-    row = np.zeros(m + 2)
+    n = m + 2
+    row = np.zeros(n)
     row[0] = 1.0  # T_0
     for j in range(m):
-        row = alpha * row
+        for q in range(n):
+            row[q] = alpha * row[q]
         row[1 + j] += b0
         row[2 + j] += b1
-        lag[j] = row
-    return lag
+        out[j, :] = row
+
+
+def _lag_matrix(substeps: int, h: float, lag_s: float) -> np.ndarray:
+    """The lag matrix of :func:`lag_rows` as a new ``(substeps, substeps + 2)`` array."""
+    out = np.empty((substeps, substeps + 2))
+    lag_rows(substeps, h, lag_s, out)
+    return out
 
 
 @dataclass(slots=True)
@@ -535,8 +569,450 @@ class MillingStep:
     (linear between sub-step points)."""
 
 
+# ---- the batched physics: N cuts stepped as arrays, one kernel for one lane or many --------
+
+#: Columns of ``MillingLanes.lane_f`` (per-lane constants, and the lane's clock).
+LANE_CONSTANTS = (
+    "command_max",  # U_max, counts
+    "ft_per_vf",  # 60 / (N P): feed per tooth per feed velocity, mm per (mm/s)
+    "feed_exponent",  # exponent of f_t in the torque law (m, or 1)
+    "torque_gain",  # c of T = c d^l f_t^e (N·mm)
+    "depth_exponent",  # l (power law; 1 for the average-force model)
+    "power_law",  # 1.0 for the power law, 0.0 for the average-force model
+    "sensor_gain",  # Ke, counts per N·mm
+    "length_mm",  # workpiece length
+    "t_s",  # time since the cut started
+    "substep_s",  # h = Ts / M
+    "sample_time_s",  # Ts
+    "spindle_rpm",  # N
+    "rev_per_s",  # N / 60
+    "plateau_scale",  # c d^l of the plateau the tool was last in (d constant)
+    "plateau",  # index of that plateau (-1: none yet)
+)
+_T = LANE_CONSTANTS.index("t_s")
+
+#: Fields of ``MillingLanes.out`` (one row per lane after each step).
+LANE_SIGNALS = (
+    "torque_Nmm",
+    "peak_torque_Nmm",
+    "measured_counts",
+    "feed_velocity_mm_s",
+    "feed_mm_per_rev",
+    "mean_feed_mm_per_rev",
+    "position_mm",
+    "depth_mm",
+)
+
+
+@intrinsic
+def _fma(typingctx, a, b, c):
+    """``a * b + c`` rounded once (the processor's fused multiply-add, or libm's ``fma``)."""
+    sig = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        return builder.fma(*args)
+
+    return sig, codegen
+
+
+@numba.njit(cache=True)
+def matvec(a, n, m, x, out):
+    """``out[k, :n] = A_k @ x[k, :m]`` for every row ``k`` of ``x``, with numpy's rounding.
+
+    ``A_k`` is the ``(n, m)`` matrix stored row after row in ``a[k]``, or in ``a[0]`` for
+    every ``k`` when ``a`` holds one matrix.
+
+    numpy hands such a product to OpenBLAS's ``dgemv`` (transposed kernel), whose x86-64
+    kernels (Haswell and later) sum each row in a fixed order: rows in groups of four
+    accumulate four interleaved partial sums with fused multiply-adds, the rows left over
+    two or one interleaved sums of rounded products; the partial sums are then added
+    pairwise, and the result is added to a zeroed output. Done here in that order, for
+    all the lanes in one call, the products cost a few nanoseconds each instead of a
+    library call, and are the numbers numpy gives to the last bit
+    (``tests/milling/test_plant.py`` checks them on random matrices). Shapes outside that
+    scheme (rows not a multiple of four long, a single row, 2048 columns or more) go to
+    ``np.dot``.
+    """
+    shared = a.shape[0] == 1
+    if m % 4 != 0 or n < 2 or m >= 2048:
+        for k in range(x.shape[0]):
+            i = 0 if shared else k
+            out[k, :n] = np.dot(a[i, : n * m].reshape(n, m), x[k, :m])
+        return
+    nb = n & ~3
+    for k in range(x.shape[0]):
+        i = 0 if shared else k
+        if m == 4:  # one group of four columns: every kind of row gives the same sum
+            x0 = x[k, 0]
+            x1 = x[k, 1]
+            x2 = x[k, 2]
+            x3 = x[k, 3]
+            for r in range(n):
+                b = 4 * r
+                p02 = a[i, b] * x0 + a[i, b + 2] * x2
+                out[k, r] = 0.0 + (p02 + (a[i, b + 1] * x1 + a[i, b + 3] * x3))
+            continue
+        for r in range(nb):
+            b = r * m
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            s3 = 0.0
+            for q in range(0, m, 4):
+                s0 = _fma(a[i, b + q], x[k, q], s0)
+                s1 = _fma(a[i, b + q + 1], x[k, q + 1], s1)
+                s2 = _fma(a[i, b + q + 2], x[k, q + 2], s2)
+                s3 = _fma(a[i, b + q + 3], x[k, q + 3], s3)
+            out[k, r] = 0.0 + ((s0 + s2) + (s1 + s3))
+        r = nb
+        if (n - nb) & 2:
+            for r in range(nb, nb + 2):
+                b = r * m
+                s0 = 0.0
+                s1 = 0.0
+                for q in range(0, m, 2):
+                    s0 = s0 + a[i, b + q] * x[k, q]
+                    s1 = s1 + a[i, b + q + 1] * x[k, q + 1]
+                out[k, r] = 0.0 + (s0 + s1)
+            r = nb + 2
+        if (n - nb) & 1:
+            b = r * m
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            s3 = 0.0
+            for q in range(0, m, 4):
+                s0 = s0 + a[i, b + q] * x[k, q]
+                s1 = s1 + a[i, b + q + 1] * x[k, q + 1]
+                s2 = s2 + a[i, b + q + 2] * x[k, q + 2]
+                s3 = s3 + a[i, b + q + 3] * x[k, q + 3]
+            out[k, r] = 0.0 + ((s0 + s2) + (s1 + s3))
+
+
+@numba.njit(cache=True)
+def bisect_right(edges, k, n, x):
+    """Index of the first of ``edges[k, :n]`` (sorted) above ``x``; ``n`` for NaN (as
+    ``np.searchsorted(..., side="right")``)."""
+    lo = 0
+    hi = n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if x < edges[k, mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+@numba.njit(cache=True)
+def _depth_at(x, edges, d0, slope, k, nseg):
+    """Radial depth (mm) at ``x`` of lane ``k``'s profile; zero outside ``[0, length)``
+    (``DepthProfile.__call__`` at one position)."""
+    if not (x >= 0.0 and x < edges[k, nseg]):
+        return 0.0
+    i = bisect_right(edges, k, nseg + 1, x) - 1
+    i = min(max(i, 0), nseg - 1)
+    return d0[k, i] + slope[k, i] * (x - edges[k, i])
+
+
+@numba.njit(cache=True)
+def step_lanes(
+    big, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, commands, noise,
+    out, out_seg, out_finish, work,
+):  # fmt: skip
+    """Advance every lane by one sample (see :class:`MillingLanes` for the layout).
+
+    Lane ``k`` holds ``commands[k]`` (counts, clipped to ``[0, U_max]``): the servo and
+    position at the M sub-step points and the next state are one product with ``big[0]``;
+    the torque law at the sub-step points drives the process lag (one product with the
+    lane's ``lag[k]``); the sensor reads ``Ke T + noise[k]``. ``out[k]`` gets the signals
+    of ``LANE_SIGNALS``, ``out_seg[k]`` the workpiece segment and ``out_finish[k]`` the time
+    the tool reached the workpiece's end in this sample (NaN if it did not). The
+    arithmetic of a lane is that of one cut, whatever the other lanes do. ``work`` is
+    scratch space, ``(n, 3 M + 3)``: ``work[k, :2M + 3]`` gets ``big[0] @ z[k]`` (feed
+    velocity at the M sub-steps, position at the M sub-steps, next ``[Vf, dVf/dt, x]``),
+    ``work[k, 2M + 3:]`` the M lagged torques.
+    """
+    n_lanes = z.shape[0]
+    tq = 2 * m + 3
+    for k in range(n_lanes):
+        u = commands[k]
+        if 0.0 > u:
+            u = 0.0
+        if lane_f[k, 0] < u:
+            u = lane_f[k, 0]
+        z[k, 3] = u
+    matvec(big, tq, 4, z, work)
+    for k in range(n_lanes):
+        ftpv = lane_f[k, 1]
+        fexp = lane_f[k, 2]
+        c = lane_f[k, 3]
+        dexp = lane_f[k, 4]
+        power = lane_f[k, 5] != 0.0
+        p_end = work[k, 2 * m - 1]
+        # buf[k] = [T_0, u_0, u_1 .. u_M]: the static torque at this sample's sub-steps
+        for j in range(m):
+            v = work[k, j]
+            if v <= 0.0:  # no reverse feed; pow(0, e) = 0 (NaN passes, caught by the env)
+                buf[k, 2 + j] = 0.0
+            elif fexp == 1.0:
+                buf[k, 2 + j] = v * ftpv
+            else:
+                buf[k, 2 + j] = (v * ftpv) ** fexp
+        i = seg[k]
+        lo = work[k, m]
+        hi = lo
+        for j in range(m, 2 * m):
+            x = work[k, j]
+            if x < lo:
+                lo = x
+            elif x > hi:
+                hi = x
+            elif x != x:  # NaN: no segment holds it
+                lo = hi = np.nan
+                break
+        if edges[k, i] <= lo and hi < edges[k, i + 1]:  # every sub-step in the segment
+            sl = slope[k, i]
+            if sl == 0.0:
+                depth_end = d0[k, i]
+                if lane_f[k, 14] == i:
+                    scale = lane_f[k, 13]
+                else:
+                    scale = c * depth_end**dexp if power else c * depth_end
+                    lane_f[k, 13] = scale
+                    lane_f[k, 14] = i
+                for j in range(m):
+                    buf[k, 2 + j] *= scale
+            else:
+                depth_end = 0.0
+                for j in range(m):
+                    depth_end = (work[k, m + j] - edges[k, i]) * sl + d0[k, i]
+                    buf[k, 2 + j] *= c * depth_end**dexp if power else c * depth_end
+        else:
+            n_s = nseg[k]
+            depth_end = 0.0
+            for j in range(m):
+                depth_end = _depth_at(work[k, m + j], edges, d0, slope, k, n_s)
+                buf[k, 2 + j] *= c * depth_end**dexp if power else c * depth_end
+            i = bisect_right(edges, k, n_s + 1, p_end) - 1
+            seg[k] = min(max(i, 0), n_s - 1)
+        out[k, 7] = depth_end
+    lagged = work[:, tq:]
+    matvec(lag, m, m + 2, buf, lagged)
+    for k in range(n_lanes):
+        t_end = lagged[k, m - 1]
+        peak = lagged[k, 0]
+        for j in range(1, m):
+            v = lagged[k, j]
+            if v > peak or v != v:  # NaN propagates, as in max()
+                peak = v
+        buf[k, 0] = t_end
+        buf[k, 1] = buf[k, m + 1]
+        p_start = z[k, 2]
+        p_end = work[k, 2 * m - 1]
+        vf = work[k, 2 * m]
+        z[k, 0] = vf
+        z[k, 1] = work[k, 2 * m + 1]
+        z[k, 2] = work[k, 2 * m + 2]
+        out[k, 0] = t_end
+        out[k, 1] = peak
+        out[k, 2] = lane_f[k, 6] * t_end + noise[k]
+        out[k, 3] = vf
+        out[k, 4] = vf * 60.0 / lane_f[k, 11]
+        out[k, 5] = (p_end - p_start) / (lane_f[k, 12] * lane_f[k, 10])
+        out[k, 6] = p_end
+        out_seg[k] = seg[k]
+        out_finish[k] = np.nan
+        t = lane_f[k, 8]
+        length = lane_f[k, 7]
+        if not finished[k] and p_end >= length:
+            j = 0
+            while not work[k, m + j] >= length:
+                j += 1
+            x_prev = work[k, m + j - 1] if j > 0 else p_start
+            x_j = work[k, m + j]
+            frac = (length - x_prev) / (x_j - x_prev) if x_j > x_prev else 1.0
+            if 0.0 > frac:
+                frac = 0.0
+            if 1.0 < frac:
+                frac = 1.0
+            out_finish[k] = t + (j + frac) * lane_f[k, 9]
+            finished[k] = True
+        lane_f[k, 8] = t + lane_f[k, 10]
+
+
+class MillingLanes:
+    """N independent cuts stepped together: the physics of every end-milling env.
+
+    Each lane has its own true parameters (torque law and its coefficients, sensor gain),
+    spindle speed and workpiece (:meth:`start`); :meth:`step` advances every lane by one
+    sample with one compiled kernel (:func:`step_lanes`) whose arithmetic per lane is that
+    of a single cut, so lane ``i`` of a batch and a batch of one give the same numbers to
+    the last bit. All lanes share the servo's discretisation (servo gain, natural
+    frequency, damping, sample time, sub-steps): that of the ``params`` given here;
+    :meth:`start` refuses a lane whose parameters differ in them. The process lag's matrix
+    depends on the spindle speed and is built per lane when the lane starts.
+
+    Parameters
+    ----------
+    params : MillingParams
+        Parameters of the shared servo (and the defaults of every lane).
+    n : int
+        Number of lanes.
+
+    Attributes
+    ----------
+    z : ndarray, shape (n, 4)
+        ``[Vf, dVf/dt, position, U]`` of every lane.
+    buf : ndarray, shape (n, M + 2)
+        ``[T, u_0, u_1 .. u_M]``: the lagged torque now and the static torque of the last
+        sample's sub-steps (``u_0`` the one before them).
+    lane_f : ndarray, shape (n, len(LANE_CONSTANTS))
+        Per-lane constants and clock (columns ``LANE_CONSTANTS``).
+    out, out_segment, out_finish : ndarray
+        Signals of the last step (``LANE_SIGNALS``), segment, finish time (NaN if none).
+    """
+
+    def __init__(self, params: MillingParams, n: int = 1) -> None:
+        check_integer("n", n, 1, 1 << 24)
+        self.n = int(n)
+        self.params = params
+        self._key = _ServoKey.of(params)
+        m = params.substeps
+        self.m = m
+        self.big = _servo_matrix(self._key).reshape(1, -1)  # one (2M + 3, 4) matrix
+        self.lag = np.zeros((self.n, m * (m + 2)))  # each lane's (M, M + 2) matrix
+        self.z = np.zeros((self.n, 4))
+        self.buf = np.zeros((self.n, m + 2))
+        self.lane_f = np.zeros((self.n, len(LANE_CONSTANTS)))
+        self._s_max = 1
+        #: Counts replacements of the lane arrays (by a profile with more segments).
+        self.version = 0
+        self.edges = np.zeros((self.n, 2))
+        self.d0 = np.zeros((self.n, 1))
+        self.slope = np.zeros((self.n, 1))
+        self.nseg = np.ones(self.n, dtype=np.int64)
+        self.seg = np.zeros(self.n, dtype=np.int64)
+        self.finished = np.zeros(self.n, dtype=np.bool_)
+        self.lane_params: list[MillingParams] = [params] * self.n
+        self.profiles: list = [None] * self.n
+        self.out = np.zeros((self.n, len(LANE_SIGNALS)))
+        self.out_segment = np.zeros(self.n, dtype=np.int64)
+        self.out_finish = np.full(self.n, np.nan)
+        #: Scratch space of the kernel (see :func:`step_lanes`).
+        self.work = np.zeros((self.n, 3 * m + 3))
+        self._lag_cache: dict[tuple[float, float], np.ndarray] = {}
+
+    def start(self, lane: int, params: MillingParams, spindle_rpm: float, profile) -> None:
+        """Start a new cut in ``lane``: tool at rest at the workpiece's start, no torque.
+
+        ``ValueError`` for a spindle speed outside ``SPINDLE_RPM_RANGE``, a workpiece deeper
+        than the tool is wide, or servo parameters other than the batch's.
+        """
+        check_range("spindle_rpm", spindle_rpm, *SPINDLE_RPM_RANGE)
+        if profile.max_depth_mm > params.tool_diameter_mm:
+            raise ValueError(
+                f"radial depth of the workpiece must be at most the tool diameter "
+                f"{params.tool_diameter_mm:g} mm, got {profile.max_depth_mm:g} mm"
+            )
+        if params is not self.params and _ServoKey.of(params) != self._key:
+            raise ValueError(
+                "a lane's servo gain, natural frequency, damping, sample time and sub-steps "
+                f"must be those of the batch ({self._key}), got {_ServoKey.of(params)}"
+            )
+        rpm = float(spindle_rpm)
+        m = self.m
+        h = params.sample_time_s / params.substeps
+        lag_s = params.process_lag_s(rpm)
+        lag = self._lag_cache.get((h, lag_s))
+        if lag is None:
+            if len(self._lag_cache) >= 4096:
+                self._lag_cache.clear()
+            lag = self._lag_cache[(h, lag_s)] = _lag_matrix(m, h, lag_s)
+        self.lag[lane] = lag.ravel()
+        self.z[lane] = 0.0
+        self.buf[lane] = 0.0
+        edges, d0, slope = profile.segment_table()
+        ns = len(d0)
+        if ns > self._s_max:
+            grow = ns - self._s_max
+            self.edges = np.pad(self.edges, ((0, 0), (0, grow)), mode="edge")
+            self.d0 = np.pad(self.d0, ((0, 0), (0, grow)))
+            self.slope = np.pad(self.slope, ((0, 0), (0, grow)))
+            self._s_max = ns
+            self.version += 1  # the arrays were replaced: cached references are stale
+        row = self.edges[lane]
+        row[: ns + 1] = edges
+        row[ns + 1 :] = edges[-1]
+        row = self.d0[lane]
+        row[:ns] = d0
+        row[ns:] = 0.0
+        row = self.slope[lane]
+        row[:ns] = slope
+        row[ns:] = 0.0
+        self.nseg[lane] = ns
+        self.seg[lane] = 0
+        power = params.force_model == "power_law"
+        if power:
+            c = KGF * params.torque_coefficient_kgfmm * params.tool_diameter_mm
+            dexp = params.depth_exponent
+        else:
+            c = params.torque_gain(1.0).item()
+            dexp = 1.0
+        self.lane_f[lane] = (
+            params.command_max,
+            60.0 / (rpm * params.n_teeth),
+            params.torque_feed_exponent,
+            c,
+            dexp,
+            1.0 if power else 0.0,
+            params.sensor_gain,
+            edges[-1],
+            0.0,
+            h,
+            params.sample_time_s,
+            rpm,
+            rpm / 60.0,
+            0.0,
+            -1.0,
+        )
+        self.finished[lane] = False
+        self.lane_params[lane] = params
+        self.profiles[lane] = profile
+
+    def step(self, commands: np.ndarray, noise_counts: np.ndarray) -> None:
+        """Hold ``commands[k]`` (counts; clipped to [0, U_max]) in every lane for one sample,
+        with ``noise_counts[k]`` added to lane ``k``'s measurement; results in ``out``,
+        ``out_segment`` and ``out_finish``."""
+        step_lanes(
+            self.big,
+            self.lag,
+            self.z,
+            self.buf,
+            self.lane_f,
+            self.edges,
+            self.d0,
+            self.slope,
+            self.nseg,
+            self.seg,
+            self.finished,
+            self.m,
+            np.asarray(commands, dtype=np.float64),
+            np.asarray(noise_counts, dtype=np.float64),
+            self.out,
+            self.out_segment,
+            self.out_finish,
+            self.work,
+        )
+
+    @property
+    def t_s(self) -> np.ndarray:
+        """Time of each lane since its cut started, s."""
+        return self.lane_f[:, _T]
+
+
 class MillingPlant:
-    """Simulates one cut at a constant spindle speed; numpy only.
+    """Simulates one cut at a constant spindle speed: a :class:`MillingLanes` of one lane.
 
     Parameters
     ----------
@@ -550,112 +1026,46 @@ class MillingPlant:
     """
 
     def __init__(self, params: MillingParams, spindle_rpm: float, profile) -> None:
-        check_range("spindle_rpm", spindle_rpm, *SPINDLE_RPM_RANGE)
-        if profile.max_depth_mm > params.tool_diameter_mm:
-            raise ValueError(
-                f"radial depth of the workpiece must be at most the tool diameter "
-                f"{params.tool_diameter_mm:g} mm, got {profile.max_depth_mm:g} mm"
-            )
+        self._lanes = MillingLanes(params, 1)
+        self._lanes.start(0, params, spindle_rpm, profile)
         self.params = params
         self.spindle_rpm = float(spindle_rpm)
         self.profile = profile
         self.length_mm = profile.length_mm
-        self._h = params.sample_time_s / params.substeps
-        self._big = _servo_matrix(_ServoKey.of(params))
-        self._lag = _lag_matrix(params.substeps, self._h, params.process_lag_s(self.spindle_rpm))
-        self._ft_per_vf = 60.0 / (self.spindle_rpm * params.n_teeth)
-        self._rev_per_s = self.spindle_rpm / 60.0
-        self._exp = params.torque_feed_exponent
-        self._power = params.force_model == "power_law"
-        if self._power:
-            self._c = KGF * params.torque_coefficient_kgfmm * params.tool_diameter_mm
-            self._l = params.depth_exponent
-        else:
-            self._c = params.torque_gain(1.0).item()
-            self._l = 1.0
-        self._edges = np.asarray(profile.edges_mm, dtype=np.float64)
-        self._edge_list, self._d0_list, self._slope_list = profile.segment_table()
-        self.reset()
+        self.finished = False
 
     def reset(self) -> None:
         """Tool at rest at the workpiece's start: no feed, no torque."""
-        self.t_s = 0.0
-        self.z = np.zeros(4)  # [Vf, dVf/dt, x, U]
-        self._buf = np.zeros(self._lag.shape[1])  # [T_0, u_0, u_1..u_M]
+        self._lanes.start(0, self.params, self.spindle_rpm, self.profile)
         self.finished = False
-        self._seg = 0
+
+    @property
+    def t_s(self) -> float:
+        """Time since the cut started, s."""
+        return float(self._lanes.lane_f[0, _T])
 
     @property
     def state(self) -> np.ndarray:
         """``[Vf (mm/s), dVf/dt (mm/s^2), position (mm), torque (N·mm)]`` now."""
-        return np.array([self.z[0], self.z[1], self.z[2], self._buf[0]])
-
-    def _depth(self, x: np.ndarray) -> tuple[np.ndarray | float, float]:
-        """Depth at the sub-step positions (a float when constant) and at the last one."""
-        e = self._edge_list
-        i = self._seg
-        if e[i] <= float(x.min()) and float(x.max()) < e[i + 1]:  # all in the current segment
-            slope = self._slope_list[i]
-            if slope == 0.0:
-                return self._d0_list[i], self._d0_list[i]
-            d = (x - e[i]) * slope + self._d0_list[i]
-            return d, float(d[-1])
-        d = self.profile(x)
-        self._seg = min(
-            max(int(np.searchsorted(self._edges, float(x[-1]), side="right")) - 1, 0), len(e) - 2
-        )
-        return d, float(d[-1])
+        lanes = self._lanes
+        return np.array([lanes.z[0, 0], lanes.z[0, 1], lanes.z[0, 2], lanes.buf[0, 0]])
 
     def step(self, command: float, noise_counts: float = 0.0) -> MillingStep:
         """Hold ``command`` (counts; clipped to [0, command_max]) for one sample and advance."""
-        prm = self.params
-        m = prm.substeps
-        z = self.z
-        z[3] = min(max(command, 0.0), prm.command_max)
-        y = self._big @ z
-        x = y[m : 2 * m]
-        p_start = float(z[2])
-        p_end = float(x[-1])
-        buf = self._buf
-        u = buf[2:]  # static torque at the M sub-step points (a view)
-        np.maximum(y[:m], 0.0, out=u)
-        u *= self._ft_per_vf
-        np.power(u, self._exp, out=u)
-        depth, depth_end = self._depth(x)
-        if self._power:
-            if isinstance(depth, float):
-                u *= self._c * depth**self._l
-            else:
-                u *= self._c * np.power(depth, self._l)
-        else:
-            u *= self._c * depth
-        torques = self._lag @ buf
-        t_end = float(torques[-1])
-        peak = float(torques.max())
-        buf[0] = t_end
-        buf[1] = buf[-1]
-        z[:3] = y[2 * m :]
-        measured = prm.sensor_gain * t_end + noise_counts
-
-        finish = None
-        if not self.finished and p_end >= self.length_mm:
-            j = int(np.argmax(x >= self.length_mm))
-            x_prev = float(x[j - 1]) if j > 0 else p_start
-            frac = (self.length_mm - x_prev) / (float(x[j]) - x_prev) if x[j] > x_prev else 1.0
-            finish = self.t_s + (j + min(max(frac, 0.0), 1.0)) * self._h
-            self.finished = True
-        dt = prm.sample_time_s
-        self.t_s += dt
-        vf = float(z[0])
+        lanes = self._lanes
+        lanes.step(np.array([command], dtype=np.float64), np.array([noise_counts]))
+        torque, peak, counts, vf, feed, mean_feed, pos, depth = lanes.out[0].tolist()
+        fin = float(lanes.out_finish[0])
+        self.finished = bool(lanes.finished[0])
         return MillingStep(
-            t_end,
+            torque,
             peak,
-            measured,
+            counts,
             vf,
-            vf * 60.0 / self.spindle_rpm,
-            (p_end - p_start) / (self._rev_per_s * dt),
-            p_end,
-            depth_end,
-            self._seg,
-            finish,
+            feed,
+            mean_feed,
+            pos,
+            depth,
+            int(lanes.out_segment[0]),
+            None if math.isnan(fin) else fin,
         )

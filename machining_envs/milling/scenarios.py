@@ -9,16 +9,16 @@ the nominal torque coefficient and feed exponent). Pass a name or a scenario obj
 
 from __future__ import annotations
 
-import bisect
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from machining_envs.core.checks import check_range
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.workpieces import DepthProfile
-from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams
+from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams, bisect_right
 
 __all__ = [
     "MillingScenario",
@@ -32,6 +32,7 @@ __all__ = [
     "paper_taper_profile",
     "cut_area_mm2",
     "CutArea",
+    "cut_area_at",
 ]
 
 #: Workpiece length L, mm (Park & Yoon §4: L = 40, cut in 200 samples).
@@ -133,30 +134,43 @@ class CutArea:
 
     Times the axial depth it is the volume removed when the tool has reached ``x``. Exact
     for the piecewise-linear profile (trapezoids between its edges); the areas up to each
-    edge are summed once, so a call costs one bisection.
+    edge are summed once (``cumulative``), so a call costs one bisection
+    (:func:`cut_area_at`, which the envs' compiled step calls too).
     """
 
     def __init__(self, profile: DepthProfile):
-        self.edges, self.d0, self.slope = profile.segment_table()
+        self.edges, self.d0, self.slope = edges, d0, slope = profile.segment_table()
         acc = [0.0]
-        for i in range(len(self.d0)):
-            w = self.edges[i + 1] - self.edges[i]
-            acc.append(acc[-1] + w * (self.d0[i] + 0.5 * self.slope[i] * w))
+        for i in range(len(d0)):
+            w = edges[i + 1] - edges[i]
+            acc.append(acc[-1] + w * (d0[i] + 0.5 * slope[i] * w))
         self.cumulative = acc
+        self._arrays = None
 
     @property
     def total(self) -> float:
         return self.cumulative[-1]
 
     def __call__(self, x_mm: float) -> float:
-        e = self.edges
-        if x_mm <= 0.0:
-            return 0.0
-        if x_mm >= e[-1]:
-            return self.cumulative[-1]
-        i = bisect.bisect_right(e, x_mm) - 1
-        w = x_mm - e[i]
-        return self.cumulative[i] + w * (self.d0[i] + 0.5 * self.slope[i] * w)
+        if self._arrays is None:
+            rows = (np.array([v]) for v in (self.edges, self.d0, self.slope, self.cumulative))
+            self._arrays = (*rows, 0, len(self.d0))
+        return cut_area_at(float(x_mm), *self._arrays)
+
+
+@numba.njit(cache=True)
+def cut_area_at(x, edges, d0, slope, cumulative, k, nseg):
+    """Area (mm²) from 0 to ``x`` under the profile in row ``k`` of the arrays (``nseg``
+    segments: ``edges[k, : nseg + 1]``, start depths ``d0[k]``, slopes ``slope[k]``;
+    ``cumulative[k, i]`` the area up to edge ``i``), clipped to the workpiece. ``x`` must
+    not be NaN."""
+    if x <= 0.0:
+        return 0.0
+    if x >= edges[k, nseg]:
+        return cumulative[k, nseg]
+    i = bisect_right(edges, k, nseg + 1, x) - 1
+    w = x - edges[k, i]
+    return cumulative[k, i] + w * (d0[k, i] + 0.5 * slope[k, i] * w)
 
 
 def cut_area_mm2(profile: DepthProfile, x_mm: float) -> float:
