@@ -14,10 +14,16 @@ from machining_envs.contouring.scenarios import CONTOURING_SCENARIOS, Contouring
 
 __all__ = ["ContouringEnv", "ContouringReward", "ContouringFeedEnv", "FeedReward", "Path"]
 __all__ += ["ContouringParams", "ContouringPlant", "ContouringScenario"]
-__all__ += ["CONTOURING_SCENARIOS", "ENTRY_POINTS"]
+__all__ += ["CONTOURING_SCENARIOS", "ENTRY_POINTS", "VECTOR_ENTRY_POINTS"]
 
 #: The env ids of this process and their entry points (registered by ``machining_envs``).
 ENTRY_POINTS = {
     "machining_envs/Contouring-v0": "machining_envs.contouring.env:ContouringEnv",
     "machining_envs/ContouringFeed-v0": "machining_envs.contouring.feed_env:ContouringFeedEnv",
+}
+#: Their native vector envs (``gym.make_vec(id, num_envs=N)``).
+VECTOR_ENTRY_POINTS = {
+    "machining_envs/ContouringFeed-v0": (
+        "machining_envs.contouring.feed_env:ContouringFeedVectorEnv"
+    ),
 }
