@@ -150,7 +150,7 @@ def _feed_step(actions, clipped, tabs, nseg, pf, load_t, load_v, n_load, sf, sh,
     n = int(c[0])
     ts = c[1]
     tol = c[2]
-    st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, x, lifted = sc
+    st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, x, lifted, zs = sc
     for k in range(actions.shape[0]):
         tab = tabs[k, : nseg[k]]
         length = pf[k, 0]
@@ -176,7 +176,7 @@ def _feed_step(actions, clipped, tabs, nseg, pf, load_t, load_v, n_load, sf, sh,
             load[j, 0] = load_v[k, i, 0]
             load[j, 1] = load_v[k, i, 1]
         run_block(sf[k], sh[k], sa[k], sb[k], scu[k], sdu[k], sgu[k], stq[k], sumax[k],
-                  state[k], ref, load, pos, vel, cmd, torque, x, lifted)  # fmt: skip
+                  state[k], ref, load, pos, vel, cmd, torque, x, lifted, zs)  # fmt: skip
         diverged = False
         for j in range(n):
             px[j] = pos[j, 0] + x0
@@ -353,6 +353,7 @@ class _FeedCore:
             np.zeros(nb), np.zeros(nb), np.zeros((nb, 2)), np.zeros((nb, 2)),
             np.zeros((nb, 2)), np.zeros((nb + 1, 2)), np.zeros((nb, 2)), np.zeros((nb, 2)),
             np.zeros(self.loops.width), np.zeros(self.loops.height),
+            np.zeros(2 * self.loops.n_states_axis),
         )  # fmt: skip
 
     # ---- per-lane episodes ---------------------------------------------------------------

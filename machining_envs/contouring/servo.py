@@ -509,14 +509,14 @@ def _lift_axis(phi, gam, da, db, dc, dd, nb, f, h, a, b, cu):
     return dr
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, _nrt=False)
 def _coef_at(c, h, hi, off, cs, length):
     if cs <= c < cs + length:
         return h[hi, off + c - cs]
     return 0.0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, _nrt=False)
 def _finish_row(v, x, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t):
     """A row's sum of chains ``v`` plus the columns after the last whole block of four
     (``_exact.gemv_row``'s ending)."""
@@ -536,7 +536,7 @@ def _finish_row(v, x, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t):
     return y + fma(t2, x[nbc + 2], fma(t0, x[nbc], t1 * x[nbc + 1]))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, _nrt=False)
 def _coef_full(c, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t):
     """The row's coefficient in column ``c``."""
     fq = f[fi, c - s0] if s0 <= c < s0 + n else 0.0
@@ -561,7 +561,7 @@ def _lane_add(mode, lane, v, xv, c0, c1, c2, c3):
     return c0, c1, c2, c3
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, _nrt=False)
 def _lifted_row(x, r, n_rows, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t):
     """Row ``r`` of ``lifted_matrix(...) @ x`` as ``_exact.gemv_row`` computes it, from the
     row's state coefficients ``f[fi]`` (columns ``s0 ..``), its set-point coefficients
@@ -616,7 +616,7 @@ def _fma3(lane, xv, ca, cb, cc, a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3):
     return a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, _nrt=False)
 def _rows3(x, s0, n, f, fa, fb, fc, cr, h, hra, hrb, hrc, ct, hta, htb, htc, off, length, extra):
     """Three rows of the lifted product that share their columns (all in whole blocks of
     four rows of the matrix): the state (``f[fa]``, ``f[fb]``, ``f[fc]``), ``length`` set
@@ -682,13 +682,27 @@ def _rows3(x, s0, n, f, fa, fb, fc, cr, h, hra, hrb, hrc, ct, hta, htb, htc, off
     return (a0 + a2) + (a1 + a3), (b0 + b2) + (b1 + b3), (c0 + c2) + (c1 + c3)
 
 
-@numba.njit(cache=True)
-def run_block(f, h, a, b, cu, du, gu, tq, umax, state, ref, load, pos, vel, cmd, torque, x, out):
+@numba.njit(cache=True, inline="always")
+def _full_row(g, nb, r0):
+    """Row ``g`` of the rows that read every column (the last position, the last
+    velocity, the end state): its row of ``f``, its first row of ``h``, its row of the
+    lifted matrix (axis rows from ``r0``)."""
+    if g == 0:
+        return nb - 1, 0, r0 + nb - 1
+    if g == 1:
+        return 2 * nb, 2, r0 + 2 * nb
+    q = g - 2
+    return 3 * nb + 1 + q, 2 * q, r0 + 3 * nb + 1 + q
+
+
+@numba.njit(cache=True, _nrt=False)
+def run_block(f, h, a, b, cu, du, gu, tq, umax, state, ref, load, pos, vel, cmd, torque, x, out,
+              zs):  # fmt: skip
     """Advance both axes of one loop by one block (``ServoLoop.run``; see there).
 
     ``f``, ``h``, ``a``, ``b``, ``cu``, ``du``, ``gu``, ``tq`` are the lane's per-axis
-    arrays (leading dimension 2); ``x`` and ``out`` are scratch of the lifted matrix's
-    width and height. Writes ``pos``, ``vel`` (``nb + 1`` rows: the start, then after each
+    arrays (leading dimension 2); ``x``, ``out`` and ``zs`` are scratch of the lifted
+    matrix's width and height and of two states. Writes ``pos``, ``vel`` (``nb + 1`` rows: the start, then after each
     period), ``cmd``, ``torque``; updates ``state``; returns whether a command clipped.
     """
     nb = ref.shape[0]
@@ -704,9 +718,6 @@ def run_block(f, h, a, b, cu, du, gu, tq, umax, state, ref, load, pos, vel, cmd,
         x[ns + 2 * nb + j] = ref[j, 1]
         x[ns + 3 * nb + j] = load[j, 1]
     hp, hpl, hv, hvl, hu, hul = 0, 1, 2, 3, 2 * n, 2 * n + 1
-    fis = np.empty(n + 2, np.int64)
-    his = np.empty(n + 2, np.int64)
-    rs = np.empty(n + 2, np.int64)
     for k in range(2):
         fk = f[k]
         hk = h[k]
@@ -734,30 +745,28 @@ def run_block(f, h, a, b, cu, du, gu, tq, umax, state, ref, load, pos, vel, cmd,
         # The last position, the last velocity and the end state read every column:
         # three rows at a time while they lie in whole blocks of four rows.
         nfull = n + 2
-        for g in range(nfull):
-            fis[g] = nb - 1 if g == 0 else (2 * nb if g == 1 else 3 * nb + 1 + g - 2)
-            his[g] = 0 if g == 0 else (2 if g == 1 else 2 * (g - 2))
-            rs[g] = r0 + nb - 1 if g == 0 else (r0 + 2 * nb if g == 1 else r0 + 3 * nb + 1 + g - 2)
         full = n_rows - (n_rows & 3)
         g = 0
-        while g < nfull and rs[g] < full:
+        while g < nfull and _full_row(g, nb, r0)[2] < full:
             ga = g
             gb = min(g + 1, nfull - 1)
             gc = min(g + 2, nfull - 1)
-            if rs[gb] >= full:
+            if _full_row(gb, nb, r0)[2] >= full:
                 gb = ga
-            if rs[gc] >= full:
+            if _full_row(gc, nb, r0)[2] >= full:
                 gc = gb
-            va, vb, vc = _rows3(x, s0, n, fk, fis[ga], fis[gb], fis[gc], cr, hk, his[ga],
-                                his[gb], his[gc], ct, his[ga] + 1, his[gb] + 1, his[gc] + 1,
-                                0, nb, 0)  # fmt: skip
+            fa, ha, _ = _full_row(ga, nb, r0)
+            fb, hb, _ = _full_row(gb, nb, r0)
+            fc, hc, _ = _full_row(gc, nb, r0)
+            va, vb, vc = _rows3(x, s0, n, fk, fa, fb, fc, cr, hk, ha, hb, hc, ct, ha + 1,
+                                hb + 1, hc + 1, 0, nb, 0)  # fmt: skip
             for gg, vg in ((ga, va), (gb, vb), (gc, vc)):
-                out[rs[gg]] = _finish_row(vg, x, fk, fis[gg], s0, n, hk, his[gg], cr,
-                                          his[gg] + 1, ct, 0, nb, nb)  # fmt: skip
+                fi, hi, r = _full_row(gg, nb, r0)
+                out[r] = _finish_row(vg, x, fk, fi, s0, n, hk, hi, cr, hi + 1, ct, 0, nb, nb)
             g = max(ga, gb, gc) + 1
         while g < nfull:  # rows past the last whole block of four
-            out[rs[g]] = _lifted_row(x, rs[g], n_rows, fk, fis[g], s0, n, hk, his[g], cr,
-                                     his[g] + 1, ct, 0, nb, nb)  # fmt: skip
+            fi, hi, r = _full_row(g, nb, r0)
+            out[r] = _lifted_row(x, r, n_rows, fk, fi, s0, n, hk, hi, cr, hi + 1, ct, 0, nb, nb)
             g += 1
     clipped = False
     for k in range(2):
@@ -776,7 +785,8 @@ def run_block(f, h, a, b, cu, du, gu, tq, umax, state, ref, load, pos, vel, cmd,
         if not nan and max(hi, -lo) > umax:
             clipped = True
             _clipped_axis(a[k], b[k], cu[k], du[k], gu[k], umax, state[k * n : k * n + n],
-                          ref[:, k], load[:, k], pos[:, k], vel[:, k], cmd[:, k])  # fmt: skip
+                          ref[:, k], load[:, k], pos[:, k], vel[:, k], cmd[:, k], zs[:n],
+                          zs[n:])  # fmt: skip
         else:
             for j in range(nb):
                 pos[j, k] = out[r0 + j]
@@ -791,13 +801,14 @@ def run_block(f, h, a, b, cu, du, gu, tq, umax, state, ref, load, pos, vel, cmd,
 
 
 @numba.njit(cache=True)
-def _clipped_axis(a, b, cu, du, gu, umax, z0, ref, load, pos, vel, cmd):
+def _clipped_axis(a, b, cu, du, gu, umax, z0, ref, load, pos, vel, cmd, z, zn):
     """One axis period by period with its command clipped (the controller, which does not
-    know of the clip, carries on unchanged); ``z0`` is updated to the block's end."""
+    know of the clip, carries on unchanged); ``z0`` is updated to the block's end (``z``,
+    ``zn``: scratch of one state)."""
     n = a.shape[0]
     nb = ref.shape[0]
-    z = z0.copy()
-    zn = np.empty(n)
+    for q in range(n):
+        z[q] = z0[q]
     vel[0] = z[1]
     for j in range(nb):
         uj = dot(cu, z) + du * ref[j]
@@ -809,10 +820,12 @@ def _clipped_axis(a, b, cu, du, gu, umax, z0, ref, load, pos, vel, cmd):
         if uc != uj:
             zn[0] += gu[0] * (uc - uj)
             zn[1] += gu[1] * (uc - uj)
-        z[:] = zn
+        for q in range(n):
+            z[q] = zn[q]
         pos[j] = z[0]
         vel[j + 1] = z[1]
-    z0[:] = z
+    for q in range(n):
+        z0[q] = z[q]
 
 
 class ServoLanes:
@@ -913,6 +926,7 @@ class ServoLoop:
         self.n_states = 2 * self.lanes.n_states_axis
         self._x = np.zeros(self.lanes.width)
         self._out = np.zeros(self.lanes.height)
+        self._zs = np.zeros(self.n_states)
 
     def initial_state(self) -> np.ndarray:
         """Table at rest at its start, controllers at rest: ``[z_x, z_y]``."""
@@ -946,6 +960,6 @@ class ServoLoop:
             ln.f[0], ln.h[0], ln.a[0], ln.b[0], ln.cu[0], ln.du[0], ln.gu[0], ln.tq[0],
             float(ln.umax[0]), state, np.ascontiguousarray(ref, dtype=np.float64),
             np.ascontiguousarray(load, dtype=np.float64), pos, vel, cmd, torque, self._x,
-            self._out,
+            self._out, self._zs,
         )  # fmt: skip
         return pos, vel[1:], cmd, torque, bool(clipped)
