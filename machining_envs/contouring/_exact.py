@@ -85,7 +85,9 @@ def py_hypot(a, b):
         return mx
     _, e = math.frexp(mx)
     if e < -1023:  # subnormal: rescale (as CPython does) and try again
-        return 2.2250738585072014e-308 * py_hypot(a / 2.2250738585072014e-308, b / 2.2250738585072014e-308)
+        return 2.2250738585072014e-308 * py_hypot(
+            a / 2.2250738585072014e-308, b / 2.2250738585072014e-308
+        )
     scale = math.ldexp(1.0, -e)
     csum = 1.0
     frac1 = 0.0

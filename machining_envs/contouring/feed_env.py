@@ -11,6 +11,7 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
+from machining_envs.contouring._exact import np_mean, py_hypot
 from machining_envs.contouring.env import (
     ERROR_SCALE_MM,
     TRACE_LOG_FIELDS,
@@ -20,8 +21,8 @@ from machining_envs.contouring.env import (
     _run_limits,
     check_action_vector,
     render_trace,
+    stack_lane_infos,
 )
-from machining_envs.contouring._exact import np_mean, py_hypot
 from machining_envs.contouring.metrics import FEED_TASK
 from machining_envs.contouring.paths import (
     SEGMENT_COLUMNS,
@@ -95,7 +96,6 @@ class FeedReward:
 
     def __post_init__(self) -> None:
         check_reward_weights(self, allow_bool=True)
-
 
 
 # ---- the compiled step of every lane ------------------------------------------------------
@@ -748,8 +748,7 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
         core = self._core
         spec = scenario_option(options, self.default_scenario)
         infos = [core.start(int(i), spec, self.lane_rngs[i]) for i in lanes]
-        part = _stack_infos(infos)
-        return core.obs[lanes].copy(), part
+        return core.obs[lanes].copy(), stack_lane_infos(infos)
 
     def _step_lanes(self, actions):
         core = self._core
@@ -765,20 +764,3 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
             f[:, 3].copy(),
             core.info_arrays(),
         )
-
-
-def _stack_infos(infos: list[dict]) -> dict:
-    """Per-lane info dicts as arrays over those lanes; a key that only some have comes with
-    its ``_key`` mask."""
-    keys = list(dict.fromkeys(k for d in infos for k in d))
-    part = {}
-    for key in keys:
-        have = np.array([key in d for d in infos])
-        vals = [d.get(key) for d in infos]
-        if not have.all():
-            fill = next(v for v in vals if v is not None)
-            vals = [v if h else np.zeros_like(fill) if isinstance(fill, np.ndarray) else type(fill)(0)
-                    for v, h in zip(vals, have)]  # fmt: skip
-            part["_" + key] = have
-        part[key] = np.array(vals)
-    return part

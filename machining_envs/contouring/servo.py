@@ -885,12 +885,10 @@ class ServoLanes:
                 self.a[lane, k], self.b[lane, k], self.cu[lane, k],
             )  # fmt: skip
             self.gu[lane, k] = gam[:, 0]
-            self.tq[lane, k] = truth.inertia_kgm2(axis) / (
-                truth.mm_per_rad * truth.sample_time_s
-            )
+            self.tq[lane, k] = truth.inertia_kgm2(axis) / (truth.mm_per_rad * truth.sample_time_s)
         self.umax[lane] = truth.command_max_mm_s
 
-    def copy_lane(self, dst: int, src: "ServoLanes", lane: int) -> None:
+    def copy_lane(self, dst: int, src: ServoLanes, lane: int) -> None:
         """Copy lane ``lane`` of ``src`` (same designs and block) into lane ``dst``."""
         for name in ("f", "h", "a", "b", "cu", "du", "gu", "tq", "umax"):
             getattr(self, name)[dst] = getattr(src, name)[lane]
