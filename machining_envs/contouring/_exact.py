@@ -52,28 +52,17 @@ def fma(typingctx, a, b, c):
 
 
 @numba.njit(cache=True, inline="always")
-def _split(x):
-    """Veltkamp's split of ``x`` into two halves whose products are exact."""
-    t = x * 134217729.0
-    hi = t - (t - x)
-    return hi, x - hi
-
-
-@numba.njit(cache=True, inline="always")
 def _exact_mul(x, y):
-    """``(hi, lo)`` with ``hi + lo == x * y`` exactly (Dekker)."""
-    xh, xl = _split(x)
-    yh, yl = _split(y)
-    p = xh * yh
-    q = xh * yl + xl * yh
-    z = p + q
-    return z, p - z + q + xl * yl
+    """``(hi, lo)``: ``hi`` the rounded product, ``hi + lo == x * y`` exactly."""
+    hi = x * y
+    return hi, fma(x, y, -hi)
 
 
 @numba.njit(cache=True)
 def py_hypot(a, b):
     """CPython's ``math.hypot(a, b)``: the Euclidean norm rounded from an exact sum of
-    squares, with one differential correction."""
+    squares, with one differential correction (the same bits for every result of normal
+    size; a subnormal result, below 2.2e-308, may differ in its last bit)."""
     a = abs(a)
     b = abs(b)
     if math.isinf(a) or math.isinf(b):

@@ -185,12 +185,13 @@ def _circle_info(path: Path) -> dict:
 # run is a step command, the path's end, the time from which the run may finish, the load
 # torques now and the previous action; ``li`` the integers (see the ``_L*`` indices). The
 # set points ahead (``_RING`` of them, the preview's horizon included) are kept in a ring
-# ``rb[lane, k % _RING] = [x, y, s, segment]``.
+# ``rb[lane, k % _RING] = [x, y]``.
 
 _LZ, _LLEN, _LFTS, _LSTEP, _LEND, _LFIN, _LLOAD, _LPREV = 19, 23, 24, 25, 26, 28, 29, 31
 _NLF = 33
 _IK, _ILOAD, _INLOAD, _INMAX, _ICLIP, _ISEG = 0, 1, 2, 3, 4, 5
 _NLI = 6
+_CIRCLE_KEYS = ("circle_cx_mm", "circle_cy_mm", "circle_radius_mm")
 _RING = 64
 #: Columns of ``_ContouringCore.out`` (the step's signals, read into ``info``).
 _OUT = ("reward", "t_s", "command_x_mm_s", "command_y_mm_s", "x_mm", "y_mm", "x_ref_mm",
@@ -200,20 +201,22 @@ _OUT = ("reward", "t_s", "command_x_mm_s", "command_y_mm_s", "x_mm", "y_mm", "x_
 
 
 @numba.njit(cache=True)
-def _set_point(k, lane, tab, lf, rb):
-    """Set point ``k`` of ``lane`` into its ring (``ContouringEnv``'s schedule: the path at
-    ``min(k F Ts, L)``, or its end for a step command)."""
+def _path_s(k, lf, lane):
+    """Arc length of set point ``k`` (``ContouringEnv``'s schedule: ``min(k F Ts, L)``, or
+    the path's end for a step command)."""
     length = lf[lane, _LLEN]
     if lf[lane, _LSTEP]:
-        s = length
-    else:
-        s = min(float(k) * lf[lane, _LFTS], length)
-    x, y = path_point(tab, length, s)
+        return length
+    return min(float(k) * lf[lane, _LFTS], length)
+
+
+@numba.njit(cache=True)
+def _set_point(k, lane, tab, lf, rb):
+    """Set point ``k`` of ``lane`` into its ring."""
+    x, y = path_point(tab, lf[lane, _LLEN], _path_s(k, lf, lane))
     r = rb[lane, k % _RING]
     r[0] = x
     r[1] = y
-    r[2] = s
-    r[3] = path_segment_index(tab, length, s)
 
 
 @numba.njit(cache=True)
@@ -247,7 +250,7 @@ _CTS, _CUMAX, _CINPOS, _CDIV, _CW, _CPRE, _CTWO = 0, 1, 2, 3, 4, 11, 14
 _PTICKS = np.array(PREVIEW_TICKS)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, _nrt=False)
 def _contour_step(act, clipped, lf, li, cf, tabs, nseg, rb, loads, obs, out, flags):
     """One servo period of every lane (``ContouringEnv.step`` after its input checks).
 
@@ -333,9 +336,10 @@ def _contour_step(act, clipped, lf, li, cf, tabs, nseg, rb, loads, obs, out, fla
         o[14] = tx * tx + ty * ty
         o[15] = lx
         o[16] = ly
-        o[17] = r[2]
+        sk = _path_s(k, lf, lane)
+        o[17] = sk
         o[18] = t if finished else np.nan
-        li[lane, _ISEG] = int(r[3])
+        li[lane, _ISEG] = path_segment_index(tab, lfl[_LLEN], sk)
         f = flags[lane]
         f[0] = diverged
         f[1] = finished
@@ -372,9 +376,10 @@ def _contour_start(lane, lf, li, cf, tabs, nseg, rb, loads, obs, out, flags):
     o[9] = py_hypot(r[0] - x0, r[1] - y0)
     o[15] = lfl[_LLOAD]
     o[16] = lfl[_LLOAD + 1]
-    o[17] = r[2]
+    sk = _path_s(0, lf, lane)
+    o[17] = sk
     o[18] = np.nan
-    li[lane, _ISEG] = int(r[3])
+    li[lane, _ISEG] = path_segment_index(tab, lfl[_LLEN], sk)
     flags[lane, :] = False
     _contour_obs(lane, 0, x0, y0, 0.0, 0.0, lf, cf, rb, obs)
 
@@ -414,7 +419,7 @@ class _ContouringCore:
         self.li = np.zeros((n, _NLI), dtype=np.int64)
         self.tabs = np.zeros((n, 4, SEGMENT_COLUMNS))
         self.nseg = np.ones(n, dtype=np.int64)
-        self.rb = np.zeros((n, _RING, 4))
+        self.rb = np.zeros((n, _RING, 2))
         self.loads = np.zeros((n, 1, 3))
         self.obs = np.zeros((n, 14), dtype=np.float32)
         self.out = np.zeros((n, len(_OUT)))
@@ -427,6 +432,8 @@ class _ContouringCore:
         self.feeds = np.zeros(n)
         self.ref_end = np.zeros(n)
         self.circles: list[dict] = [{}] * n
+        self.has_circle = np.zeros(n, dtype=bool)
+        self.circle = np.zeros((n, 3))
 
     def _grow(self, n_seg: int, n_load: int) -> None:
         if n_seg > self.tabs.shape[1]:
@@ -476,6 +483,8 @@ class _ContouringCore:
         self.feeds[lane] = 0.0 if sc.is_step else sc.feed_mm_s
         self.ref_end[lane] = ref_end
         self.circles[lane] = _circle_info(path)
+        self.has_circle[lane] = bool(self.circles[lane])
+        self.circle[lane] = tuple(self.circles[lane].values()) or (0.0, 0.0, 0.0)
         _contour_start(lane, self.lf, self.li, self.cf, self.tabs, self.nseg, self.rb,
                        self.loads, self.obs, self.out, self.flags)  # fmt: skip
         return self.lane_info(lane)
@@ -548,11 +557,10 @@ class _ContouringCore:
         info["feed_mm_s"] = self.feeds.copy()
         info["reference_end_s"] = self.ref_end.copy()
         info["scenario"] = self.names.copy()
-        circle = np.array([bool(c) for c in self.circles])
-        if circle.any():
-            for key in ("circle_cx_mm", "circle_cy_mm", "circle_radius_mm"):
-                info[key] = np.array([c.get(key, 0.0) for c in self.circles])
-                info["_" + key] = circle
+        if self.has_circle.any():
+            for i, key in enumerate(_CIRCLE_KEYS):
+                info[key] = self.circle[:, i].copy()
+                info["_" + key] = self.has_circle.copy()
         info["machining_time_s"] = np.where(f[:, 1], o[:, 18], np.nan)
         info["_machining_time_s"] = f[:, 1].copy()
         return info

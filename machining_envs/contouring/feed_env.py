@@ -347,6 +347,8 @@ class _FeedCore:
         self.names = np.full(n, "", dtype=object)
         self.servos = np.full(n, servo, dtype=object)
         self.circles: list[dict] = [{}] * n
+        self.has_circle = np.zeros(n, dtype=bool)
+        self.circle = np.zeros((n, 3))
         nb = n_sub
         self._scratch = (
             np.zeros(nb + 1), np.zeros(nb), np.zeros(nb), np.zeros(nb), np.zeros(nb),
@@ -417,6 +419,8 @@ class _FeedCore:
         self.n_clipped[lane] = 0
         self.names[lane] = sc.name
         self.circles[lane] = _circle_info(path)
+        self.has_circle[lane] = bool(self.circles[lane])
+        self.circle[lane] = tuple(self.circles[lane].values()) or (0.0, 0.0, 0.0)
         _feed_reset_obs(lane, self.tabs, self.nseg, self.pf, self.s, self.override,
                         self.prev_action, self.tolerance_mm, _LOOK, self._lo, self._hi,
                         self.obs)  # fmt: skip
@@ -518,11 +522,10 @@ class _FeedCore:
         info["time_limit_s"] = pf[:, 7].copy()
         info["servo"] = self.servos.copy()
         info["scenario"] = self.names.copy()
-        circle = np.array([bool(c) for c in self.circles])
-        if circle.any():
-            for key in ("circle_cx_mm", "circle_cy_mm", "circle_radius_mm"):
-                info[key] = np.array([c.get(key, 0.0) for c in self.circles])
-                info["_" + key] = circle
+        if self.has_circle.any():
+            for i, key in enumerate(("circle_cx_mm", "circle_cy_mm", "circle_radius_mm")):
+                info[key] = self.circle[:, i].copy()
+                info["_" + key] = self.has_circle.copy()
         info["machining_time_s"] = np.where(f[:, 1], o[:, 20], np.nan)
         info["_machining_time_s"] = f[:, 1].copy()
         return info

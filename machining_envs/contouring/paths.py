@@ -813,8 +813,17 @@ def path_distance(tab, px, py):
     best = math.inf
     for k in range(tab.shape[0]):
         row = tab[k]
-        if py_hypot(px - row[3], py - row[4]) - row[5] >= best:
-            continue
+        if best < math.inf:
+            # The exact test below decides; a plain square root (within a few units in the
+            # last place of it) settles all but the near-ties first.
+            dx = px - row[3]
+            dy = py - row[4]
+            gap = math.sqrt(dx * dx + dy * dy) - row[5]
+            margin = 1e-12 * (abs(gap) + row[5] + best)
+            if gap - margin >= best:
+                continue
+            if not gap + margin < best and py_hypot(dx, dy) - row[5] >= best:
+                continue
         d = _segment_distance(row, px, py)
         if d < best:
             best = d
