@@ -141,63 +141,83 @@ def _pairwise_block(a, lo, n):
     return res
 
 
+# numpy's pairwise_sum halves (at a multiple of 8) every run of more than 128 numbers and
+# adds the halves' sums; each function below takes runs of up to 2**k * 128 (no recursion
+# and no allocation, so that code without a runtime can use them).
+
+
 @numba.njit(cache=True)
-def _pairwise(a, lo, n):
-    """numpy's ``pairwise_sum`` of ``a[lo : lo + n]``: blocks of at most 128, halved (at a
-    multiple of 8) and added as a binary tree (evaluated here with an explicit stack)."""
+def _pairwise1(a, lo, n):
     if n <= 128:
         return _pairwise_block(a, lo, n)
-    # frames: (lo, n, stage); stage 0: left half to do, 1: right half to do, 2: combine
-    f_lo = np.empty(64, np.int64)
-    f_n = np.empty(64, np.int64)
-    f_stage = np.empty(64, np.int64)
-    f_left = np.empty(64)
-    vals = 0.0
-    top = 0
-    f_lo[0] = lo
-    f_n[0] = n
-    f_stage[0] = 0
-    while top >= 0:
-        m = f_n[top]
-        n2 = m // 2
-        n2 -= n2 % 8
-        st = f_stage[top]
-        if st == 0:
-            f_stage[top] = 1
-            if n2 <= 128:
-                f_left[top] = _pairwise_block(a, f_lo[top], n2)
-                continue
-            top += 1
-            f_lo[top] = f_lo[top - 1]
-            f_n[top] = n2
-            f_stage[top] = 0
-        elif st == 1:
-            f_stage[top] = 2
-            r = m - n2
-            if r <= 128:
-                vals = _pairwise_block(a, f_lo[top] + n2, r)
-                f_stage[top] = 3
-                continue
-            top += 1
-            f_lo[top] = f_lo[top - 1] + n2
-            f_n[top] = r
-            f_stage[top] = 0
-        else:
-            # stage 2: the right half's sum is in vals (from a child); stage 3: likewise
-            total = f_left[top] + vals
-            top -= 1
-            if top < 0:
-                return total
-            if f_stage[top] == 1:
-                f_left[top] = total
-            else:
-                vals = total
-    return vals
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise_block(a, lo, n2) + _pairwise_block(a, lo + n2, n - n2)
+
+
+@numba.njit(cache=True)
+def _pairwise2(a, lo, n):
+    if n <= 128:
+        return _pairwise_block(a, lo, n)
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise1(a, lo, n2) + _pairwise1(a, lo + n2, n - n2)
+
+
+@numba.njit(cache=True)
+def _pairwise3(a, lo, n):
+    if n <= 128:
+        return _pairwise_block(a, lo, n)
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise2(a, lo, n2) + _pairwise2(a, lo + n2, n - n2)
+
+
+@numba.njit(cache=True)
+def _pairwise4(a, lo, n):
+    if n <= 128:
+        return _pairwise_block(a, lo, n)
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise3(a, lo, n2) + _pairwise3(a, lo + n2, n - n2)
+
+
+@numba.njit(cache=True)
+def _pairwise5(a, lo, n):
+    if n <= 128:
+        return _pairwise_block(a, lo, n)
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise4(a, lo, n2) + _pairwise4(a, lo + n2, n - n2)
+
+
+@numba.njit(cache=True)
+def _pairwise6(a, lo, n):
+    if n <= 128:
+        return _pairwise_block(a, lo, n)
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise5(a, lo, n2) + _pairwise5(a, lo + n2, n - n2)
+
+
+@numba.njit(cache=True)
+def _pairwise7(a, lo, n):
+    if n <= 128:
+        return _pairwise_block(a, lo, n)
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise6(a, lo, n2) + _pairwise6(a, lo + n2, n - n2)
+
+
+@numba.njit(cache=True)
+def _pairwise(a, lo, n):
+    """numpy's ``pairwise_sum`` of ``a[lo : lo + n]`` (``n`` up to 16384)."""
+    return _pairwise7(a, lo, n)
 
 
 @numba.njit(cache=True)
 def np_sum(a):
-    """``np.sum(a)`` of a 1-d contiguous float64 array."""
+    """``np.sum(a)`` of a 1-d contiguous float64 array (of up to 16384 numbers)."""
     return _pairwise(a, 0, a.size)
 
 

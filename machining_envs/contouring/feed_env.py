@@ -118,27 +118,29 @@ def _feed_obs(k, tab, pf, s, override, prev_action, eps, peak, ex, ey, vx, vy, t
     length = pf[k, 0]
     sk = s[k]
     o = obs[k]
-    v = np.empty(16)
-    v[0] = eps / tol
-    v[1] = peak / tol
-    v[2] = ex / ERROR_SCALE_MM
-    v[3] = ey / ERROR_SCALE_MM
-    v[4] = override[k] if sk < length else 0.0
-    v[5] = sk / length
-    v[6] = (length - sk) / 100.0
+    _bound(o, 0, eps / tol, lo, hi)
+    _bound(o, 1, peak / tol, lo, hi)
+    _bound(o, 2, ex / ERROR_SCALE_MM, lo, hi)
+    _bound(o, 3, ey / ERROR_SCALE_MM, lo, hi)
+    _bound(o, 4, override[k] if sk < length else 0.0, lo, hi)
+    _bound(o, 5, sk / length, lo, hi)
+    _bound(o, 6, (length - sk) / 100.0, lo, hi)
     h0 = path_heading(tab, length, sk)
     for i in range(look.size):
-        v[7 + i] = (path_heading(tab, length, sk + look[i]) - h0) / math.pi
-    v[12] = pf[k, 5] / 100.0
-    v[13] = vx / VELOCITY_SCALE_MM_S
-    v[14] = vy / VELOCITY_SCALE_MM_S
-    v[15] = prev_action[k]
-    for i in range(16):
-        x = v[i]
-        o[i] = lo[i] if x < lo[i] else (hi[i] if x > hi[i] else x)
+        _bound(o, 7 + i, (path_heading(tab, length, sk + look[i]) - h0) / math.pi, lo, hi)
+    _bound(o, 12, pf[k, 5] / 100.0, lo, hi)
+    _bound(o, 13, vx / VELOCITY_SCALE_MM_S, lo, hi)
+    _bound(o, 14, vy / VELOCITY_SCALE_MM_S, lo, hi)
+    _bound(o, 15, prev_action[k], lo, hi)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
+def _bound(o, i, x, lo, hi):
+    """``o[i]`` = ``x`` held within ``[lo[i], hi[i]]`` (as float32)."""
+    o[i] = lo[i] if x < lo[i] else (hi[i] if x > hi[i] else x)
+
+
+@numba.njit(cache=True, _nrt=False)
 def _feed_step(actions, clipped, tabs, nseg, pf, load_t, load_v, n_load, sf, sh, sa, sb, scu,
                sdu, sgu, stq, sumax, state, s, kk, override, prev_action, n_clipped, c, w,
                look, lo, hi, obs, reward, flags, out, segment, sc):  # fmt: skip
@@ -150,7 +152,7 @@ def _feed_step(actions, clipped, tabs, nseg, pf, load_t, load_v, n_load, sf, sh,
     n = int(c[0])
     ts = c[1]
     tol = c[2]
-    st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, x, lifted, zs = sc
+    st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, x, lifted, zs, lower, order = sc
     for k in range(actions.shape[0]):
         tab = tabs[k, : nseg[k]]
         length = pf[k, 0]
@@ -189,11 +191,15 @@ def _feed_step(actions, clipped, tabs, nseg, pf, load_t, load_v, n_load, sf, sh,
             for j in range(n):
                 px[j] = rx[j]
                 py[j] = ry[j]
-            vel[:, :] = 0.0
-            torque[:, :] = 0.0
-            cmd[:, :] = 0.0
-            state[k, :] = 0.0
-        path_distances(tab, px, py, n, eps, tmp)
+                for q in range(2):
+                    torque[j, q] = 0.0
+                    cmd[j, q] = 0.0
+            for j in range(n + 1):
+                vel[j, 0] = 0.0
+                vel[j, 1] = 0.0
+            for q in range(state.shape[1]):
+                state[k, q] = 0.0
+        path_distances(tab, px, py, n, eps, tmp, lower, order)
         ds = st[n] - s0
         s[k] = st[n]
         kk[k] += n
@@ -355,7 +361,8 @@ class _FeedCore:
             np.zeros(nb), np.zeros(nb), np.zeros((nb, 2)), np.zeros((nb, 2)),
             np.zeros((nb, 2)), np.zeros((nb + 1, 2)), np.zeros((nb, 2)), np.zeros((nb, 2)),
             np.zeros(self.loops.width), np.zeros(self.loops.height),
-            np.zeros(2 * self.loops.n_states_axis),
+            np.zeros(2 * self.loops.n_states_axis), np.zeros(self.tabs.shape[1]),
+            np.zeros(self.tabs.shape[1], dtype=np.int64),
         )  # fmt: skip
 
     # ---- per-lane episodes ---------------------------------------------------------------
@@ -376,6 +383,8 @@ class _FeedCore:
             tabs = np.zeros((self.n, n_seg, SEGMENT_COLUMNS))
             tabs[:, : self.tabs.shape[1]] = self.tabs
             self.tabs = tabs
+            sc = self._scratch
+            self._scratch = (*sc[:-2], np.zeros(n_seg), np.zeros(n_seg, dtype=np.int64))
         if n_load > self.load_t.shape[1]:
             lt = np.full((self.n, n_load), np.inf)
             lt[:, : self.load_t.shape[1]] = self.load_t

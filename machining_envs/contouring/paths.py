@@ -890,8 +890,9 @@ def _segment_distances(row, px, py, n, out):
 
 
 @numba.njit(cache=True)
-def path_distances(tab, px, py, n, out, scratch):
-    """``Path.distances(px[:n], py[:n])`` into ``out[:n]`` (``scratch``: ``n`` floats).
+def path_distances(tab, px, py, n, out, scratch, lower, order):
+    """``Path.distances(px[:n], py[:n])`` into ``out[:n]`` (scratch: ``scratch`` of ``n``
+    floats, ``lower`` and ``order`` of one float and one integer per segment).
 
     As there: the segments are tried from the one whose bounding circle lies nearest the
     points' centroid, and a segment is skipped when its circle lies beyond the largest
@@ -907,10 +908,14 @@ def path_distances(tab, px, py, n, out, scratch):
         h = math.hypot(px[j] - mx, py[j] - my)
         if j == 0 or h > spread or h != h:
             spread = h
-    lower = np.empty(ns)
-    for k in range(ns):
-        lower[k] = py_hypot(mx - tab[k, 3], my - tab[k, 4]) - tab[k, 5]
-    order = np.argsort(lower, kind="mergesort")
+    for k in range(ns):  # a stable insertion sort of the segments by their lower bound
+        v = py_hypot(mx - tab[k, 3], my - tab[k, 4]) - tab[k, 5]
+        lower[k] = v
+        i = k
+        while i > 0 and lower[order[i - 1]] > v:
+            order[i] = order[i - 1]
+            i -= 1
+        order[i] = k
     _segment_distances(tab[order[0]], px, py, n, out)
     for q in range(1, ns):
         k = order[q]

@@ -718,6 +718,7 @@ def run_block(f, h, a, b, cu, du, gu, tq, umax, state, ref, load, pos, vel, cmd,
         x[ns + 2 * nb + j] = ref[j, 1]
         x[ns + 3 * nb + j] = load[j, 1]
     hp, hpl, hv, hvl, hu, hul = 0, 1, 2, 3, 2 * n, 2 * n + 1
+    nbc = x.size - (x.size & 3)
     for k in range(2):
         fk = f[k]
         hk = h[k]
@@ -732,6 +733,11 @@ def run_block(f, h, a, b, cu, du, gu, tq, umax, state, ref, load, pos, vel, cmd,
             fp, fv, fu = j, nb + j + 1, 2 * nb + 2 + j
             vp, vv, vu = _rows3(x, s0, n, fk, fp, fv, fu, cr, hk, hp, hv, hu, ct, hpl, hvl,
                                 hul, off, j + 1, 1)  # fmt: skip
+            if ct + j + 1 <= nbc:  # no coefficient after the last whole block of four
+                out[r0 + j] = 0.0 + vp
+                out[r0 + nb + j + 1] = 0.0 + vv
+                out[r0 + 2 * nb + 2 + j] = 0.0 + vu
+                continue
             out[r0 + j] = _finish_row(vp, x, fk, fp, s0, n, hk, hp, cr, hpl, ct, off, j + 1,
                                       j + 1)  # fmt: skip
             out[r0 + nb + j + 1] = _finish_row(vv, x, fk, fv, s0, n, hk, hv, cr, hvl, ct, off,
@@ -762,7 +768,10 @@ def run_block(f, h, a, b, cu, du, gu, tq, umax, state, ref, load, pos, vel, cmd,
                                 hb + 1, hc + 1, 0, nb, 0)  # fmt: skip
             for gg, vg in ((ga, va), (gb, vb), (gc, vc)):
                 fi, hi, r = _full_row(gg, nb, r0)
-                out[r] = _finish_row(vg, x, fk, fi, s0, n, hk, hi, cr, hi + 1, ct, 0, nb, nb)
+                if ct + nb <= nbc:
+                    out[r] = 0.0 + vg
+                else:
+                    out[r] = _finish_row(vg, x, fk, fi, s0, n, hk, hi, cr, hi + 1, ct, 0, nb, nb)
             g = max(ga, gb, gc) + 1
         while g < nfull:  # rows past the last whole block of four
             fi, hi, r = _full_row(g, nb, r0)
