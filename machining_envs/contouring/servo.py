@@ -39,6 +39,13 @@ from scipy.linalg import schur, solve_continuous_are
 from scipy.signal import cont2discrete
 
 from machining_envs.contouring._exact import dot, fma, gemm_entry, gemv_row
+from machining_envs.contouring._simd import (
+    lanes_fma,
+    lanes_fma_masked,
+    lanes_fma_one,
+    lanes_sum,
+    lanes_zero,
+)
 from machining_envs.contouring.plant import AXES, ContouringParams
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_integer, check_range
 
@@ -621,65 +628,61 @@ def _rows3(x, s0, n, f, fa, fb, fc, cr, h, hra, hrb, hrc, ct, hta, htb, htc, off
     """Three rows of the lifted product that share their columns (all in whole blocks of
     four rows of the matrix): the state (``f[fa]``, ``f[fb]``, ``f[fc]``), ``length`` set
     points and loads (rows ``hr*`` and ``ht*`` of ``h`` from ``off``) and ``extra`` more
-    set points of the third row. Returns the three sums of chains."""
+    set points of the third row. Returns the three sums of chains.
+
+    The chains of a row are one register of four lanes (column ``c`` in lane ``c % 4``),
+    advanced a block of four columns at a time as the BLAS kernel advances them; the
+    columns of a range's first and last blocks that lie outside it are masked (``h`` has
+    ``_PAD`` columns of room on either side)."""
     n_cols = x.size
     nbc = n_cols - (n_cols & 3)
-    a0 = a1 = a2 = a3 = b0 = b1 = b2 = b3 = c0 = c1 = c2 = c3 = 0.0
+    a = lanes_zero()
+    b = lanes_zero()
+    c = lanes_zero()
     for q in range(n):
         col = s0 + q
         if col < nbc:
-            a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3 = _fma3(
-                col & 3, x[col], f[fa, q], f[fb, q], f[fc, q],
-                a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3,
-            )  # fmt: skip
+            xv = x[col]
+            a = lanes_fma_one(a, col & 3, f[fa, q], xv)
+            b = lanes_fma_one(b, col & 3, f[fb, q], xv)
+            c = lanes_fma_one(c, col & 3, f[fc, q], xv)
+    ka = h[hra]
+    kb = h[hrb]
+    kc = h[hrc]
     for part in range(2):
+        if part == 1:
+            ka = h[hta]
+            kb = h[htb]
+            kc = h[htc]
         cs = cr if part == 0 else ct
-        ka = hra if part == 0 else hta
-        kb = hrb if part == 0 else htb
-        kc = hrc if part == 0 else htc
         end = min(cs + length, nbc)
-        d = off - cs
-        col = cs
-        while col < end and col & 3:
-            a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3 = _fma3(
-                col & 3, x[col], h[ka, d + col], h[kb, d + col], h[kc, d + col],
-                a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3,
-            )  # fmt: skip
-            col += 1
-        while col + 4 <= end:
-            x0 = x[col]
-            x1 = x[col + 1]
-            x2 = x[col + 2]
-            x3 = x[col + 3]
-            i = d + col
-            a0 = fma(h[ka, i], x0, a0)
-            a1 = fma(h[ka, i + 1], x1, a1)
-            a2 = fma(h[ka, i + 2], x2, a2)
-            a3 = fma(h[ka, i + 3], x3, a3)
-            b0 = fma(h[kb, i], x0, b0)
-            b1 = fma(h[kb, i + 1], x1, b1)
-            b2 = fma(h[kb, i + 2], x2, b2)
-            b3 = fma(h[kb, i + 3], x3, b3)
-            c0 = fma(h[kc, i], x0, c0)
-            c1 = fma(h[kc, i + 1], x1, c1)
-            c2 = fma(h[kc, i + 2], x2, c2)
-            c3 = fma(h[kc, i + 3], x3, c3)
-            col += 4
-        while col < end:
-            a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3 = _fma3(
-                col & 3, x[col], h[ka, d + col], h[kb, d + col], h[kc, d + col],
-                a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3,
-            )  # fmt: skip
-            col += 1
+        if end > cs:
+            d = off - cs
+            col = cs - (cs & 3)
+            last = (end - 1) - ((end - 1) & 3)
+            if col < cs or col == last:  # the first block, masked
+                lo = cs - col
+                hi = min(end - col, 4)
+                a = lanes_fma_masked(a, ka, d + col, x, col, lo, hi)
+                b = lanes_fma_masked(b, kb, d + col, x, col, lo, hi)
+                c = lanes_fma_masked(c, kc, d + col, x, col, lo, hi)
+                col += 4
+            while col < last:
+                a = lanes_fma(a, ka, d + col, x, col)
+                b = lanes_fma(b, kb, d + col, x, col)
+                c = lanes_fma(c, kc, d + col, x, col)
+                col += 4
+            if col == last:  # the last block, masked
+                hi = end - col
+                a = lanes_fma_masked(a, ka, d + col, x, col, 0, hi)
+                b = lanes_fma_masked(b, kb, d + col, x, col, 0, hi)
+                c = lanes_fma_masked(c, kc, d + col, x, col, 0, hi)
         if part == 0:
             for e in range(extra):  # the third row's further set points
                 col = cr + length + e
                 if col < nbc:
-                    a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3 = _fma3(
-                        col & 3, x[col], 0.0, 0.0, h[hrc, off + length + e],
-                        a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3,
-                    )  # fmt: skip
-    return (a0 + a2) + (a1 + a3), (b0 + b2) + (b1 + b3), (c0 + c2) + (c1 + c3)
+                    c = lanes_fma_one(c, col & 3, kc[off + length + e], x[col])
+    return lanes_sum(a), lanes_sum(b), lanes_sum(c)
 
 
 @numba.njit(cache=True, inline="always")
