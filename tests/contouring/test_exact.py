@@ -64,9 +64,10 @@ def test_py_hypot_is_pythons_math_hypot():
     for scale in (1e-6, 1.0, 1e3, 1e200):
         x = RNG.normal(size=20000) * scale
         y = RNG.normal(size=20000) * scale * RNG.uniform(0, 3, 20000)
-        for a, b in zip(x.tolist(), y.tolist(), strict=True):
-            assert _exact.py_hypot(a, b) == math.hypot(a, b)
-        differs += int(np.sum(np.hypot(x, y) != [math.hypot(a, b) for a, b in zip(x, y)]))
+        py = [math.hypot(a, b) for a, b in zip(x.tolist(), y.tolist(), strict=True)]
+        for a, b, h in zip(x.tolist(), y.tolist(), py, strict=True):
+            assert _exact.py_hypot(a, b) == h
+        differs += int(np.sum(np.hypot(x, y) != py))
     assert differs > 0  # so the distinction is needed
     assert _exact.py_hypot(0.0, 0.0) == 0.0 and _exact.py_hypot(-3.0, 4.0) == 5.0
     assert _exact.py_hypot(math.inf, math.nan) == math.inf
