@@ -606,8 +606,15 @@ class ContouringFeedEnv(gym.Env):
     (this episode's truncation time), and ``machining_time_s`` (the cycle time, to the servo
     period) once finished.
 
+    ## Vector env
+    ``gym.make_vec("machining_envs/ContouringFeed-v0", num_envs=N)`` gives a
+    :class:`ContouringFeedVectorEnv`: N tables stepped by one compiled function, lane ``i``
+    after ``reset(seed=s)`` exactly this env after ``reset(seed=s + i)``.
+
     ## Version History
-    * v0: first version.
+    * v0: first version. The step now runs compiled, shared with the vector env: the 50
+      servo periods of a step are still the one lifted linear update, evaluated as the BLAS
+      product was (the same numbers to the last bit), from its distinct coefficients.
 
     ## Example
     >>> import gymnasium as gym
