@@ -87,6 +87,7 @@ _VECTOR_ENTRY_POINTS = {
     **turning.VECTOR_ENTRY_POINTS,
     **milling.VECTOR_ENTRY_POINTS,
     **drilling.VECTOR_ENTRY_POINTS,
+    **contouring.VECTOR_ENTRY_POINTS,
 }
 ENV_IDS = tuple(_ENTRY_POINTS)
 

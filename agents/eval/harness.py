@@ -104,8 +104,8 @@ def _lane_trajectories(infos: list[dict], rewards: list, length: np.ndarray) -> 
     columns = {}
     for key in keys:
         sample = next(np.asarray(d[key]) for d in (*infos, *finals) if key in d)  # the key's dtype
-        if sample.dtype.kind not in "biuf":
-            continue
+        if sample.dtype.kind not in "biuf" or sample.ndim != 1:
+            continue  # rollout keeps numbers only (not the arrays of a signal's components)
         top = np.full((n_steps, n), np.nan)
         top_ok = np.zeros((n_steps, n), dtype=bool)
         fin = np.full((n_steps, n), np.nan)

@@ -106,7 +106,6 @@ class MillingReward:
         check_reward_weights(self)
 
 
-
 @numba.njit(cache=True)
 def _clamp(x, lo, hi):
     """``min(max(x, lo), hi)`` with Python's tie rules."""

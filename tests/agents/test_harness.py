@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from agents import ConstantFeed, FixedGainPI, VariableGainPI
+from agents.contouring import ConstantOverride, HInf2DOF, PIPosition
 from agents.drilling import PD, NoControl, PeckDrilling, SlidingMode
 from agents.eval import Evaluation, evaluate
 from agents.rl import pretrained
@@ -115,6 +116,38 @@ def test_batched_drilling_evaluation_gives_the_episode_by_episode_rows(factory, 
             assert a[k] == b[k] or (a[k] != a[k] and b[k] != b[k]), k
     for a, b in zip(one.trajectories, batch.trajectories, strict=True):
         assert a.keys() == b.keys() and "drilling_time_s" in a
+        for k, v in a.items():
+            if isinstance(v, np.ndarray):
+                assert v.dtype == b[k].dtype, k
+                np.testing.assert_array_equal(v, b[k], err_msg=k)
+            else:
+                assert v == b[k], k
+
+
+@pytest.mark.parametrize(
+    "env_id, factory, scenarios",
+    [
+        ("machining_envs/Contouring-v0", PIPosition.from_env, ["test", "paper_corner"]),
+        ("machining_envs/Contouring-v0", HInf2DOF.from_env, ["test", "paper_circle_load"]),
+        ("machining_envs/ContouringFeed-v0", ConstantOverride.from_env, ["test", "paper_involute"]),
+    ],
+    ids=["PI position", "H-inf 2-DOF", "constant override"],
+)
+def test_batched_contouring_evaluation_gives_the_episode_by_episode_rows(
+    env_id, factory, scenarios
+):
+    """The contouring agents on the lanes of the native vector envs: the same metrics and
+    trajectories, to the last bit, as one episode after another with the same seeds."""
+    kw = dict(n_episodes=3, seed=1000, keep_trajectories=True)
+    one = evaluate(factory, env_id, scenarios, batched=False, **kw)
+    batch = evaluate(factory, env_id, scenarios, batched=True, **kw)
+    assert len(one.rows) == len(batch.rows) == 6
+    for a, b in zip(one.rows, batch.rows, strict=True):
+        assert a.keys() == b.keys()
+        for k in a:
+            assert a[k] == b[k] or (a[k] != a[k] and b[k] != b[k]), k
+    for a, b in zip(one.trajectories, batch.trajectories, strict=True):
+        assert a.keys() == b.keys()
         for k, v in a.items():
             if isinstance(v, np.ndarray):
                 assert v.dtype == b[k].dtype, k

@@ -28,7 +28,13 @@ ACTION_BOUND = {
 #: MicroDrilling-v0 hole takes 1000-3000 steps and random voltages rarely break the drill,
 #: so a 2 s limit ends its episodes (truncated) every 200 steps; its other episode ends
 #: (finished, broken, feed control) are compared in tests/drilling/test_vector.py.
-ENV_KWARGS = {"machining_envs/MicroDrilling-v0": {"max_episode_time_s": 2.0}}
+#: Under random axis commands a Contouring-v0 table neither finishes nor diverges, and its
+#: runs last the reference's duration plus 0.5 s (thousands of 0.2 ms steps): a 50 ms time
+#: limit truncates every lane every 250 steps, so the 2000 steps cross about 30 autoresets.
+ENV_KWARGS = {
+    "machining_envs/MicroDrilling-v0": {"max_episode_time_s": 2.0},
+    "machining_envs/Contouring-v0": {"max_episode_time_s": 0.05},
+}
 
 
 def _actions(rng, env_id: str, space, n: int) -> np.ndarray:
@@ -37,6 +43,8 @@ def _actions(rng, env_id: str, space, n: int) -> np.ndarray:
 
 
 def _same(a, b) -> bool:
+    if isinstance(b, np.ndarray):  # an array-valued signal (the contouring commands)
+        return bool(np.array_equal(a, b))
     if isinstance(a, float) and np.isnan(a):
         return isinstance(b, (float, np.floating)) and np.isnan(b)
     return a == b
