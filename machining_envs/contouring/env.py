@@ -40,6 +40,7 @@ from machining_envs.core.env import (
     check_scenario_spec,
     present_frame,
     ready_to_render,
+    real_actions,
     record_step,
     resolve_params,
     resolve_reward,
@@ -84,13 +85,14 @@ _PRE_LIM = 20.0
 def check_action_vector(action, n: int, env_name: str) -> tuple[list[float], bool]:
     """The action as ``n`` floats in [-1, 1] and whether any had to be clipped.
 
-    NaN or inf raise ``ValueError`` naming the env and the values; a wrong size raises
-    ``ValueError``; finite values outside the box are clipped (the caller counts them).
+    Anything but real numbers (``real_actions``), NaN or inf raise ``ValueError`` naming
+    the env and the values; a wrong size raises ``ValueError``; finite values outside the
+    box are clipped (the caller counts them).
     """
-    if isinstance(action, np.ndarray) and action.shape == (n,):
+    if isinstance(action, np.ndarray) and action.shape == (n,) and action.dtype.kind == "f":
         a = action
     else:
-        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        a = real_actions(action, env_name).reshape(-1)
         if a.size != n:
             raise ValueError(
                 f"{env_name}: action must hold {n} value(s), got shape {np.shape(action)}"
@@ -141,7 +143,8 @@ class ContouringReward:
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
-            ok = isinstance(v, (int, float)) and math.isfinite(v) and v >= 0
+            ok = isinstance(v, (int, float)) and not isinstance(v, bool)
+            ok = ok and math.isfinite(v) and v >= 0
             if f.name.endswith(("_mm", "_Nm")):
                 ok = ok and v > 0
             if not ok:
@@ -836,9 +839,6 @@ def render_xy(path: Path, x, y, t, eps, title: str) -> np.ndarray:
     """XY plot of the path and the table's trace with the contour error magnified, above
     the contour error against time; returned as an RGB array."""
     try:
-        import matplotlib
-
-        matplotlib.use("Agg", force=False)
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
     except ImportError as exc:  # pragma: no cover - matplotlib is a dependency

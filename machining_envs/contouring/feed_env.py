@@ -95,7 +95,7 @@ class FeedReward:
     """w_d, one-off penalty when the run diverges."""
 
     def __post_init__(self) -> None:
-        check_reward_weights(self, allow_bool=True)
+        check_reward_weights(self)
 
 
 # ---- the compiled step of every lane ------------------------------------------------------

@@ -352,7 +352,7 @@ def hinf_2dof_design(
         ("weight_gain", weight_gain, 1e-6, 1e12),
         ("weight_pole", weight_pole, 0.0, 1e6),
     ):
-        check_range(name, v, lo, hi, types=PY_NUMBER_TYPES, allow_bool=True)
+        check_range(name, v, lo, hi, types=PY_NUMBER_TYPES)
     return _hinf(
         params.velocity_pole(axis),
         params.sample_time_s,
@@ -855,7 +855,7 @@ class ServoLanes:
     """
 
     def __init__(self, designs, block: int, n: int = 1) -> None:
-        check_integer("block", block, 1, 10000, types=(int,), allow_bool=True)
+        check_integer("block", block, 1, 10000, types=(int,))
         self.designs = tuple(designs)
         self.block = block
         self.n = n

@@ -276,23 +276,18 @@ def resolve_reward(reward, reward_cls: type):
     return reward
 
 
-def check_reward_weights(reward, *, allow_bool: bool = False) -> None:
+def check_reward_weights(reward) -> None:
     """``ValueError`` unless every field of the reward dataclass ``reward`` is a finite
-    number >= 0 (the first that is not is named: ``"reward weight {name} must be a finite
-    number >= 0, got {value!r}"``). Call it from the dataclass's ``__post_init__``.
-
-    ``allow_bool``: take ``True`` and ``False`` as 1 and 0, as ``TurningReward`` and
-    ``FeedReward`` always have (the other rewards refuse them).
+    number >= 0, not a bool (the first that is not is named: ``"reward weight {name} must
+    be a finite number >= 0, got {value!r}"``). Call it from the dataclass's
+    ``__post_init__``.
     """
     import dataclasses
 
     for f in dataclasses.fields(reward):
         v = getattr(reward, f.name)
         if not (
-            isinstance(v, (int, float))
-            and (allow_bool or not isinstance(v, bool))
-            and math.isfinite(v)
-            and v >= 0
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0
         ):
             raise ValueError(f"reward weight {f.name} must be a finite number >= 0, got {v!r}")
 

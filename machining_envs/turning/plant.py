@@ -122,7 +122,7 @@ class TurningParams:
         _check("feed_exponent", self.feed_exponent, 0.0, 2.0, lo_open=True)
         _check("sensor_gain", self.sensor_gain, 0.0, 1e6, lo_open=True)
         _check("sensor_cutoff_hz", self.sensor_cutoff_hz, 0.0, 1e4, lo_open=True)
-        if self.sensor_filter_order not in (1, 2):
+        if isinstance(self.sensor_filter_order, bool) or self.sensor_filter_order not in (1, 2):
             raise ValueError(
                 f"sensor_filter_order must be 1 or 2, got {self.sensor_filter_order!r}"
             )
