@@ -8,10 +8,12 @@ RESULTS ?= results
 
 .PHONY: demo test lint format bench-speed clean
 
-$(STAMP): pyproject.toml
+# constraints.txt pins torch to the CPU build on this kind of machine (no CUDA packages);
+# the package itself does not pin it.
+$(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[rl,onnx,dev]'
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -109,7 +109,13 @@ class LinearServoAgent(Agent):
         z[:, :nx] = state[:, :nx]
         z[:, nx::2] = r - origin
         z[:, nx + 1 :: 2] = y - origin
-        out = z @ self._m
+        if z.shape[0] == 1:
+            out = z @ self._m
+        else:  # row by row: each env gets the numbers it gets alone (a batch's matrix
+            # product would sum in another order)
+            out = np.empty((z.shape[0], self._m.shape[1]))
+            for i in range(z.shape[0]):
+                out[i] = z[i] @ self._m
         state[:, :nx] = out[:, :nx]
         u = out[:, nx:]
         umax = self.command_max_mm_s

@@ -24,7 +24,7 @@ _I = TurningEnv.OBS_INDEX
 
 #: The turning controllers' settings are Python numbers, and (unlike the other processes')
 #: a bool passes as 0 or 1; kept so that no setting accepted before is refused.
-_positive = functools.partial(check_positive, types=PY_NUMBER_TYPES, allow_bool=True)
+_positive = functools.partial(check_positive, types=PY_NUMBER_TYPES)
 
 
 @dataclass(frozen=True)

@@ -83,7 +83,12 @@ _ENTRY_POINTS = {
     **contouring.ENTRY_POINTS,
 }
 #: Native vector envs of the ids that have one (``gym.make_vec(id, num_envs=N)``).
-_VECTOR_ENTRY_POINTS = {**turning.VECTOR_ENTRY_POINTS, **milling.VECTOR_ENTRY_POINTS}
+_VECTOR_ENTRY_POINTS = {
+    **turning.VECTOR_ENTRY_POINTS,
+    **milling.VECTOR_ENTRY_POINTS,
+    **drilling.VECTOR_ENTRY_POINTS,
+    **contouring.VECTOR_ENTRY_POINTS,
+}
 ENV_IDS = tuple(_ENTRY_POINTS)
 
 for _id, _entry in _ENTRY_POINTS.items():

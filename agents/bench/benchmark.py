@@ -19,6 +19,15 @@ from agents.eval import Evaluation, agent_name, evaluate, primary_score_table, r
 __all__ = ["run_benchmark"]
 
 
+def _rl_installed() -> bool:
+    """Whether Stable-Baselines3 (the ``rl`` extra) is importable."""
+    try:
+        import stable_baselines3  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
 def run_benchmark(
     out_dir="results", quick: bool = False, seed: int = 1000, verbose: bool = True
 ) -> Evaluation:
@@ -35,6 +44,13 @@ def run_benchmark(
         spec_evals = []
         learned = set()
         for k, factory in enumerate(spec.agents):
+            if getattr(factory, "learned", False) and not _rl_installed():
+                if verbose:
+                    print(
+                        f"[{env_name}] {k + 1}/{len(spec.agents)} {factory.__name__}: skipped "
+                        "(learned policies need the rl extra: pip install 'machining-envs[rl]')"
+                    )
+                continue
             for scenarios, n in (
                 (spec.paper_scenarios, n_paper),
                 ((spec.heldout_scenario,), n_test),
@@ -107,14 +123,12 @@ def run_benchmark(
 
 
 def _plot_trajectories(spec: BenchmarkSpec, path: Path, seed: int) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     key, ref_key, label = spec.plot_main
     low_key, low_label = spec.plot_lower
-    fig, axes = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
+    fig = Figure(figsize=(9, 5.5))
+    axes = fig.subplots(2, 1, sharex=True)
     env = gym.make(spec.env_id)
     try:
         for i, factory in enumerate(spec.agents):
@@ -138,20 +152,17 @@ def _plot_trajectories(spec: BenchmarkSpec, path: Path, seed: int) -> None:
     axes[1].set_xlabel("time (s)")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
-    plt.close(fig)
 
 
 def _plot_bars(ev: Evaluation, spec: BenchmarkSpec, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     scenario = spec.heldout_scenario
     keys = [m for m, _ in spec.bar_metrics]
     summ = [r for r in ev.summary(keys) if r["scenario"] == scenario]
     names = [r["agent"] for r in summ]
-    fig, axes = plt.subplots(1, len(keys), figsize=(3.3 * len(keys), 3.2), squeeze=False)
+    fig = Figure(figsize=(3.3 * len(keys), 3.2))
+    axes = fig.subplots(1, len(keys), squeeze=False)
     for ax, (m, label) in zip(axes[0], spec.bar_metrics, strict=True):
         ax.bar(
             range(len(names)),
@@ -164,4 +175,3 @@ def _plot_bars(ev: Evaluation, spec: BenchmarkSpec, path: Path) -> None:
     fig.suptitle(f"held-out scenario '{scenario}': mean ± std over episodes", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
-    plt.close(fig)

@@ -1,7 +1,11 @@
-"""``machining-bench``: the command line of the library.
+"""machining-bench: benchmark controllers, reproduce the papers, train and evaluate policies.
 
 machining-bench benchmark [--quick] [--out results] [--seed 1000]
 machining-bench reproduce turning [--out results] [--sensor-gain 17]
+machining-bench train --env ID --out runs/x [--algo ppo] [--resume]
+machining-bench evaluate --model runs/x/best_model.zip --env ID
+machining-bench export --onnx --model runs/x/best_model.zip
+machining-bench convert-stats FILE_vecnormalize.pkl
 """
 
 from __future__ import annotations
@@ -24,18 +28,61 @@ def _positive_float(text: str) -> float:
     return v
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="machining-bench", description=__doc__.split("\n\n")[0])
-    sub = p.add_subparsers(dest="command", required=True)
+class _Formatter(argparse.HelpFormatter):
+    """Shows each option's default where it has one its help does not already state."""
 
-    b = sub.add_parser("benchmark", help="every agent on every env; table, CSV, report, plots")
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if action.default not in (None, False, argparse.SUPPRESS) and "default" not in text:
+            text += " (default: %(default)s)"
+        return text
+
+
+class _TopFormatter(_Formatter, argparse.RawDescriptionHelpFormatter):
+    """The top-level help keeps the usage lines of the description as they are."""
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("machining_envs")
+    except PackageNotFoundError:  # pragma: no cover - running from a source tree
+        import machining_envs
+
+        return machining_envs.__version__
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="machining-bench", description=__doc__, formatter_class=_TopFormatter
+    )
+    p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def command(name: str, summary: str, description: str):
+        return sub.add_parser(
+            name, help=summary, description=description, formatter_class=_Formatter
+        )
+
+    b = command(
+        "benchmark",
+        "every agent on every env; table, CSV, report, plots",
+        "Run every agent (paper classical controllers and the shipped policies) on every "
+        "env's held-out episodes; print the score table and write CSV, report and plots.",
+    )
     b.add_argument(
         "--quick", action="store_true", help="fewer episodes (a couple of minutes on 2 cores)"
     )
     b.add_argument("--out", default="results", help="output folder (default: results)")
     b.add_argument("--seed", type=int, default=1000, help="first episode seed (default: 1000)")
 
-    r = sub.add_parser("reproduce", help="run a paper's experiments; paper vs ours")
+    r = command(
+        "reproduce",
+        "run a paper's experiments; paper vs ours",
+        "Run the experiments of one source paper on the simulated plant and print the "
+        "paper's numbers beside ours, row by row (exit 1 if a row does not match).",
+    )
     r.add_argument("process", choices=[p.name for p in PROCESSES], help="which paper")
     r.add_argument("--out", default="results", help="folder for the figure (default: results)")
     r.add_argument("--seed", type=int, default=0)
@@ -45,7 +92,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="turning: override Ke (counts/N) to explore the calibration",
     )
-    t = sub.add_parser("train", help="train an SB3 policy (PPO, SAC, TD3) on an env")
+    t = command(
+        "train",
+        "train an SB3 policy (PPO, SAC, TD3) on an env",
+        "Train a Stable-Baselines3 policy with the hyperparameters of "
+        "agents/rl/configs/<algo>.yml (or --config); the run folder keeps the model, its "
+        "normalisation statistics, checkpoints and held-out evaluations.",
+    )
     t.add_argument("--env", required=True, help="env id, e.g. machining_envs/Turning-v0")
     t.add_argument("--algo", default="ppo", choices=["ppo", "sac", "td3"])
     t.add_argument("--out", required=True, help="run folder (must be new unless --resume)")
@@ -64,15 +117,92 @@ def build_parser() -> argparse.ArgumentParser:
         "SB3's SubprocVecEnv or DummyVecEnv (default otherwise)",
     )
 
-    e = sub.add_parser("evaluate", help="the harness on a saved policy")
-    e.add_argument(
-        "--model", required=True, help="a saved model .zip (VecNormalize stats beside it)"
+    e = command(
+        "evaluate",
+        "the harness on a saved policy",
+        "Run a saved SB3 model on an env's episodes and print the env's metrics and primary "
+        "score. The model's run folder (config.json beside it) gives its algorithm and the "
+        "env it was trained on; for a model trained elsewhere give --algo (and --stats).",
     )
-    e.add_argument("--env", required=True)
-    e.add_argument("--scenarios", nargs="+", default=["test"])
-    e.add_argument("--episodes", type=int, default=20)
-    e.add_argument("--seed", type=int, default=1000)
+    e.add_argument("--model", required=True, help="a saved model .zip")
+    e.add_argument("--env", required=True, help="env id, e.g. machining_envs/Turning-v0")
+    e.add_argument("--scenarios", nargs="+", default=["test"], help="scenario names")
+    e.add_argument("--episodes", type=int, default=20, help="episodes per scenario")
+    e.add_argument("--seed", type=int, default=1000, help="first episode seed")
+    e.add_argument("--algo", choices=["ppo", "sac", "td3"], default=None,
+                   help="the model's algorithm (default: from config.json or the file name)")  # fmt: skip
+    e.add_argument("--stats", default=None,
+                   help="VecNormalize statistics (.json; default: *_vecnormalize.json beside "
+                   "the model)")  # fmt: skip
+    e.add_argument("--force", action="store_true",
+                   help="evaluate on --env although config.json names another env")  # fmt: skip
+
+    x = command(
+        "export",
+        "write a learned policy as ONNX, checked against SB3",
+        "Write a saved SB3 model with its normalisation (and its action increment) folded "
+        "in as one ONNX graph, raw observation -> env action; check that onnxruntime "
+        "reproduces SB3's actions to 1e-5 on real episodes and print the per-decision "
+        "latency against the env's control period. Needs the onnx extra.",
+    )
+    x.add_argument("--onnx", action="store_true", required=True, help="write ONNX")
+    x.add_argument("--model", required=True, help="a saved model .zip")
+    x.add_argument("--env", default=None, help="env id (default: from config.json)")
+    x.add_argument("--out", default=None, help="the .onnx file (default: beside the model)")
+    x.add_argument("--algo", choices=["ppo", "sac", "td3"], default=None,
+                   help="the model's algorithm (default: from config.json or the file name)")  # fmt: skip
+    x.add_argument("--stats", default=None,
+                   help="VecNormalize statistics (.json; default: beside the model)")  # fmt: skip
+
+    c = command(
+        "convert-stats",
+        "turn a pickled VecNormalize into the JSON statistics the library reads",
+        "Read FILE_vecnormalize.pkl (written by SB3's VecNormalize.save) and write its "
+        "statistics as FILE_vecnormalize.json beside it. Reading a pickle runs any code it "
+        "names: convert only files you trust.",
+    )
+    c.add_argument("files", nargs="+", help="pickled VecNormalize files")
     return p
+
+
+def _fail(command: str, exc: BaseException) -> int:
+    """One line on stderr, exit status 2 (a user error, not a crash)."""
+    print(f"machining-bench {command}: {exc}", file=sys.stderr)
+    return 2
+
+
+def _evaluate(args) -> int:
+    import json
+    from pathlib import Path
+
+    import gymnasium as gym
+
+    from agents.rl import evaluate_policy_file
+
+    model = Path(args.model)
+    if not model.is_file():
+        raise FileNotFoundError(f"no model at {model}")
+    if args.env not in gym.registry:
+        raise ValueError(f"unknown env id {args.env!r}")
+    meta = model.parent / "config.json"
+    trained_on = json.loads(meta.read_text()).get("env_id") if meta.is_file() else None
+    if trained_on is not None and trained_on != args.env and not args.force:
+        raise ValueError(
+            f"{model} was trained on {trained_on}, not {args.env} (--force to evaluate anyway)"
+        )
+    if args.episodes < 1:
+        raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
+    ev, s, score = evaluate_policy_file(
+        model, args.env, args.scenarios, args.episodes, args.seed, algo=args.algo,
+        stats=args.stats, progress=True,
+    )  # fmt: skip
+    spec = benchmark_spec(args.env)
+    print(ev.to_markdown(spec.table_metrics if spec else ev.metric_names()))
+    print(
+        f"\nprimary score ({score.label}): {s['score'] * score.scale:.4g} (episodes that "
+        f"count: {s['valid']:.0%}); {score.secondary_label} {s['secondary']:.4g}"
+    )
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -80,7 +210,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "benchmark":
         from agents.bench.benchmark import run_benchmark
 
-        run_benchmark(args.out, quick=args.quick, seed=args.seed)
+        try:
+            run_benchmark(args.out, quick=args.quick, seed=args.seed)
+        except (FileExistsError, NotADirectoryError, PermissionError) as exc:
+            return _fail("benchmark", exc)
         return 0
     if args.command == "reproduce":
         kwargs = {"seed": args.seed}
@@ -106,21 +239,32 @@ def main(argv: list[str] | None = None) -> int:
                 vec=args.vec,
             )
         except (ConfigError, FileExistsError, FileNotFoundError) as exc:
-            print(f"machining-bench train: {exc}", file=sys.stderr)
-            return 2
+            return _fail("train", exc)
         return 0
     if args.command == "evaluate":
-        from agents.rl import evaluate_policy_file
+        try:
+            return _evaluate(args)
+        except (FileNotFoundError, ValueError) as exc:
+            return _fail("evaluate", exc)
+    if args.command == "export":
+        try:
+            from agents.rl.export import export_onnx
+        except ImportError as exc:
+            return _fail("export", f"{exc}: pip install 'machining-envs[rl,onnx]'")
+        try:
+            result = export_onnx(args.model, args.env, args.out, algo=args.algo, stats=args.stats)
+        except (FileNotFoundError, ValueError) as exc:
+            return _fail("export", exc)
+        print(result.summary())
+        return 0
+    if args.command == "convert-stats":
+        from agents.rl.stats import convert_pickle
 
-        ev, s, score = evaluate_policy_file(
-            args.model, args.env, args.scenarios, args.episodes, args.seed
-        )
-        spec = benchmark_spec(args.env)
-        print(ev.to_markdown(spec.table_metrics if spec else ev.metric_names()))
-        print(
-            f"\nprimary score ({score.label}): {s['score'] * score.scale:.4g} (episodes that "
-            f"count: {s['valid']:.0%}); {score.secondary_label} {s['secondary']:.4g}"
-        )
+        for name in args.files:
+            try:
+                print(f"{name} -> {convert_pickle(name)}")
+            except Exception as exc:  # noqa: BLE001 - any unreadable file: one line
+                return _fail("convert-stats", f"{name}: {exc}")
         return 0
     return 2  # pragma: no cover - argparse rejects other commands
 

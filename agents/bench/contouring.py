@@ -220,14 +220,12 @@ def _print(results, dt: float) -> None:
 
 def plot_contouring_reproduction(results, path) -> None:
     """Six panels: Fig. 4-8 for both controllers and the largest contour errors."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     by = {r["experiment"].scenario: r for r in results}
     style = {"pi": ("C1", "PI"), "hinf": ("C0", "H-inf 2-DOF")}
-    fig, axes = plt.subplots(2, 3, figsize=(14, 8.5))
+    fig = Figure(figsize=(14, 8.5))
+    axes = fig.subplots(2, 3)
     ax = axes[0, 0]
     r = by["paper_step"]
     for k, (c, label) in style.items():
@@ -322,7 +320,6 @@ def plot_contouring_reproduction(results, path) -> None:
     fig.tight_layout()
     FilePath(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=90)
-    plt.close(fig)
 
 
 # --- The declaration: what the benchmark, the CLI and the docs know of contouring -------------

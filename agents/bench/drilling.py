@@ -277,14 +277,12 @@ def plot_drilling_reproduction(
 ) -> None:
     """Thrust and torque against time per drill (like Fig. 18-21), Fig. 22 and Fig. 12,
     and the open-loop responses of Fig. 7 and 8 (:func:`plant_responses`)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     diameters = list(comp)
     rows = len(diameters) + 2
-    fig, axes = plt.subplots(rows, 2, figsize=(11, 2.3 * rows), squeeze=False)
+    fig = Figure(figsize=(11, 2.3 * rows))
+    axes = fig.subplots(rows, 2, squeeze=False)
     for i, d in enumerate(diameters):
         for j, (key, label) in enumerate(
             (("thrust_N", "thrust (N)"), ("torque_Nmm", "torque (N·mm)"))
@@ -335,7 +333,6 @@ def plot_drilling_reproduction(
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=90)
-    plt.close(fig)
 
 
 # --- The declaration: what the benchmark, the CLI and the docs know of drilling -------------

@@ -318,12 +318,10 @@ def _print(results: list[dict]) -> None:
 
 def plot_milling_reproduction(runs: dict, fig5: dict, gains: dict, path) -> None:
     """Torque, feed and the adapted gains against sample number (paper Fig. 5-12)."""
-    import matplotlib
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(3, 3, figsize=(14, 8.5), squeeze=False)
+    fig = Figure(figsize=(14, 8.5))
+    axes = fig.subplots(3, 3, squeeze=False)
     for col, wp in enumerate(("paper_step", "paper_taper")):
         tr_ac, tr_no = runs[wp]["ac"], runs[wp]["no_ac"]
         n_ac = np.arange(tr_ac["t_s"].size)
@@ -386,7 +384,6 @@ def plot_milling_reproduction(runs: dict, fig5: dict, gains: dict, path) -> None
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=90)
-    plt.close(fig)
 
 
 # --- The declaration: what the benchmark, the CLI and the docs know of milling -------------

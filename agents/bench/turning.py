@@ -201,15 +201,13 @@ def reproduce_turning(
 
 def plot_turning_reproduction(results, path) -> None:
     """Force and depth of cut against time for each run, like the paper's Fig. 8-15."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     n = len(results)
     cols = 2
     rows = int(math.ceil(n / cols))
-    fig, axes = plt.subplots(rows, cols, figsize=(11, 2.4 * rows), squeeze=False)
+    fig = Figure(figsize=(11, 2.4 * rows))
+    axes = fig.subplots(rows, cols, squeeze=False)
     for ax, r in zip(axes.flat, results, strict=False):
         tr, e, c = r["traj"], r["experiment"], r["ours"]
         ax.plot(tr["t_s"], tr["force_N"] / 1000.0, "C0-", lw=1, label="force")
@@ -228,7 +226,6 @@ def plot_turning_reproduction(results, path) -> None:
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=90)
-    plt.close(fig)
 
 
 # --- The declaration: what the benchmark, the CLI and the docs know of turning -------------

@@ -104,8 +104,8 @@ def _lane_trajectories(infos: list[dict], rewards: list, length: np.ndarray) -> 
     columns = {}
     for key in keys:
         sample = next(np.asarray(d[key]) for d in (*infos, *finals) if key in d)  # the key's dtype
-        if sample.dtype.kind not in "biuf":
-            continue
+        if sample.dtype.kind not in "biuf" or sample.ndim != 1:
+            continue  # rollout keeps numbers only (not the arrays of a signal's components)
         top = np.full((n_steps, n), np.nan)
         top_ok = np.zeros((n_steps, n), dtype=bool)
         fin = np.full((n_steps, n), np.nan)
@@ -214,6 +214,7 @@ def evaluate(
     keep_trajectories: bool = False,
     metrics_fn: Callable[[dict], dict] | None = None,
     batched: bool | None = None,
+    progress: bool = False,
 ) -> Evaluation:
     """Evaluate ``agent`` on ``env_id`` over ``scenarios`` x ``n_episodes``.
 
@@ -236,6 +237,8 @@ def evaluate(
         (``gym.make_vec``), the agent predicting for all of them at once; the rows are the
         same as episode by episode. By default batched where the id has a native vector env
         and more than one episode is asked for.
+    progress : bool
+        Show a progress bar (tqdm, on stderr) over the episodes.
     """
     if not isinstance(n_episodes, int) or n_episodes < 1:
         raise ValueError(f"n_episodes must be an integer >= 1, got {n_episodes!r}")
@@ -255,12 +258,23 @@ def evaluate(
         ev = Evaluation()
         if batched:
             venv = gym.make_vec(env_id, num_envs=n_episodes, **(env_kwargs or {}))
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(scenarios) * n_episodes, desc=name, unit="episode")
         for sc in scenarios:
             seeds = [seed + i for i in range(n_episodes)]
             if batched:
                 trajs = rollout_batch(agent, venv, sc, seeds)
+                if bar is not None:
+                    bar.update(n_episodes)
             else:
-                trajs = [rollout(agent, env, sc, s) for s in seeds]
+                trajs = []
+                for s in seeds:
+                    trajs.append(rollout(agent, env, sc, s))
+                    if bar is not None:
+                        bar.update(1)
             for i, traj in enumerate(trajs):
                 row = {
                     "agent": name,
@@ -273,6 +287,8 @@ def evaluate(
                 if keep_trajectories:
                     traj["agent"] = name
                     ev.trajectories.append(traj)
+        if bar is not None:
+            bar.close()
         return ev
     finally:
         env.close()

@@ -11,8 +11,8 @@ A run folder holds everything needed to reload or continue it::
 
     run/
       config.json            the resolved configuration, seed and command
-      final_model.zip        the model at the end   (+ final_vecnormalize.pkl)
-      best_model.zip         the best on the held-out evaluation (+ best_vecnormalize.pkl)
+      final_model.zip        the model at the end   (+ final_vecnormalize.json)
+      best_model.zip         the best on the held-out evaluation (+ best_vecnormalize.json)
       checkpoints/           periodic model + VecNormalize snapshots (for --resume)
       eval.csv               the held-out evaluations made during training
       tb/                    TensorBoard logs

@@ -41,6 +41,80 @@ _SETTINGS: dict[str, tuple[type, ...]] = {
 }
 _NORMALIZE_KEYS = {"norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon"}
 
+_INF = float("inf")
+#: Ranges of the algorithms' numeric keywords that SB3 needs (checked before training):
+#: key -> (lo, hi, lo open, integer). A schedule ``"lin_<x>"`` (rl-zoo3's syntax) is
+#: checked on ``x`` for the keys that take one.
+_HYPER_RANGES: dict[str, tuple[float, float, bool, bool]] = {
+    "learning_rate": (0.0, 1.0, True, False),
+    "gamma": (0.0, 1.0, True, False),
+    "gae_lambda": (0.0, 1.0, False, False),
+    "clip_range": (0.0, _INF, True, False),
+    "ent_coef": (0.0, _INF, False, False),
+    "vf_coef": (0.0, _INF, False, False),
+    "max_grad_norm": (0.0, _INF, True, False),
+    "tau": (0.0, 1.0, True, False),
+    "target_policy_noise": (0.0, _INF, False, False),
+    "target_noise_clip": (0.0, _INF, False, False),
+    "n_steps": (1, _INF, False, True),
+    "batch_size": (1, _INF, False, True),
+    "n_epochs": (1, _INF, False, True),
+    "buffer_size": (1, _INF, False, True),
+    "learning_starts": (0, _INF, False, True),
+    "policy_delay": (1, _INF, False, True),
+}
+_SCHEDULE_KEYS = ("learning_rate", "clip_range")
+#: Ranges of the ``normalize`` mapping's numbers (VecNormalize's keywords).
+_NORMALIZE_RANGES = {
+    "clip_obs": (0.0, _INF, True),
+    "clip_reward": (0.0, _INF, True),
+    "gamma": (0.0, 1.0, True),
+    "epsilon": (0.0, 1.0, True),
+}
+
+
+def _in_range(where: str, key: str, value, lo, hi, lo_open: bool, integer: bool):
+    """``value`` if it is a number in the range (integer where asked), else ConfigError."""
+    is_num = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if integer and is_num and isinstance(value, float) and value.is_integer():
+        value = int(value)  # rl-zoo3 writes large counts as !!float 1e6
+    ok = is_num and (not integer or isinstance(value, int)) and value == value
+    ok = ok and (value > lo if lo_open else value >= lo) and value <= hi
+    if not ok:
+        kind = "an integer" if integer else "a number"
+        bounds = f"{'(' if lo_open else '['}{lo:g}, {hi:g}]"
+        raise ConfigError(f"{where}: {key} must be {kind} in {bounds}, got {value!r}")
+    return value
+
+
+def _schedule(where: str, key: str, value):
+    """A constant or rl-zoo3's linear schedule ``"lin_<x>"`` (x at the start, 0 at the end)."""
+    if isinstance(value, str):
+        if not value.startswith("lin_"):
+            raise ConfigError(
+                f"{where}: {key} must be a number or a linear schedule 'lin_<x>', got {value!r}"
+            )
+        try:
+            start = float(value[4:])
+        except ValueError:
+            raise ConfigError(f"{where}: {key}: cannot read the number in {value!r}") from None
+        lo, hi, lo_open, _ = _HYPER_RANGES[key]
+        start = _in_range(where, key, start, lo, hi, lo_open, False)
+        return LinearSchedule(start)
+    lo, hi, lo_open, integer = _HYPER_RANGES[key]
+    return _in_range(where, key, value, lo, hi, lo_open, integer)
+
+
+@dataclass(frozen=True)
+class LinearSchedule:
+    """rl-zoo3's ``lin_<x>``: ``x`` times the share of training left (SB3 calls it with
+    ``progress_remaining``, 1 at the start and 0 at the end)."""
+
+    start: float
+
+    def __call__(self, progress_remaining: float) -> float:
+        return progress_remaining * self.start
+
 
 @dataclass
 class TrainConfig:
@@ -107,6 +181,8 @@ def load_config(env_id: str, algo: str, path=None) -> TrainConfig:
     hyper = {}
     for key, value in entry.items():
         if key in _SETTINGS:
+            if _SETTINGS[key] == (int,) and isinstance(value, float) and value.is_integer():
+                value = int(value)  # rl-zoo3 writes large counts as !!float 1e6
             _check_type(where, key, value, _SETTINGS[key])
             setattr(cfg, key, value)
         elif key in algo_params:
@@ -134,19 +210,48 @@ def load_config(env_id: str, algo: str, path=None) -> TrainConfig:
             raise ConfigError(
                 f"{where}: unknown normalize keys {sorted(bad)}; allowed {sorted(_NORMALIZE_KEYS)}"
             )
-    for key in ("learning_rate", "gamma", "ent_coef", "clip_range", "tau"):
-        if key in hyper and not isinstance(hyper[key], (int, float, str)):
-            _check_type(where, key, hyper[key], (float,))
-    for key in (
-        "n_steps",
-        "batch_size",
-        "n_epochs",
-        "buffer_size",
-        "learning_starts",
-        "train_freq",
-    ):
-        if key in hyper:
-            _check_type(where, key, hyper[key], (int,) if key != "train_freq" else (int, list))
+    if isinstance(cfg.normalize, dict):
+        for key, value in cfg.normalize.items():
+            if key in _NORMALIZE_RANGES:
+                lo, hi, lo_open = _NORMALIZE_RANGES[key]
+                _in_range(where, f"normalize.{key}", value, lo, hi, lo_open, False)
+            else:
+                _check_type(where, f"normalize.{key}", value, (bool,))
+    for key, value in hyper.items():
+        if key in _SCHEDULE_KEYS:
+            hyper[key] = _schedule(where, key, value)
+        elif key == "ent_coef" and isinstance(value, str):
+            if not (value == "auto" or value.startswith("auto_")):
+                raise ConfigError(
+                    f"{where}: ent_coef must be a number >= 0 or 'auto', got {value!r}"
+                )
+        elif key in _HYPER_RANGES:
+            lo, hi, lo_open, integer = _HYPER_RANGES[key]
+            hyper[key] = _in_range(where, key, value, lo, hi, lo_open, integer)
+    if "train_freq" in hyper:
+        tf = hyper["train_freq"]
+        ok = (isinstance(tf, int) and not isinstance(tf, bool) and tf >= 1) or (
+            isinstance(tf, list)
+            and len(tf) == 2
+            and isinstance(tf[0], int)
+            and tf[0] >= 1
+            and tf[1] in ("step", "episode")
+        )
+        if not ok:
+            raise ConfigError(
+                f"{where}: train_freq must be an integer >= 1 or [n, 'step' | 'episode'], got {tf!r}"
+            )
+        if isinstance(tf, list):
+            hyper["train_freq"] = tuple(tf)
+    if cfg.algo == "ppo":
+        rollout = hyper.get("n_steps", 2048) * cfg.n_envs
+        if rollout < 2:
+            raise ConfigError(f"{where}: n_steps x n_envs must be > 1 for PPO, got {rollout}")
+        if hyper.get("batch_size", 64) > rollout:
+            raise ConfigError(
+                f"{where}: batch_size must be <= n_steps x n_envs = {rollout}, "
+                f"got {hyper['batch_size']}"
+            )
     if "policy_kwargs" in hyper:
         _check_type(where, "policy_kwargs", hyper["policy_kwargs"], (dict,))
     cfg.hyperparams = hyper

@@ -11,6 +11,7 @@ import numpy as np
 
 from agents.base import check_observation
 from agents.rl.config import ALGOS, _algos
+from agents.rl.stats import read_stats, stats_path
 
 __all__ = ["PolicyAgent", "load_policy", "pretrained", "PRETRAINED_DIR"]
 
@@ -97,14 +98,19 @@ class PolicyAgent:
         return self.increment.absolute_action(raw, delta), state
 
 
-def load_policy(model_path, name: str | None = None, algo: str | None = None) -> PolicyAgent:
-    """Load ``*.zip`` and, if present, the VecNormalize statistics saved beside it.
+def load_policy(
+    model_path, name: str | None = None, algo: str | None = None, stats=None
+) -> PolicyAgent:
+    """Load ``*.zip`` and its VecNormalize statistics (``*_vecnormalize.json`` beside it,
+    or ``stats``).
 
     The algorithm comes from ``algo``, else the run's ``config.json`` beside the model, else
-    the file name (``ppo``, ``sac`` or ``td3`` in it); otherwise ``ValueError``.
+    the file name (``ppo``, ``sac`` or ``td3`` in it); otherwise ``ValueError``. Statistics
+    are read from JSON only (``agents.rl.stats``): a pickled ``*_vecnormalize.pkl`` is
+    refused, since reading it could run code; convert one you trust with
+    ``machining-bench convert-stats FILE.pkl``. SB3's ``.zip`` itself unpickles parts of its
+    content: load models only from sources you trust.
     """
-    import pickle
-
     model_path = Path(model_path)
     if not model_path.is_file():
         raise FileNotFoundError(f"no model at {model_path}")
@@ -126,14 +132,29 @@ def load_policy(model_path, name: str | None = None, algo: str | None = None) ->
         algo = m.group(1)
     if algo not in ALGOS:
         raise ValueError(f"algo must be one of {list(ALGOS)}, got {algo!r}")
+    if stats is None:
+        stats = stats_path(model_path)
+        pickled = stats.with_suffix(".pkl")
+        if not stats.is_file() and pickled.is_file():
+            raise ValueError(
+                f"{pickled} is a pickle, which can run code when read: convert it once, if "
+                f"you trust it, with `machining-bench convert-stats {pickled}`"
+            )
+    else:
+        stats = Path(stats)
+        if not stats.is_file():
+            raise FileNotFoundError(f"no statistics file at {stats}")
+        if stats.suffix != ".json":
+            raise ValueError(f"stats must be a .json statistics file, got {stats}")
+    norm = read_stats(stats) if stats.is_file() else None
     model = _algos()[algo].load(model_path, device="cpu")
-    stats = model_path.with_name(model_path.stem.replace("model", "vecnormalize") + ".pkl")
     obs_rms, clip, eps = None, 10.0, 1e-8
-    if stats.is_file():
-        with open(stats, "rb") as fh:
-            vn = pickle.load(fh)
-        if vn.norm_obs:
-            obs_rms, clip, eps = vn.obs_rms, vn.clip_obs, vn.epsilon
+    if norm is not None and norm.norm_obs:
+        from stable_baselines3.common.running_mean_std import RunningMeanStd
+
+        obs_rms = RunningMeanStd(shape=norm.obs_mean.shape)
+        obs_rms.mean, obs_rms.var, obs_rms.count = norm.obs_mean, norm.obs_var, norm.obs_count
+        clip, eps = norm.clip_obs, norm.epsilon
     return PolicyAgent(
         model,
         obs_rms,

@@ -18,6 +18,7 @@ import machining_envs  # noqa: F401  (registers the env ids)
 from agents.eval import Evaluation, evaluate, task_of
 from agents.rl.config import ConfigError, TrainConfig, _algos, load_config
 from agents.rl.policy import PolicyAgent, load_policy
+from agents.rl.stats import read_stats, restore_stats, save_stats, stats_path
 from machining_envs.core.score import REGULATION_SCORE, PrimaryScore
 
 __all__ = ["train", "evaluate_policy_file", "primary_score", "FAILED_EPISODE_TIME_S"]
@@ -104,6 +105,26 @@ def _make_vec(cfg: TrainConfig, seed: int, vec: str | None = None):
     return venv, increment
 
 
+def _check_env_setup(cfg: TrainConfig) -> None:
+    """Make the env with the config's ``env_kwargs`` and reset it on every evaluation
+    scenario, so that a wrong keyword or scenario name fails before training starts."""
+    where = f"{cfg.source}:{cfg.env_id}"
+    try:
+        env = gym.make(cfg.env_id, **dict(cfg.env_kwargs))
+    except gym.error.Error as exc:
+        raise ConfigError(f"{where}: {exc}") from None
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{where}: env_kwargs: {exc}") from None
+    try:
+        for name in cfg.eval_scenarios:
+            try:
+                env.reset(seed=0, options={"scenario": name})
+            except (TypeError, ValueError) as exc:
+                raise ConfigError(f"{where}: eval_scenarios: {exc}") from None
+    finally:
+        env.close()
+
+
 def _evaluation_setup(env_id: str, env_kwargs: dict):
     """The env's task (its metrics function and primary score, ``agents.eval.task_of``) and
     the failure cost of that score for the env."""
@@ -118,13 +139,52 @@ def _evaluation_setup(env_id: str, env_kwargs: dict):
     return task.metrics, task.score, failed
 
 
-def _latest_checkpoint(folder: Path):
+def _model_steps(path: Path) -> int:
+    """``num_timesteps`` recorded in a saved SB3 model (read from its JSON, not unpickled)."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as zf:
+            return int(json.loads(zf.read("data"))["num_timesteps"])
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+        return -1
+
+
+def _resume_point(out: Path):
+    """The model to resume from: the latest checkpoint or the final model, whichever has
+    the more steps; ``(None, -1)`` if the run has neither."""
     best, steps = None, -1
-    for p in folder.glob("rl_model_*_steps.zip"):
+    for p in (out / "checkpoints").glob("rl_model_*_steps.zip"):
         m = re.search(r"_(\d+)_steps", p.name)
         if m and int(m.group(1)) > steps:
             best, steps = p, int(m.group(1))
+    final = out / "final_model.zip"
+    if final.is_file():
+        n = _model_steps(final)
+        if n >= steps:
+            best, steps = final, n
     return best, steps
+
+
+def _checkpoint_callback(cfg: TrainConfig, folder: Path):
+    """SB3's CheckpointCallback, with the VecNormalize statistics written as JSON beside
+    each checkpoint (``rl_model_vecnormalize_<steps>_steps.json``) instead of a pickle."""
+    from stable_baselines3.common.callbacks import CheckpointCallback
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    class JsonStatsCheckpoint(CheckpointCallback):
+        def _on_step(self) -> bool:
+            keep = super()._on_step()
+            if self.n_calls % self.save_freq == 0:
+                venv = self.model.get_vec_normalize_env()
+                if isinstance(venv, VecNormalize):
+                    path = self._checkpoint_path("vecnormalize_", extension="json")
+                    save_stats(venv, path)
+            return keep
+
+    return JsonStatsCheckpoint(
+        max(1, cfg.checkpoint_freq // cfg.n_envs), str(folder), save_vecnormalize=False
+    )
 
 
 def train(
@@ -141,10 +201,11 @@ def train(
 ) -> Path:
     """Train ``algo`` on ``env_id``; returns the run folder. See the module docstring."""
     import torch
-    from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
+    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
     from stable_baselines3.common.vec_env import VecNormalize
 
     cfg = load_config(env_id, algo, config_path)  # all validation before anything starts
+    _check_env_setup(cfg)
     vec_kind = _vec_kind(env_id, vec)
     if n_timesteps is not None:
         if n_timesteps < 1:
@@ -159,9 +220,11 @@ def train(
     out = Path(out_dir)
     ckpt_dir = out / "checkpoints"
     if resume:
-        ckpt, done_steps = _latest_checkpoint(ckpt_dir)
+        ckpt, done_steps = _resume_point(out)
         if ckpt is None:
-            raise FileNotFoundError(f"--resume: no checkpoint in {ckpt_dir}")
+            raise FileNotFoundError(
+                f"--resume: no checkpoint in {ckpt_dir} and no final_model.zip in {out}"
+            )
     elif out.exists() and any(out.iterdir()):
         raise FileExistsError(f"{out} is not empty: choose another --out or pass --resume")
     out.mkdir(parents=True, exist_ok=True)
@@ -171,11 +234,9 @@ def train(
     # ``increment``: the wrapper's ActionIncrement, for evaluation and the run record.
     venv, increment = _make_vec(cfg, seed, vec_kind)
     if resume:
-        stats = ckpt.with_name(
-            ckpt.name.replace("rl_model_", "rl_model_vecnormalize_").replace(".zip", ".pkl")
-        )
+        stats = stats_path(ckpt)
         if isinstance(venv, VecNormalize) and stats.is_file():
-            venv = VecNormalize.load(str(stats), venv.venv)
+            restore_stats(venv, read_stats(stats))
         model = AlgoCls.load(ckpt, env=venv, device="cpu", tensorboard_log=str(out / "tb"))
         remaining = max(0, cfg.n_timesteps - model.num_timesteps)
         if verbose:
@@ -261,13 +322,9 @@ def train(
                 self.best = s["score"]
                 self.model.save(out / "best_model.zip")
                 if isinstance(venv, VecNormalize):
-                    venv.save(str(out / "best_vecnormalize.pkl"))
+                    save_stats(venv, out / "best_vecnormalize.json")
 
-    ckpt_cb = CheckpointCallback(
-        max(1, cfg.checkpoint_freq // cfg.n_envs),
-        str(ckpt_dir),
-        save_vecnormalize=bool(cfg.normalize),
-    )
+    ckpt_cb = _checkpoint_callback(cfg, ckpt_dir)
     eval_cb = HeldOutEval()
     t0 = time.perf_counter()
     model.learn(
@@ -280,12 +337,12 @@ def train(
     learn_s = time.perf_counter() - t0
     model.save(out / "final_model.zip")
     if isinstance(venv, VecNormalize):
-        venv.save(str(out / "final_vecnormalize.pkl"))
+        save_stats(venv, out / "final_vecnormalize.json")
     eval_cb.evaluate_now()
     if not (out / "best_model.zip").is_file():  # e.g. every evaluation scored inf
         model.save(out / "best_model.zip")
         if isinstance(venv, VecNormalize):
-            venv.save(str(out / "best_vecnormalize.pkl"))
+            save_stats(venv, out / "best_vecnormalize.json")
     venv.close()
     if verbose:
         print(
@@ -297,17 +354,26 @@ def train(
 
 
 def evaluate_policy_file(
-    model_path, env_id: str, scenarios, n_episodes: int, seed: int
+    model_path,
+    env_id: str,
+    scenarios,
+    n_episodes: int,
+    seed: int,
+    algo: str | None = None,
+    stats=None,
+    progress: bool = False,
 ) -> tuple[Evaluation, dict, PrimaryScore]:
-    """The harness on a saved policy (with its VecNormalize statistics), with the env's own
-    metrics; returns the evaluation, its primary score and the env's ``PrimaryScore``."""
+    """The harness on a saved policy (with its VecNormalize statistics: ``stats``, or the
+    JSON beside the model), with the env's own metrics; returns the evaluation, its primary
+    score and the env's ``PrimaryScore``."""
     metrics_fn, score_fn, failed = _evaluation_setup(env_id, {})
     ev = evaluate(
-        load_policy(model_path),
+        load_policy(model_path, algo=algo, stats=stats),
         env_id,
         scenarios,
         n_episodes=n_episodes,
         seed=seed,
         metrics_fn=metrics_fn,
+        progress=progress,
     )
     return ev, score_fn(ev.rows, failed), score_fn

@@ -6,18 +6,30 @@
 axis commands) and ``feed_env`` (``ContouringFeed-v0``: the feed override over a servo).
 """
 
-from machining_envs.contouring.env import ContouringEnv, ContouringReward
-from machining_envs.contouring.feed_env import ContouringFeedEnv, FeedReward
+from machining_envs.contouring.env import ContouringEnv, ContouringReward, ContouringVectorEnv
+from machining_envs.contouring.feed_env import (
+    ContouringFeedEnv,
+    ContouringFeedVectorEnv,
+    FeedReward,
+)
 from machining_envs.contouring.paths import Path
 from machining_envs.contouring.plant import ContouringParams, ContouringPlant
 from machining_envs.contouring.scenarios import CONTOURING_SCENARIOS, ContouringScenario
 
 __all__ = ["ContouringEnv", "ContouringReward", "ContouringFeedEnv", "FeedReward", "Path"]
+__all__ += ["ContouringVectorEnv", "ContouringFeedVectorEnv"]
 __all__ += ["ContouringParams", "ContouringPlant", "ContouringScenario"]
-__all__ += ["CONTOURING_SCENARIOS", "ENTRY_POINTS"]
+__all__ += ["CONTOURING_SCENARIOS", "ENTRY_POINTS", "VECTOR_ENTRY_POINTS"]
 
 #: The env ids of this process and their entry points (registered by ``machining_envs``).
 ENTRY_POINTS = {
     "machining_envs/Contouring-v0": "machining_envs.contouring.env:ContouringEnv",
     "machining_envs/ContouringFeed-v0": "machining_envs.contouring.feed_env:ContouringFeedEnv",
+}
+#: Their native vector envs (``gym.make_vec(id, num_envs=N)``).
+VECTOR_ENTRY_POINTS = {
+    "machining_envs/Contouring-v0": "machining_envs.contouring.env:ContouringVectorEnv",
+    "machining_envs/ContouringFeed-v0": (
+        "machining_envs.contouring.feed_env:ContouringFeedVectorEnv"
+    ),
 }

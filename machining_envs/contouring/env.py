@@ -8,12 +8,25 @@ import math
 from dataclasses import dataclass
 
 import gymnasium as gym
+import numba
 import numpy as np
 from gymnasium import spaces
 
+from machining_envs.contouring._exact import py_hypot
 from machining_envs.contouring.metrics import CONTOURING_TASK
-from machining_envs.contouring.paths import Path
-from machining_envs.contouring.plant import ContouringParams, ContouringPlant
+from machining_envs.contouring.paths import (
+    SEGMENT_COLUMNS,
+    Path,
+    path_distance,
+    path_point,
+    path_segment_index,
+)
+from machining_envs.contouring.plant import (
+    PLANT_COLUMNS,
+    ContouringParams,
+    ContouringPlant,
+    step_axes,
+)
 from machining_envs.contouring.scenarios import (
     CONTOURING_SCENARIOS,
     ContouringScenario,
@@ -27,14 +40,17 @@ from machining_envs.core.env import (
     check_scenario_spec,
     present_frame,
     ready_to_render,
+    real_actions,
     record_step,
     resolve_params,
     resolve_reward,
     scenario_option,
 )
+from machining_envs.core.vector import LaneVectorEnv, check_num_envs
 
 __all__ = [
     "ContouringEnv",
+    "ContouringVectorEnv",
     "ContouringReward",
     "check_action_vector",
     "render_xy",
@@ -60,7 +76,6 @@ _P0, _P1, _P2 = PREVIEW_TICKS
 #: The signals the contouring envs' render() draws: name -> the info key each is read from.
 TRACE_LOG_FIELDS = {"t": "t_s", "x": "x_mm", "y": "y_mm", "eps": "contour_error_mm"}
 
-_CHUNK = 4096
 _ERR_LIM = 100.0
 _VEL_LIM = 10.0
 _POS_LIM = 20.0
@@ -70,13 +85,14 @@ _PRE_LIM = 20.0
 def check_action_vector(action, n: int, env_name: str) -> tuple[list[float], bool]:
     """The action as ``n`` floats in [-1, 1] and whether any had to be clipped.
 
-    NaN or inf raise ``ValueError`` naming the env and the values; a wrong size raises
-    ``ValueError``; finite values outside the box are clipped (the caller counts them).
+    Anything but real numbers (``real_actions``), NaN or inf raise ``ValueError`` naming
+    the env and the values; a wrong size raises ``ValueError``; finite values outside the
+    box are clipped (the caller counts them).
     """
-    if isinstance(action, np.ndarray) and action.shape == (n,):
+    if isinstance(action, np.ndarray) and action.shape == (n,) and action.dtype.kind == "f":
         a = action
     else:
-        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        a = real_actions(action, env_name).reshape(-1)
         if a.size != n:
             raise ValueError(
                 f"{env_name}: action must hold {n} value(s), got shape {np.shape(action)}"
@@ -127,7 +143,8 @@ class ContouringReward:
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
-            ok = isinstance(v, (int, float)) and math.isfinite(v) and v >= 0
+            ok = isinstance(v, (int, float)) and not isinstance(v, bool)
+            ok = ok and math.isfinite(v) and v >= 0
             if f.name.endswith(("_mm", "_Nm")):
                 ok = ok and v > 0
             if not ok:
@@ -162,6 +179,394 @@ def _circle_info(path: Path) -> dict:
     if c is None:
         return {}
     return {"circle_cx_mm": c[0], "circle_cy_mm": c[1], "circle_radius_mm": c[2]}
+
+
+# ---- the compiled step of every lane ------------------------------------------------------
+#
+# Per lane, ``lf`` holds the floats: the plant's numbers (``PLANT_COLUMNS``), its state
+# ``[x, vx, y, vy]``, the path's length, the set point's advance per period, whether the
+# run is a step command, the path's end, the time from which the run may finish, the load
+# torques now and the previous action; ``li`` the integers (see the ``_L*`` indices). The
+# set points ahead (``_RING`` of them, the preview's horizon included) are kept in a ring
+# ``rb[lane, k % _RING] = [x, y]``.
+
+_LZ, _LLEN, _LFTS, _LSTEP, _LEND, _LFIN, _LLOAD, _LPREV = 19, 23, 24, 25, 26, 28, 29, 31
+_NLF = 33
+_IK, _ILOAD, _INLOAD, _INMAX, _ICLIP, _ISEG = 0, 1, 2, 3, 4, 5
+_NLI = 6
+_CIRCLE_KEYS = ("circle_cx_mm", "circle_cy_mm", "circle_radius_mm")
+_RING = 64
+#: Columns of ``_ContouringCore.out`` (the step's signals, read into ``info``).
+_OUT = ("reward", "t_s", "command_x_mm_s", "command_y_mm_s", "x_mm", "y_mm", "x_ref_mm",
+        "y_ref_mm", "contour_error_mm", "tracking_error_mm", "vx_mm_s", "vy_mm_s",
+        "torque_x_Nm", "torque_y_Nm", "torque_sq_Nm2", "load_x_Nm", "load_y_Nm", "path_s_mm",
+        "machining_time_s")  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _path_s(k, lf, lane):
+    """Arc length of set point ``k`` (``ContouringEnv``'s schedule: ``min(k F Ts, L)``, or
+    the path's end for a step command)."""
+    length = lf[lane, _LLEN]
+    if lf[lane, _LSTEP]:
+        return length
+    return min(float(k) * lf[lane, _LFTS], length)
+
+
+@numba.njit(cache=True)
+def _set_point(k, lane, tab, lf, rb):
+    """Set point ``k`` of ``lane`` into its ring."""
+    x, y = path_point(tab, lf[lane, _LLEN], _path_s(k, lf, lane))
+    r = rb[lane, k % _RING]
+    r[0] = x
+    r[1] = y
+
+
+@numba.njit(cache=True)
+def _contour_obs(lane, k, x, y, vx, vy, lf, cf, rb, obs):
+    """Observation of ``lane`` at period ``k`` (``ContouringEnv``'s table) into ``obs``."""
+    ring = rb[lane]
+    r0 = ring[k % _RING]
+    r0x = r0[0]
+    r0y = r0[1]
+    o = obs[lane]
+    ex = (r0x - x) / ERROR_SCALE_MM
+    ey = (r0y - y) / ERROR_SCALE_MM
+    o[0] = min(max(ex, -_ERR_LIM), _ERR_LIM)
+    o[1] = min(max(ey, -_ERR_LIM), _ERR_LIM)
+    o[2] = min(max(vx / VELOCITY_SCALE_MM_S, -_VEL_LIM), _VEL_LIM)
+    o[3] = min(max(vy / VELOCITY_SCALE_MM_S, -_VEL_LIM), _VEL_LIM)
+    o[4] = min(max(r0x / POSITION_SCALE_MM, -_POS_LIM), _POS_LIM)
+    o[5] = min(max(r0y / POSITION_SCALE_MM, -_POS_LIM), _POS_LIM)
+    for i in range(3):
+        ahead = ring[(k + _PTICKS[i]) % _RING]
+        o[6 + i] = (ahead[0] - r0x) * cf[_CPRE + i]
+        o[9 + i] = (ahead[1] - r0y) * cf[_CPRE + i]
+    o[12] = lf[lane, _LPREV]
+    o[13] = lf[lane, _LPREV + 1]
+
+
+# cf: [Ts, command limit (nominal), in_position, divergence, contour weight, contour scale,
+#      tracking weight, tracking scale, effort weight, torque scale, divergence weight,
+#      preview scales (3), the exponent 2 (read at run time: CPython's x ** 2 is pow)]
+_CTS, _CUMAX, _CINPOS, _CDIV, _CW, _CPRE, _CTWO = 0, 1, 2, 3, 4, 11, 14
+_PTICKS = np.array(PREVIEW_TICKS)
+
+
+@numba.njit(cache=True, _nrt=False)
+def _contour_step(act, clipped, lf, li, cf, tabs, nseg, rb, loads, obs, out, flags):
+    """One servo period of every lane (``ContouringEnv.step`` after its input checks).
+
+    ``flags[k]`` = ``[diverged, finished, terminated, truncated, action clipped]``."""
+    ts = cf[_CTS]
+    umax = cf[_CUMAX]
+    two = cf[_CTWO]
+    for lane in range(act.shape[0]):
+        ax = act[lane, 0]
+        ay = act[lane, 1]
+        li[lane, _ICLIP] += clipped[lane]
+        ux = ax * umax
+        uy = ay * umax
+        k = li[lane, _IK]
+        lfl = lf[lane]
+        nl = li[lane, _INLOAD]
+        if li[lane, _ILOAD] < nl:
+            t = k * ts
+            i = li[lane, _ILOAD]
+            while i < nl and loads[lane, i, 0] <= t + 1e-12:
+                lfl[_LLOAD] = loads[lane, i, 1]
+                lfl[_LLOAD + 1] = loads[lane, i, 2]
+                i += 1
+            li[lane, _ILOAD] = i
+        lx = lfl[_LLOAD]
+        ly = lfl[_LLOAD + 1]
+        z = lfl[_LZ : _LZ + 4]
+        tx, ty = step_axes(lfl, z, ux, uy, lx, ly)
+        k += 1
+        li[lane, _IK] = k
+        tab = tabs[lane, : nseg[lane]]
+        _set_point(k + _PTICKS[2], lane, tab, lf, rb)
+        t = k * ts
+        x = z[0]
+        y = z[2]
+        vx = z[1]
+        vy = z[3]
+        diverged = not (np.isfinite(x) and np.isfinite(y) and np.isfinite(vx) and np.isfinite(vy))
+        r = rb[lane, k % _RING]
+        rx = r[0]
+        ry = r[1]
+        if diverged:  # kept so that no NaN can reach an observation or a reward
+            x = rx
+            y = ry
+            vx = vy = tx = ty = 0.0
+            z[0] = rx
+            z[1] = 0.0
+            z[2] = ry
+            z[3] = 0.0
+        etrack = py_hypot(rx - x, ry - y)
+        eps = path_distance(tab, x, y)
+        diverged = diverged or etrack > cf[_CDIV]
+        finished = (
+            t >= lfl[_LFIN] - 1e-12 and py_hypot(x - lfl[_LEND], y - lfl[_LEND + 1]) <= cf[_CINPOS]
+        )
+        terminated = diverged or finished
+        truncated = (not terminated) and k >= li[lane, _INMAX]
+        t0 = cf[_CW + 5]
+        rew = (
+            -cf[_CW] * eps / cf[_CW + 1]
+            - cf[_CW + 2] * etrack / cf[_CW + 3]
+            - cf[_CW + 4] * (math.pow(tx / t0, two) + math.pow(ty / t0, two))
+        )
+        if diverged:
+            rew -= cf[_CW + 6]
+        lfl[_LPREV] = ax
+        lfl[_LPREV + 1] = ay
+        o = out[lane]
+        o[0] = rew
+        o[1] = t
+        o[2] = ux
+        o[3] = uy
+        o[4] = x
+        o[5] = y
+        o[6] = rx
+        o[7] = ry
+        o[8] = eps
+        o[9] = etrack
+        o[10] = vx
+        o[11] = vy
+        o[12] = tx
+        o[13] = ty
+        o[14] = tx * tx + ty * ty
+        o[15] = lx
+        o[16] = ly
+        sk = _path_s(k, lf, lane)
+        o[17] = sk
+        o[18] = t if finished else np.nan
+        li[lane, _ISEG] = path_segment_index(tab, lfl[_LLEN], sk)
+        f = flags[lane]
+        f[0] = diverged
+        f[1] = finished
+        f[2] = terminated
+        f[3] = truncated
+        f[4] = clipped[lane]
+        _contour_obs(lane, k, x, y, vx, vy, lf, cf, rb, obs)
+
+
+@numba.njit(cache=True)
+def _contour_start(lane, lf, li, cf, tabs, nseg, rb, loads, obs, out, flags):
+    """Set points ``0 .. 50``, the load at ``t = 0``, the first observation and the reset
+    signals of ``lane`` (the rest of ``lf`` and ``li`` already set)."""
+    tab = tabs[lane, : nseg[lane]]
+    for k in range(_PTICKS[2] + 1):
+        _set_point(k, lane, tab, lf, rb)
+    lfl = lf[lane]
+    i = 0
+    nl = li[lane, _INLOAD]
+    while i < nl and loads[lane, i, 0] <= 0.0 + 1e-12:
+        lfl[_LLOAD] = loads[lane, i, 1]
+        lfl[_LLOAD + 1] = loads[lane, i, 2]
+        i += 1
+    li[lane, _ILOAD] = i
+    x0 = lfl[_LZ]
+    y0 = lfl[_LZ + 2]
+    r = rb[lane, 0]
+    o = out[lane]
+    o[:] = 0.0
+    o[4] = x0
+    o[5] = y0
+    o[6] = r[0]
+    o[7] = r[1]
+    o[9] = py_hypot(r[0] - x0, r[1] - y0)
+    o[15] = lfl[_LLOAD]
+    o[16] = lfl[_LLOAD + 1]
+    sk = _path_s(0, lf, lane)
+    o[17] = sk
+    o[18] = np.nan
+    li[lane, _ISEG] = path_segment_index(tab, lfl[_LLEN], sk)
+    flags[lane, :] = False
+    _contour_obs(lane, 0, x0, y0, 0.0, 0.0, lf, cf, rb, obs)
+
+
+class _ContouringCore:
+    """The state and arithmetic of N Contouring-v0 episodes, shared by ``ContouringEnv``
+    (one lane) and ``ContouringVectorEnv`` (N lanes): each lane's table
+    (:func:`~machining_envs.contouring.plant.step_axes`), path (``Path.table``), set points
+    and loads, advanced by one compiled function (:func:`_contour_step`), so that a lane
+    and the single env agree to the last bit."""
+
+    def __init__(self, owner, n, scenario, params, reward, max_episode_time_s, in_position_mm,
+                 divergence_mm, overrides):  # fmt: skip
+        self.params = resolve_params(
+            owner, params, ContouringParams, ContouringParams.choi_et_al, overrides
+        )
+        self.reward_weights = resolve_reward(reward, ContouringReward)
+        self.max_episode_time_s, self.in_position_mm, self.divergence_mm = _run_limits(
+            max_episode_time_s, in_position_mm, divergence_mm
+        )
+        check_scenario_spec(scenario, ContouringScenario, CONTOURING_SCENARIOS)
+        umax = self.params.command_max_mm_s
+        self.command_map = ActionMap(-umax, umax)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+        lim = [_ERR_LIM] * 2 + [_VEL_LIM] * 2 + [_POS_LIM] * 2 + [_PRE_LIM] * 6 + [1.0] * 2
+        high = np.array(lim, dtype=np.float32)
+        self.observation_space = spaces.Box(-high, high, dtype=np.float32)
+        ts = self.params.sample_time_s
+        w = self.reward_weights
+        self.cf = np.array(
+            [ts, umax, self.in_position_mm, self.divergence_mm, w.contour, w.contour_scale_mm,
+             w.tracking, w.tracking_scale_mm, w.effort, w.torque_scale_Nm, w.divergence,
+             *(1.0 / (k * ts * VELOCITY_SCALE_MM_S) for k in PREVIEW_TICKS), 2.0]
+        )  # fmt: skip
+        self.n = n
+        self.lf = np.zeros((n, _NLF))
+        self.li = np.zeros((n, _NLI), dtype=np.int64)
+        self.tabs = np.zeros((n, 4, SEGMENT_COLUMNS))
+        self.nseg = np.ones(n, dtype=np.int64)
+        self.rb = np.zeros((n, _RING, 2))
+        self.loads = np.zeros((n, 1, 3))
+        self.obs = np.zeros((n, 14), dtype=np.float32)
+        self.out = np.zeros((n, len(_OUT)))
+        self.flags = np.zeros((n, 5), dtype=np.bool_)
+        self.act = np.zeros((n, 2))
+        self.clipped = np.zeros(n, dtype=np.int64)
+        self.scenarios: list[ContouringScenario | None] = [None] * n
+        self.plants: list[ContouringPlant | None] = [None] * n
+        self.names = np.full(n, "", dtype=object)
+        self.feeds = np.zeros(n)
+        self.ref_end = np.zeros(n)
+        self.circles: list[dict] = [{}] * n
+        self.has_circle = np.zeros(n, dtype=bool)
+        self.circle = np.zeros((n, 3))
+
+    def _grow(self, n_seg: int, n_load: int) -> None:
+        if n_seg > self.tabs.shape[1]:
+            tabs = np.zeros((self.n, n_seg, SEGMENT_COLUMNS))
+            tabs[:, : self.tabs.shape[1]] = self.tabs
+            self.tabs = tabs
+        if n_load > self.loads.shape[1]:
+            loads = np.zeros((self.n, n_load, 3))
+            loads[:, : self.loads.shape[1]] = self.loads
+            self.loads = loads
+
+    def start(self, lane: int, spec, rng: np.random.Generator) -> dict:
+        """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
+        first observation goes to ``obs[lane]``; returns its reset info."""
+        sc = contouring_scenario(spec, rng)
+        self.scenarios[lane] = sc
+        plant = ContouringPlant(sc.true_params(self.params))
+        self.plants[lane] = plant
+        path = sc.path
+        tab = path.table()
+        self._grow(tab.shape[0], len(sc.load_steps))
+        self.tabs[lane, : tab.shape[0]] = tab
+        self.nseg[lane] = tab.shape[0]
+        ts = self.params.sample_time_s
+        ref_end = sc.reference_time_s
+        t_max = self.max_episode_time_s
+        if t_max is None:
+            t_max = ref_end + sc.dwell_s + 0.5
+        lf = self.lf[lane]
+        lf[:PLANT_COLUMNS] = plant.coefficients
+        x0, y0 = path.start
+        lf[_LZ : _LZ + 4] = (x0, 0.0, y0, 0.0)
+        lf[_LLEN] = path.length
+        lf[_LFTS] = 0.0 if sc.is_step else sc.feed_mm_s * ts
+        lf[_LSTEP] = float(sc.is_step)
+        lf[_LEND : _LEND + 2] = path.end
+        lf[_LFIN] = ref_end + sc.dwell_s
+        lf[_LLOAD : _LLOAD + 2] = 0.0
+        lf[_LPREV : _LPREV + 2] = 0.0
+        li = self.li[lane]
+        li[:] = 0
+        li[_INLOAD] = len(sc.load_steps)
+        li[_INMAX] = int(math.ceil(t_max / ts - 1e-9))
+        for i, step in enumerate(sc.load_steps):
+            self.loads[lane, i] = step
+        self.names[lane] = sc.name
+        self.feeds[lane] = 0.0 if sc.is_step else sc.feed_mm_s
+        self.ref_end[lane] = ref_end
+        self.circles[lane] = _circle_info(path)
+        self.has_circle[lane] = bool(self.circles[lane])
+        self.circle[lane] = tuple(self.circles[lane].values()) or (0.0, 0.0, 0.0)
+        _contour_start(lane, self.lf, self.li, self.cf, self.tabs, self.nseg, self.rb,
+                       self.loads, self.obs, self.out, self.flags)  # fmt: skip
+        return self.lane_info(lane)
+
+    def step(self) -> None:
+        """Advance every lane by one servo period with the (checked, clipped) actions in
+        ``act``; whether each was clipped is in ``clipped``."""
+        _contour_step(self.act, self.clipped, self.lf, self.li, self.cf, self.tabs, self.nseg,
+                      self.rb, self.loads, self.obs, self.out, self.flags)  # fmt: skip
+
+    def lane_info(self, k: int) -> dict:
+        """The info of lane ``k`` after its reset or its last step."""
+        o = self.out[k].tolist()
+        diverged, finished, _, _, clipped = self.flags[k].tolist()
+        info = {
+            "t_s": o[1],
+            "command": np.array(o[2:4]),
+            "command_x_mm_s": o[2],
+            "command_y_mm_s": o[3],
+            "action_clipped": clipped,
+            "n_action_clipped": int(self.li[k, _ICLIP]),
+            "breakage": False,
+            "diverged": diverged,
+            "finished": finished,
+            "x_mm": o[4],
+            "y_mm": o[5],
+            "x_ref_mm": o[6],
+            "y_ref_mm": o[7],
+            "contour_error_mm": o[8],
+            "tracking_error_mm": o[9],
+            "vx_mm_s": o[10],
+            "vy_mm_s": o[11],
+            "torque_x_Nm": o[12],
+            "torque_y_Nm": o[13],
+            "torque_sq_Nm2": o[14],
+            "load_x_Nm": o[15],
+            "load_y_Nm": o[16],
+            "path_s_mm": o[17],
+            "path_length_mm": float(self.lf[k, _LLEN]),
+            "segment": int(self.li[k, _ISEG]),
+            "feed_mm_s": float(self.feeds[k]),
+            "reference_end_s": float(self.ref_end[k]),
+            "scenario": self.names[k],
+        }
+        info.update(self.circles[k])
+        if finished:
+            info["machining_time_s"] = o[18]
+        return info
+
+    def info_arrays(self) -> dict:
+        """The step info of every lane, as arrays (keys that only some lanes have come with
+        their ``_key`` masks)."""
+        o = self.out
+        f = self.flags
+        info = {
+            "t_s": o[:, 1].copy(),
+            "command": o[:, 2:4].copy(),
+            "command_x_mm_s": o[:, 2].copy(),
+            "command_y_mm_s": o[:, 3].copy(),
+            "action_clipped": f[:, 4].copy(),
+            "n_action_clipped": self.li[:, _ICLIP].copy(),
+            "breakage": np.zeros(self.n, dtype=bool),
+            "diverged": f[:, 0].copy(),
+            "finished": f[:, 1].copy(),
+        }
+        for i, name in enumerate(_OUT[4:-1], start=4):
+            info[name] = o[:, i].copy()
+        info["path_length_mm"] = self.lf[:, _LLEN].copy()
+        info["segment"] = self.li[:, _ISEG].copy()
+        info["feed_mm_s"] = self.feeds.copy()
+        info["reference_end_s"] = self.ref_end.copy()
+        info["scenario"] = self.names.copy()
+        if self.has_circle.any():
+            for i, key in enumerate(_CIRCLE_KEYS):
+                info[key] = self.circle[:, i].copy()
+                info["_" + key] = self.has_circle.copy()
+        info["machining_time_s"] = np.where(f[:, 1], o[:, 18], np.nan)
+        info["_machining_time_s"] = f[:, 1].copy()
+        return info
 
 
 class ContouringEnv(gym.Env):
@@ -239,8 +644,14 @@ class ContouringEnv(gym.Env):
     ``circle_cy_mm`` and ``circle_radius_mm`` (only when the path is one arc),
     ``scenario``, and ``machining_time_s`` (the cycle time) once finished.
 
+    ## Vector env
+    ``gym.make_vec("machining_envs/Contouring-v0", num_envs=N)`` gives a
+    :class:`ContouringVectorEnv`: N tables stepped by one compiled function, lane ``i``
+    after ``reset(seed=s)`` exactly this env after ``reset(seed=s + i)``.
+
     ## Version History
-    * v0: first version.
+    * v0: first version. The step now runs compiled, shared with the vector env (the same
+      numbers to the last bit).
 
     ## Example
     >>> import gymnasium as gym
@@ -271,26 +682,28 @@ class ContouringEnv(gym.Env):
         divergence_mm: float = 50.0,
         **overrides,
     ):
-        self.params = resolve_params(
-            type(self).__name__, params, ContouringParams, ContouringParams.choi_et_al, overrides
-        )
-        self.reward_weights = resolve_reward(reward, ContouringReward)
-        self.max_episode_time_s, self.in_position_mm, self.divergence_mm = _run_limits(
-            max_episode_time_s, in_position_mm, divergence_mm
-        )
-        check_scenario_spec(scenario, ContouringScenario, CONTOURING_SCENARIOS)
+        self._core = core = _ContouringCore(
+            type(self).__name__, 1, scenario, params, reward, max_episode_time_s,
+            in_position_mm, divergence_mm, overrides,
+        )  # fmt: skip
+        self.params = core.params
+        self.reward_weights = core.reward_weights
+        self.max_episode_time_s = core.max_episode_time_s
+        self.in_position_mm = core.in_position_mm
+        self.divergence_mm = core.divergence_mm
         self.default_scenario = scenario
         self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
-
-        umax = self.params.command_max_mm_s
-        self.command_map = ActionMap(-umax, umax)
-        self._umax = umax
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
-        lim = [_ERR_LIM] * 2 + [_VEL_LIM] * 2 + [_POS_LIM] * 2 + [_PRE_LIM] * 6 + [1.0] * 2
-        high = np.array(lim, dtype=np.float32)
-        self.observation_space = spaces.Box(-high, high, dtype=np.float32)
+        self.command_map = core.command_map
+        self._umax = self.params.command_max_mm_s
+        self.action_space = core.action_space
+        self.observation_space = core.observation_space
         self.scenario: ContouringScenario | None = None
         self.plant: ContouringPlant | None = None
+
+    @property
+    def _n_clipped(self) -> int:
+        """Actions clipped so far this episode (``info["n_action_clipped"]``)."""
+        return int(self._core.li[0, _ICLIP])
 
     # ---- the command map, for classical agents -----------------------------------------
     def action_to_command(self, action):
@@ -304,196 +717,110 @@ class ContouringEnv(gym.Env):
     # ---- gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        spec = scenario_option(options, self.default_scenario)
-        sc = contouring_scenario(spec, self.np_random)
-        self.scenario = sc
-        self._truth = sc.true_params(self.params)
-        self.plant = ContouringPlant(self._truth)
-        path = sc.path
-        self._path = path
-        ts = self.params.sample_time_s
-        self._ts = ts
-        self._ref_end = sc.reference_time_s
-        t_max = self.max_episode_time_s
-        if t_max is None:
-            t_max = self._ref_end + sc.dwell_s + 0.5
-        self._t_max = t_max
-        self._n_max = int(math.ceil(t_max / ts - 1e-9))
-        self._t_finish = self._ref_end + sc.dwell_s
-        # Set points are computed in chunks as the run goes (a long path's whole schedule
-        # would make every reset slow): ``_extend`` keeps them ahead of the preview.
-        self._rx, self._ry, self._s, self._seg = [], [], [], []
-        self._extend(PREVIEW_TICKS[-1] + 1)
-        self._end = path.end
-        x0, y0 = path.start
-        self.plant.reset(x0, y0)
-        self._k = 0
-        self._loads = list(sc.load_steps)
-        self._load_i = 0
-        self._load = (0.0, 0.0)
-        self._advance_load(0.0)
-        self._prev_action = [0.0, 0.0]
-        self._n_clipped = 0
-        self._circle = _circle_info(path)
-        self._pre_scale = [1.0 / (k * ts * VELOCITY_SCALE_MM_S) for k in PREVIEW_TICKS]
+        core = self._core
+        info = core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        self.scenario = core.scenarios[0]
+        #: The table of this episode (its true parameters in ``plant.params``).
+        self.plant = core.plants[0]
+        self._path = self.scenario.path
         self._log = EpisodeLog(TRACE_LOG_FIELDS)
-        info = self._info(0.0, 0.0, 0.0, x0, y0, 0.0, 0.0, 0.0, 0.0, False, False, False)
         if self.render_mode is not None:
             self._log.record(info)
-        return self._obs(x0, y0, 0.0, 0.0), info
-
-    def _extend(self, n_needed: int) -> None:
-        """Compute set points up to index ``n_needed`` (exclusive), a chunk at a time."""
-        start = len(self._rx)
-        stop = max(n_needed, start + _CHUNK)
-        sc = self.scenario
-        path = self._path
-        k = np.arange(start, stop)
-        if sc.is_step:
-            s = np.full(k.size, path.length)
-        else:
-            s = np.minimum(k * (sc.feed_mm_s * self._ts), path.length)
-        rx, ry = path.points(s)
-        self._rx += rx.tolist()
-        self._ry += ry.tolist()
-        self._s += s.tolist()
-        self._seg += path._index(s).tolist()
-
-    def _advance_load(self, t: float) -> None:
-        loads = self._loads
-        while self._load_i < len(loads) and loads[self._load_i][0] <= t + 1e-12:
-            _, a, b = loads[self._load_i]
-            self._load = (a, b)
-            self._load_i += 1
+        return core.obs[0].copy(), info
 
     def step(self, action):
         if self.plant is None:
             raise RuntimeError("ContouringEnv: call reset() before step()")
         (ax, ay), clipped = check_action_vector(action, 2, "ContouringEnv")
-        self._n_clipped += clipped
-        umax = self._umax
-        ux, uy = ax * umax, ay * umax
-        if self._load_i < len(self._loads):
-            self._advance_load(self._k * self._ts)
-        lx, ly = self._load
-        s = self.plant.step(ux, uy, lx, ly)
-        self._k += 1
-        k = self._k
-        if k + PREVIEW_TICKS[-1] >= len(self._rx):
-            self._extend(k + PREVIEW_TICKS[-1] + 1)
-        t = k * self._ts
-        x, y = s.x_mm, s.y_mm
-        diverged = not (
-            math.isfinite(x)
-            and math.isfinite(y)
-            and math.isfinite(s.vx_mm_s)
-            and math.isfinite(s.vy_mm_s)
-        )
-        rx, ry = self._rx[k], self._ry[k]
-        if diverged:  # kept so that no NaN can reach an observation or a reward
-            x, y = rx, ry
-            vx = vy = tx = ty = 0.0
-            self.plant.reset(rx, ry)
-        else:
-            vx, vy, tx, ty = s.vx_mm_s, s.vy_mm_s, s.torque_x_Nm, s.torque_y_Nm
-        ex, ey = rx - x, ry - y
-        etrack = math.hypot(ex, ey)
-        eps = self._path.distance(x, y)
-        diverged = diverged or etrack > self.divergence_mm
-        finished = (
-            t >= self._t_finish - 1e-12
-            and math.hypot(x - self._end[0], y - self._end[1]) <= self.in_position_mm
-        )
-        terminated = diverged or finished
-        truncated = (not terminated) and k >= self._n_max
-        w = self.reward_weights
-        t0 = w.torque_scale_Nm
-        reward = (
-            -w.contour * eps / w.contour_scale_mm
-            - w.tracking * etrack / w.tracking_scale_mm
-            - w.effort * ((tx / t0) ** 2 + (ty / t0) ** 2)
-        )
-        if diverged:
-            reward -= w.divergence
-        self._prev_action = [ax, ay]
-        info = self._info(t, ux, uy, x, y, vx, vy, tx, ty, clipped, diverged, finished)
-        info["contour_error_mm"] = eps
-        info["tracking_error_mm"] = etrack
-        if finished:
-            info["machining_time_s"] = t
+        core = self._core
+        act = core.act[0]
+        act[0] = ax
+        act[1] = ay
+        core.clipped[0] = clipped
+        core.step()
+        info = core.lane_info(0)
         record_step(self, self._log, info)
-        return self._obs(x, y, vx, vy), float(reward), terminated, truncated, info
-
-    # ---- helpers -------------------------------------------------------------------------
-    def _obs(self, x: float, y: float, vx: float, vy: float) -> np.ndarray:
-        k = self._k
-        rx, ry = self._rx, self._ry
-        r0x, r0y = rx[k], ry[k]
-        ps = self._pre_scale
-        # The preview cannot leave its bounds (feeds are at most 1000 mm/s); the rest can
-        # (a diverging run, or a drive overridden to more than 1000 mm/s).
-        ex = (r0x - x) / ERROR_SCALE_MM
-        ey = (r0y - y) / ERROR_SCALE_MM
-        px = r0x / POSITION_SCALE_MM
-        py = r0y / POSITION_SCALE_MM
-        o = [
-            min(max(ex, -_ERR_LIM), _ERR_LIM),
-            min(max(ey, -_ERR_LIM), _ERR_LIM),
-            min(max(vx / VELOCITY_SCALE_MM_S, -_VEL_LIM), _VEL_LIM),
-            min(max(vy / VELOCITY_SCALE_MM_S, -_VEL_LIM), _VEL_LIM),
-            min(max(px, -_POS_LIM), _POS_LIM),
-            min(max(py, -_POS_LIM), _POS_LIM),
-            (rx[k + _P0] - r0x) * ps[0],
-            (rx[k + _P1] - r0x) * ps[1],
-            (rx[k + _P2] - r0x) * ps[2],
-            (ry[k + _P0] - r0y) * ps[0],
-            (ry[k + _P1] - r0y) * ps[1],
-            (ry[k + _P2] - r0y) * ps[2],
-            *self._prev_action,
-        ]
-        return np.array(o, dtype=np.float32)
-
-    def _info(self, t, ux, uy, x, y, vx, vy, tx, ty, clipped, diverged, finished) -> dict:
-        k = self._k
-        sc = self.scenario
-        info = {
-            "t_s": t,
-            "command": np.array([ux, uy]),
-            "command_x_mm_s": ux,
-            "command_y_mm_s": uy,
-            "action_clipped": bool(clipped),
-            "n_action_clipped": self._n_clipped,
-            "breakage": False,
-            "diverged": bool(diverged),
-            "finished": bool(finished),
-            "x_mm": x,
-            "y_mm": y,
-            "x_ref_mm": self._rx[k],
-            "y_ref_mm": self._ry[k],
-            "contour_error_mm": 0.0,
-            "tracking_error_mm": math.hypot(self._rx[k] - x, self._ry[k] - y),
-            "vx_mm_s": vx,
-            "vy_mm_s": vy,
-            "torque_x_Nm": tx,
-            "torque_y_Nm": ty,
-            "torque_sq_Nm2": tx * tx + ty * ty,
-            "load_x_Nm": self._load[0],
-            "load_y_Nm": self._load[1],
-            "path_s_mm": self._s[k],
-            "path_length_mm": self._path.length,
-            "segment": self._seg[k],
-            "feed_mm_s": 0.0 if sc.is_step else sc.feed_mm_s,
-            "reference_end_s": self._ref_end,
-            "scenario": sc.name,
-        }
-        info.update(self._circle)
-        return info
+        f = core.flags[0]
+        return core.obs[0].copy(), float(core.out[0, 0]), bool(f[2]), bool(f[3]), info
 
     def render(self):
         if not ready_to_render(self, "ContouringEnv"):
             return None
         img = render_trace(self._path, self._log, f"Contouring-v0 | {self.scenario.name}")
         return present_frame(img, self.render_mode, "Contouring-v0")
+
+
+class ContouringVectorEnv(LaneVectorEnv):
+    """``machining_envs/Contouring-v0`` as a native vector env: N XY tables, each on its own
+    path with its own hidden inertias and loads, stepped by one compiled function.
+
+    ``gym.make_vec("machining_envs/Contouring-v0", num_envs=N, **kwargs)`` takes the
+    keyword arguments of :class:`ContouringEnv` (but not ``render_mode``). Lane ``i`` after
+    ``reset(seed=s)`` runs exactly the episode ``ContouringEnv.reset(seed=s + i)`` runs,
+    with the same observations, rewards and ``info`` (here a dict of arrays; the circle's
+    keys and ``machining_time_s`` with their masks); every lane draws its own scenario from
+    its own generator. Finished lanes are reset in the same step
+    (``metadata["autoreset_mode"]``): see ``machining_envs.core.vector``.
+    """
+
+    env_name = "ContouringEnv"
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        scenario: str | ContouringScenario = "train",
+        params: ContouringParams | None = None,
+        reward: ContouringReward | dict | None = None,
+        max_episode_time_s: float | None = None,
+        in_position_mm: float = 0.005,
+        divergence_mm: float = 50.0,
+        **overrides,
+    ):
+        self._core = core = _ContouringCore(
+            type(self).__name__, check_num_envs(num_envs), scenario, params, reward,
+            max_episode_time_s, in_position_mm, divergence_mm, overrides,
+        )  # fmt: skip
+        super().__init__(num_envs, core.observation_space, core.action_space)
+        self.default_scenario = scenario
+        self.params = core.params
+        self.command_map = core.command_map
+
+    def _reset_lanes(self, lanes, options):
+        core = self._core
+        spec = scenario_option(options, self.default_scenario)
+        infos = [core.start(int(i), spec, self.lane_rngs[i]) for i in lanes]
+        return core.obs[lanes].copy(), stack_lane_infos(infos)
+
+    def _step_lanes(self, actions):
+        core = self._core
+        core.clipped[:] = ((actions < -1.0) | (actions > 1.0)).any(axis=1)
+        np.clip(actions, -1.0, 1.0, out=core.act)
+        core.step()
+        f = core.flags
+        return (
+            core.obs.copy(),
+            core.out[:, 0].copy(),
+            f[:, 2].copy(),
+            f[:, 3].copy(),
+            core.info_arrays(),
+        )
+
+
+def stack_lane_infos(infos: list[dict]) -> dict:
+    """Per-lane info dicts as arrays over those lanes; a key that only some have comes with
+    its ``_key`` mask."""
+    keys = list(dict.fromkeys(k for d in infos for k in d))
+    part = {}
+    for key in keys:
+        have = np.array([key in d for d in infos])
+        vals = [d.get(key) for d in infos]
+        if not have.all():
+            fill = next(v for v in vals if v is not None)
+            zero = np.zeros_like(fill) if isinstance(fill, np.ndarray) else type(fill)(0)
+            vals = [v if h else zero for v, h in zip(vals, have, strict=True)]
+            part["_" + key] = have
+        part[key] = np.array(vals)
+    return part
 
 
 def render_trace(path: Path, log: EpisodeLog, title: str) -> np.ndarray:
@@ -512,9 +839,6 @@ def render_xy(path: Path, x, y, t, eps, title: str) -> np.ndarray:
     """XY plot of the path and the table's trace with the contour error magnified, above
     the contour error against time; returned as an RGB array."""
     try:
-        import matplotlib
-
-        matplotlib.use("Agg", force=False)
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
     except ImportError as exc:  # pragma: no cover - matplotlib is a dependency

@@ -3,14 +3,15 @@ CNC's own position loop (PI or H-infinity) drives the axes."""
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
 import gymnasium as gym
+import numba
 import numpy as np
 from gymnasium import spaces
 
+from machining_envs.contouring._exact import np_mean, py_hypot
 from machining_envs.contouring.env import (
     ERROR_SCALE_MM,
     TRACE_LOG_FIELDS,
@@ -20,15 +21,24 @@ from machining_envs.contouring.env import (
     _run_limits,
     check_action_vector,
     render_trace,
+    stack_lane_infos,
 )
 from machining_envs.contouring.metrics import FEED_TASK
+from machining_envs.contouring.paths import (
+    SEGMENT_COLUMNS,
+    path_distances,
+    path_heading,
+    path_point,
+    path_points,
+    path_segment_index,
+)
 from machining_envs.contouring.plant import AXES, ContouringParams
 from machining_envs.contouring.scenarios import (
     CONTOURING_SCENARIOS,
     ContouringScenario,
     contouring_scenario,
 )
-from machining_envs.contouring.servo import SERVO_KINDS, ServoLoop, servo_design
+from machining_envs.contouring.servo import SERVO_KINDS, ServoLanes, run_block, servo_design
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
@@ -42,8 +52,10 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
+from machining_envs.core.vector import LaneVectorEnv, check_num_envs
 
-__all__ = ["ContouringFeedEnv", "FeedReward", "LOOKAHEAD_MM", "DEFAULT_TOLERANCE_MM"]
+__all__ = ["ContouringFeedEnv", "ContouringFeedVectorEnv", "FeedReward", "LOOKAHEAD_MM"]
+__all__ += ["DEFAULT_TOLERANCE_MM"]
 
 #: The observation previews the path's turn over these distances ahead of the set point, mm.
 LOOKAHEAD_MM = (0.5, 1.0, 2.0, 5.0, 10.0)
@@ -83,13 +95,449 @@ class FeedReward:
     """w_d, one-off penalty when the run diverges."""
 
     def __post_init__(self) -> None:
-        check_reward_weights(self, allow_bool=True)
+        check_reward_weights(self)
 
 
-@functools.lru_cache(maxsize=16)
-def _servo_loop(truth: ContouringParams, nominal: ContouringParams, kind: str, block: int):
-    designs = tuple(servo_design(kind, nominal, ax) for ax in AXES)
-    return ServoLoop(truth, designs, block)
+# ---- the compiled step of every lane ------------------------------------------------------
+
+#: Columns of ``_FeedCore.pf`` (per-lane path and run constants).
+_PF = ("length", "x0", "y0", "x_end", "y_end", "feed", "programmed_time", "time_limit")
+#: Columns of ``_FeedCore.out`` (the step's signals, read into ``info``).
+_OUT = ("t_s", "command_x_mm_s", "command_y_mm_s", "x_mm", "y_mm", "x_ref_mm", "y_ref_mm",
+        "contour_error_mm", "peak_contour_error_mm", "tracking_error_mm", "vx_mm_s",
+        "vy_mm_s", "torque_x_Nm", "torque_y_Nm", "torque_sq_Nm2", "load_x_Nm", "load_y_Nm",
+        "feed_override", "path_speed_mm_s", "path_s_mm", "machining_time_s")  # fmt: skip
+_O = {name: i for i, name in enumerate(_OUT)}
+_LOOK = np.array(LOOKAHEAD_MM)
+
+
+@numba.njit(cache=True)
+def _feed_obs(k, tab, pf, s, override, prev_action, eps, peak, ex, ey, vx, vy, tol, look,
+              lo, hi, obs):  # fmt: skip
+    """Observation of lane ``k`` (``ContouringFeedEnv``'s table) into ``obs[k]``."""
+    length = pf[k, 0]
+    sk = s[k]
+    o = obs[k]
+    _bound(o, 0, eps / tol, lo, hi)
+    _bound(o, 1, peak / tol, lo, hi)
+    _bound(o, 2, ex / ERROR_SCALE_MM, lo, hi)
+    _bound(o, 3, ey / ERROR_SCALE_MM, lo, hi)
+    _bound(o, 4, override[k] if sk < length else 0.0, lo, hi)
+    _bound(o, 5, sk / length, lo, hi)
+    _bound(o, 6, (length - sk) / 100.0, lo, hi)
+    h0 = path_heading(tab, length, sk)
+    for i in range(look.size):
+        _bound(o, 7 + i, (path_heading(tab, length, sk + look[i]) - h0) / math.pi, lo, hi)
+    _bound(o, 12, pf[k, 5] / 100.0, lo, hi)
+    _bound(o, 13, vx / VELOCITY_SCALE_MM_S, lo, hi)
+    _bound(o, 14, vy / VELOCITY_SCALE_MM_S, lo, hi)
+    _bound(o, 15, prev_action[k], lo, hi)
+
+
+@numba.njit(cache=True, inline="always")
+def _bound(o, i, x, lo, hi):
+    """``o[i]`` = ``x`` held within ``[lo[i], hi[i]]`` (as float32)."""
+    o[i] = lo[i] if x < lo[i] else (hi[i] if x > hi[i] else x)
+
+
+@numba.njit(cache=True, _nrt=False)
+def _feed_step(actions, clipped, tabs, nseg, pf, load_t, load_v, n_load, sf, sh, sa, sb, scu,
+               sdu, sgu, stq, sumax, state, s, kk, override, prev_action, n_clipped, c, w,
+               look, lo, hi, obs, reward, flags, out, segment, sc):  # fmt: skip
+    """One decision step of every lane (``ContouringFeedEnv.step`` after its input checks).
+
+    ``c`` = ``[n_sub, Ts, tolerance, in_position, divergence, override mid, override half]``;
+    ``w`` = the reward weights; ``flags[k]`` = ``[diverged, finished, terminated,
+    truncated]``; ``sc`` = scratch arrays (``_FeedCore._scratch``)."""
+    n = int(c[0])
+    ts = c[1]
+    tol = c[2]
+    st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, x, lifted, zs, lower, order = sc
+    for k in range(actions.shape[0]):
+        tab = tabs[k, : nseg[k]]
+        length = pf[k, 0]
+        x0 = pf[k, 1]
+        y0 = pf[k, 2]
+        a = actions[k]
+        n_clipped[k] += clipped[k]
+        ov = c[5] + c[6] * a
+        v = pf[k, 5] * ov
+        vts = v * ts
+        s0 = s[k]
+        for j in range(n + 1):
+            st[j] = min(s0 + vts * float(j), length)
+        path_points(tab, length, st, n, rx, ry)
+        nl = n_load[k]
+        for j in range(n):
+            ref[j, 0] = rx[j] - x0
+            ref[j, 1] = ry[j] - y0
+            t = float(kk[k] + j) * ts + 1e-12
+            i = 0
+            while i < nl and load_t[k, i] <= t:
+                i += 1
+            load[j, 0] = load_v[k, i, 0]
+            load[j, 1] = load_v[k, i, 1]
+        run_block(sf[k], sh[k], sa[k], sb[k], scu[k], sdu[k], sgu[k], stq[k], sumax[k],
+                  state[k], ref, load, pos, vel, cmd, torque, x, lifted, zs)  # fmt: skip
+        diverged = False
+        for j in range(n):
+            px[j] = pos[j, 0] + x0
+            py[j] = pos[j, 1] + y0
+            if not (np.isfinite(pos[j, 0]) and np.isfinite(pos[j, 1])):
+                diverged = True
+            if not (np.isfinite(vel[j + 1, 0]) and np.isfinite(vel[j + 1, 1])):
+                diverged = True
+        if diverged:  # kept so that no NaN can reach an observation or a reward
+            for j in range(n):
+                px[j] = rx[j]
+                py[j] = ry[j]
+                for q in range(2):
+                    torque[j, q] = 0.0
+                    cmd[j, q] = 0.0
+            for j in range(n + 1):
+                vel[j, 0] = 0.0
+                vel[j, 1] = 0.0
+            for q in range(state.shape[1]):
+                state[k, q] = 0.0
+        path_distances(tab, px, py, n, eps, tmp, lower, order)
+        ds = st[n] - s0
+        s[k] = st[n]
+        kk[k] += n
+        t = kk[k] * ts
+        rxe, rye = path_point(tab, length, s[k])
+        xe = px[n - 1]
+        ye = py[n - 1]
+        etrack = py_hypot(rxe - xe, rye - ye)
+        diverged = diverged or etrack > c[4]
+        hit = -1
+        for j in range(n):
+            if st[j + 1] >= length and math.hypot(px[j] - pf[k, 3], py[j] - pf[k, 4]) <= c[3]:
+                hit = j
+                break
+        finished = hit >= 0 and not diverged
+        terminated = diverged or finished
+        truncated = (not terminated) and t >= pf[k, 7] - 1e-12
+        for j in range(n):
+            e = eps[j] / tol - 1.0
+            tmp[j] = e if (e > 0.0 or e != e) else 0.0
+        excess = np_mean(tmp[:n])
+        r = w[0] * ds / length - w[1] * (n * ts) / pf[k, 6] - w[2] * excess
+        if diverged:
+            r -= w[3]
+        reward[k] = r
+        override[k] = ov
+        prev_action[k] = a
+        for j in range(n):
+            tmp[j] = torque[j, 0] * torque[j, 0] + torque[j, 1] * torque[j, 1]
+        tsq = np_mean(tmp[:n])
+        peak = eps[0]
+        for j in range(1, n):
+            if eps[j] > peak or eps[j] != eps[j]:
+                peak = eps[j]
+        o = out[k]
+        o[0] = t
+        o[1] = cmd[n - 1, 0]
+        o[2] = cmd[n - 1, 1]
+        o[3] = xe
+        o[4] = ye
+        o[5] = rxe
+        o[6] = rye
+        o[7] = eps[n - 1]
+        o[8] = peak
+        o[9] = etrack
+        o[10] = vel[n, 0]
+        o[11] = vel[n, 1]
+        o[12] = torque[n - 1, 0]
+        o[13] = torque[n - 1, 1]
+        o[14] = tsq
+        o[15] = load[n - 1, 0]
+        o[16] = load[n - 1, 1]
+        o[17] = ov
+        o[18] = ov * pf[k, 5] if s[k] < length else 0.0
+        o[19] = s[k]
+        o[20] = (kk[k] - n + hit + 1) * ts if finished else np.nan
+        segment[k] = path_segment_index(tab, length, s[k])
+        flags[k, 0] = diverged
+        flags[k, 1] = finished
+        flags[k, 2] = terminated
+        flags[k, 3] = truncated
+        _feed_obs(k, tab, pf, s, override, prev_action, o[7], peak, rxe - xe, rye - ye, o[10],
+                  o[11], tol, look, lo, hi, obs)  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _feed_reset_obs(k, tabs, nseg, pf, s, override, prev_action, tol, look, lo, hi, obs):
+    """The first observation of lane ``k``'s episode (table at rest at the path's start)."""
+    _feed_obs(k, tabs[k, : nseg[k]], pf, s, override, prev_action, 0.0, 0.0, 0.0, 0.0, 0.0,
+              0.0, tol, look, lo, hi, obs)  # fmt: skip
+
+
+class _FeedCore:
+    """The state and arithmetic of N ContouringFeed-v0 episodes, shared by
+    ``ContouringFeedEnv`` (one lane) and ``ContouringFeedVectorEnv`` (N lanes): each lane's
+    path (``Path.table``), loads and closed loops (``ServoLanes``), advanced by one compiled
+    function (:func:`_feed_step`), so that a lane and the single env agree to the last bit."""
+
+    #: Closed loops kept per true plant (the paper's runs all use the nominal one).
+    CACHE_SIZE = 32
+
+    def __init__(self, owner, n, scenario, params, servo, tolerance_mm, reward,
+                 decision_interval_s, override_max, max_episode_time_s, in_position_mm,
+                 divergence_mm, overrides):  # fmt: skip
+        self.params = resolve_params(
+            owner, params, ContouringParams, ContouringParams.choi_et_al, overrides
+        )
+        if servo not in SERVO_KINDS:
+            raise ValueError(f"servo must be one of {SERVO_KINDS}, got {servo!r}")
+        self.servo = servo
+        if tolerance_mm is None:
+            tolerance_mm = DEFAULT_TOLERANCE_MM[servo]
+        self.tolerance_mm = _positive("tolerance_mm", tolerance_mm, 0.0, 100.0)
+        self.reward_weights = resolve_reward(reward, FeedReward)
+        ts = self.params.sample_time_s
+        dec = _positive("decision_interval_s", decision_interval_s, 0.0, 1.0)
+        n_sub = int(round(dec / ts))
+        if n_sub < 1 or abs(n_sub * ts - dec) > 1e-9 * dec:
+            raise ValueError(
+                f"decision_interval_s must be a whole number of servo periods "
+                f"({ts} s), got {decision_interval_s!r}"
+            )
+        self.decision_interval_s = dec
+        self.n_sub = n_sub
+        self.override_max = _positive("override_max", override_max, 0.0, 10.0)
+        self.max_episode_time_s, self.in_position_mm, self.divergence_mm = _run_limits(
+            max_episode_time_s, in_position_mm, divergence_mm
+        )
+        check_scenario_spec(scenario, ContouringScenario, CONTOURING_SCENARIOS)
+        # Design the servo now (cached per process), so that a bad design fails here.
+        designs = tuple(servo_design(servo, self.params, ax) for ax in AXES)
+        self.command_map = ActionMap(0.0, self.override_max)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        high = np.array(_LIMS, dtype=np.float32)
+        high[4] = self.override_max
+        low = -high
+        low[[0, 1, 4, 5, 6, 12]] = 0.0
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        # The bounds as the observation clips to them (Python floats of the float32 box).
+        self._lo = np.array(low.tolist())
+        self._hi = np.array(high.tolist())
+        w = self.reward_weights
+        self._w = np.array([w.progress, w.time, w.tolerance, w.divergence])
+        cm = self.command_map
+        self._c = np.array([n_sub, ts, self.tolerance_mm, self.in_position_mm,
+                            self.divergence_mm, cm._mid, cm._half])  # fmt: skip
+        self.n = n
+        self.loops = ServoLanes(designs, n_sub, n)
+        self._loop_cache: dict = {}
+        self.state = np.zeros((n, 2 * self.loops.n_states_axis))
+        self.tabs = np.zeros((n, 4, SEGMENT_COLUMNS))
+        self.nseg = np.ones(n, dtype=np.int64)
+        self.pf = np.ones((n, len(_PF)))
+        self.load_t = np.full((n, 1), np.inf)
+        self.load_v = np.zeros((n, 2, 2))
+        self.n_load = np.zeros(n, dtype=np.int64)
+        self.s = np.zeros(n)
+        self.k = np.zeros(n, dtype=np.int64)
+        self.override = np.zeros(n)
+        self.prev_action = np.full(n, -1.0)
+        self.n_clipped = np.zeros(n, dtype=np.int64)
+        self.obs = np.zeros((n, 16), dtype=np.float32)
+        self.reward = np.zeros(n)
+        self.flags = np.zeros((n, 4), dtype=np.bool_)
+        self.out = np.zeros((n, len(_OUT)))
+        self.segment = np.zeros(n, dtype=np.int64)
+        self.in_action = np.zeros(n)
+        self.in_clipped = np.zeros(n, dtype=np.int64)
+        self.scenarios: list[ContouringScenario | None] = [None] * n
+        self.paths: list = [None] * n
+        self.names = np.full(n, "", dtype=object)
+        self.servos = np.full(n, servo, dtype=object)
+        self.circles: list[dict] = [{}] * n
+        self.has_circle = np.zeros(n, dtype=bool)
+        self.circle = np.zeros((n, 3))
+        nb = n_sub
+        self._scratch = (
+            np.zeros(nb + 1), np.zeros(nb), np.zeros(nb), np.zeros(nb), np.zeros(nb),
+            np.zeros(nb), np.zeros(nb), np.zeros((nb, 2)), np.zeros((nb, 2)),
+            np.zeros((nb, 2)), np.zeros((nb + 1, 2)), np.zeros((nb, 2)), np.zeros((nb, 2)),
+            np.zeros(self.loops.width), np.zeros(self.loops.height),
+            np.zeros(2 * self.loops.n_states_axis), np.zeros(self.tabs.shape[1]),
+            np.zeros(self.tabs.shape[1], dtype=np.int64),
+        )  # fmt: skip
+
+    # ---- per-lane episodes ---------------------------------------------------------------
+    def _set_loops(self, lane: int, truth: ContouringParams) -> None:
+        cached = self._loop_cache.get(truth)
+        if cached is not None:
+            self.loops.copy_lane(lane, cached, 0)
+            return
+        self.loops.start(lane, truth)
+        if len(self._loop_cache) >= self.CACHE_SIZE:
+            self._loop_cache.pop(next(iter(self._loop_cache)))
+        one = ServoLanes(self.loops.designs, self.n_sub, 1)
+        one.copy_lane(0, self.loops, lane)
+        self._loop_cache[truth] = one
+
+    def _grow(self, n_seg: int, n_load: int) -> None:
+        if n_seg > self.tabs.shape[1]:
+            tabs = np.zeros((self.n, n_seg, SEGMENT_COLUMNS))
+            tabs[:, : self.tabs.shape[1]] = self.tabs
+            self.tabs = tabs
+            sc = self._scratch
+            self._scratch = (*sc[:-2], np.zeros(n_seg), np.zeros(n_seg, dtype=np.int64))
+        if n_load > self.load_t.shape[1]:
+            lt = np.full((self.n, n_load), np.inf)
+            lt[:, : self.load_t.shape[1]] = self.load_t
+            lv = np.zeros((self.n, n_load + 1, 2))
+            lv[:, : self.load_v.shape[1]] = self.load_v
+            self.load_t, self.load_v = lt, lv
+
+    def start(self, lane: int, spec, rng: np.random.Generator) -> dict:
+        """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
+        first observation goes to ``obs[lane]``; returns its reset info."""
+        sc = contouring_scenario(spec, rng)
+        if sc.is_step:
+            raise ValueError(
+                f"scenario {sc.name!r} is a step command; ContouringFeed-v0 needs a path with a feed"
+            )
+        self.scenarios[lane] = sc
+        self._set_loops(lane, sc.true_params(self.params))
+        self.state[lane] = 0.0
+        path = sc.path
+        self.paths[lane] = path
+        tab = path.table()
+        self._grow(tab.shape[0], len(sc.load_steps))
+        self.tabs[lane, : tab.shape[0]] = tab
+        self.nseg[lane] = tab.shape[0]
+        prog = path.length / sc.feed_mm_s
+        t_max = self.max_episode_time_s
+        if t_max is None:
+            t_max = 5.0 * prog + 0.5
+        x0, y0 = path.start
+        self.pf[lane] = (path.length, x0, y0, *path.end, sc.feed_mm_s, prog, t_max)
+        self.load_t[lane] = np.inf
+        self.load_v[lane] = 0.0
+        for i, (t, a, b) in enumerate(sc.load_steps):
+            self.load_t[lane, i] = t
+            self.load_v[lane, i + 1] = (a, b)
+        self.n_load[lane] = max(len(sc.load_steps), 1)
+        self.s[lane] = 0.0
+        self.k[lane] = 0
+        self.override[lane] = 0.0
+        self.prev_action[lane] = -1.0
+        self.n_clipped[lane] = 0
+        self.names[lane] = sc.name
+        self.circles[lane] = _circle_info(path)
+        self.has_circle[lane] = bool(self.circles[lane])
+        self.circle[lane] = tuple(self.circles[lane].values()) or (0.0, 0.0, 0.0)
+        _feed_reset_obs(lane, self.tabs, self.nseg, self.pf, self.s, self.override,
+                        self.prev_action, self.tolerance_mm, _LOOK, self._lo, self._hi,
+                        self.obs)  # fmt: skip
+        rx, ry = path.point(0.0)
+        o = self.out[lane]
+        o[:] = 0.0
+        o[_O["x_mm"]], o[_O["y_mm"]] = x0, y0
+        o[_O["x_ref_mm"]], o[_O["y_ref_mm"]] = rx, ry
+        o[_O["path_speed_mm_s"]] = 0.0 * sc.feed_mm_s if 0.0 < path.length else 0.0
+        o[_O["machining_time_s"]] = np.nan
+        self.flags[lane] = False
+        self.segment[lane] = path.segment_index(0.0)
+        return self.lane_info(lane, clipped=False)
+
+    def step(self) -> None:
+        """Advance every lane with the (checked, clipped) actions in ``in_action``; whether
+        each was clipped is in ``in_clipped``."""
+        lp = self.loops
+        _feed_step(
+            self.in_action, self.in_clipped, self.tabs, self.nseg, self.pf, self.load_t,
+            self.load_v, self.n_load, lp.f, lp.h, lp.a, lp.b, lp.cu, lp.du, lp.gu, lp.tq,
+            lp.umax, self.state, self.s, self.k, self.override, self.prev_action,
+            self.n_clipped, self._c, self._w, _LOOK, self._lo, self._hi, self.obs,
+            self.reward, self.flags, self.out, self.segment, self._scratch,
+        )  # fmt: skip
+
+    def lane_info(self, k: int, clipped: bool | None = None) -> dict:
+        """The info of lane ``k`` after its reset or its last step (``clipped``: whether
+        the action was clipped; by default as recorded by the last step)."""
+        o = self.out[k].tolist()
+        sc = self.scenarios[k]
+        diverged, finished = self.flags[k, :2].tolist()
+        length = float(self.pf[k, 0])
+        info = {
+            "t_s": o[0],
+            "command": np.array(o[1:3]),
+            "command_x_mm_s": o[1],
+            "command_y_mm_s": o[2],
+            "action_clipped": bool(self.in_clipped[k]) if clipped is None else clipped,
+            "n_action_clipped": int(self.n_clipped[k]),
+            "breakage": False,
+            "diverged": diverged,
+            "finished": finished,
+            "x_mm": o[3],
+            "y_mm": o[4],
+            "x_ref_mm": o[5],
+            "y_ref_mm": o[6],
+            "contour_error_mm": o[7],
+            "peak_contour_error_mm": o[8],
+            "tracking_error_mm": o[9],
+            "tolerance_mm": self.tolerance_mm,
+            "vx_mm_s": o[10],
+            "vy_mm_s": o[11],
+            "torque_x_Nm": o[12],
+            "torque_y_Nm": o[13],
+            "torque_sq_Nm2": o[14],
+            "load_x_Nm": o[15],
+            "load_y_Nm": o[16],
+            "feed_override": o[17],
+            "path_speed_mm_s": o[18],
+            "path_s_mm": o[19],
+            "path_length_mm": length,
+            "segment": int(self.segment[k]),
+            "feed_mm_s": sc.feed_mm_s,
+            "programmed_time_s": float(self.pf[k, 6]),
+            "time_limit_s": float(self.pf[k, 7]),
+            "servo": self.servo,
+            "scenario": sc.name,
+        }
+        info.update(self.circles[k])
+        if finished:
+            info["machining_time_s"] = o[20]
+        return info
+
+    def info_arrays(self) -> dict:
+        """The step info of every lane, as arrays (keys that only some lanes have come with
+        their ``_key`` masks)."""
+        o = self.out
+        f = self.flags
+        pf = self.pf
+        info = {
+            "t_s": o[:, 0].copy(),
+            "command": o[:, 1:3].copy(),
+            "command_x_mm_s": o[:, 1].copy(),
+            "command_y_mm_s": o[:, 2].copy(),
+            "action_clipped": self.in_clipped.astype(bool),
+            "n_action_clipped": self.n_clipped.copy(),
+            "breakage": np.zeros(self.n, dtype=bool),
+            "diverged": f[:, 0].copy(),
+            "finished": f[:, 1].copy(),
+        }
+        for i, name in enumerate(_OUT[3:-1], start=3):
+            info[name] = o[:, i].copy()
+        info["tolerance_mm"] = np.full(self.n, self.tolerance_mm)
+        info["path_length_mm"] = pf[:, 0].copy()
+        info["segment"] = self.segment.copy()
+        info["feed_mm_s"] = pf[:, 5].copy()
+        info["programmed_time_s"] = pf[:, 6].copy()
+        info["time_limit_s"] = pf[:, 7].copy()
+        info["servo"] = self.servos.copy()
+        info["scenario"] = self.names.copy()
+        if self.has_circle.any():
+            for i, key in enumerate(("circle_cx_mm", "circle_cy_mm", "circle_radius_mm")):
+                info[key] = self.circle[:, i].copy()
+                info["_" + key] = self.has_circle.copy()
+        info["machining_time_s"] = np.where(f[:, 1], o[:, 20], np.nan)
+        info["_machining_time_s"] = f[:, 1].copy()
+        return info
 
 
 class ContouringFeedEnv(gym.Env):
@@ -158,8 +606,15 @@ class ContouringFeedEnv(gym.Env):
     (this episode's truncation time), and ``machining_time_s`` (the cycle time, to the servo
     period) once finished.
 
+    ## Vector env
+    ``gym.make_vec("machining_envs/ContouringFeed-v0", num_envs=N)`` gives a
+    :class:`ContouringFeedVectorEnv`: N tables stepped by one compiled function, lane ``i``
+    after ``reset(seed=s)`` exactly this env after ``reset(seed=s + i)``.
+
     ## Version History
-    * v0: first version.
+    * v0: first version. The step now runs compiled, shared with the vector env: the 50
+      servo periods of a step are still the one lifted linear update, evaluated as the BLAS
+      product was (the same numbers to the last bit), from its distinct coefficients.
 
     ## Example
     >>> import gymnasium as gym
@@ -192,46 +647,33 @@ class ContouringFeedEnv(gym.Env):
         divergence_mm: float = 50.0,
         **overrides,
     ):
-        self.params = resolve_params(
-            type(self).__name__, params, ContouringParams, ContouringParams.choi_et_al, overrides
-        )
-        if servo not in SERVO_KINDS:
-            raise ValueError(f"servo must be one of {SERVO_KINDS}, got {servo!r}")
-        self.servo = servo
-        if tolerance_mm is None:
-            tolerance_mm = DEFAULT_TOLERANCE_MM[servo]
-        self.tolerance_mm = _positive("tolerance_mm", tolerance_mm, 0.0, 100.0)
-        self.reward_weights = resolve_reward(reward, FeedReward)
-        ts = self.params.sample_time_s
-        dec = _positive("decision_interval_s", decision_interval_s, 0.0, 1.0)
-        n_sub = int(round(dec / ts))
-        if n_sub < 1 or abs(n_sub * ts - dec) > 1e-9 * dec:
-            raise ValueError(
-                f"decision_interval_s must be a whole number of servo periods "
-                f"({ts} s), got {decision_interval_s!r}"
-            )
-        self.decision_interval_s = dec
-        self._n_sub = n_sub
-        self.override_max = _positive("override_max", override_max, 0.0, 10.0)
-        self.max_episode_time_s, self.in_position_mm, self.divergence_mm = _run_limits(
-            max_episode_time_s, in_position_mm, divergence_mm
-        )
-        check_scenario_spec(scenario, ContouringScenario, CONTOURING_SCENARIOS)
+        self._core = core = _FeedCore(
+            type(self).__name__, 1, scenario, params, servo, tolerance_mm, reward,
+            decision_interval_s, override_max, max_episode_time_s, in_position_mm,
+            divergence_mm, overrides,
+        )  # fmt: skip
+        self.params = core.params
+        self.servo = core.servo
+        self.tolerance_mm = core.tolerance_mm
+        self.reward_weights = core.reward_weights
+        self.decision_interval_s = core.decision_interval_s
+        self._n_sub = core.n_sub
+        self.override_max = core.override_max
+        self.max_episode_time_s = core.max_episode_time_s
+        self.in_position_mm = core.in_position_mm
+        self.divergence_mm = core.divergence_mm
         self.default_scenario = scenario
         self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
-        # Design the servo now (cached per process), so that a bad design fails here.
-        for ax in AXES:
-            servo_design(servo, self.params, ax)
-        self.command_map = ActionMap(0.0, self.override_max)
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
-        high = np.array(_LIMS, dtype=np.float32)
-        high[4] = self.override_max
-        low = -high
-        low[[0, 1, 4, 5, 6, 12]] = 0.0
-        self.observation_space = spaces.Box(low, high, dtype=np.float32)
-        self._bounds = (low.tolist(), high.tolist())
+        self.command_map = core.command_map
+        self.action_space = core.action_space
+        self.observation_space = core.observation_space
         self.scenario: ContouringScenario | None = None
-        self.loop: ServoLoop | None = None
+        self._started = False
+
+    @property
+    def _n_clipped(self) -> int:
+        """Actions clipped so far this episode (``info["n_action_clipped"]``)."""
+        return int(self._core.n_clipped[0])
 
     def action_to_command(self, action):
         """Feed override for an action in [-1, 1]."""
@@ -244,195 +686,31 @@ class ContouringFeedEnv(gym.Env):
     # ---- gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        spec = scenario_option(options, self.default_scenario)
-        sc = contouring_scenario(spec, self.np_random)
-        if sc.is_step:
-            raise ValueError(
-                f"scenario {sc.name!r} is a step command; ContouringFeed-v0 needs a path with a feed"
-            )
-        self.scenario = sc
-        self._truth = sc.true_params(self.params)
-        self.loop = _servo_loop(self._truth, self.params, self.servo, self._n_sub)
-        self._state = self.loop.initial_state()
-        path = sc.path
-        self._path = path
-        self._x0, self._y0 = path.start
-        self._feed = sc.feed_mm_s
-        self._prog_time = path.length / sc.feed_mm_s
-        t_max = self.max_episode_time_s
-        if t_max is None:
-            t_max = 5.0 * self._prog_time + 0.5
-        self._t_max = t_max
-        self._k = 0
-        self._s = 0.0
-        self._override = 0.0
-        self._prev_action = -1.0
-        self._n_clipped = 0
-        self._load_t = np.array([t for t, _, _ in sc.load_steps] or [math.inf])
-        self._load_v = np.array([[0.0, 0.0]] + [[a, b] for _, a, b in sc.load_steps])
-        self._circle = _circle_info(path)
+        core = self._core
+        info = core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        self.scenario = core.scenarios[0]
+        self._path = core.paths[0]
+        self._started = True
         self._log = EpisodeLog(TRACE_LOG_FIELDS)
-        info = self._info(0.0, (0.0, 0.0), self._x0, self._y0, (0.0, 0.0), 0.0, 0.0, 0.0, 0.0)
-        info.update(diverged=False, finished=False, action_clipped=False)
         if self.render_mode is not None:
             self._log.record(info)
-        return self._obs(0.0, 0.0, 0.0, 0.0, 0.0, 0.0), info
+        return core.obs[0].copy(), info
 
     def step(self, action):
-        if self.loop is None:
+        if not self._started:
             raise RuntimeError("ContouringFeedEnv: call reset() before step()")
         (a,), clipped = check_action_vector(action, 1, "ContouringFeedEnv")
-        self._n_clipped += clipped
-        ov = float(self.action_to_command(a))
-        n = self._n_sub
-        ts = self.params.sample_time_s
-        length = self._path.length
-        v = self._feed * ov
-        s_ticks = np.minimum(self._s + v * ts * np.arange(n + 1), length)
-        rx, ry = self._path.points(s_ticks[:n])
-        ref = np.column_stack([rx - self._x0, ry - self._y0])
-        t_ticks = (self._k + np.arange(n)) * ts
-        load = self._load_v[np.searchsorted(self._load_t, t_ticks + 1e-12, side="right")]
-        pos, vel, cmd, torque, _ = self.loop.run(self._state, ref, load)
-        px = pos[:, 0] + self._x0
-        py = pos[:, 1] + self._y0
-        diverged = not bool(np.all(np.isfinite(pos)) and np.all(np.isfinite(vel)))
-        if diverged:  # kept so that no NaN can reach an observation or a reward
-            px, py = rx.copy(), ry.copy()
-            vel = np.zeros_like(vel)
-            torque = np.zeros_like(torque)
-            cmd = np.zeros_like(cmd)
-            self._state = self.loop.initial_state()
-        eps = self._path.distances(px, py)
-        ds = float(s_ticks[-1] - self._s)
-        self._s = float(s_ticks[-1])
-        self._k += n
-        t = self._k * ts
-        # Set point at the end of the step (the next period's), for the tracking error.
-        rxe, rye = self._path.point(self._s)
-        x, y = float(px[-1]), float(py[-1])
-        etrack = math.hypot(rxe - x, rye - y)
-        diverged = diverged or etrack > self.divergence_mm
-        end = self._path.end
-        done_ref = s_ticks[1:] >= length
-        inpos = np.hypot(px - end[0], py - end[1]) <= self.in_position_mm
-        hit = np.flatnonzero(done_ref & inpos)
-        finished = bool(hit.size) and not diverged
-        terminated = diverged or finished
-        truncated = (not terminated) and t >= self._t_max - 1e-12
-        tol = self.tolerance_mm
-        w = self.reward_weights
-        excess = float(np.mean(np.maximum(0.0, eps / tol - 1.0)))
-        reward = (
-            w.progress * ds / length - w.time * (n * ts) / self._prog_time - w.tolerance * excess
-        )
-        if diverged:
-            reward -= w.divergence
-        self._override = ov
-        self._prev_action = a
-        tsq = float(np.mean(torque[:, 0] ** 2 + torque[:, 1] ** 2))
-        info = self._info(
-            t,
-            (float(cmd[-1, 0]), float(cmd[-1, 1])),
-            x,
-            y,
-            (float(vel[-1, 0]), float(vel[-1, 1])),
-            float(eps[-1]),
-            float(eps.max()),
-            etrack,
-            tsq,
-        )
-        info.update(
-            torque_x_Nm=float(torque[-1, 0]),
-            torque_y_Nm=float(torque[-1, 1]),
-            load_x_Nm=float(load[-1, 0]),
-            load_y_Nm=float(load[-1, 1]),
-            action_clipped=bool(clipped),
-            diverged=bool(diverged),
-            finished=finished,
-        )
-        if finished:
-            info["machining_time_s"] = float((self._k - n + hit[0] + 1) * ts)
+        core = self._core
+        core.in_action[0] = a
+        core.in_clipped[0] = clipped
+        core.step()
+        info = core.lane_info(0)
         record_step(self, self._log, info)
-        obs = self._obs(
-            float(eps[-1]), float(eps.max()), rxe - x, rye - y, info["vx_mm_s"], info["vy_mm_s"]
-        )
-        return obs, float(reward), terminated, truncated, info
-
-    # ---- helpers -------------------------------------------------------------------------
-    def _obs(self, eps, peak, ex, ey, vx, vy) -> np.ndarray:
-        tol = self.tolerance_mm
-        path = self._path
-        s = self._s
-        ahead = np.array([s, *(s + d for d in LOOKAHEAD_MM)])
-        h = path.headings(ahead)
-        turn = ((h[1:] - h[0]) / math.pi).tolist()
-        o = [
-            eps / tol,
-            peak / tol,
-            ex / ERROR_SCALE_MM,
-            ey / ERROR_SCALE_MM,
-            self._override if s < path.length else 0.0,
-            s / path.length,
-            (path.length - s) / 100.0,
-            *turn,
-            self._feed / 100.0,
-            vx / VELOCITY_SCALE_MM_S,
-            vy / VELOCITY_SCALE_MM_S,
-            self._prev_action,
-        ]
-        return np.array(
-            [
-                lo if v < lo else (hi if v > hi else v)
-                for v, lo, hi in zip(o, *self._bounds, strict=True)
-            ],
-            dtype=np.float32,
-        )
-
-    def _info(self, t, cmd, x, y, vel, eps, peak, etrack, tsq) -> dict:
-        sc = self.scenario
-        rx, ry = self._path.point(self._s)
-        info = {
-            "t_s": t,
-            "command": np.array(cmd),
-            "command_x_mm_s": cmd[0],
-            "command_y_mm_s": cmd[1],
-            "action_clipped": False,
-            "n_action_clipped": self._n_clipped,
-            "breakage": False,
-            "diverged": False,
-            "finished": False,
-            "x_mm": x,
-            "y_mm": y,
-            "x_ref_mm": rx,
-            "y_ref_mm": ry,
-            "contour_error_mm": eps,
-            "peak_contour_error_mm": peak,
-            "tracking_error_mm": etrack,
-            "tolerance_mm": self.tolerance_mm,
-            "vx_mm_s": vel[0],
-            "vy_mm_s": vel[1],
-            "torque_x_Nm": 0.0,
-            "torque_y_Nm": 0.0,
-            "torque_sq_Nm2": tsq,
-            "load_x_Nm": 0.0,
-            "load_y_Nm": 0.0,
-            "feed_override": self._override,
-            "path_speed_mm_s": self._override * self._feed if self._s < self._path.length else 0.0,
-            "path_s_mm": self._s,
-            "path_length_mm": self._path.length,
-            "segment": self._path.segment_index(self._s),
-            "feed_mm_s": self._feed,
-            "programmed_time_s": self._prog_time,
-            "time_limit_s": self._t_max,
-            "servo": self.servo,
-            "scenario": sc.name,
-        }
-        info.update(self._circle)
-        return info
+        f = core.flags[0]
+        return core.obs[0].copy(), float(core.reward[0]), bool(f[2]), bool(f[3]), info
 
     def render(self):
-        if not ready_to_render(self, "ContouringFeedEnv", started=self.loop is not None):
+        if not ready_to_render(self, "ContouringFeedEnv", started=self._started):
             return None
         img = render_trace(
             self._path,
@@ -440,3 +718,68 @@ class ContouringFeedEnv(gym.Env):
             f"ContouringFeed-v0 | {self.scenario.name} | servo {self.servo}",
         )
         return present_frame(img, self.render_mode, "ContouringFeed-v0")
+
+
+class ContouringFeedVectorEnv(LaneVectorEnv):
+    """``machining_envs/ContouringFeed-v0`` as a native vector env: N tables, each on its
+    own path with its own hidden inertias and loads, stepped by one compiled function.
+
+    ``gym.make_vec("machining_envs/ContouringFeed-v0", num_envs=N, **kwargs)`` takes the
+    keyword arguments of :class:`ContouringFeedEnv` (but not ``render_mode``). Lane ``i``
+    after ``reset(seed=s)`` runs exactly the episode ``ContouringFeedEnv.reset(seed=s + i)``
+    runs, with the same observations, rewards and ``info`` (here a dict of arrays; the
+    circle's keys and ``machining_time_s`` with their masks); every lane draws its own
+    scenario from its own generator. Finished lanes are reset in the same step
+    (``metadata["autoreset_mode"]``): see ``machining_envs.core.vector``.
+    """
+
+    env_name = "ContouringFeedEnv"
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        scenario: str | ContouringScenario = "train",
+        params: ContouringParams | None = None,
+        servo: str = "hinf",
+        tolerance_mm: float | None = None,
+        reward: FeedReward | dict | None = None,
+        decision_interval_s: float = 0.01,
+        override_max: float = 2.0,
+        max_episode_time_s: float | None = None,
+        in_position_mm: float = 0.005,
+        divergence_mm: float = 50.0,
+        **overrides,
+    ):
+        self._core = core = _FeedCore(
+            type(self).__name__, check_num_envs(num_envs), scenario, params, servo,
+            tolerance_mm, reward, decision_interval_s, override_max, max_episode_time_s,
+            in_position_mm, divergence_mm, overrides,
+        )  # fmt: skip
+        super().__init__(num_envs, core.observation_space, core.action_space)
+        self.default_scenario = scenario
+        self.params = core.params
+        self.servo = core.servo
+        self.tolerance_mm = core.tolerance_mm
+        self.override_max = core.override_max
+        self.command_map = core.command_map
+
+    def _reset_lanes(self, lanes, options):
+        core = self._core
+        spec = scenario_option(options, self.default_scenario)
+        infos = [core.start(int(i), spec, self.lane_rngs[i]) for i in lanes]
+        return core.obs[lanes].copy(), stack_lane_infos(infos)
+
+    def _step_lanes(self, actions):
+        core = self._core
+        a = actions[:, 0]
+        core.in_clipped[:] = (a < -1.0) | (a > 1.0)
+        np.clip(a, -1.0, 1.0, out=core.in_action)
+        core.step()
+        f = core.flags
+        return (
+            core.obs.copy(),
+            core.reward.copy(),
+            f[:, 2].copy(),
+            f[:, 3].copy(),
+            core.info_arrays(),
+        )

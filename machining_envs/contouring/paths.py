@@ -25,9 +25,14 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import numba
 import numpy as np
 
+from machining_envs.contouring._exact import np_mean, py_hypot
+
 __all__ = ["Line", "Arc", "Involute", "Path", "PAPER_CORNER_FEED_MM_S", "PAPER_FEED_MM_S"]
+__all__ += ["SEGMENT_COLUMNS", "path_point", "path_points", "path_heading", "path_distance"]
+__all__ += ["path_distances", "path_segment_index"]
 
 #: Feed of the paper's corner test, mm/s (§5, Fig. 6).
 PAPER_CORNER_FEED_MM_S = 5.0
@@ -631,5 +636,296 @@ class Path:
         x, y = self.points(s)
         return float(x.min()), float(x.max()), float(y.min()), float(y.max())
 
+    def table(self) -> np.ndarray:
+        """The path as one float64 array ``(n_segments, SEGMENT_COLUMNS)`` for the compiled
+        geometry (:func:`path_point`, :func:`path_distances`, ...), computed once.
+
+        Row ``k`` holds the segment's kind (0 line, 1 arc, 2 involute), the arc length at
+        its start, its unwrapped heading there, its bounding circle ``(cx, cy, r)`` and its
+        own numbers from column 6 (line: start, unit direction, length; arc: centre,
+        radius, start angle, turning sign, ``|sweep|``, start and end points; involute:
+        centre, radius, ``theta1``, ``theta_start``, ``theta_end``, ``theta_start**2``, the
+        turns searched for feet of normals).
+        """
+        tab = getattr(self, "_table", None)
+        if tab is not None:
+            return tab
+        tab = np.zeros((len(self.segments), SEGMENT_COLUMNS))
+        for k, seg in enumerate(self.segments):
+            row = tab[k]
+            row[1] = self._start_list[k]
+            row[2] = self._heading_starts[k]
+            row[3:6] = self._bounds[k]
+            if isinstance(seg, Line):
+                row[0] = _LINE
+                row[6:11] = (*seg.start, *seg._u, seg.length)
+            elif isinstance(seg, Arc):
+                row[0] = _ARC
+                row[6:16] = (*seg.center, seg.radius, seg.start_angle, seg.sign, abs(seg.sweep),
+                             *seg.start, *seg.end)  # fmt: skip
+            else:
+                row[0] = _INVOLUTE
+                row[6:14] = (*seg.center, seg.radius, seg.theta1, seg.theta_start,
+                             seg.theta_end, seg.theta_start**2, seg._k_span)  # fmt: skip
+        tab.setflags(write=False)
+        self._table = tab
+        return tab
+
     def __repr__(self) -> str:
         return f"Path({self.name!r}, {len(self.segments)} segments, {self.length:.4g} mm)"
+
+
+# ---- compiled geometry over Path.table() ------------------------------------------------------
+# Each function below reproduces the arithmetic of the Path method it names, to the last bit:
+# the scalar methods (point, distance) in Python floats (CPython's math.hypot), the array
+# methods (points, headings, distances) in numpy's (libm's hypot).
+
+#: Columns of a row of :meth:`Path.table`.
+SEGMENT_COLUMNS = 16
+_LINE, _ARC, _INVOLUTE = 0.0, 1.0, 2.0
+
+
+@numba.njit(cache=True)
+def _segment_point(row, s):
+    """Point of the segment ``row`` at arc length ``s`` from its start (``Segment.point``)."""
+    kind = row[0]
+    if kind == _LINE:
+        return row[6] + row[8] * s, row[7] + row[9] * s
+    if kind == _ARC:
+        ang = row[9] + row[10] * s / row[8]
+        return row[6] + row[8] * math.cos(ang), row[7] + row[8] * math.sin(ang)
+    th = math.sqrt(row[12] + 2.0 * s / row[8])
+    return _involute_at(row, th)
+
+
+@numba.njit(cache=True)
+def _involute_at(row, th):
+    phi = th + row[9]
+    c = math.cos(phi)
+    sn = math.sin(phi)
+    return row[6] + row[8] * (c + th * sn), row[7] + row[8] * (sn - th * c)
+
+
+@numba.njit(cache=True)
+def path_segment_index(tab, length, s):
+    """``Path.segment_index(s)``."""
+    s = min(max(s, 0.0), length)
+    k = tab.shape[0] - 1
+    while k > 0 and s < tab[k, 1]:
+        k -= 1
+    return k
+
+
+@numba.njit(cache=True)
+def path_point(tab, length, s):
+    """``Path.point(s)``: one point, ``s`` clamped to the path."""
+    s = min(max(s, 0.0), length)
+    k = path_segment_index(tab, length, s)
+    return _segment_point(tab[k], s - tab[k, 1])
+
+
+@numba.njit(cache=True)
+def path_points(tab, length, s, n, out_x, out_y):
+    """``Path.points(s[:n])`` into ``out_x[:n]``, ``out_y[:n]``."""
+    for j in range(n):
+        out_x[j], out_y[j] = path_point(tab, length, s[j])
+
+
+@numba.njit(cache=True)
+def path_heading(tab, length, s):
+    """``Path.headings([s])[0]``: the unwrapped heading at ``s`` (rad)."""
+    s = min(max(s, 0.0), length)
+    k = path_segment_index(tab, length, s)
+    row = tab[k]
+    loc = s - row[1]
+    kind = row[0]
+    if kind == _LINE:
+        return row[2] + 0.0
+    if kind == _ARC:
+        return row[2] + row[10] * loc / row[8]
+    return row[2] + (math.sqrt(row[12] + 2.0 * loc / row[8]) - row[10])
+
+
+# -- scalar contour error (Path.distance, Python floats) --
+
+
+@numba.njit(cache=True)
+def _segment_distance(row, px, py):
+    """``Segment.closest(px, py)[0]``."""
+    kind = row[0]
+    if kind == _LINE:
+        x0 = row[6]
+        y0 = row[7]
+        ux = row[8]
+        uy = row[9]
+        t = (px - x0) * ux + (py - y0) * uy
+        t = 0.0 if t < 0.0 else (row[10] if t > row[10] else t)
+        return py_hypot(px - (x0 + ux * t), py - (y0 + uy * t))
+    if kind == _ARC:
+        dx = px - row[6]
+        dy = py - row[7]
+        rho = py_hypot(dx, dy)
+        rel = (math.atan2(dy, dx) - row[9]) * row[10] % _TWO_PI
+        if rel <= row[11] and rho > 0.0:
+            return abs(rho - row[8])
+        if rho == 0.0:
+            return row[8]
+        d0 = py_hypot(px - row[12], py - row[13])
+        d1 = py_hypot(px - row[14], py - row[15])
+        return d0 if d0 <= d1 else d1
+    # involute: the feet of the normals from p, and the two ends
+    best = math.inf
+    ts = row[10]
+    te = row[11]
+    for th in (ts, te):
+        qx, qy = _involute_at(row, th)
+        d = py_hypot(px - qx, py - qy)
+        if d < best:
+            best = d
+    dx = px - row[6]
+    dy = py - row[7]
+    rho = py_hypot(dx, dy)
+    if rho <= row[8]:
+        return best
+    alpha = math.atan2(dy, dx)
+    off = math.acos(row[8] / rho)
+    span = int(row[13])
+    for phi in (alpha + off, alpha - off):
+        base = phi - row[9]
+        k0 = math.ceil((ts - base) / _TWO_PI)
+        for k in range(k0, k0 + span):
+            th = base + k * _TWO_PI
+            if th > te:
+                break
+            qx, qy = _involute_at(row, th)
+            d = py_hypot(px - qx, py - qy)
+            if d < best:
+                best = d
+    return best
+
+
+@numba.njit(cache=True)
+def path_distance(tab, px, py):
+    """``Path.distance(px, py)``: the contour error of one point (segments whose bounding
+    circle lies beyond the best distance so far are skipped, as there)."""
+    if tab.shape[0] == 1:
+        return _segment_distance(tab[0], px, py)
+    best = math.inf
+    for k in range(tab.shape[0]):
+        row = tab[k]
+        if best < math.inf:
+            # The exact test below decides; a plain square root (within a few units in the
+            # last place of it) settles all but the near-ties first.
+            dx = px - row[3]
+            dy = py - row[4]
+            gap = math.sqrt(dx * dx + dy * dy) - row[5]
+            margin = 1e-12 * (abs(gap) + row[5] + best)
+            if gap - margin >= best:
+                continue
+            if not gap + margin < best and py_hypot(dx, dy) - row[5] >= best:
+                continue
+        d = _segment_distance(row, px, py)
+        if d < best:
+            best = d
+    return best
+
+
+# -- contour errors of many points (Path.distances, numpy arrays) --
+
+
+@numba.njit(cache=True)
+def _segment_distances(row, px, py, n, out):
+    """``Segment.closest_many(px[:n], py[:n])[0]`` into ``out[:n]``."""
+    kind = row[0]
+    if kind == _LINE:
+        x0 = row[6]
+        y0 = row[7]
+        ux = row[8]
+        uy = row[9]
+        for j in range(n):
+            t = min(max((px[j] - x0) * ux + (py[j] - y0) * uy, 0.0), row[10])
+            out[j] = math.hypot(px[j] - (x0 + ux * t), py[j] - (y0 + uy * t))
+        return
+    if kind == _ARC:
+        for j in range(n):
+            dx = px[j] - row[6]
+            dy = py[j] - row[7]
+            rho = math.hypot(dx, dy)
+            rel = (math.atan2(dy, dx) - row[9]) * row[10] % _TWO_PI
+            if rel <= row[11] and rho > 0.0:
+                out[j] = abs(rho - row[8])
+            else:
+                d0 = math.hypot(px[j] - row[12], py[j] - row[13])
+                d1 = math.hypot(px[j] - row[14], py[j] - row[15])
+                out[j] = d0 if d0 <= d1 else d1
+        return
+    ts = row[10]
+    te = row[11]
+    span = int(row[13])
+    for j in range(n):
+        dx = px[j] - row[6]
+        dy = py[j] - row[7]
+        rho = math.hypot(dx, dy)
+        outside = rho > row[8]
+        alpha = math.atan2(dy, dx)
+        off = math.acos(row[8] / rho if outside else 1.0)
+        qx, qy = _involute_at(row, ts)
+        best = math.hypot(px[j] - qx, py[j] - qy)
+        qx, qy = _involute_at(row, te)
+        d = math.hypot(px[j] - qx, py[j] - qy)
+        if d < best:
+            best = d
+        for phi in (alpha + off, alpha - off):
+            base = phi - row[9]
+            k0 = math.ceil((ts - base) / _TWO_PI)
+            for k in range(span):
+                th = base + (k0 + k) * _TWO_PI
+                if not (outside and th <= te):
+                    continue  # numpy evaluates theta_start there, already counted
+                qx, qy = _involute_at(row, th)
+                d = math.hypot(px[j] - qx, py[j] - qy)
+                if d < best:
+                    best = d
+        out[j] = best
+
+
+@numba.njit(cache=True)
+def path_distances(tab, px, py, n, out, scratch, lower, order):
+    """``Path.distances(px[:n], py[:n])`` into ``out[:n]`` (scratch: ``scratch`` of ``n``
+    floats, ``lower`` and ``order`` of one float and one integer per segment).
+
+    As there: the segments are tried from the one whose bounding circle lies nearest the
+    points' centroid, and a segment is skipped when its circle lies beyond the largest
+    distance found so far."""
+    ns = tab.shape[0]
+    if ns == 1:
+        _segment_distances(tab[0], px, py, n, out)
+        return
+    mx = np_mean(px[:n])
+    my = np_mean(py[:n])
+    spread = 0.0
+    for j in range(n):
+        h = math.hypot(px[j] - mx, py[j] - my)
+        if j == 0 or h > spread or h != h:
+            spread = h
+    for k in range(ns):  # a stable insertion sort of the segments by their lower bound
+        v = py_hypot(mx - tab[k, 3], my - tab[k, 4]) - tab[k, 5]
+        lower[k] = v
+        i = k
+        while i > 0 and lower[order[i - 1]] > v:
+            order[i] = order[i - 1]
+            i -= 1
+        order[i] = k
+    _segment_distances(tab[order[0]], px, py, n, out)
+    for q in range(1, ns):
+        k = order[q]
+        dmax = out[0]
+        for j in range(1, n):
+            if out[j] > dmax or out[j] != out[j]:
+                dmax = out[j]
+        if lower[k] - spread >= dmax:
+            continue
+        _segment_distances(tab[k], px, py, n, scratch)
+        for j in range(n):
+            if scratch[j] < out[j]:
+                out[j] = scratch[j]

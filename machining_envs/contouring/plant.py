@@ -19,7 +19,7 @@ so that with ``T_L = 0`` the command-to-position transfer function is the paper'
 input). Both inputs are held over each servo period and the axes are discretised exactly
 (ZOH) once; a step is then eight multiply-adds per axis.
 
-This module imports numpy and scipy only; it knows nothing of gymnasium.
+This module imports numpy, scipy and numba only; it knows nothing of gymnasium.
 """
 
 from __future__ import annotations
@@ -30,12 +30,14 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from machining_envs.core.checks import check_range
 from machining_envs.core.lti import zoh
 
-__all__ = ["ContouringParams", "ContouringPlant", "ContouringStep", "AXES"]
+__all__ = ["ContouringParams", "ContouringPlant", "ContouringStep", "AXES", "step_axes"]
+__all__ += ["PLANT_COLUMNS"]
 
 #: The two feed axes, in the order every array of this package uses.
 AXES = ("x", "y")
@@ -170,8 +172,37 @@ class ContouringStep(NamedTuple):
     torque_y_Nm: float
 
 
+#: Numbers of one table in :func:`step_axes`'s ``c``: the X axis's ``Phi`` and ``Gamma``
+#: (row by row), the Y axis's, the command limit, the two torque factors.
+PLANT_COLUMNS = 19
+
+
+@numba.njit(cache=True)
+def step_axes(c, z, ux, uy, lx, ly):
+    """Both axes over one servo period (:meth:`ContouringPlant.step`'s arithmetic): the
+    commands ``ux``, ``uy`` (mm/s, clipped to the limit ``c[16]``) and load torques ``lx``,
+    ``ly`` (N m) held; ``z = [x, vx, y, vy]`` is updated in place. Returns the mean motor
+    torques of the period."""
+    m = c[16]
+    ux = m if ux > m else (-m if ux < -m else ux)
+    uy = m if uy > m else (-m if uy < -m else uy)
+    x = z[0]
+    vx = z[1]
+    y = z[2]
+    vy = z[3]
+    xn = c[0] * x + c[1] * vx + c[4] * ux + c[5] * lx
+    vxn = c[2] * x + c[3] * vx + c[6] * ux + c[7] * lx
+    yn = c[8] * y + c[9] * vy + c[12] * uy + c[13] * ly
+    vyn = c[10] * y + c[11] * vy + c[14] * uy + c[15] * ly
+    z[0] = xn
+    z[1] = vxn
+    z[2] = yn
+    z[3] = vyn
+    return c[17] * (vxn - vx) + lx, c[18] * (vyn - vy) + ly
+
+
 class ContouringPlant:
-    """Both axes of the XY table; numpy-free per step (eight multiply-adds per axis).
+    """Both axes of the XY table: eight multiply-adds per axis and period (:func:`step_axes`).
 
     Parameters
     ----------
@@ -194,43 +225,44 @@ class ContouringPlant:
         self.gamma = np.zeros((4, 4))
         self.phi[:2, :2], self.phi[2:, 2:] = phx, phy
         self.gamma[:2, :2], self.gamma[2:, 2:] = gax, gay
-        self._cx = [float(v) for v in (*phx.ravel(), *gax.ravel())]
-        self._cy = [float(v) for v in (*phy.ravel(), *gay.ravel())]
         self._umax = params.command_max_mm_s
         # Torque from the velocity change: J (2 pi / lead) dv / Ts.
         k = 1.0 / (params.mm_per_rad * params.sample_time_s)
-        self._tq = (params.inertia_x_kgm2 * k, params.inertia_y_kgm2 * k)
+        #: The numbers :func:`step_axes` reads (``PLANT_COLUMNS`` of them).
+        self.coefficients = np.array(
+            [
+                *phx.ravel(),
+                *gax.ravel(),
+                *phy.ravel(),
+                *gay.ravel(),
+                self._umax,
+                params.inertia_x_kgm2 * k,
+                params.inertia_y_kgm2 * k,
+            ]  # fmt: skip
+        )
+        self.z = np.zeros(4)
         self.reset()
 
     def reset(self, x0_mm: float = 0.0, y0_mm: float = 0.0) -> None:
         """Table at rest at ``(x0, y0)``."""
-        self.z = [float(x0_mm), 0.0, float(y0_mm), 0.0]
+        self.z[:] = (float(x0_mm), 0.0, float(y0_mm), 0.0)
         self.t_s = 0.0
 
     @property
     def state(self) -> np.ndarray:
         """``[x mm, vx mm/s, y mm, vy mm/s]`` now."""
-        return np.array(self.z)
+        return self.z.copy()
 
     def step(
         self, ux: float, uy: float, load_x_Nm: float = 0.0, load_y_Nm: float = 0.0
     ) -> ContouringStep:
         """Hold the commands (mm/s, clipped) and load torques (N m) for one servo period."""
-        m = self._umax
-        ux = m if ux > m else (-m if ux < -m else ux)
-        uy = m if uy > m else (-m if uy < -m else uy)
-        x, vx, y, vy = self.z
-        p00, p01, p10, p11, g00, g01, g10, g11 = self._cx
-        xn = p00 * x + p01 * vx + g00 * ux + g01 * load_x_Nm
-        vxn = p10 * x + p11 * vx + g10 * ux + g11 * load_x_Nm
-        p00, p01, p10, p11, g00, g01, g10, g11 = self._cy
-        yn = p00 * y + p01 * vy + g00 * uy + g01 * load_y_Nm
-        vyn = p10 * y + p11 * vy + g10 * uy + g11 * load_y_Nm
-        self.z = [xn, vxn, yn, vyn]
+        z = self.z
+        tx, ty = step_axes(
+            self.coefficients, z, float(ux), float(uy), float(load_x_Nm), float(load_y_Nm)
+        )
         self.t_s += self.params.sample_time_s
-        tx = self._tq[0] * (vxn - vx) + load_x_Nm
-        ty = self._tq[1] * (vyn - vy) + load_y_Nm
-        return ContouringStep(xn, yn, vxn, vyn, tx, ty)
+        return ContouringStep(float(z[0]), float(z[2]), float(z[1]), float(z[3]), tx, ty)
 
     def step_batch(self, z: np.ndarray, w: np.ndarray) -> np.ndarray:
         """States ``z`` (n, 4) after one period under inputs ``w`` (n, 4) = [ux, TLx, uy, TLy].

@@ -20,8 +20,9 @@ which keeps the numbers small and makes the loop indifferent to where on the tab
   loop-shaping design of the paper (§4), synthesised with python-control's ``hinfsyn``.
 
 Both are synthesised once per axis model and cached; nothing here runs per step except
-:class:`ServoLoop`, which precomputes the closed loop of a design and a (true) plant and
-advances it a block of servo periods at a time with a few matrix products.
+:class:`ServoLanes` (and :class:`ServoLoop`, one loop of it), which precomputes the closed
+loop of a design and a (true) plant and advances it a block of servo periods at a time as
+one lifted linear update, compiled (:func:`run_block`).
 
 python-control and slycot are imported only inside the H-infinity design.
 """
@@ -32,10 +33,19 @@ import functools
 import math
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 from scipy.linalg import schur, solve_continuous_are
 from scipy.signal import cont2discrete
 
+from machining_envs.contouring._exact import dot, fma, gemm_entry, gemv_row
+from machining_envs.contouring._simd import (
+    lanes_fma,
+    lanes_fma_masked,
+    lanes_fma_one,
+    lanes_sum,
+    lanes_zero,
+)
 from machining_envs.contouring.plant import AXES, ContouringParams
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_integer, check_range
 
@@ -45,6 +55,9 @@ __all__ = [
     "hinf_2dof_design",
     "closed_loop",
     "ServoLoop",
+    "ServoLanes",
+    "lifted_matrix",
+    "run_block",
     "SERVO_KINDS",
     "servo_design",
     "HINF_MODEL_POLE",
@@ -339,7 +352,7 @@ def hinf_2dof_design(
         ("weight_gain", weight_gain, 1e-6, 1e12),
         ("weight_pole", weight_pole, 0.0, 1e6),
     ):
-        check_range(name, v, lo, hi, types=PY_NUMBER_TYPES, allow_bool=True)
+        check_range(name, v, lo, hi, types=PY_NUMBER_TYPES)
     return _hinf(
         params.velocity_pole(axis),
         params.sample_time_s,
@@ -364,15 +377,545 @@ def servo_design(kind: str, params: ContouringParams, axis: str) -> ServoDesign:
     raise ValueError(f"servo must be one of {SERVO_KINDS}, got {kind!r}")
 
 
+# ---- the block update -------------------------------------------------------------------
+#
+# A block of ``nb`` servo periods of one axis's closed loop ``z+ = A z + B w`` (w = [r, T_L])
+# is linear in the state at its start and the block's inputs: positions after each period,
+# velocities at every instant, the commands and the state at the block's end are rows of
+# one matrix (``lifted_matrix``) applied to ``[z_x, z_y, r_x, TL_x, r_y, TL_y]``. Its rows
+# are Toeplitz in the inputs (the coefficient of an input depends only on how many periods
+# ago it was applied: ``A^m B``), so a lane keeps only the distinct coefficients:
+#
+# - ``F`` (3 nb + 1 + n, n): the state's coefficients of every row (positions, velocities,
+#   commands, end state, in that order);
+# - ``H`` (2 n + 2, nb + 1): row ``2q`` / ``2q + 1`` holds ``(A^m B)[q, 0 / 1]`` for
+#   ``m = nb - 1 - i`` at column ``i`` (so a row of the lifted matrix reads a contiguous
+#   run of it); rows ``2n`` / ``2n + 1`` the commands' ``Cu A^m B`` likewise, with the
+#   command's direct feed-through of the set point in the last column.
+#
+# ``run_block`` evaluates every row as OpenBLAS's dgemv evaluates that row of the full
+# matrix (``_exact.gemv_row``: four interleaved FMA chains over the columns), skipping the
+# zeros (an FMA with a zero coefficient leaves its chain unchanged), so it returns what
+# ``lifted_matrix(...) @ vector`` returns, to the last bit, at a fraction of the work.
+
+
+def lifted_matrix(truth: ContouringParams, designs, block: int) -> np.ndarray:
+    """The block update of both axes as one matrix (numpy; the reference of
+    :func:`run_block`, for tests and inspection).
+
+    Rows per axis (X, then Y): the positions after each of the ``block`` periods, the
+    velocities at the ``block + 1`` instants, the ``block`` commands, the closed-loop state
+    at the block's end; columns: ``[z_x, z_y, r_x, TL_x, r_y, TL_y]``.
+    """
+    nb = block
+    blocks = []
+    slices = []
+    offset = 0
+    for axis, design in zip(AXES, designs, strict=True):
+        a, b, _, cu, du = closed_loop(truth, design, axis)
+        n = a.shape[0]
+        # z_j = A^j z_0 + sum_{i<j} A^(j-1-i) B w_i (j = 0..block), w_i = [r_i, TL_i].
+        powers = [np.eye(n)]
+        for _ in range(nb):
+            powers.append(a @ powers[-1])
+        free = np.stack(powers)  # (nb+1, n, n)
+        pb = np.stack([powers[m] @ b for m in range(nb)])  # A^m B, (nb, n, 2)
+        forced = np.zeros((nb + 1, n, nb, 2))
+        for j in range(1, nb + 1):
+            forced[j, :, :j, :] = pb[j - 1 :: -1].transpose(1, 0, 2)
+        cu_row = cu[0]
+        u_free = np.einsum("k,jkl->jl", cu_row, free[:-1])
+        u_forced = np.einsum("k,jkim->jim", cu_row, forced[:-1])
+        u_forced[np.arange(nb), np.arange(nb), :] += du[0]
+        rows_free = np.concatenate([free[1:, 0, :], free[:, 1, :], u_free, free[-1]])
+        rows_forced = np.concatenate([forced[1:, 0], forced[:, 1], u_forced, forced[-1]])
+        blocks.append((rows_free, rows_forced[:, :, 0], rows_forced[:, :, 1]))
+        slices.append(slice(offset, offset + n))
+        offset += n
+    n_rows = [rf.shape[0] for rf, *_ in blocks]
+    big = np.zeros((sum(n_rows), offset + 4 * nb))
+    r0 = 0
+    for k, (rf, rr, rl) in enumerate(blocks):
+        big[r0 : r0 + rf.shape[0], slices[k]] = rf
+        c0 = offset + 2 * nb * k
+        big[r0 : r0 + rf.shape[0], c0 : c0 + nb] = rr
+        big[r0 : r0 + rf.shape[0], c0 + nb : c0 + 2 * nb] = rl
+        r0 += rf.shape[0]
+    return big
+
+
+@numba.njit(cache=True)
+def _lift_axis(phi, gam, da, db, dc, dd, nb, f, h, a, b, cu):
+    """Closed loop of one axis (``closed_loop``'s arithmetic) and its block coefficients
+    (``lifted_matrix``'s), into ``f``, ``h`` (layout above), ``a``, ``b``, ``cu``; returns
+    the command's feed-through of the set point."""
+    nk = da.shape[0]
+    n = nk + 2
+    dr = dd[0, 0]
+    dy = dd[0, 1]
+    a[:, :] = 0.0
+    for i in range(2):
+        g = gam[i, 0] * dy
+        a[i, 0] = phi[i, 0] + g * 1.0
+        a[i, 1] = phi[i, 1] + g * 0.0
+        for j in range(nk):
+            a[i, 2 + j] = gam[i, 0] * dc[0, j]
+        b[i, 0] = gam[i, 0] * dr
+        b[i, 1] = gam[i, 1]
+    for i in range(nk):
+        a[2 + i, 0] = db[i, 1] * 1.0
+        a[2 + i, 1] = db[i, 1] * 0.0
+        for j in range(nk):
+            a[2 + i, 2 + j] = da[i, j]
+        b[2 + i, 0] = db[i, 0]
+        b[2 + i, 1] = 0.0
+    cu[0] = dy * 1.0
+    cu[1] = dy * 0.0
+    for j in range(nk):
+        cu[2 + j] = dc[0, j]
+    # Powers A^j (dgemm: one FMA chain per entry) and A^m B.
+    p = np.eye(n)
+    nxt = np.empty((n, n))
+    pb = np.empty((n, 2))
+    h[:, :] = 0.0
+    for j in range(nb + 1):
+        # the state's coefficients in the rows of this power: the position after period
+        # j (row j - 1), the velocity at j, the command of period j, the end state
+        if j >= 1:
+            for q in range(n):
+                f[j - 1, q] = p[0, q]
+        for q in range(n):
+            f[nb + j, q] = p[1, q]
+        if j < nb:
+            for q in range(n):
+                acc = 0.0
+                for k in range(n):
+                    acc += cu[k] * p[k, q]
+                f[2 * nb + 1 + j, q] = acc
+            for r in range(n):
+                for c in range(2):
+                    pb[r, c] = gemm_entry(p, b, r, c)
+            col = nb - 1 - j
+            for r in range(n):
+                h[2 * r, col] = pb[r, 0]
+                h[2 * r + 1, col] = pb[r, 1]
+            for c in range(2):
+                acc = 0.0
+                for k in range(n):
+                    acc += cu[k] * pb[k, c]
+                h[2 * n + c, col] = acc
+            for r in range(n):
+                for c in range(n):
+                    nxt[r, c] = gemm_entry(a, p, r, c)
+            p[:, :] = nxt
+        else:
+            for r in range(n):
+                for q in range(n):
+                    f[3 * nb + 1 + r, q] = p[r, q]
+    h[2 * n, nb] = 0.0 + dr
+    return dr
+
+
+@numba.njit(cache=True, _nrt=False)
+def _coef_at(c, h, hi, off, cs, length):
+    if cs <= c < cs + length:
+        return h[hi, off + c - cs]
+    return 0.0
+
+
+@numba.njit(cache=True, _nrt=False)
+def _finish_row(v, x, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t):
+    """A row's sum of chains ``v`` plus the columns after the last whole block of four
+    (``_exact.gemv_row``'s ending)."""
+    n_cols = x.size
+    m3 = n_cols & 3
+    y = 0.0 + v
+    if m3 == 0:
+        return y
+    nbc = n_cols - m3
+    t0 = _coef_full(nbc, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t)
+    if m3 == 1:
+        return fma(t0, x[nbc], y)
+    t1 = _coef_full(nbc + 1, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t)
+    if m3 == 2:
+        return y + fma(t0, x[nbc], t1 * x[nbc + 1])
+    t2 = _coef_full(nbc + 2, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t)
+    return y + fma(t2, x[nbc + 2], fma(t0, x[nbc], t1 * x[nbc + 1]))
+
+
+@numba.njit(cache=True, _nrt=False)
+def _coef_full(c, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t):
+    """The row's coefficient in column ``c``."""
+    fq = f[fi, c - s0] if s0 <= c < s0 + n else 0.0
+    return fq + _coef_at(c, h, hr, off, cr, len_r) + _coef_at(c, h, ht, off, ct, len_t)
+
+
+@numba.njit(cache=True, inline="always")
+def _lane_add(mode, lane, v, xv, c0, c1, c2, c3):
+    """Add ``v * xv`` to chain ``lane``: an FMA (mode 0) or a multiply and an add."""
+    if mode == 0:
+        p = 0.0
+    else:
+        p = v * xv
+    if lane == 0:
+        c0 = fma(v, xv, c0) if mode == 0 else c0 + p
+    elif lane == 1:
+        c1 = fma(v, xv, c1) if mode == 0 else c1 + p
+    elif lane == 2:
+        c2 = fma(v, xv, c2) if mode == 0 else c2 + p
+    else:
+        c3 = fma(v, xv, c3) if mode == 0 else c3 + p
+    return c0, c1, c2, c3
+
+
+@numba.njit(cache=True, _nrt=False)
+def _lifted_row(x, r, n_rows, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t):
+    """Row ``r`` of ``lifted_matrix(...) @ x`` as ``_exact.gemv_row`` computes it, from the
+    row's state coefficients ``f[fi]`` (columns ``s0 ..``), its set-point coefficients
+    ``h[hr, off:]`` (columns ``cr ..``, ``len_r`` of them) and load coefficients
+    ``h[ht, off:]`` (columns ``ct ..``, ``len_t``); every other column of the row is zero."""
+    n_cols = x.size
+    nbc = n_cols - (n_cols & 3)
+    full = n_rows - (n_rows & 3)
+    two = (n_rows & 2) and r < full + 2
+    mode = 0 if r < full else 1
+    c0 = 0.0
+    c1 = 0.0
+    c2 = 0.0
+    c3 = 0.0
+    for q in range(n):
+        c = s0 + q
+        if c < nbc:
+            c0, c1, c2, c3 = _lane_add(mode, (c & 1) if (mode and two) else (c & 3),
+                                       f[fi, q], x[c], c0, c1, c2, c3)  # fmt: skip
+    for c in range(cr, min(cr + len_r, nbc)):
+        c0, c1, c2, c3 = _lane_add(mode, (c & 1) if (mode and two) else (c & 3),
+                                   h[hr, off + c - cr], x[c], c0, c1, c2, c3)  # fmt: skip
+    for c in range(ct, min(ct + len_t, nbc)):
+        c0, c1, c2, c3 = _lane_add(mode, (c & 1) if (mode and two) else (c & 3),
+                                   h[ht, off + c - ct], x[c], c0, c1, c2, c3)  # fmt: skip
+    if mode and two:
+        v = c0 + c1
+    else:
+        v = (c0 + c2) + (c1 + c3)
+    return _finish_row(v, x, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t)
+
+
+@numba.njit(cache=True, inline="always")
+def _fma3(lane, xv, ca, cb, cc, a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3):
+    """Add ``ca * xv``, ``cb * xv``, ``cc * xv`` to chain ``lane`` of three rows."""
+    if lane == 0:
+        a0 = fma(ca, xv, a0)
+        b0 = fma(cb, xv, b0)
+        c0 = fma(cc, xv, c0)
+    elif lane == 1:
+        a1 = fma(ca, xv, a1)
+        b1 = fma(cb, xv, b1)
+        c1 = fma(cc, xv, c1)
+    elif lane == 2:
+        a2 = fma(ca, xv, a2)
+        b2 = fma(cb, xv, b2)
+        c2 = fma(cc, xv, c2)
+    else:
+        a3 = fma(ca, xv, a3)
+        b3 = fma(cb, xv, b3)
+        c3 = fma(cc, xv, c3)
+    return a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3
+
+
+@numba.njit(cache=True, _nrt=False)
+def _rows3(x, s0, n, f, fa, fb, fc, cr, h, hra, hrb, hrc, ct, hta, htb, htc, off, length, extra):
+    """Three rows of the lifted product that share their columns (all in whole blocks of
+    four rows of the matrix): the state (``f[fa]``, ``f[fb]``, ``f[fc]``), ``length`` set
+    points and loads (rows ``hr*`` and ``ht*`` of ``h`` from ``off``) and ``extra`` more
+    set points of the third row. Returns the three sums of chains.
+
+    The chains of a row are one register of four lanes (column ``c`` in lane ``c % 4``),
+    advanced a block of four columns at a time as the BLAS kernel advances them; the
+    columns of a range's first and last blocks that lie outside it are masked (``h`` has
+    ``_PAD`` columns of room on either side)."""
+    n_cols = x.size
+    nbc = n_cols - (n_cols & 3)
+    a = lanes_zero()
+    b = lanes_zero()
+    c = lanes_zero()
+    for q in range(n):
+        col = s0 + q
+        if col < nbc:
+            xv = x[col]
+            a = lanes_fma_one(a, col & 3, f[fa, q], xv)
+            b = lanes_fma_one(b, col & 3, f[fb, q], xv)
+            c = lanes_fma_one(c, col & 3, f[fc, q], xv)
+    ka = h[hra]
+    kb = h[hrb]
+    kc = h[hrc]
+    for part in range(2):
+        if part == 1:
+            ka = h[hta]
+            kb = h[htb]
+            kc = h[htc]
+        cs = cr if part == 0 else ct
+        end = min(cs + length, nbc)
+        if end > cs:
+            d = off - cs
+            col = cs - (cs & 3)
+            last = (end - 1) - ((end - 1) & 3)
+            if col < cs or col == last:  # the first block, masked
+                lo = cs - col
+                hi = min(end - col, 4)
+                a = lanes_fma_masked(a, ka, d + col, x, col, lo, hi)
+                b = lanes_fma_masked(b, kb, d + col, x, col, lo, hi)
+                c = lanes_fma_masked(c, kc, d + col, x, col, lo, hi)
+                col += 4
+            while col < last:
+                a = lanes_fma(a, ka, d + col, x, col)
+                b = lanes_fma(b, kb, d + col, x, col)
+                c = lanes_fma(c, kc, d + col, x, col)
+                col += 4
+            if col == last:  # the last block, masked
+                hi = end - col
+                a = lanes_fma_masked(a, ka, d + col, x, col, 0, hi)
+                b = lanes_fma_masked(b, kb, d + col, x, col, 0, hi)
+                c = lanes_fma_masked(c, kc, d + col, x, col, 0, hi)
+        if part == 0:
+            for e in range(extra):  # the third row's further set points
+                col = cr + length + e
+                if col < nbc:
+                    c = lanes_fma_one(c, col & 3, kc[off + length + e], x[col])
+    return lanes_sum(a), lanes_sum(b), lanes_sum(c)
+
+
+@numba.njit(cache=True, inline="always")
+def _full_row(g, nb, r0):
+    """Row ``g`` of the rows that read every column (the last position, the last
+    velocity, the end state): its row of ``f``, its first row of ``h``, its row of the
+    lifted matrix (axis rows from ``r0``)."""
+    if g == 0:
+        return nb - 1, 0, r0 + nb - 1
+    if g == 1:
+        return 2 * nb, 2, r0 + 2 * nb
+    q = g - 2
+    return 3 * nb + 1 + q, 2 * q, r0 + 3 * nb + 1 + q
+
+
+@numba.njit(cache=True, _nrt=False)
+def run_block(f, h, a, b, cu, du, gu, tq, umax, state, ref, load, pos, vel, cmd, torque, x, out,
+              zs):  # fmt: skip
+    """Advance both axes of one loop by one block (``ServoLoop.run``; see there).
+
+    ``f``, ``h``, ``a``, ``b``, ``cu``, ``du``, ``gu``, ``tq`` are the lane's per-axis
+    arrays (leading dimension 2); ``x``, ``out`` and ``zs`` are scratch of the lifted
+    matrix's width and height and of two states. Writes ``pos``, ``vel`` (``nb + 1`` rows: the start, then after each
+    period), ``cmd``, ``torque``; updates ``state``; returns whether a command clipped.
+    """
+    nb = ref.shape[0]
+    n = a.shape[1]
+    ns = 2 * n
+    rows_axis = 3 * nb + 1 + n
+    n_rows = 2 * rows_axis
+    for q in range(ns):
+        x[q] = state[q]
+    for j in range(nb):
+        x[ns + j] = ref[j, 0]
+        x[ns + nb + j] = load[j, 0]
+        x[ns + 2 * nb + j] = ref[j, 1]
+        x[ns + 3 * nb + j] = load[j, 1]
+    hp, hpl, hv, hvl, hu, hul = 0, 1, 2, 3, 2 * n, 2 * n + 1
+    nbc = x.size - (x.size & 3)
+    for k in range(2):
+        fk = f[k]
+        hk = h[k]
+        s0 = k * n
+        cr = ns + 2 * nb * k
+        ct = cr + nb
+        r0 = k * rows_axis
+        # The position after period j, the velocity at j + 1 and the command of period
+        # j + 1 read the same columns: three rows at a time.
+        for j in range(nb - 1):
+            off = nb - 1 - j
+            fp, fv, fu = j, nb + j + 1, 2 * nb + 2 + j
+            vp, vv, vu = _rows3(x, s0, n, fk, fp, fv, fu, cr, hk, hp, hv, hu, ct, hpl, hvl,
+                                hul, off, j + 1, 1)  # fmt: skip
+            if ct + j + 1 <= nbc:  # no coefficient after the last whole block of four
+                out[r0 + j] = 0.0 + vp
+                out[r0 + nb + j + 1] = 0.0 + vv
+                out[r0 + 2 * nb + 2 + j] = 0.0 + vu
+                continue
+            out[r0 + j] = _finish_row(vp, x, fk, fp, s0, n, hk, hp, cr, hpl, ct, off, j + 1,
+                                      j + 1)  # fmt: skip
+            out[r0 + nb + j + 1] = _finish_row(vv, x, fk, fv, s0, n, hk, hv, cr, hvl, ct, off,
+                                               j + 1, j + 1)  # fmt: skip
+            out[r0 + 2 * nb + 2 + j] = _finish_row(vu, x, fk, fu, s0, n, hk, hu, cr, hul, ct,
+                                                   off, j + 2, j + 1)  # fmt: skip
+        r = r0 + nb  # the velocity at the start
+        out[r] = _lifted_row(x, r, n_rows, fk, nb, s0, n, hk, hv, cr, hvl, ct, nb, 0, 0)
+        r = r0 + 2 * nb + 1  # the first command
+        out[r] = _lifted_row(x, r, n_rows, fk, 2 * nb + 1, s0, n, hk, hu, cr, hul, ct, nb, 1, 0)
+        # The last position, the last velocity and the end state read every column:
+        # three rows at a time while they lie in whole blocks of four rows.
+        nfull = n + 2
+        full = n_rows - (n_rows & 3)
+        g = 0
+        while g < nfull and _full_row(g, nb, r0)[2] < full:
+            ga = g
+            gb = min(g + 1, nfull - 1)
+            gc = min(g + 2, nfull - 1)
+            if _full_row(gb, nb, r0)[2] >= full:
+                gb = ga
+            if _full_row(gc, nb, r0)[2] >= full:
+                gc = gb
+            fa, ha, _ = _full_row(ga, nb, r0)
+            fb, hb, _ = _full_row(gb, nb, r0)
+            fc, hc, _ = _full_row(gc, nb, r0)
+            va, vb, vc = _rows3(x, s0, n, fk, fa, fb, fc, cr, hk, ha, hb, hc, ct, ha + 1,
+                                hb + 1, hc + 1, 0, nb, 0)  # fmt: skip
+            for gg, vg in ((ga, va), (gb, vb), (gc, vc)):
+                fi, hi, r = _full_row(gg, nb, r0)
+                if ct + nb <= nbc:
+                    out[r] = 0.0 + vg
+                else:
+                    out[r] = _finish_row(vg, x, fk, fi, s0, n, hk, hi, cr, hi + 1, ct, 0, nb, nb)
+            g = max(ga, gb, gc) + 1
+        while g < nfull:  # rows past the last whole block of four
+            fi, hi, r = _full_row(g, nb, r0)
+            out[r] = _lifted_row(x, r, n_rows, fk, fi, s0, n, hk, hi, cr, hi + 1, ct, 0, nb, nb)
+            g += 1
+    clipped = False
+    for k in range(2):
+        r0 = k * rows_axis
+        ru = r0 + 2 * nb + 1
+        # numpy's max(u.max(), -u.min()) > umax: never true when a command is NaN
+        hi = -math.inf
+        lo = math.inf
+        nan = False
+        for j in range(nb):
+            u = out[ru + j]
+            if u != u:
+                nan = True
+            hi = max(hi, u)
+            lo = min(lo, u)
+        if not nan and max(hi, -lo) > umax:
+            clipped = True
+            _clipped_axis(a[k], b[k], cu[k], du[k], gu[k], umax, state[k * n : k * n + n],
+                          ref[:, k], load[:, k], pos[:, k], vel[:, k], cmd[:, k], zs[:n],
+                          zs[n:])  # fmt: skip
+        else:
+            for j in range(nb):
+                pos[j, k] = out[r0 + j]
+                cmd[j, k] = out[ru + j]
+            for j in range(nb + 1):
+                vel[j, k] = out[r0 + nb + j]
+            for q in range(n):
+                state[k * n + q] = out[r0 + 3 * nb + 1 + q]
+        for j in range(nb):
+            torque[j, k] = (vel[j + 1, k] - vel[j, k]) * tq[k] + load[j, k]
+    return clipped
+
+
+@numba.njit(cache=True)
+def _clipped_axis(a, b, cu, du, gu, umax, z0, ref, load, pos, vel, cmd, z, zn):
+    """One axis period by period with its command clipped (the controller, which does not
+    know of the clip, carries on unchanged); ``z0`` is updated to the block's end (``z``,
+    ``zn``: scratch of one state)."""
+    n = a.shape[0]
+    nb = ref.shape[0]
+    for q in range(n):
+        z[q] = z0[q]
+    vel[0] = z[1]
+    for j in range(nb):
+        uj = dot(cu, z) + du * ref[j]
+        uc = max(uj, -umax)
+        uc = min(uc, umax)
+        cmd[j] = uc
+        for q in range(n):
+            zn[q] = gemv_row(a, z, q, n) + b[q, 0] * ref[j] + b[q, 1] * load[j]
+        if uc != uj:
+            zn[0] += gu[0] * (uc - uj)
+            zn[1] += gu[1] * (uc - uj)
+        for q in range(n):
+            z[q] = zn[q]
+        pos[j] = z[0]
+        vel[j + 1] = z[1]
+    for q in range(n):
+        z0[q] = z[q]
+
+
+class ServoLanes:
+    """The closed loops of N lanes (each a pair of designs on its own true plant), in the
+    arrays :func:`run_block` reads.
+
+    Parameters
+    ----------
+    designs : (ServoDesign, ServoDesign)
+        The X and Y controllers (designed from the nominal plant; the same in every lane).
+    block : int
+        Servo periods per block.
+    n : int
+        Number of lanes.
+    """
+
+    def __init__(self, designs, block: int, n: int = 1) -> None:
+        check_integer("block", block, 1, 10000, types=(int,))
+        self.designs = tuple(designs)
+        self.block = block
+        self.n = n
+        nk = self.designs[0].n_states
+        if any(d.n_states != nk for d in self.designs):
+            raise ValueError("the X and Y designs must have as many states")
+        ns = nk + 2
+        self.n_states_axis = ns
+        self.f = np.zeros((n, 2, 3 * block + 1 + ns, ns))
+        self.h = np.zeros((n, 2, 2 * ns + 2, block + 1))
+        self.a = np.zeros((n, 2, ns, ns))
+        self.b = np.zeros((n, 2, ns, 2))
+        self.cu = np.zeros((n, 2, ns))
+        self.du = np.zeros((n, 2))
+        self.gu = np.zeros((n, 2, 2))
+        self.tq = np.zeros((n, 2))
+        self.umax = np.zeros(n)
+        self._design_arrays = tuple(
+            tuple(np.ascontiguousarray(m) for m in (d.a, d.b, d.c, d.d)) for d in self.designs
+        )
+
+    @property
+    def width(self) -> int:
+        """Columns of the lifted matrix (state of both axes, then four inputs per period)."""
+        return 2 * self.n_states_axis + 4 * self.block
+
+    @property
+    def height(self) -> int:
+        """Rows of the lifted matrix."""
+        return 2 * (3 * self.block + 1 + self.n_states_axis)
+
+    def start(self, lane: int, truth: ContouringParams) -> None:
+        """Set ``lane``'s loops to the designs on the plant ``truth``."""
+        for k, axis in enumerate(AXES):
+            phi, gam = truth.discrete_axis(axis)
+            da, db, dc, dd = self._design_arrays[k]
+            self.du[lane, k] = _lift_axis(
+                phi, gam, da, db, dc, dd, self.block, self.f[lane, k], self.h[lane, k],
+                self.a[lane, k], self.b[lane, k], self.cu[lane, k],
+            )  # fmt: skip
+            self.gu[lane, k] = gam[:, 0]
+            self.tq[lane, k] = truth.inertia_kgm2(axis) / (truth.mm_per_rad * truth.sample_time_s)
+        self.umax[lane] = truth.command_max_mm_s
+
+    def copy_lane(self, dst: int, src: ServoLanes, lane: int) -> None:
+        """Copy lane ``lane`` of ``src`` (same designs and block) into lane ``dst``."""
+        for name in ("f", "h", "a", "b", "cu", "du", "gu", "tq", "umax"):
+            getattr(self, name)[dst] = getattr(src, name)[lane]
+
+
 class ServoLoop:
     """Both axes' closed loops (a design on a true plant), advanced a block at a time.
 
     The loop is linear until a command reaches the drive's limit, so a block of ``n``
-    servo periods is one product of precomputed matrices: state, positions, commands and
-    velocities over the block follow from the state at its start and the block's reference
-    and load-torque samples. Where a command would pass the limit, the block is run again
-    period by period with the command clipped (the controller, which does not know of the
-    clip, carries on unchanged). Positions are relative to the table's start.
+    servo periods is one lifted linear update (:func:`lifted_matrix`, evaluated by the
+    compiled :func:`run_block`): state, positions, commands and velocities over the block
+    follow from the state at its start and the block's reference and load-torque samples.
+    Where a command would pass the limit, the block is run again period by period with the
+    command clipped (the controller, which does not know of the clip, carries on
+    unchanged). Positions are relative to the table's start.
 
     Parameters
     ----------
@@ -385,68 +928,15 @@ class ServoLoop:
     """
 
     def __init__(self, truth: ContouringParams, designs, block: int) -> None:
-        check_integer("block", block, 1, 10000, types=(int,), allow_bool=True)
         self.truth = truth
-        self.designs = tuple(designs)
+        self.lanes = ServoLanes(designs, block, 1)
+        self.lanes.start(0, truth)
+        self.designs = self.lanes.designs
         self.block = block
-        self._umax = truth.command_max_mm_s
-        nb = block
-        self._axes = []
-        blocks = []
-        offset = 0
-        for axis, design in zip(AXES, self.designs, strict=True):
-            a, b, _, cu, du = closed_loop(truth, design, axis)
-            n = a.shape[0]
-            # z_j = A^j z_0 + sum_{i<j} A^(j-1-i) B w_i (j = 0..block), w_i = [r_i, TL_i].
-            powers = [np.eye(n)]
-            for _ in range(nb):
-                powers.append(a @ powers[-1])
-            free = np.stack(powers)  # (nb+1, n, n)
-            pb = np.stack([powers[m] @ b for m in range(nb)])  # A^m B, (nb, n, 2)
-            forced = np.zeros((nb + 1, n, nb, 2))
-            for j in range(1, nb + 1):
-                forced[j, :, :j, :] = pb[j - 1 :: -1].transpose(1, 0, 2)
-            # Output rows: positions after each period (nb), velocities at every instant
-            # (nb + 1), commands (nb), the state at the block's end (n).
-            cu_row = cu[0]
-            u_free = np.einsum("k,jkl->jl", cu_row, free[:-1])
-            u_forced = np.einsum("k,jkim->jim", cu_row, forced[:-1])
-            u_forced[np.arange(nb), np.arange(nb), :] += du[0]
-            rows_free = np.concatenate([free[1:, 0, :], free[:, 1, :], u_free, free[-1]])
-            rows_forced = np.concatenate(
-                [forced[1:, 0], forced[:, 1], u_forced, forced[-1]]
-            )  # (R, nb, 2)
-            blocks.append((rows_free, rows_forced[:, :, 0], rows_forced[:, :, 1], n))
-            self._axes.append(
-                {
-                    "a": a,
-                    "b": b,
-                    "cu": cu_row,
-                    "du": du[0],
-                    "n": n,
-                    "gu": truth.discrete_axis(axis)[1][:, 0].copy(),
-                    "slice": slice(offset, offset + n),
-                }
-            )
-            offset += n
-        self.n_states = offset
-        # One matrix for both axes: columns [z_x, z_y, r_x, TL_x, r_y, TL_y].
-        n_rows = [rf.shape[0] for rf, *_ in blocks]
-        big = np.zeros((sum(n_rows), offset + 4 * nb))
-        r0 = 0
-        for k, (rf, rr, rl, _) in enumerate(blocks):
-            sl = self._axes[k]["slice"]
-            big[r0 : r0 + rf.shape[0], sl] = rf
-            c0 = offset + 2 * nb * k
-            big[r0 : r0 + rf.shape[0], c0 : c0 + nb] = rr
-            big[r0 : r0 + rf.shape[0], c0 + nb : c0 + 2 * nb] = rl
-            self._axes[k]["rows"] = r0
-            r0 += rf.shape[0]
-        self._big = big
-        self._vec = np.zeros(big.shape[1])
-        self._tq = [
-            truth.inertia_kgm2(ax) / (truth.mm_per_rad * truth.sample_time_s) for ax in AXES
-        ]
+        self.n_states = 2 * self.lanes.n_states_axis
+        self._x = np.zeros(self.lanes.width)
+        self._out = np.zeros(self.lanes.height)
+        self._zs = np.zeros(self.n_states)
 
     def initial_state(self) -> np.ndarray:
         """Table at rest at its start, controllers at rest: ``[z_x, z_y]``."""
@@ -471,51 +961,15 @@ class ServoLoop:
         clipped : bool, whether a command reached the limit.
         """
         nb = self.block
-        ns = self.n_states
-        vec = self._vec
-        vec[:ns] = state
-        vec[ns : ns + nb] = ref[:, 0]
-        vec[ns + nb : ns + 2 * nb] = load[:, 0]
-        vec[ns + 2 * nb : ns + 3 * nb] = ref[:, 1]
-        vec[ns + 3 * nb :] = load[:, 1]
-        out = self._big @ vec
+        ln = self.lanes
         pos = np.empty((nb, 2))
         vel = np.empty((nb + 1, 2))
         cmd = np.empty((nb, 2))
-        clipped = False
-        for k, ax in enumerate(self._axes):
-            r0 = ax["rows"]
-            u = out[r0 + 2 * nb + 1 : r0 + 3 * nb + 1]
-            if max(u.max(), -u.min()) > self._umax:
-                clipped = True
-                z, u = self._clipped(ax, state[ax["slice"]], ref[:, k], load[:, k])
-                pos[:, k] = z[1:, 0]
-                vel[:, k] = z[:, 1]
-                state[ax["slice"]] = z[-1]
-            else:
-                pos[:, k] = out[r0 : r0 + nb]
-                vel[:, k] = out[r0 + nb : r0 + 2 * nb + 1]
-                state[ax["slice"]] = out[r0 + 3 * nb + 1 : r0 + 3 * nb + 1 + ax["n"]]
-            cmd[:, k] = u
-        torque = np.diff(vel, axis=0)
-        torque *= self._tq
-        torque += load
-        return pos, vel[1:], cmd, torque, clipped
-
-    def _clipped(self, ax, z0, ref, load):
-        a, b, cu, du = ax["a"], ax["b"], ax["cu"], ax["du"]
-        n_b = self.block
-        z = np.empty((n_b + 1, ax["n"]))
-        z[0] = z0
-        u = np.empty(n_b)
-        # The plant sees the clipped command: the unclipped loop's update plus the clip's
-        # correction through the plant's command column.
-        gu = ax["gu"]
-        for j in range(n_b):
-            uj = float(cu @ z[j] + du[0] * ref[j])
-            uc = min(max(uj, -self._umax), self._umax)
-            u[j] = uc
-            z[j + 1] = a @ z[j] + b[:, 0] * ref[j] + b[:, 1] * load[j]
-            if uc != uj:
-                z[j + 1, :2] += gu * (uc - uj)
-        return z, u
+        torque = np.empty((nb, 2))
+        clipped = run_block(
+            ln.f[0], ln.h[0], ln.a[0], ln.b[0], ln.cu[0], ln.du[0], ln.gu[0], ln.tq[0],
+            float(ln.umax[0]), state, np.ascontiguousarray(ref, dtype=np.float64),
+            np.ascontiguousarray(load, dtype=np.float64), pos, vel, cmd, torque, self._x,
+            self._out, self._zs,
+        )  # fmt: skip
+        return pos, vel[1:], cmd, torque, bool(clipped)

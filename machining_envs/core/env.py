@@ -11,6 +11,7 @@ import numpy as np
 __all__ = [
     "ActionMap",
     "check_action",
+    "real_actions",
     "check_overrides",
     "render_signals",
     "present_frame",
@@ -90,16 +91,35 @@ class ActionMap:
         return np.log1p(x) / self._c - 1.0
 
 
+def real_actions(action, env_name: str) -> np.ndarray:
+    """``action`` as a float64 array if it is made of real numbers (Python or numpy ints and
+    floats), else ``ValueError`` naming the env: strings, bytes, complex numbers, booleans
+    and objects are refused, never converted (``"0.3"`` is not an action, and ``True`` is
+    most likely a mistake)."""
+    if isinstance(action, (str, bytes, bool, np.bool_, complex, dict, set)):
+        raise ValueError(f"{env_name}: action must be real numbers, got {action!r:.60}")
+    try:
+        a = np.asarray(action)
+    except (TypeError, ValueError):
+        raise ValueError(f"{env_name}: action must be real numbers, got {action!r:.60}") from None
+    if a.dtype.kind not in "iuf":
+        raise ValueError(
+            f"{env_name}: action must be real numbers, got {action!r:.60} (dtype {a.dtype})"
+        )
+    return a.astype(np.float64, copy=False)
+
+
 def check_action(action, env_name: str) -> tuple[float, bool]:
     """Return the action as a float in [-1, 1] and whether it had to be clipped.
 
-    NaN or inf raise ``ValueError`` naming the env and the value; a finite action outside the
-    box is clipped (the caller counts it in ``info``).
+    Anything but real numbers raises ``ValueError`` naming the env (:func:`real_actions`);
+    so do NaN and inf; a finite action outside the box is clipped (the caller counts it in
+    ``info``).
     """
-    if isinstance(action, np.ndarray) and action.shape == (1,):
+    if isinstance(action, np.ndarray) and action.shape == (1,) and action.dtype.kind == "f":
         v = float(action[0])
     else:
-        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        a = real_actions(action, env_name).reshape(-1)
         if a.size != 1:
             raise ValueError(
                 f"{env_name}: action must hold one value, got shape {np.shape(action)}"
@@ -134,9 +154,6 @@ def render_signals(
     ``panels`` is a list of ``(y label, [(legend, values, style), ...])``.
     """
     try:
-        import matplotlib
-
-        matplotlib.use("Agg", force=False)
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
     except ImportError as exc:  # pragma: no cover - matplotlib is a dependency
@@ -211,7 +228,13 @@ def resolve_scenario(spec, rng: np.random.Generator, scenario_cls: type, factori
 
 
 def scenario_option(options: dict | None, default):
-    """The scenario asked for in ``reset(options=...)``; any other option is a ``ValueError``."""
+    """The scenario asked for in ``reset(options=...)``; ``options`` must be a dict or None
+    (``TypeError`` naming it), and any other option is a ``ValueError``."""
+    if options is not None and not isinstance(options, dict):
+        raise TypeError(
+            f"reset options must be a dict such as {{'scenario': 'test'}} or None, "
+            f"got {type(options).__name__} {options!r:.40}"
+        )
     options = dict(options or {})
     spec = options.pop("scenario", default)
     if options:
@@ -253,23 +276,18 @@ def resolve_reward(reward, reward_cls: type):
     return reward
 
 
-def check_reward_weights(reward, *, allow_bool: bool = False) -> None:
+def check_reward_weights(reward) -> None:
     """``ValueError`` unless every field of the reward dataclass ``reward`` is a finite
-    number >= 0 (the first that is not is named: ``"reward weight {name} must be a finite
-    number >= 0, got {value!r}"``). Call it from the dataclass's ``__post_init__``.
-
-    ``allow_bool``: take ``True`` and ``False`` as 1 and 0, as ``TurningReward`` and
-    ``FeedReward`` always have (the other rewards refuse them).
+    number >= 0, not a bool (the first that is not is named: ``"reward weight {name} must
+    be a finite number >= 0, got {value!r}"``). Call it from the dataclass's
+    ``__post_init__``.
     """
     import dataclasses
 
     for f in dataclasses.fields(reward):
         v = getattr(reward, f.name)
         if not (
-            isinstance(v, (int, float))
-            and (allow_bool or not isinstance(v, bool))
-            and math.isfinite(v)
-            and v >= 0
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0
         ):
             raise ValueError(f"reward weight {f.name} must be a finite number >= 0, got {v!r}")
 

@@ -32,6 +32,8 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
+from machining_envs.core.env import real_actions
+
 __all__ = ["LaneVectorEnv", "check_num_envs", "merge_lane_info"]
 
 
@@ -123,12 +125,7 @@ class LaneVectorEnv(gym.vector.VectorEnv):
         if not self._started:
             raise RuntimeError(f"{self.env_name} (vector): call reset() before step()")
         shape = (self.num_envs, *self.single_action_space.shape)
-        try:
-            a = np.asarray(actions, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(
-                f"{self.env_name} (vector): actions must be real numbers of shape {shape}"
-            ) from None
+        a = real_actions(actions, f"{self.env_name} (vector)")
         if a.shape != shape:
             if a.size == math.prod(shape):
                 a = a.reshape(shape)

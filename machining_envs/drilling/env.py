@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 
 import gymnasium as gym
+import numba
 import numpy as np
 from gymnasium import spaces
 
@@ -25,19 +26,40 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
+from machining_envs.core.vector import LaneVectorEnv, check_num_envs
 from machining_envs.drilling.metrics import DRILLING_TASK
-from machining_envs.drilling.plant import DrillingParams, DrillingPlant
+from machining_envs.drilling.plant import (
+    _N_IN,
+    _N_TMP,
+    _P_BREAK,
+    _P_D,
+    _P_TARGET,
+    _S_OMEGA,
+    _S_POS,
+    _S_T,
+    _S_VOLT,
+    _S_X1,
+    LANE_BLOCK,
+    DrillingLanes,
+    DrillingParams,
+    _pymax,
+    _pymin,
+    advance,
+)
 from machining_envs.drilling.scenarios import (
     DRILLING_SCENARIOS,
     DrillingScenario,
     drilling_scenario,
 )
 
-__all__ = ["MicroDrillingEnv", "DrillingReward", "CONTROL_MODES"]
+__all__ = ["MicroDrillingEnv", "MicroDrillingVectorEnv", "DrillingReward", "CONTROL_MODES"]
 
 _HISTORY = 3
 _TORQUE_OBS = (-1.0, 10.0)
+#: Rows of five standard normals drawn from the generator at a time (a block), and rows
+#: held in memory at a time.
 _NOISE_BLOCK = 256
+_NOISE_ROWS = 64
 #: What the action commands: the valve voltage (the paper's loop) or the feed velocity.
 CONTROL_MODES = ("voltage", "feed")
 #: The signals render() draws: name -> the info key each is read from.
@@ -74,6 +96,379 @@ class DrillingReward:
 
     def __post_init__(self) -> None:
         check_reward_weights(self)
+
+
+#: Columns of ``_DrillingCore.ev`` (floats of the env per lane).
+(_E_ACTION, _E_TR, _E_THRUST_MEAS, _E_SPEED_MEAS, _E_COMMAND, _E_VOLTAGE, _E_REWARD, _E_MEAS,
+ _N_EV) = range(9)  # fmt: skip
+#: Columns of ``_DrillingCore.flags``.
+(_F_IN_CLIPPED, _F_CLIPPED, _F_DIVERGED, _F_BREAKAGE, _F_FINISHED, _F_TERMINATED,
+ _F_TRUNCATED, _N_FLAGS) = range(8)  # fmt: skip
+#: Columns of ``_DrillingCore.counts``.
+_C_N_CLIPPED, _C_SEGMENT, _C_NOISE = 0, 1, 2
+#: Entries of ``_DrillingCore.consts``.
+(_K_MID, _K_HALF, _K_FEED_MODE, _K_V0, _K_U0, _K_MAX_T, _K_TORQUE_SCALE, _K_THRUST_SCALE,
+ _K_SPEED_SCALE, _K_LENGTH_SCALE, _K_W) = range(11)  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs):
+    """Episode flags, reward and observation of lanes ``k0 .. k1 - 1`` from the plant's
+    signals ``out[k]`` (those that are not finite after a divergence are set to zero there)."""
+    for k in range(k0, k1):
+        torque, peak, meas = out[k, 0], out[k, 1], out[k, 3]
+        diverged = not (
+            np.isfinite(torque)
+            and np.isfinite(peak)
+            and np.isfinite(meas)
+            and np.isfinite(out[k, 2])
+            and np.isfinite(out[k, 4])
+            and np.isfinite(out[k, 6])
+            and np.isfinite(out[k, 5])
+        )
+        if diverged:  # never seen; kept so that no NaN can reach an observation or a reward
+            torque = 0.0
+            peak = 0.0
+            meas = 0.0
+            for i in (0, 1, 2, 3, 4, 5, 6, 10):  # torques, thrusts, speeds, feed per rev
+                out[k, i] = 0.0
+        ev[k, _E_MEAS] = meas
+        ev[k, _E_THRUST_MEAS] = out[k, 4]
+        ev[k, _E_SPEED_MEAS] = out[k, 5]
+        if out[k, 15] != 0.0:
+            counts[k, _C_SEGMENT] = 1
+        breakage = peak > par[k, _P_BREAK]
+        finished = not np.isnan(out[k, 17])
+        terminated = diverged or breakage or finished
+        t = state[k, _S_T]
+        truncated = (not terminated) and t >= c[_K_MAX_T] - 1e-9
+        e = torque / ev[k, _E_TR]
+        reward = -c[_K_W + 0] * abs(e - 1.0) - c[_K_W + 1] * _pymax(0.0, e - c[_K_W + 2])
+        if c[_K_W + 3] != 0.0:
+            reward += c[_K_W + 3] * out[k, 9] / c[_K_V0]
+        if breakage or diverged:
+            reward -= c[_K_W + 4]
+        ev[k, _E_REWARD] = reward
+        flags[k, _F_DIVERGED] = diverged
+        flags[k, _F_BREAKAGE] = breakage
+        flags[k, _F_FINISHED] = finished
+        flags[k, _F_TERMINATED] = terminated
+        flags[k, _F_TRUNCATED] = truncated
+        lo, hi = _TORQUE_OBS
+        ts = c[_K_TORQUE_SCALE]
+        ls = c[_K_LENGTH_SCALE]
+        # The torque history: the measured torques of the last steps, as they were observed.
+        for i in range(8 + _HISTORY, 9, -1):
+            obs[k, i] = obs[k, i - 1]
+        obs[k, 9] = obs[k, 0]
+        obs[k, 0] = _pymin(_pymax(meas / ts, lo), hi)
+        obs[k, 2] = _pymin(_pymax(ev[k, _E_THRUST_MEAS] / c[_K_THRUST_SCALE], lo), hi)
+        obs[k, 3] = _pymin(_pymax(ev[k, _E_SPEED_MEAS] / c[_K_SPEED_SCALE], 0.0), 3.0)
+        obs[k, 4] = ev[k, _E_ACTION]
+        obs[k, 5] = _pymin(_pymax(out[k, 11] / ls, -1.0), 2.0)
+        obs[k, 6] = _pymin(out[k, 12] / ls, 2.0)
+
+
+@numba.njit(cache=True)
+def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, normals):
+    """One step of every lane: the action's command, the plant, the env's outputs.
+
+    Lane ``k`` applies ``ev[k, _E_ACTION]``, clipped to the box here (and counted as clipped,
+    as it is when ``flags[k, _F_IN_CLIPPED]`` says it was clipped before), and takes the
+    next five of its standard normals. The plant advances ``LANE_BLOCK`` lanes at a time.
+    """
+    feed_mode = c[_K_FEED_MODE] != 0.0
+    n = state.shape[0]
+    inputs = np.empty((LANE_BLOCK, _N_IN))
+    tmp = np.empty((LANE_BLOCK, _N_TMP))
+    for k0 in range(0, n, LANE_BLOCK):
+        k1 = min(k0 + LANE_BLOCK, n)
+        for k in range(k0, k1):
+            a = ev[k, _E_ACTION]
+            clipped = flags[k, _F_IN_CLIPPED]
+            if a > 1.0:
+                a = 1.0
+                clipped = True
+            elif a < -1.0:
+                a = -1.0
+                clipped = True
+            ev[k, _E_ACTION] = a
+            flags[k, _F_CLIPPED] = clipped
+            counts[k, _C_N_CLIPPED] += clipped
+            command = c[_K_MID] + c[_K_HALF] * a
+            if feed_mode:
+                voltage, feed = c[_K_U0], command
+            else:
+                voltage, feed = command, c[_K_V0]
+            ev[k, _E_COMMAND] = command
+            ev[k, _E_VOLTAGE] = voltage
+            i = counts[k, _C_NOISE]
+            counts[k, _C_NOISE] = i + 1
+            inputs[k - k0, 0] = voltage
+            inputs[k - k0, 1] = feed
+            for q in range(5):
+                inputs[k - k0, 2 + q] = normals[k, 5 * i + q]
+        advance(k0, k1, m, g, par, eng, state, inputs, out, tmp)
+        _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs)
+
+
+class _DrillingCore:
+    """The state and arithmetic of N drilling episodes, shared by ``MicroDrillingEnv`` (one
+    lane) and ``MicroDrillingVectorEnv`` (N lanes): the plant (:class:`DrillingLanes`) and
+    the reward, observation and episode end computed for all lanes by one compiled function,
+    so that a lane of the vector env and the single env agree to the last bit.
+
+    Noise: lane ``k`` draws the standard normals of its plant from the generator of its
+    episode in blocks of ``_NOISE_BLOCK`` rows of five, the first at the reset after the
+    scenario; the rest of a block an episode did not use is drawn (and dropped) when the
+    next episode starts on the same generator. The numbers are held ``_NOISE_ROWS`` rows at
+    a time.
+    """
+
+    def __init__(self, owner, n, scenario, control, params, reward, max_episode_time_s,
+                 overrides):  # fmt: skip
+        self.params = resolve_params(
+            owner, params, DrillingParams, DrillingParams.cheong_cho, overrides
+        )
+        if control not in CONTROL_MODES:
+            raise ValueError(f"control must be one of {CONTROL_MODES}, got {control!r}")
+        self.control = control
+        self.reward_weights = resolve_reward(reward, DrillingReward)
+        self.max_episode_time_s = check_episode_time(max_episode_time_s)
+        check_scenario_spec(scenario, DrillingScenario, DRILLING_SCENARIOS)
+        p = self.params
+        if control == "voltage":
+            self.command_map = ActionMap(0.0, p.voltage_max)
+            self._a0 = float(self.command_map.command_to_action(p.nominal_voltage))
+        else:
+            self.command_map = ActionMap(-p.feed_speed_max_mm_s, p.feed_speed_max_mm_s)
+            self._a0 = float(self.command_map.command_to_action(p.feed_velocity_mm_s))
+        self._c0 = float(self.command_map.action_to_command(self._a0))
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        t_lo, t_hi = _TORQUE_OBS
+        low = np.array(
+            [t_lo, 0.0, t_lo, 0.0, -1.0, -1.0, 0.0, 0.0, 0.0] + [t_lo] * _HISTORY,
+            dtype=np.float32,
+        )
+        high = np.array(
+            [t_hi, 10.0, t_hi, 3.0, 1.0, 2.0, 2.0, 2.0, 1.0] + [t_hi] * _HISTORY,
+            dtype=np.float32,
+        )
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        w = self.reward_weights
+        m = self.command_map
+        self.consts = np.array([
+            m._mid, m._half, float(control == "feed"), p.feed_velocity_mm_s, p.nominal_voltage,
+            self.max_episode_time_s, p.torque_scale_Nmm, p.thrust_scale_N,
+            MicroDrillingEnv.SPEED_SCALE_HZ, MicroDrillingEnv.LENGTH_SCALE_MM,
+            w.tracking, w.overtorque, w.overtorque_threshold, w.progress, w.breakage,
+        ])  # fmt: skip
+        self.n = n
+        self.lanes = DrillingLanes(p, n)
+        self.scenarios: list[DrillingScenario | None] = [None] * n
+        self.names = np.full(n, "", dtype=object)
+        self.ev = np.zeros((n, _N_EV))
+        self.flags = np.zeros((n, _N_FLAGS), dtype=np.bool_)
+        self.counts = np.zeros((n, 3), dtype=np.int64)
+        self.obs = np.zeros((n, 9 + _HISTORY), dtype=np.float32)
+        self.normals = np.zeros((n, 5 * _NOISE_ROWS))
+        self.counts[:, _C_NOISE] = _NOISE_ROWS
+        #: Normals of the current block not drawn yet, per lane, and its generator.
+        self.owed = [0] * n
+        self.block_rng: list = [None] * n
+        lanes = self.lanes
+        self._args = (
+            lanes.m, lanes.shared, lanes.par, lanes.eng, lanes.state, lanes.out,
+            self.consts, self.ev, self.flags, self.counts, self.obs, self.normals,
+        )  # fmt: skip
+
+    def draw_normals(self, lane: int, rng: np.random.Generator) -> None:
+        """The next ``_NOISE_ROWS`` rows of ``lane``'s normals (a new block if one is due)."""
+        if self.owed[lane] == 0:
+            self.owed[lane] = 5 * _NOISE_BLOCK
+        rng.standard_normal(out=self.normals[lane])
+        self.owed[lane] -= 5 * _NOISE_ROWS
+        self.counts[lane, _C_NOISE] = 0
+
+    def start(self, lane: int, spec, rng: np.random.Generator) -> dict:
+        """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
+        first observation goes to ``obs[lane]``; returns its reset info."""
+        check_scenario_spec(spec, DrillingScenario, DRILLING_SCENARIOS)
+        if self.owed[lane] and self.block_rng[lane] is rng:
+            rng.standard_normal(self.owed[lane])  # the rest of the last episode's block
+        self.owed[lane] = 0
+        sc = drilling_scenario(spec, rng)
+        self.scenarios[lane] = sc
+        self.names[lane] = sc.name
+        p = self.params
+        d = sc.diameter_mm
+        truth = sc.true_params(p)
+        lanes = self.lanes
+        lanes.start(lane, truth, d, sc.target_depth_mm)
+        self.block_rng[lane] = rng
+        self.draw_normals(lane, rng)
+        tr = sc.reference_Nmm(p)
+        s = lanes.state[lane]
+        hz = float(s[_S_OMEGA]) / (2.0 * math.pi)
+        position = float(s[_S_POS])
+        e = self.ev[lane]
+        e[:] = 0.0
+        e[_E_ACTION] = self._a0
+        e[_E_TR] = tr
+        e[_E_SPEED_MEAS] = hz
+        self.flags[lane] = False
+        c = self.counts[lane]
+        c[_C_N_CLIPPED] = 0
+        c[_C_SEGMENT] = 0
+        lo, hi = _TORQUE_OBS
+        ls = MicroDrillingEnv.LENGTH_SCALE_MM
+        self.obs[lane] = (
+            min(max(0.0 / p.torque_scale_Nmm, lo), hi),
+            min(tr / p.torque_scale_Nmm, 10.0),
+            min(max(0.0 / p.thrust_scale_N, lo), hi),
+            min(max(hz / MicroDrillingEnv.SPEED_SCALE_HZ, 0.0), 3.0),
+            self._a0,
+            min(max(position / ls, -1.0), 2.0),
+            min(0.0 / ls, 2.0),
+            min(sc.target_depth_mm / ls, 2.0),
+            d,
+            *(min(max(0.0 / p.torque_scale_Nmm, lo), hi) for _ in range(_HISTORY)),
+        )
+        u = float(s[_S_VOLT])
+        return {
+            "t_s": 0.0,
+            "command": self._c0,
+            "action_clipped": False,
+            "n_action_clipped": 0,
+            "breakage": False,
+            "diverged": False,
+            "finished": False,
+            "torque_Nmm": 0.0,
+            "torque_ref_Nmm": float(tr),
+            "measured": 0.0,
+            "peak_torque_Nmm": 0.0,
+            "breakage_torque_Nmm": float(lanes.par[lane, _P_BREAK]),
+            "thrust_N": 0.0,
+            "measured_thrust_N": 0.0,
+            "spindle_hz": hz,
+            "measured_spindle_hz": hz,
+            "spindle_rpm": 60.0 * hz,
+            "voltage_V": u,
+            "valve_opening": float(s[_S_X1]),
+            "feed_velocity_mm_s": 0.0,
+            "feed_mm_per_rev": 0.0,
+            "cutting": False,
+            "engagement": 0.0,
+            "position_mm": position,
+            "depth_mm": 0.0,
+            "target_depth_mm": sc.target_depth_mm,
+            "packed_chip_mm": 0.0,
+            "chip_ratio": 0.0,
+            "diameter_mm": d,
+            "segment": 0,
+            "scenario": sc.name,
+        }
+
+    def step(self) -> None:
+        """Advance every lane with its action ``ev[:, _E_ACTION]`` (finite; clipped to the
+        box, ``flags[:, _F_IN_CLIPPED]`` saying whether it was clipped already); the lanes'
+        normals must hold a row for this step (:meth:`draw_normals`)."""
+        _step(*self._args)
+
+    def lane_info(self, k: int) -> dict:
+        """The step info of lane ``k`` (after :meth:`step`)."""
+        (torque, peak, thrust, _, meas_thrust, meas_speed, speed, valve, feed, _, per_rev,
+         position, depth, packed, chip, cutting, engagement, finish) = self.lanes.out[k].tolist()  # fmt: skip
+        e = self.ev[k].tolist()
+        clipped, diverged, breakage, finished = self.flags[k, _F_CLIPPED:_F_TERMINATED].tolist()
+        n_clipped, segment, _ = self.counts[k].tolist()
+        p = self.lanes.par[k]
+        sc = self.scenarios[k]
+        info = {
+            "t_s": float(self.lanes.state[k, _S_T]),
+            "command": e[_E_COMMAND],
+            "action_clipped": clipped,
+            "n_action_clipped": n_clipped,
+            "breakage": breakage,
+            "diverged": diverged,
+            "finished": finished,
+            "torque_Nmm": torque,
+            "torque_ref_Nmm": e[_E_TR],
+            "measured": e[_E_MEAS],
+            "peak_torque_Nmm": peak,
+            "breakage_torque_Nmm": float(p[_P_BREAK]),
+            "thrust_N": thrust,
+            "measured_thrust_N": meas_thrust,
+            "spindle_hz": speed,
+            "measured_spindle_hz": meas_speed,
+            "spindle_rpm": 60.0 * speed,
+            "voltage_V": e[_E_VOLTAGE],
+            "valve_opening": valve,
+            "feed_velocity_mm_s": feed,
+            "feed_mm_per_rev": per_rev,
+            "cutting": cutting != 0.0,
+            "engagement": engagement,
+            "position_mm": position,
+            "depth_mm": depth,
+            "target_depth_mm": sc.target_depth_mm,
+            "packed_chip_mm": packed,
+            "chip_ratio": chip,
+            "diameter_mm": sc.diameter_mm,
+            "segment": segment,
+            "scenario": sc.name,
+        }
+        if finished:
+            info["drilling_time_s"] = finish
+            info["machining_time_s"] = finish
+        return info
+
+    def info_arrays(self) -> dict:
+        """The step info of every lane, as arrays (the finish times with their masks): views
+        of one copy of each of the core's tables, so a step copies a few blocks of memory."""
+        o = self.lanes.out.copy()
+        e = self.ev.copy()
+        f = self.flags.copy()
+        c = self.counts.copy()
+        lane = self.lanes.par[:, [_P_BREAK, _P_TARGET, _P_D]]
+        done = f[:, _F_FINISHED]
+        finish = o[:, 17]  # NaN unless the hole was finished in this step
+        return {
+            "t_s": self.lanes.state[:, _S_T].copy(),
+            "command": e[:, _E_COMMAND],
+            "action_clipped": f[:, _F_CLIPPED],
+            "n_action_clipped": c[:, _C_N_CLIPPED],
+            "breakage": f[:, _F_BREAKAGE],
+            "diverged": f[:, _F_DIVERGED],
+            "finished": done,
+            "torque_Nmm": o[:, 0],
+            "torque_ref_Nmm": e[:, _E_TR],
+            "measured": e[:, _E_MEAS],
+            "peak_torque_Nmm": o[:, 1],
+            "breakage_torque_Nmm": lane[:, 0],
+            "thrust_N": o[:, 2],
+            "measured_thrust_N": o[:, 4],
+            "spindle_hz": o[:, 6],
+            "measured_spindle_hz": o[:, 5],
+            "spindle_rpm": 60.0 * o[:, 6],
+            "voltage_V": e[:, _E_VOLTAGE],
+            "valve_opening": o[:, 7],
+            "feed_velocity_mm_s": o[:, 8],
+            "feed_mm_per_rev": o[:, 10],
+            "cutting": o[:, 15] != 0.0,
+            "engagement": o[:, 16],
+            "position_mm": o[:, 11],
+            "depth_mm": o[:, 12],
+            "target_depth_mm": lane[:, 1],
+            "packed_chip_mm": o[:, 13],
+            "chip_ratio": o[:, 14],
+            "diameter_mm": lane[:, 2],
+            "segment": c[:, _C_SEGMENT],
+            "scenario": self.names.copy(),
+            "drilling_time_s": finish,
+            "_drilling_time_s": done.copy(),
+            "machining_time_s": finish.copy(),
+            "_machining_time_s": done.copy(),
+        }
 
 
 class MicroDrillingEnv(gym.Env):
@@ -164,8 +559,14 @@ class MicroDrillingEnv(gym.Env):
     ``diameter_mm``, ``segment`` (0 before the first cut, 1 after), ``scenario``, and
     ``drilling_time_s`` / ``machining_time_s`` once the hole is finished.
 
+    ## Vector env
+    ``gym.make_vec("machining_envs/MicroDrilling-v0", num_envs=N)`` gives a
+    :class:`MicroDrillingVectorEnv`: N drilling machines stepped by one compiled kernel,
+    lane ``i`` after ``reset(seed=s)`` exactly this env after ``reset(seed=s + i)``.
+
     ## Version History
-    * v0: first version.
+    * v0: first version. The physics now runs as a batched kernel shared with the vector
+      env (same numbers to the last bit, the same noise draws from ``np_random``).
 
     ## Example
     >>> import gymnasium as gym
@@ -209,36 +610,33 @@ class MicroDrillingEnv(gym.Env):
         max_episode_time_s: float = 150.0,
         **overrides,
     ):
-        self.params = resolve_params(
-            type(self).__name__, params, DrillingParams, DrillingParams.cheong_cho, overrides
+        self._core = _DrillingCore(
+            type(self).__name__,
+            1,
+            scenario,
+            control,
+            params,
+            reward,
+            max_episode_time_s,
+            overrides,
         )
-        if control not in CONTROL_MODES:
-            raise ValueError(f"control must be one of {CONTROL_MODES}, got {control!r}")
-        self.control = control
-        self.reward_weights = resolve_reward(reward, DrillingReward)
-        self.max_episode_time_s = check_episode_time(max_episode_time_s)
-        check_scenario_spec(scenario, DrillingScenario, DRILLING_SCENARIOS)
+        core = self._core
+        self.params = core.params
+        self.control = core.control
+        self.reward_weights = core.reward_weights
+        self.max_episode_time_s = core.max_episode_time_s
         self.default_scenario = scenario
         self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
-
-        p = self.params
-        if control == "voltage":
-            self.command_map = ActionMap(0.0, p.voltage_max)
-        else:
-            self.command_map = ActionMap(-p.feed_speed_max_mm_s, p.feed_speed_max_mm_s)
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
-        t_lo, t_hi = _TORQUE_OBS
-        low = np.array(
-            [t_lo, 0.0, t_lo, 0.0, -1.0, -1.0, 0.0, 0.0, 0.0] + [t_lo] * _HISTORY,
-            dtype=np.float32,
-        )
-        high = np.array(
-            [t_hi, 10.0, t_hi, 3.0, 1.0, 2.0, 2.0, 2.0, 1.0] + [t_hi] * _HISTORY,
-            dtype=np.float32,
-        )
-        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.command_map = core.command_map
+        self.action_space = core.action_space
+        self.observation_space = core.observation_space
         self.scenario: DrillingScenario | None = None
-        self.plant: DrillingPlant | None = None
+        self.plant: DrillingLanes | None = None
+
+    @property
+    def _n_clipped(self) -> int:
+        """Actions clipped so far this episode (``info["n_action_clipped"]``)."""
+        return int(self._core.counts[0, _C_N_CLIPPED])
 
     # ---- the command map, for classical agents -----------------------------------------
     def action_to_command(self, action):
@@ -252,192 +650,34 @@ class MicroDrillingEnv(gym.Env):
     # ---- gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        spec = scenario_option(options, self.default_scenario)
-        sc = drilling_scenario(spec, self.np_random)
-        self.scenario = sc
-        self._truth = sc.true_params(self.params)
-        self.plant = DrillingPlant(self._truth, sc.diameter_mm, sc.target_depth_mm)
-        self._tr = sc.reference_Nmm(self.params)
-        p = self.params
-        self._ts = p.sample_time_s
-        self._v0 = p.feed_velocity_mm_s
-        if self.control == "voltage":
-            self._prev_action = float(self.command_to_action(p.nominal_voltage))
-        else:
-            self._prev_action = float(self.command_to_action(p.feed_velocity_mm_s))
-        self._noise = self.np_random.standard_normal((_NOISE_BLOCK, 5)).tolist()
-        self._noise_i = 0
-        self._meas = [0.0] * (_HISTORY + 1)  # newest first, N·mm
-        self._thrust_meas = 0.0
-        self._speed_meas = self.plant.omega / (2.0 * math.pi)
-        self._n_clipped = 0
-        self._segment = 0
-        self._static_obs = (
-            min(self._tr / p.torque_scale_Nmm, 10.0),
-            min(sc.target_depth_mm / self.LENGTH_SCALE_MM, 2.0),
-            sc.diameter_mm,
-        )
+        core = self._core
+        info = core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        self.scenario = core.scenarios[0]
+        self.plant = core.lanes
         self._log = EpisodeLog(_LOG_FIELDS)
-        info = self._info_reset()
         self._log.record(info)
-        return self._obs(), info
+        return core.obs[0].copy(), info
 
     def step(self, action):
         if self.plant is None:
             raise RuntimeError("MicroDrillingEnv: call reset() before step()")
+        core = self._core
         a, clipped = check_action(action, "MicroDrillingEnv")
-        self._n_clipped += clipped
-        command = self.command_map.action_to_command(a)
-        p = self.params
-        if self.control == "voltage":
-            voltage, feed = command, self._v0
-        else:
-            voltage, feed = p.nominal_voltage, command
-        if self._noise_i == _NOISE_BLOCK:
-            self._noise = self.np_random.standard_normal((_NOISE_BLOCK, 5)).tolist()
-            self._noise_i = 0
-        noise = self._noise[self._noise_i]
-        self._noise_i += 1
-        s = self.plant.step(voltage, feed, noise)
-        t = self.plant.t_s
-        torque, peak, meas = s.torque_Nmm, s.peak_torque_Nmm, s.measured_torque_Nmm
-        diverged = not (
-            math.isfinite(torque)
-            and math.isfinite(peak)
-            and math.isfinite(meas)
-            and math.isfinite(s.thrust_N)
-            and math.isfinite(s.measured_thrust_N)
-            and math.isfinite(s.speed_hz)
-            and math.isfinite(s.measured_speed_hz)
-        )
-        if diverged:  # never seen; kept so that no NaN can reach an observation or a reward
-            torque = peak = meas = 0.0
-        hist = self._meas
-        hist.pop()
-        hist.insert(0, meas)
-        self._thrust_meas = s.measured_thrust_N if not diverged else 0.0
-        self._speed_meas = s.measured_speed_hz if not diverged else 0.0
-        self._prev_action = a
-        if s.cutting:
-            self._segment = 1
-        breakage = peak > self.plant.breakage_torque_Nmm
-        finished = s.finish_time_s is not None
-        terminated = diverged or breakage or finished
-        truncated = (not terminated) and t >= self.max_episode_time_s - 1e-9
-
-        w = self.reward_weights
-        e = torque / self._tr
-        reward = -w.tracking * abs(e - 1.0) - w.overtorque * max(0.0, e - w.overtorque_threshold)
-        if w.progress:
-            reward += w.progress * s.cutting_feed_mm_s / self._v0
-        if breakage or diverged:
-            reward -= w.breakage
-
-        sc = self.scenario
-        info = {
-            "t_s": t,
-            "command": command,
-            "action_clipped": clipped,
-            "n_action_clipped": self._n_clipped,
-            "breakage": breakage,
-            "diverged": diverged,
-            "finished": finished,
-            "torque_Nmm": torque,
-            "torque_ref_Nmm": self._tr,
-            "measured": meas,
-            "peak_torque_Nmm": peak,
-            "breakage_torque_Nmm": self.plant.breakage_torque_Nmm,
-            "thrust_N": s.thrust_N if not diverged else 0.0,
-            "measured_thrust_N": self._thrust_meas,
-            "spindle_hz": s.speed_hz if not diverged else 0.0,
-            "measured_spindle_hz": self._speed_meas,
-            "spindle_rpm": 60.0 * s.speed_hz if not diverged else 0.0,
-            "voltage_V": voltage,
-            "valve_opening": s.valve_opening,
-            "feed_velocity_mm_s": s.feed_velocity_mm_s,
-            "feed_mm_per_rev": s.feed_mm_per_rev if not diverged else 0.0,
-            "cutting": s.cutting,
-            "engagement": s.engagement,
-            "position_mm": s.position_mm,
-            "depth_mm": s.depth_mm,
-            "target_depth_mm": sc.target_depth_mm,
-            "packed_chip_mm": s.packed_mm,
-            "chip_ratio": s.chip_ratio,
-            "diameter_mm": sc.diameter_mm,
-            "segment": self._segment,
-            "scenario": sc.name,
-        }
-        if finished:
-            info["drilling_time_s"] = s.finish_time_s
-            info["machining_time_s"] = s.finish_time_s
+        core.ev[0, _E_ACTION] = a
+        core.flags[0, _F_IN_CLIPPED] = clipped
+        if core.counts[0, _C_NOISE] == _NOISE_ROWS:
+            core.draw_normals(0, core.block_rng[0])
+        core.step()
+        info = core.lane_info(0)
         record_step(self, self._log, info)
-        return self._obs(), float(reward), terminated, truncated, info
-
-    # ---- helpers -------------------------------------------------------------------------
-    def _obs(self) -> np.ndarray:
-        p = self.params
-        ts = p.torque_scale_Nmm
-        lo, hi = _TORQUE_OBS
-        m = self._meas
-        pl = self.plant
-        tr, target, diameter = self._static_obs
-        ls = self.LENGTH_SCALE_MM
-        return np.array(
-            (
-                min(max(m[0] / ts, lo), hi),
-                tr,
-                min(max(self._thrust_meas / p.thrust_scale_N, lo), hi),
-                min(max(self._speed_meas / self.SPEED_SCALE_HZ, 0.0), 3.0),
-                self._prev_action,
-                min(max(pl.position_mm / ls, -1.0), 2.0),
-                min(pl.depth_mm / ls, 2.0),
-                target,
-                diameter,
-                min(max(m[1] / ts, lo), hi),
-                min(max(m[2] / ts, lo), hi),
-                min(max(m[3] / ts, lo), hi),
-            ),
-            dtype=np.float32,
+        f = core.flags[0]
+        return (
+            core.obs[0].copy(),
+            float(core.ev[0, _E_REWARD]),
+            bool(f[_F_TERMINATED]),
+            bool(f[_F_TRUNCATED]),
+            info,
         )
-
-    def _info_reset(self) -> dict:
-        sc = self.scenario
-        pl = self.plant
-        hz = pl.omega / (2.0 * math.pi)
-        command = self.action_to_command(self._prev_action)
-        return {
-            "t_s": 0.0,
-            "command": float(command),
-            "action_clipped": False,
-            "n_action_clipped": 0,
-            "breakage": False,
-            "diverged": False,
-            "finished": False,
-            "torque_Nmm": 0.0,
-            "torque_ref_Nmm": float(self._tr),
-            "measured": 0.0,
-            "peak_torque_Nmm": 0.0,
-            "breakage_torque_Nmm": pl.breakage_torque_Nmm,
-            "thrust_N": 0.0,
-            "measured_thrust_N": 0.0,
-            "spindle_hz": hz,
-            "measured_spindle_hz": hz,
-            "spindle_rpm": 60.0 * hz,
-            "voltage_V": pl.voltage,
-            "valve_opening": pl.x1,
-            "feed_velocity_mm_s": 0.0,
-            "feed_mm_per_rev": 0.0,
-            "cutting": False,
-            "engagement": 0.0,
-            "position_mm": pl.position_mm,
-            "depth_mm": 0.0,
-            "target_depth_mm": sc.target_depth_mm,
-            "packed_chip_mm": 0.0,
-            "chip_ratio": 0.0,
-            "diameter_mm": sc.diameter_mm,
-            "segment": 0,
-            "scenario": sc.name,
-        }
 
     def render(self):
         if not ready_to_render(self, "MicroDrillingEnv"):
@@ -452,7 +692,7 @@ class MicroDrillingEnv(gym.Env):
                     [
                         ("torque", log["torque"], "C0-"),
                         ("measured", log["measured"], "C1-"),
-                        ("reference", [self._tr] * len(t), "k--"),
+                        ("reference", [float(self._core.ev[0, _E_TR])] * len(t), "k--"),
                     ],
                 ),
                 ("spindle (Hz)", [("spindle", log["speed"], "C2-")]),
@@ -465,3 +705,69 @@ class MicroDrillingEnv(gym.Env):
             f" | control = {self.control}",
         )
         return present_frame(img, self.render_mode, "MicroDrilling-v0")
+
+
+class MicroDrillingVectorEnv(LaneVectorEnv):
+    """``machining_envs/MicroDrilling-v0`` as a native vector env: N drilling machines
+    stepped as arrays.
+
+    ``gym.make_vec("machining_envs/MicroDrilling-v0", num_envs=N, **kwargs)`` takes the
+    keyword arguments of :class:`MicroDrillingEnv` (but not ``render_mode``), ``control``
+    included. Lane ``i`` after ``reset(seed=s)`` runs exactly the episode
+    ``MicroDrillingEnv.reset(seed=s + i)`` runs, with the same observations, rewards and
+    ``info`` (here a dict of arrays; ``drilling_time_s`` and ``machining_time_s`` come with
+    masks); every lane draws its own scenario from its own generator. Finished lanes are
+    reset in the same step (``metadata["autoreset_mode"]``): see
+    ``machining_envs.core.vector``.
+    """
+
+    env_name = "MicroDrillingEnv"
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        scenario: str | DrillingScenario = "train",
+        control: str = "voltage",
+        params: DrillingParams | None = None,
+        reward: DrillingReward | dict | None = None,
+        max_episode_time_s: float = 150.0,
+        **overrides,
+    ):
+        self._core = _DrillingCore(
+            type(self).__name__,
+            check_num_envs(num_envs),
+            scenario,
+            control,
+            params,
+            reward,
+            max_episode_time_s,
+            overrides,
+        )
+        super().__init__(num_envs, self._core.observation_space, self._core.action_space)
+        self.default_scenario = scenario
+        self.params = self._core.params
+        self.control = self._core.control
+        self.command_map = self._core.command_map
+        self.max_episode_time_s = self._core.max_episode_time_s
+
+    def _reset_lanes(self, lanes, options):
+        core = self._core
+        spec = scenario_option(options, self.default_scenario)
+        infos = [core.start(int(i), spec, self.lane_rngs[i]) for i in lanes]
+        part = {k: np.array([d[k] for d in infos]) for k in infos[0]}
+        return core.obs[lanes].copy(), part
+
+    def _step_lanes(self, actions):
+        core = self._core
+        core.ev[:, _E_ACTION] = actions[:, 0]  # clipped to the box by the kernel
+        for k in np.flatnonzero(core.counts[:, _C_NOISE] == _NOISE_ROWS).tolist():
+            core.draw_normals(k, core.block_rng[k])
+        core.step()
+        f = core.flags
+        return (
+            core.obs.copy(),
+            core.ev[:, _E_REWARD].copy(),
+            f[:, _F_TERMINATED].copy(),
+            f[:, _F_TRUNCATED].copy(),
+            core.info_arrays(),
+        )

@@ -32,7 +32,11 @@ The paper's eq. (19) leaves out the drilling torque acting back on the spindle; 
 kept as ``-T / I`` (the spindle slows under load, their Fig. 8(c)). Thrust follows the same
 cutting model. The valve is linear and integrated exactly (ZOH, matrices computed once);
 the spindle is integrated with fixed RK4 sub-steps in which the valve position comes from
-the exact solution. This module imports numpy and scipy only; it knows nothing of gymnasium.
+the exact solution.
+
+The physics is batched: :class:`DrillingLanes` holds N holes in arrays and one compiled
+kernel (:func:`advance`, numba, cached on disk) advances them; :class:`DrillingPlant` is
+one such lane. This module knows nothing of gymnasium.
 """
 
 from __future__ import annotations
@@ -41,7 +45,9 @@ import dataclasses
 import functools
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from machining_envs.core.checks import check_integer, check_range
@@ -50,6 +56,10 @@ from machining_envs.core.lti import zoh
 __all__ = [
     "DrillingParams",
     "DrillingPlant",
+    "DrillingLanes",
+    "LANE_SIGNALS",
+    "LANE_BLOCK",
+    "advance",
     "DrillingStep",
     "CuttingCoefficients",
     "cutting_coefficients",
@@ -384,6 +394,20 @@ class _GeometryKey:
             p.free_speed_hz(p.nominal_voltage),
         )
 
+    def shape(self) -> tuple:
+        """The fields other than the shear stress (what :func:`_cutting_geometry` needs)."""
+        return (
+            self.point_angle_deg,
+            self.helix_angle_deg,
+            self.web_ratio,
+            self.friction_angle_deg,
+            self.chisel_rake_deg,
+            self.indentation_coeff_MPa,
+            self.indentation_wedge_deg,
+            self.feed_velocity_mm_s,
+            self.nominal_speed_hz,
+        )
+
 
 @dataclass(frozen=True)
 class CuttingCoefficients:
@@ -421,8 +445,12 @@ class CuttingCoefficients:
         return self.chisel_thrust_per_feed / self.thrust_per_feed
 
 
-_N_LIP = 64
+_N_LIP = 64  # elements of each lip and of the chisel edge (at most 128: see _sum)
 _N_CHISEL = 24
+#: Element midpoints and lip element edges, in element widths.
+_LIP_MID = np.arange(_N_LIP) + 0.5
+_CHISEL_MID = np.arange(_N_CHISEL) + 0.5
+_LIP_EDGES = np.arange(1, _N_LIP + 1, dtype=np.float64)
 
 
 @functools.lru_cache(maxsize=64)
@@ -481,64 +509,171 @@ def cutting_coefficients(key: _GeometryKey, diameter_mm: float) -> CuttingCoeffi
     The engagement tables follow the drill point into the work: at a point depth ``z`` the
     lips cut out to radius ``z tan(kappa)``.
     """
-    k = math.radians(key.point_angle_deg / 2.0)
+    return _cutting_forces(_cutting_geometry(key.shape(), diameter_mm), key.shear_stress_MPa)
+
+
+class _Geometry(NamedTuple):
+    """What the cutting model of one drill computes before the shear stress enters: the
+    element radii and widths and the angle terms of eq. (6)-(14) (see
+    :func:`cutting_coefficients`)."""
+
+    sk: float
+    bt: float
+    r: np.ndarray
+    sin_phi: np.ndarray
+    fp_angle: np.ndarray
+    fq_den: np.ndarray
+    fq_angle: np.ndarray
+    q: np.ndarray
+    dc: float
+    rc: np.ndarray
+    cos_a: np.ndarray
+    neg_sin_a: np.ndarray
+    cos_b: np.ndarray
+    sin_b: np.ndarray
+    den: np.ndarray
+    indent: float
+    depth: np.ndarray
+
+
+@functools.lru_cache(maxsize=256)
+def _cutting_geometry(shape: tuple, diameter_mm: float) -> _Geometry:
+    """The shear-stress-free part of :func:`cutting_coefficients` for one drill (``shape``:
+    ``_GeometryKey.shape()``); a drill of another shear stress reuses it."""
+    point, helix, web_ratio, friction, chisel_rake, indent_c, wedge, v_f, n_rev = shape
+    k = math.radians(point / 2.0)
     sk, ck = math.sin(k), math.cos(k)
     radius = diameter_mm / 2.0
-    w = key.web_ratio * radius
-    tau = key.shear_stress_MPa
+    w = web_ratio * radius
     # Main lips.
     dr = (radius - w) / _N_LIP
-    r = w + dr * (np.arange(_N_LIP) + 0.5)
-    web = np.arcsin(w / r)
-    incl = np.arcsin(w / r * sk)
-    tan_psi = r / radius * math.tan(math.radians(key.helix_angle_deg))
+    r = w + dr * _LIP_MID
+    w_r = w / r
+    web = np.arcsin(w_r)
+    incl = np.arcsin(w_r * sk)
+    tan_psi = r / radius * math.tan(math.radians(helix))
     alpha = np.arctan(tan_psi * np.cos(web) / sk - np.sin(web) * ck)
-    beta = math.radians(key.friction_angle_deg)
-    phi = np.maximum(0.25 * math.pi - 0.5 * (beta - alpha), math.radians(5.0))
+    beta = math.radians(friction)
+    b_a = beta - alpha
+    phi = np.maximum(0.25 * math.pi - 0.5 * b_a, math.radians(5.0))
     eta = incl
+    tan_eta = np.tan(eta)
     bt = 0.5 * dr  # b t per unit feed: (dr / sin k) (1/2 sin k)
-    q = np.sqrt(np.cos(phi + beta - alpha) ** 2 + np.tan(eta) ** 2 * math.sin(beta) ** 2)
-    fp = (
-        tau
-        * bt
-        / np.sin(phi)
-        * (np.cos(beta - alpha) + np.tan(incl) * np.tan(eta) * math.sin(beta))
-        / q
-    )
-    fq = tau * bt / (np.sin(phi) * np.cos(incl)) * np.sin(beta - alpha) / q
-    lip_t = 2.0 * r * fp
-    lip_h = 2.0 * fq * sk
+    q = np.sqrt(np.cos(phi + beta - alpha) ** 2 + tan_eta**2 * math.sin(beta) ** 2)
+    sin_phi = np.sin(phi)
+    fp_angle = np.cos(b_a) + tan_eta * tan_eta * math.sin(beta)
+    fq_den = sin_phi * np.cos(incl)
+    fq_angle = np.sin(b_a)
     # Chisel edge: secondary cutting between the indentation zone and the web.
-    v_f = key.feed_velocity_mm_s
-    n_rev = key.nominal_speed_hz
     r_ind = min(v_f / (0.2 * _TWO_PI * n_rev), w)
     dc = (w - r_ind) / _N_CHISEL
-    rc = r_ind + dc * (np.arange(_N_CHISEL) + 0.5)
+    rc = r_ind + dc * _CHISEL_MID
     b_i = np.arctan(v_f / (_TWO_PI * n_rev * rc))
-    a_dc = math.radians(key.chisel_rake_deg) + b_i
+    a_dc = math.radians(chisel_rake) + b_i
     phi_c = 0.25 * math.pi + 0.5 * a_dc
     den = 2.0 * np.sin(phi_c) * np.cos(phi_c - a_dc)
-    fc = tau * dc * np.cos(a_dc) * np.cos(b_i) / den
-    ft = tau * dc * (-np.sin(a_dc)) * np.cos(b_i) / den
-    ch_t = 2.0 * rc * (fc * np.cos(b_i) + ft * np.sin(b_i))
-    ch_h = 2.0 * (fc * np.sin(b_i) + ft * np.cos(b_i))
-    indent = key.indentation_coeff_MPa * math.tan(math.radians(key.indentation_wedge_deg))
-
+    indent = indent_c * math.tan(math.radians(wedge))
     # Engagement against point depth: the chisel cuts from the first touch (its height is
     # w / tan(kappa), a few microns), the lips out to radius z tan(kappa).
-    radii = np.concatenate([[0.0, w], w + dr * np.arange(1, _N_LIP + 1)])
-    cum_t = np.concatenate([[0.0, ch_t.sum()], ch_t.sum() + np.cumsum(lip_t)])
-    cum_h = np.concatenate([[0.0, ch_h.sum()], ch_h.sum() + np.cumsum(lip_h)])
+    radii = np.concatenate([[0.0, w], w + dr * _LIP_EDGES])
     depth = radii / math.tan(k)
+    return _Geometry(
+        sk, bt, r, sin_phi, fp_angle, fq_den, fq_angle, q, dc, rc, np.cos(a_dc),
+        -np.sin(a_dc), np.cos(b_i), np.sin(b_i), den, indent, depth,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _sum(a):
+    """``a.sum()`` of numpy for a float64 vector of at most 128 elements, to the last bit:
+    numpy's pairwise summation, which below 128 elements keeps eight running sums."""
+    n = a.size
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[i]
+        return 0.0 + res
+    r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
+    i = 8
+    while i < n - n % 8:
+        r0 += a[i]
+        r1 += a[i + 1]
+        r2 += a[i + 2]
+        r3 += a[i + 3]
+        r4 += a[i + 4]
+        r5 += a[i + 5]
+        r6 += a[i + 6]
+        r7 += a[i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[i]
+        i += 1
+    return 0.0 + res
+
+
+@numba.njit(cache=True)
+def _forces(tau, bt, r, sin_phi, fp_angle, fq_den, fq_angle, q, sk, dc, rc, cos_a, neg_sin_a,
+            cos_b, sin_b, den, sums, cum_t, cum_h):  # fmt: skip
+    """The shear-stress part of the cutting model (eq. 6-13) of one drill: the torque and
+    thrust of every lip and chisel element per unit feed, summed as numpy sums.
+
+    ``sums`` gets ``[lip torque, lip thrust, chisel torque, chisel thrust]``; ``cum_t`` and
+    ``cum_h`` (``2 + r.size``) the torque and thrust cut out to each engagement radius.
+    """
+    n_lip, n_ch = r.size, rc.size
+    lip_t = np.empty(n_lip)
+    lip_h = np.empty(n_lip)
+    a = tau * bt
+    for i in range(n_lip):
+        fp = a / sin_phi[i] * fp_angle[i] / q[i]
+        fq = a / fq_den[i] * fq_angle[i] / q[i]
+        lip_t[i] = 2.0 * r[i] * fp
+        lip_h[i] = 2.0 * fq * sk
+    ch_t = np.empty(n_ch)
+    ch_h = np.empty(n_ch)
+    b = tau * dc
+    for i in range(n_ch):
+        fc = b * cos_a[i] * cos_b[i] / den[i]
+        ft = b * neg_sin_a[i] * cos_b[i] / den[i]
+        ch_t[i] = 2.0 * rc[i] * (fc * cos_b[i] + ft * sin_b[i])
+        ch_h[i] = 2.0 * (fc * sin_b[i] + ft * cos_b[i])
+    ch_t_sum = _sum(ch_t)
+    ch_h_sum = _sum(ch_h)
+    sums[0] = _sum(lip_t)
+    sums[1] = _sum(lip_h)
+    sums[2] = ch_t_sum
+    sums[3] = ch_h_sum
+    cum_t[0] = 0.0
+    cum_h[0] = 0.0
+    cum_t[1] = ch_t_sum
+    cum_h[1] = ch_h_sum
+    st = 0.0
+    sh = 0.0
+    for i in range(n_lip):  # np.cumsum: running sums in order
+        st = lip_t[i] if i == 0 else st + lip_t[i]
+        sh = lip_h[i] if i == 0 else sh + lip_h[i]
+        cum_t[2 + i] = ch_t_sum + st
+        cum_h[2 + i] = ch_h_sum + sh
+
+
+def _cutting_forces(g: _Geometry, tau: float) -> CuttingCoefficients:
+    """The cutting model of one drill (its :class:`_Geometry`) at the shear stress ``tau``."""
+    sums = np.empty(4)
+    cum_t = np.empty(2 + g.r.size)
+    cum_h = np.empty(2 + g.r.size)
+    _forces(float(tau), g.bt, g.r, g.sin_phi, g.fp_angle, g.fq_den, g.fq_angle, g.q, g.sk, g.dc,
+            g.rc, g.cos_a, g.neg_sin_a, g.cos_b, g.sin_b, g.den, sums, cum_t, cum_h)  # fmt: skip
+    lip_t, lip_h, ch_t, ch_h = sums.tolist()
     return CuttingCoefficients(
         torque_per_feed=float(cum_t[-1]),
         thrust_per_feed=float(cum_h[-1]),
-        indentation_per_feed2=float(indent),
-        lip_torque_per_feed=float(lip_t.sum()),
-        lip_thrust_per_feed=float(lip_h.sum()),
-        chisel_torque_per_feed=float(ch_t.sum()),
-        chisel_thrust_per_feed=float(ch_h.sum()),
-        engage_depth_mm=depth,
+        indentation_per_feed2=float(g.indent),
+        lip_torque_per_feed=lip_t,
+        lip_thrust_per_feed=lip_h,
+        chisel_torque_per_feed=ch_t,
+        chisel_thrust_per_feed=ch_h,
+        engage_depth_mm=g.depth,
         engage_torque=cum_t / cum_t[-1],
         engage_thrust=cum_h / cum_h[-1],
     )
@@ -622,8 +757,498 @@ class DrillingStep:
     finish_time_s: float | None = None
 
 
+# ---- the batched physics: N holes stepped as arrays, one kernel for one lane or many --------
+
+#: Entries of ``DrillingLanes.shared`` (the batch's constants). The valve's transition rows
+#: (``_G_HALF``: 2m+1 rows of 3, then 2 rows of 3) and the filter weights (m+1) follow the
+#: scalars.
+(_G_TS, _G_UMAX, _G_VMAX, _G_RETRACT, _G_K2, _G_K3, _G_N, _G_INERTIA, _G_OU_C, _G_OU_C_IN,
+ _G_OU_0, _G_OU_0_IN, _G_FA, _G_CHIP_LEN, _G_SQUARE, _G_H, _G_H2, _G_H6,
+ _G_HALF) = range(19)  # fmt: skip
+#: Columns of ``DrillingLanes.par`` (one row of parameters per lane).
+(_P_G0, _P_SIG_C, _P_SIG_0, _P_KT, _P_KH, _P_KH2, _P_FULL, _P_D, _P_TARGET, _P_NOISE_T,
+ _P_NOISE_H, _P_NOISE_S, _P_BREAK, _N_PAR) = range(14)  # fmt: skip
+#: Columns of ``DrillingLanes.state``.
+(_S_X1, _S_X2, _S_OMEGA, _S_T, _S_POS, _S_DEPTH, _S_PACKED, _S_XI_CHIP, _S_XI_CUT, _S_TQ_F,
+ _S_TH_F, _S_TQ, _S_TH, _S_VOLT, _S_FINISHED, _N_STATE) = range(16)  # fmt: skip
+#: Fields of ``DrillingLanes.out`` (one row per lane after each step), in the order of
+#: :class:`DrillingStep`; ``cutting`` is 0 or 1 and ``finish_time_s`` NaN until the hole ends.
+LANE_SIGNALS = tuple(f.name for f in dataclasses.fields(DrillingStep))
+_N_OUT = len(LANE_SIGNALS)
+#: Entries of each engagement table (``DrillingLanes.eng[k]``: point depth, torque share,
+#: thrust share).
+_N_ENG = _N_LIP + 2
+#: Inputs per lane of :func:`advance`: voltage, feed velocity and the five standard normals.
+_N_IN = 7
+#: 1 Hz, rad/s: below it the torque law is not evaluated (the drill stalls).
+_W_FLOOR = 2.0 * math.pi
+
+
+#: The fields of ``DrillingParams`` every lane of a batch shares (``DrillingLanes.shared``).
+_SHARED_FIELDS = (
+    "valve_natural_freq_hz",
+    "valve_damping",
+    "valve_static_gain_per_V",
+    "voltage_max",
+    "spindle_friction_exponent",
+    "spindle_drive_gain",
+    "spindle_friction",
+    "spindle_inertia_Nmm_s2",
+    "chip_length_diameters",
+    "chip_fluctuation_time_s",
+    "cutting_fluctuation_time_s",
+    "feed_speed_max_mm_s",
+    "retract_limit_mm",
+    "sensor_cutoff_hz",
+    "sample_time_s",
+    "substeps",
+)
+
+
+def _shared_key(p: DrillingParams) -> tuple:
+    return tuple(getattr(p, f) for f in _SHARED_FIELDS)
+
+
+def _shared_constants(p: DrillingParams) -> np.ndarray:
+    """``DrillingLanes.shared`` of a batch with the parameters ``p``."""
+    m = p.substeps
+    ts = p.sample_time_s
+    half, vstep = _valve_matrices(p.valve_natural_freq_rad_s, p.valve_damping, p.k1, ts, m)
+    fa, fw = _filter_weights(p.sensor_cutoff_hz, ts, m)
+    ou_c = math.exp(-ts / p.chip_fluctuation_time_s)
+    ou_0 = math.exp(-ts / p.cutting_fluctuation_time_s)
+    scalars = (
+        ts,
+        p.voltage_max,
+        p.feed_speed_max_mm_s,
+        p.retract_limit_mm,
+        p.spindle_drive_gain,
+        p.spindle_friction,
+        p.spindle_friction_exponent,
+        p.spindle_inertia_Nmm_s2,
+        ou_c,
+        math.sqrt(1.0 - ou_c**2),
+        ou_0,
+        math.sqrt(1.0 - ou_0**2),
+        fa,
+        p.chip_length_diameters,
+        2.0,  # x ** 2 of Python calls pow(); the exponent is data so that the kernel does too
+        ts / m,  # the RK4 step, and the factors of its stages
+        0.5 * (ts / m),
+        (ts / m) / 6.0,
+    )
+    return np.concatenate([scalars, half.ravel(), vstep.ravel(), fw])
+
+
+@numba.njit(cache=True, inline="always")
+def _pymax(a, b):
+    """``max(a, b)`` of Python for floats (``a`` unless ``b > a``)."""
+    return b if b > a else a
+
+
+@numba.njit(cache=True, inline="always")
+def _pymin(a, b):
+    """``min(a, b)`` of Python for floats (``a`` unless ``b < a``)."""
+    return b if b < a else a
+
+
+@numba.njit(cache=True, inline="always")
+def _interval(x, eng, k):
+    """The ``j`` with ``xp[j] <= x < xp[j + 1]`` in the depths ``xp = eng[k, 0]`` of lane
+    ``k``'s engagement tables, for ``x`` inside ``[xp[0], xp[-1])``. The search starts where
+    an evenly spaced table past ``xp[1]`` (the lips' part) would have ``x``; the comparisons
+    make it exact."""
+    last = eng.shape[2] - 2
+    x1 = eng[k, 0, 1]
+    j = 0
+    if x >= x1:
+        j = 1 + int(min((x - x1) / (eng[k, 0, 2] - x1), last))
+    j = min(j, last)
+    while j > 0 and eng[k, 0, j] > x:
+        j -= 1
+    while j < last and eng[k, 0, j + 1] <= x:
+        j += 1
+    return j
+
+
+@numba.njit(cache=True, inline="always")
+def _interp(x, eng, k, row, j):
+    """``np.interp(x, xp, fp)`` with numpy's arithmetic, ``xp = eng[k, 0]`` and
+    ``fp = eng[k, row]``, for ``x`` in the interval ``j`` (:func:`_interval`)."""
+    if np.isnan(x):
+        return x
+    x0 = eng[k, 0, j]
+    y0 = eng[k, row, j]
+    if x0 == x:
+        return y0
+    x1 = eng[k, 0, j + 1]
+    y1 = eng[k, row, j + 1]
+    slope = (y1 - y0) / (x1 - x0)
+    y = slope * (x - x0) + y0
+    if np.isnan(y):
+        y = slope * (x - x1) + y1
+        if np.isnan(y) and y0 == y1:
+            y = y0
+    return y
+
+
+@numba.njit(cache=True, inline="always")
+def _engagement(eng, k, full, depth_mm):
+    """Engaged shares of torque and thrust of lane ``k`` (tables ``eng[k]``) with the point
+    ``depth_mm`` below the surface (``full``: depth of full engagement)."""
+    if depth_mm >= full:
+        return 1.0, 1.0
+    if depth_mm <= 0.0:
+        return 0.0, 0.0
+    if np.isnan(depth_mm):
+        return depth_mm, depth_mm
+    j = _interval(depth_mm, eng, k)
+    return _interp(depth_mm, eng, k, 1, j), _interp(depth_mm, eng, k, 2, j)
+
+
+#: Columns of the step kernel's scratch: what a lane carries between the stages of its step.
+(_T_U, _T_BOTTOM, _T_CUT, _T_K4, _T_KH, _T_KH2, _T_LOAD, _T_W, _T_WB, _T_F1, _T_F2, _T_F3,
+ _T_XB, _T_XC, _T_TQ_F, _T_TH_F, _T_PEAK, _T_TQ, _T_TH, _N_TMP) = range(20)  # fmt: skip
+#: Lanes whose step advances together, stage by stage (see :func:`advance`).
+LANE_BLOCK = 16
+
+
+@numba.njit(cache=True)
+def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
+    """Advance lanes ``k0 .. k1 - 1`` by one sample; ``inputs[k - k0]`` = voltage (V), feed
+    velocity (mm/s) and five standard normals (chip and cutting fluctuation innovations,
+    torque, thrust and speed sensor noise) of lane ``k``; ``out[k]`` gets the signals of
+    :class:`DrillingStep`; ``tmp`` (at least ``k1 - k0`` rows of ``_N_TMP``) is scratch.
+
+    The lanes go through each stage of the step together (the commands, fluctuations, hole
+    and load; the four stages of every RK4 sub-step of the spindle; the new state and the
+    sensors), so that the slow operations of different lanes (``pow`` above all) overlap in
+    the processor; each lane's arithmetic is that of one hole, whatever the number of
+    lanes. (One function: the arrays are not passed on per lane.)
+    """
+    for k in range(k0, k1):
+        voltage = inputs[k - k0, 0]
+        feed = inputs[k - k0, 1]
+        ts = g[_G_TS]
+        u = _pymin(_pymax(voltage, 0.0), g[_G_UMAX])
+        vmax = g[_G_VMAX]
+        v = _pymin(_pymax(feed, -vmax), vmax)
+        state[k, _S_VOLT] = u
+
+        # Fluctuations (Ornstein-Uhlenbeck, unit variance), then the hole over this period.
+        xi_chip = g[_G_OU_C] * state[k, _S_XI_CHIP] + g[_G_OU_C_IN] * inputs[k - k0, 2]
+        xi_cut = g[_G_OU_0] * state[k, _S_XI_CUT] + g[_G_OU_0_IN] * inputs[k - k0, 3]
+        state[k, _S_XI_CHIP] = xi_chip
+        state[k, _S_XI_CUT] = xi_cut
+        z0 = state[k, _S_POS]
+        z1 = z0 + v * ts
+        if z1 < -g[_G_RETRACT]:
+            z1 = -g[_G_RETRACT]
+        bottom = state[k, _S_DEPTH]
+        cut_len = z1 - bottom if (v > 0.0 and z1 > bottom) else 0.0
+        cutting = cut_len > 0.0
+        d = par[k, _P_D]
+        if cutting:
+            v_cut = cut_len / ts
+            mid = bottom + 0.5 * cut_len
+            eng_t, eng_h = _engagement(eng, k, par[k, _P_FULL], mid)
+            packed = state[k, _S_PACKED] + 0.5 * cut_len
+            ratio = par[k, _P_G0] * (math.exp(packed / (g[_G_CHIP_LEN] * d)) - 1.0)
+            ratio *= _pymax(0.0, 1.0 + par[k, _P_SIG_C] * xi_chip)
+            load = (1.0 + ratio) * _pymax(0.0, 1.0 + par[k, _P_SIG_0] * xi_cut)
+            k4 = par[k, _P_KT] * v_cut * eng_t * load
+            kh = par[k, _P_KH] * v_cut * eng_h * load
+            kh2 = par[k, _P_KH2] * math.pow(v_cut * eng_h, g[_G_SQUARE])
+        else:
+            v_cut = 0.0
+            ratio = 0.0
+            eng_t = 0.0
+            k4 = 0.0
+            kh = 0.0
+            kh2 = 0.0
+        out[k, 8] = v
+        out[k, 9] = v_cut
+        out[k, 11] = z1
+        out[k, 14] = ratio
+        out[k, 15] = 1.0 if cutting else 0.0
+        out[k, 16] = eng_t
+        tmp[k - k0, _T_U] = u
+        tmp[k - k0, _T_BOTTOM] = bottom
+        tmp[k - k0, _T_CUT] = cut_len
+        tmp[k - k0, _T_K4] = k4
+        tmp[k - k0, _T_KH] = kh
+        tmp[k - k0, _T_KH2] = kh2
+        tmp[k - k0, _T_LOAD] = k4 / g[_G_INERTIA]
+
+        # Torque and thrust at the sub-step instants (j = 0..m); the sensors filter them.
+        w = state[k, _S_OMEGA]
+        fw = _G_HALF + 3 * (2 * m + 1) + 6
+        fa = g[_G_FA]
+        wj = w if w > _W_FLOOR else _W_FLOOR
+        tq = k4 / wj
+        th = kh / wj + kh2 / (wj * wj)
+        tmp[k - k0, _T_TQ_F] = state[k, _S_TQ_F] * fa + g[fw] * tq
+        tmp[k - k0, _T_TH_F] = state[k, _S_TH_F] * fa + g[fw] * th
+        tmp[k - k0, _T_PEAK] = tq if tq > 0.0 else 0.0
+        tmp[k - k0, _T_TQ] = tq
+        tmp[k - k0, _T_TH] = th
+        tmp[k - k0, _T_W] = w
+        # The valve's exact position at the start of the period.
+        tmp[k - k0, _T_XC] = (
+            g[_G_HALF] * state[k, _S_X1] + g[_G_HALF + 1] * state[k, _S_X2] + g[_G_HALF + 2] * u
+        )
+    # The spindle by RK4 with the valve exactly at every half sub-step and the load
+    # k4 / omega; the torque and thrust at the end of every sub-step.
+    fw = _G_HALF + 3 * (2 * m + 1) + 6
+    for j in range(m):
+        r = _G_HALF + 6 * j
+        for k in range(k0, k1):
+            u = tmp[k - k0, _T_U]
+            x1 = state[k, _S_X1]
+            x2 = state[k, _S_X2]
+            xa = tmp[k - k0, _T_XC]
+            tmp[k - k0, _T_XB] = g[r + 3] * x1 + g[r + 4] * x2 + g[r + 5] * u
+            tmp[k - k0, _T_XC] = g[r + 6] * x1 + g[r + 7] * x2 + g[r + 8] * u
+            w = tmp[k - k0, _T_W]
+            wa = w if w > 0.0 else 0.0
+            f = (
+                g[_G_K2] * xa
+                - g[_G_K3] * wa ** g[_G_N]
+                - tmp[k - k0, _T_LOAD] / (wa if wa > _W_FLOOR else _W_FLOOR)
+            )
+            tmp[k - k0, _T_F1] = f
+            wb = w + g[_G_H2] * f
+            tmp[k - k0, _T_WB] = wb if wb > 0.0 else 0.0
+        for k in range(k0, k1):
+            wb = tmp[k - k0, _T_WB]
+            f = (
+                g[_G_K2] * tmp[k - k0, _T_XB]
+                - g[_G_K3] * wb ** g[_G_N]
+                - tmp[k - k0, _T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
+            )
+            tmp[k - k0, _T_F2] = f
+            wb = tmp[k - k0, _T_W] + g[_G_H2] * f
+            tmp[k - k0, _T_WB] = wb if wb > 0.0 else 0.0
+        for k in range(k0, k1):
+            wb = tmp[k - k0, _T_WB]
+            f = (
+                g[_G_K2] * tmp[k - k0, _T_XB]
+                - g[_G_K3] * wb ** g[_G_N]
+                - tmp[k - k0, _T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
+            )
+            tmp[k - k0, _T_F3] = f
+            wc = tmp[k - k0, _T_W] + g[_G_H] * f
+            tmp[k - k0, _T_WB] = wc if wc > 0.0 else 0.0
+        for k in range(k0, k1):
+            wc = tmp[k - k0, _T_WB]
+            f4 = (
+                g[_G_K2] * tmp[k - k0, _T_XC]
+                - g[_G_K3] * wc ** g[_G_N]
+                - tmp[k - k0, _T_LOAD] / (wc if wc > _W_FLOOR else _W_FLOOR)
+            )
+            w = tmp[k - k0, _T_W] + g[_G_H6] * (
+                tmp[k - k0, _T_F1] + 2.0 * tmp[k - k0, _T_F2] + 2.0 * tmp[k - k0, _T_F3] + f4
+            )
+            if w < 0.0:
+                w = 0.0
+            tmp[k - k0, _T_W] = w
+            wj = w if w > _W_FLOOR else _W_FLOOR
+            tq = tmp[k - k0, _T_K4] / wj
+            th = tmp[k - k0, _T_KH] / wj + tmp[k - k0, _T_KH2] / (wj * wj)
+            if tq > tmp[k - k0, _T_PEAK]:
+                tmp[k - k0, _T_PEAK] = tq
+            tmp[k - k0, _T_TQ_F] += g[fw + j + 1] * tq
+            tmp[k - k0, _T_TH_F] += g[fw + j + 1] * th
+            tmp[k - k0, _T_TQ] = tq
+            tmp[k - k0, _T_TH] = th
+    for k in range(k0, k1):
+        ts = g[_G_TS]
+        u = tmp[k - k0, _T_U]
+        x1 = state[k, _S_X1]
+        x2 = state[k, _S_X2]
+        r = _G_HALF + 3 * (2 * m + 1)
+        state[k, _S_X1] = g[r] * x1 + g[r + 1] * x2 + g[r + 2] * u
+        state[k, _S_X2] = g[r + 3] * x1 + g[r + 4] * x2 + g[r + 5] * u
+        w = tmp[k - k0, _T_W]
+        state[k, _S_OMEGA] = w
+        tq_f = tmp[k - k0, _T_TQ_F]
+        th_f = tmp[k - k0, _T_TH_F]
+        state[k, _S_TQ_F] = tq_f
+        state[k, _S_TH_F] = th_f
+        state[k, _S_TQ] = tmp[k - k0, _T_TQ]
+        state[k, _S_TH] = tmp[k - k0, _T_TH]
+
+        # The drill point and the chips.
+        z1 = out[k, 11]
+        cut_len = tmp[k - k0, _T_CUT]
+        bottom = tmp[k - k0, _T_BOTTOM]
+        state[k, _S_POS] = z1
+        if cut_len > 0.0:
+            state[k, _S_DEPTH] = z1
+            state[k, _S_PACKED] += cut_len
+        if z1 < 0.0:
+            state[k, _S_PACKED] = 0.0  # the point left the hole: the flutes are cleared
+        time = state[k, _S_T]
+        finish = np.nan
+        if state[k, _S_FINISHED] == 0.0 and state[k, _S_DEPTH] >= par[k, _P_TARGET]:
+            frac = (par[k, _P_TARGET] - bottom) / cut_len if cut_len > 0 else 1.0
+            finish = time + _pymin(_pymax(frac, 0.0), 1.0) * ts
+            state[k, _S_FINISHED] = 1.0
+        state[k, _S_T] = time + ts
+        speed_hz = w / (2.0 * math.pi)
+        v_cut = out[k, 9]
+        out[k, 0] = tmp[k - k0, _T_TQ]
+        out[k, 1] = tmp[k - k0, _T_PEAK]
+        out[k, 2] = tmp[k - k0, _T_TH]
+        out[k, 3] = tq_f + par[k, _P_NOISE_T] * inputs[k - k0, 4]
+        out[k, 4] = th_f + par[k, _P_NOISE_H] * inputs[k - k0, 5]
+        out[k, 5] = speed_hz + par[k, _P_NOISE_S] * inputs[k - k0, 6]
+        out[k, 6] = speed_hz
+        out[k, 7] = state[k, _S_X1]
+        out[k, 10] = (v_cut / speed_hz) if speed_hz > 1.0 else 0.0
+        out[k, 12] = state[k, _S_DEPTH]
+        out[k, 13] = state[k, _S_PACKED]
+        out[k, 17] = finish
+
+
+@numba.njit(cache=True)
+def _step_lanes(m, g, par, eng, state, inputs, out):
+    """Advance every lane by one sample (:func:`advance`, ``LANE_BLOCK`` lanes at a time;
+    ``inputs[k]`` is lane ``k``'s)."""
+    n = state.shape[0]
+    tmp = np.empty((LANE_BLOCK, _N_TMP))
+    for k0 in range(0, n, LANE_BLOCK):
+        k1 = min(k0 + LANE_BLOCK, n)
+        advance(k0, k1, m, g, par, eng, state, inputs[k0:k1], out, tmp)
+
+
+class DrillingLanes:
+    """N independent holes drilled together: the physics of every drilling env.
+
+    Each lane has its own parameters, drill and hole (:meth:`start`); :meth:`step`
+    advances every lane by one sample with one compiled kernel whose arithmetic per lane is
+    exactly that of a single hole, so lane ``i`` of a batch and a batch of one give the same
+    numbers to the last bit. The lanes share the valve, the spindle, the sensor filter, the
+    fluctuations' correlation times, the stage's limits, the sample time and the RK4
+    sub-steps (those of the ``params`` given here; :meth:`start` refuses a lane whose
+    parameters differ in them); the drill, the hole, the cutting and chip constants, the
+    fluctuations' sizes and the sensor noise are the lane's own.
+
+    Layout: ``shared`` the batch's constants (with the valve's exact transitions and the
+    sensor filter's weights); one row per lane of ``par`` the lane's parameters and its
+    drill's cutting constants, ``eng`` the engagement tables of the drill (point depth,
+    torque share, thrust share), ``state`` the valve, spindle, drill point, chips,
+    fluctuations and sensor filters, ``out`` the signals of the last step
+    (``LANE_SIGNALS``).
+
+    Parameters
+    ----------
+    params : DrillingParams
+        Parameters of every lane until :meth:`start` gives it its own; sets the sub-steps.
+    n : int
+        Number of lanes.
+    """
+
+    def __init__(self, params: DrillingParams, n: int = 1) -> None:
+        check_integer("n", n, 1, 1 << 24)
+        self.n = int(n)
+        self.params = params
+        self.m = params.substeps
+        self._key = _shared_key(params)
+        #: The batch's constants: valve, spindle, filter, fluctuation times, sample time.
+        self.shared = _shared_constants(params)
+        self.par = np.zeros((self.n, _N_PAR))
+        self.eng = np.zeros((self.n, 3, _N_ENG))
+        self.state = np.zeros((self.n, _N_STATE))
+        #: Signals of the last step, one row per lane (columns: ``LANE_SIGNALS``).
+        self.out = np.zeros((self.n, _N_OUT))
+        self.out[:, -1] = np.nan
+
+    def start(
+        self,
+        lane: int,
+        params: DrillingParams,
+        diameter_mm: float,
+        target_depth_mm: float,
+        start_position_mm: float = 0.0,
+        coefficients: CuttingCoefficients | None = None,
+    ) -> None:
+        """Set ``lane``'s parameters, drill and hole, and start it (:meth:`restart`).
+
+        ``coefficients``: the drill's cutting model if the caller has it
+        (``params.coefficients(diameter_mm)``).
+        """
+        p = params
+        check_range("target_depth_mm", target_depth_mm, 0.0, 100.0, lo_open=True)
+        check_range("start_position_mm", start_position_mm, -p.retract_limit_mm, 0.0)
+        if p is not self.params and _shared_key(p) != self._key:
+            own = dict(zip(_SHARED_FIELDS, _shared_key(p), strict=True))
+            batch = dict(zip(_SHARED_FIELDS, self._key, strict=True))
+            diff = {f: v for f, v in own.items() if v != batch[f]}
+            raise ValueError(
+                f"a lane's {', '.join(diff)} must be the batch's "
+                f"({', '.join(f'{f}={batch[f]!r}' for f in diff)}), got {diff}"
+            )
+        c = p.coefficients(diameter_mm) if coefficients is None else coefficients
+        self.par[lane] = (
+            p.chip_friction,
+            p.chip_fluctuation,
+            p.cutting_fluctuation,
+            _TWO_PI * c.torque_per_feed,
+            _TWO_PI * c.thrust_per_feed,
+            _TWO_PI**2 * c.indentation_per_feed2,
+            c.full_engagement_mm,
+            float(diameter_mm),
+            float(target_depth_mm),
+            p.torque_noise_Nmm,
+            p.thrust_noise_N,
+            p.speed_noise_hz,
+            p.breakage_torque_Nmm(diameter_mm),
+        )
+        e = self.eng[lane]
+        e[0] = c.engage_depth_mm
+        e[1] = c.engage_torque
+        e[2] = c.engage_thrust
+        self.restart(lane, p, start_position_mm)
+
+    def restart(
+        self,
+        lane: int,
+        params: DrillingParams,
+        position_mm: float = 0.0,
+        speed_hz: float | None = None,
+        voltage: float | None = None,
+    ) -> None:
+        """Start ``lane``'s hole again: the spindle running free at ``voltage`` (default
+        nominal; or at ``speed_hz``), the valve settled, the drill point at ``position_mm``,
+        no hole, no chips, fluctuations and sensor filters at zero."""
+        u = params.nominal_voltage if voltage is None else float(voltage)
+        s = self.state[lane]
+        s[:] = 0.0
+        s[_S_VOLT] = u
+        s[_S_X1] = params.valve_static_gain_per_V * u
+        s[_S_OMEGA] = params.free_speed_rad_s(u) if speed_hz is None else _TWO_PI * speed_hz
+        s[_S_POS] = position_mm
+
+    def step(self, inputs: np.ndarray) -> None:
+        """Advance every lane by one sample; ``inputs[k]`` = voltage (V), feed velocity
+        (mm/s) and five standard normals of lane ``k``; results in ``out``."""
+        inputs = np.asarray(inputs, dtype=np.float64)
+        if inputs.shape != (self.n, _N_IN):
+            raise ValueError(f"inputs must have shape ({self.n}, {_N_IN}), got {inputs.shape}")
+        _step_lanes(self.m, self.shared, self.par, self.eng, self.state, inputs, self.out)
+
+
+def _state_property(col: int, doc: str) -> property:
+    def get(self) -> float:
+        return float(self._lanes.state[0, col])
+
+    return property(get, doc=doc)
+
+
 class DrillingPlant:
-    """Simulates one hole: valve, spindle, drill point and chips; numpy and floats only.
+    """Simulates one hole: valve, spindle, drill point and chips (a :class:`DrillingLanes`
+    of one lane).
 
     Parameters
     ----------
@@ -652,64 +1277,46 @@ class DrillingPlant:
         self.diameter_mm = float(diameter_mm)
         self.target_depth_mm = float(target_depth_mm)
         self.start_position_mm = float(start_position_mm)
-        p = params
-        self.coeffs = p.coefficients(diameter_mm)
-        m = p.substeps
-        half, vstep = _valve_matrices(
-            p.valve_natural_freq_rad_s, p.valve_damping, p.k1, p.sample_time_s, m
+        self.coeffs = params.coefficients(diameter_mm)
+        self.breakage_torque_Nmm = params.breakage_torque_Nmm(diameter_mm)
+        self._lanes = DrillingLanes(params, 1)
+        self._lanes.start(
+            0, params, self.diameter_mm, self.target_depth_mm, self.start_position_mm, self.coeffs
         )
-        # Rows as float tuples: three products each beat a numpy call at this size.
-        self._half = [tuple(float(v) for v in row) for row in half]
-        self._vstep = [tuple(float(v) for v in row) for row in vstep]
-        self._fa, self._fw = _filter_weights(p.sensor_cutoff_hz, p.sample_time_s, m)
-        self._ou_c = math.exp(-p.sample_time_s / p.chip_fluctuation_time_s)
-        self._ou_c_in = math.sqrt(1.0 - self._ou_c**2)
-        self._ou_0 = math.exp(-p.sample_time_s / p.cutting_fluctuation_time_s)
-        self._ou_0_in = math.sqrt(1.0 - self._ou_0**2)
-        self._kt = _TWO_PI * self.coeffs.torque_per_feed
-        self._kh = _TWO_PI * self.coeffs.thrust_per_feed
-        self._kh2 = _TWO_PI**2 * self.coeffs.indentation_per_feed2
-        self._full = self.coeffs.full_engagement_mm
-        self.breakage_torque_Nmm = p.breakage_torque_Nmm(diameter_mm)
-        self.reset()
+        self._inputs = np.zeros((1, _N_IN))
 
     def reset(self, speed_hz: float | None = None, voltage: float | None = None) -> None:
         """Spindle running free at ``voltage`` (default nominal), valve settled, drill at start."""
-        p = self.params
-        u = p.nominal_voltage if voltage is None else float(voltage)
-        self.voltage = u
-        self.x1 = p.valve_static_gain_per_V * u
-        self.x2 = 0.0
-        w = p.free_speed_rad_s(u) if speed_hz is None else _TWO_PI * speed_hz
-        self.omega = w
-        self.t_s = 0.0
-        self.position_mm = self.start_position_mm
-        self.depth_mm = 0.0
-        self.packed_mm = 0.0
-        self.xi_chip = 0.0
-        self.xi_cut = 0.0
-        self.torque_filt = 0.0
-        self.thrust_filt = 0.0
-        self.torque_Nmm = 0.0
-        self.thrust_N = 0.0
-        self.finished = False
+        self._lanes.restart(0, self.params, self.start_position_mm, speed_hz, voltage)
+
+    x1 = _state_property(_S_X1, "Spool opening x_v.")
+    x2 = _state_property(_S_X2, "Spool velocity dx_v/dt, 1/s.")
+    omega = _state_property(_S_OMEGA, "Spindle speed, rad/s.")
+    t_s = _state_property(_S_T, "Time since the hole started, s.")
+    position_mm = _state_property(_S_POS, "Drill point below the surface, mm.")
+    depth_mm = _state_property(_S_DEPTH, "Hole depth, mm.")
+    packed_mm = _state_property(_S_PACKED, "Length drilled since the chips were cleared, mm.")
+    xi_chip = _state_property(_S_XI_CHIP, "Chip-friction fluctuation (unit OU process).")
+    xi_cut = _state_property(_S_XI_CUT, "Cutting fluctuation (unit OU process).")
+    torque_filt = _state_property(_S_TQ_F, "Torque sensor filter output, N·mm.")
+    thrust_filt = _state_property(_S_TH_F, "Thrust sensor filter output, N.")
+    torque_Nmm = _state_property(_S_TQ, "Torque at the last sample instant, N·mm.")
+    thrust_N = _state_property(_S_TH, "Thrust at the last sample instant, N.")
+    voltage = _state_property(_S_VOLT, "Valve voltage now applied, V.")
+
+    @property
+    def finished(self) -> bool:
+        """Whether the hole has reached its target depth."""
+        return bool(self._lanes.state[0, _S_FINISHED])
 
     @property
     def state(self) -> np.ndarray:
         """``[x_v, dx_v/dt, omega (rad/s)]``: the paper's x1, x2, x3 (eq. 18-19)."""
-        return np.array([self.x1, self.x2, self.omega])
+        return self._lanes.state[0, [_S_X1, _S_X2, _S_OMEGA]].copy()
 
     def engagement(self, depth_mm: float) -> tuple[float, float]:
         """Engaged share of torque and thrust with the point ``depth_mm`` below the surface."""
-        if depth_mm >= self._full:
-            return 1.0, 1.0
-        if depth_mm <= 0.0:
-            return 0.0, 0.0
-        c = self.coeffs
-        return (
-            float(np.interp(depth_mm, c.engage_depth_mm, c.engage_torque)),
-            float(np.interp(depth_mm, c.engage_depth_mm, c.engage_thrust)),
-        )
+        return _engagement(self._lanes.eng, 0, self._lanes.par[0, _P_FULL], float(depth_mm))
 
     def step(
         self,
@@ -722,121 +1329,16 @@ class DrillingPlant:
         ``noise`` holds five standard normal draws: the chip and cutting fluctuation
         innovations and the torque, thrust and speed sensor noises.
         """
-        p = self.params
-        m = p.substeps
-        ts = p.sample_time_s
-        h = ts / m
-        u = min(max(voltage, 0.0), p.voltage_max)
-        vmax = p.feed_speed_max_mm_s
-        v = min(max(feed_velocity_mm_s, -vmax), vmax)
-        self.voltage = u
-        n_chip, n_cut, n_tq, n_th, n_sp = noise
-
-        # Fluctuations (Ornstein-Uhlenbeck, unit variance), then the hole over this period.
-        self.xi_chip = self._ou_c * self.xi_chip + self._ou_c_in * n_chip
-        self.xi_cut = self._ou_0 * self.xi_cut + self._ou_0_in * n_cut
-        z0 = self.position_mm
-        z1 = z0 + v * ts
-        if z1 < -p.retract_limit_mm:
-            z1 = -p.retract_limit_mm
-        bottom = self.depth_mm
-        cut_len = z1 - bottom if (v > 0.0 and z1 > bottom) else 0.0
-        cutting = cut_len > 0.0
-        d = self.diameter_mm
-        if cutting:
-            v_cut = cut_len / ts
-            mid = bottom + 0.5 * cut_len
-            eng_t, eng_h = self.engagement(mid)
-            packed = self.packed_mm + 0.5 * cut_len
-            g = p.chip_friction * (math.exp(packed / (p.chip_length_diameters * d)) - 1.0)
-            g *= max(0.0, 1.0 + p.chip_fluctuation * self.xi_chip)
-            load = (1.0 + g) * max(0.0, 1.0 + p.cutting_fluctuation * self.xi_cut)
-            k4 = self._kt * v_cut * eng_t * load
-            kh = self._kh * v_cut * eng_h * load
-            kh2 = self._kh2 * (v_cut * eng_h) ** 2
-        else:
-            v_cut = 0.0
-            g = 0.0
-            eng_t = 0.0
-            k4 = kh = kh2 = 0.0
-
-        # Valve exactly at every half sub-step; spindle by RK4 with the load k4 / omega.
-        x1, x2 = self.x1, self.x2
-        xv = [a * x1 + b * x2 + c * u for a, b, c in self._half]
-        k2, k3, n = p.spindle_drive_gain, p.spindle_friction, p.spindle_friction_exponent
-        load_c = k4 / p.spindle_inertia_Nmm_s2
-        w_floor = _TWO_PI  # 1 Hz: below it the torque law is not evaluated (the drill stalls)
-        w = self.omega
-        ws = [w]
-        for j in range(m):
-            xa, xb, xc = xv[2 * j], xv[2 * j + 1], xv[2 * j + 2]
-            wa = w if w > 0.0 else 0.0
-            f1 = k2 * xa - k3 * wa**n - load_c / (wa if wa > w_floor else w_floor)
-            wb = w + 0.5 * h * f1
-            wb = wb if wb > 0.0 else 0.0
-            f2 = k2 * xb - k3 * wb**n - load_c / (wb if wb > w_floor else w_floor)
-            wb = w + 0.5 * h * f2
-            wb = wb if wb > 0.0 else 0.0
-            f3 = k2 * xb - k3 * wb**n - load_c / (wb if wb > w_floor else w_floor)
-            wc = w + h * f3
-            wc = wc if wc > 0.0 else 0.0
-            f4 = k2 * xc - k3 * wc**n - load_c / (wc if wc > w_floor else w_floor)
-            w = w + h / 6.0 * (f1 + 2.0 * f2 + 2.0 * f3 + f4)
-            if w < 0.0:
-                w = 0.0
-            ws.append(w)
-        (a1, b1, c1), (a2, b2, c2) = self._vstep
-        self.x1 = a1 * x1 + b1 * x2 + c1 * u
-        self.x2 = a2 * x1 + b2 * x2 + c2 * u
-        self.omega = w
-
-        # Torque and thrust at the sub-step instants; the sensors filter them.
-        fa, fw = self._fa, self._fw
-        tq_f = self.torque_filt * fa
-        th_f = self.thrust_filt * fa
-        peak = 0.0
-        for j in range(m + 1):
-            wj = ws[j] if ws[j] > w_floor else w_floor
-            tq = k4 / wj
-            th = kh / wj + kh2 / (wj * wj)
-            if tq > peak:
-                peak = tq
-            tq_f += fw[j] * tq
-            th_f += fw[j] * th
-        self.torque_filt, self.thrust_filt = tq_f, th_f
-        self.torque_Nmm, self.thrust_N = tq, th
-
-        # The drill point and the chips.
-        self.position_mm = z1
-        if cutting:
-            self.depth_mm = z1
-            self.packed_mm += cut_len
-        if z1 < 0.0:
-            self.packed_mm = 0.0  # the point left the hole: the flutes are cleared
-        finish = None
-        if not self.finished and self.depth_mm >= self.target_depth_mm:
-            frac = (self.target_depth_mm - bottom) / cut_len if cut_len > 0 else 1.0
-            finish = self.t_s + min(max(frac, 0.0), 1.0) * ts
-            self.finished = True
-        self.t_s += ts
-        speed_hz = w / _TWO_PI
+        inp = self._inputs
+        inp[0, 0] = voltage
+        inp[0, 1] = feed_velocity_mm_s
+        inp[0, 2:] = noise
+        self._lanes.step(inp)
+        o = self._lanes.out[0].tolist()
+        finish = o[17]
         return DrillingStep(
-            torque_Nmm=tq,
-            peak_torque_Nmm=peak,
-            thrust_N=th,
-            measured_torque_Nmm=tq_f + p.torque_noise_Nmm * n_tq,
-            measured_thrust_N=th_f + p.thrust_noise_N * n_th,
-            measured_speed_hz=speed_hz + p.speed_noise_hz * n_sp,
-            speed_hz=speed_hz,
-            valve_opening=self.x1,
-            feed_velocity_mm_s=v,
-            cutting_feed_mm_s=v_cut,
-            feed_mm_per_rev=(v_cut / speed_hz) if speed_hz > 1.0 else 0.0,
-            position_mm=z1,
-            depth_mm=self.depth_mm,
-            packed_mm=self.packed_mm,
-            chip_ratio=g,
-            cutting=cutting,
-            engagement=eng_t,
-            finish_time_s=finish,
+            *o[:15],
+            cutting=o[15] != 0.0,
+            engagement=o[16],
+            finish_time_s=None if math.isnan(finish) else finish,
         )

@@ -70,7 +70,7 @@ class TurningReward:
     """w_b, one-off penalty when the tool breaks."""
 
     def __post_init__(self) -> None:
-        check_reward_weights(self, allow_bool=True)
+        check_reward_weights(self)
 
 
 @numba.njit(cache=True)

@@ -42,9 +42,8 @@ __all__ = ["TurningParams", "TurningPlant", "TurningStep", "SPINDLE_RPM_RANGE"]
 SPINDLE_RPM_RANGE = (50.0, 3000.0)
 
 
-#: The range check of this process's parameters and scenarios. Unlike the other processes'
-#: it takes a bool as the number 0 or 1; kept so that no value accepted before is refused.
-_check = functools.partial(check_range, allow_bool=True)
+#: The range check of this process's parameters and scenarios (a bool is not a number).
+_check = check_range
 
 
 @dataclass(frozen=True)
@@ -123,12 +122,12 @@ class TurningParams:
         _check("feed_exponent", self.feed_exponent, 0.0, 2.0, lo_open=True)
         _check("sensor_gain", self.sensor_gain, 0.0, 1e6, lo_open=True)
         _check("sensor_cutoff_hz", self.sensor_cutoff_hz, 0.0, 1e4, lo_open=True)
-        if self.sensor_filter_order not in (1, 2):
+        if isinstance(self.sensor_filter_order, bool) or self.sensor_filter_order not in (1, 2):
             raise ValueError(
                 f"sensor_filter_order must be 1 or 2, got {self.sensor_filter_order!r}"
             )
         _check("sample_time_s", self.sample_time_s, 0.0, 10.0, lo_open=True)
-        check_integer("substeps", self.substeps, 1, 10000, allow_bool=True)
+        check_integer("substeps", self.substeps, 1, 10000)
         _check("command_max", self.command_max, 0.0, 1e9, lo_open=True)
         _check("breakage_force_N", self.breakage_force_N, 0.0, 1e7, lo_open=True)
         _check("noise_std_N", self.noise_std_N, 0.0, 1e5)

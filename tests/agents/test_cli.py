@@ -32,3 +32,80 @@ def test_cli_rejects_bad_arguments():
         main(["reproduce", "grinding"])
     with pytest.raises(SystemExit):
         main(["reproduce", "turning", "--sensor-gain", "-3"])
+
+
+def test_cli_help_shows_defaults_and_version(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code == 0
+    assert capsys.readouterr().out.startswith("machining-bench ")
+    with pytest.raises(SystemExit):
+        main(["evaluate", "--help"])
+    text = capsys.readouterr().out
+    assert (
+        "(default: ['test'])" in text
+        and "(default: None)" not in text
+        and "--force" in text
+        and "--stats" in text
+    )
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    text = capsys.readouterr().out
+    assert "``" not in text and "convert-stats" in text
+
+
+def test_cli_user_errors_are_one_line_with_exit_2(tmp_path, capsys):
+    model = "agents/rl/pretrained/turning_ppo/best_model.zip"
+    # A model evaluated on another env than it was trained on, without --force.
+    assert main(["evaluate", "--model", model, "--env", "machining_envs/EndMilling-v0"]) == 2
+    err = capsys.readouterr().err
+    assert "trained on machining_envs/Turning-v0" in err and "--force" in err
+    assert err.count("\n") == 1
+    assert main(["evaluate", "--model", str(tmp_path / "no.zip"), "--env", "x"]) == 2
+    assert "no model" in capsys.readouterr().err
+    assert main(["evaluate", "--model", model, "--env", "machining_envs/Nope-v0"]) == 2
+    assert "unknown env id" in capsys.readouterr().err
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    assert main(["benchmark", "--quick", "--out", str(blocker)]) == 2
+    assert "machining-bench benchmark:" in capsys.readouterr().err
+    assert main(["convert-stats", str(blocker)]) == 2
+    assert "convert-stats" in capsys.readouterr().err
+
+
+def test_cli_evaluates_a_model_trained_elsewhere(tmp_path, capsys):
+    """A model without its run folder: --algo and --stats give what config.json would."""
+    import shutil
+
+    src = "agents/rl/pretrained/turning_ppo"
+    shutil.copy(f"{src}/best_model.zip", tmp_path / "policy.zip")
+    shutil.copy(f"{src}/best_vecnormalize.json", tmp_path / "norm.json")
+    args = ["evaluate", "--model", str(tmp_path / "policy.zip"), "--env"]
+    args += ["machining_envs/Turning-v0", "--scenarios", "paper_700", "--episodes", "1"]
+    assert main(args) == 2  # no config.json, no algorithm in the file name
+    assert "algo" in capsys.readouterr().err
+    assert main([*args, "--algo", "ppo", "--stats", str(tmp_path / "norm.json")]) == 0
+    assert "primary score" in capsys.readouterr().out
+
+
+def test_plots_and_renders_leave_the_users_matplotlib_backend_alone(tmp_path):
+    """The library draws on its own Agg canvases: a notebook's backend (here svg) is not
+    switched, and no pyplot figure is left open."""
+    code = f"""
+import matplotlib
+matplotlib.use("svg")
+import gymnasium as gym
+import machining_envs
+from agents.bench.benchmark import _plot_trajectories
+from agents.bench.declarations import benchmark_spec
+env = gym.make("machining_envs/Turning-v0", render_mode="rgb_array")
+env.reset(seed=0)
+env.step(env.action_space.sample())
+assert env.render().ndim == 3
+_plot_trajectories(benchmark_spec("machining_envs/Turning-v0"), {str(tmp_path / "t.png")!r}, 0)
+import matplotlib.pyplot as plt
+assert matplotlib.get_backend() == "svg", matplotlib.get_backend()
+assert plt.get_fignums() == []
+"""
+    subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
+    assert (tmp_path / "t.png").stat().st_size > 0

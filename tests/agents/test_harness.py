@@ -5,14 +5,10 @@ import csv
 import numpy as np
 import pytest
 
-from agents import (
-    ConstantFeed,
-    FixedGainIntegral,
-    FixedGainPI,
-    IntegralACC,
-    MillingConstantFeed,
-    VariableGainPI,
-)
+from agents import ConstantFeed, FixedGainPI, VariableGainPI
+from agents.contouring import ConstantOverride, HInf2DOF, PIPosition
+from agents.drilling import PD, NoControl, PeckDrilling, SlidingMode
+from agents.milling import FixedGainIntegral, IntegralACC, MillingConstantFeed
 from agents.eval import Evaluation, evaluate
 from agents.rl import pretrained
 from tests.helpers import TURNING
@@ -97,6 +93,71 @@ def test_batched_evaluation_of_a_network_policy_agrees_to_float32_rounding():
 
 
 @pytest.mark.parametrize(
+    "factory, env_kwargs",
+    [
+        (NoControl.from_env, {}),
+        (PD.from_env, {}),
+        (SlidingMode.from_env, {}),
+        (PeckDrilling.from_env, {"control": "feed"}),
+    ],
+    ids=["no control", "PD", "sliding mode", "peck drilling"],
+)
+def test_batched_drilling_evaluation_gives_the_episode_by_episode_rows(factory, env_kwargs):
+    """The drilling controllers as the lanes of MicroDrilling-v0's native vector env (voltage
+    and feed control): the same metrics and trajectories, to the last bit, as one episode
+    after another with the same seeds."""
+    kw = dict(n_episodes=4, seed=1000, keep_trajectories=True, env_kwargs=env_kwargs)
+    scenarios = ["test", "paper_0.6"]
+    one = evaluate(factory, "machining_envs/MicroDrilling-v0", scenarios, batched=False, **kw)
+    batch = evaluate(factory, "machining_envs/MicroDrilling-v0", scenarios, batched=True, **kw)
+    assert len(one.rows) == len(batch.rows) == 8
+    for a, b in zip(one.rows, batch.rows, strict=True):
+        assert a.keys() == b.keys()
+        for k in a:
+            assert a[k] == b[k] or (a[k] != a[k] and b[k] != b[k]), k
+    for a, b in zip(one.trajectories, batch.trajectories, strict=True):
+        assert a.keys() == b.keys() and "drilling_time_s" in a
+        for k, v in a.items():
+            if isinstance(v, np.ndarray):
+                assert v.dtype == b[k].dtype, k
+                np.testing.assert_array_equal(v, b[k], err_msg=k)
+            else:
+                assert v == b[k], k
+
+
+@pytest.mark.parametrize(
+    "env_id, factory, scenarios",
+    [
+        ("machining_envs/Contouring-v0", PIPosition.from_env, ["test", "paper_corner"]),
+        ("machining_envs/Contouring-v0", HInf2DOF.from_env, ["test", "paper_circle_load"]),
+        ("machining_envs/ContouringFeed-v0", ConstantOverride.from_env, ["test", "paper_involute"]),
+    ],
+    ids=["PI position", "H-inf 2-DOF", "constant override"],
+)
+def test_batched_contouring_evaluation_gives_the_episode_by_episode_rows(
+    env_id, factory, scenarios
+):
+    """The contouring agents on the lanes of the native vector envs: the same metrics and
+    trajectories, to the last bit, as one episode after another with the same seeds."""
+    kw = dict(n_episodes=3, seed=1000, keep_trajectories=True)
+    one = evaluate(factory, env_id, scenarios, batched=False, **kw)
+    batch = evaluate(factory, env_id, scenarios, batched=True, **kw)
+    assert len(one.rows) == len(batch.rows) == 6
+    for a, b in zip(one.rows, batch.rows, strict=True):
+        assert a.keys() == b.keys()
+        for k in a:
+            assert a[k] == b[k] or (a[k] != a[k] and b[k] != b[k]), k
+    for a, b in zip(one.trajectories, batch.trajectories, strict=True):
+        assert a.keys() == b.keys()
+        for k, v in a.items():
+            if isinstance(v, np.ndarray):
+                assert v.dtype == b[k].dtype, k
+                np.testing.assert_array_equal(v, b[k], err_msg=k)
+            else:
+                assert v == b[k], k
+
+
+@pytest.mark.parametrize(
     "factory",
     [IntegralACC.from_env, FixedGainIntegral.from_env, MillingConstantFeed.from_env],
     ids=["IntegralACC", "fixed-gain integral", "constant feed"],
@@ -114,7 +175,7 @@ def test_batched_milling_evaluation_gives_the_episode_by_episode_rows(factory):
         for k in a:
             assert a[k] == b[k] or (a[k] != a[k] and b[k] != b[k]), k
     for a, b in zip(one.trajectories, batch.trajectories, strict=True):
-        assert a.keys() == b.keys()
+        assert a.keys() == b.keys() and "machining_time_s" in a
         for k, v in a.items():
             if isinstance(v, np.ndarray):
                 assert v.dtype == b[k].dtype, k

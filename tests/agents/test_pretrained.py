@@ -34,7 +34,7 @@ def test_each_pretrained_policy_has_its_regeneration_command_and_is_small(folder
     assert f"--seed {cfg['seed']}" in readme
     size = sum(p.stat().st_size for p in folder.iterdir())
     assert size < 5 * 2**20, folder
-    assert (folder / "best_model.zip").is_file() and (folder / "best_vecnormalize.pkl").is_file()
+    assert (folder / "best_model.zip").is_file() and (folder / "best_vecnormalize.json").is_file()
 
 
 def _scores(spec, n_episodes=20):

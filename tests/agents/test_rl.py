@@ -45,7 +45,17 @@ def test_shipped_configs_load(algo):
         (TINY.replace("n_epochs: 1", "n_epoch: 1"), "unknown key 'n_epoch'.*n_epochs"),
         (TINY.replace("n_envs: 2", "n_envs: two"), "n_envs must be int"),
         (TINY.replace("n_envs: 2", "n_envs: 0"), "n_envs must be >= 1"),
-        (TINY.replace("batch_size: 64", "batch_size: 6.4"), "batch_size must be int"),
+        (TINY.replace("batch_size: 64", "batch_size: 6.4"), "batch_size must be an integer"),
+        (TINY.replace("n_epochs: 1", "n_epochs: -1"), r"n_epochs must be an integer in \[1, "),
+        (TINY.replace("n_epochs: 1", "n_epochs: 1\n  gamma: 5.0"), r"gamma must be .* \(0, 1\]"),
+        (
+            TINY.replace("normalize: true", "normalize: {norm_obs: true, gamma: x}"),
+            "normalize.gamma must be a number",
+        ),
+        (TINY.replace("batch_size: 64", "batch_size: 512"), "batch_size must be <= n_steps"),
+        (TINY.replace("[paper_700]", "[bogus]"), "eval_scenarios: .*bogus"),
+        (TINY.replace("{scenario: train}", "{scenario: train, nope: 1}"), "env_kwargs"),
+        (TINY.replace("n_epochs: 1", "n_epochs: 1\n  learning_rate: fast"), "learning_rate"),
         (
             TINY.replace("normalize: true", "normalize: {norm_obs: true, clipobs: 5}"),
             "normalize keys",
@@ -60,6 +70,20 @@ def test_bad_configs_fail_before_training(tmp_path, text, message):
     with pytest.raises(ConfigError, match=message):
         train(TURNING, "ppo", tmp_path / "run", config_path=path, progress_bar=False, verbose=False)
     assert not (tmp_path / "run").exists()
+
+
+def test_rl_zoo3_value_syntax_is_read(tmp_path):
+    """rl-zoo3 writes counts as ``!!float 1e6`` and schedules as ``lin_<x>``."""
+    path = tmp_path / "zoo.yml"
+    path.write_text(
+        TINY.replace("n_timesteps: 256", "n_timesteps: !!float 2.56e2").replace(
+            "n_epochs: 1", "n_epochs: 1\n  learning_rate: lin_3e-4"
+        )
+    )
+    cfg = load_config(TURNING, "ppo", path)
+    assert cfg.n_timesteps == 256 and isinstance(cfg.n_timesteps, int)
+    schedule = cfg.hyperparams["learning_rate"]
+    assert schedule(1.0) == pytest.approx(3e-4) and schedule(0.5) == pytest.approx(1.5e-4)
 
 
 def test_missing_config_file_and_bad_algo(tmp_path):
@@ -96,9 +120,9 @@ def test_train_save_reload_resume(tiny, tmp_path):
     )
     for name in (
         "final_model.zip",
-        "final_vecnormalize.pkl",
+        "final_vecnormalize.json",
         "best_model.zip",
-        "best_vecnormalize.pkl",
+        "best_vecnormalize.json",
         "config.json",
         "eval.csv",
     ):
@@ -131,6 +155,52 @@ def test_train_save_reload_resume(tiny, tmp_path):
     from stable_baselines3 import PPO
 
     assert PPO.load(run / "final_model.zip").num_timesteps >= 512
+    suffixes = {p.suffix for p in (run / "checkpoints").iterdir()}
+    assert suffixes == {".json", ".zip"}  # each checkpoint with its statistics
+    assert not list(run.rglob("*.pkl")), "statistics are written as JSON only"
+    # Without checkpoints, --resume continues from the final model.
+    import shutil
+
+    shutil.rmtree(run / "checkpoints")
+    train(
+        TURNING,
+        "ppo",
+        run,
+        config_path=tiny,
+        n_timesteps=768,
+        resume=True,
+        progress_bar=False,
+        verbose=False,
+    )
+    assert PPO.load(run / "final_model.zip").num_timesteps >= 768
+
+
+def test_statistics_are_never_unpickled(tmp_path):
+    """A pickled VecNormalize beside a model is refused (reading it could run code); a
+    malformed JSON statistics file is refused with the field named."""
+    import shutil
+
+    from agents.rl.policy import PRETRAINED_DIR
+    from agents.rl.stats import read_stats
+
+    src = PRETRAINED_DIR / "turning_ppo"
+    for name in ("best_model.zip", "config.json"):
+        shutil.copy(src / name, tmp_path / name)
+    (tmp_path / "best_vecnormalize.pkl").write_bytes(b"not read")
+    with pytest.raises(ValueError, match="pickle"):
+        load_policy(tmp_path / "best_model.zip")
+    data = json.loads((src / "best_vecnormalize.json").read_text())
+    data["obs_var"][2] = -1.0
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(data))
+    with pytest.raises(ValueError, match="obs_var must be >= 0"):
+        read_stats(bad)
+    data["obs_var"][2] = "nan"
+    bad.write_text(json.dumps(data))
+    with pytest.raises(ValueError, match=r"obs_var\[2\] must be a finite number"):
+        load_policy(tmp_path / "best_model.zip", stats=bad)
+    agent = load_policy(tmp_path / "best_model.zip", stats=src / "best_vecnormalize.json")
+    assert agent.obs_rms is not None
 
 
 def test_fixed_seed_reproduces_the_run(tiny, tmp_path):

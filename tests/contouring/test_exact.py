@@ -1,0 +1,136 @@
+"""The compiled contouring kernels give the numbers the numpy, BLAS and Python forms of the
+same equations give, to the last bit: the arithmetic primitives (``_exact``), the path
+geometry over ``Path.table()`` and the lifted block product of the servo loop."""
+
+import math
+
+import numpy as np
+import pytest
+
+from machining_envs.contouring import _exact
+from machining_envs.contouring.paths import (
+    Arc,
+    Involute,
+    Line,
+    Path,
+    path_distance,
+    path_distances,
+    path_heading,
+    path_point,
+    path_segment_index,
+)
+from machining_envs.contouring.plant import ContouringParams
+from machining_envs.contouring.servo import ServoLoop, lifted_matrix, servo_design
+
+RNG = np.random.default_rng(20240)
+
+
+@pytest.mark.parametrize(
+    "shape", [(314, 212), (308, 206), (13, 9), (7, 5), (6, 6), (6, 7), (15, 15), (3, 3)]
+)
+def test_gemv_row_is_numpys_matrix_vector_product(shape):
+    """Every residue of rows and columns modulo four (the BLAS kernel's cases)."""
+    for _ in range(30):
+        a = RNG.normal(size=shape)
+        x = RNG.normal(size=shape[1])
+        out = np.empty(shape[0])
+        _exact.gemv(a, x, out)
+        np.testing.assert_array_equal(out, a @ x)
+
+
+def test_gemm_entry_and_dot_are_numpys_products():
+    for n, k, m in [(6, 6, 6), (6, 6, 2), (3, 3, 3), (3, 3, 2), (2, 1, 2)]:
+        a, b = RNG.normal(size=(n, k)), RNG.normal(size=(k, m))
+        ref = a @ b
+        got = np.array([[_exact.gemm_entry(a, b, i, j) for j in range(m)] for i in range(n)])
+        np.testing.assert_array_equal(got, ref)
+    for k in (3, 6, 7):
+        a, b = RNG.normal(size=k), RNG.normal(size=k)
+        assert _exact.dot(a, b) == a @ b
+
+
+@pytest.mark.parametrize("n", [1, 5, 8, 50, 128, 129, 300, 1000, 5000])
+def test_np_sum_and_mean_are_numpys_pairwise_sums(n):
+    for _ in range(20):
+        a = RNG.normal(size=n) * 10.0 ** RNG.uniform(-3, 3, n)
+        assert _exact.np_sum(a) == np.sum(a)
+        assert _exact.np_mean(a) == np.mean(a)
+
+
+def test_py_hypot_is_pythons_math_hypot():
+    """CPython's hypot differs from libm's (numpy's, numba's) in the last bit now and then;
+    the kernels that reproduce Python code use this one."""
+    differs = 0
+    for scale in (1e-6, 1.0, 1e3, 1e200):
+        x = RNG.normal(size=20000) * scale
+        y = RNG.normal(size=20000) * scale * RNG.uniform(0, 3, 20000)
+        py = [math.hypot(a, b) for a, b in zip(x.tolist(), y.tolist(), strict=True)]
+        for a, b, h in zip(x.tolist(), y.tolist(), py, strict=True):
+            assert _exact.py_hypot(a, b) == h
+        differs += int(np.sum(np.hypot(x, y) != py))
+    assert differs > 0  # so the distinction is needed
+    assert _exact.py_hypot(0.0, 0.0) == 0.0 and _exact.py_hypot(-3.0, 4.0) == 5.0
+    assert _exact.py_hypot(math.inf, math.nan) == math.inf
+
+
+def _paths():
+    out = [Path.paper_corner(), Path.paper_circle(), Path.paper_involute()]
+    out += [Path.random_smooth(np.random.default_rng(s), n_segments=(3, 6)) for s in range(6)]
+    inv = Involute((-20.0, 5.0), 20.0, 0.3, 0.2, 7.5)  # more than a turn: several feet
+    line = Line(inv.end, (inv.end[0] + 5.0, inv.end[1] - 2.0))
+    out.append(Path([inv, line]))
+    a = Arc((0.0, 0.0), 5.0, 0.0, -math.pi)
+    out.append(Path([a, Line(a.end, (a.end[0], a.end[1] + 3.0))]))
+    return out
+
+
+@pytest.mark.parametrize("path", _paths(), ids=lambda p: f"{p.name}-{len(p.segments)}")
+def test_compiled_geometry_is_the_path_methods(path):
+    tab, length = path.table(), path.length
+    s = np.concatenate([RNG.uniform(-1.0, length + 1.0, 300), [0.0, length], tab[1:, 1]])
+    x, y = path.points(s)
+    for k, sk in enumerate(s.tolist()):
+        assert path_point(tab, length, sk) == path.point(sk)
+        assert path_point(tab, length, sk) == (x[k], y[k])
+        assert path_heading(tab, length, sk) == path.headings(np.array([sk]))[0]
+        assert path_segment_index(tab, length, sk) == path.segment_index(sk)
+    # Points near and far, inside and outside arcs and base circles.
+    px = x + RNG.normal(0, 0.05, x.size) * RNG.choice([0.01, 1.0, 100.0], x.size)
+    py = y + RNG.normal(0, 0.05, y.size) * RNG.choice([0.01, 1.0, 100.0], y.size)
+    for a, b in zip(px.tolist(), py.tolist(), strict=True):
+        assert path_distance(tab, a, b) == path.distance(a, b)
+    for lo in range(0, px.size - 50, 37):  # blocks of 50 points, as the feed env asks
+        n = 50
+        out, scratch = np.empty(n), np.empty(n)
+        lower, order = np.empty(len(path.segments)), np.empty(len(path.segments), np.int64)
+        path_distances(tab, px[lo : lo + n], py[lo : lo + n], n, out, scratch, lower, order)
+        np.testing.assert_array_equal(out, path.distances(px[lo : lo + n], py[lo : lo + n]))
+
+
+@pytest.mark.parametrize("kind", ["hinf", "pi"])
+def test_block_kernel_is_the_lifted_matrix_product(kind):
+    """Unclipped, a block is ``lifted_matrix(...) @ [state, inputs]`` (numpy, BLAS) to the
+    last bit; the compiled kernel reads only the distinct coefficients."""
+    p = ContouringParams()
+    designs = tuple(servo_design(kind, p, ax) for ax in "xy")
+    for scale in (1.0, 0.8, 1.3):
+        truth = p.replace(inertia_x_kgm2=p.inertia_x_kgm2 * scale)
+        big = lifted_matrix(truth, designs, 50)
+        loop = ServoLoop(truth, designs, 50)
+        n = loop.n_states // 2
+        for _ in range(5):
+            state = RNG.normal(0, 1e-3, loop.n_states)
+            ref = np.cumsum(RNG.normal(0, 0.01, (50, 2)), axis=0)
+            load = np.repeat(RNG.uniform(-1, 1, (1, 2)), 50, axis=0)
+            vec = np.concatenate([state, ref[:, 0], load[:, 0], ref[:, 1], load[:, 1]])
+            want = big @ vec
+            s = state.copy()
+            pos, vel, cmd, _, clipped = loop.run(s, ref, load)
+            assert not clipped
+            rows = 3 * 50 + 1 + n
+            for k in range(2):
+                r0 = k * rows
+                np.testing.assert_array_equal(pos[:, k], want[r0 : r0 + 50])
+                np.testing.assert_array_equal(vel[:, k], want[r0 + 51 : r0 + 101])
+                np.testing.assert_array_equal(cmd[:, k], want[r0 + 101 : r0 + 151])
+                np.testing.assert_array_equal(s[k * n : k * n + n], want[r0 + 151 : r0 + rows])

@@ -1,0 +1,77 @@
+"""Packaging: the core install (envs, classical agents, harness) runs without the ``rl``
+extra, nothing in the package metadata pins an exact version, the license is an SPDX id."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+tomllib = pytest.importorskip("tomllib")  # Python >= 3.11
+
+ROOT = Path(__file__).resolve().parents[1]
+RL_ONLY = ("torch", "stable-baselines3", "tensorboard", "rich", "tqdm", "pyyaml")
+
+#: Run in a fresh interpreter in which the rl extra's modules cannot be imported.
+CORE_ONLY = """
+import sys, importlib.abc
+BLOCK = ("torch", "stable_baselines3", "yaml", "tqdm", "rich", "tensorboard")
+class Blocker(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path, target=None):
+        if name.split(".")[0] in BLOCK:
+            raise ImportError(f"No module named {name!r}")
+sys.meta_path.insert(0, Blocker())
+import gymnasium as gym
+env = gym.make("machining_envs:machining_envs/Turning-v0")
+env.reset(seed=0)
+env.step(env.action_space.sample())
+venv = gym.make_vec("machining_envs/Turning-v0", num_envs=2)
+venv.reset(seed=0)
+from agents import VariableGainPI
+from agents.eval import evaluate
+ev = evaluate(VariableGainPI.from_env, "machining_envs/Turning-v0", ["paper_405"], n_episodes=2)
+assert len(ev.rows) == 2
+from agents.bench.benchmark import _rl_installed
+assert not _rl_installed()
+from agents.bench.cli import main
+try:
+    main(["--version"])
+except SystemExit as exit_:
+    assert exit_.code == 0
+print("core ok")
+"""
+
+
+def _project() -> dict:
+    return tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+
+
+def test_core_dependencies_leave_training_to_the_rl_extra():
+    core = " ".join(_project()["dependencies"]).lower()
+    for name in RL_ONLY:
+        assert name not in core, name
+    rl = " ".join(_project()["optional-dependencies"]["rl"]).lower()
+    for name in ("torch", "stable-baselines3"):
+        assert name in rl
+
+
+def test_no_exact_pins_in_the_metadata_and_an_spdx_license():
+    project = _project()
+    every = list(project["dependencies"])
+    for extra in project["optional-dependencies"].values():
+        every += extra
+    assert not [d for d in every if "==" in d]
+    assert project["license"] == "MIT"
+    # The CPU build of torch is pinned only for `make`, through the constraints file.
+    assert "torch==2.13.0" in (ROOT / "constraints.txt").read_text()
+    assert "-c constraints.txt" in (ROOT / "Makefile").read_text()
+
+
+def test_envs_agents_and_harness_run_without_the_rl_extra():
+    out = subprocess.run(
+        [sys.executable, "-c", CORE_ONLY], capture_output=True, text=True, cwd=ROOT
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "core ok" in out.stdout
