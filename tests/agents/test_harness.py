@@ -8,8 +8,8 @@ import pytest
 from agents import ConstantFeed, FixedGainPI, VariableGainPI
 from agents.contouring import ConstantOverride, HInf2DOF, PIPosition
 from agents.drilling import PD, NoControl, PeckDrilling, SlidingMode
-from agents.milling import FixedGainIntegral, IntegralACC, MillingConstantFeed
 from agents.eval import Evaluation, evaluate
+from agents.milling import FixedGainIntegral, IntegralACC, MillingConstantFeed
 from agents.rl import pretrained
 from tests.helpers import TURNING
 

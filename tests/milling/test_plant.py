@@ -215,6 +215,20 @@ def _random_matrix(rng, shape):
     return v
 
 
+def _numpy_blas_orders_as_matvec() -> bool:
+    """numpy's matrix-vector products come from OpenBLAS's x86-64 dgemv kernel for Haswell
+    and its successors (the order ``matvec`` follows, in which the golden data were
+    recorded); other libraries or processors may sum in another order."""
+    from threadpoolctl import threadpool_info
+
+    blas = [i for i in threadpool_info() if "numpy" in i.get("filepath", "")]
+    arch = str(blas[0].get("architecture", "")).lower() if blas else ""
+    return bool(blas) and blas[0].get("internal_api") == "openblas" and arch in {
+        "haswell", "zen", "steamroller", "excavator", "skylakex", "cooperlake", "sapphirerapids"
+    }  # fmt: skip
+
+
+@pytest.mark.skipif(not _numpy_blas_orders_as_matvec(), reason="numpy's BLAS sums in another order")
 @pytest.mark.parametrize("substeps", [1, 2, 3, 6, 10, 14, 30])
 def test_matvec_rounds_as_numpy_does(substeps):
     """The kernel's matrix-vector products equal numpy's to the last bit, for the servo's
