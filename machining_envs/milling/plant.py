@@ -30,7 +30,10 @@ evaluated at the sub-step points and drives the process lag, whose update is exa
 input linear between sub-step points (first-order hold). All of a sample's sub-steps are a
 few small matrix products.
 
-This module imports numpy and scipy only; it knows nothing of gymnasium.
+:class:`MillingLanes` holds N cuts as arrays and advances them with one compiled kernel
+(:func:`step_lanes`, numba, cached on disk); :class:`MillingPlant` is one lane of it.
+
+This module imports numpy, scipy and numba; it knows nothing of gymnasium.
 """
 
 from __future__ import annotations
@@ -865,6 +868,10 @@ class MillingLanes:
 
     Attributes
     ----------
+    big : ndarray, shape (1, (2 M + 3) * 4)
+        The servo's step matrix (``_servo_matrix``), row after row, shared by the lanes.
+    lag : ndarray, shape (n, M * (M + 2))
+        Each lane's lag matrix (:func:`lag_rows` at its spindle speed), row after row.
     z : ndarray, shape (n, 4)
         ``[Vf, dVf/dt, position, U]`` of every lane.
     buf : ndarray, shape (n, M + 2)
@@ -1046,6 +1053,11 @@ class MillingPlant:
     def t_s(self) -> float:
         """Time since the cut started, s."""
         return float(self._lanes.lane_f[0, _T])
+
+    @property
+    def z(self) -> np.ndarray:
+        """``[Vf, dVf/dt, position, U]``: the servo's state and the command held (a view)."""
+        return self._lanes.z[0]
 
     @property
     def state(self) -> np.ndarray:
