@@ -13,66 +13,38 @@ from __future__ import annotations
 from gymnasium.envs.registration import register, registry
 
 from machining_envs import contouring, drilling, milling, turning
-from machining_envs.contouring import (
-    CONTOURING_SCENARIOS,
-    ContouringEnv,
-    ContouringFeedEnv,
-    ContouringParams,
-    ContouringReward,
-    ContouringScenario,
-    FeedReward,
-    Path,
-)
-from machining_envs.core.workpieces import DepthProfile
-from machining_envs.drilling import (
-    DRILLING_SCENARIOS,
-    DrillingParams,
-    DrillingReward,
-    DrillingScenario,
-    MicroDrillingEnv,
-)
-from machining_envs.milling import (
-    MILLING_SCENARIOS,
-    EndMillingEnv,
-    MillingParams,
-    MillingReward,
-    MillingScenario,
-)
-from machining_envs.turning import (
-    TURNING_SCENARIOS,
-    TurningEnv,
-    TurningParams,
-    TurningReward,
-    TurningScenario,
-)
+from machining_envs.core.lazy import lazy_exports
 
-__all__ = [
-    "CONTOURING_SCENARIOS",
-    "ContouringEnv",
-    "ContouringFeedEnv",
-    "FeedReward",
-    "ContouringParams",
-    "ContouringReward",
-    "ContouringScenario",
-    "Path",
-    "DepthProfile",
-    "TURNING_SCENARIOS",
-    "TurningEnv",
-    "TurningParams",
-    "TurningReward",
-    "TurningScenario",
-    "ENV_IDS",
-    "EndMillingEnv",
-    "MILLING_SCENARIOS",
-    "MillingParams",
-    "MillingReward",
-    "MillingScenario",
-    "DRILLING_SCENARIOS",
-    "DrillingParams",
-    "DrillingReward",
-    "DrillingScenario",
-    "MicroDrillingEnv",
-]
+#: The classes this package exports, loaded on first use (``import machining_envs`` only
+#: registers the ids, whose entry points are strings).
+_EXPORTS = {
+    "CONTOURING_SCENARIOS": "machining_envs.contouring",
+    "ContouringEnv": "machining_envs.contouring",
+    "ContouringFeedEnv": "machining_envs.contouring",
+    "FeedReward": "machining_envs.contouring",
+    "ContouringParams": "machining_envs.contouring",
+    "ContouringReward": "machining_envs.contouring",
+    "ContouringScenario": "machining_envs.contouring",
+    "Path": "machining_envs.contouring",
+    "DepthProfile": "machining_envs.core.workpieces",
+    "TURNING_SCENARIOS": "machining_envs.turning",
+    "TurningEnv": "machining_envs.turning",
+    "TurningParams": "machining_envs.turning",
+    "TurningReward": "machining_envs.turning",
+    "TurningScenario": "machining_envs.turning",
+    "EndMillingEnv": "machining_envs.milling",
+    "MILLING_SCENARIOS": "machining_envs.milling",
+    "MillingParams": "machining_envs.milling",
+    "MillingReward": "machining_envs.milling",
+    "MillingScenario": "machining_envs.milling",
+    "DRILLING_SCENARIOS": "machining_envs.drilling",
+    "DrillingParams": "machining_envs.drilling",
+    "DrillingReward": "machining_envs.drilling",
+    "DrillingScenario": "machining_envs.drilling",
+    "MicroDrillingEnv": "machining_envs.drilling",
+}
+__all__ = [*_EXPORTS, "ENV_IDS"]
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 __version__ = "0.1.0"
 
 #: Every env id this package registers, with its entry point (each process declares its own).

@@ -75,3 +75,28 @@ def test_envs_agents_and_harness_run_without_the_rl_extra():
     )
     assert out.returncode == 0, out.stderr[-2000:]
     assert "core ok" in out.stdout
+
+
+def test_importing_the_package_loads_no_physics():
+    """``import machining_envs`` registers the ids and loads nothing heavy (numba, scipy,
+    matplotlib, torch, the env modules): the rest comes with ``gym.make`` or the first
+    use of an exported name. Its time is measured by ``benchmarks/import_time.py``."""
+    code = """
+import sys
+import machining_envs, gymnasium as gym
+heavy = [m for m in sys.modules if m.split(".")[0] in ("numba", "scipy", "matplotlib", "torch")
+         or m.endswith((".env", ".feed_env", ".plant"))]
+assert not heavy, heavy
+assert gym.spec("machining_envs/Turning-v0").vector_entry_point
+from machining_envs import TurningEnv, Path, DepthProfile
+assert TurningEnv.__name__ == "TurningEnv" and "numba" in sys.modules
+assert "TurningEnv" in dir(machining_envs)
+try:
+    machining_envs.Nope
+except AttributeError as exc:
+    assert "Nope" in str(exc)
+else:
+    raise AssertionError("no AttributeError")
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr[-2000:]

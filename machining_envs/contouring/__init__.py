@@ -6,20 +6,25 @@
 axis commands) and ``feed_env`` (``ContouringFeed-v0``: the feed override over a servo).
 """
 
-from machining_envs.contouring.env import ContouringEnv, ContouringReward, ContouringVectorEnv
-from machining_envs.contouring.feed_env import (
-    ContouringFeedEnv,
-    ContouringFeedVectorEnv,
-    FeedReward,
-)
-from machining_envs.contouring.paths import Path
-from machining_envs.contouring.plant import ContouringParams, ContouringPlant
-from machining_envs.contouring.scenarios import CONTOURING_SCENARIOS, ContouringScenario
+from machining_envs.core.lazy import lazy_exports
 
-__all__ = ["ContouringEnv", "ContouringReward", "ContouringFeedEnv", "FeedReward", "Path"]
-__all__ += ["ContouringVectorEnv", "ContouringFeedVectorEnv"]
-__all__ += ["ContouringParams", "ContouringPlant", "ContouringScenario"]
-__all__ += ["CONTOURING_SCENARIOS", "ENTRY_POINTS", "VECTOR_ENTRY_POINTS"]
+#: What this package exports, and the module each comes from (loaded on first use, so
+#: that registering the ids imports none of the physics).
+_EXPORTS = {
+    "ContouringEnv": "machining_envs.contouring.env",
+    "ContouringReward": "machining_envs.contouring.env",
+    "ContouringVectorEnv": "machining_envs.contouring.env",
+    "ContouringFeedEnv": "machining_envs.contouring.feed_env",
+    "ContouringFeedVectorEnv": "machining_envs.contouring.feed_env",
+    "FeedReward": "machining_envs.contouring.feed_env",
+    "Path": "machining_envs.contouring.paths",
+    "ContouringParams": "machining_envs.contouring.plant",
+    "ContouringPlant": "machining_envs.contouring.plant",
+    "CONTOURING_SCENARIOS": "machining_envs.contouring.scenarios",
+    "ContouringScenario": "machining_envs.contouring.scenarios",
+}
+__all__ = [*_EXPORTS, "ENTRY_POINTS", "VECTOR_ENTRY_POINTS"]
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 #: The env ids of this process and their entry points (registered by ``machining_envs``).
 ENTRY_POINTS = {

@@ -5,13 +5,22 @@ drills, the train/test distributions), ``metrics`` (torque statistics, drilling 
 task), ``env`` (``MicroDrilling-v0``).
 """
 
-from machining_envs.drilling.env import DrillingReward, MicroDrillingEnv, MicroDrillingVectorEnv
-from machining_envs.drilling.plant import DrillingLanes, DrillingParams, DrillingPlant
-from machining_envs.drilling.scenarios import DRILLING_SCENARIOS, DrillingScenario
+from machining_envs.core.lazy import lazy_exports
 
-__all__ = ["MicroDrillingEnv", "MicroDrillingVectorEnv", "DrillingReward", "DrillingParams"]
-__all__ += ["DrillingPlant", "DrillingLanes", "DrillingScenario", "DRILLING_SCENARIOS"]
-__all__ += ["ENTRY_POINTS", "VECTOR_ENTRY_POINTS"]
+#: What this package exports, and the module each comes from (loaded on first use, so
+#: that registering the ids imports none of the physics).
+_EXPORTS = {
+    "DrillingReward": "machining_envs.drilling.env",
+    "MicroDrillingEnv": "machining_envs.drilling.env",
+    "MicroDrillingVectorEnv": "machining_envs.drilling.env",
+    "DrillingLanes": "machining_envs.drilling.plant",
+    "DrillingParams": "machining_envs.drilling.plant",
+    "DrillingPlant": "machining_envs.drilling.plant",
+    "DRILLING_SCENARIOS": "machining_envs.drilling.scenarios",
+    "DrillingScenario": "machining_envs.drilling.scenarios",
+}
+__all__ = [*_EXPORTS, "ENTRY_POINTS", "VECTOR_ENTRY_POINTS"]
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 #: The env ids of this process and their entry points (registered by ``machining_envs``).
 ENTRY_POINTS = {

@@ -5,19 +5,21 @@ train/test distributions), ``metrics`` (the task: metrics and primary score), ``
 (``Turning-v0``).
 """
 
-from machining_envs.turning.env import TurningEnv, TurningReward, TurningVectorEnv
-from machining_envs.turning.plant import TurningParams, TurningPlant
-from machining_envs.turning.scenarios import TURNING_SCENARIOS, TurningScenario
+from machining_envs.core.lazy import lazy_exports
 
-__all__ = [
-    "TurningEnv",
-    "TurningVectorEnv",
-    "TurningReward",
-    "TurningParams",
-    "TurningPlant",
-    "TurningScenario",
-]
-__all__ += ["TURNING_SCENARIOS", "ENTRY_POINTS", "VECTOR_ENTRY_POINTS"]
+#: What this package exports, and the module each comes from (loaded on first use, so
+#: that registering the ids imports none of the physics).
+_EXPORTS = {
+    "TurningEnv": "machining_envs.turning.env",
+    "TurningReward": "machining_envs.turning.env",
+    "TurningVectorEnv": "machining_envs.turning.env",
+    "TurningParams": "machining_envs.turning.plant",
+    "TurningPlant": "machining_envs.turning.plant",
+    "TURNING_SCENARIOS": "machining_envs.turning.scenarios",
+    "TurningScenario": "machining_envs.turning.scenarios",
+}
+__all__ = [*_EXPORTS, "ENTRY_POINTS", "VECTOR_ENTRY_POINTS"]
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 #: The env ids of this process and their entry points (registered by ``machining_envs``).
 ENTRY_POINTS = {"machining_envs/Turning-v0": "machining_envs.turning.env:TurningEnv"}
