@@ -11,7 +11,8 @@ SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "throughput.py"
 
 def test_throughput_script_reports_every_env():
     out = subprocess.run(
-        [sys.executable, str(SCRIPT), "--steps", "200", "--rounds", "1"],
+        [sys.executable, str(SCRIPT), "--steps", "200", "--rounds", "1", "--lanes", "1", "16"]
+        + ["--vector-steps", "2000", "--sync-steps", "200"],
         capture_output=True,
         text=True,
         check=True,
@@ -22,3 +23,7 @@ def test_throughput_script_reports_every_env():
         # A rate, and its ratio to Pendulum's printed to two decimals (a slow env on a busy
         # machine may print 0.00: the numbers are not judged).
         assert rate > 0 and ratio >= 0
+    vector = out[out.index("native vector envs") :]
+    for env_id in machining_envs.ENV_IDS:  # every id has its native vector env
+        line = next(row for row in vector.splitlines() if row.startswith(env_id))
+        assert "no native vector env" not in line
