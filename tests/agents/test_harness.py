@@ -99,7 +99,7 @@ def test_batched_evaluation_of_a_network_policy_agrees_to_float32_rounding():
 @pytest.mark.parametrize(
     "env_id, factory, scenarios",
     [
-        ("machining_envs/Contouring-v0", PIPosition.from_env, ["test", "paper_corner"]),
+        ("machining_envs/Contouring-v0", PIPosition.from_env, ["test", "paper_step_load"]),
         ("machining_envs/Contouring-v0", HInf2DOF.from_env, ["test", "paper_circle_load"]),
         ("machining_envs/ContouringFeed-v0", ConstantOverride.from_env, ["test", "paper_involute"]),
     ],
