@@ -343,12 +343,52 @@ def _bounding_circle(seg) -> tuple[float, float, float]:
 
     From 257 points along it: their centroid, and the largest distance to them plus the
     largest gap between neighbours (the curve between two neighbours stays within that).
+    Compiled (:func:`_bounding_circle_of_row`): the numbers of ``np.linspace``, the
+    segment's ``points``, ``np.mean`` and ``np.hypot``, to the last bit.
     """
-    s = np.linspace(0.0, seg.length, 257)
-    x, y = seg.points(s)
-    cx, cy = float(x.mean()), float(y.mean())
-    gap = float(np.max(np.hypot(np.diff(x), np.diff(y))))
-    return cx, cy, float(np.max(np.hypot(x - cx, y - cy))) + gap
+    cx, cy, r = _bounding_circle_of_row(_segment_row(seg), float(seg.length))
+    return float(cx), float(cy), float(r)
+
+
+def _segment_row(seg) -> np.ndarray:
+    """A segment's row of :meth:`Path.table` (its kind and own numbers; the columns of its
+    place in the path left at zero)."""
+    row = np.zeros(SEGMENT_COLUMNS)
+    if isinstance(seg, Line):
+        row[0] = _LINE
+        row[6:11] = (*seg.start, *seg._u, seg.length)
+    elif isinstance(seg, Arc):
+        row[0] = _ARC
+        row[6:16] = (*seg.center, seg.radius, seg.start_angle, seg.sign, abs(seg.sweep),
+                     *seg.start, *seg.end)  # fmt: skip
+    else:
+        row[0] = _INVOLUTE
+        row[6:14] = (*seg.center, seg.radius, seg.theta1, seg.theta_start, seg.theta_end,
+                     seg.theta_start**2, seg._k_span)  # fmt: skip
+    return row
+
+
+@numba.njit(cache=True)
+def _bounding_circle_of_row(row, length):
+    """:func:`_bounding_circle` of the segment ``row`` (of arc length ``length``)."""
+    n = 257
+    x = np.empty(n)
+    y = np.empty(n)
+    step = length / (n - 1)  # np.linspace(0, length, n): i * step, the last exactly length
+    for i in range(n):
+        s = float(i) * step + 0.0 if i < n - 1 else length
+        if step == 0.0:
+            s = float(i) / (n - 1) * length + 0.0 if i < n - 1 else length
+        x[i], y[i] = _segment_point(row, s)
+    cx = np_mean(x)
+    cy = np_mean(y)
+    gap = -np.inf
+    far = -np.inf
+    for i in range(n):
+        if i + 1 < n:
+            gap = max(gap, math.hypot(x[i + 1] - x[i], y[i + 1] - y[i]))
+        far = max(far, math.hypot(x[i] - cx, y[i] - cy))
+    return cx, cy, far + gap
 
 
 def _wrap(a: float) -> float:
@@ -395,7 +435,11 @@ class Path:
         self._start_list = [float(v) for v in self._starts]
         self._inner = self._starts[1:-1].copy()
         self.length = float(self._starts[-1])
-        self._bounds = [_bounding_circle(seg) for seg in segs]
+        self._rows = [_segment_row(seg) for seg in segs]
+        self._bounds = [
+            tuple(float(v) for v in _bounding_circle_of_row(row, float(seg.length)))
+            for row, seg in zip(self._rows, segs, strict=True)
+        ]
         # Unwrapped heading at each segment's start: corners add their turn in (-pi, pi].
         head = [segs[0].heading0]
         for k in range(1, len(segs)):
@@ -650,23 +694,12 @@ class Path:
         tab = getattr(self, "_table", None)
         if tab is not None:
             return tab
-        tab = np.zeros((len(self.segments), SEGMENT_COLUMNS))
-        for k, seg in enumerate(self.segments):
+        tab = np.array(self._rows)
+        for k in range(len(self.segments)):
             row = tab[k]
             row[1] = self._start_list[k]
             row[2] = self._heading_starts[k]
             row[3:6] = self._bounds[k]
-            if isinstance(seg, Line):
-                row[0] = _LINE
-                row[6:11] = (*seg.start, *seg._u, seg.length)
-            elif isinstance(seg, Arc):
-                row[0] = _ARC
-                row[6:16] = (*seg.center, seg.radius, seg.start_angle, seg.sign, abs(seg.sweep),
-                             *seg.start, *seg.end)  # fmt: skip
-            else:
-                row[0] = _INVOLUTE
-                row[6:14] = (*seg.center, seg.radius, seg.theta1, seg.theta_start,
-                             seg.theta_end, seg.theta_start**2, seg._k_span)  # fmt: skip
         tab.setflags(write=False)
         self._table = tab
         return tab

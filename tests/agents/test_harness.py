@@ -128,7 +128,7 @@ def test_batched_drilling_evaluation_gives_the_episode_by_episode_rows(factory, 
 @pytest.mark.parametrize(
     "env_id, factory, scenarios",
     [
-        ("machining_envs/Contouring-v0", PIPosition.from_env, ["test", "paper_corner"]),
+        ("machining_envs/Contouring-v0", PIPosition.from_env, ["test", "paper_step_load"]),
         ("machining_envs/Contouring-v0", HInf2DOF.from_env, ["test", "paper_circle_load"]),
         ("machining_envs/ContouringFeed-v0", ConstantOverride.from_env, ["test", "paper_involute"]),
     ],
