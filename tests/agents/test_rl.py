@@ -366,6 +366,15 @@ def test_native_vector_training_reproduces_a_fixed_seed_run(tmp_path, increment)
 def test_bad_vec_kind_is_refused_before_training(tiny, tmp_path):
     with pytest.raises(ConfigError, match="vec must be one of"):
         train(TURNING, "ppo", tmp_path / "r", config_path=tiny, progress_bar=False, vec="gpu")
+    # Every id of the package has a native vector env: an id registered without one (as a
+    # user may register our classes) is refused before training.
+    import gymnasium as gym
+
+    plain = "machining_envs_tests/TurningScalar-v0"
+    if plain not in gym.registry:
+        gym.register(plain, entry_point="machining_envs.turning.env:TurningEnv")
+    config = tmp_path / "plain.yml"
+    config.write_text(TINY.replace(TURNING, plain))
     with pytest.raises(ConfigError, match="no native vector env"):
-        train("machining_envs/EndMilling-v0", "ppo", tmp_path / "r2", vec="native")
+        train(plain, "ppo", tmp_path / "r2", config_path=config, vec="native")
     assert not (tmp_path / "r").exists() and not (tmp_path / "r2").exists()
