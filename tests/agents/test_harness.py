@@ -43,34 +43,6 @@ def test_same_seeds_give_every_agent_the_same_workpieces():
         assert ta["spindle_rpm"][0] == tb["spindle_rpm"][0]
 
 
-@pytest.mark.parametrize(
-    "factory",
-    [VariableGainPI.from_env, FixedGainPI.from_env, ConstantFeed.from_env],
-    ids=["adaptive PI", "fixed PI", "constant feed"],
-)
-def test_batched_evaluation_gives_the_episode_by_episode_rows(factory):
-    """N episodes of one agent as the lanes of the native vector env: the same metrics and
-    trajectories (values and dtypes, to the last bit) as one episode after another with the
-    same seeds."""
-    kw = dict(n_episodes=6, seed=1000, keep_trajectories=True)
-    scenarios = ["test", "paper_405"]
-    one = evaluate(factory, "machining_envs/Turning-v0", scenarios, batched=False, **kw)
-    batch = evaluate(factory, "machining_envs/Turning-v0", scenarios, batched=True, **kw)
-    assert len(one.rows) == len(batch.rows) == 12
-    for a, b in zip(one.rows, batch.rows, strict=True):
-        assert a.keys() == b.keys()
-        for k in a:
-            assert a[k] == b[k] or (a[k] != a[k] and b[k] != b[k]), k
-    for a, b in zip(one.trajectories, batch.trajectories, strict=True):
-        assert a.keys() == b.keys()
-        for k, v in a.items():
-            if isinstance(v, np.ndarray):
-                assert v.dtype == b[k].dtype, k
-                np.testing.assert_array_equal(v, b[k], err_msg=k)
-            else:
-                assert v == b[k], k
-
-
 def test_batched_evaluation_needs_a_native_vector_env():
     with pytest.raises(ValueError, match="no native vector env"):
         evaluate(ConstantFeed.from_env, "Pendulum-v1", [None], n_episodes=2, batched=True)
@@ -92,90 +64,49 @@ def test_batched_evaluation_of_a_network_policy_agrees_to_float32_rounding():
                 assert v == b[k], k
 
 
-@pytest.mark.parametrize(
-    "factory, env_kwargs",
-    [
-        (NoControl.from_env, {}),
-        (PD.from_env, {}),
-        (SlidingMode.from_env, {}),
-        (PeckDrilling.from_env, {"control": "feed"}),
-    ],
-    ids=["no control", "PD", "sliding mode", "peck drilling"],
-)
-def test_batched_drilling_evaluation_gives_the_episode_by_episode_rows(factory, env_kwargs):
-    """The drilling controllers as the lanes of MicroDrilling-v0's native vector env (voltage
-    and feed control): the same metrics and trajectories, to the last bit, as one episode
-    after another with the same seeds."""
-    kw = dict(n_episodes=4, seed=1000, keep_trajectories=True, env_kwargs=env_kwargs)
-    scenarios = ["test", "paper_0.6"]
-    one = evaluate(factory, "machining_envs/MicroDrilling-v0", scenarios, batched=False, **kw)
-    batch = evaluate(factory, "machining_envs/MicroDrilling-v0", scenarios, batched=True, **kw)
-    assert len(one.rows) == len(batch.rows) == 8
-    for a, b in zip(one.rows, batch.rows, strict=True):
-        assert a.keys() == b.keys()
-        for k in a:
-            assert a[k] == b[k] or (a[k] != a[k] and b[k] != b[k]), k
-    for a, b in zip(one.trajectories, batch.trajectories, strict=True):
-        assert a.keys() == b.keys() and "drilling_time_s" in a
-        for k, v in a.items():
-            if isinstance(v, np.ndarray):
-                assert v.dtype == b[k].dtype, k
-                np.testing.assert_array_equal(v, b[k], err_msg=k)
-            else:
-                assert v == b[k], k
+TURNING_ID, MILLING_ID = TURNING, "machining_envs/EndMilling-v0"
+DRILLING_ID, CONTOURING_ID = "machining_envs/MicroDrilling-v0", "machining_envs/Contouring-v0"
+#: (env id, env kwargs, agent factory, scenarios, episodes per scenario): every classical
+#: agent of every process, on the held-out distribution and one paper scenario.
+BATCHED_CASES = [
+    (TURNING_ID, {}, VariableGainPI.from_env, ["test", "paper_405"], 6),
+    (TURNING_ID, {}, FixedGainPI.from_env, ["test", "paper_405"], 6),
+    (TURNING_ID, {}, ConstantFeed.from_env, ["test", "paper_405"], 6),
+    (MILLING_ID, {}, IntegralACC.from_env, ["test", "paper_taper"], 5),
+    (MILLING_ID, {}, FixedGainIntegral.from_env, ["test", "paper_taper"], 5),
+    (MILLING_ID, {}, MillingConstantFeed.from_env, ["test", "paper_taper"], 5),
+    (DRILLING_ID, {}, NoControl.from_env, ["test", "paper_0.6"], 4),
+    (DRILLING_ID, {}, PD.from_env, ["test", "paper_0.6"], 4),
+    (DRILLING_ID, {}, SlidingMode.from_env, ["test", "paper_0.6"], 4),
+    (DRILLING_ID, {"control": "feed"}, PeckDrilling.from_env, ["test", "paper_0.6"], 4),
+    (CONTOURING_ID, {}, PIPosition.from_env, ["test", "paper_step_load"], 3),
+    (CONTOURING_ID, {}, HInf2DOF.from_env, ["test", "paper_circle_load"], 3),
+    ("machining_envs/ContouringFeed-v0", {}, ConstantOverride.from_env,
+     ["test", "paper_involute"], 3),
+]  # fmt: skip
 
 
 @pytest.mark.parametrize(
-    "env_id, factory, scenarios",
-    [
-        ("machining_envs/Contouring-v0", PIPosition.from_env, ["test", "paper_step_load"]),
-        ("machining_envs/Contouring-v0", HInf2DOF.from_env, ["test", "paper_circle_load"]),
-        ("machining_envs/ContouringFeed-v0", ConstantOverride.from_env, ["test", "paper_involute"]),
-    ],
-    ids=["PI position", "H-inf 2-DOF", "constant override"],
+    "env_id, env_kwargs, factory, scenarios, n",
+    BATCHED_CASES,
+    ids=[f"{c[2].__qualname__.split('.')[0]}-{c[0].split('/')[1]}" for c in BATCHED_CASES],
 )
-def test_batched_contouring_evaluation_gives_the_episode_by_episode_rows(
-    env_id, factory, scenarios
+def test_batched_evaluation_gives_the_episode_by_episode_rows(
+    env_id, env_kwargs, factory, scenarios, n
 ):
-    """The contouring agents on the lanes of the native vector envs: the same metrics and
-    trajectories, to the last bit, as one episode after another with the same seeds."""
-    kw = dict(n_episodes=3, seed=1000, keep_trajectories=True)
+    """N episodes of one agent as the lanes of the native vector env: the same metrics and
+    trajectories (values and dtypes, to the last bit) as one episode after another with the
+    same seeds, for every classical agent (drilling on voltage and on feed control)."""
+    kw = dict(n_episodes=n, seed=1000, keep_trajectories=True, env_kwargs=env_kwargs)
     one = evaluate(factory, env_id, scenarios, batched=False, **kw)
     batch = evaluate(factory, env_id, scenarios, batched=True, **kw)
-    assert len(one.rows) == len(batch.rows) == 6
+    assert len(one.rows) == len(batch.rows) == n * len(scenarios)
     for a, b in zip(one.rows, batch.rows, strict=True):
         assert a.keys() == b.keys()
         for k in a:
             assert a[k] == b[k] or (a[k] != a[k] and b[k] != b[k]), k
     for a, b in zip(one.trajectories, batch.trajectories, strict=True):
         assert a.keys() == b.keys()
-        for k, v in a.items():
-            if isinstance(v, np.ndarray):
-                assert v.dtype == b[k].dtype, k
-                np.testing.assert_array_equal(v, b[k], err_msg=k)
-            else:
-                assert v == b[k], k
-
-
-@pytest.mark.parametrize(
-    "factory",
-    [IntegralACC.from_env, FixedGainIntegral.from_env, MillingConstantFeed.from_env],
-    ids=["IntegralACC", "fixed-gain integral", "constant feed"],
-)
-def test_batched_milling_evaluation_gives_the_episode_by_episode_rows(factory):
-    """The milling agents on EndMilling-v0's native vector env: the same metrics and
-    trajectories, to the last bit, as one episode after another with the same seeds."""
-    kw = dict(n_episodes=5, seed=1000, keep_trajectories=True)
-    scenarios = ["test", "paper_taper"]
-    one = evaluate(factory, "machining_envs/EndMilling-v0", scenarios, batched=False, **kw)
-    batch = evaluate(factory, "machining_envs/EndMilling-v0", scenarios, batched=True, **kw)
-    assert len(one.rows) == len(batch.rows) == 10
-    for a, b in zip(one.rows, batch.rows, strict=True):
-        assert a.keys() == b.keys()
-        for k in a:
-            assert a[k] == b[k] or (a[k] != a[k] and b[k] != b[k]), k
-    for a, b in zip(one.trajectories, batch.trajectories, strict=True):
-        assert a.keys() == b.keys() and "machining_time_s" in a
         for k, v in a.items():
             if isinstance(v, np.ndarray):
                 assert v.dtype == b[k].dtype, k
