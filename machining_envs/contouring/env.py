@@ -36,7 +36,7 @@ from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
-    check_render_mode,
+    adopt_core,
     check_scenario_spec,
     present_frame,
     ready_to_render,
@@ -686,17 +686,10 @@ class ContouringEnv(gym.Env):
             type(self).__name__, 1, scenario, params, reward, max_episode_time_s,
             in_position_mm, divergence_mm, overrides,
         )  # fmt: skip
-        self.params = core.params
-        self.reward_weights = core.reward_weights
-        self.max_episode_time_s = core.max_episode_time_s
+        adopt_core(self, core, scenario, render_mode)
         self.in_position_mm = core.in_position_mm
         self.divergence_mm = core.divergence_mm
-        self.default_scenario = scenario
-        self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
-        self.command_map = core.command_map
         self._umax = self.params.command_max_mm_s
-        self.action_space = core.action_space
-        self.observation_space = core.observation_space
         self.scenario: ContouringScenario | None = None
         self.plant: ContouringPlant | None = None
 

@@ -42,7 +42,7 @@ from machining_envs.contouring.servo import SERVO_KINDS, ServoLanes, run_block, 
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
-    check_render_mode,
+    adopt_core,
     check_reward_weights,
     check_scenario_spec,
     present_frame,
@@ -652,21 +652,14 @@ class ContouringFeedEnv(gym.Env):
             decision_interval_s, override_max, max_episode_time_s, in_position_mm,
             divergence_mm, overrides,
         )  # fmt: skip
-        self.params = core.params
+        adopt_core(self, core, scenario, render_mode)
         self.servo = core.servo
         self.tolerance_mm = core.tolerance_mm
-        self.reward_weights = core.reward_weights
         self.decision_interval_s = core.decision_interval_s
         self._n_sub = core.n_sub
         self.override_max = core.override_max
-        self.max_episode_time_s = core.max_episode_time_s
         self.in_position_mm = core.in_position_mm
         self.divergence_mm = core.divergence_mm
-        self.default_scenario = scenario
-        self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
-        self.command_map = core.command_map
-        self.action_space = core.action_space
-        self.observation_space = core.observation_space
         self.scenario: ContouringScenario | None = None
         self._started = False
 

@@ -10,6 +10,7 @@ import numpy as np
 
 __all__ = [
     "ActionMap",
+    "adopt_core",
     "check_action",
     "real_actions",
     "check_overrides",
@@ -107,6 +108,20 @@ def real_actions(action, env_name: str) -> np.ndarray:
             f"{env_name}: action must be real numbers, got {action!r:.60} (dtype {a.dtype})"
         )
     return a.astype(np.float64, copy=False)
+
+
+def adopt_core(env, core, scenario, render_mode) -> None:
+    """Give a single env (a core of one lane) the public attributes every env has:
+    ``params``, ``reward_weights``, ``max_episode_time_s``, ``default_scenario``
+    (``scenario``), ``render_mode`` (checked), ``command_map`` and the two spaces."""
+    env.params = core.params
+    env.reward_weights = core.reward_weights
+    env.max_episode_time_s = core.max_episode_time_s
+    env.default_scenario = scenario
+    env.render_mode = check_render_mode(render_mode, env.metadata["render_modes"])
+    env.command_map = core.command_map
+    env.action_space = core.action_space
+    env.observation_space = core.observation_space
 
 
 def check_action(action, env_name: str) -> tuple[float, bool]:

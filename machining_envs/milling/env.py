@@ -14,9 +14,9 @@ from machining_envs.core.env import (
     ACTION_MAPS,
     ActionMap,
     EpisodeLog,
+    adopt_core,
     check_action,
     check_episode_time,
-    check_render_mode,
     check_reward_weights,
     check_scenario_spec,
     present_frame,
@@ -684,14 +684,7 @@ class EndMillingEnv(gym.Env):
             overrides,
         )
         core = self._core
-        self.params = core.params
-        self.reward_weights = core.reward_weights
-        self.max_episode_time_s = core.max_episode_time_s
-        self.default_scenario = scenario
-        self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
-        self.command_map = core.command_map
-        self.action_space = core.action_space
-        self.observation_space = core.observation_space
+        adopt_core(self, core, scenario, render_mode)
         self.scenario: MillingScenario | None = None
         self.plant: MillingLanes | None = None
 

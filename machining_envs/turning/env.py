@@ -14,9 +14,9 @@ from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
+    adopt_core,
     check_action,
     check_episode_time,
-    check_render_mode,
     check_reward_weights,
     check_scenario_spec,
     present_frame,
@@ -510,15 +510,8 @@ class TurningEnv(gym.Env):
             overrides,
         )
         core = self._core
-        self.params = core.params
+        adopt_core(self, core, scenario, render_mode)
         self.spindle_rpm_override = core.spindle_rpm_override
-        self.reward_weights = core.reward_weights
-        self.max_episode_time_s = core.max_episode_time_s
-        self.default_scenario = scenario
-        self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
-        self.command_map = core.command_map
-        self.action_space = core.action_space
-        self.observation_space = core.observation_space
         self.scenario: TurningScenario | None = None
         self.plant: TurningLanes | None = None
 
