@@ -14,14 +14,14 @@ __all__ = [
     "oscillation_amplitude",
     "episode_flag",
     "finish_time",
+    "score_bound",
     "SETTLE_BAND",
-    "OVER_LIMIT",
     "OSC_WINDOW_S",
 ]
 
-#: Half-width of the band around the reference that counts as settled (5 % of the reference).
+#: Half-width of the band that counts as settled (5 % of the limit).
 SETTLE_BAND = 0.05
-#: Force (or torque) above this multiple of the reference counts as over the limit.
+#: The former over-limit factor (1.1x a reference); removed once every env reports ``cost``.
 OVER_LIMIT = 1.1
 #: Window of the moving mean removed before measuring oscillation, s.
 OSC_WINDOW_S = 1.0
@@ -66,13 +66,26 @@ def oscillation_amplitude(e: np.ndarray, window: int) -> float:
     return float(0.5 * np.ptp(r)) if r.size else 0.0
 
 
+def score_bound(traj: dict) -> float:
+    """The episode's floor of its score (``info["score_bound"]``, constant over an
+    episode), NaN where the env gives none."""
+    b = traj.get("score_bound")
+    if b is None:
+        return float("nan")
+    b = np.asarray(b, dtype=np.float64)
+    b = b[np.isfinite(b)]
+    return float(b[-1]) if b.size else float("nan")
+
+
 def regulation_metrics(
-    traj: dict, signal: str = "force_N", reference: str = "force_ref_N"
+    traj: dict, signal: str = "force_N", limit: str = "force_limit_N"
 ) -> dict[str, float]:
     """Metrics of one regulation episode.
 
-    With the normalised error ``e = (y - r) / r`` of the regulated signal ``y`` (true force or
-    torque) against its reference ``r``, sampled every ``dt``:
+    With the normalised gap ``e = (y - L) / L`` of the regulated signal ``y`` (true force or
+    torque) to the process limit ``L``, sampled every ``dt`` (an agent regulating at 0.9 L
+    has ``e = -0.1`` in steady state: these metrics read how close to the limit, and how
+    steadily, a controller runs, whatever setpoint it chose):
 
     - ``iae``: sum |e| dt (s); ``itae``: sum t |e| dt (s^2);
     - ``max_overshoot``: largest e after the first entry into the 5 % band (0 if none), so the
@@ -83,20 +96,23 @@ def regulation_metrics(
     - ``steady_state_error``: mean over segments of |mean e| over the last 30 % of each;
     - ``oscillation``: largest over segments of half the peak-to-peak of e less its 1 s
       moving mean, over the segment's second half (sustained oscillation, not slow drift);
-    - ``time_over_limit``: share of samples with y above 1.1 r;
+    - ``time_over_limit``: share of samples with a constraint cost (``info["cost"] > 0``,
+      ``y`` above ``L``);
+    - ``score_bound``: the episode's floor of the machining time (``info["score_bound"]``);
     - ``machining_time_s``: when the workpiece was finished (the episode's length if not);
     - ``finished``, ``breakage``, ``diverged`` (1.0 / 0.0); ``n_steps``.
     """
     t = np.asarray(traj["t_s"], dtype=np.float64)
     y = np.asarray(traj[signal], dtype=np.float64)
-    r = np.asarray(traj[reference], dtype=np.float64)
+    r = np.asarray(traj[limit], dtype=np.float64)
+    cost = np.asarray(traj["cost"], dtype=np.float64)
     e = (y - r) / r
     dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
     # Sample 0 is the reset (t = 0, nothing cut yet); errors are scored from the first step,
     # and only while the tool is in the workpiece (the last sample of a finished cut is air).
     cutting = np.asarray(traj.get("depth_mm", np.ones(t.size)), dtype=np.float64)[1:] > 0
     te, ee = t[1:][cutting], e[1:][cutting]
-    y, r = y[1:][cutting], r[1:][cutting]
+    cost = cost[1:][cutting]
     ae = np.abs(ee)
     out: dict[str, float] = {
         "iae": float(np.sum(ae) * dt),
@@ -124,7 +140,8 @@ def regulation_metrics(
     out["n_unsettled"] = float(unsettled)
     out["steady_state_error"] = float(np.mean(sse)) if sse else 0.0
     out["oscillation"] = float(max(osc)) if osc else 0.0
-    out["time_over_limit"] = float(np.mean(y > OVER_LIMIT * r)) if y.size else 0.0
+    out["time_over_limit"] = float(np.mean(cost > 0.0)) if cost.size else 0.0
+    out["score_bound"] = score_bound(traj)
     finished = episode_flag(traj, "finished")
     out["machining_time_s"] = finish_time(traj, "machining_time_s", finished, t)
     out["finished"] = float(finished)

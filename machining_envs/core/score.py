@@ -7,8 +7,15 @@ env's time limit, or its divergence limit), so that no agent can win by breaking
 constraint. The score's second column is a tracking measure reported beside it.
 
 An episode counts if it finished, nothing broke or diverged, and (where the env has one)
-the constrained signal spent under 2 % of the time over its limit: 1.1x the reference force
-or torque for the regulation envs, the contour-error tolerance for ContouringFeed-v0.
+the constrained signal spent under 2 % of the time over its limit: the share of steps with
+a constraint cost (``info["cost"] > 0``: force or torque above the scenario's process limit,
+contour error above its tolerance) stays under ``OVER_LIMIT_SHARE``. The limit is the
+scenario's, the same for every agent; where to regulate below it is each agent's choice.
+
+Each env also reports ``info["score_bound"]``: a floor of the episode's value computed from
+its hidden truth (for Turning-v0, the time to cut the workpiece with the force exactly at
+the limit everywhere, within the servo's top speed). ``efficiency = bound / charged value``
+is 1 for an agent that reaches the floor and falls towards 0 as it wastes time.
 
 >>> from machining_envs.core.score import REGULATION_SCORE
 >>> row = {"machining_time_s": 30.0, "breakage": 0.0, "time_over_limit": 0.0,
@@ -54,6 +61,8 @@ class PrimaryScore:
     """Env attribute with the cost of an episode that does not count."""
     scale: float = 1.0
     """Factor applied to the score for display (1000 shows mm as µm)."""
+    bound_key: str | None = "score_bound"
+    """Per-episode floor of ``value_key`` from the episode's truth (NaN or absent: none)."""
 
     def counts(self, row: dict) -> bool:
         """Whether an episode counts: finished, nothing broke or diverged, constraint held."""
@@ -72,13 +81,25 @@ class PrimaryScore:
         cost = float(row.get("time_limit_s", failed_value))
         return max(cost, value) if math.isfinite(value) else cost
 
+    def efficiency(self, row: dict, failed_value: float) -> float:
+        """``bound / charged value`` of one episode (NaN where the env gives no bound)."""
+        if self.bound_key is None:
+            return math.nan
+        bound = float(row.get(self.bound_key, math.nan))
+        charged = self.charged(row, failed_value)
+        if not (math.isfinite(bound) and bound > 0 and charged > 0):
+            return math.nan
+        return bound / charged
+
     def __call__(self, rows: list[dict], failed_value: float) -> dict:
-        """``score`` (mean charged value), ``valid`` (share that counts), ``secondary``
-        (mean of ``secondary_key``, NaN if absent) and ``itae`` (its alias, kept for the
-        regulation envs' tables)."""
+        """``score`` (mean charged value), ``valid`` (share that counts), ``efficiency``
+        (mean of bound / charged value, NaN without a bound), ``secondary`` (mean of
+        ``secondary_key``, NaN if absent) and ``itae`` (its alias, kept for the regulation
+        envs' tables)."""
         if not rows:
             raise ValueError("rows must hold at least one episode")
         charged = [self.charged(r, failed_value) for r in rows]
+        eff = [self.efficiency(r, failed_value) for r in rows]
         sec = (
             float(np.mean([r.get(self.secondary_key, math.nan) for r in rows]))
             if self.secondary_key
@@ -87,6 +108,7 @@ class PrimaryScore:
         return {
             "score": float(np.mean(charged)),
             "valid": float(np.mean([self.counts(r) for r in rows])),
+            "efficiency": float(np.mean(eff)) if all(math.isfinite(e) for e in eff) else math.nan,
             "secondary": sec,
             "itae": sec,
         }
