@@ -11,7 +11,7 @@ episode metrics and primary score are not declared here: they belong to the env'
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import gymnasium as gym
 from gymnasium.envs.registration import load_env_creator
@@ -20,7 +20,7 @@ import machining_envs  # noqa: F401  (registers the env ids)
 from agents.eval import task_of
 from machining_envs.core.score import Task
 
-__all__ = ["BenchmarkSpec", "Process", "TABLE_METRICS"]
+__all__ = ["BenchmarkSpec", "Process", "Robustness", "TABLE_METRICS"]
 
 #: Metrics shown in the printed table by default (all are in the CSV).
 TABLE_METRICS = (
@@ -38,31 +38,52 @@ TABLE_METRICS = (
 
 
 @dataclass(frozen=True)
+class Robustness:
+    """The grid of the robustness heatmap: one constant-depth (or constant-parameter) cut
+    per cell, ``scenario(x, y)`` building it from the two axes' values."""
+
+    x_label: str
+    x_values: tuple[float, ...]
+    y_label: str
+    y_values: tuple[float, ...]
+    scenario: Callable[[float, float], object]
+
+
+@dataclass(frozen=True)
 class BenchmarkSpec:
-    """One env's part of the benchmark: which agents run on which scenarios, and how the
-    table and plots show them."""
+    """One env's part of the benchmark: which agents run, and how the report shows them.
+
+    Rows, in the order the table prints them: the physical bound (from every episode's
+    ``score_bound``), the MPC ``oracle`` (on the first ``oracle_episodes`` test episodes),
+    the ``paper_agents`` at the papers' settings, the ``tuned`` classes at the settings of
+    ``agents/bench/tuned.json`` (``agents.bench.tune``), and the ``learned`` policies
+    (``agents/rl/pretrained/<name>``, each training seed a policy).
+    """
 
     env_id: str
-    agents: tuple[Callable, ...]
-    """Agent factories ``env -> agent``; a factory with ``learned = True`` is a learned
-    policy (its row gets the paired margin over the best of the others)."""
+    paper_agents: tuple[Callable, ...]
+    """Agent factories ``env -> agent`` at the papers' settings."""
     paper_scenarios: tuple[str, ...]
-    heldout_scenario: str
     showcase_scenario: str
-    """Scenario of the trajectory plot."""
+    """Scenario of the paper-agent trajectory plot."""
+    tuned: tuple[type, ...] = ()
+    """Classical agent classes (with ``TUNABLE``) tuned by ``machining-bench tune``."""
+    learned: tuple[str, ...] = ()
+    """Folders of ``agents/rl/pretrained`` whose policies the benchmark scores."""
+    oracle: Callable | None = None
+    """Factory of the MPC oracle (single env; reads the episode's truth)."""
+    oracle_episodes: int = 10
+    env_kwargs: dict = field(default_factory=dict)
+    """Keyword arguments of ``gym.make`` for every row (tuning uses them too)."""
+    robustness: Robustness | None = None
     table_metrics: tuple[str, ...] = TABLE_METRICS
-    #: (info key, reference key or None, axis label) of the trajectory plot's upper panel,
+    """Metrics ``machining-bench evaluate`` prints."""
+    #: (info key, limit key or None, axis label) of the trajectory plot's upper panel,
     #: (info key, label) of its lower panel and of the context drawn on the lower panel's
     #: right axis (None for none).
-    plot_main: tuple[str, str | None, str] = ("force_N", "force_ref_N", "force (N)")
+    plot_main: tuple[str, str | None, str] = ("force_N", "force_limit_N", "force (N)")
     plot_lower: tuple[str, str] = ("feed_mm_per_rev", "feed (mm/rev)")
     plot_context: tuple[str, str] | None = ("depth_mm", "depth (mm)")
-    bar_metrics: tuple[tuple[str, str], ...] = (
-        ("machining_time_s", "machining time (s)"),
-        ("iae", "IAE (s)"),
-        ("time_over_limit", "share of time over 1.1x reference"),
-        ("breakage", "breakage rate"),
-    )
 
     @property
     def task(self) -> Task:

@@ -12,9 +12,9 @@ A run folder holds everything needed to reload or continue it::
     run/
       config.json            the resolved configuration, seed and command
       final_model.zip        the model at the end   (+ final_vecnormalize.json)
-      best_model.zip         the best on the held-out evaluation (+ best_vecnormalize.json)
+      best_model.zip         the best on the validation evaluations (+ best_vecnormalize.json)
       checkpoints/           periodic model + VecNormalize snapshots (for --resume)
-      eval.csv               the held-out evaluations made during training
+      eval.csv               the validation evaluations made during training (model selection)
       tb/                    TensorBoard logs
 
 >>> from agents.rl import load_config
@@ -24,7 +24,7 @@ A run folder holds everything needed to reload or continue it::
 """
 
 from agents.rl.config import ALGOS, CONFIG_DIR, ConfigError, TrainConfig, load_config
-from agents.rl.policy import PRETRAINED_DIR, PolicyAgent, load_policy, pretrained
+from agents.rl.policy import PRETRAINED_DIR, PolicyAgent, load_policy, pretrained, pretrained_seeds
 from agents.rl.train import FAILED_EPISODE_TIME_S, evaluate_policy_file, primary_score, train
 
 __all__ = [
@@ -40,5 +40,6 @@ __all__ = [
     "primary_score",
     "FAILED_EPISODE_TIME_S",
     "pretrained",
+    "pretrained_seeds",
     "PRETRAINED_DIR",
 ]

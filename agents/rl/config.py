@@ -129,7 +129,7 @@ class TrainConfig:
     env_kwargs: dict = field(default_factory=dict)
     eval_freq: int = 10_000
     eval_episodes: int = 10
-    eval_scenarios: list = field(default_factory=lambda: ["test"])
+    eval_scenarios: list = field(default_factory=lambda: ["validation"])
     checkpoint_freq: int = 20_000
     action_increment: float | None = None
     """If set, the policy outputs a change of the env's action of at most this much per step

@@ -13,7 +13,7 @@ from agents.base import check_observation
 from agents.rl.config import ALGOS, _algos
 from agents.rl.stats import read_stats, stats_path
 
-__all__ = ["PolicyAgent", "load_policy", "pretrained", "PRETRAINED_DIR"]
+__all__ = ["PolicyAgent", "load_policy", "pretrained", "pretrained_seeds", "PRETRAINED_DIR"]
 
 
 class PolicyAgent:
@@ -178,3 +178,24 @@ def pretrained(name: str):
     make.__name__ = f"pretrained_{name}"
     make.learned = True  # the benchmark gives learned agents their margin over the classical
     return make
+
+
+def pretrained_seeds(name: str, root=None) -> list[tuple[int, Path]]:
+    """The policies of ``<root>/<name>`` (default ``agents/rl/pretrained``), one per training
+    seed: ``(seed, model path)`` for every ``seed_<k>/best_model.zip`` in it, or the folder's
+    own ``best_model.zip`` (its seed from ``config.json``) when it has no seed folders.
+    ``FileNotFoundError`` when there is neither."""
+    folder = Path(root or PRETRAINED_DIR) / name
+    found = []
+    for sub in sorted(folder.glob("seed_*/best_model.zip")):
+        tail = sub.parent.name.removeprefix("seed_")
+        if tail.isdigit():
+            found.append((int(tail), sub))
+    if not found and (folder / "best_model.zip").is_file():
+        meta = folder / "config.json"
+        seed = json.loads(meta.read_text()).get("seed", 0) if meta.is_file() else 0
+        found.append((int(seed), folder / "best_model.zip"))
+    if not found:
+        raise FileNotFoundError(f"no policy in {folder} (seed_<k>/best_model.zip or best_model.zip)")
+    return sorted(found)
+

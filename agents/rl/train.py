@@ -20,6 +20,7 @@ from agents.rl.config import ConfigError, TrainConfig, _algos, load_config
 from agents.rl.policy import PolicyAgent, load_policy
 from agents.rl.stats import read_stats, restore_stats, save_stats, stats_path
 from machining_envs.core.score import REGULATION_SCORE, PrimaryScore
+from machining_envs.core.splits import check_not_held_out, split_seeds
 
 __all__ = ["train", "evaluate_policy_file", "primary_score", "FAILED_EPISODE_TIME_S"]
 
@@ -109,6 +110,11 @@ def _check_env_setup(cfg: TrainConfig) -> None:
     """Make the env with the config's ``env_kwargs`` and reset it on every evaluation
     scenario, so that a wrong keyword or scenario name fails before training starts."""
     where = f"{cfg.source}:{cfg.env_id}"
+    try:
+        check_not_held_out(cfg.eval_scenarios, "training (eval_scenarios)")
+        check_not_held_out([cfg.env_kwargs.get("scenario", "train")], "training (env_kwargs.scenario)")
+    except ValueError as exc:
+        raise ConfigError(f"{where}: {exc}") from None
     try:
         env = gym.make(cfg.env_id, **dict(cfg.env_kwargs))
     except gym.error.Error as exc:
@@ -297,7 +303,7 @@ def train(
                 env_id,
                 cfg.eval_scenarios,
                 n_episodes=cfg.eval_episodes,
-                seed=10_000,
+                seed=split_seeds("validation", cfg.eval_episodes)[0],
                 env_kwargs=dict(cfg.env_kwargs),
                 metrics_fn=metrics_fn,
             )
