@@ -1,143 +1,439 @@
-"""The benchmark: every applicable agent on every env, same held-out scenarios, one report.
+"""The benchmark: every agent of every env on the same held-out episodes, one report.
 
-``machining-bench benchmark [--quick] [--out results]`` prints a markdown table and writes
-``benchmark.csv``, ``report.md`` and PNG plots (representative trajectories, metric bars)
-to the output folder, plus the paper reproduction figure.
+``machining-bench benchmark [--quick] [--out results]`` runs, for each env, the physical
+bound, the MPC oracle (where built), the paper's classical agents, the tuned classical
+agents (``agents/bench/tuned.json``) and the learned policies (every training seed) on
+the fixed episodes of the ``test`` split, paired by seed, and on the ``ood`` split apart.
+It prints one table per env and writes ``benchmark.csv`` (every episode), ``report.md``
+and PNG plots: score intervals, performance profiles, representative trajectories and,
+for the regulation envs, a robustness heatmap. The paper reproductions follow.
+
+``test`` is touched here only: tuning and training use ``train`` and ``validation``.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 
 import gymnasium as gym
+import numpy as np
 
 from agents.bench.declarations import BENCHMARKS, PROCESSES
 from agents.bench.spec import BenchmarkSpec
-from agents.eval import Evaluation, agent_name, evaluate, primary_score_table, rollout
+from agents.bench.tune import load_tuned, tuned_factory
+from agents.eval import Evaluation, agent_name, evaluate, rollout
+from agents.eval.stats import agent_stats, paired_difference
+from machining_envs.core.splits import split_seeds
 
-__all__ = ["run_benchmark"]
+__all__ = ["run_benchmark", "SIZES"]
+
+#: Episodes per split: (test, ood, robustness grid cells' episodes) for the quick and full run.
+SIZES = {"quick": (20, 10), "full": (100, 50)}
+_KIND_COLOUR = {"bound": "0.3", "oracle": "C3", "paper": "C0", "tuned": "C2", "learned": "C1"}
 
 
-def _rl_installed() -> bool:
-    """Whether Stable-Baselines3 (the ``rl`` extra) is importable."""
+def _installed(module: str) -> bool:
     try:
-        import stable_baselines3  # noqa: F401
+        __import__(module)
     except ImportError:
         return False
     return True
 
 
-def run_benchmark(
-    out_dir="results", quick: bool = False, seed: int = 1000, verbose: bool = True
-) -> Evaluation:
-    """Run every benchmark; return all episode rows. ``quick``: fewer held-out episodes."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    n_test = 5 if quick else 20
-    n_paper = 1 if quick else 3
-    evals = []
-    report = ["# machining_envs benchmark", ""]
-    t0 = time.perf_counter()
-    for spec in BENCHMARKS:
-        env_name = spec.env_id.split("/")[-1]
-        spec_evals = []
-        learned = set()
-        for k, factory in enumerate(spec.agents):
-            if getattr(factory, "learned", False) and not _rl_installed():
-                if verbose:
-                    print(
-                        f"[{env_name}] {k + 1}/{len(spec.agents)} {factory.__name__}: skipped "
-                        "(learned policies need the rl extra: pip install 'machining-envs[rl]')"
-                    )
-                continue
-            for scenarios, n in (
-                (spec.paper_scenarios, n_paper),
-                ((spec.heldout_scenario,), n_test),
-            ):
-                ev = evaluate(
-                    factory,
-                    spec.env_id,
-                    scenarios,
-                    n_episodes=n,
-                    seed=seed,
-                    metrics_fn=spec.metrics_fn,
-                )
-                for row in ev.rows:
-                    row["env_id"] = spec.env_id
-                spec_evals.append(ev)
-            name = spec_evals[-1].rows[0]["agent"]
-            if getattr(factory, "learned", False):
-                learned.add(name)
+class _EnvRun:
+    """The rows of one env: per agent, its kind and its episode rows per split."""
+
+    def __init__(self, spec: BenchmarkSpec):
+        self.spec = spec
+        self.kind: dict[str, str] = {}
+        self.rows: dict[str, dict[str, list]] = {}
+        self.factory: dict[str, object] = {}
+        env = gym.make(spec.env_id, **spec.env_kwargs)
+        try:
+            self.score = spec.task.score
+            self.failed = self.score.failed_value(env)
+        finally:
+            env.close()
+
+    def add(self, name, kind, split, rows, policy_seed=None):
+        for r in rows:
+            r["env_id"] = self.spec.env_id
+            r["split"] = split
+            r["kind"] = kind
+            if policy_seed is not None:
+                r["policy_seed"] = policy_seed
+        self.kind.setdefault(name, kind)
+        self.rows.setdefault(name, {}).setdefault(split, []).extend(rows)
+
+    def all_rows(self) -> list[dict]:
+        return [r for by in self.rows.values() for rs in by.values() for r in rs]
+
+
+def _factories(spec: BenchmarkSpec, tuned: dict, verbose: bool):
+    """``(kind, factory, policy_seed)`` of every row the env's benchmark runs."""
+    out = [("paper", f, None) for f in spec.paper_agents]
+    for cls in spec.tuned:
+        f = tuned_factory(cls, spec.env_id, tuned)
+        if f is None:
+            if verbose:
+                print(f"  {cls.__name__}: no tuned settings (run `machining-bench tune`)")
+            continue
+        out.append(("tuned", f, None))
+    if spec.learned:
+        if not _installed("stable_baselines3"):
             if verbose:
                 print(
-                    f"[{env_name}] {k + 1}/{len(spec.agents)} {name}: done ({time.perf_counter() - t0:.0f} s)"
+                    "  learned rows skipped: they need the rl extra (pip install 'machining-envs[rl]')"
                 )
-        ev = Evaluation.concat(spec_evals)
-        evals.append(ev)
-        table = ev.to_markdown(spec.table_metrics)
-        score = spec.task.score
-        failed = score.failed_value(gym.make(spec.env_id))
-        primary = primary_score_table(ev, spec.heldout_scenario, failed, score, learned=learned)
-        if primary:
-            table += "\n\n" + primary
+        else:
+            from agents.rl.policy import load_policy, pretrained_seeds
+
+            for name in spec.learned:
+                for seed, path in pretrained_seeds(name):
+
+                    def make(env, path=path, name=name):
+                        return load_policy(path, name=f"{name}")
+
+                    out.append(("learned", make, seed))
+    return out
+
+
+def _run_env(spec: BenchmarkSpec, n_test: int, n_ood: int, tuned: dict, verbose: bool, t0):
+    run = _EnvRun(spec)
+    env_name = spec.env_id.split("/")[-1]
+    jobs = _factories(spec, tuned, verbose)
+    for k, (kind, factory, pseed) in enumerate(jobs):
+        for split, n in (("test", n_test), ("ood", n_ood)):
+            ev = evaluate(
+                factory,
+                spec.env_id,
+                [split],
+                n_episodes=n,
+                seed=split_seeds(split, n)[0],
+                env_kwargs=spec.env_kwargs,
+            )
+            name = ev.rows[0]["agent"]
+            run.factory.setdefault(name, factory)
+            run.add(name, kind, split, ev.rows, pseed)
+        if verbose:
+            tag = f" seed {pseed}" if pseed is not None else ""
+            print(
+                f"[{env_name}] {k + 1}/{len(jobs)} {kind} {name}{tag} ({time.perf_counter() - t0:.0f} s)"
+            )
+    if spec.oracle is not None:
+        if not _installed("casadi"):
+            if verbose:
+                print("  oracle skipped: it needs casadi (pip install 'machining-envs[bench]')")
+        else:
+            n = min(spec.oracle_episodes, n_test)
+            ev = evaluate(
+                spec.oracle,
+                spec.env_id,
+                ["test"],
+                n_episodes=n,
+                seed=split_seeds("test", n)[0],
+                env_kwargs=spec.env_kwargs,
+                batched=False,
+            )
+            name = ev.rows[0]["agent"]
+            run.factory.setdefault(name, spec.oracle)
+            run.add(name, "oracle", "test", ev.rows)
+            if verbose:
+                print(
+                    f"[{env_name}] oracle {name}, {n} test episodes ({time.perf_counter() - t0:.0f} s)"
+                )
+    return run
+
+
+def _fmt(v: float, digits: int = 3) -> str:
+    """``v`` to ``digits`` significant digits, no float noise (``1.05e-15`` prints ``0``)."""
+    if v is None or not math.isfinite(v):
+        return "–"
+    if abs(v) < 1e-9:
+        return "0"
+    return f"{v:.{digits}g}" if abs(v) < 10**digits else f"{v:.0f}"
+
+
+def _reference(run: _EnvRun, tuned: dict) -> str | None:
+    """The best tuned classical agent: the lowest ``validation_score`` in ``tuned.json``
+    among the tuned rows (chosen without looking at ``test``)."""
+    entries = tuned.get("envs", {}).get(run.spec.env_id, {})
+    best, best_v = None, math.inf
+    for name, kind in run.kind.items():
+        if kind != "tuned":
+            continue
+        cls = run.factory[name].__name__.removesuffix("_tuned")
+        v = entries.get(cls, {}).get("validation_score", math.inf)
+        if v < best_v:
+            best, best_v = name, v
+    return best
+
+
+def _table(run: _EnvRun, split: str, ref: str | None, seed: int = 0) -> tuple[str, dict]:
+    """The markdown table of one split and the per-agent statistics."""
+    score, failed = run.score, run.failed
+    k = score.scale
+    unit = score.label
+    stats = {}
+    names = [n for n in run.rows if split in run.rows[n]]
+    for name in names:
+        stats[name] = agent_stats(run.rows[name][split], score, failed, seed)
+    lines = [
+        f"| agent | kind | {unit}: IQM [95 % CI] | mean | counts | efficiency | "
+        f"better than {ref or 'best tuned'} by [95 % CI] | P(better) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    # The physical bound: the floor of every episode, from its truth.
+    any_rows = run.rows[names[0]][split] if names else []
+    bounds = [r.get(score.bound_key or "", math.nan) for r in any_rows]
+    if bounds and all(math.isfinite(b) for b in bounds):
+        b = np.array(bounds) * k
+        lines.append(
+            f"| physical bound | bound | {_fmt(_iqm(b))} | {_fmt(b.mean())} | – | 1 | – | – |"
+        )
+    order = {"oracle": 0, "paper": 1, "tuned": 2, "learned": 3}
+    for name in sorted(names, key=lambda n: order[run.kind[n]]):
+        s = stats[name]
+        kind = run.kind[name]
+        if kind == "learned":
+            kind = f"learned, {s.n_seeds} seed{'s' if s.n_seeds > 1 else ''}"
+        if run.kind[name] == "oracle":
+            kind = f"oracle, {s.n_episodes} ep."
+        cmp_, p = "–", "–"
+        if ref is not None and name != ref and split in run.rows.get(ref, {}):
+            d = paired_difference(run.rows[ref][split], run.rows[name][split], score, failed, seed)
+            cmp_ = f"{_fmt(d['diff'] * k)} [{_fmt(d['low'] * k)}, {_fmt(d['high'] * k)}]"
+            p = f"{d['p_improve']:.2f}"
+        eff = "–" if not math.isfinite(s.efficiency) else f"{s.efficiency:.2f}"
+        lines.append(
+            f"| {name} | {kind} | {_fmt(s.iqm * k)} [{_fmt(s.iqm_low * k)}, {_fmt(s.iqm_high * k)}] "
+            f"| {_fmt(s.mean * k)} | {s.count_rate:.0%} | {eff} | {cmp_} | {p} |"
+        )
+    return "\n".join(lines), stats
+
+
+def _iqm(x: np.ndarray) -> float:
+    from scipy.stats import trim_mean
+
+    return float(trim_mean(x, 0.25))
+
+
+def run_benchmark(
+    out_dir="results", quick: bool = False, seed: int = 0, verbose: bool = True,
+    envs: list[str] | None = None, reproductions: bool = True,
+) -> Evaluation:  # fmt: skip
+    """Run every env's benchmark (or those in ``envs``); return all episode rows.
+
+    ``quick``: 20 test and 10 ood episodes per agent instead of 100 and 50, no robustness
+    grid. ``seed`` seeds the bootstrap only: the episodes are the splits' fixed ones.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    n_test, n_ood = SIZES["quick" if quick else "full"]
+    tuned = load_tuned()
+    report = [
+        "# machining_envs benchmark",
+        "",
+        f"Every agent on the same {n_test} `test` episodes (seeds "
+        f"{split_seeds('test', n_test)[0]}-{split_seeds('test', n_test)[-1]}) and {n_ood} `ood` "
+        "episodes, paired by seed. Score: the env's primary score (lower is better; an episode "
+        "that does not count is charged the env's failure cost). IQM: interquartile mean with "
+        "its 95 % stratified-bootstrap interval (rliable); counts: share of episodes that count; "
+        "efficiency: mean of bound / charged value. The comparison column is the paired "
+        "difference (reference minus agent, positive = better) against the best tuned "
+        "classical agent (chosen by its validation score), with its 95 % bootstrap interval "
+        "over episodes; P(better): probability of improvement on an episode.",
+        "",
+    ]
+    all_rows, times = [], {}
+    t0 = time.perf_counter()
+    for spec in BENCHMARKS:
+        if envs and spec.env_id not in envs:
+            continue
+        t_env = time.perf_counter()
+        env_name = spec.env_id.split("/")[-1]
+        run = _run_env(spec, n_test, n_ood, tuned, verbose, t0)
+        ref = _reference(run, tuned)
+        test_table, stats = _table(run, "test", ref, seed)
+        ood_table, _ = _table(run, "ood", ref, seed)
+        pngs = [
+            _plot_scores(run, stats, out / f"{env_name}_scores.png"),
+            _plot_profiles(run, out / f"{env_name}_profiles.png"),
+            _plot_trajectories(run, out / f"{env_name}_trajectories.png"),
+        ]
+        if spec.robustness is not None and not quick:
+            pngs.append(_plot_robustness(run, ref, out / f"{env_name}_robustness.png"))
+        times[env_name] = time.perf_counter() - t_env
         report += [
             f"## {env_name}",
             "",
-            f"Held-out scenario `{spec.heldout_scenario}`: {n_test} episodes "
-            f"per agent (seeds {seed}..{seed + n_test - 1}); paper scenarios: {n_paper} each.",
+            f"`test`, {n_test} episodes:",
             "",
-            table,
+            test_table,
+            "",
+            f"`ood` (beyond the training ranges), {n_ood} episodes:",
+            "",
+            ood_table,
+            "",
+            *[f"![{p.stem}]({p.name})" for p in pngs if p is not None],
             "",
         ]
         if verbose:
-            print(f"\n### {env_name}\n\n{table}\n")
-        traj_png = out / f"{env_name}_trajectories.png"
-        _plot_trajectories(spec, traj_png, seed)
-        bars_png = out / f"{env_name}_metrics.png"
-        _plot_bars(ev, spec, bars_png)
-        report += [f"![trajectories]({traj_png.name})", "", f"![metrics]({bars_png.name})", ""]
-    allev = Evaluation.concat(evals)
+            print(f"\n### {env_name} ({times[env_name]:.0f} s)\n\n`test`:\n\n{test_table}\n\n"
+                  f"`ood`:\n\n{ood_table}\n")  # fmt: skip
+        all_rows += run.all_rows()
+    allev = Evaluation(rows=all_rows)
     allev.to_csv(out / "benchmark.csv")
-
-    for process in PROCESSES:
-        if verbose:
-            print(f"### Paper reproduction: {process.name}\n")
-        repro = process.reproduce(out, verbose=verbose)
-        n_ok = sum(r["match"] for r in repro)
-        report += [
-            f"## Paper reproduction: {process.name}",
-            "",
-            f"{n_ok}/{len(repro)} experiments show the paper's behaviour.",
-            "",
-            f"![reproduction](reproduce_{process.name}.png)",
-            "",
-        ]
+    if reproductions:
+        for process in PROCESSES:
+            if verbose:
+                print(f"### Paper reproduction: {process.name}\n")
+            repro = process.reproduce(out, verbose=verbose)
+            n_ok = sum(r["match"] for r in repro)
+            report += [
+                f"## Paper reproduction: {process.name}",
+                "",
+                f"{n_ok}/{len(repro)} experiments match the paper within their stated tolerance.",
+                "",
+                f"![reproduction](reproduce_{process.name}.png)",
+                "",
+            ]
+    total = time.perf_counter() - t0
+    report += [
+        "## Time",
+        "",
+        *[f"- {k}: {v:.0f} s" for k, v in times.items()],
+        f"- total: {total:.0f} s",
+        "",
+    ]
     (out / "report.md").write_text("\n".join(report))
     if verbose:
-        print(
-            f"\nwrote {out / 'benchmark.csv'}, {out / 'report.md'} and plots "
-            f"({time.perf_counter() - t0:.0f} s)"
-        )
+        per_env = ", ".join(f"{k} {v:.0f} s" for k, v in times.items())
+        print(f"\nwrote {out / 'benchmark.csv'}, {out / 'report.md'} and plots")
+        print(f"time: {per_env}; total {total:.0f} s")
     return allev
 
 
-def _plot_trajectories(spec: BenchmarkSpec, path: Path, seed: int) -> None:
+# ---- plots ---------------------------------------------------------------------------------
+
+
+def _plot_scores(run: _EnvRun, stats: dict, path: Path) -> Path:
     from matplotlib.figure import Figure
 
-    key, ref_key, label = spec.plot_main
+    k = run.score.scale
+    names = list(stats)
+    fig = Figure(figsize=(7.5, 0.45 * len(names) + 1.4))
+    ax = fig.subplots()
+    for i, name in enumerate(names):
+        s = stats[name]
+        c = _KIND_COLOUR[run.kind[name]]
+        ax.plot([s.iqm_low * k, s.iqm_high * k], [i, i], color=c, lw=6, alpha=0.5)
+        ax.plot([s.iqm * k], [i], "|", color=c, ms=14, mew=2)
+    rows = next(iter(run.rows.values()))["test"]
+    bounds = np.array([r.get("score_bound", math.nan) for r in rows]) * k
+    if np.all(np.isfinite(bounds)):
+        ax.axvline(_iqm(bounds), color="0.3", ls="--", lw=1, label="physical bound (IQM)")
+        ax.legend(fontsize=8, loc="lower right")
+    ax.set_yticks(range(len(names)), [f"{n} [{run.kind[n]}]" for n in names], fontsize=8)
+    ax.set_xlabel(f"{run.score.label}: IQM, 95 % CI (lower is better)")
+    ax.set_title(f"{run.spec.env_id}: test split", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    return path
+
+
+def _plot_profiles(run: _EnvRun, path: Path) -> Path:
+    """Performance profiles: the share of test episodes whose efficiency exceeds tau (or,
+    without a bound, whose score is below tau), with rliable's bootstrap bands."""
+    from matplotlib.figure import Figure
+    from rliable import library
+
+    from agents.eval.stats import BOOTSTRAP_REPS, score_matrix
+
+    score, failed = run.score, run.failed
+    names = [n for n in run.rows if "test" in run.rows[n]]
+    mats, has_bound = {}, True
+    for n in names:
+        rows = run.rows[n]["test"]
+        eff = [score.efficiency(r, failed) for r in rows]
+        has_bound = has_bound and all(math.isfinite(e) for e in eff)
+    for n in names:
+        rows = run.rows[n]["test"]
+        if has_bound:
+            by_p: dict = {}
+            for r in rows:
+                by_p.setdefault(r.get("policy_seed", 0), {})[r["seed"]] = score.efficiency(
+                    r, failed
+                )
+            seeds = sorted(next(iter(by_p.values())))
+            mats[n] = np.array([[by_p[p][s] for p in sorted(by_p)] for s in seeds])
+        else:
+            mats[n] = -score_matrix(rows, score, failed)[1] * score.scale
+    if has_bound:
+        taus = np.linspace(0.0, 1.0, 41)
+        xlabel = "efficiency tau (bound / charged value)"
+    else:
+        lo = min(m.min() for m in mats.values())
+        taus = np.linspace(lo, 0.0, 41)
+        xlabel = f"-({score.label}) tau"
+    prof, ci = library.create_performance_profile(mats, taus, reps=min(BOOTSTRAP_REPS, 500))
+    fig = Figure(figsize=(6.5, 4))
+    ax = fig.subplots()
+    for i, n in enumerate(names):
+        c = _KIND_COLOUR[run.kind[n]] if run.kind[n] in ("bound", "oracle") else f"C{i % 10}"
+        ax.plot(taus, prof[n], color=c, lw=1.5, label=f"{n} [{run.kind[n]}]")
+        ax.fill_between(taus, ci[n][0], ci[n][1], color=c, alpha=0.15)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("share of episodes above tau")
+    ax.set_title(f"{run.spec.env_id}: performance profiles (test)", fontsize=10)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    return path
+
+
+def _representative_seed(run: _EnvRun) -> int:
+    """The test episode whose bound (or, without one, whose first agent's score) is the
+    median of the split: a typical workpiece, not a chosen one."""
+    rows = next(iter(run.rows.values()))["test"]
+    key = (
+        "score_bound" if all(math.isfinite(r.get("score_bound", math.nan)) for r in rows) else None
+    )
+    vals = [(r.get(key) if key else run.score.charged(r, run.failed), r["seed"]) for r in rows]
+    vals = [v for v in vals if v[1] is not None]
+    vals.sort()
+    return int(vals[len(vals) // 2][1])
+
+
+def _plot_trajectories(run: _EnvRun, path: Path) -> Path:
+    """One typical test episode, one line per agent (the first seed of a learned agent);
+    the upper panel is clipped to three times its limit (or typical peak), so that an agent
+    that diverges does not hide the others."""
+    from matplotlib.figure import Figure
+
+    spec = run.spec
+    key, lim_key, label = spec.plot_main
     low_key, low_label = spec.plot_lower
+    seed = _representative_seed(run)
     fig = Figure(figsize=(9, 5.5))
     axes = fig.subplots(2, 1, sharex=True)
-    env = gym.make(spec.env_id)
+    env = gym.make(spec.env_id, **spec.env_kwargs)
+    peaks, lim = [], None
     try:
-        for i, factory in enumerate(spec.agents):
+        for i, (name, factory) in enumerate(run.factory.items()):
+            kind = run.kind[name]
             agent = factory(env)
-            tr = rollout(agent, env, spec.showcase_scenario, seed)
-            axes[0].plot(tr["t_s"], tr[key], color=f"C{i}", lw=1, label=agent_name(agent))
-            axes[1].plot(tr["t_s"], tr[low_key], color=f"C{i}", lw=1)
-        if ref_key is not None:
-            axes[0].plot(tr["t_s"], tr[ref_key], color="k", ls="--", lw=0.8, label="reference")
+            tr = rollout(agent, env, "test", seed)
+            c = _KIND_COLOUR[kind] if kind == "oracle" else f"C{i % 10}"
+            axes[0].plot(tr["t_s"], tr[key], color=c, lw=1, label=f"{agent_name(agent)} [{kind}]")
+            axes[1].plot(tr["t_s"], tr[low_key], color=c, lw=1)
+            peaks.append(float(np.nanmax(np.abs(tr[key]))))
+            if lim_key is not None and lim_key in tr:
+                lim = float(tr[lim_key][0])
+                if i == len(run.factory) - 1:
+                    axes[0].axhline(lim, color="k", ls="--", lw=0.8, label="limit")
         if spec.plot_context is not None:
             ctx_key, ctx_label = spec.plot_context
             ax2 = axes[1].twinx()
@@ -145,33 +441,56 @@ def _plot_trajectories(spec: BenchmarkSpec, path: Path, seed: int) -> None:
             ax2.set_ylabel(ctx_label, color="0.5")
     finally:
         env.close()
+    top = 1.5 * lim if lim is not None else 3.0 * float(np.median(peaks))
+    if max(peaks) > top:
+        axes[0].set_ylim(top=top)
+        axes[0].text(0.01, 0.97, "clipped: some agents go beyond the axis", transform=axes[0].transAxes,
+                     fontsize=7, va="top")  # fmt: skip
     axes[0].set_ylabel(label)
-    axes[0].legend(fontsize=8)
-    axes[0].set_title(f"{spec.env_id}, scenario {spec.showcase_scenario}, seed {seed}")
+    axes[0].legend(fontsize=7)
+    axes[0].set_title(f"{spec.env_id}: typical test episode (seed {seed})", fontsize=10)
     axes[1].set_ylabel(low_label)
     axes[1].set_xlabel("time (s)")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
+    return path
 
 
-def _plot_bars(ev: Evaluation, spec: BenchmarkSpec, path: Path) -> None:
+def _plot_robustness(run: _EnvRun, ref: str | None, path: Path) -> Path | None:
+    """Efficiency of the best tuned classical agent and of the learned agent (first seed)
+    over the spec's grid (one episode per cell, seed 0)."""
     from matplotlib.figure import Figure
 
-    scenario = spec.heldout_scenario
-    keys = [m for m, _ in spec.bar_metrics]
-    summ = [r for r in ev.summary(keys) if r["scenario"] == scenario]
-    names = [r["agent"] for r in summ]
-    fig = Figure(figsize=(3.3 * len(keys), 3.2))
-    axes = fig.subplots(1, len(keys), squeeze=False)
-    for ax, (m, label) in zip(axes[0], spec.bar_metrics, strict=True):
-        ax.bar(
-            range(len(names)),
-            [r[m] for r in summ],
-            yerr=[r[m + "_std"] for r in summ],
-            color=[f"C{i}" for i in range(len(names))],
-        )
-        ax.set_xticks(range(len(names)), names, rotation=20, ha="right", fontsize=7)
-        ax.set_title(label, fontsize=9)
-    fig.suptitle(f"held-out scenario '{scenario}': mean ± std over episodes", fontsize=10)
-    fig.tight_layout()
+    grid = run.spec.robustness
+    learned = [n for n, k in run.kind.items() if k == "learned"]
+    who = [n for n in (ref, learned[0] if learned else None) if n is not None]
+    if not who:
+        return None
+    fig = Figure(figsize=(4.6 * len(who), 4))
+    axes = fig.subplots(1, len(who), squeeze=False)[0]
+    env = gym.make(run.spec.env_id, **run.spec.env_kwargs)
+    score, failed = run.score, run.failed
+    try:
+        for ax, name in zip(axes, who, strict=True):
+            agent = run.factory[name](env)
+            eff = np.full((len(grid.y_values), len(grid.x_values)), np.nan)
+            for iy, y in enumerate(grid.y_values):
+                for ix, x in enumerate(grid.x_values):
+                    tr = rollout(agent, env, grid.scenario(x, y), 0)
+                    eff[iy, ix] = score.efficiency(run.spec.task.metrics(tr), failed)
+            im = ax.imshow(eff, origin="lower", vmin=0.0, vmax=1.0, cmap="viridis", aspect="auto")
+            for iy in range(eff.shape[0]):
+                for ix in range(eff.shape[1]):
+                    ax.text(ix, iy, f"{eff[iy, ix]:.2f}", ha="center", va="center", fontsize=7,
+                            color="w" if eff[iy, ix] < 0.6 else "k")  # fmt: skip
+            ax.set_xticks(range(len(grid.x_values)), [f"{v:g}" for v in grid.x_values])
+            ax.set_yticks(range(len(grid.y_values)), [f"{v:g}" for v in grid.y_values])
+            ax.set_xlabel(grid.x_label)
+            ax.set_ylabel(grid.y_label)
+            ax.set_title(f"{name} [{run.kind[name]}]", fontsize=9)
+        fig.colorbar(im, ax=list(axes), label="efficiency (bound / charged time)")
+    finally:
+        env.close()
+    fig.suptitle(f"{run.spec.env_id}: robustness", fontsize=10)
     fig.savefig(path, dpi=90)
+    return path

@@ -1,6 +1,7 @@
 """machining-bench: benchmark controllers, reproduce the papers, train and evaluate policies.
 
-machining-bench benchmark [--quick] [--out results] [--seed 1000]
+machining-bench benchmark [--quick] [--out results] [--env ID ...]
+machining-bench tune [--env ID] [--trials 30] [--episodes 16]
 machining-bench reproduce turning [--out results] [--sensor-gain 17]
 machining-bench train --env ID --out runs/x [--algo ppo] [--resume]
 machining-bench evaluate --model runs/x/best_model.zip --env ID
@@ -68,14 +69,30 @@ def build_parser() -> argparse.ArgumentParser:
     b = command(
         "benchmark",
         "every agent on every env; table, CSV, report, plots",
-        "Run every agent (paper classical controllers and the shipped policies) on every "
-        "env's held-out episodes; print the score table and write CSV, report and plots.",
+        "Run every agent (physical bound, MPC oracle, the papers' classical controllers, the "
+        "tuned ones and the shipped policies) on every env's fixed test and ood episodes; "
+        "print the score tables and write CSV, report and plots.",
     )
     b.add_argument(
-        "--quick", action="store_true", help="fewer episodes (a couple of minutes on 2 cores)"
-    )
+        "--quick", action="store_true",
+        help="20 test and 10 ood episodes per agent instead of 100 and 50, no robustness grid",
+    )  # fmt: skip
     b.add_argument("--out", default="results", help="output folder (default: results)")
-    b.add_argument("--seed", type=int, default=1000, help="first episode seed (default: 1000)")
+    b.add_argument("--env", nargs="+", default=None, help="only these env ids (default: all)")
+    b.add_argument("--no-reproductions", action="store_true", help="skip the paper reproductions")
+    b.add_argument("--seed", type=int, default=0, help="seed of the bootstrap intervals")
+
+    tu = command(
+        "tune",
+        "tune the classical agents on the train split (Optuna); writes tuned.json",
+        "Tune every classical agent's free parameters (TUNABLE) on fixed train episodes with "
+        "Optuna's TPE sampler, check the result on validation episodes, and write "
+        "agents/bench/tuned.json (or --out). The same budget for every agent.",
+    )
+    tu.add_argument("--env", default=None, help="only this env id (default: all)")
+    tu.add_argument("--trials", type=int, default=30, help="trials per agent")
+    tu.add_argument("--episodes", type=int, default=16, help="train episodes per trial")
+    tu.add_argument("--out", default=None, help="file to write (default: agents/bench/tuned.json)")
 
     r = command(
         "reproduce",
@@ -126,9 +143,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     e.add_argument("--model", required=True, help="a saved model .zip")
     e.add_argument("--env", required=True, help="env id, e.g. machining_envs/Turning-v0")
-    e.add_argument("--scenarios", nargs="+", default=["test"], help="scenario names")
+    e.add_argument("--scenarios", nargs="+", default=["validation"], help="scenario names")
     e.add_argument("--episodes", type=int, default=20, help="episodes per scenario")
-    e.add_argument("--seed", type=int, default=1000, help="first episode seed")
+    e.add_argument("--seed", type=int, default=5000, help="first episode seed (validation's)")
     e.add_argument("--algo", choices=["ppo", "sac", "td3"], default=None,
                    help="the model's algorithm (default: from config.json or the file name)")  # fmt: skip
     e.add_argument("--stats", default=None,
@@ -211,9 +228,26 @@ def main(argv: list[str] | None = None) -> int:
         from agents.bench.benchmark import run_benchmark
 
         try:
-            run_benchmark(args.out, quick=args.quick, seed=args.seed)
-        except (FileExistsError, NotADirectoryError, PermissionError) as exc:
+            run_benchmark(
+                args.out, quick=args.quick, seed=args.seed, envs=args.env,
+                reproductions=not args.no_reproductions,
+            )  # fmt: skip
+        except (FileExistsError, NotADirectoryError, PermissionError, ImportError) as exc:
             return _fail("benchmark", exc)
+        return 0
+    if args.command == "tune":
+        from agents.bench.declarations import BENCHMARKS
+        from agents.bench.tune import TUNED_FILE, TuningBudget, tune_all
+
+        try:
+            if args.env is not None and benchmark_spec(args.env) is None:
+                raise ValueError(
+                    f"--env must be one of {[b.env_id for b in BENCHMARKS]}, got {args.env!r}"
+                )
+            budget = TuningBudget(args.trials, args.episodes)
+            tune_all(BENCHMARKS, budget, args.out or TUNED_FILE, only=args.env)
+        except (ValueError, ImportError) as exc:
+            return _fail("tune", exc)
         return 0
     if args.command == "reproduce":
         kwargs = {"seed": args.seed}

@@ -28,7 +28,6 @@ import numpy as np
 from agents.bench.spec import BenchmarkSpec, Process
 from agents.contouring import ConstantOverride, HInf2DOF, PIPosition
 from agents.eval import rollout
-from agents.rl import pretrained
 from machining_envs.contouring.metrics import contouring_metrics
 from machining_envs.contouring.paths import Path
 from machining_envs.contouring.scenarios import PAPER_LOAD_TIME_S, PAPER_STEP_MM
@@ -329,10 +328,11 @@ PROCESS = Process(
     benchmarks=(
         BenchmarkSpec(
             "machining_envs/Contouring-v0",
-            (PIPosition.from_env, HInf2DOF.from_env, pretrained("contouring_ppo")),
+            (PIPosition.from_env, HInf2DOF.from_env),
             ("paper_circle", "paper_involute"),
-            "test",
             "paper_circle",
+            tuned=(PIPosition,),
+            learned=("contouring_ppo",),
             table_metrics=(
                 "max_contour_error_mm",
                 "rms_contour_error_mm",
@@ -347,23 +347,14 @@ PROCESS = Process(
             plot_main=("contour_error_mm", None, "contour error (mm)"),
             plot_lower=("tracking_error_mm", "tracking error (mm)"),
             plot_context=("path_s_mm", "set point along the path (mm)"),
-            bar_metrics=(
-                ("max_contour_error_mm", "largest contour error (mm)"),
-                ("rms_contour_error_mm", "RMS contour error (mm)"),
-                ("cycle_time_s", "cycle time (s)"),
-                ("effort_rms_Nm", "RMS motor torque (N m)"),
-            ),
         ),
         BenchmarkSpec(
             "machining_envs/ContouringFeed-v0",
-            (
-                ConstantOverride.from_env,
-                functools.partial(ConstantOverride.from_env, override=1.0),
-                pretrained("contouring_feed_ppo"),
-            ),
+            (ConstantOverride.from_env, functools.partial(ConstantOverride.from_env, override=1.0)),
             ("paper_circle", "paper_involute"),
-            "test",
             "paper_involute",
+            tuned=(ConstantOverride,),
+            learned=("contouring_feed_ppo",),
             table_metrics=(
                 "cycle_time_s",
                 "max_contour_error_mm",
@@ -373,14 +364,9 @@ PROCESS = Process(
                 "finished",
                 "diverged",
             ),
-            plot_main=("peak_contour_error_mm", "tolerance_mm", "contour error (mm)"),
+            plot_main=("peak_contour_error_mm", "contour_tolerance_mm", "contour error (mm)"),
             plot_lower=("feed_override", "feed override"),
             plot_context=("path_s_mm", "set point along the path (mm)"),
-            bar_metrics=(
-                ("cycle_time_s", "cycle time (s)"),
-                ("max_contour_error_mm", "largest contour error (mm)"),
-                ("time_over_tolerance", "share of steps over tolerance"),
-            ),
         ),
     ),
     reproduce=reproduce_contouring,

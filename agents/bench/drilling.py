@@ -30,7 +30,6 @@ import numpy as np
 from agents.bench.spec import BenchmarkSpec, Process
 from agents.drilling import PD, NoControl, PeckDrilling, SlidingMode
 from agents.eval import rollout
-from agents.rl import pretrained
 from machining_envs.drilling.metrics import drilling_mask, drilling_metrics
 from machining_envs.drilling.plant import DrillingParams, DrillingPlant
 from machining_envs.drilling.scenarios import PAPER_DIAMETERS_MM, DrillingScenario
@@ -342,15 +341,11 @@ PROCESS = Process(
     benchmarks=(
         BenchmarkSpec(
             "machining_envs/MicroDrilling-v0",
-            (
-                NoControl.from_env,
-                PD.from_env,
-                SlidingMode.from_env,
-                pretrained("micro_drilling_ppo"),
-            ),
+            (NoControl.from_env, PD.from_env, SlidingMode.from_env),
             ("paper_0.5", "paper_0.6", "paper_0.7", "paper_0.8"),
-            "test",
             "paper_0.8",
+            tuned=(PD, SlidingMode),
+            learned=("micro_drilling_ppo",),
             table_metrics=(
                 "drilling_time_s",
                 "torque_mean_rel",
@@ -363,15 +358,9 @@ PROCESS = Process(
                 "breakage",
                 "finished",
             ),
-            plot_main=("torque_Nmm", "torque_ref_Nmm", "torque (N·mm)"),
+            plot_main=("torque_Nmm", "torque_limit_Nmm", "torque (N·mm)"),
             plot_lower=("spindle_hz", "spindle (Hz)"),
             plot_context=("depth_mm", "hole depth (mm)"),
-            bar_metrics=(
-                ("torque_mean_rel", "mean torque / reference"),
-                ("torque_std_rel", "torque std / reference"),
-                ("peak_torque_rel", "peak torque / breakage torque"),
-                ("breakage", "breakage rate"),
-            ),
         ),
     ),
     reproduce=reproduce_drilling,

@@ -51,7 +51,11 @@ class TuningBudget:
     """Trials and episodes per trial, the same for every agent (stated in ``tuned.json``)."""
 
     def __init__(self, trials: int = 30, episodes: int = 16, startup: int = 8, seed: int = 0):
-        for name, v, lo in (("trials", trials, 1), ("episodes", episodes, 1), ("startup", startup, 0)):
+        for name, v, lo in (
+            ("trials", trials, 1),
+            ("episodes", episodes, 1),
+            ("startup", startup, 0),
+        ):
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise ValueError(f"{name} must be an integer >= {lo}, got {v!r}")
         self.trials, self.episodes, self.startup, self.seed = trials, episodes, startup, seed
@@ -72,7 +76,9 @@ def paper_settings(cls) -> dict:
     for name in cls.TUNABLE:
         p = sig.parameters.get(name)
         if p is None or p.default is inspect.Parameter.empty:
-            raise ValueError(f"{cls.__name__}.TUNABLE names {name!r}, which from_env lacks a default for")
+            raise ValueError(
+                f"{cls.__name__}.TUNABLE names {name!r}, which from_env lacks a default for"
+            )
         out[name] = p.default
     return out
 

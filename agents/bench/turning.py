@@ -23,9 +23,8 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-from agents.bench.spec import BenchmarkSpec, Process
+from agents.bench.spec import BenchmarkSpec, Process, Robustness
 from agents.eval import rollout
-from agents.rl import pretrained
 from agents.turning import ConstantFeed, FixedGainPI, VariableGainPI
 from machining_envs.core.metrics import (
     OSC_WINDOW_S,
@@ -33,6 +32,8 @@ from machining_envs.core.metrics import (
     oscillation_amplitude,
     segment_bounds,
 )
+from machining_envs.core.workpieces import DepthProfile
+from machining_envs.turning.scenarios import PAPER_STEP_SEGMENT_MM, TurningScenario
 
 __all__ = [
     "TurningExperiment",
@@ -230,20 +231,30 @@ def plot_turning_reproduction(results, path) -> None:
 
 # --- The declaration: what the benchmark, the CLI and the docs know of turning -------------
 
+
+def _grid_cut(rpm: float, depth_mm: float) -> TurningScenario:
+    """One constant-depth cut of the robustness grid (nominal process constants)."""
+    prof = DepthProfile.steps((depth_mm,), 3 * PAPER_STEP_SEGMENT_MM, name=f"{depth_mm:g} mm")
+    return TurningScenario(f"grid_{rpm:g}_{depth_mm:g}", prof, float(rpm))
+
+
 PROCESS = Process(
     "turning",
     benchmarks=(
         BenchmarkSpec(
             "machining_envs/Turning-v0",
-            (
-                ConstantFeed.from_env,
-                FixedGainPI.from_env,
-                VariableGainPI.from_env,
-                pretrained("turning_ppo"),
-            ),
+            (ConstantFeed.from_env, FixedGainPI.from_env, VariableGainPI.from_env),
             ("paper_245", "paper_405", "paper_700", "taper_405"),
-            "test",
             "paper_405",
+            tuned=(ConstantFeed, FixedGainPI, VariableGainPI),
+            learned=("turning_ppo",),
+            robustness=Robustness(
+                "spindle speed (rpm)",
+                (245.0, 350.0, 500.0, 700.0),
+                "depth of cut (mm)",
+                (0.5, 1.0, 2.0, 3.0),
+                _grid_cut,
+            ),  # fmt: skip
         ),
     ),
     reproduce=reproduce_turning,

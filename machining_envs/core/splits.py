@@ -60,8 +60,14 @@ def split_seeds(split: str, n: int) -> range:
     """The reset seeds of the first ``n`` fixed episodes of ``split``."""
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= MAX_SPLIT_EPISODES:
-        raise ValueError(f"n (episodes of split {split!r}) must be an integer in [1, {MAX_SPLIT_EPISODES}], got {n!r}")
+    if (
+        isinstance(n, bool)
+        or not isinstance(n, (int, np.integer))
+        or not 1 <= n <= MAX_SPLIT_EPISODES
+    ):
+        raise ValueError(
+            f"n (episodes of split {split!r}) must be an integer in [1, {MAX_SPLIT_EPISODES}], got {n!r}"
+        )
     base = SPLIT_SEED_BASE[split]
     return range(base, base + int(n))
 

@@ -1,0 +1,148 @@
+"""The benchmark protocol: tuning and training never evaluate on the held-out splits, the
+splits are fixed and disjoint, the statistics behave, the tuned settings reload."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import machining_envs.turning.env as turning_env
+from agents.bench.tune import TuningBudget, load_tuned, paper_settings, tune_agent, tuned_factory
+from agents.rl import ConfigError, train
+from agents.turning import FixedGainPI
+from machining_envs.core.score import REGULATION_SCORE
+from machining_envs.core.splits import HELD_OUT, SPLITS, check_not_held_out, split_seeds
+from tests.helpers import TURNING
+
+
+@pytest.fixture
+def scenarios_seen(monkeypatch):
+    """Every scenario any Turning-v0 reset (single env or vector lane) asks for."""
+    seen: list = []
+    real = turning_env.scenario_option
+
+    def spy(options, default):
+        spec = real(options, default)
+        seen.append(spec if isinstance(spec, str) else getattr(spec, "name", spec))
+        return spec
+
+    monkeypatch.setattr(turning_env, "scenario_option", spy)
+    return seen
+
+
+def test_tuning_never_evaluates_on_held_out_splits(scenarios_seen):
+    entry = tune_agent(FixedGainPI, TURNING, TuningBudget(trials=2, episodes=2, startup=1))
+    assert set(scenarios_seen) == {"train", "validation"}, set(scenarios_seen)
+    assert entry["params"].keys() == FixedGainPI.TUNABLE.keys()
+    # The first trial is the paper's settings: tuning never reports worse on train.
+    assert entry["train_score"] <= entry["paper_train_score"]
+
+
+TINY = """
+machining_envs/Turning-v0:
+  n_timesteps: 128
+  n_envs: 2
+  normalize: true
+  env_kwargs: {scenario: train}
+  eval_freq: 64
+  eval_episodes: 1
+  checkpoint_freq: 128
+  n_steps: 64
+  batch_size: 64
+  n_epochs: 1
+"""
+
+
+def test_training_selects_on_validation_and_never_touches_held_out(tmp_path, scenarios_seen):
+    path = tmp_path / "tiny.yml"
+    path.write_text(TINY)
+    run = train(
+        TURNING, "ppo", tmp_path / "run", config_path=path, progress_bar=False, verbose=False
+    )
+    assert set(scenarios_seen) == {"train", "validation"}, set(scenarios_seen)
+    cfg = json.loads((run / "config.json").read_text())["config"]
+    assert cfg["eval_scenarios"] == ["validation"]
+
+
+@pytest.mark.parametrize("split", HELD_OUT)
+@pytest.mark.parametrize("where", ["eval_scenarios: [{}]", "env_kwargs: {{scenario: {}}}"])
+def test_training_refuses_held_out_splits(tmp_path, split, where):
+    text = TINY + f"  {where.format(split)}\n"
+    if where.startswith("env_kwargs"):
+        text = TINY.replace("env_kwargs: {scenario: train}", where.format(split))
+    path = tmp_path / "bad.yml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match="held-out"):
+        train(TURNING, "ppo", tmp_path / "run", config_path=path, progress_bar=False, verbose=False)
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("split", HELD_OUT)
+def test_tuning_refuses_held_out_splits(split):
+    with pytest.raises(ValueError, match="held-out"):
+        tune_agent(FixedGainPI, TURNING, TuningBudget(trials=1, episodes=1), {"scenario": split})
+    with pytest.raises(ValueError, match="held-out"):
+        check_not_held_out(["validation", split], "tuning")
+
+
+def test_split_seeds_are_fixed_and_disjoint():
+    blocks = [set(split_seeds(s, 1000)) for s in SPLITS]
+    assert all(a.isdisjoint(b) for i, a in enumerate(blocks) for b in blocks[i + 1 :])
+    assert list(split_seeds("test", 2)) == [10000, 10001]
+    with pytest.raises(ValueError, match="n .* must be an integer in"):
+        split_seeds("test", 0)
+    with pytest.raises(ValueError, match="split must be one of"):
+        split_seeds("dev", 3)
+
+
+def test_tuned_file_ships_settings_for_every_tuned_agent():
+    """``agents/bench/tuned.json`` holds settings for every ``tuned`` class of every
+    benchmark, within the class's ranges, and the factories rebuild those agents."""
+    from agents.bench.declarations import BENCHMARKS
+
+    data = load_tuned()
+    assert data.get("command", "").startswith("machining-bench tune")
+    for spec in BENCHMARKS:
+        for cls in spec.tuned:
+            entry = data["envs"][spec.env_id][cls.__name__]
+            assert entry["paper_params"] == {k: float(v) for k, v in paper_settings(cls).items()}
+            for k, (lo, hi, _) in cls.TUNABLE.items():
+                assert lo <= entry["params"][k] <= hi
+            assert entry["train_score"] <= entry["paper_train_score"]
+            assert tuned_factory(cls, spec.env_id, data) is not None
+
+
+def _rows(values, policy_seed=None):
+    out = []
+    for i, v in enumerate(values):
+        r = {"seed": i, "machining_time_s": float(v), "finished": 1.0, "breakage": 0.0,
+             "time_over_limit": 0.0, "score_bound": 10.0}  # fmt: skip
+        if policy_seed is not None:
+            r["policy_seed"] = policy_seed
+        out.append(r)
+    return out
+
+
+def test_statistics_pair_episodes_and_bracket_the_truth():
+    from agents.eval.stats import agent_stats, paired_difference
+
+    rng = np.random.default_rng(0)
+    base = 30.0 + rng.normal(0.0, 3.0, 100)
+    ref = _rows(base)
+    better = _rows(base - 2.0)  # exactly 2 s better on every episode
+    d = paired_difference(ref, better, REGULATION_SCORE, 200.0)
+    assert d["diff"] == pytest.approx(2.0) and d["low"] == d["high"] == pytest.approx(2.0)
+    assert d["p_improve"] == 1.0
+    s = agent_stats(ref, REGULATION_SCORE, 200.0)
+    assert s.iqm_low <= s.iqm <= s.iqm_high and s.count_rate == 1.0
+    assert s.efficiency == pytest.approx(np.mean(10.0 / base))
+    # Five policy seeds are five columns of the same episodes.
+    seeds = [r for k in range(5) for r in _rows(base + k, k)]
+    s5 = agent_stats(seeds, REGULATION_SCORE, 200.0)
+    assert s5.n_seeds == 5 and s5.n_episodes == 100 and s5.mean == pytest.approx(base.mean() + 2)
+    # An episode that does not count is charged the failure cost.
+    broken = _rows(base)
+    broken[0]["breakage"] = 1.0
+    assert agent_stats(broken, REGULATION_SCORE, 200.0).count_rate == 0.99
