@@ -28,6 +28,7 @@ import numpy as np
 from scipy.linalg import block_diag
 
 from agents.base import Agent, unwrap, unwrap_as
+from machining_envs.contouring._exact import vecmat_rows
 from machining_envs.contouring.env import ERROR_SCALE_MM, POSITION_SCALE_MM, ContouringEnv
 from machining_envs.contouring.feed_env import DEFAULT_TOLERANCE_MM, ContouringFeedEnv
 from machining_envs.contouring.plant import AXES, ContouringParams
@@ -79,6 +80,7 @@ class LinearServoAgent(Agent):
         c = block_diag(*(d.c for d in designs))
         d = block_diag(*(d.d for d in designs))
         self._m = np.block([[a.T, c.T], [b.T, d.T]])
+        self._mt = np.ascontiguousarray(self._m.T)
         # Anti-windup by conditioning (Hanus): while an axis's command passes the drive's
         # limit, its controller is updated with the set point that would have produced the
         # limited command, r + (u_sat - u) / d_r; so the states follow what the drive does.
@@ -111,11 +113,10 @@ class LinearServoAgent(Agent):
         z[:, nx + 1 :: 2] = y - origin
         if z.shape[0] == 1:
             out = z @ self._m
-        else:  # row by row: each env gets the numbers it gets alone (a batch's matrix
-            # product would sum in another order)
+        else:  # compiled, row by row: each env gets the numbers it gets alone (a batch's
+            # matrix product would sum in another order)
             out = np.empty((z.shape[0], self._m.shape[1]))
-            for i in range(z.shape[0]):
-                out[i] = z[i] @ self._m
+            vecmat_rows(z, self._mt, out)
         state[:, :nx] = out[:, :nx]
         u = out[:, nx:]
         umax = self.command_max_mm_s

@@ -1,4 +1,4 @@
-"""Wall time of the held-out benchmark of every classical agent: 100 ``test`` episodes per
+"""Wall time of the held-out benchmark of every paper classical agent: 100 ``test`` episodes per
 env and agent, run batched on the native vector envs (each agent's episodes as the lanes
 of one vector env), as the benchmark runs them.
 
@@ -12,25 +12,25 @@ import time
 
 from agents.bench.declarations import BENCHMARKS
 from agents.eval import evaluate
+from machining_envs.core.splits import split_seeds
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--episodes", type=int, default=100)
-    ap.add_argument("--seed", type=int, default=1000)
     args = ap.parse_args(argv)
     total = 0.0
     print(f"{'env':34s} {'agents':>6s} {'episodes':>8s} {'time (s)':>9s}")
     for spec in BENCHMARKS:
-        agents = [f for f in spec.agents if not getattr(f, "learned", False)]
+        agents = list(spec.paper_agents)
         t0 = time.perf_counter()
         for factory in agents:
             ev = evaluate(
                 factory,
                 spec.env_id,
-                [spec.heldout_scenario],
+                ["test"],
                 n_episodes=args.episodes,
-                seed=args.seed,
+                seed=split_seeds("test", args.episodes)[0],
             )
             assert len(ev.rows) == args.episodes
         dt = time.perf_counter() - t0

@@ -93,28 +93,46 @@ def rollout_batch(agent, venv, scenario, seeds: Sequence[int]) -> list[dict[str,
     return _lane_trajectories(infos, rewards, length)
 
 
+def _stack(dicts: list[dict], key: str, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(values, ok)`` arrays ``(len(dicts), n)`` of ``d[key]`` over ``dicts`` (NaN where a
+    dict lacks it) and of its mask ``d["_" + key]`` (True where absent, False where the key is)."""
+    mask_key = "_" + key
+    if all(key in d for d in dicts):
+        vals = np.array([d[key] for d in dicts], dtype=np.float64).reshape(len(dicts), n)
+        if all(mask_key in d for d in dicts):
+            ok = np.array([d[mask_key] for d in dicts], dtype=bool).reshape(len(dicts), n)
+        else:
+            ok = np.stack(
+                [
+                    np.broadcast_to(np.asarray(d.get(mask_key, True), dtype=bool), (n,))
+                    for d in dicts
+                ]
+            )
+        return vals, ok
+    vals = np.full((len(dicts), n), np.nan)
+    ok = np.zeros((len(dicts), n), dtype=bool)
+    for t, d in enumerate(dicts):
+        if key in d:
+            vals[t] = d[key]
+            ok[t] = d.get(mask_key, True)
+    return vals, ok
+
+
 def _lane_trajectories(infos: list[dict], rewards: list, length: np.ndarray) -> list[dict]:
     """Per-lane trajectories (as :func:`rollout` gives them) from a vector env's infos:
     lane ``i``'s rows are the infos of steps ``0 .. length[i] - 1`` and the ``final_info``
     of step ``length[i]``."""
     n_steps, n = len(infos), len(length)
     finals = [info.get("final_info", {}) for info in infos]
-    keys = {k for info in (*infos, *finals) for k in info if not k.startswith("_")}
+    keys = {k for k in set().union(*infos, *finals) if not k.startswith("_")}
     keys -= {"final_obs", "final_info"}
     columns = {}
     for key in keys:
         sample = next(np.asarray(d[key]) for d in (*infos, *finals) if key in d)  # the key's dtype
         if sample.dtype.kind not in "biuf" or sample.ndim != 1:
             continue  # rollout keeps numbers only (not the arrays of a signal's components)
-        top = np.full((n_steps, n), np.nan)
-        top_ok = np.zeros((n_steps, n), dtype=bool)
-        fin = np.full((n_steps, n), np.nan)
-        fin_ok = np.zeros((n_steps, n), dtype=bool)
-        for t in range(n_steps):
-            for src, vals, ok in ((infos[t], top, top_ok), (finals[t], fin, fin_ok)):
-                if key in src:
-                    vals[t] = src[key]
-                    ok[t] = src.get("_" + key, True)
+        top, top_ok = _stack(infos, key, n)
+        fin, fin_ok = _stack(finals, key, n)
         columns[key] = (top, top_ok, fin, fin_ok, sample.dtype)
     reward = np.array(rewards)
     scenario = infos[0].get("scenario")

@@ -32,7 +32,16 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-__all__ = ["fma", "py_hypot", "np_sum", "np_mean", "gemv_row", "gemm_entry", "py_mod"]
+__all__ = [
+    "fma",
+    "py_hypot",
+    "np_sum",
+    "np_mean",
+    "gemv_row",
+    "gemm_entry",
+    "py_mod",
+    "vecmat_rows",
+]
 
 
 @intrinsic
@@ -308,3 +317,14 @@ def dot(a, b):
     for q in range(a.size):
         acc = acc + a[q] * b[q]
     return acc
+
+
+@numba.njit(cache=True)
+def vecmat_rows(z, mt, out):
+    """``out[i] = z[i] @ mt.T`` for every row ``i``, each row exactly as numpy computes the
+    1-D product ``z[i] @ m`` alone (``mt`` is ``m.T`` made C-ordered: numpy's ``z @ m`` of
+    a 1-D ``z`` is OpenBLAS's ``dgemv`` on ``m.T``, :func:`gemv_row`)."""
+    n_rows = mt.shape[0]
+    for i in range(z.shape[0]):
+        for r in range(n_rows):
+            out[i, r] = gemv_row(mt, z[i], r, n_rows)
