@@ -122,7 +122,7 @@ def _lane_trajectories(infos: list[dict], rewards: list, length: np.ndarray) -> 
     """Per-lane trajectories (as :func:`rollout` gives them) from a vector env's infos:
     lane ``i``'s rows are the infos of steps ``0 .. length[i] - 1`` and the ``final_info``
     of step ``length[i]``."""
-    n_steps, n = len(infos), len(length)
+    n = len(length)
     finals = [info.get("final_info", {}) for info in infos]
     keys = {k for k in set().union(*infos, *finals) if not k.startswith("_")}
     keys -= {"final_obs", "final_info"}
