@@ -2,7 +2,9 @@
 variable-gain (adaptive) PI after Masory & Koren (eq. 15-16) and the constant-feed baseline.
 
 All are designed from the env's nominal parameters only (``from_env``), and read only the
-observation: the measured force, the reference and the spindle speed.
+observation: the measured force, the force limit and the spindle speed. Each regulates at
+its ``setpoint``, a share of the observed limit (1.0, the paper's choice, by default), and
+declares its free parameters in ``TUNABLE`` for ``agents.bench.tune``.
 """
 
 from __future__ import annotations
@@ -50,10 +52,17 @@ class TurningIO:
         p = unwrap_as(env, TurningEnv, "a turning controller").params
         return cls(p.sensor_gain, p.force_scale_N, p.command_max, p.sample_time_s, p)
 
-    def force_counts(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Measured force and reference in counts, from a batch of observations."""
+    def force_counts(
+        self, obs: np.ndarray, setpoint: float = 1.0
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Measured force and the set point (``setpoint`` x the limit) in counts, from a
+        batch of observations."""
         k = self.sensor_gain * self.force_scale_N
-        return k * obs[:, _I["measured"]], k * obs[:, _I["reference"]]
+        return k * obs[:, _I["measured"]], k * obs[:, _I["limit"]] * setpoint
+
+    def limit_N(self, obs: np.ndarray) -> np.ndarray:
+        """The force limit, N, from a batch of observations."""
+        return self.force_scale_N * obs[:, _I["limit"]]
 
     def spindle_rpm(self, obs: np.ndarray) -> np.ndarray:
         return 1000.0 * obs[:, _I["spindle"]]
@@ -80,24 +89,33 @@ class FixedGainPI(Agent):
         Proportional gain Kh, command counts per force count (paper: 0.006, 0.02, 0.04).
     kgh : float
         Kgh = 1 + Kg/Kh (paper: 1.9, from Ziegler-Nichols then hand tuning).
+    setpoint : float
+        Force regulated at, as a share of the observed limit (paper: 1.0), in (0, 1.5].
     """
 
     state_size = 2  # [U_{k-1} (counts), E_{k-1} (counts)]
     obs_dim = 7
     obs_index = _I
+    #: Free parameters and their search ranges (low, high, log scale) for tuning.
+    TUNABLE = {
+        "kh": (0.002, 0.1, True),
+        "kgh": (1.05, 5.0, True),
+        "setpoint": (0.5, 1.0, False),
+    }
 
-    def __init__(self, io: TurningIO, kh: float = 0.02, kgh: float = 1.9):
+    def __init__(self, io: TurningIO, kh: float = 0.02, kgh: float = 1.9, setpoint: float = 1.0):
         self.io = io
         self.kh = _positive("kh", kh)
         self.kgh = _positive("kgh", kgh, 100.0)
-        self.name = f"fixed PI Kh={kh:g}"
+        self.setpoint = _positive("setpoint", setpoint, 1.5)
+        self.name = f"fixed PI Kh={kh:.3g}"
 
     @classmethod
-    def from_env(cls, env, kh: float = 0.02, kgh: float = 1.9) -> FixedGainPI:
-        return cls(TurningIO.from_env(env), kh, kgh)
+    def from_env(cls, env, kh: float = 0.02, kgh: float = 1.9, setpoint: float = 1.0) -> FixedGainPI:
+        return cls(TurningIO.from_env(env), kh, kgh, setpoint)
 
     def _act(self, obs, state):
-        fm, fr = self.io.force_counts(obs)
+        fm, fr = self.io.force_counts(obs, self.setpoint)
         e = fr - fm
         u = np.clip(state[:, 0] + self.kh * (self.kgh * e - state[:, 1]), 0.0, self.io.command_max)
         state[:, 0] = u
@@ -108,20 +126,37 @@ class FixedGainPI(Agent):
 class ConstantFeed(Agent):
     """Industrial baseline: one feed per revolution for the whole cut, no force feedback.
 
-    The feed is chosen, as a process planner would, so that the nominal force law gives the
-    reference force at the deepest cut expected (``design_depth_mm``); shallower parts of
-    the workpiece are then cut below the reference, wasting time. The command follows the
-    spindle speed so that the feed per revolution stays constant: ``U = f n / (60 Ks Km)``.
+    The feed is chosen, as a process planner would, so that the nominal force law gives
+    ``setpoint`` x the force limit at the deepest cut expected (``design_depth_mm``):
+    ``f = (setpoint L / (Kf a_design))^(1/p)`` (eq. 8), the limit ``L`` read from the
+    observation. Shallower parts of the workpiece are then cut below the limit, wasting
+    time; deeper ones pass it. The command follows the spindle speed so that the feed per
+    revolution stays constant: ``U = f n / (60 Ks Km)``. Give ``feed_mm_per_rev`` to fix
+    the feed instead.
     """
 
     state_size = 0
     obs_dim = 7
     obs_index = _I
+    #: Free parameters and their search ranges (low, high, log scale) for tuning.
+    TUNABLE = {"design_depth_mm": (0.5, 6.0, False), "setpoint": (0.5, 1.0, False)}
 
-    def __init__(self, io: TurningIO, feed_mm_per_rev: float):
+    def __init__(
+        self,
+        io: TurningIO,
+        feed_mm_per_rev: float | None = None,
+        design_depth_mm: float = 3.0,
+        setpoint: float = 1.0,
+    ):
         self.io = io
-        self.feed_mm_per_rev = _positive("feed_mm_per_rev", feed_mm_per_rev, 10.0)
-        self.name = f"constant feed {feed_mm_per_rev:.3f} mm/rev"
+        self.design_depth_mm = _positive("design_depth_mm", design_depth_mm, 10.0)
+        self.setpoint = _positive("setpoint", setpoint, 1.5)
+        if feed_mm_per_rev is not None:
+            self.feed_mm_per_rev = _positive("feed_mm_per_rev", feed_mm_per_rev, 10.0)
+            self.name = f"constant feed {feed_mm_per_rev:.3f} mm/rev"
+        else:
+            self.feed_mm_per_rev = None
+            self.name = f"constant feed, designed for {design_depth_mm:.2g} mm"
 
     @classmethod
     def from_env(
@@ -129,19 +164,16 @@ class ConstantFeed(Agent):
         env,
         feed_mm_per_rev: float | None = None,
         design_depth_mm: float = 3.0,
-        force_ref_N: float | None = None,
+        setpoint: float = 1.0,
     ) -> ConstantFeed:
-        io = TurningIO.from_env(env)
-        if feed_mm_per_rev is None:
-            fr = force_ref_N if force_ref_N is not None else io.force_scale_N
-            feed_mm_per_rev = io.params.feed_for_force(
-                fr, _positive("design_depth_mm", design_depth_mm, 10.0)
-            )
-        return cls(io, feed_mm_per_rev)
+        return cls(TurningIO.from_env(env), feed_mm_per_rev, design_depth_mm, setpoint)
 
     def _act(self, obs, state):
         p = self.io.params
-        u = self.feed_mm_per_rev * self.io.spindle_rpm(obs) / (60.0 * p.servo_gain * p.gear_ratio)
+        feed = self.feed_mm_per_rev
+        if feed is None:
+            feed = p.feed_for_force(self.setpoint * self.io.limit_N(obs), self.design_depth_mm)
+        u = feed * self.io.spindle_rpm(obs) / (60.0 * p.servo_gain * p.gear_ratio)
         return self.io.action(np.clip(u, 0.0, self.io.command_max))
 
 
@@ -170,9 +202,9 @@ class VariableGainPI(Agent):
     sample.
 
     Start-up guard: while ``U_hat`` is below ``min_command_fraction`` of the command range or
-    the force below ``min_force_fraction`` of the reference, the ratio is 0/0-like, so the
+    the force below ``min_force_fraction`` of the set point, the ratio is 0/0-like, so the
     previous estimate is kept; the first comes from the nominal model, eq. (11) at the
-    reference force, the observed spindle speed and ``design_depth_mm``.
+    set-point force, the observed spindle speed and ``design_depth_mm``.
 
     Parameters
     ----------
@@ -181,8 +213,16 @@ class VariableGainPI(Agent):
         Designed open-loop gain K (paper: 0.5, inside the stable range 0 < K < 0.807).
     kgh : float
         Kgh = 1 + Kg/Kh (paper: 1.9).
+    setpoint : float
+        Force regulated at, as a share of the observed limit (paper: 1.0), in (0, 1.5].
     """
 
+    #: Free parameters and their search ranges (low, high, log scale) for tuning.
+    TUNABLE = {
+        "k": (0.05, 0.8, True),
+        "kgh": (1.05, 5.0, True),
+        "setpoint": (0.5, 1.0, False),
+    }
     # [E_{k-1}, Kp_hat, U_{k-1..k-3}, U_hat_{k-1..k-3}, b1..b3, a1..a3]
     state_size = 14
     obs_dim = 7
@@ -196,8 +236,10 @@ class VariableGainPI(Agent):
         design_depth_mm: float = 2.0,
         min_command_fraction: float = 0.01,
         min_force_fraction: float = 0.05,
+        setpoint: float = 1.0,
     ):
         self.io = io
+        self.setpoint = _positive("setpoint", setpoint, 1.5)
         self.k = _positive("k", k, 100.0)
         self.kgh = _positive("kgh", kgh, 100.0)
         self.design_depth_mm = _positive("design_depth_mm", design_depth_mm, 10.0)
@@ -208,19 +250,21 @@ class VariableGainPI(Agent):
         self.name = f"adaptive PI K={k:g}"
 
     @classmethod
-    def from_env(cls, env, k: float = 0.5, kgh: float = 1.9, **kwargs) -> VariableGainPI:
-        return cls(TurningIO.from_env(env), k, kgh, **kwargs)
+    def from_env(
+        cls, env, k: float = 0.5, kgh: float = 1.9, setpoint: float = 1.0, **kwargs
+    ) -> VariableGainPI:
+        return cls(TurningIO.from_env(env), k, kgh, setpoint=setpoint, **kwargs)
 
-    def nominal_process_gain(self, spindle_rpm: np.ndarray, force_ref_N: np.ndarray) -> np.ndarray:
-        """Kp of eq. (11) for the nominal plant at the reference force and the design depth."""
+    def nominal_process_gain(self, spindle_rpm: np.ndarray, force_N: np.ndarray) -> np.ndarray:
+        """Kp of eq. (11) for the nominal plant at the set-point force and the design depth."""
         p = self.io.params
-        feed = p.feed_for_force(force_ref_N, self.design_depth_mm)
+        feed = p.feed_for_force(force_N, self.design_depth_mm)
         return p.process_gain(spindle_rpm, self.design_depth_mm, feed)
 
     def initial_state(self, n, obs):
         st = np.zeros((n, self.state_size))
         rpm = np.clip(self.io.spindle_rpm(obs), *SPINDLE_RPM_RANGE)
-        fr_N = self.io.force_scale_N * obs[:, 1]
+        fr_N = self.io.limit_N(obs) * self.setpoint
         fr_N = np.where(fr_N > 0, fr_N, self.io.force_scale_N)
         st[:, 1] = self.nominal_process_gain(rpm, fr_N)
         for i in range(n):  # the model at each env's spindle speed (cached per speed)
@@ -228,7 +272,7 @@ class VariableGainPI(Agent):
         return st
 
     def _act(self, obs, state):
-        fm, fr = self.io.force_counts(obs)
+        fm, fr = self.io.force_counts(obs, self.setpoint)
         u_hist = state[:, 2:5]
         y_hist = state[:, 5:8]
         y = np.sum(state[:, 8:11] * u_hist, axis=1) - np.sum(state[:, 11:14] * y_hist, axis=1)

@@ -21,7 +21,8 @@ DRILLING = "machining_envs/MicroDrilling-v0"
 CONTOURING = "machining_envs/Contouring-v0"
 CONTOURING_FEED = "machining_envs/ContouringFeed-v0"
 #: The random scenario sets every env has: training draws and held-out ones.
-TRAIN_TEST = ("train", "test")
+#: The training split and the out-of-distribution one, whose ranges reach beyond it.
+TRAIN_OOD = ("train", "ood")
 
 
 def random_action(rng: np.random.Generator, env: gym.Env, bound: float = 1.0) -> np.ndarray:
@@ -140,12 +141,26 @@ def agents_built_on_train_and_test(factory: Callable, env_id: str) -> tuple:
     env = gym.make(env_id)
     env.reset(seed=0, options={"scenario": "train"})
     a = factory(env)
-    env.reset(seed=5, options={"scenario": "test"})
+    env.reset(seed=5, options={"scenario": "ood"})
     return a, factory(env)
 
 
-def assert_test_reaches_beyond_train(values: dict, low: float, high: float) -> None:
-    """``values["train"]`` stay within ``[low, high]``; ``values["test"]`` (the held-out
-    draws) reach below ``low`` and above ``high``."""
+def assert_ood_reaches_beyond_train(values: dict, low: float, high: float) -> None:
+    """``values["train"]`` stay within ``[low, high]``; ``values["ood"]`` (the
+    out-of-distribution draws) reach below ``low`` and above ``high``."""
     assert low <= min(values["train"]) and max(values["train"]) <= high
-    assert min(values["test"]) < low and max(values["test"]) > high
+    assert min(values["ood"]) < low and max(values["ood"]) > high
+
+
+def assert_splits_share_a_distribution_not_episodes(env: gym.Env, key, n: int = 60) -> None:
+    """``train``, ``validation`` and ``test`` draw different scenarios for the same seed,
+    from one distribution: ``key(scenario)`` spans the same range in each (within 10 % of
+    the training span at ``n`` draws)."""
+    draws = {
+        s: [key(sc) for sc in drawn_scenarios(env, s, n)] for s in ("train", "validation", "test")
+    }
+    assert draws["train"] != draws["validation"] != draws["test"] != draws["train"]
+    lo, hi = min(draws["train"]), max(draws["train"])
+    span = hi - lo
+    for s in ("validation", "test"):
+        assert abs(min(draws[s]) - lo) < 0.1 * span and abs(max(draws[s]) - hi) < 0.1 * span, s

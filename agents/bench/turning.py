@@ -89,7 +89,7 @@ def classify_turning_run(traj: dict) -> dict:
     """Verdict and the numbers that decide it, for one stepped-bar run (see module doc)."""
     t = np.asarray(traj["t_s"])[1:]
     f = np.asarray(traj["force_N"])[1:]
-    fr = np.asarray(traj["force_ref_N"])[1:]
+    fr = np.asarray(traj["force_limit_N"])[1:]
     depth = np.asarray(traj["depth_mm"])[1:]
     cutting = depth > 0
     t, f, fr, depth = t[cutting], f[cutting], fr[cutting], depth[cutting]
@@ -212,7 +212,7 @@ def plot_turning_reproduction(results, path) -> None:
     for ax, r in zip(axes.flat, results, strict=False):
         tr, e, c = r["traj"], r["experiment"], r["ours"]
         ax.plot(tr["t_s"], tr["force_N"] / 1000.0, "C0-", lw=1, label="force")
-        ax.axhline(tr["force_ref_N"][0] / 1000.0, color="k", ls="--", lw=0.8)
+        ax.axhline(tr["force_limit_N"][0] / 1000.0, color="k", ls="--", lw=0.8)
         ax.set_ylabel("force (kN)")
         ax.set_ylim(0, 3.2)
         ax2 = ax.twinx()

@@ -1,4 +1,4 @@
-"""``machining_envs/Turning-v0``: hold the cutting force at a reference by adjusting the feed."""
+"""``machining_envs/Turning-v0``: cut as fast as the cutting-force limit allows, by the feed."""
 
 from __future__ import annotations
 
@@ -30,7 +30,12 @@ from machining_envs.core.env import (
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs
 from machining_envs.turning.metrics import TURNING_TASK
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningLanes, TurningParams, step_lane
-from machining_envs.turning.scenarios import TURNING_SCENARIOS, TurningScenario, turning_scenario
+from machining_envs.turning.scenarios import (
+    TURNING_SCENARIOS,
+    TurningScenario,
+    machining_time_bound,
+    turning_scenario,
+)
 
 __all__ = ["TurningEnv", "TurningVectorEnv", "TurningReward"]
 
@@ -54,16 +59,17 @@ class TurningReward:
 
     .. math::
 
-        r = -w_t \frac{|F - F_r|}{F_r} - w_o \max\!\left(0, \frac{F}{F_r} - \theta_o\right)
+        r = -w_t \left|\frac{F}{\theta L} - 1\right| - w_o \max\!\left(0, \frac{F}{L} - 1\right)
             + w_p \frac{\Delta x}{T_s V_{max}} - w_b [\text{breakage}]
     """
 
     tracking: float = 1.0
-    """w_t, weight of the normalised force error."""
+    """w_t, weight of the force's distance to ``target`` x limit (relative)."""
+    target: float = 0.9
+    """theta, the share of the force limit ``L`` the tracking term pulls towards: the
+    reward's own setpoint (the task has none; agents choose theirs)."""
     overforce: float = 4.0
-    """w_o, extra weight on force above ``overforce_threshold`` x reference."""
-    overforce_threshold: float = 1.1
-    """theta_o, the 1.1 x reference above which force counts as a constraint violation."""
+    """w_o, weight of the force above the limit (relative to the limit)."""
     progress: float = 0.0
     """w_p, weight of the distance fed this step as a share of the most the servo can feed."""
     breakage: float = 50.0
@@ -71,6 +77,8 @@ class TurningReward:
 
     def __post_init__(self) -> None:
         check_reward_weights(self)
+        if not 0.0 < self.target <= 2.0:
+            raise ValueError(f"reward target must lie in (0, 2], got {self.target!r}")
 
 
 @numba.njit(cache=True)
@@ -78,8 +86,9 @@ def _env_lane(k, out, finish, t, gain, fs, meas, fr, vmax, brk, max_t, w, prev_a
               rpm_obs, obs, reward, flags):  # fmt: skip
     """Reward, observation and episode flags of lane ``k`` from the plant's signals.
 
-    ``w`` = ``[tracking, overforce, overforce_threshold, progress, breakage]``;
-    ``flags[k]`` = ``[diverged, breakage, finished, terminated, truncated]``.
+    ``fr`` holds the force limits; ``w`` = ``[tracking, overforce, target, progress,
+    breakage]``; ``flags[k]`` = ``[diverged, breakage, finished, terminated, truncated,
+    over the limit]``.
     """
     lo, hi = _FORCE_OBS
     force, peak, counts, pos = out[k, 0], out[k, 1], out[k, 2], out[k, 5]
@@ -100,7 +109,7 @@ def _env_lane(k, out, finish, t, gain, fs, meas, fr, vmax, brk, max_t, w, prev_a
     terminated = diverged or breakage or finished
     truncated = (not terminated) and t[k] >= max_t - 1e-9
     e = force / fr[k]
-    r = -w[0] * abs(e - 1.0) - w[1] * max(0.0, e - w[2])
+    r = -w[0] * abs(e / w[2] - 1.0) - w[1] * max(0.0, e - 1.0)
     if w[3]:
         r += w[3] * out[k, 4] / vmax[k]
     if breakage or diverged:
@@ -111,6 +120,7 @@ def _env_lane(k, out, finish, t, gain, fs, meas, fr, vmax, brk, max_t, w, prev_a
     flags[k, 2] = finished
     flags[k, 3] = terminated
     flags[k, 4] = truncated
+    flags[k, 5] = force > fr[k]
     o = obs[k]
     o[0] = min(max(m[0] / fs, lo), hi)
     o[1] = fr_obs[k]
@@ -158,7 +168,7 @@ class _TurningCore:
         self.spindle_rpm_override = spindle_rpm
         self.reward_weights = resolve_reward(reward, TurningReward)
         w = self.reward_weights
-        self._w = np.array([w.tracking, w.overforce, w.overforce_threshold, w.progress, w.breakage])
+        self._w = np.array([w.tracking, w.overforce, w.target, w.progress, w.breakage])
         self.max_episode_time_s = check_episode_time(max_episode_time_s)
         check_scenario_spec(scenario, TurningScenario, TURNING_SCENARIOS)
         self._gain = float(self.params.sensor_gain)
@@ -174,7 +184,8 @@ class _TurningCore:
         self.n = n
         self.lanes = TurningLanes(self.params, n)
         self.scenarios: list[TurningScenario | None] = [None] * n
-        self.force_ref = np.ones(n)
+        self.force_limit = np.ones(n)
+        self.bound = np.full(n, np.nan)
         self.vmax = np.ones(n)
         self.breakage_force = np.ones(n)
         self.noise_counts = np.zeros(n)
@@ -187,7 +198,7 @@ class _TurningCore:
         self.clipped = np.zeros(n, dtype=bool)
         self.obs = np.zeros((n, 4 + _HISTORY), dtype=np.float32)
         self.reward = np.zeros(n)
-        self.flags = np.zeros((n, 5), dtype=np.bool_)
+        self.flags = np.zeros((n, 6), dtype=np.bool_)
         self.normals = np.zeros((n, _NORMAL_BLOCK))
         self.normal_i = np.full(n, _NORMAL_BLOCK)
         self._lane_index = np.arange(n)
@@ -210,12 +221,13 @@ class _TurningCore:
         self.scenarios[lane] = sc
         truth = sc.true_params(self.params)
         self.lanes.start(lane, truth, sc.spindle_rpm, sc.profile)
-        self.force_ref[lane] = float(sc.force_ref_N)
+        self.force_limit[lane] = float(sc.force_limit_N)
+        self.bound[lane] = machining_time_bound(sc, truth)
         self.vmax[lane] = truth.max_feed_velocity_mm_s
         self.breakage_force[lane] = truth.breakage_force_N
         self.noise_counts[lane] = truth.sensor_gain * truth.noise_std_N
         self.meas[lane] = 0.0
-        self.fr_obs[lane] = min(self.force_ref[lane] / self.params.force_scale_N, 10.0)
+        self.fr_obs[lane] = min(self.force_limit[lane] / self.params.force_scale_N, 10.0)
         self.rpm_obs[lane] = sc.spindle_rpm / 1000.0
         self.prev_action[lane] = -1.0
         self.n_clipped[lane] = 0
@@ -234,7 +246,9 @@ class _TurningCore:
             "diverged": False,
             "finished": False,
             "force_N": 0.0,
-            "force_ref_N": float(self.force_ref[lane]),
+            "force_limit_N": float(self.force_limit[lane]),
+            "cost": 0.0,
+            "score_bound": float(self.bound[lane]),
             "measured": 0.0,
             "measured_counts": 0.0,
             "spindle_rpm": float(sc.spindle_rpm),
@@ -302,7 +316,7 @@ class _TurningCore:
                 self._gain,
                 self._fs,
                 self.meas,
-                self.force_ref,
+                self.force_limit,
                 self.vmax,
                 self.breakage_force,
                 self.max_episode_time_s,
@@ -340,7 +354,9 @@ class _TurningCore:
             "diverged": diverged,
             "finished": finished,
             "force_N": force,
-            "force_ref_N": float(self.force_ref[k]),
+            "force_limit_N": float(self.force_limit[k]),
+            "cost": 1.0 if self.flags[k, 5] else 0.0,
+            "score_bound": float(self.bound[k]),
             "measured": float(self.meas[k, 0]),
             "measured_counts": counts,
             "peak_force_N": peak,
@@ -371,7 +387,9 @@ class _TurningCore:
             "diverged": f[:, 0].copy(),
             "finished": f[:, 2].copy(),
             "force_N": o[:, 0].copy(),
-            "force_ref_N": self.force_ref.copy(),
+            "force_limit_N": self.force_limit.copy(),
+            "cost": f[:, 5].astype(np.float64),
+            "score_bound": self.bound.copy(),
             "measured": self.meas[:, 0].copy(),
             "measured_counts": o[:, 2].copy(),
             "peak_force_N": o[:, 1].copy(),
@@ -390,12 +408,14 @@ class _TurningCore:
 
 
 class TurningEnv(gym.Env):
-    """Constant cutting-force regulation in turning by feed (Noh, Kim & Kim 1992).
+    """Turning as fast as the cutting-force limit allows, by feed (Noh, Kim & Kim 1992).
 
     ## Description
     A lathe turns an SM45C bar with a carbide tool. The depth of cut changes along the bar
-    (pre-machined steps, tapers); the controller must keep the main cutting force at the
-    reference (1 kN in the paper) by commanding the feed servo, as fast as the force allows.
+    (pre-machined steps, tapers); the controller commands the feed servo to cut the bar as
+    fast as it can while the main cutting force stays under the scenario's process limit
+    (1 kN, the force the paper's controllers regulated at). The controller sees the limit and
+    chooses where to regulate below it.
     The plant is ``machining_envs.turning.plant``: a second-order feed servo (eq. 1), a gear
     train (eq. 2), the feed per revolution as the exact moving integral of the feed velocity
     over the last spindle revolution (eq. 4), the force law ``F = Kf f^p a`` (eq. 8) and a
@@ -415,7 +435,7 @@ class TurningEnv(gym.Env):
     | index | observation | unit | range |
     |---|---|---|---|
     | 0 | measured force (filtered, noisy) / ``force_scale_N`` | - | [-1, 10] |
-    | 1 | reference force / ``force_scale_N`` | - | [0, 10] |
+    | 1 | force limit / ``force_scale_N`` | - | [0, 10] |
     | 2 | previous action (the command now applied) | - | [-1, 1] |
     | 3 | spindle speed / 1000 rpm | - | [0, 3] |
     | 4-6 | measured force one, two, three samples ago / ``force_scale_N`` | - | [-1, 10] |
@@ -424,12 +444,20 @@ class TurningEnv(gym.Env):
     ``info``).
 
     ## Rewards
-    With ``F`` the cutting force at the sample instant, ``Fr`` the reference, ``dx`` the
-    distance fed in the step and ``Vmax`` the servo's top feed velocity (weights in
+    With ``F`` the cutting force at the sample instant, ``L`` the limit, ``dx`` the distance
+    fed in the step and ``Vmax`` the servo's top feed velocity (weights in
     :class:`TurningReward`, configurable with ``reward=``):
-    ``r = -1.0 |F - Fr|/Fr - 4.0 max(0, F/Fr - 1.1) + 0.0 dx/(Ts Vmax) - 50 [breakage]``.
-    Holding the force at the reference is also the fastest safe cut, so the default reward
-    needs no progress term. Benchmark metrics are computed from ``info``, not from rewards.
+    ``r = -1.0 |F/(0.9 L) - 1| - 4.0 max(0, F/L - 1) + 0.0 dx/(Ts Vmax) - 50 [breakage]``.
+    The reward's own setpoint 0.9 L (``target``) is a training choice, not the task's.
+
+    ## Cost and score
+    ``info["cost"]`` is 1.0 on a step whose force sample is above the limit, else 0.0 (the
+    Safety-Gymnasium convention). The task's score (``task``, ``machining_envs.core.score``)
+    is the machining time, counted if the bar was finished, the tool did not break and
+    under 2 % of the steps had a cost; else the time limit is charged.
+    ``info["score_bound"]`` is the floor of the machining time from the cut's truth
+    (``machining_time_bound``): the force exactly at the limit everywhere, within the
+    servo's top speed.
 
     ## Starting State
     Tool at the start of the workpiece, feed at rest, force zero; the scenario (workpiece,
@@ -453,7 +481,8 @@ class TurningEnv(gym.Env):
 
     ## info
     ``t_s``, ``command`` (U, counts), ``action_clipped``, ``n_action_clipped``,
-    ``breakage``, ``diverged``, ``finished``, ``force_N`` (true force), ``force_ref_N``,
+    ``breakage``, ``diverged``, ``finished``, ``force_N`` (true force), ``force_limit_N``,
+    ``cost``, ``score_bound`` (s),
     ``measured`` (force the controller saw, N), ``measured_counts``, ``peak_force_N``,
     ``feed_mm_per_rev``, ``feed_velocity_mm_s``, ``depth_mm``, ``spindle_rpm``,
     ``position_mm``, ``segment`` (index of the workpiece segment being cut),
@@ -470,6 +499,12 @@ class TurningEnv(gym.Env):
       ``np_random`` (the same normals in the same order within an episode; after an
       episode the unused rest of a block is skipped, so later episodes of an unseeded
       reset differ from the first implementation's).
+      The task is a process limit, not a reference: scenarios carry ``force_limit_N``
+      (was ``force_ref_N``), observation 1 is the limit, ``info`` gives ``force_limit_N``,
+      ``cost`` and ``score_bound``; the reward tracks ``target`` x limit and penalises
+      force above the limit (was above 1.1x the reference); the scenarios ``train``,
+      ``validation``, ``test`` (one distribution, separate streams) and ``ood`` (the
+      former ``test`` ranges, varying limit) replace ``train``/``test``.
 
     ## Example
     >>> import gymnasium as gym
@@ -487,7 +522,7 @@ class TurningEnv(gym.Env):
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = TURNING_TASK
     #: Positions of the observation's fields, for controllers that read them by name.
-    OBS_INDEX = {"measured": 0, "reference": 1, "prev_action": 2, "spindle": 3, "history": 4}
+    OBS_INDEX = {"measured": 0, "limit": 1, "prev_action": 2, "spindle": 3, "history": 4}
 
     def __init__(
         self,
@@ -570,7 +605,7 @@ class TurningEnv(gym.Env):
                     [
                         ("cutting force", log["force"], "C0-"),
                         ("measured", log["measured"], "C1-"),
-                        ("reference", [self._core.force_ref[0]] * len(t), "k--"),
+                        ("limit", [self._core.force_limit[0]] * len(t), "k--"),
                     ],
                 ),
                 ("feed (mm/rev)", [("feed", log["feed"], "C2-")]),

@@ -1,9 +1,16 @@
-"""Named scenarios: the papers' experiments, a training distribution, a held-out test set.
+"""Named scenarios: the paper's experiments and the four splits of the benchmark.
 
 A scenario fixes what changes from one cut to the next and what a controller cannot see:
-the workpiece's depth profile, the spindle speed, the reference, and the true process
-constants (as scale factors on the nominal parameters). Pass a name or a scenario object to
-``env.reset(options={"scenario": ...})``.
+the workpiece's depth profile, the spindle speed, the process force limit, and the true
+process constants (as scale factors on the nominal parameters). Pass a name or a scenario
+object to ``env.reset(options={"scenario": ...})``.
+
+Splits (``machining_envs.core.splits``): ``train``, ``validation`` and ``test`` share one
+distribution (spindle speed log-uniform over the paper's 245-700 rpm, 2-5 random plateaus
+and tapers of 0.5-3 mm, Kf and p within +-20 % of nominal, noise 0.5-2x, the paper's 1 kN
+force limit), each split drawing through its own stream; ``ood`` goes beyond it: 200-800
+rpm, 0.5-3.5 mm, 2-6 segments, and a force limit of 700-1300 N, so that a controller which
+ignores the observed limit is exposed.
 """
 
 from __future__ import annotations
@@ -14,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from machining_envs.core.env import resolve_scenario
+from machining_envs.core.splits import split_rng
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams, _check
 
@@ -22,6 +30,7 @@ __all__ = [
     "TURNING_SCENARIOS",
     "turning_scenario",
     "PAPER_STEP_SEGMENT_MM",
+    "machining_time_bound",
 ]
 
 #: Length of each plateau of the paper's 1 -> 2 -> 3 mm bar, mm. Not given in the paper;
@@ -32,7 +41,7 @@ PAPER_STEP_SEGMENT_MM = 15.0
 
 @dataclass(frozen=True)
 class TurningScenario:
-    """One turning cut: workpiece, spindle speed, reference and the hidden process truth.
+    """One turning cut: workpiece, spindle speed, force limit and the hidden process truth.
 
     Parameters
     ----------
@@ -41,8 +50,10 @@ class TurningScenario:
         Depth of cut along the workpiece; its length is the cut's length.
     spindle_rpm : float
         Spindle speed, rpm, constant over the cut (range ``SPINDLE_RPM_RANGE``).
-    force_ref_N : float
-        Reference cutting force, N (the paper's 1 kN by default).
+    force_limit_N : float
+        Process limit of the cutting force, N: what the tool and spindle may take (the
+        paper's 1 kN by default, the force its controllers regulated at). Controllers see
+        it; where they regulate below it is their choice.
     force_coefficient_scale, feed_exponent_scale : float
         True Kf and p as multiples of the nominal ones (0.5 to 2): the tool, material or
         wear differ from what the controller was designed for.
@@ -53,7 +64,7 @@ class TurningScenario:
     name: str
     profile: DepthProfile
     spindle_rpm: float
-    force_ref_N: float = 1000.0
+    force_limit_N: float = 1000.0
     force_coefficient_scale: float = 1.0
     feed_exponent_scale: float = 1.0
     noise_scale: float = 1.0
@@ -62,7 +73,7 @@ class TurningScenario:
         if not isinstance(self.profile, DepthProfile):
             raise ValueError(f"profile must be a DepthProfile, got {type(self.profile).__name__}")
         _check("spindle_rpm", self.spindle_rpm, *SPINDLE_RPM_RANGE)
-        _check("force_ref_N", self.force_ref_N, 1.0, 1e5)
+        _check("force_limit_N", self.force_limit_N, 1.0, 1e5)
         _check("force_coefficient_scale", self.force_coefficient_scale, 0.5, 2.0)
         _check("feed_exponent_scale", self.feed_exponent_scale, 0.5, 2.0)
         _check("noise_scale", self.noise_scale, 0.0, 10.0)
@@ -95,32 +106,88 @@ def _step_range(rng: np.random.Generator) -> TurningScenario:
 
 
 def _random(
-    name: str, rpm: tuple[float, float], depth: tuple[float, float], segments: tuple[int, int]
+    name: str,
+    rpm: tuple[float, float],
+    depth: tuple[float, float],
+    segments: tuple[int, int],
+    limit_N: tuple[float, float] = (1000.0, 1000.0),
 ):
-    def make(rng: np.random.Generator) -> TurningScenario:
+    def make(env_rng: np.random.Generator) -> TurningScenario:
+        rng = split_rng(env_rng, name)
         spindle = float(np.exp(rng.uniform(np.log(rpm[0]), np.log(rpm[1]))))
         prof = DepthProfile.random(rng, depth, segments, (4.0, 12.0), 0.3, name=f"{name} profile")
         kf, p, noise = rng.uniform(0.8, 1.2), rng.uniform(0.8, 1.2), rng.uniform(0.5, 2.0)
-        return TurningScenario(name, prof, spindle, 1000.0, float(kf), float(p), float(noise))
+        limit = float(rng.uniform(*limit_N)) if limit_N[1] > limit_N[0] else limit_N[0]
+        return TurningScenario(name, prof, spindle, limit, float(kf), float(p), float(noise))
 
     return make
 
 
-#: name -> factory drawing a scenario from the env's generator. ``train``: spindle speed
-#: log-uniform over the paper's 245-700 rpm, 2-5 random plateaus and tapers of 0.5-3 mm,
-#: Kf and p within +-20 % of nominal, noise 0.5-2x. ``test`` (held out): wider, 200-800 rpm,
-#: 0.5-3.5 mm, 2-6 segments, so a policy is judged partly outside what it trained on.
+#: name -> factory drawing a scenario from the env's generator: the paper's experiments and
+#: the splits (see the module docstring).
 TURNING_SCENARIOS: dict[str, Callable[[np.random.Generator], TurningScenario]] = {
     "paper_245": _paper(245),
     "paper_405": _paper(405),
     "paper_700": _paper(700),
     "taper_405": _taper,
     "step_range": _step_range,
-    "train": _random("train", (245.0, 700.0), (0.5, 3.0), (2, 5)),
-    "test": _random("test", (200.0, 800.0), (0.5, 3.5), (2, 6)),
+    **{
+        split: _random(split, (245.0, 700.0), (0.5, 3.0), (2, 5))
+        for split in ("train", "validation", "test")
+    },
+    "ood": _random("ood", (200.0, 800.0), (0.5, 3.5), (2, 6), (700.0, 1300.0)),
 }
 
 
 def turning_scenario(spec, rng: np.random.Generator) -> TurningScenario:
     """Resolve a scenario name or object; unknown names raise ``ValueError``."""
     return resolve_scenario(spec, rng, TurningScenario, TURNING_SCENARIOS)
+
+
+def machining_time_bound(scenario: TurningScenario, truth: TurningParams) -> float:
+    r"""The physical floor of the cut's machining time, s: the time to cut the whole
+    workpiece with the force exactly at the limit everywhere, within the servo's top speed.
+
+    With the true ``Kf`` and ``p`` of the cut, the limit ``L``, the spindle speed ``n`` and the
+    depth ``a(x)`` along the workpiece, the feed per revolution at the limit is
+    ``f*(x) = (L / (Kf a(x)))^(1/p)`` (eq. 8) and the feed velocity
+    ``v(x) = min(V_max, f*(x) n / 60)`` (``V_max`` at the largest command, eq. 1-2; in air,
+    ``a = 0``, the top speed). The floor is
+
+    .. math:: T^* = \int_0^{\ell} \frac{dx}{v(x)},
+
+    integrated in closed form segment by segment (a plateau or a linear taper, split where
+    ``v`` reaches ``V_max``). No controller that keeps the force at or below the limit can
+    cut faster: the feed per revolution of the plant is the distance fed over the last
+    revolution, which only lags the velocity, and the servo needs time to accelerate. An
+    episode may pass the limit on under 2 % of its steps and still count, so an agent could
+    in principle beat the floor by about that much.
+    """
+    kf, p = truth.force_coefficient, truth.feed_exponent
+    vmax = truth.max_feed_velocity_mm_s
+    c = 60.0 / scenario.spindle_rpm * (kf / scenario.force_limit_N) ** (1.0 / p)
+    # 1/v(x) = max(1/vmax, c a^(1/p)); the depth at which the two meet:
+    a_star = (1.0 / (vmax * c)) ** p
+    prof = scenario.profile
+    q = 1.0 / p
+    total = 0.0
+    for i in range(len(prof.edges_mm) - 1):
+        x0, x1 = prof.edges_mm[i], prof.edges_mm[i + 1]
+        a0, a1 = prof.start_depths_mm[i], prof.end_depths_mm[i]
+        if a0 == a1:
+            total += (x1 - x0) * max(1.0 / vmax, c * a0**q)
+            continue
+        # a(x) linear from a0 to a1: split where a crosses a_star.
+        slope = (a1 - a0) / (x1 - x0)
+        cuts = [x0, x1]
+        xs = x0 + (a_star - a0) / slope
+        if x0 < xs < x1:
+            cuts = [x0, xs, x1]
+        for u, w in zip(cuts[:-1], cuts[1:], strict=True):
+            am = a0 + slope * (0.5 * (u + w) - x0)
+            if am <= a_star:
+                total += (w - u) / vmax
+            else:
+                au, aw = a0 + slope * (u - x0), a0 + slope * (w - x0)
+                total += c * (aw ** (q + 1.0) - au ** (q + 1.0)) / ((q + 1.0) * slope)
+    return float(total)

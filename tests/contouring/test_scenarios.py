@@ -4,7 +4,7 @@ import gymnasium as gym
 import pytest
 
 from machining_envs import ContouringScenario, Path
-from tests.helpers import CONTOURING, TRAIN_TEST, assert_test_reaches_beyond_train, drawn_scenarios
+from tests.helpers import CONTOURING, TRAIN_OOD, assert_ood_reaches_beyond_train, drawn_scenarios
 
 
 def test_scenarios_by_name_and_object_and_train_vs_test():
@@ -15,8 +15,8 @@ def test_scenarios_by_name_and_object_and_train_vs_test():
     _, info = env.reset(options={"scenario": sc})
     assert info["scenario"] == "mine" and (info["x_mm"], info["y_mm"]) == (1.0, 1.0)
     # train and test differ: the held-out set reaches feeds the training set never does.
-    feeds = {name: [s.feed_mm_s for s in drawn_scenarios(env, name, 100)] for name in TRAIN_TEST}
-    assert_test_reaches_beyond_train(feeds, 20.0, 60.0)
+    feeds = {name: [s.feed_mm_s for s in drawn_scenarios(env, name, 100)] for name in TRAIN_OOD}
+    assert_ood_reaches_beyond_train(feeds, 20.0, 60.0)
 
 
 def test_bad_scenarios_name_the_field():

@@ -8,7 +8,7 @@ import pytest
 from machining_envs import MillingScenario
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.milling.scenarios import cut_area_mm2
-from tests.helpers import MILLING, TRAIN_TEST, assert_test_reaches_beyond_train, drawn_scenarios
+from tests.helpers import MILLING, TRAIN_OOD, assert_ood_reaches_beyond_train, drawn_scenarios
 
 
 def test_scenarios_by_name_and_object():
@@ -20,10 +20,10 @@ def test_scenarios_by_name_and_object():
     _, info = env.reset(options={"scenario": sc})
     assert info["scenario"] == "mine" and info["spindle_rpm"] == 600.0
     # train and test differ: the held-out set reaches depths and speeds training never does.
-    draws = {name: drawn_scenarios(env, name, 200) for name in TRAIN_TEST}
+    draws = {name: drawn_scenarios(env, name, 200) for name in TRAIN_OOD}
     rpm = {k: [s.spindle_scale for s in v] for k, v in draws.items()}
     depth = {k: [s.profile.max_depth_mm for s in v] for k, v in draws.items()}
-    assert_test_reaches_beyond_train(rpm, 0.8, 1.25)
+    assert_ood_reaches_beyond_train(rpm, 0.8, 1.25)
     assert max(depth["train"]) <= 3.0 < max(depth["test"])
 
 

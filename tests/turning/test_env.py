@@ -16,7 +16,7 @@ def test_info_values_and_units_after_a_step():
     _, _, _, _, info = env.step(np.array([0.0], dtype=np.float32))
     assert info["t_s"] == pytest.approx(0.1)
     assert info["command"] == pytest.approx(0.5 * env.unwrapped.params.command_max)
-    assert info["spindle_rpm"] == 405.0 and info["force_ref_N"] == 1000.0
+    assert info["spindle_rpm"] == 405.0 and info["force_limit_N"] == 1000.0
 
 
 def test_action_map_round_trip():

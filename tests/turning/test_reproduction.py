@@ -46,7 +46,7 @@ def test_adaptive_pi_holds_5_percent_after_settling(rpm, seed):
     # start, and stays settled for at least the second after.
     assert m["n_unsettled"] == 0.0
     t = traj["t_s"][1:]
-    e = np.abs(traj["force_N"][1:] / traj["force_ref_N"][1:] - 1.0)
+    e = np.abs(traj["force_N"][1:] / traj["force_limit_N"][1:] - 1.0)
     cutting = traj["depth_mm"][1:] > 0
     seg = traj["segment"][1:]
     for s in np.unique(seg[cutting]):
