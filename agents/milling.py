@@ -1,7 +1,7 @@
 r"""End-milling controllers of Park & Yoon (1986): integral torque control, fixed or adaptive.
 
 All three are built from the env's nominal parameters only (``from_env``) and read only the
-observation: the measured torque, the reference and the spindle speed. Torques are handled
+observation: the measured torque, the torque limit and the spindle speed. Torques are handled
 in sensor counts, ``Tc = Ke T`` (eq. 9), the units of the paper's gains.
 
 - :class:`FixedGainIntegral`: eq. (1)-(4), ``U = Kc W``, ``W(i) = W(i-1) + Ts E(i)``.
@@ -39,7 +39,7 @@ class MillingIO:
     sensor_gain: float
     """Ke, counts per N·mm (eq. 9)."""
     torque_scale_Nmm: float
-    """N·mm per unit of the reference observation (the nominal reference torque)."""
+    """N·mm per unit of the limit observation (the nominal torque limit)."""
     command_max: float
     """Largest command, counts; action -1 is U = 0, +1 is U = command_max."""
     sample_time_s: float
@@ -53,21 +53,24 @@ class MillingIO:
         base = unwrap_as(env, EndMillingEnv, "a milling controller")
         p = base.params
         return cls(
-            p.sensor_gain, p.torque_ref_Nmm, p.command_max, p.sample_time_s, p, base.command_map
+            p.sensor_gain, p.torque_limit_Nmm, p.command_max, p.sample_time_s, p, base.command_map
         )
 
-    def torque_counts(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Measured torque Tc and reference Tr in counts, from a batch of observations
-        (the torques are observed as multiples of the reference)."""
-        tr = self.sensor_gain * self.torque_scale_Nmm * obs[:, _I["reference"]]
-        return tr * obs[:, _I["measured"]], tr
+    def torque_counts(
+        self, obs: np.ndarray, setpoint: float = 1.0
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Measured torque Tc and the set point Tr = ``setpoint`` x the limit, in counts, from
+        a batch of observations (the torques are observed as multiples of the limit)."""
+        lim = self.sensor_gain * self.torque_scale_Nmm * obs[:, _I["limit"]]
+        return lim * obs[:, _I["measured"]], lim * setpoint
 
     def spindle_rpm(self, obs: np.ndarray) -> np.ndarray:
         return np.clip(1000.0 * obs[:, _I["spindle"]], *SPINDLE_RPM_RANGE)
 
-    def reference_Nmm(self, obs: np.ndarray) -> np.ndarray:
-        tr = self.torque_scale_Nmm * obs[:, _I["reference"]]
-        return np.where(tr > 0, tr, self.torque_scale_Nmm)
+    def limit_Nmm(self, obs: np.ndarray) -> np.ndarray:
+        """The torque limit, N·mm, from a batch of observations (the nominal if none)."""
+        lim = self.torque_scale_Nmm * obs[:, _I["limit"]]
+        return np.where(lim > 0, lim, self.torque_scale_Nmm)
 
     def action(self, command: np.ndarray) -> np.ndarray:
         """Actions (n, 1) for commands (n,) in counts."""
@@ -91,23 +94,28 @@ class FixedGainIntegral(Agent):
     io : MillingIO
     kc : float
         Controller gain Kc, counts of command per (count of torque x s) (paper: 0.2).
+    setpoint : float
+        Torque regulated at, as a share of the observed limit (paper: 1.0), in (0, 1.5].
     """
 
     state_size = 1  # [W]
     obs_dim = 7
     obs_index = _I
+    #: Free parameters and their search ranges (low, high, log scale) for tuning.
+    TUNABLE = {"kc": (0.02, 2.0, True), "setpoint": (0.5, 1.0, False)}
 
-    def __init__(self, io: MillingIO, kc: float = 0.2):
+    def __init__(self, io: MillingIO, kc: float = 0.2, setpoint: float = 1.0):
         self.io = io
         self.kc = check_positive("kc", kc, 1e6)
-        self.name = f"fixed integral Kc={kc:g}"
+        self.setpoint = check_positive("setpoint", setpoint, 1.5)
+        self.name = f"fixed integral Kc={kc:.3g}"
 
     @classmethod
-    def from_env(cls, env, kc: float = 0.2) -> FixedGainIntegral:
-        return cls(MillingIO.from_env(env), kc)
+    def from_env(cls, env, kc: float = 0.2, setpoint: float = 1.0) -> FixedGainIntegral:
+        return cls(MillingIO.from_env(env), kc, setpoint)
 
     def _act(self, obs, state):
-        tc, tr = self.io.torque_counts(obs)
+        tc, tr = self.io.torque_counts(obs, self.setpoint)
         w = state[:, 0] + self.io.sample_time_s * (tr - tc)
         u = np.clip(self.kc * w, 0.0, self.io.command_max)
         state[:, 0] = u / self.kc
@@ -136,11 +144,11 @@ class IntegralACC(Agent):
     of the paper's workpiece): ``K = 0.2 Km / Ts`` with ``Km`` the nominal ``Tc / U`` there
     at the reference torque. The discrete loop gain is then ``m K Ts^2 = 0.43`` at every
     depth, a gain margin of 3.5. Each episode starts from ``Km`` = the nominal process
-    gain at ``design_depth_mm``, the observed spindle speed and reference, and ``Kc`` at
+    gain at ``design_depth_mm``, the observed spindle speed and set point, and ``Kc`` at
     its matching value ``Ts K / Km``.
 
     Guards against the estimator's "overflow" the paper warns about (§4): the gains are
-    held while the measured torque is below ``min_torque_fraction`` of the reference or no
+    held while the measured torque is below ``min_torque_fraction`` of the set point or no
     feed is commanded (cutting air gives ``Tc = 0``, which would drive ``Km`` to 0 and
     ``Kc`` without bound), and while the command is held at the top of its range
     (anti-windup: the estimator is frozen while the feed saturates); ``Km`` is kept above 0.1 % of its initial value and ``Kc``
@@ -158,12 +166,20 @@ class IntegralACC(Agent):
     design_depth_mm : float
         Radial depth at which ``kc_design`` is the adapted gain.
     min_torque_fraction : float
-        Below this share of the reference the estimator is held.
+        Below this share of the set point the estimator is held.
+    setpoint : float
+        Torque regulated at, as a share of the observed limit (paper: 1.0), in (0, 1.5].
     """
 
     state_size = 6  # [W, Km, Kc, U held, Km at start, Kc at start]
     obs_dim = 7
     obs_index = _I
+    #: Free parameters and their search ranges (low, high, log scale) for tuning.
+    TUNABLE = {
+        "kc_design": (0.02, 1.0, True),
+        "c1": (1e-4, 1e-2, True),
+        "setpoint": (0.5, 1.0, False),
+    }
 
     def __init__(
         self,
@@ -174,8 +190,10 @@ class IntegralACC(Agent):
         kc_design: float = 0.2,
         design_depth_mm: float = 1.0,
         min_torque_fraction: float = 0.2,
+        setpoint: float = 1.0,
     ):
         self.io = io
+        self.setpoint = check_positive("setpoint", setpoint, 1.5)
         self.c1 = check_positive("c1", c1, 10.0)
         self.c2 = check_positive("c2", c2, 10.0)
         self.kc_design = check_positive("kc_design", kc_design, 1e6)
@@ -188,23 +206,29 @@ class IntegralACC(Agent):
         self.name = f"integral ACC K={self.k:.3g}"
 
     @classmethod
-    def from_env(cls, env, k: float | None = None, **kwargs) -> IntegralACC:
-        return cls(MillingIO.from_env(env), k, **kwargs)
+    def from_env(
+        cls, env, k: float | None = None, kc_design: float = 0.2, c1: float = 1e-3,
+        setpoint: float = 1.0, **kwargs,
+    ) -> IntegralACC:  # fmt: skip
+        return cls(
+            MillingIO.from_env(env), k, c1=c1, kc_design=kc_design, setpoint=setpoint, **kwargs
+        )
 
-    def nominal_process_gain(self, spindle_rpm: np.ndarray, torque_ref_Nmm: np.ndarray):
-        """Nominal ``Tc / U`` at ``design_depth_mm`` for these speeds and references."""
-        return self.io.params.process_gain(self.design_depth_mm, torque_ref_Nmm, spindle_rpm)
+    def nominal_process_gain(self, spindle_rpm: np.ndarray, torque_Nmm: np.ndarray):
+        """Nominal ``Tc / U`` at ``design_depth_mm`` for these speeds and set-point torques."""
+        return self.io.params.process_gain(self.design_depth_mm, torque_Nmm, spindle_rpm)
 
     def initial_state(self, n, obs):
         st = np.zeros((n, self.state_size))
-        km = self.nominal_process_gain(self.io.spindle_rpm(obs), self.io.reference_Nmm(obs))
+        torque = self.io.limit_Nmm(obs) * self.setpoint
+        km = self.nominal_process_gain(self.io.spindle_rpm(obs), torque)
         st[:, 1] = st[:, 4] = km
         st[:, 2] = st[:, 5] = self.io.sample_time_s * self.k / km
         return st
 
     def _act(self, obs, state):
         ts = self.io.sample_time_s
-        tc, tr = self.io.torque_counts(obs)
+        tc, tr = self.io.torque_counts(obs, self.setpoint)
         w, km, kc, u_held = state[:, 0], state[:, 1], state[:, 2], state[:, 3]
         km0, kc0 = state[:, 4], state[:, 5]
         # Held while the command is at either end of its range (anti-windup: a clipped
@@ -229,18 +253,33 @@ class MillingConstantFeed(Agent):
     """Baseline without AC: one programmed feed velocity for the whole cut.
 
     By default the feed is chosen, as a process planner would, so that the nominal torque
-    law gives the reference torque at the deepest cut expected (``design_depth_mm``) at
-    the nominal spindle speed; shallower parts are then cut below the reference, wasting
-    time. :meth:`paper` gives the feeds of Table 1's "without AC" rows. The command is
-    ``U = Vf / Kn`` with the nominal servo gain (eq. 5).
+    law gives ``setpoint`` x the observed torque limit at the deepest cut expected
+    (``design_depth_mm``) at the nominal spindle speed; shallower parts are then cut below
+    the limit, wasting time. :meth:`paper` gives the feeds of Table 1's "without AC" rows.
+    The command is ``U = Vf / Kn`` with the nominal servo gain (eq. 5), at most the largest.
     """
 
     state_size = 0
     obs_dim = 7
     obs_index = _I
+    #: Free parameters and their search ranges (low, high, log scale) for tuning.
+    TUNABLE = {"design_depth_mm": (0.5, 4.0, False), "setpoint": (0.5, 1.0, False)}
 
-    def __init__(self, io: MillingIO, feed_mm_per_min: float):
+    def __init__(
+        self,
+        io: MillingIO,
+        feed_mm_per_min: float | None = None,
+        design_depth_mm: float = 3.0,
+        setpoint: float = 1.0,
+    ):
         self.io = io
+        self.design_depth_mm = check_positive("design_depth_mm", design_depth_mm, 100.0)
+        self.setpoint = check_positive("setpoint", setpoint, 1.5)
+        if feed_mm_per_min is None:
+            self.feed_mm_per_min = None
+            self.command = None
+            self.name = f"constant feed, designed for {design_depth_mm:.2g} mm"
+            return
         self.feed_mm_per_min = check_positive("feed_mm_per_min", feed_mm_per_min, 1e5)
         self.command = self.feed_mm_per_min / 60.0 / io.params.servo_gain
         if self.command > io.command_max:
@@ -256,15 +295,9 @@ class MillingConstantFeed(Agent):
         env,
         feed_mm_per_min: float | None = None,
         design_depth_mm: float = 3.0,
+        setpoint: float = 1.0,
     ) -> MillingConstantFeed:
-        io = MillingIO.from_env(env)
-        if feed_mm_per_min is None:
-            p = io.params
-            ft = p.feed_per_tooth_for_torque(
-                p.torque_ref_Nmm, check_positive("design_depth_mm", design_depth_mm, 100.0)
-            )
-            feed_mm_per_min = 60.0 * float(p.feed_velocity_for_feed(ft))
-        return cls(io, feed_mm_per_min)
+        return cls(MillingIO.from_env(env), feed_mm_per_min, design_depth_mm, setpoint)
 
     @classmethod
     def paper(cls, env, workpiece: str) -> MillingConstantFeed:
@@ -277,4 +310,12 @@ class MillingConstantFeed(Agent):
         return cls(MillingIO.from_env(env), PAPER_CONSTANT_FEED_MM_MIN[workpiece])
 
     def _act(self, obs, state):
-        return self.io.action(np.full(obs.shape[0], self.command))
+        if self.command is not None:
+            return self.io.action(np.full(obs.shape[0], self.command))
+        p = self.io.params
+        ft = p.feed_per_tooth_for_torque(
+            self.setpoint * self.io.limit_Nmm(obs), self.design_depth_mm
+        )
+        feed_mm_per_min = 60.0 * p.feed_velocity_for_feed(ft)
+        command = np.minimum(feed_mm_per_min / 60.0 / p.servo_gain, self.io.command_max)
+        return self.io.action(command)

@@ -52,9 +52,7 @@ class TurningIO:
         p = unwrap_as(env, TurningEnv, "a turning controller").params
         return cls(p.sensor_gain, p.force_scale_N, p.command_max, p.sample_time_s, p)
 
-    def force_counts(
-        self, obs: np.ndarray, setpoint: float = 1.0
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def force_counts(self, obs: np.ndarray, setpoint: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         """Measured force and the set point (``setpoint`` x the limit) in counts, from a
         batch of observations."""
         k = self.sensor_gain * self.force_scale_N
@@ -111,7 +109,9 @@ class FixedGainPI(Agent):
         self.name = f"fixed PI Kh={kh:.3g}"
 
     @classmethod
-    def from_env(cls, env, kh: float = 0.02, kgh: float = 1.9, setpoint: float = 1.0) -> FixedGainPI:
+    def from_env(
+        cls, env, kh: float = 0.02, kgh: float = 1.9, setpoint: float = 1.0
+    ) -> FixedGainPI:
         return cls(TurningIO.from_env(env), kh, kgh, setpoint)
 
     def _act(self, obs, state):

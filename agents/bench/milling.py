@@ -6,10 +6,14 @@ Kn = 0.02, C1 = C2 = 0.001) and without AC at the constant feeds Table 1 implies
 machining time (eq. 20) and metal removal rate beside the paper's. A row matches when:
 
 - **without AC**: time and MRR within ``TABLE_TOLERANCE`` (2 %) of the paper's;
-- **with AC**: the machining time is at least ``MIN_TIME_GAIN`` (70 %) below our
-  without-AC run of the same workpiece, nothing breaks, and on every segment of the
-  workpiece the torque enters the ``HOLD_BAND`` (10 %) around the reference within
-  ``TRANSIENT_S`` (10 s) of the segment's start and stays there to its end.
+- **with AC**: the machining time is within ``AC_TIME_TOLERANCE`` (5 %) of the paper's
+  with-AC time and at least ``MIN_TIME_GAIN`` (70 %) below our without-AC run of the same
+  workpiece, nothing breaks, and on every segment of the workpiece the torque enters the
+  ``HOLD_BAND`` (10 %) around the reference within ``TRANSIENT_S`` (10 s) of the
+  segment's start and stays there to its end. The taper row does not match: ours holds
+  the reference and is 26 % faster than the paper's with-AC time (3.132 min); what slowed
+  the paper's cut on the shallow start of the taper is not in the paper (our feed drive's
+  top speed, ``MillingParams.command_max``, is a choice, not a paper value).
 
 Fig. 5 (the stability trend) runs the fixed-gain integral controller at Kc = 0.2 on the
 step workpiece with Kn = 0.02 and 0.025: the paper reports the larger servo gain faster but
@@ -67,6 +71,11 @@ PAPER_TABLE_1 = {
     },
 }
 TABLE_TOLERANCE = 0.02
+#: How far our with-AC machining time may be from the paper's: the limit torque was chosen
+#: to give the step workpiece's with-AC time (``MillingParams.torque_limit_Nmm``; rounding
+#: 3613 to 3600 N·mm moves it 0.9 %), and the start-up transient and the paper's unstated
+#: details move it a few per cent more; 5 % separates that from a different behaviour.
+AC_TIME_TOLERANCE = 0.05
 MIN_TIME_GAIN = 0.70
 HOLD_BAND = 0.10
 TRANSIENT_S = 10.0
@@ -84,7 +93,7 @@ def hold_check(traj: dict, band: float = HOLD_BAND) -> dict:
     depth = np.asarray(traj["depth_mm"])[1:]
     cutting = depth > 0
     t = np.asarray(traj["t_s"])[1:][cutting]
-    e = np.abs(np.asarray(traj["torque_Nmm"])[1:] / np.asarray(traj["torque_ref_Nmm"])[1:] - 1.0)
+    e = np.abs(np.asarray(traj["torque_Nmm"])[1:] / np.asarray(traj["torque_limit_Nmm"])[1:] - 1.0)
     e = e[cutting]
     seg = np.asarray(traj["segment"])[1:][cutting]
     dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
@@ -111,7 +120,7 @@ def plateau_oscillation(traj: dict) -> dict[float, float]:
     depth = np.asarray(traj["depth_mm"])[1:]
     cutting = depth > 0
     t = np.asarray(traj["t_s"])[1:][cutting]
-    e = np.asarray(traj["torque_Nmm"])[1:] / np.asarray(traj["torque_ref_Nmm"])[1:] - 1.0
+    e = np.asarray(traj["torque_Nmm"])[1:] / np.asarray(traj["torque_limit_Nmm"])[1:] - 1.0
     e, depth = e[cutting], depth[cutting]
     seg = np.asarray(traj["segment"])[1:][cutting]
     window = max(1, int(round(OSC_WINDOW_S / float(np.median(np.diff(t))))))
@@ -208,6 +217,7 @@ def reproduce_milling(out_dir=None, seed: int = 0, verbose: bool = True) -> list
             }
         )
         gain = 1.0 - m_ac["machining_time_min"] / m_no["machining_time_min"]
+        d_ac = m_ac["machining_time_min"] / paper["time_ac"] - 1.0
         hold = hold_check(tr_ac)
         broke = bool(m_ac["breakage"])
         results.append(
@@ -221,11 +231,17 @@ def reproduce_milling(out_dir=None, seed: int = 0, verbose: bool = True) -> list
                 "paper_time_gain": 1.0 - paper["time_ac"] / paper["time_no_ac"],
                 "hold": hold,
                 "note": (
+                    f"{d_ac:+.1%} vs paper; "
                     f"time -{gain:.1%} (paper -{1.0 - paper['time_ac'] / paper['time_no_ac']:.1%}); "
                     f"within 10 % after {max(hold['transient_s']):.1f} s"
                     + ("; BROKE" if broke else "")
                 ),
-                "match": bool(gain >= MIN_TIME_GAIN and hold["held"] and not broke),
+                "match": bool(
+                    abs(d_ac) <= AC_TIME_TOLERANCE
+                    and gain >= MIN_TIME_GAIN
+                    and hold["held"]
+                    and not broke
+                ),
                 "agent": agent.name,
                 "traj": tr_ac,
             }
@@ -326,7 +342,7 @@ def plot_milling_reproduction(runs: dict, fig5: dict, gains: dict, path) -> None
     for col, wp in enumerate(("paper_step", "paper_taper")):
         tr_ac, tr_no = runs[wp]["ac"], runs[wp]["no_ac"]
         n_ac = np.arange(tr_ac["t_s"].size)
-        tr_ref = tr_ac["torque_ref_Nmm"][0]
+        tr_ref = tr_ac["torque_limit_Nmm"][0]
         ax = axes[0, col]
         ax.plot(n_ac, tr_ac["torque_Nmm"] / 1000.0, "C0-", lw=1, label="with AC (integral ACC)")
         n_no = np.arange(tr_no["t_s"].size)
@@ -375,7 +391,7 @@ def plot_milling_reproduction(runs: dict, fig5: dict, gains: dict, path) -> None
         tr = fig5[key]
         n = np.arange(tr["t_s"].size)
         ax.plot(n, tr["torque_Nmm"] / 1000.0, "C1-" if key == 0.025 else "C0-", lw=0.8)
-        ax.axhline(tr["torque_ref_Nmm"][0] / 1000.0, color="k", ls="--", lw=0.8)
+        ax.axhline(tr["torque_limit_Nmm"][0] / 1000.0, color="k", ls="--", lw=0.8)
         ax.set_ylabel("torque (N·m)")
         ax.set_title(f"step, {label} (Fig. 5 trend)", fontsize=9)
         ax2 = ax.twinx()

@@ -196,6 +196,7 @@ def pretrained_seeds(name: str, root=None) -> list[tuple[int, Path]]:
         seed = json.loads(meta.read_text()).get("seed", 0) if meta.is_file() else 0
         found.append((int(seed), folder / "best_model.zip"))
     if not found:
-        raise FileNotFoundError(f"no policy in {folder} (seed_<k>/best_model.zip or best_model.zip)")
+        raise FileNotFoundError(
+            f"no policy in {folder} (seed_<k>/best_model.zip or best_model.zip)"
+        )
     return sorted(found)
-

@@ -112,7 +112,9 @@ def _check_env_setup(cfg: TrainConfig) -> None:
     where = f"{cfg.source}:{cfg.env_id}"
     try:
         check_not_held_out(cfg.eval_scenarios, "training (eval_scenarios)")
-        check_not_held_out([cfg.env_kwargs.get("scenario", "train")], "training (env_kwargs.scenario)")
+        check_not_held_out(
+            [cfg.env_kwargs.get("scenario", "train")], "training (env_kwargs.scenario)"
+        )
     except ValueError as exc:
         raise ConfigError(f"{where}: {exc}") from None
     try:

@@ -189,3 +189,36 @@ class DepthProfile:
             if self.end_depths_mm[k - 1] != self.start_depths_mm[k]:
                 out.append(float(self.edges_mm[k]))
         return tuple(out)
+
+    def traverse_time_s(self, c: float, q: float, v_max: float) -> float:
+        r"""``\int_0^{\ell} \max(1 / v_{max}, c\, a(x)^q)\, dx``, in closed form.
+
+        The time to travel the workpiece at the speed ``v(x) = min(v_max, 1 / (c a(x)^q))``:
+        with ``c a^q`` the inverse of the speed a process law allows at depth ``a`` (the
+        physical floors of the machining time, e.g. ``machining_envs.turning.scenarios.
+        machining_time_bound``). Segment by segment: a plateau exactly, a linear taper by
+        the antiderivative of ``a^q``, split where ``c a^q`` crosses ``1 / v_max``; in air
+        (``a = 0``) the top speed.
+        """
+        if not (c > 0 and q > 0 and v_max > 0):
+            raise ValueError(f"c, q and v_max must be > 0, got {c!r}, {q!r}, {v_max!r}")
+        a_star = (1.0 / (v_max * c)) ** (1.0 / q)  # the depth at which the two limits meet
+        total = 0.0
+        for i in range(len(self.edges_mm) - 1):
+            x0, x1 = float(self.edges_mm[i]), float(self.edges_mm[i + 1])
+            a0, a1 = float(self.start_depths_mm[i]), float(self.end_depths_mm[i])
+            if a0 == a1:
+                total += (x1 - x0) * max(1.0 / v_max, c * a0**q)
+                continue
+            slope = (a1 - a0) / (x1 - x0)
+            cuts = [x0, x1]
+            xs = x0 + (a_star - a0) / slope
+            if x0 < xs < x1:
+                cuts = [x0, xs, x1]
+            for u, w in zip(cuts[:-1], cuts[1:], strict=True):
+                if a0 + slope * (0.5 * (u + w) - x0) <= a_star:
+                    total += (w - u) / v_max
+                else:
+                    au, aw = a0 + slope * (u - x0), a0 + slope * (w - x0)
+                    total += c * (aw ** (q + 1.0) - au ** (q + 1.0)) / ((q + 1.0) * slope)
+        return float(total)

@@ -1,4 +1,4 @@
-"""``machining_envs/EndMilling-v0``: hold the cutting torque at a reference by adjusting the feed."""
+"""``machining_envs/EndMilling-v0``: mill as fast as the cutting-torque limit allows, by the feed."""
 
 from __future__ import annotations
 
@@ -40,6 +40,7 @@ from machining_envs.milling.scenarios import (
     CutArea,
     MillingScenario,
     cut_area_at,
+    machining_time_bound,
     milling_scenario,
 )
 
@@ -87,16 +88,17 @@ class MillingReward:
 
     .. math::
 
-        r = -w_t \frac{|T - T_r|}{T_r} - w_o \max\!\left(0, \frac{T}{T_r} - \theta_o\right)
+        r = -w_t \left|\frac{T}{\theta L} - 1\right| - w_o \max\!\left(0, \frac{T}{L} - 1\right)
             + w_p \frac{V_f}{V_{max}} - w_b [\text{breakage}]
     """
 
     tracking: float = 1.0
-    """w_t, weight of the normalised torque error."""
+    """w_t, weight of the torque's distance to ``target`` x limit (relative)."""
+    target: float = 0.9
+    """theta, the share of the torque limit ``L`` the tracking term pulls towards: the
+    reward's own setpoint (the task has none; agents choose theirs)."""
     overtorque: float = 4.0
-    """w_o, extra weight on torque above ``overtorque_threshold`` x reference."""
-    overtorque_threshold: float = 1.1
-    """theta_o, the 1.1 x reference above which torque counts as a constraint violation."""
+    """w_o, weight of the torque above the limit (relative to the limit)."""
     progress: float = 0.0
     """w_p, weight of the feed velocity as a share of the servo's top feed velocity."""
     breakage: float = 50.0
@@ -104,6 +106,8 @@ class MillingReward:
 
     def __post_init__(self) -> None:
         check_reward_weights(self)
+        if not 0.0 < self.target <= 2.0:
+            raise ValueError(f"reward target must lie in (0, 2], got {self.target!r}")
 
 
 @numba.njit(cache=True)
@@ -128,8 +132,9 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
     (:class:`machining_envs.core.env.ActionMap`): the command is
     ``command_min + span expm1(c (a + 1)) / g`` on the log map, ``mid + half a`` on the
     linear one. A lane with noise takes the next normal of its block ``normals[k]``.
-    ``w`` = ``[tracking, overtorque, overtorque_threshold, progress, breakage]``;
-    ``flags[k]`` = ``[diverged, breakage, finished, terminated, truncated]``;
+    ``tr`` holds the torque limits; ``w`` = ``[tracking, overtorque, target, progress,
+    breakage]``; ``flags[k]`` = ``[diverged, breakage, finished, terminated, truncated,
+    over the limit]``;
     ``info_f[:, k]`` gets the signals of ``_INFO_F``.
     """
     n = z.shape[0]
@@ -184,8 +189,8 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
         terminated = diverged or breakage or finished_k
         truncated = (not terminated) and t >= max_t - 1e-9
         e = torque / tr[k]
-        over = e - w[2]
-        r = -w[0] * abs(e - 1.0) - w[1] * (over if over > 0.0 else 0.0)
+        over = e - 1.0
+        r = -w[0] * abs(e / w[2] - 1.0) - w[1] * (over if over > 0.0 else 0.0)
         if w[3] != 0.0 and not diverged:
             r += w[3] * vf / vmax[k]
         if breakage or diverged:
@@ -196,6 +201,7 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
         flags[k, 2] = finished_k
         flags[k, 3] = terminated
         flags[k, 4] = truncated
+        flags[k, 5] = torque > tr[k]
         if diverged:
             feed = 0.0
             mean_feed = 0.0
@@ -247,7 +253,7 @@ class _MillingCore:
         self.reward_weights = resolve_reward(reward, MillingReward)
         w = self.reward_weights
         self._w = np.array(
-            [w.tracking, w.overtorque, w.overtorque_threshold, w.progress, w.breakage],
+            [w.tracking, w.overtorque, w.target, w.progress, w.breakage],
             dtype=np.float64,
         )
         self.max_episode_time_s = check_episode_time(max_episode_time_s)
@@ -272,7 +278,7 @@ class _MillingCore:
         self.lanes = MillingLanes(self.params, n)
         self.scenarios: list[MillingScenario | None] = [None] * n
         self.truths: list[MillingParams | None] = [None] * n
-        self.torque_ref = np.ones(n)
+        self.torque_limit = np.ones(n)
         self.vmax = np.ones(n)
         self.breakage_torque = np.ones(n)
         self.noise_counts = np.zeros(n)
@@ -286,7 +292,8 @@ class _MillingCore:
         self.n_clipped = np.zeros(n, dtype=np.int64)
         self.obs = np.zeros((n, 4 + _HISTORY), dtype=np.float32)
         self.reward = np.zeros(n)
-        self.flags = np.zeros((n, 5), dtype=np.bool_)
+        self.flags = np.zeros((n, 6), dtype=np.bool_)
+        self.bound = np.full(n, np.nan)
         self.info_f = np.zeros((len(_INFO_F), n))  # one row per signal
         self.normals = np.zeros((n, _NORMAL_BLOCK))
         self.normal_i = np.full(n, _NORMAL_BLOCK, dtype=np.int64)
@@ -312,7 +319,7 @@ class _MillingCore:
         self.lanes.start(lane, truth, rpm, sc.profile)
         self.scenarios[lane] = sc
         self.truths[lane] = truth
-        tr = sc.torque_ref_Nmm(nominal)
+        tr = sc.torque_limit_Nmm(nominal)
         area = CutArea(sc.profile)
         cum = area.cumulative
         if len(cum) > self.cumulative.shape[1]:
@@ -323,14 +330,15 @@ class _MillingCore:
         row[: len(cum)] = cum
         row[len(cum) :] = cum[-1]
         w = truth.axial_depth_mm
-        self.torque_ref[lane] = tr
+        self.torque_limit[lane] = tr
+        self.bound[lane] = machining_time_bound(sc, truth, rpm)
         self.vmax[lane] = truth.max_feed_velocity_mm_s
         self.breakage_torque[lane] = truth.breakage_torque_Nmm
         self.noise_counts[lane] = truth.sensor_gain * truth.noise_std_Nmm
         self.n_teeth[lane] = truth.n_teeth
         self.w_axial[lane] = w
         self.meas[lane] = 0.0
-        tr_obs = min(tr / nominal.torque_ref_Nmm, 10.0)
+        tr_obs = min(tr / nominal.torque_limit_Nmm, 10.0)
         self.tr_obs[lane] = tr_obs
         self.rpm_obs[lane] = rpm / 1000.0
         self.prev_action[lane] = -1.0
@@ -354,7 +362,9 @@ class _MillingCore:
             "diverged": False,
             "finished": False,
             "torque_Nmm": 0.0,
-            "torque_ref_Nmm": float(self.torque_ref[k]),
+            "torque_limit_Nmm": float(self.torque_limit[k]),
+            "cost": 0.0,
+            "score_bound": float(self.bound[k]),
             "measured": 0.0,
             "measured_counts": 0.0,
             "peak_torque_Nmm": 0.0,
@@ -386,7 +396,9 @@ class _MillingCore:
             "diverged": no,
             "finished": no,
             "torque_Nmm": zero,
-            "torque_ref_Nmm": self.torque_ref[lanes],
+            "torque_limit_Nmm": self.torque_limit[lanes],
+            "cost": zero,
+            "score_bound": self.bound[lanes],
             "measured": zero,
             "measured_counts": zero,
             "peak_torque_Nmm": zero,
@@ -449,7 +461,7 @@ class _MillingCore:
                 lanes.out_finish,
                 lanes.work,
                 self._ke,
-                self.torque_ref,
+                self.torque_limit,
                 self.breakage_torque,
                 self.vmax,
                 self.n_teeth,
@@ -490,7 +502,9 @@ class _MillingCore:
             "diverged": diverged,
             "finished": finished,
             "torque_Nmm": torque,
-            "torque_ref_Nmm": float(self.torque_ref[k]),
+            "torque_limit_Nmm": float(self.torque_limit[k]),
+            "cost": 1.0 if self.flags[k, 5] else 0.0,
+            "score_bound": float(self.bound[k]),
             "measured": measured,
             "measured_counts": counts,
             "peak_torque_Nmm": peak,
@@ -524,7 +538,9 @@ class _MillingCore:
             "diverged": f[:, 0].copy(),
             "finished": f[:, 2].copy(),
             "torque_Nmm": c[2],
-            "torque_ref_Nmm": self.torque_ref.copy(),
+            "torque_limit_Nmm": self.torque_limit.copy(),
+            "cost": f[:, 5].astype(np.float64),
+            "score_bound": self.bound.copy(),
             "measured": c[3],
             "measured_counts": c[4],
             "peak_torque_Nmm": c[5],
@@ -547,14 +563,15 @@ class _MillingCore:
 
 
 class EndMillingEnv(gym.Env):
-    """Constant cutting-torque regulation in end milling by feed (Park & Yoon 1986).
+    """End milling as fast as the cutting-torque limit allows, by feed (Park & Yoon 1986).
 
     ## Description
     A vertical machining centre end-mills SM45C steel with a 16 mm, 4-tooth HSS end mill
     (up-milling, 32 mm axial depth, 400 rpm). The radial depth of cut changes along the
-    workpiece (the paper's steps and tapers, or random profiles); the controller must keep
-    the cutting torque at the reference by commanding the CNC feed, as fast as the torque
-    allows. The plant is ``machining_envs.milling.plant``: a second-order CNC feed servo
+    workpiece (the paper's steps and tapers, or random profiles); the controller commands the
+    CNC feed to mill the workpiece as fast as it can while the cutting torque stays under the
+    scenario's process limit (the paper's reference torque by default). The controller sees
+    the limit and chooses where to regulate below it. The plant is ``machining_envs.milling.plant``: a second-order CNC feed servo
     (eq. 5-7), feed per revolution and per tooth (eq. 6), the torque law
     ``T = Ks d^l f_t^m D`` (eq. 8) or the average-force model of seed 002
     (``force_model="average_force"``), a first-order process lag (eq. 10) and a torque
@@ -576,32 +593,38 @@ class EndMillingEnv(gym.Env):
 
     ## Observation Space
     ``Box(float32, (7,))``: only what the machine measures, normalised to order one. The
-    torques are multiples of this cut's reference ``Tr``, so that holding the reference
-    looks the same at every reference; the reference itself is a multiple of the nominal
-    ``Tn = params.torque_ref_Nmm``.
+    torques are multiples of this cut's limit ``L``, so that running at a share of the limit
+    looks the same at every limit; the limit itself is a multiple of the nominal
+    ``Tn = params.torque_limit_Nmm``.
 
     | index | observation | unit | range |
     |---|---|---|---|
-    | 0 | measured torque (lagged, noisy) / Tr | - | [-1, 10] |
-    | 1 | reference torque / Tn | - | [0, 10] |
+    | 0 | measured torque (lagged, noisy) / L | - | [-1, 10] |
+    | 1 | torque limit L / Tn | - | [0, 10] |
     | 2 | previous action (the command now applied) | - | [-1, 1] |
     | 3 | spindle speed / 1000 rpm | - | [0, 6] |
-    | 4-6 | measured torque one, two, three samples ago / Tr | - | [-1, 10] |
+    | 4-6 | measured torque one, two, three samples ago / L | - | [-1, 10] |
 
     The radial depth, the feed and the true process constants are hidden (they are in
     ``info``).
 
     ## Rewards
-    With ``T`` the cutting torque at the sample instant, ``Tr`` the reference, ``Vf`` the
+    With ``T`` the cutting torque at the sample instant, ``L`` the limit, ``Vf`` the
     feed velocity and ``Vmax`` the servo's top feed velocity (weights in
     :class:`MillingReward`, configurable with ``reward=``):
-    ``r = -1.0 |T - Tr|/Tr - 4.0 max(0, T/Tr - 1.1) + 0.0 Vf/Vmax - 50 [breakage]``.
-    Holding the torque at the reference is also the fastest safe cut, so the default reward
-    needs no progress term. Benchmark metrics are computed from ``info``, not from rewards.
+    ``r = -1.0 |T/(0.9 L) - 1| - 4.0 max(0, T/L - 1) + 0.0 Vf/Vmax - 50 [breakage]``.
+    The reward's own setpoint 0.9 L (``target``) is a training choice, not the task's.
+
+    ## Cost and score
+    ``info["cost"]`` is 1.0 on a step whose torque sample is above the limit, else 0.0 (the
+    Safety-Gymnasium convention). The score (``task``) is the machining time, counted if the
+    workpiece was finished, the tool did not break and under 2 % of the steps had a cost;
+    else the time limit is charged. ``info["score_bound"]`` is the floor of the machining
+    time from the cut's truth (``machining_time_bound``).
 
     ## Starting State
     Tool at the start of the workpiece, feed at rest, torque zero; the scenario (workpiece,
-    spindle speed, reference, hidden Ks and m, noise) is drawn from ``self.np_random``.
+    spindle speed, torque limit, hidden Ks and m, noise) is drawn from ``self.np_random``.
 
     ## Episode End
     Terminated when the workpiece is cut to its end (``info["finished"]``), when the torque
@@ -624,7 +647,8 @@ class EndMillingEnv(gym.Env):
     ## info
     ``t_s``, ``command`` (U, counts), ``action_clipped``, ``n_action_clipped``,
     ``breakage``, ``diverged``, ``finished``, ``torque_Nmm`` (true torque),
-    ``torque_ref_Nmm``, ``measured`` (torque the controller saw, N·mm),
+    ``torque_limit_Nmm``, ``cost``, ``score_bound`` (s), ``measured`` (torque the
+    controller saw, N·mm),
     ``measured_counts``, ``peak_torque_Nmm``, ``feed_mm_per_rev`` (at the sample instant),
     ``mean_feed_mm_per_rev`` (over the last sample: the f(i) of eq. 20),
     ``feed_per_tooth_mm``, ``feed_velocity_mm_s``, ``depth_mm`` (radial), ``spindle_rpm``,
@@ -643,13 +667,19 @@ class EndMillingEnv(gym.Env):
       ``np_random`` (the same normals in the same order within an episode; after an
       episode the unused rest of a block is skipped, so later episodes of an unseeded
       reset differ from the first implementation's).
+      The task is a process limit, not a reference: ``MillingParams.torque_limit_Nmm`` and
+      the scenarios' ``torque_limit_scale`` (were ``torque_ref_*``), observation 1 is the
+      limit, ``info`` gives ``torque_limit_Nmm``, ``cost`` and ``score_bound``; the reward
+      tracks ``target`` x limit and penalises torque above the limit (was above 1.1x the
+      reference); the scenarios ``train``, ``validation``, ``test`` (one distribution,
+      separate streams) and ``ood`` (the former ``test`` ranges) replace ``train``/``test``.
 
     ## Example
     >>> import gymnasium as gym
     >>> import machining_envs
     >>> env = gym.make("machining_envs/EndMilling-v0", scenario="paper_step")
     >>> obs, info = env.reset(seed=0)
-    >>> obs.shape, info["depth_mm"], info["spindle_rpm"], info["torque_ref_Nmm"]
+    >>> obs.shape, info["depth_mm"], info["spindle_rpm"], info["torque_limit_Nmm"]
     ((7,), 1.0, 400.0, 3600.0)
     >>> action = np.array([env.unwrapped.command_to_action(7.5)], dtype=np.float32)
     >>> obs, reward, terminated, truncated, info = env.step(action)
@@ -661,7 +691,7 @@ class EndMillingEnv(gym.Env):
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = MILLING_TASK
     #: Positions of the observation's fields, for controllers that read them by name.
-    OBS_INDEX = {"measured": 0, "reference": 1, "prev_action": 2, "spindle": 3, "history": 4}
+    OBS_INDEX = {"measured": 0, "limit": 1, "prev_action": 2, "spindle": 3, "history": 4}
 
     def __init__(
         self,
@@ -734,7 +764,7 @@ class EndMillingEnv(gym.Env):
             return None
         log = self._log
         t = log["t"]
-        tr = float(self._core.torque_ref[0])
+        tr = float(self._core.torque_limit[0])
         rpm = float(self._core.spindle[0])
         img = render_signals(
             t,
@@ -744,7 +774,7 @@ class EndMillingEnv(gym.Env):
                     [
                         ("cutting torque", log["torque"], "C0-"),
                         ("measured", log["measured"], "C1-"),
-                        ("reference", [tr] * len(t), "k--"),
+                        ("limit", [tr] * len(t), "k--"),
                     ],
                 ),
                 ("feed (mm/rev)", [("feed", log["feed"], "C2-")]),

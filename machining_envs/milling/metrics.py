@@ -44,7 +44,7 @@ def milling_metrics(traj: dict) -> dict[str, float]:
     - ``mrr_mm3_per_min``: volume removed / ``machining_time_min``;
     - ``removed_volume_mm3``: volume removed by the end of the episode.
     """
-    out = regulation_metrics(traj, signal="torque_Nmm", reference="torque_ref_Nmm")
+    out = regulation_metrics(traj, signal="torque_Nmm", limit="torque_limit_Nmm")
     tm = machining_time_eq20_min(traj)
     vol = float(np.asarray(traj["removed_volume_mm3"], dtype=np.float64)[-1])
     out["machining_time_min"] = tm

@@ -189,8 +189,9 @@ class MillingParams:
     not reverse). Not given: with Kn = 0.02 it is 3 mm/s = 180 mm/min, 0.11 mm per tooth at
     400 rpm, just above the paper's largest test feed (0.1 mm per tooth)."""
 
-    torque_ref_Nmm: float = 3600.0
-    """Tr, the reference (constraint) torque, N·mm (367 kgf·mm). Not given: chosen so that
+    torque_limit_Nmm: float = 3600.0
+    """L, the process torque limit, N·mm (367 kgf·mm): the paper's reference (constraint)
+    torque, at which its controllers regulated. Not given: chosen so that
     holding Tr at every depth of the step workpiece takes, by eq. (20), the paper's
     machining time with AC (3.117 min, Table 1): 3613 N·mm exactly, rounded to 3600
     (3.145 min). Observations are normalised by it."""
@@ -238,7 +239,7 @@ class MillingParams:
             milling_mode="down",
             sensor_gain=round(1200.0 / ref, 2),
             noise_std_Nmm=round(0.01 * ref, 2),
-            torque_ref_Nmm=round(ref, 1),
+            torque_limit_Nmm=round(ref, 1),
             breakage_torque_Nmm=round(4.0 * ref, 0),
         )
 
@@ -333,7 +334,7 @@ class MillingParams:
         with ``U_r`` the command that gives the reference torque ``T_r``. The loop's
         incremental gain ``dTc/dU`` is ``e`` times it (``e = m`` for the power law).
         """
-        t = self.torque_ref_Nmm if torque_Nmm is None else torque_Nmm
+        t = self.torque_limit_Nmm if torque_Nmm is None else torque_Nmm
         return (
             self.sensor_gain
             * np.asarray(t, dtype=np.float64)
@@ -379,7 +380,7 @@ _FIELD_RULES: dict[str, tuple] = {
     "sample_time_s": (0.0, 10.0, True),
     "substeps": ("int", 1, 10000),
     "command_max": (0.0, 1e9, True),
-    "torque_ref_Nmm": (0.0, 1e8, True),
+    "torque_limit_Nmm": (0.0, 1e8, True),
     "breakage_torque_Nmm": (0.0, 1e9, True),
 }
 assert tuple(_FIELD_RULES) == tuple(f.name for f in dataclasses.fields(MillingParams))

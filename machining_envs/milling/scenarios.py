@@ -1,10 +1,14 @@
-"""Named end-milling scenarios: Park & Yoon's workpieces, a training and a held-out set.
+"""Named end-milling scenarios: Park & Yoon's workpieces and the four splits of the benchmark.
 
 A scenario fixes what changes from one cut to the next and what a controller cannot see:
-the workpiece's radial-depth profile, the spindle speed and reference torque (as multiples
-of the nominal ones in ``MillingParams``) and the true process constants (as multiples of
-the nominal torque coefficient and feed exponent). Pass a name or a scenario object to
-``env.reset(options={"scenario": ...})``.
+the workpiece's radial-depth profile, the spindle speed and the process torque limit (as
+multiples of the nominal ones in ``MillingParams``) and the true process constants (as
+multiples of the nominal torque coefficient and feed exponent). Pass a name or a scenario
+object to ``env.reset(options={"scenario": ...})``.
+
+Splits (``machining_envs.core.splits``): ``train``, ``validation`` and ``test`` share one
+distribution, each drawing through its own stream; ``ood`` goes beyond it (see
+``MILLING_SCENARIOS``).
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ import numpy as np
 
 from machining_envs.core.checks import check_range
 from machining_envs.core.env import resolve_scenario
+from machining_envs.core.splits import split_rng
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams, bisect_right
 
@@ -33,6 +38,7 @@ __all__ = [
     "cut_area_mm2",
     "CutArea",
     "cut_area_at",
+    "machining_time_bound",
 ]
 
 #: Workpiece length L, mm (Park & Yoon §4: L = 40, cut in 200 samples).
@@ -51,7 +57,7 @@ PAPER_CONSTANT_FEED_MM_MIN = {"paper_step": 40.0 / 11.797, "paper_taper": 40.0 /
 
 @dataclass(frozen=True)
 class MillingScenario:
-    """One end-milling cut: workpiece, spindle speed, reference and the hidden process truth.
+    """One end-milling cut: workpiece, spindle speed, torque limit and the hidden process truth.
 
     Parameters
     ----------
@@ -60,8 +66,9 @@ class MillingScenario:
         Radial depth of cut along the workpiece; its length is the cut's length.
     spindle_scale : float
         Spindle speed as a multiple of the nominal ``MillingParams.spindle_rpm`` (0.25 to 4).
-    torque_ref_scale : float
-        Reference torque as a multiple of the nominal ``MillingParams.torque_ref_Nmm``
+    torque_limit_scale : float
+        Process torque limit (what the tool may take) as a multiple of the nominal
+        ``MillingParams.torque_limit_Nmm``
         (0.25 to 4).
     torque_coefficient_scale : float
         True Ks (power law) or Kt (average force) as a multiple of the nominal (0.5 to 2):
@@ -75,7 +82,7 @@ class MillingScenario:
     name: str
     profile: DepthProfile
     spindle_scale: float = 1.0
-    torque_ref_scale: float = 1.0
+    torque_limit_scale: float = 1.0
     torque_coefficient_scale: float = 1.0
     feed_exponent_scale: float = 1.0
     noise_scale: float = 1.0
@@ -84,7 +91,7 @@ class MillingScenario:
         if not isinstance(self.profile, DepthProfile):
             raise ValueError(f"profile must be a DepthProfile, got {type(self.profile).__name__}")
         check_range("spindle_scale", self.spindle_scale, 0.25, 4.0)
-        check_range("torque_ref_scale", self.torque_ref_scale, 0.25, 4.0)
+        check_range("torque_limit_scale", self.torque_limit_scale, 0.25, 4.0)
         check_range("torque_coefficient_scale", self.torque_coefficient_scale, 0.5, 2.0)
         check_range("feed_exponent_scale", self.feed_exponent_scale, 0.5, 2.0)
         check_range("noise_scale", self.noise_scale, 0.0, 10.0)
@@ -100,9 +107,9 @@ class MillingScenario:
             )
         return rpm
 
-    def torque_ref_Nmm(self, nominal: MillingParams) -> float:
-        """Reference torque of this cut, N·mm."""
-        return float(nominal.torque_ref_Nmm * self.torque_ref_scale)
+    def torque_limit_Nmm(self, nominal: MillingParams) -> float:
+        """Process torque limit of this cut, N·mm."""
+        return float(nominal.torque_limit_Nmm * self.torque_limit_scale)
 
     def true_params(self, nominal: MillingParams) -> MillingParams:
         """The plant parameters this cut really has (hidden from controllers)."""
@@ -193,7 +200,8 @@ def _random(
     ref: tuple[float, float],
     truth: float,
 ):
-    def make(rng: np.random.Generator) -> MillingScenario:
+    def make(env_rng: np.random.Generator) -> MillingScenario:
+        rng = split_rng(env_rng, name)
         prof = DepthProfile.random(rng, depth, segments, (5.0, 12.0), 0.3, name=f"{name} profile")
         sp = float(np.exp(rng.uniform(np.log(spindle[0]), np.log(spindle[1]))))
         tr = float(np.exp(rng.uniform(np.log(ref[0]), np.log(ref[1]))))
@@ -207,19 +215,46 @@ def _random(
 #: name -> factory drawing a scenario from the env's generator.
 #:
 #: - ``paper_step``, ``paper_taper``: Park & Yoon's workpieces (Fig. 4) at the nominal
-#:   400 rpm and reference, exact nominal process.
-#: - ``train``: 2-5 random plateaus and tapers of 0.5-3 mm radial depth, 5-12 mm each;
-#:   spindle 0.8-1.25x nominal, reference 0.8-1.25x, Ks and m within +-20 %, noise 0.5-2x.
-#: - ``test`` (held out): wider, 0.4-3.5 mm, 2-6 segments, spindle 0.7-1.4x, reference
-#:   0.7-1.4x, Ks and m within +-25 %, so a policy is judged partly outside what it trained on.
+#:   400 rpm and torque limit, exact nominal process.
+#: - ``train``, ``validation``, ``test``: 2-5 random plateaus and tapers of 0.5-3 mm radial
+#:   depth, 5-12 mm each; spindle 0.8-1.25x nominal, torque limit 0.8-1.25x, Ks and m
+#:   within +-20 %, noise 0.5-2x.
+#: - ``ood``: wider, 0.4-3.5 mm, 2-6 segments, spindle 0.7-1.4x, limit 0.7-1.4x, Ks and m
+#:   within +-25 %.
 MILLING_SCENARIOS: dict[str, Callable[[np.random.Generator], MillingScenario]] = {
     "paper_step": _fixed("paper_step", paper_step_profile),
     "paper_taper": _fixed("paper_taper", paper_taper_profile),
-    "train": _random("train", (0.5, 3.0), (2, 5), (0.8, 1.25), (0.8, 1.25), 0.2),
-    "test": _random("test", (0.4, 3.5), (2, 6), (0.7, 1.4), (0.7, 1.4), 0.25),
+    **{
+        split: _random(split, (0.5, 3.0), (2, 5), (0.8, 1.25), (0.8, 1.25), 0.2)
+        for split in ("train", "validation", "test")
+    },
+    "ood": _random("ood", (0.4, 3.5), (2, 6), (0.7, 1.4), (0.7, 1.4), 0.25),
 }
 
 
 def milling_scenario(spec, rng: np.random.Generator) -> MillingScenario:
     """Resolve a scenario name or object; unknown names raise ``ValueError``."""
     return resolve_scenario(spec, rng, MillingScenario, MILLING_SCENARIOS)
+
+
+def machining_time_bound(
+    scenario: MillingScenario, truth: MillingParams, spindle_rpm: float
+) -> float:
+    r"""The physical floor of the cut's machining time, s: the time to mill the whole
+    workpiece with the torque exactly at the limit everywhere, within the feed drive's top
+    speed.
+
+    With the true torque law ``T = c(d) f_t^e`` (``MillingParams.torque_gain``,
+    ``c(d) = c_1 d^l``: the power law of eq. 8, or the average-force model with ``l = e = 1``),
+    the limit ``L``, ``N`` teeth at ``n`` rpm, the feed per tooth at the limit is
+    ``f_t* = (L / c(d))^(1/e)`` and the feed velocity ``v = min(V_max, f_t* N n / 60)``
+    (eq. 6); the floor is ``\int dx / v(x)`` over the workpiece
+    (``DepthProfile.traverse_time_s``). The torque lags the feed (eq. 10) and the drive
+    needs time to accelerate, so no controller that keeps the limit cuts faster; the 2 %
+    of steps over the limit an episode may take could beat it by about that much.
+    """
+    e = truth.torque_feed_exponent
+    l_exp = truth.depth_exponent if truth.force_model == "power_law" else 1.0
+    c1 = float(truth.torque_gain(1.0))
+    c = 60.0 / (truth.n_teeth * spindle_rpm) * (c1 / scenario.torque_limit_Nmm(truth)) ** (1.0 / e)
+    return scenario.profile.traverse_time_s(c, l_exp / e, truth.max_feed_velocity_mm_s)

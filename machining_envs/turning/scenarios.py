@@ -164,30 +164,5 @@ def machining_time_bound(scenario: TurningScenario, truth: TurningParams) -> flo
     in principle beat the floor by about that much.
     """
     kf, p = truth.force_coefficient, truth.feed_exponent
-    vmax = truth.max_feed_velocity_mm_s
     c = 60.0 / scenario.spindle_rpm * (kf / scenario.force_limit_N) ** (1.0 / p)
-    # 1/v(x) = max(1/vmax, c a^(1/p)); the depth at which the two meet:
-    a_star = (1.0 / (vmax * c)) ** p
-    prof = scenario.profile
-    q = 1.0 / p
-    total = 0.0
-    for i in range(len(prof.edges_mm) - 1):
-        x0, x1 = prof.edges_mm[i], prof.edges_mm[i + 1]
-        a0, a1 = prof.start_depths_mm[i], prof.end_depths_mm[i]
-        if a0 == a1:
-            total += (x1 - x0) * max(1.0 / vmax, c * a0**q)
-            continue
-        # a(x) linear from a0 to a1: split where a crosses a_star.
-        slope = (a1 - a0) / (x1 - x0)
-        cuts = [x0, x1]
-        xs = x0 + (a_star - a0) / slope
-        if x0 < xs < x1:
-            cuts = [x0, xs, x1]
-        for u, w in zip(cuts[:-1], cuts[1:], strict=True):
-            am = a0 + slope * (0.5 * (u + w) - x0)
-            if am <= a_star:
-                total += (w - u) / vmax
-            else:
-                au, aw = a0 + slope * (u - x0), a0 + slope * (w - x0)
-                total += c * (aw ** (q + 1.0) - au ** (q + 1.0)) / ((q + 1.0) * slope)
-    return float(total)
+    return scenario.profile.traverse_time_s(c, 1.0 / p, truth.max_feed_velocity_mm_s)

@@ -43,7 +43,7 @@ def test_integral_law_matches_eq_1_to_4_by_hand():
     env = gym.make(MILLING)
     ag = FixedGainIntegral.from_env(env, kc=0.2)
     p = env.unwrapped.params
-    k = p.sensor_gain * p.torque_ref_Nmm  # counts per unit of observed torque
+    k = p.sensor_gain * p.torque_limit_Nmm  # counts per unit of observed torque
     a, s = ag.predict(_obs(0.0))
     w0 = 0.1 * k  # W(0) = Ts E(0), E = Tr - Tc in counts
     assert s[0, 0] == pytest.approx(w0)
@@ -60,7 +60,7 @@ def test_acc_estimator_follows_eq_14_to_19_by_hand():
     ag = IntegralACC.from_env(env)
     p = env.unwrapped.params
     ts = p.sample_time_s
-    k = p.sensor_gain * p.torque_ref_Nmm
+    k = p.sensor_gain * p.torque_limit_Nmm
     _, s = ag.predict(_obs(0.0))
     km0, kc0 = s[0, 4], s[0, 5]
     # Design: Kc = 0.2 is the adapted gain at 1 mm, 400 rpm, the reference torque (the
@@ -90,7 +90,7 @@ def test_acc_estimator_converges_to_tc_over_u_and_holds_k():
         s[0, 0] = 30.0 / s[0, 2]  # hold U = 30 counts while the torque stays at Tr
         s[0, 3] = 30.0
         _, s = ag.predict(_obs(1.0), state=s)
-    k = env.unwrapped.params.sensor_gain * env.unwrapped.params.torque_ref_Nmm
+    k = env.unwrapped.params.sensor_gain * env.unwrapped.params.torque_limit_Nmm
     assert s[0, 1] == pytest.approx(k / 30.0, rel=1e-6)
     assert s[0, 1] * s[0, 2] == pytest.approx(0.1 * ag.k, rel=1e-6)
 
@@ -114,7 +114,7 @@ def test_acc_keeps_the_loop_gain_where_the_fixed_gain_oscillates():
         env = gym.make(MILLING, scenario="paper_step", servo_gain=0.025)
         tr = rollout(factory(env), env, seed=0)
         last = (tr["depth_mm"] == 3.0) & (tr["t_s"] > tr["t_s"][-1] - 30.0)
-        out[name] = np.ptp(tr["torque_Nmm"][last]) / tr["torque_ref_Nmm"][0]
+        out[name] = np.ptp(tr["torque_Nmm"][last]) / tr["torque_limit_Nmm"][0]
     assert out["fixed"] > 0.5 and out["acc"] < 0.1, out
 
 
@@ -149,8 +149,13 @@ def test_constant_feed_holds_the_programmed_feed():
         act, state = cf.predict(obs, state)
         obs, _, _, _, info = env.step(act)
     assert 60.0 * info["feed_velocity_mm_s"] == pytest.approx(40.0 / 11.797, rel=1e-4)
-    # The default planner's feed gives the reference torque at 3 mm with the nominal law.
-    d = MillingConstantFeed.from_env(env)
+    # The default planner's feed gives setpoint x the observed limit at 3 mm with the
+    # nominal law.
     p = env.unwrapped.params
-    ft = d.feed_mm_per_min / (p.n_teeth * p.spindle_rpm)
-    assert float(p.steady_torque_Nmm(3.0, ft)) == pytest.approx(p.torque_ref_Nmm, rel=1e-9)
+    for setpoint in (1.0, 0.7):
+        d = MillingConstantFeed.from_env(env, setpoint=setpoint)
+        act, _ = d.predict(obs)
+        vf = p.servo_gain * env.unwrapped.action_to_command(act[0])
+        ft = 60.0 * vf / (p.n_teeth * p.spindle_rpm)
+        torque = float(p.steady_torque_Nmm(3.0, ft))
+        assert torque == pytest.approx(setpoint * p.torque_limit_Nmm, rel=1e-6)

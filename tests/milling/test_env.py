@@ -18,7 +18,7 @@ def test_info_values_and_units_after_a_step():
     assert info["t_s"] == pytest.approx(0.1)
     cmax = env.unwrapped.params.command_max
     assert info["command"] == pytest.approx(cmax * (1000**0.5 - 1) / 999)  # log map, action 0
-    assert info["spindle_rpm"] == 400.0 and info["torque_ref_Nmm"] == 3600.0
+    assert info["spindle_rpm"] == 400.0 and info["torque_limit_Nmm"] == 3600.0
     assert info["workpiece_length_mm"] == 40.0
     assert info["workpiece_volume_mm3"] == pytest.approx(32.0 * 40.0 * 2.0)
     assert info["feed_per_tooth_mm"] == pytest.approx(info["feed_mm_per_rev"] / 4)
@@ -101,7 +101,7 @@ def test_kwargs_override_parameters():
     al = gym.make(MILLING, params=MillingParams.ahn_choi_al6061(), scenario="paper_step")
     _, info = al.reset(seed=0)
     assert info["spindle_rpm"] == 1000.0
-    assert info["torque_ref_Nmm"] == pytest.approx(222.8)
+    assert info["torque_limit_Nmm"] == pytest.approx(222.8)
 
 
 def test_force_models_give_different_torques_on_one_cut():

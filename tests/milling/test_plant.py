@@ -116,11 +116,11 @@ def test_steady_state_follows_eq_6_and_8():
 def test_process_gain_is_the_steady_ratio_tc_over_u():
     p = MillingParams()
     for d in (1.0, 2.0, 3.0):
-        u = float(p.command_for_torque(p.torque_ref_Nmm, d))
+        u = float(p.command_for_torque(p.torque_limit_Nmm, d))
         plant = MillingPlant(p, 400.0, DepthProfile.steps((d,), 100.0))
         for _ in range(80):
             s = plant.step(u)
-        assert s.torque_Nmm == pytest.approx(p.torque_ref_Nmm, rel=1e-9)
+        assert s.torque_Nmm == pytest.approx(p.torque_limit_Nmm, rel=1e-9)
         assert s.measured_counts / u == pytest.approx(float(p.process_gain(d)), rel=1e-9)
     # Deeper cut, smaller command, larger gain: the source of Fig. 5's trend.
     gains = [float(p.process_gain(d)) for d in (1.0, 2.0, 3.0)]
@@ -153,7 +153,7 @@ def test_average_force_torque_is_the_tangential_force_times_radius():
             closed = mean_torque_average_force(dr, a, ft, kt=kt, n_flutes=nf)
             assert closed == pytest.approx(numeric, rel=1e-9)
     p = MillingParams.ahn_choi_al6061()
-    assert float(p.steady_torque_Nmm(2.0, 0.05)) == pytest.approx(p.torque_ref_Nmm, rel=1e-3)
+    assert float(p.steady_torque_Nmm(2.0, 0.05)) == pytest.approx(p.torque_limit_Nmm, rel=1e-3)
 
 
 @pytest.mark.parametrize("mode", ["up", "down"])

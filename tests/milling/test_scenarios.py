@@ -8,7 +8,13 @@ import pytest
 from machining_envs import MillingScenario
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.milling.scenarios import cut_area_mm2
-from tests.helpers import MILLING, TRAIN_OOD, assert_ood_reaches_beyond_train, drawn_scenarios
+from tests.helpers import (
+    MILLING,
+    TRAIN_OOD,
+    assert_ood_reaches_beyond_train,
+    assert_splits_share_a_distribution_not_episodes,
+    drawn_scenarios,
+)
 
 
 def test_scenarios_by_name_and_object():
@@ -19,12 +25,12 @@ def test_scenarios_by_name_and_object():
     sc = MillingScenario("mine", DepthProfile.steps((0.5, 1.5), 5.0), spindle_scale=1.5)
     _, info = env.reset(options={"scenario": sc})
     assert info["scenario"] == "mine" and info["spindle_rpm"] == 600.0
-    # train and test differ: the held-out set reaches depths and speeds training never does.
+    # ood reaches depths and speeds training never does.
     draws = {name: drawn_scenarios(env, name, 200) for name in TRAIN_OOD}
     rpm = {k: [s.spindle_scale for s in v] for k, v in draws.items()}
     depth = {k: [s.profile.max_depth_mm for s in v] for k, v in draws.items()}
     assert_ood_reaches_beyond_train(rpm, 0.8, 1.25)
-    assert max(depth["train"]) <= 3.0 < max(depth["test"])
+    assert max(depth["train"]) <= 3.0 < max(depth["ood"])
 
 
 def test_cut_area_is_the_integral_of_the_profile():
@@ -42,3 +48,7 @@ def test_bad_scenarios_name_the_field():
         MillingScenario("x", DepthProfile.steps(), spindle_scale=-1.0)
     with pytest.raises(ValueError, match="profile"):
         MillingScenario("x", [1.0, 2.0])
+
+
+def test_splits_share_a_distribution_but_not_episodes():
+    assert_splits_share_a_distribution_not_episodes(gym.make(MILLING), lambda s: s.spindle_scale)
