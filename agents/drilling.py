@@ -3,7 +3,9 @@ Cho) and peck drilling (the industrial baseline).
 
 Every drilling controller is built with ``from_env(env)`` from the env's nominal parameters
 (:class:`DrillingIO`) and reads only the observation: the measured torque and spindle
-frequency, the reference, the drill's position and the previous command.
+frequency, the torque limit, the drill's position and the previous command. The voltage
+controllers regulate at ``setpoint`` x the observed limit (1.0, the paper's choice, by
+default) and declare their free parameters in ``TUNABLE`` for ``agents.bench.tune``.
 
 **Peck drilling.** The drill feeds at the nominal feed velocity for ``q`` mm, retracts at rapid speed until its
 point is out of the hole (the chips leave with it), rapids back to just above the bottom and
@@ -133,10 +135,10 @@ class DrillingIO:
     def sample_time_s(self) -> float:
         return self.params.sample_time_s
 
-    def torque(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Measured torque and reference, N·mm."""
+    def torque(self, obs: np.ndarray, setpoint: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """Measured torque and the set point (``setpoint`` x the observed limit), N·mm."""
         s = self.params.torque_scale_Nmm
-        return s * obs[:, _I["measured"]], s * obs[:, _I["reference"]]
+        return s * obs[:, _I["measured"]], s * obs[:, _I["limit"]] * setpoint
 
     def speed_hz(self, obs: np.ndarray) -> np.ndarray:
         """Measured spindle frequency, Hz."""
@@ -170,6 +172,8 @@ class NoControl(Agent):
     nominal one): the same cut.
     """
 
+    #: Nothing to tune: the paper's free-running spindle.
+    TUNABLE: dict = {}
     state_size = 0
     obs_dim = _OBS_DIM
     obs_index = _I
@@ -230,11 +234,19 @@ class PD(Agent):
         N, the derivative's high-frequency gain limit.
     min_voltage : float or None
         Lowest voltage commanded, V (default nominal).
+    setpoint : float
+        Torque regulated at, as a share of the observed limit (paper: 1.0), in (0, 1.5].
     """
 
     state_size = 2  # [filtered error e^f_{k-1} (N·mm), started (0/1)]
     obs_dim = _OBS_DIM
     obs_index = _I
+    #: Free parameters and their search ranges (low, high, log scale) for tuning.
+    TUNABLE = {
+        "loop_gain": (0.3, 30.0, True),
+        "derivative_time_s": (0.002, 0.2, True),
+        "setpoint": (0.5, 1.0, False),
+    }
 
     def __init__(
         self,
@@ -243,9 +255,11 @@ class PD(Agent):
         derivative_time_s: float = 0.02,
         derivative_filter: float = 5.0,
         min_voltage: float | None = None,
+        setpoint: float = 1.0,
     ):
         io.require("voltage", "PD")
         self.io = io
+        self.setpoint = _positive("setpoint", setpoint, 1.5)
         p = io.params
         self.loop_gain = _positive("loop_gain", loop_gain, 1e3)
         self.derivative_time_s = _in_range("derivative_time_s", derivative_time_s, 0.0, 10.0)
@@ -256,7 +270,7 @@ class PD(Agent):
         ts = p.sample_time_s
         tf = self.derivative_time_s / self.derivative_filter
         self._alpha = 1.0 - math.exp(-ts / tf) if tf > 0 else 1.0
-        self.name = f"PD L={loop_gain:g}"
+        self.name = f"PD L={loop_gain:.3g}"
 
     @classmethod
     def from_env(cls, env, **kwargs) -> PD:
@@ -269,7 +283,7 @@ class PD(Agent):
     def _act(self, obs, state):
         io = self.io
         p = io.params
-        tm, tr = io.torque(obs)
+        tm, tr = io.torque(obs, self.setpoint)
         tr = np.maximum(tr, 1e-9)
         e = tm - tr
         first = state[:, 1] == 0.0
@@ -307,6 +321,8 @@ class PeckDrilling(Agent):
 
     # [phase (0 feed, 1 out, 2 back), depth at which to retract next (mm), started]
     state_size = 3
+    #: Free parameters and their search ranges (low, high, log scale) for tuning.
+    TUNABLE = {"peck_diameters": (0.25, 5.0, True)}
     obs_dim = _OBS_DIM
     obs_index = _I
 
@@ -449,8 +465,16 @@ class SlidingMode(Agent):
         The law runs once the estimated torque passes this share of the reference (the
         drill is cutting); before, and whenever the estimate falls below it, the voltage is
         ``min_voltage`` (``k4 -> 0`` makes the inverse meaningless).
+    setpoint : float
+        Torque regulated at, as a share of the observed limit (paper: 1.0), in (0, 1.5].
     """
 
+    #: Free parameters and their search ranges (low, high, log scale) for tuning.
+    TUNABLE = {
+        "lam": (2.0, 60.0, True),
+        "epsilon": (0.005, 0.2, True),
+        "setpoint": (0.5, 1.0, False),
+    }
     # [x1_hat, x2_hat, k4_hat, S, e, started, near(0/1), u]
     state_size = 8
     obs_dim = _OBS_DIM
@@ -467,9 +491,11 @@ class SlidingMode(Agent):
         k4_filter_s: float = 0.02,
         min_voltage: float | None = None,
         engage_fraction: float = 0.3,
+        setpoint: float = 1.0,
     ):
         io.require("voltage", "SlidingMode")
         self.io = io
+        self.setpoint = _positive("setpoint", setpoint, 1.5)
         p = io.params
         self.lam = _positive("lam", lam, 1e3)
         self.epsilon = _positive("epsilon", epsilon, 1.0)
@@ -494,7 +520,7 @@ class SlidingMode(Agent):
         self._phi = phi
         self._gam = gam[:, 0]
         self._alpha = 1.0 - math.exp(-ts / self.k4_filter_s) if self.k4_filter_s > 0 else 1.0
-        self.name = f"sliding mode lambda={lam:g}"
+        self.name = f"sliding mode lambda={lam:.3g}"
 
     @classmethod
     def from_env(cls, env, **kwargs) -> SlidingMode:
@@ -526,7 +552,7 @@ class SlidingMode(Agent):
         nx2 = self._phi[1, 0] * x1 + self._phi[1, 1] * x2 + self._gam[1] * u_prev
         x1 = np.where(started, nx1, x1)
         x2 = np.where(started, nx2, x2)
-        tm, tr = io.torque(obs)
+        tm, tr = io.torque(obs, self.setpoint)
         tr = np.maximum(tr, 1e-9)
         x3 = _TWO_PI * np.maximum(io.speed_hz(obs), 50.0)
         k4_raw = np.maximum(tm, 0.0) * x3

@@ -293,7 +293,7 @@ def plot_drilling_reproduction(
                     continue
                 ax.plot(tr["t_s"], tr[key], color=f"C{k}", lw=0.7, label=name)
             if key == "torque_Nmm" and tr is not None:
-                ax.axhline(tr["torque_ref_Nmm"][0], color="k", ls="--", lw=0.8)
+                ax.axhline(tr["torque_limit_Nmm"][0], color="k", ls="--", lw=0.8)
             ax.set_ylabel(label)
             ax.set_title(f"{d:g} mm drill", fontsize=9)
             if i == 0 and j == 0:

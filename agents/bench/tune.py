@@ -70,11 +70,12 @@ class TuningBudget:
 
 
 def paper_settings(cls) -> dict:
-    """The defaults of ``cls.from_env`` for every key of ``cls.TUNABLE``: the paper's."""
-    sig = inspect.signature(cls.from_env)
+    """The defaults of ``cls.from_env`` (or, for keywords it passes on, of ``cls``) for
+    every key of ``cls.TUNABLE``: the paper's."""
+    sigs = [inspect.signature(cls.from_env).parameters, inspect.signature(cls).parameters]
     out = {}
     for name in cls.TUNABLE:
-        p = sig.parameters.get(name)
+        p = next((s[name] for s in sigs if name in s), None)
         if p is None or p.default is inspect.Parameter.empty:
             raise ValueError(
                 f"{cls.__name__}.TUNABLE names {name!r}, which from_env lacks a default for"

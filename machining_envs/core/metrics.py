@@ -21,8 +21,6 @@ __all__ = [
 
 #: Half-width of the band that counts as settled (5 % of the limit).
 SETTLE_BAND = 0.05
-#: The former over-limit factor (1.1x a reference); removed once every env reports ``cost``.
-OVER_LIMIT = 1.1
 #: Window of the moving mean removed before measuring oscillation, s.
 OSC_WINDOW_S = 1.0
 

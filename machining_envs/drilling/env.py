@@ -79,16 +79,17 @@ class DrillingReward:
 
     .. math::
 
-        r = -w_t \frac{|T - T_r|}{T_r} - w_o \max\!\left(0, \frac{T}{T_r} - \theta_o\right)
+        r = -w_t \left|\frac{T}{\theta L} - 1\right| - w_o \max\!\left(0, \frac{T}{L} - 1\right)
             + w_p \frac{\Delta z}{T_s v_0} - w_b [\text{breakage}]
     """
 
     tracking: float = 1.0
-    """w_t, weight of the normalised torque error."""
+    """w_t, weight of the torque's distance to ``target`` x limit (relative)."""
+    target: float = 0.9
+    """theta, the share of the torque limit ``L`` the tracking term pulls towards: the
+    reward's own setpoint (the task has none; agents choose theirs)."""
     overtorque: float = 4.0
-    """w_o, extra weight on torque above ``overtorque_threshold`` x reference."""
-    overtorque_threshold: float = 1.1
-    """theta_o, the multiple of the reference above which torque counts as a violation."""
+    """w_o, weight of the torque above the limit (relative to the limit)."""
     progress: float = 0.0
     """w_p, weight of the hole deepening this step, as a share of the nominal feed's."""
     breakage: float = 50.0
@@ -96,6 +97,8 @@ class DrillingReward:
 
     def __post_init__(self) -> None:
         check_reward_weights(self)
+        if not 0.0 < self.target <= 2.0:
+            raise ValueError(f"reward target must lie in (0, 2], got {self.target!r}")
 
 
 #: Columns of ``_DrillingCore.ev`` (floats of the env per lane).
@@ -103,7 +106,7 @@ class DrillingReward:
  _N_EV) = range(9)  # fmt: skip
 #: Columns of ``_DrillingCore.flags``.
 (_F_IN_CLIPPED, _F_CLIPPED, _F_DIVERGED, _F_BREAKAGE, _F_FINISHED, _F_TERMINATED,
- _F_TRUNCATED, _N_FLAGS) = range(8)  # fmt: skip
+ _F_TRUNCATED, _F_OVER, _N_FLAGS) = range(9)  # fmt: skip
 #: Columns of ``_DrillingCore.counts``.
 _C_N_CLIPPED, _C_SEGMENT, _C_NOISE = 0, 1, 2
 #: Entries of ``_DrillingCore.consts``.
@@ -143,7 +146,7 @@ def _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs):
         t = state[k, _S_T]
         truncated = (not terminated) and t >= c[_K_MAX_T] - 1e-9
         e = torque / ev[k, _E_TR]
-        reward = -c[_K_W + 0] * abs(e - 1.0) - c[_K_W + 1] * _pymax(0.0, e - c[_K_W + 2])
+        reward = -c[_K_W + 0] * abs(e / c[_K_W + 2] - 1.0) - c[_K_W + 1] * _pymax(0.0, e - 1.0)
         if c[_K_W + 3] != 0.0:
             reward += c[_K_W + 3] * out[k, 9] / c[_K_V0]
         if breakage or diverged:
@@ -154,6 +157,7 @@ def _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs):
         flags[k, _F_FINISHED] = finished
         flags[k, _F_TERMINATED] = terminated
         flags[k, _F_TRUNCATED] = truncated
+        flags[k, _F_OVER] = out[k, 15] != 0.0 and torque > ev[k, _E_TR]
         lo, hi = _TORQUE_OBS
         ts = c[_K_TORQUE_SCALE]
         ls = c[_K_LENGTH_SCALE]
@@ -261,7 +265,7 @@ class _DrillingCore:
             m._mid, m._half, float(control == "feed"), p.feed_velocity_mm_s, p.nominal_voltage,
             self.max_episode_time_s, p.torque_scale_Nmm, p.thrust_scale_N,
             MicroDrillingEnv.SPEED_SCALE_HZ, MicroDrillingEnv.LENGTH_SCALE_MM,
-            w.tracking, w.overtorque, w.overtorque_threshold, w.progress, w.breakage,
+            w.tracking, w.overtorque, w.target, w.progress, w.breakage,
         ])  # fmt: skip
         self.n = n
         self.lanes = DrillingLanes(p, n)
@@ -270,6 +274,7 @@ class _DrillingCore:
         self.ev = np.zeros((n, _N_EV))
         self.flags = np.zeros((n, _N_FLAGS), dtype=np.bool_)
         self.counts = np.zeros((n, 3), dtype=np.int64)
+        self.bound = np.full(n, np.nan)
         self.obs = np.zeros((n, 9 + _HISTORY), dtype=np.float32)
         self.normals = np.zeros((n, 5 * _NOISE_ROWS))
         self.counts[:, _C_NOISE] = _NOISE_ROWS
@@ -307,10 +312,14 @@ class _DrillingCore:
         lanes.start(lane, truth, d, sc.target_depth_mm)
         self.block_rng[lane] = rng
         self.draw_normals(lane, rng)
-        tr = sc.reference_Nmm(p)
+        tr = sc.limit_Nmm(p)
         s = lanes.state[lane]
         hz = float(s[_S_OMEGA]) / (2.0 * math.pi)
         position = float(s[_S_POS])
+        # The floor of the drilling time: the whole travel at the programmed feed (voltage
+        # control) or at the stage's top speed (feed control).
+        v = p.feed_velocity_mm_s if self.control == "voltage" else p.feed_speed_max_mm_s
+        self.bound[lane] = (sc.target_depth_mm - position) / v
         e = self.ev[lane]
         e[:] = 0.0
         e[_E_ACTION] = self._a0
@@ -344,7 +353,9 @@ class _DrillingCore:
             "diverged": False,
             "finished": False,
             "torque_Nmm": 0.0,
-            "torque_ref_Nmm": float(tr),
+            "torque_limit_Nmm": float(tr),
+            "cost": 0.0,
+            "score_bound": float(self.bound[lane]),
             "measured": 0.0,
             "peak_torque_Nmm": 0.0,
             "breakage_torque_Nmm": float(lanes.par[lane, _P_BREAK]),
@@ -393,7 +404,9 @@ class _DrillingCore:
             "diverged": diverged,
             "finished": finished,
             "torque_Nmm": torque,
-            "torque_ref_Nmm": e[_E_TR],
+            "torque_limit_Nmm": e[_E_TR],
+            "cost": 1.0 if self.flags[k, _F_OVER] else 0.0,
+            "score_bound": float(self.bound[k]),
             "measured": e[_E_MEAS],
             "peak_torque_Nmm": peak,
             "breakage_torque_Nmm": float(p[_P_BREAK]),
@@ -441,7 +454,9 @@ class _DrillingCore:
             "diverged": f[:, _F_DIVERGED],
             "finished": done,
             "torque_Nmm": o[:, 0],
-            "torque_ref_Nmm": e[:, _E_TR],
+            "torque_limit_Nmm": e[:, _E_TR],
+            "cost": f[:, _F_OVER].astype(np.float64),
+            "score_bound": self.bound.copy(),
             "measured": e[:, _E_MEAS],
             "peak_torque_Nmm": o[:, 1],
             "breakage_torque_Nmm": lane[:, 0],
@@ -472,14 +487,15 @@ class _DrillingCore:
 
 
 class MicroDrillingEnv(gym.Env):
-    """Torque regulation in micro drilling by the spindle speed (Cheong & Cho, seed 003).
+    """Micro drilling under a torque limit by the spindle speed (Cheong & Cho, seed 003).
 
     ## Description
     An air-turbine spindle drives a 0.5-0.8 mm drill into SS40 mild steel at a constant feed
     velocity (0.32 mm/s). As the hole deepens, chips pack in the flutes and the torque climbs
     (their Fig. 12) until the drill breaks; industry pecks (retracts to clear the chips),
-    which is safe but slow. Here the controller holds the torque at a reference by the
-    spindle speed: a faster spindle cuts a thinner chip per revolution, and the torque falls
+    which is safe but slow. Here the controller keeps the torque under the scenario's
+    process limit (the drill's nominal chip-free torque, the paper's reference) by the
+    spindle speed, choosing where to regulate below it: a faster spindle cuts a thinner chip per revolution, and the torque falls
     as ``k4 / omega`` (eq. 20). The spindle is driven through a pneumatic proportional valve
     (second order, eq. 17), its air friction grows as ``omega^0.608`` (eq. 19) and the
     drilling torque slows it. The plant is ``machining_envs.drilling.plant``; the valve is
@@ -506,7 +522,7 @@ class MicroDrillingEnv(gym.Env):
     | index | observation | unit | range |
     |---|---|---|---|
     | 0 | measured torque (filtered, noisy) / ``torque_scale_Nmm`` | - | [-1, 10] |
-    | 1 | torque reference / ``torque_scale_Nmm`` | - | [0, 10] |
+    | 1 | torque limit / ``torque_scale_Nmm`` | - | [0, 10] |
     | 2 | measured thrust / ``thrust_scale_N`` | - | [-1, 10] |
     | 3 | measured spindle frequency / 1000 Hz | - | [0, 3] |
     | 4 | previous action (the command now applied) | - | [-1, 1] |
@@ -520,11 +536,22 @@ class MicroDrillingEnv(gym.Env):
     (they are in ``info``).
 
     ## Rewards
-    With ``T`` the torque at the sample instant, ``Tr`` the reference, ``dz`` the hole's
+    With ``T`` the torque at the sample instant, ``L`` the limit, ``dz`` the hole's
     deepening in the step and ``v0`` the nominal feed (weights in :class:`DrillingReward`,
     configurable with ``reward=``):
-    ``r = -1.0 |T - Tr|/Tr - 4.0 max(0, T/Tr - 1.1) + 0.0 dz/(Ts v0) - 50 [breakage]``.
-    Benchmark metrics are computed from ``info``, not from rewards.
+    ``r = -1.0 |T/(0.9 L) - 1| - 4.0 max(0, T/L - 1) + 0.0 dz/(Ts v0) - 50 [breakage]``.
+    The reward's own setpoint 0.9 L (``target``) is a training choice, not the task's.
+
+    ## Cost and score
+    ``info["cost"]`` is 1.0 on a step where the drill is cutting and its torque is above the
+    limit, else 0.0 (the Safety-Gymnasium convention). The score (``task``) is the drilling
+    time, counted if the hole was finished, the drill did not break and under 2 % of the
+    drilling steps had a cost; else the time limit is charged. **What the score ranks:**
+    with ``control="voltage"`` the feed is the programmed constant, so every hole that
+    counts takes the same time (``info["score_bound"]``, the travel at the programmed feed)
+    and the score ranks the share of holes kept under the limit; the torque fluctuation is
+    reported beside it. ``control="feed"`` lets the agent drill faster (its floor is the
+    travel at the stage's top speed).
 
     ## Starting State
     The spindle runs free at the nominal voltage (545 Hz, Table 1), the valve settled, the
@@ -549,7 +576,8 @@ class MicroDrillingEnv(gym.Env):
 
     ## info
     ``t_s``, ``command`` (V or mm/s), ``action_clipped``, ``n_action_clipped``, ``breakage``,
-    ``diverged``, ``finished``, ``torque_Nmm`` (true torque), ``torque_ref_Nmm``,
+    ``diverged``, ``finished``, ``torque_Nmm`` (true torque), ``torque_limit_Nmm``,
+    ``cost``, ``score_bound`` (s),
     ``measured`` (torque the controller saw, N·mm), ``peak_torque_Nmm``,
     ``breakage_torque_Nmm``, ``thrust_N``, ``measured_thrust_N``, ``spindle_hz``,
     ``measured_spindle_hz``, ``spindle_rpm``, ``voltage_V``, ``valve_opening``,
@@ -567,6 +595,13 @@ class MicroDrillingEnv(gym.Env):
     ## Version History
     * v0: first version. The physics now runs as a batched kernel shared with the vector
       env (same numbers to the last bit, the same noise draws from ``np_random``).
+      The task is a process limit, not a reference: scenarios carry ``torque_limit_Nmm``
+      and ``torque_limit_scale`` (was ``torque_ref_Nmm``), observation 1 is the limit,
+      ``info`` gives ``torque_limit_Nmm``, ``cost`` and ``score_bound``; the reward tracks
+      ``target`` x limit and penalises torque above the limit (was above 1.1x the
+      reference); the scenarios ``train``, ``validation``, ``test`` (one distribution,
+      separate streams) and ``ood`` (the former ``test`` ranges, varying limit) replace
+      ``train``/``test``.
 
     ## Example
     >>> import gymnasium as gym
@@ -586,7 +621,7 @@ class MicroDrillingEnv(gym.Env):
     #: Positions of the observation's fields, for controllers that read them by name.
     OBS_INDEX = {
         "measured": 0,
-        "reference": 1,
+        "limit": 1,
         "thrust": 2,
         "spindle": 3,
         "prev_action": 4,
@@ -685,7 +720,7 @@ class MicroDrillingEnv(gym.Env):
                     [
                         ("torque", log["torque"], "C0-"),
                         ("measured", log["measured"], "C1-"),
-                        ("reference", [float(self._core.ev[0, _E_TR])] * len(t), "k--"),
+                        ("limit", [float(self._core.ev[0, _E_TR])] * len(t), "k--"),
                     ],
                 ),
                 ("spindle (Hz)", [("spindle", log["speed"], "C2-")]),

@@ -1,9 +1,13 @@
-"""Named micro-drilling scenarios: the paper's holes, a training distribution, a held-out set.
+"""Named micro-drilling scenarios: the paper's holes and the four splits of the benchmark.
 
-A scenario fixes the drill, the hole and what a controller cannot see: the true cutting
-constant of this drill and material, how strongly chips pack in the flutes, how irregular
-that is, and the sensor noise (as scale factors on the nominal parameters). Pass a name or
-an object to ``env.reset(options={"scenario": ...})``.
+A scenario fixes the drill, the hole, the process torque limit and what a controller
+cannot see: the true cutting constant of this drill and material, how strongly chips pack
+in the flutes, how irregular that is, and the sensor noise (as scale factors on the
+nominal parameters). Pass a name or an object to ``env.reset(options={"scenario": ...})``.
+
+Splits (``machining_envs.core.splits``): ``train``, ``validation`` and ``test`` share one
+distribution, each drawing through its own stream; ``ood`` goes beyond it (see
+``DRILLING_SCENARIOS``).
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import numpy as np
 
 from machining_envs.core.checks import check_range
 from machining_envs.core.env import resolve_scenario
+from machining_envs.core.splits import split_rng
 from machining_envs.drilling.plant import DIAMETER_RANGE_MM, DrillingParams
 
 __all__ = [
@@ -34,7 +39,7 @@ PAPER_ASPECT_RATIO = 10.0
 
 @dataclass(frozen=True)
 class DrillingScenario:
-    """One hole: drill, depth, reference and the hidden process truth.
+    """One hole: drill, depth, torque limit and the hidden process truth.
 
     Parameters
     ----------
@@ -43,10 +48,11 @@ class DrillingScenario:
         Drill diameter, mm (``DIAMETER_RANGE_MM``); known to the controller.
     aspect_ratio : float
         Hole depth over diameter (1 to 20); the hole is finished at ``aspect_ratio * D``.
-    torque_ref_Nmm : float or None
-        Torque reference, N·mm. ``None``: the nominal chip-free torque of this drill at the
-        nominal voltage's 545 Hz and the nominal feed, from the nominal parameters (what a
-        process planner would set).
+    torque_limit_Nmm : float or None
+        Process torque limit, N·mm: what the drill may take. ``None``: the nominal chip-free
+        torque of this drill at the nominal voltage's 545 Hz and the nominal feed, from the
+        nominal parameters (what a process planner would set; the paper's reference),
+        times ``torque_limit_scale``.
     cutting_scale : float
         True effective shear stress as a multiple of the nominal (0.5 to 2): drill wear,
         material batch.
@@ -57,22 +63,27 @@ class DrillingScenario:
         Multiple of the nominal chip and cutting fluctuations (0 to 3).
     noise_scale : float
         Multiple of the nominal sensor noises (0 to 10).
+    torque_limit_scale : float
+        Multiple of the nominal chip-free torque that is the limit when
+        ``torque_limit_Nmm`` is None (0.25 to 4).
     """
 
     name: str
     diameter_mm: float
     aspect_ratio: float = PAPER_ASPECT_RATIO
-    torque_ref_Nmm: float | None = None
+    torque_limit_Nmm: float | None = None
     cutting_scale: float = 1.0
     chip_scale: float = 1.0
     fluctuation_scale: float = 1.0
     noise_scale: float = 1.0
+    torque_limit_scale: float = 1.0
 
     def __post_init__(self) -> None:
         check_range("diameter_mm", self.diameter_mm, *DIAMETER_RANGE_MM)
         check_range("aspect_ratio", self.aspect_ratio, 1.0, 20.0)
-        if self.torque_ref_Nmm is not None:
-            check_range("torque_ref_Nmm", self.torque_ref_Nmm, 1e-4, 100.0)
+        if self.torque_limit_Nmm is not None:
+            check_range("torque_limit_Nmm", self.torque_limit_Nmm, 1e-4, 100.0)
+        check_range("torque_limit_scale", self.torque_limit_scale, 0.25, 4.0)
         check_range("cutting_scale", self.cutting_scale, 0.5, 2.0)
         check_range("chip_scale", self.chip_scale, 0.0, 5.0)
         check_range("fluctuation_scale", self.fluctuation_scale, 0.0, 3.0)
@@ -83,11 +94,14 @@ class DrillingScenario:
         """Depth at which the hole is finished, mm."""
         return self.aspect_ratio * self.diameter_mm
 
-    def reference_Nmm(self, nominal: DrillingParams) -> float:
-        """The torque reference of this hole, N·mm (from the nominal parameters)."""
-        if self.torque_ref_Nmm is not None:
-            return float(self.torque_ref_Nmm)
-        return nominal.nominal_torque_Nmm(self.diameter_mm)
+    def limit_Nmm(self, nominal: DrillingParams) -> float:
+        """The process torque limit of this hole, N·mm: ``torque_limit_Nmm``, or the
+        nominal chip-free torque of the drill (from the nominal parameters) times
+        ``torque_limit_scale``."""
+        if self.torque_limit_Nmm is not None:
+            return float(self.torque_limit_Nmm)
+        base = nominal.nominal_torque_Nmm(self.diameter_mm)
+        return base if self.torque_limit_scale == 1.0 else base * self.torque_limit_scale
 
     def true_params(self, nominal: DrillingParams) -> DrillingParams:
         """The plant parameters this hole really has (hidden from controllers)."""
@@ -118,8 +132,10 @@ def _random(
     chips: tuple[float, float],
     fluct: tuple[float, float],
     noise: tuple[float, float],
+    limit: tuple[float, float] = (1.0, 1.0),
 ):
-    def make(rng: np.random.Generator) -> DrillingScenario:
+    def make(env_rng: np.random.Generator) -> DrillingScenario:
+        rng = split_rng(env_rng, name)
         u = rng.random(6).tolist()
         d = 0.5 + 0.3 * u[0]
         ar = aspect[0] + (aspect[1] - aspect[0]) * u[1]
@@ -127,7 +143,8 @@ def _random(
         ch = math.exp(math.log(chips[0]) + (math.log(chips[1]) - math.log(chips[0])) * u[3])
         fl = fluct[0] + (fluct[1] - fluct[0]) * u[4]
         ns = noise[0] + (noise[1] - noise[0]) * u[5]
-        return DrillingScenario(name, d, ar, None, cs, ch, fl, ns)
+        scale = 1.0 if limit == (1.0, 1.0) else float(rng.uniform(*limit))
+        return DrillingScenario(name, d, ar, None, cs, ch, fl, ns, torque_limit_scale=scale)
 
     return make
 
@@ -136,14 +153,18 @@ def _random(
 #:
 #: - ``paper_0.5`` ... ``paper_0.8``: Table 1 (545 Hz, 0.32 mm/s, SS40) with the paper's
 #:   drills, aspect ratio 10, nominal chips; only the fluctuations and noise vary by seed.
-#: - ``train``: diameter uniform 0.5-0.8 mm, aspect ratio 6-12, cutting constant +-15 %,
-#:   chip friction 0.6-1.6x (log-uniform), fluctuation 0.5-1.5x, noise 0.5-2x.
-#: - ``test`` (held out, wider): aspect ratio 8-14, cutting constant +-20 %, chip friction
-#:   0.5-2x, fluctuation 0.5-2x, noise 0.5-3x.
+#: - ``train``, ``validation``, ``test``: diameter uniform 0.5-0.8 mm, aspect ratio 6-12,
+#:   cutting constant +-15 %, chip friction 0.6-1.6x (log-uniform), fluctuation 0.5-1.5x,
+#:   noise 0.5-2x; the torque limit is the drill's nominal chip-free torque.
+#: - ``ood`` (wider): aspect ratio 8-14, cutting constant +-20 %, chip friction 0.5-2x,
+#:   fluctuation 0.5-2x, noise 0.5-3x, torque limit 0.8-1.2x the nominal.
 DRILLING_SCENARIOS: dict[str, Callable[[np.random.Generator], DrillingScenario]] = {
     **{f"paper_{d:g}": _paper(d) for d in PAPER_DIAMETERS_MM},
-    "train": _random("train", (6.0, 12.0), (0.85, 1.15), (0.6, 1.6), (0.5, 1.5), (0.5, 2.0)),
-    "test": _random("test", (8.0, 14.0), (0.8, 1.2), (0.5, 2.0), (0.5, 2.0), (0.5, 3.0)),
+    **{
+        split: _random(split, (6.0, 12.0), (0.85, 1.15), (0.6, 1.6), (0.5, 1.5), (0.5, 2.0))
+        for split in ("train", "validation", "test")
+    },
+    "ood": _random("ood", (8.0, 14.0), (0.8, 1.2), (0.5, 2.0), (0.5, 2.0), (0.5, 3.0), (0.8, 1.2)),
 }
 
 

@@ -33,10 +33,10 @@ def test_evaluate_table_and_csv(tmp_path):
 
 def test_same_seeds_give_every_agent_the_same_workpieces():
     a = evaluate(
-        FixedGainPI.from_env, TURNING, ["test"], n_episodes=3, seed=5, keep_trajectories=True
+        FixedGainPI.from_env, TURNING, ["ood"], n_episodes=3, seed=5, keep_trajectories=True
     )
     b = evaluate(
-        VariableGainPI.from_env, TURNING, ["test"], n_episodes=3, seed=5, keep_trajectories=True
+        VariableGainPI.from_env, TURNING, ["ood"], n_episodes=3, seed=5, keep_trajectories=True
     )
     for ta, tb in zip(a.trajectories, b.trajectories, strict=True):
         assert ta["workpiece_length_mm"][0] == tb["workpiece_length_mm"][0]
@@ -52,9 +52,9 @@ def test_batched_evaluation_of_a_network_policy_agrees_to_float32_rounding():
     """A torch policy evaluated on a batch multiplies its matrices in another order than on
     one observation (float32), so its actions, and the episodes, agree to about 1e-7
     relative, not to the last bit; the metrics agree to 1e-5."""
-    kw = dict(n_episodes=4, seed=1000)
-    one = evaluate(pretrained("turning_ppo"), TURNING, ["test"], batched=False, **kw)
-    batch = evaluate(pretrained("turning_ppo"), TURNING, ["test"], batched=True, **kw)
+    kw = dict(n_episodes=4, seed=5000)
+    one = evaluate(pretrained("turning_ppo"), TURNING, ["validation"], batched=False, **kw)
+    batch = evaluate(pretrained("turning_ppo"), TURNING, ["validation"], batched=True, **kw)
     for a, b in zip(one.rows, batch.rows, strict=True):
         assert a.keys() == b.keys()
         for k, v in a.items():
@@ -69,20 +69,20 @@ DRILLING_ID, CONTOURING_ID = "machining_envs/MicroDrilling-v0", "machining_envs/
 #: (env id, env kwargs, agent factory, scenarios, episodes per scenario): every classical
 #: agent of every process, on the held-out distribution and one paper scenario.
 BATCHED_CASES = [
-    (TURNING_ID, {}, VariableGainPI.from_env, ["test", "paper_405"], 6),
-    (TURNING_ID, {}, FixedGainPI.from_env, ["test", "paper_405"], 6),
-    (TURNING_ID, {}, ConstantFeed.from_env, ["test", "paper_405"], 6),
-    (MILLING_ID, {}, IntegralACC.from_env, ["test", "paper_taper"], 5),
-    (MILLING_ID, {}, FixedGainIntegral.from_env, ["test", "paper_taper"], 5),
-    (MILLING_ID, {}, MillingConstantFeed.from_env, ["test", "paper_taper"], 5),
-    (DRILLING_ID, {}, NoControl.from_env, ["test", "paper_0.6"], 4),
-    (DRILLING_ID, {}, PD.from_env, ["test", "paper_0.6"], 4),
-    (DRILLING_ID, {}, SlidingMode.from_env, ["test", "paper_0.6"], 4),
-    (DRILLING_ID, {"control": "feed"}, PeckDrilling.from_env, ["test", "paper_0.6"], 4),
-    (CONTOURING_ID, {}, PIPosition.from_env, ["test", "paper_step_load"], 3),
-    (CONTOURING_ID, {}, HInf2DOF.from_env, ["test", "paper_circle_load"], 3),
+    (TURNING_ID, {}, VariableGainPI.from_env, ["ood", "paper_405"], 6),
+    (TURNING_ID, {}, FixedGainPI.from_env, ["ood", "paper_405"], 6),
+    (TURNING_ID, {}, ConstantFeed.from_env, ["ood", "paper_405"], 6),
+    (MILLING_ID, {}, IntegralACC.from_env, ["ood", "paper_taper"], 5),
+    (MILLING_ID, {}, FixedGainIntegral.from_env, ["ood", "paper_taper"], 5),
+    (MILLING_ID, {}, MillingConstantFeed.from_env, ["ood", "paper_taper"], 5),
+    (DRILLING_ID, {}, NoControl.from_env, ["ood", "paper_0.6"], 4),
+    (DRILLING_ID, {}, PD.from_env, ["ood", "paper_0.6"], 4),
+    (DRILLING_ID, {}, SlidingMode.from_env, ["ood", "paper_0.6"], 4),
+    (DRILLING_ID, {"control": "feed"}, PeckDrilling.from_env, ["ood", "paper_0.6"], 4),
+    (CONTOURING_ID, {}, PIPosition.from_env, ["ood", "paper_step_load"], 3),
+    (CONTOURING_ID, {}, HInf2DOF.from_env, ["ood", "paper_circle_load"], 3),
     ("machining_envs/ContouringFeed-v0", {}, ConstantOverride.from_env,
-     ["test", "paper_involute"], 3),
+     ["ood", "paper_involute"], 3),
 ]  # fmt: skip
 
 

@@ -161,7 +161,7 @@ def test_integral_acc_holds_its_estimator_while_the_feed_saturates():
         start[:] = False
         kc.append(state[0, 2])
         obs, _, terminated, truncated, info = env.step(action)
-        torque.append(info["torque_Nmm"] / info["torque_ref_Nmm"])
+        torque.append(info["torque_Nmm"] / info["torque_limit_Nmm"])
         depth.append(info["depth_mm"])
         saturated.append(action[0] >= 1.0)
         if terminated or truncated:

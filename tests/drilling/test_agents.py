@@ -209,7 +209,7 @@ def _smc_nominal_run(d):
         obs, _, term, trunc, info = env.step(action)
         done = term or trunc
     assert info["finished"] and not info["breakage"]
-    return agent, info["torque_ref_Nmm"], {k: np.array(v) for k, v in rec.items()}
+    return agent, info["torque_limit_Nmm"], {k: np.array(v) for k, v in rec.items()}
 
 
 @pytest.mark.parametrize("d", [0.6, 0.8])
@@ -259,13 +259,13 @@ def test_sliding_surface_converges_into_the_boundary_layer_and_error_stays_bound
 
 
 def test_no_controller_breaks_a_drill_no_control_would_not_and_peck_never_breaks(capsys):
-    """Held-out ``test`` holes (deeper, worse chips) and the paper's four holes.
+    """Out-of-distribution ``ood`` holes (deeper, worse chips) and the paper's four holes.
 
     No control breaks some of them (so the check can fail); PD and sliding mode break
     none that no control survives; peck drilling breaks none and always takes longer
     than sliding mode. Both drilling times are printed.
     """
-    cases = [("test", s) for s in range(16)] + [(f"paper_{d:g}", 0) for d in (0.5, 0.6, 0.7, 0.8)]
+    cases = [("ood", s) for s in range(16)] + [(f"paper_{d:g}", 0) for d in (0.5, 0.6, 0.7, 0.8)]
     broke = {}
     times = {}
     for name, factory, control in (

@@ -20,7 +20,7 @@ def test_info_values_and_units_at_reset_and_after_a_step():
     assert info["command"] == pytest.approx(5.0) and info["voltage_V"] == pytest.approx(5.0)
     assert info["feed_velocity_mm_s"] == pytest.approx(0.32)
     assert info["depth_mm"] == pytest.approx(0.0032) and info["cutting"]
-    assert info["torque_ref_Nmm"] == pytest.approx(env.unwrapped.params.nominal_torque_Nmm(0.8))
+    assert info["torque_limit_Nmm"] == pytest.approx(env.unwrapped.params.nominal_torque_Nmm(0.8))
     assert info["breakage_torque_Nmm"] == pytest.approx(5.0 * 0.8**3)
 
 

@@ -19,7 +19,9 @@ def _traj():
         "engagement": np.array([0, 0.3, 0.9, 1, 1, 1, 1, 0, 1, 1.0]),
         "torque_Nmm": np.array([0, 0.1, 0.3, 0.4, 0.5, 0.6, 0.5, 0.0, 0.4, 0.4]),
         "thrust_N": np.array([0, 1, 1, 2, 2, 2, 2, 0, 2, 2.0]),
-        "torque_ref_Nmm": np.full(10, 0.4),
+        "torque_limit_Nmm": np.full(10, 0.44),
+        # The env's cost: cutting with the torque above the limit.
+        "cost": np.array([0, 0, 0, 0, 1, 1, 1, 0, 0, 0.0]),
         "spindle_hz": np.array([545, 540, 538, 550, 560, 570, 565, 545, 552, 551.0]),
         "peak_torque_Nmm": np.array([0, 0.1, 0.3, 0.45, 0.55, 0.65, 0.55, 0.0, 0.42, 0.41]),
         "breakage_torque_Nmm": np.full(10, 1.3),
@@ -39,11 +41,12 @@ def test_metrics_by_hand():
     engaged = np.array([0.4, 0.5, 0.6, 0.5, 0.4, 0.4])
     assert m["torque_mean_Nmm"] == pytest.approx(engaged.mean())
     assert m["torque_std_Nmm"] == pytest.approx(engaged.std())
-    assert m["torque_mean_rel"] == pytest.approx(engaged.mean() / 0.4)
+    assert m["torque_mean_rel"] == pytest.approx(engaged.mean() / 0.44)
     assert m["thrust_mean_N"] == 2.0 and m["thrust_std_N"] == 0.0
     assert m["time_over_limit"] == pytest.approx(3 / 6)  # 0.5, 0.6, 0.5 above 0.44
     assert m["spindle_min_hz"] == 550.0 and m["spindle_range_hz"] == 20.0
     assert m["peak_torque_Nmm"] == 0.65 and m["peak_torque_rel"] == pytest.approx(0.5)
+    assert math.isnan(m["score_bound"])  # the hand-made record has none
     assert m["drilling_time_s"] == 0.085 and m["finished"] == 1.0
     assert m["n_retracts"] == 1.0 and m["breakage"] == 0.0 and m["n_steps"] == 9.0
 

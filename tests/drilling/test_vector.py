@@ -96,7 +96,7 @@ def test_lanes_of_the_feed_control_retract_break_and_run_out_of_time_like_the_si
         return np.where(jump, rng.uniform(-1.2, 1.2, (n, 1)), a).astype(np.float32)
 
     ends = _compare_lanes(
-        {"control": "feed", "scenario": "test", "max_episode_time_s": 1.0}, feeds, n_steps=800
+        {"control": "feed", "scenario": "ood", "max_episode_time_s": 1.0}, feeds, n_steps=800
     )
     assert ends["truncated"] >= 5 and ends["breakage"] >= 5 and ends["out_of_hole"] > 10
 

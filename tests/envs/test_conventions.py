@@ -45,8 +45,9 @@ SHARED_INFO_KEYS = frozenset(
 )
 #: Keys of the envs that regulate a cut (turning, milling, drilling): the measurement and the cut.
 _CUT_KEYS = frozenset(
-    {"measured", "feed_mm_per_rev", "depth_mm", "spindle_rpm", "position_mm", "finished", "segment"}
-)
+    {"measured", "feed_mm_per_rev", "depth_mm", "spindle_rpm", "position_mm", "finished", "segment",
+     "cost", "score_bound"}
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -114,13 +115,13 @@ _CUT_REGULATION = dict(
     truncation=({"max_episode_time_s": 2.0}, -1.0, 20),
     reward_term="tracking",
 )
-_DRILLING_SCENARIOS = ("train", "test", "paper_0.5", "paper_0.8")
+_DRILLING_SCENARIOS = ("train", "ood", "paper_0.5", "paper_0.8")
 _DRILLING = dict(
     env_id=DRILLING,
     env_class=MicroDrillingEnv,
     obs_dim=12,
     signal="torque_Nmm",
-    info_keys=_CUT_KEYS | {"torque_Nmm", "torque_ref_Nmm", "thrust_N", "spindle_hz"},
+    info_keys=_CUT_KEYS | {"torque_Nmm", "torque_limit_Nmm", "thrust_N", "spindle_hz"},
     scenarios=("paper_0.6", "paper_0.5", "paper_0.8"),
     misspelt=("torque_noise_nmm", "torque_noise_Nmm"),
     reward_term="tracking",
@@ -144,10 +145,10 @@ CASES = (
         env_id=TURNING,
         env_class=TurningEnv,
         signal="force_N",
-        info_keys=_CUT_KEYS | {"force_N", "force_ref_N"},
+        info_keys=_CUT_KEYS | {"force_N", "force_limit_N"},
         scenarios=("paper_405", "paper_245"),
         random_runs=(
-            RandomRun(100_000, 0, ("train", "test", "paper_245", "paper_700", "step_range")),
+            RandomRun(100_000, 0, ("train", "ood", "paper_245", "paper_700", "step_range")),
         ),
         misspelt=("sensor_gian", "sensor_gain"),
         render_run=(30, -0.2),
@@ -158,11 +159,11 @@ CASES = (
         env_id=MILLING,
         env_class=EndMillingEnv,
         signal="torque_Nmm",
-        info_keys=_CUT_KEYS | {"torque_Nmm", "torque_ref_Nmm"},
+        info_keys=_CUT_KEYS | {"torque_Nmm", "torque_limit_Nmm"},
         scenarios=("paper_step", "paper_taper"),
         # Half the steps with each force model.
         random_runs=tuple(
-            RandomRun(50_000, seed, ("train", "test", "paper_step", "paper_taper"), kw)
+            RandomRun(50_000, seed, ("train", "ood", "paper_step", "paper_taper"), kw)
             for seed, kw in enumerate(({}, {"force_model": "average_force"}))
         ),
         misspelt=("servo_gian", "servo_gain"),
@@ -206,7 +207,7 @@ CASES = (
             RandomRun(
                 100_000,
                 0,
-                ("train", "test", "paper_step_load", "paper_circle", "paper_involute")
+                ("train", "ood", "paper_step_load", "paper_circle", "paper_involute")
                 + ("paper_corner",),
                 {"max_episode_time_s": 0.2},
             ),
@@ -228,7 +229,7 @@ CASES = (
             RandomRun(
                 10_000,
                 1,
-                ("train", "test", "paper_circle", "paper_involute", "paper_corner"),
+                ("train", "ood", "paper_circle", "paper_involute", "paper_corner"),
                 {"max_episode_time_s": 0.5},
             ),
         ),

@@ -119,7 +119,8 @@ def test_counting_episodes_never_beat_the_bound(env_id, cls):
                       seed=5000)  # fmt: skip
         for r in ev.rows:
             if score.counts(r):
-                assert r[score.value_key] >= r["score_bound"], (cls.__name__, setpoint, r)
+                # (to rounding: a constant-feed hole takes its floor exactly)
+                assert r[score.value_key] >= r["score_bound"] * (1 - 1e-9), (cls.__name__, r)
 
 
 @pytest.mark.parametrize("env_id, cls", AGENT_CASES, ids=lambda v: getattr(v, "__name__", v))

@@ -165,7 +165,7 @@ def test_a_non_finite_action_names_its_lane_and_nothing_is_stepped(env_id):
 @pytest.mark.parametrize("env_id", VECTOR_IDS)
 def test_reset_options_apply_to_every_lane_and_are_checked(env_id):
     venv = gym.make_vec(env_id, num_envs=3)
-    name = "paper_405" if "Turning" in env_id else "test"
+    name = "paper_405" if "Turning" in env_id else "ood"
     _, info = venv.reset(seed=0, options={"scenario": name})
     assert list(info["scenario"]) == [name] * 3
     with pytest.raises(TypeError, match="options"):
