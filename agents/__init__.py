@@ -7,7 +7,7 @@ SB3 models run under one harness (and under SB3's own ``evaluate_policy``)::
 """
 
 from agents.base import Agent
-from agents.contouring import ConstantOverride, HInf2DOF, PIPosition
+from agents.contouring import ConstantOverride, HInf2DOF, LookAheadFeed, PIPosition
 from agents.drilling import PD, NoControl, PeckDrilling, SlidingMode
 from agents.milling import FixedGainIntegral, IntegralACC, MillingConstantFeed
 from agents.turning import ConstantFeed, FixedGainPI, VariableGainPI
@@ -21,6 +21,7 @@ __all__ = [
     "IntegralACC",
     "MillingConstantFeed",
     "ConstantOverride",
+    "LookAheadFeed",
     "HInf2DOF",
     "PIPosition",
 ]

@@ -27,10 +27,14 @@ import gymnasium as gym
 import numpy as np
 from scipy.linalg import block_diag
 
-from agents.base import Agent, unwrap, unwrap_as
+from agents.base import Agent, check_positive, unwrap, unwrap_as
 from machining_envs.contouring._exact import vecmat_rows
 from machining_envs.contouring.env import ERROR_SCALE_MM, POSITION_SCALE_MM, ContouringEnv
-from machining_envs.contouring.feed_env import DEFAULT_TOLERANCE_MM, ContouringFeedEnv
+from machining_envs.contouring.feed_env import (
+    DEFAULT_TOLERANCE_MM,
+    LOOKAHEAD_MM,
+    ContouringFeedEnv,
+)
 from machining_envs.contouring.plant import AXES, ContouringParams
 from machining_envs.contouring.servo import HINF_RHO, ServoDesign, hinf_2dof_design, pi_design
 
@@ -40,12 +44,15 @@ __all__ = [
     "contouring_params",
     "HInf2DOF",
     "ConstantOverride",
+    "LookAheadFeed",
     "calibrate_constant_override",
     "BASELINE_OVERRIDE",
     "CALIBRATION_SEEDS",
 ]
 
 _I = ContouringEnv.OBS_INDEX
+#: Smallest override :class:`LookAheadFeed` commands (2 % of the programmed feed).
+MIN_OVERRIDE = 0.02
 
 
 def contouring_params(env) -> ContouringParams:
@@ -180,11 +187,26 @@ class PIPosition(LinearServoAgent):
     Designed from the env's nominal parameters; discretised by Tustin at the servo rate.
     """
 
+    #: Free parameters and their search ranges (low, high, log scale) for tuning: the gains
+    #: as multiples of the pole-placement design's, and the set-point weight b.
+    TUNABLE = {
+        "kp_scale": (0.3, 3.0, True),
+        "ki_scale": (0.1, 10.0, True),
+        "setpoint_weight": (0.1, 1.0, False),
+    }
+
     @classmethod
-    def from_env(cls, env) -> PIPosition:
+    def from_env(
+        cls, env, kp_scale: float = 1.0, ki_scale: float = 1.0, setpoint_weight: float = 1.0 / 3.0
+    ) -> PIPosition:
         p = contouring_params(env)
-        designs = tuple(pi_design(p, ax) for ax in AXES)
-        return cls(designs, p.command_max_mm_s, "PI position")
+        kp_scale = check_positive("kp_scale", kp_scale, 10.0)
+        ki_scale = check_positive("ki_scale", ki_scale, 100.0)
+        setpoint_weight = check_positive("setpoint_weight", setpoint_weight, 1.0)
+        designs = tuple(pi_design(p, ax, kp_scale, ki_scale, setpoint_weight) for ax in AXES)
+        agent = cls(designs, p.command_max_mm_s, "PI position")
+        agent.kp_scale, agent.ki_scale, agent.setpoint_weight = kp_scale, ki_scale, setpoint_weight
+        return agent
 
 
 class HInf2DOF(LinearServoAgent):
@@ -203,11 +225,18 @@ class HInf2DOF(LinearServoAgent):
     [5.83, 6.01]
     """
 
+    #: Free parameters and their search ranges (low, high, log scale) for tuning: rho, the
+    #: weight of model matching against robust stabilisation (one synthesis per trial).
+    TUNABLE = {"rho": (0.3, 3.0, True)}
+
     @classmethod
     def from_env(cls, env, rho: float = HINF_RHO) -> HInf2DOF:
         p = contouring_params(env)
+        rho = check_positive("rho", rho, 100.0)
         designs = tuple(hinf_2dof_design(p, ax, rho=rho) for ax in AXES)
-        return cls(designs, p.command_max_mm_s, "H-inf 2-DOF")
+        agent = cls(designs, p.command_max_mm_s, "H-inf 2-DOF")
+        agent.rho = rho
+        return agent
 
     @property
     def gammas(self) -> tuple[float, float]:
@@ -221,7 +250,7 @@ CALIBRATION_SEEDS = tuple(range(200))
 #: servo -> the largest constant override keeping the default tolerance on every path of
 #: ``CALIBRATION_SEEDS`` (default parameters, tolerance and decision interval), rounded down
 #: to 0.01. Regenerate: ``python -m agents.contouring``.
-BASELINE_OVERRIDE = {"pi": 0.08, "hinf": 0.37}
+BASELINE_OVERRIDE = {"pi": 0.13, "hinf": 0.41}
 
 
 def _max_error(env, scenario, override: float) -> float:
@@ -298,6 +327,8 @@ class ConstantOverride(Agent):
 
     state_size = 0
     obs_dim = 16
+    #: Free parameters and their search ranges (low, high, log scale) for tuning.
+    TUNABLE = {"override": (0.1, 2.0, False)}
 
     def __init__(self, override: float, override_max: float):
         if not (isinstance(override, (int, float)) and math.isfinite(override)):
@@ -333,6 +364,81 @@ class ConstantOverride(Agent):
     def _act(self, obs, state):
         a = 2.0 * self.override / self.override_max - 1.0
         return np.full((obs.shape[0], 1), a)
+
+
+class LookAheadFeed(Agent):
+    r"""The look-ahead feed planner of a CNC: the feed limited by the path's curvature and
+    by the drives' deceleration over the path previewed ahead.
+
+    Read from the observation (ContouringFeed-v0): the programmed feed ``F``, the path's
+    turn ``theta_i`` over the next ``d_i`` = 0.5, 1, 2, 5, 10 mm (``LOOKAHEAD_MM``) and the
+    path left ``r``. The window from ``d_{i-1}`` to ``d_i`` (``d_0 = 0``) turns by
+    ``|theta_i - theta_{i-1}|``; its mean curvature ``kappa_i`` limits the speed there to
+    ``v_i = sqrt(a_c / kappa_i)`` (centripetal acceleration ``a_c``). To be able to slow
+    down to it by the window's start, the speed now is at most
+
+    .. math:: v = \min_i \sqrt{v_i^2 + 2 a_t d_{i-1}}, \qquad v \le \sqrt{2 a_t r},
+
+    (tangential deceleration ``a_t``; the second bound stops the set point at the path's
+    end), and the override is ``min(override_cap, v / F)``. A real planner takes ``a_c`` and
+    ``a_t`` from the drives' ratings and the tolerance; here they are the free parameters
+    (``TUNABLE``). Designed from nothing hidden: the preview is what a CNC reads from the
+    part program.
+
+    Parameters
+    ----------
+    override_max : float
+        The env's largest override (action +1).
+    centripetal_mm_s2, tangential_mm_s2 : float
+        ``a_c`` and ``a_t``, mm/s^2 (default 1000 each, about 0.1 g).
+    override_cap : float
+        Largest override the planner commands (default 1: the programmed feed).
+    """
+
+    state_size = 0
+    obs_dim = 16
+    #: Free parameters and their search ranges (low, high, log scale) for tuning.
+    TUNABLE = {
+        "centripetal_mm_s2": (10.0, 1e5, True),
+        "tangential_mm_s2": (10.0, 1e5, True),
+        "override_cap": (0.1, 2.0, False),
+    }
+
+    def __init__(
+        self,
+        override_max: float,
+        centripetal_mm_s2: float = 1000.0,
+        tangential_mm_s2: float = 1000.0,
+        override_cap: float = 1.0,
+    ):
+        self.override_max = check_positive("override_max", override_max, 10.0)
+        self.centripetal_mm_s2 = check_positive("centripetal_mm_s2", centripetal_mm_s2, 1e7)
+        self.tangential_mm_s2 = check_positive("tangential_mm_s2", tangential_mm_s2, 1e7)
+        self.override_cap = check_positive("override_cap", override_cap, self.override_max)
+        self._d = np.asarray(LOOKAHEAD_MM, dtype=np.float64)
+        self.name = "look-ahead feed"
+
+    @classmethod
+    def from_env(cls, env, centripetal_mm_s2: float = 1000.0, tangential_mm_s2: float = 1000.0,
+                 override_cap: float = 1.0) -> LookAheadFeed:  # fmt: skip
+        base = unwrap_as(env, ContouringFeedEnv, "LookAheadFeed")
+        return cls(base.override_max, centripetal_mm_s2, tangential_mm_s2, override_cap)
+
+    def _act(self, obs, state):
+        feed = np.maximum(100.0 * obs[:, 12].astype(np.float64), 1e-9)
+        heading = obs[:, 7:12].astype(np.float64) * math.pi
+        turn = np.abs(np.diff(heading, axis=1, prepend=0.0))
+        kappa = turn / np.diff(self._d, prepend=0.0)
+        with np.errstate(divide="ignore"):
+            v_win = np.sqrt(self.centripetal_mm_s2 / kappa)  # inf on a straight window
+        start = np.concatenate(([0.0], self._d[:-1]))
+        v = np.min(np.sqrt(v_win**2 + 2.0 * self.tangential_mm_s2 * start), axis=1)
+        left = 100.0 * obs[:, 6].astype(np.float64)
+        v = np.minimum(v, np.sqrt(2.0 * self.tangential_mm_s2 * np.maximum(left, 0.0)))
+        # A floor keeps the set point moving: slowing to zero at the path's end would
+        # approach it without ever arriving.
+        override = np.clip(v / feed, MIN_OVERRIDE, self.override_cap)
+        return (2.0 * override / self.override_max - 1.0)[:, None]
 
 
 if __name__ == "__main__":  # pragma: no cover - regenerates BASELINE_OVERRIDE

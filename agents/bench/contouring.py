@@ -26,7 +26,7 @@ import gymnasium as gym
 import numpy as np
 
 from agents.bench.spec import BenchmarkSpec, Process
-from agents.contouring import ConstantOverride, HInf2DOF, PIPosition
+from agents.contouring import ConstantOverride, HInf2DOF, LookAheadFeed, PIPosition
 from agents.eval import rollout
 from machining_envs.contouring.metrics import contouring_metrics
 from machining_envs.contouring.paths import Path
@@ -331,7 +331,7 @@ PROCESS = Process(
             (PIPosition.from_env, HInf2DOF.from_env),
             ("paper_circle", "paper_involute"),
             "paper_circle",
-            tuned=(PIPosition,),
+            tuned=(PIPosition, HInf2DOF),
             learned=("contouring_ppo",),
             table_metrics=(
                 "max_contour_error_mm",
@@ -353,7 +353,7 @@ PROCESS = Process(
             (ConstantOverride.from_env, functools.partial(ConstantOverride.from_env, override=1.0)),
             ("paper_circle", "paper_involute"),
             "paper_involute",
-            tuned=(ConstantOverride,),
+            tuned=(ConstantOverride, LookAheadFeed),
             learned=("contouring_feed_ppo",),
             table_metrics=(
                 "cycle_time_s",

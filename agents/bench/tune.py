@@ -22,7 +22,6 @@ from it; the paper's settings stay as rows of their own.
 from __future__ import annotations
 
 import functools
-import inspect
 import json
 import math
 import time
@@ -69,19 +68,16 @@ class TuningBudget:
         }
 
 
-def paper_settings(cls) -> dict:
-    """The defaults of ``cls.from_env`` (or, for keywords it passes on, of ``cls``) for
-    every key of ``cls.TUNABLE``: the paper's."""
-    sigs = [inspect.signature(cls.from_env).parameters, inspect.signature(cls).parameters]
-    out = {}
-    for name in cls.TUNABLE:
-        p = next((s[name] for s in sigs if name in s), None)
-        if p is None or p.default is inspect.Parameter.empty:
-            raise ValueError(
-                f"{cls.__name__}.TUNABLE names {name!r}, which from_env lacks a default for"
-            )
-        out[name] = p.default
-    return out
+def paper_settings(cls, env) -> dict:
+    """The settings of ``cls.from_env(env)`` (its defaults: the paper's, or the library's
+    own calibration where the paper gives none) for every key of ``cls.TUNABLE``."""
+    agent = cls.from_env(env)
+    try:
+        return {name: float(getattr(agent, name)) for name in cls.TUNABLE}
+    except AttributeError as e:
+        raise ValueError(
+            f"{cls.__name__}.TUNABLE names a setting its agents do not keep: {e}"
+        ) from None
 
 
 def _score(cls, params: dict, env_id: str, split: str, episodes: int, env_kwargs: dict) -> float:
@@ -115,7 +111,11 @@ def tune_agent(
     env_kwargs = dict(env_kwargs or {})
     check_not_held_out([env_kwargs.get("scenario", "train")], "tuning (env_kwargs.scenario)")
     space = cls.TUNABLE
-    paper = paper_settings(cls)
+    env = gym.make(env_id, **env_kwargs)
+    try:
+        paper = paper_settings(cls, env)
+    finally:
+        env.close()
     if not space:
         raise ValueError(f"{cls.__name__} has no free parameters to tune (TUNABLE is empty)")
     t0 = time.perf_counter()

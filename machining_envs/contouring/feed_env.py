@@ -333,6 +333,7 @@ class _FeedCore:
         self.tabs = np.zeros((n, 4, SEGMENT_COLUMNS))
         self.nseg = np.ones(n, dtype=np.int64)
         self.pf = np.ones((n, len(_PF)))
+        self.bound = np.full(n, np.nan)
         self.load_t = np.full((n, 1), np.inf)
         self.load_v = np.zeros((n, 2, 2))
         self.n_load = np.zeros(n, dtype=np.int64)
@@ -415,6 +416,9 @@ class _FeedCore:
             t_max = 5.0 * prog + 0.5
         x0, y0 = path.start
         self.pf[lane] = (path.length, x0, y0, *path.end, sc.feed_mm_s, prog, t_max)
+        # The floor of the cycle time: the set point must travel the path, at most at the
+        # largest override of the programmed feed.
+        self.bound[lane] = path.length / (self.override_max * sc.feed_mm_s)
         self.load_t[lane] = np.inf
         self.load_v[lane] = 0.0
         for i, (t, a, b) in enumerate(sc.load_steps):
@@ -480,7 +484,9 @@ class _FeedCore:
             "contour_error_mm": o[7],
             "peak_contour_error_mm": o[8],
             "tracking_error_mm": o[9],
-            "tolerance_mm": self.tolerance_mm,
+            "contour_tolerance_mm": self.tolerance_mm,
+            "cost": 1.0 if o[8] > self.tolerance_mm else 0.0,
+            "score_bound": float(self.bound[k]),
             "vx_mm_s": o[10],
             "vy_mm_s": o[11],
             "torque_x_Nm": o[12],
@@ -523,7 +529,9 @@ class _FeedCore:
         }
         for i, name in enumerate(_OUT[3:-1], start=3):
             info[name] = o[:, i].copy()
-        info["tolerance_mm"] = np.full(self.n, self.tolerance_mm)
+        info["contour_tolerance_mm"] = np.full(self.n, self.tolerance_mm)
+        info["cost"] = (o[:, 8] > self.tolerance_mm).astype(np.float64)
+        info["score_bound"] = self.bound.copy()
         info["path_length_mm"] = pf[:, 0].copy()
         info["segment"] = self.segment.copy()
         info["feed_mm_s"] = pf[:, 5].copy()
@@ -578,6 +586,15 @@ class ContouringFeedEnv(gym.Env):
     ``r = 1.0 ds/L - 1.0 dt/(L/F) - 1.0 mean_j max(0, eps_j/tol - 1) - 10 [diverged]``
     (weights in :class:`FeedReward`, configurable with ``reward=``).
 
+    ## Cost and score
+    The limit is the contour-error tolerance ``tolerance_mm`` (the errors are observed as
+    multiples of it). ``info["cost"]`` is 1.0 on a step whose largest contour error passed
+    it. The score (``task``) is the cycle time, counted if the run finished without
+    diverging and under 2 % of its steps had a cost; else the run's time limit is charged.
+    ``info["score_bound"]`` is the floor of the cycle time: the path at the largest override
+    of the programmed feed (``override_max x F``; the drives' acceleration is left out, so
+    the floor is loose on tight curves).
+
     ## Starting State
     Table and controllers at rest at the path's start; the scenario is drawn from
     ``self.np_random`` (step scenarios are refused: they have no path to feed along).
@@ -601,7 +618,8 @@ class ContouringFeedEnv(gym.Env):
     ## info
     The keys of ``Contouring-v0`` at the step's end (``x_mm``, ``contour_error_mm``,
     ``command``...; ``torque_sq_Nm2`` is the step's mean) plus ``peak_contour_error_mm``
-    (largest over the step), ``tolerance_mm``, ``feed_override``, ``path_speed_mm_s``,
+    (largest over the step), ``contour_tolerance_mm``, ``cost``, ``score_bound`` (s),
+    ``feed_override``, ``path_speed_mm_s``,
     ``servo``, ``programmed_time_s`` (path length over programmed feed), ``time_limit_s``
     (this episode's truncation time), and ``machining_time_s`` (the cycle time, to the servo
     period) once finished.
@@ -615,13 +633,17 @@ class ContouringFeedEnv(gym.Env):
     * v0: first version. The step now runs compiled, shared with the vector env: the 50
       servo periods of a step are still the one lifted linear update, evaluated as the BLAS
       product was (the same numbers to the last bit), from its distinct coefficients.
+      The contour tolerance is the task's limit: ``info["contour_tolerance_mm"]`` (was
+      ``tolerance_mm``), ``cost`` (1 on a step whose largest contour error is above it) and
+      ``score_bound`` (the path at the largest override of the programmed feed); the
+      scenarios ``train``, ``validation``, ``test`` and ``ood`` replace ``train``/``test``.
 
     ## Example
     >>> import gymnasium as gym
     >>> import machining_envs
     >>> env = gym.make("machining_envs/ContouringFeed-v0", scenario="paper_circle")
     >>> obs, info = env.reset(seed=0)
-    >>> obs.shape, info["tolerance_mm"], info["servo"]
+    >>> obs.shape, info["contour_tolerance_mm"], info["servo"]
     ((16,), 0.005, 'hinf')
     >>> obs, reward, terminated, truncated, info = env.step(np.zeros(1, dtype=np.float32))
     >>> round(info["t_s"], 6), info["feed_override"], round(info["path_s_mm"], 6)

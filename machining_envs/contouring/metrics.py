@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from machining_envs.core.metrics import episode_flag, finish_time
+from machining_envs.core.metrics import episode_flag, finish_time, score_bound
 from machining_envs.core.score import PrimaryScore, Task
 
 __all__ = [
@@ -75,8 +75,9 @@ def contouring_metrics(traj: dict) -> dict[str, float]:
       position), else the episode's length;
     - ``effort_rms_Nm``: root mean square of the motor torques (both axes), the control
       effort; ``peak_command_mm_s``: largest velocity command;
-    - ``time_over_tolerance``: share of steps whose contour error passed the env's
-      tolerance (ContouringFeed-v0; NaN where the env has none);
+    - ``time_over_tolerance``: share of steps with a constraint cost (``info["cost"]``: the
+      contour error past the tolerance; NaN where the env reports no cost);
+    - ``score_bound``: the floor of the score from the run's truth (NaN where none);
     - ``time_limit_s``: the episode's truncation time, where the env reports it
       (ContouringFeed-v0; the primary score charges it to runs that do not count);
     - ``finished``, ``diverged`` (1.0 / 0.0), ``n_steps``.
@@ -100,11 +101,12 @@ def contouring_metrics(traj: dict) -> dict[str, float]:
     out["effort_rms_Nm"] = float(np.sqrt(np.mean(tsq))) if tsq.size else 0.0
     cmd = [np.asarray(traj[k], dtype=np.float64)[1:] for k in ("command_x_mm_s", "command_y_mm_s")]
     out["peak_command_mm_s"] = float(max(np.max(np.abs(c)) for c in cmd)) if cmd[0].size else 0.0
-    if "tolerance_mm" in traj:
-        tol = np.asarray(traj["tolerance_mm"], dtype=np.float64)[1:]
-        out["time_over_tolerance"] = float(np.mean(peak > tol)) if peak.size else 0.0
+    if "cost" in traj:
+        cost = np.asarray(traj["cost"], dtype=np.float64)[1:]
+        out["time_over_tolerance"] = float(np.mean(cost > 0.0)) if cost.size else 0.0
     else:
         out["time_over_tolerance"] = math.nan
+    out["score_bound"] = score_bound(traj)
     if "time_limit_s" in traj:
         out["time_limit_s"] = float(np.asarray(traj["time_limit_s"], dtype=np.float64)[0])
     out["finished"] = float(finished)

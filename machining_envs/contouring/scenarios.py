@@ -1,4 +1,4 @@
-"""Named contouring scenarios: the paper's tests, a training distribution, a held-out one.
+"""Named contouring scenarios: the paper's tests and the four splits of the benchmark.
 
 A scenario fixes the path, the programmed feed, the load-torque steps the cutting puts on
 the axes and the table's true inertias (as multiples of the nominal ones: the workpiece and
@@ -18,6 +18,7 @@ from machining_envs.contouring.paths import PAPER_CORNER_FEED_MM_S, PAPER_FEED_M
 from machining_envs.contouring.plant import ContouringParams
 from machining_envs.core.checks import check_range
 from machining_envs.core.env import resolve_scenario
+from machining_envs.core.splits import split_rng
 
 __all__ = [
     "ContouringScenario",
@@ -160,7 +161,8 @@ def _random(
     inertia: tuple[float, float],
     load_max: float,
 ):
-    def make(rng: np.random.Generator) -> ContouringScenario:
+    def make(env_rng: np.random.Generator) -> ContouringScenario:
+        rng = split_rng(env_rng, name)
         path = Path.random_smooth(
             rng,
             n_segments=segments,
@@ -185,11 +187,12 @@ def _random(
 #: ``paper_step`` / ``paper_step_load`` (Fig. 4-5: a 0.1 mm X step; with a 1 N m load step at
 #: 0.15 s), ``paper_corner`` (Fig. 6, 5 mm/s), ``paper_circle`` (Fig. 7, R 10 mm at 50 mm/s),
 #: ``paper_involute`` (Fig. 8, R 50 mm at 50 mm/s) and ``paper_circle_load`` (the circle with
-#: 1 N m on both axes from 0.5 s). ``train``: 3-5 random tangent-continuous lines (5-20 mm)
-#: and arcs (radius 3-30 mm, 30-180 degrees), feed log-uniform 20-60 mm/s, inertias
-#: log-uniform x0.8-1.25, half the runs with one load step of up to 1.5 N m per axis at a
-#: random time. ``test`` (held out, wider): 3-6 segments, lines 3-20 mm, radius 2-40 mm,
-#: 20-240 degrees, feed 15-90 mm/s, inertias x0.7-1.4, loads up to 2 N m.
+#: 1 N m on both axes from 0.5 s). ``train``, ``validation``, ``test`` (one distribution,
+#: separate streams): 3-5 random tangent-continuous lines (5-20 mm) and arcs (radius 3-30
+#: mm, 30-180 degrees), feed log-uniform 20-60 mm/s, inertias log-uniform x0.8-1.25, half
+#: the runs with one load step of up to 1.5 N m per axis at a random time. ``ood`` (wider):
+#: 3-6 segments, lines 3-20 mm, radius 2-40 mm, 20-240 degrees, feed 15-90 mm/s, inertias
+#: x0.7-1.4, loads up to 2 N m.
 CONTOURING_SCENARIOS: dict[str, Callable[[np.random.Generator], ContouringScenario]] = {
     "paper_step": _step(False),
     "paper_step_load": _step(True),
@@ -202,11 +205,14 @@ CONTOURING_SCENARIOS: dict[str, Callable[[np.random.Generator], ContouringScenar
         PAPER_FEED_MM_S,
         ((0.5, PAPER_LOAD_TORQUE_NM, PAPER_LOAD_TORQUE_NM),),
     ),
-    "train": _random(
-        "train", (3, 5), (5.0, 20.0), (3.0, 30.0), (30.0, 180.0), (20.0, 60.0), (0.8, 1.25), 1.5
-    ),
-    "test": _random(
-        "test", (3, 6), (3.0, 20.0), (2.0, 40.0), (20.0, 240.0), (15.0, 90.0), (0.7, 1.4), 2.0
+    **{
+        split: _random(
+            split, (3, 5), (5.0, 20.0), (3.0, 30.0), (30.0, 180.0), (20.0, 60.0), (0.8, 1.25), 1.5
+        )
+        for split in ("train", "validation", "test")
+    },
+    "ood": _random(
+        "ood", (3, 6), (3.0, 20.0), (2.0, 40.0), (20.0, 240.0), (15.0, 90.0), (0.7, 1.4), 2.0
     ),
 }
 

@@ -148,10 +148,17 @@ def closed_loop(params: ContouringParams, design: ServoDesign, axis: str | None 
 
 # ---- PI ------------------------------------------------------------------------------------
 @functools.lru_cache(maxsize=32)
-def _pi(a_pole: float, ts: float, axis: str) -> ServoDesign:
+def _pi(
+    a_pole: float, ts: float, axis: str, kp_scale: float = 1.0, ki_scale: float = 1.0,
+    setpoint_weight: float = 1.0 / 3.0,
+) -> ServoDesign:  # fmt: skip
     kp = a_pole / 3.0
     ki = a_pole**2 / 27.0
-    b_w = 1.0 / 3.0
+    if kp_scale != 1.0:
+        kp = kp * kp_scale
+    if ki_scale != 1.0:
+        ki = ki * ki_scale
+    b_w = setpoint_weight
     ca = np.zeros((1, 1))
     cb = np.array([[1.0, -1.0]])
     cc = np.array([[ki]])
@@ -172,7 +179,10 @@ def _pi(a_pole: float, ts: float, axis: str) -> ServoDesign:
     )
 
 
-def pi_design(params: ContouringParams, axis: str) -> ServoDesign:
+def pi_design(
+    params: ContouringParams, axis: str, kp_scale: float = 1.0, ki_scale: float = 1.0,
+    setpoint_weight: float = 1.0 / 3.0,
+) -> ServoDesign:  # fmt: skip
     r"""PI position controller for one axis, tuned by pole placement, without overshoot.
 
     With the axis ``G(s) = a / (s (s + a))`` and ``u = Kp (b r - y) + Ki \int (r - y)``, the
@@ -186,8 +196,12 @@ def pi_design(params: ContouringParams, axis: str) -> ServoDesign:
     integrator in the loop, ``b = 1`` always overshoots). Discretised by Tustin.
 
     X: ``p = 60.7 rad/s`` (``Kp = 60.7 /s``, ``Ki = 1227 /s^2``); Y: ``p = 45.7 rad/s``.
+
+    ``kp_scale``, ``ki_scale`` and ``setpoint_weight`` move the design away from that
+    placement (for tuning; the defaults are the design above).
     """
-    return _pi(params.velocity_pole(axis), params.sample_time_s, axis)
+    return _pi(params.velocity_pole(axis), params.sample_time_s, axis, kp_scale, ki_scale,
+               setpoint_weight)  # fmt: skip
 
 
 # ---- H-infinity 2-DOF ----------------------------------------------------------------------

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -107,7 +108,8 @@ def test_tuned_file_ships_settings_for_every_tuned_agent():
     for spec in BENCHMARKS:
         for cls in spec.tuned:
             entry = data["envs"][spec.env_id][cls.__name__]
-            assert entry["paper_params"] == {k: float(v) for k, v in paper_settings(cls).items()}
+            env = gym.make(spec.env_id, **spec.env_kwargs)
+            assert entry["paper_params"] == paper_settings(cls, env)
             for k, (lo, hi, _) in cls.TUNABLE.items():
                 assert lo <= entry["params"][k] <= hi
             assert entry["train_score"] <= entry["paper_train_score"]
