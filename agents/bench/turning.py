@@ -232,6 +232,13 @@ def plot_turning_reproduction(results, path) -> None:
 # --- The declaration: what the benchmark, the CLI and the docs know of turning -------------
 
 
+def _oracle(env):
+    """The MPC oracle (``agents.oracle``; imported when the benchmark runs it: CasADi)."""
+    from agents.oracle import TurningMPCOracle
+
+    return TurningMPCOracle.from_env(env)
+
+
 def _grid_cut(rpm: float, depth_mm: float) -> TurningScenario:
     """One constant-depth cut of the robustness grid (nominal process constants)."""
     prof = DepthProfile.steps((depth_mm,), 3 * PAPER_STEP_SEGMENT_MM, name=f"{depth_mm:g} mm")
@@ -248,6 +255,8 @@ PROCESS = Process(
             "paper_405",
             tuned=(ConstantFeed, FixedGainPI, VariableGainPI),
             learned=("turning_ppo",),
+            oracle=_oracle,
+            oracle_episodes=10,
             robustness=Robustness(
                 "spindle speed (rpm)",
                 (245.0, 350.0, 500.0, 700.0),

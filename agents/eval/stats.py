@@ -78,14 +78,19 @@ def agent_stats(
     rows: Sequence[dict], score: PrimaryScore, failed_value: float, seed: int = 0
 ) -> AgentStats:
     """Mean, IQM with its 95 % stratified-bootstrap interval, count rate and efficiency."""
+    import warnings
+
     library, metrics = _rliable()
     _, m = score_matrix(rows, score, failed_value)
-    point, ci = library.get_interval_estimates(
-        {"a": m},
-        lambda x: np.array([metrics.aggregate_iqm(x)]),
-        reps=BOOTSTRAP_REPS,
-        random_state=np.random.RandomState(seed),
-    )
+    with warnings.catch_warnings():
+        # rliable passes arch a RandomState, which arch has deprecated (same numbers).
+        warnings.simplefilter("ignore", FutureWarning)
+        point, ci = library.get_interval_estimates(
+            {"a": m},
+            lambda x: np.array([metrics.aggregate_iqm(x)]),
+            reps=BOOTSTRAP_REPS,
+            random_state=np.random.RandomState(seed),
+        )
     eff = [score.efficiency(r, failed_value) for r in rows]
     eff = float(np.mean(eff)) if all(math.isfinite(e) for e in eff) else math.nan
     return AgentStats(

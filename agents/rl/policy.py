@@ -182,21 +182,24 @@ def pretrained(name: str):
 
 def pretrained_seeds(name: str, root=None) -> list[tuple[int, Path]]:
     """The policies of ``<root>/<name>`` (default ``agents/rl/pretrained``), one per training
-    seed: ``(seed, model path)`` for every ``seed_<k>/best_model.zip`` in it, or the folder's
-    own ``best_model.zip`` (its seed from ``config.json``) when it has no seed folders.
-    ``FileNotFoundError`` when there is neither."""
+    seed, as ``(seed, model path)``: the folder's own ``best_model.zip`` (its seed from the
+    ``config.json`` beside it) and every ``seed_<k>/best_model.zip`` below it.
+    ``FileNotFoundError`` when there is none; ``ValueError`` when two claim one seed."""
     folder = Path(root or PRETRAINED_DIR) / name
     found = []
+    if (folder / "best_model.zip").is_file():
+        meta = folder / "config.json"
+        seed = json.loads(meta.read_text()).get("seed", 0) if meta.is_file() else 0
+        found.append((int(seed), folder / "best_model.zip"))
     for sub in sorted(folder.glob("seed_*/best_model.zip")):
         tail = sub.parent.name.removeprefix("seed_")
         if tail.isdigit():
             found.append((int(tail), sub))
-    if not found and (folder / "best_model.zip").is_file():
-        meta = folder / "config.json"
-        seed = json.loads(meta.read_text()).get("seed", 0) if meta.is_file() else 0
-        found.append((int(seed), folder / "best_model.zip"))
     if not found:
         raise FileNotFoundError(
-            f"no policy in {folder} (seed_<k>/best_model.zip or best_model.zip)"
+            f"no policy in {folder} (best_model.zip or seed_<k>/best_model.zip)"
         )
+    seeds = [s for s, _ in found]
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"{folder}: two policies for one training seed: {sorted(seeds)}")
     return sorted(found)

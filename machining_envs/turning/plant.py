@@ -34,7 +34,7 @@ import numpy as np
 from machining_envs.core.checks import check_integer, check_range
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
 
-__all__ = ["TurningParams", "TurningPlant", "TurningStep", "SPINDLE_RPM_RANGE"]
+__all__ = ["TurningParams", "TurningPlant", "TurningStep", "SPINDLE_RPM_RANGE", "sampled_model"]
 
 #: Spindle speeds the plant accepts, rpm. A conventional lathe of the paper's size (2.2 kW
 #: spindle) runs from a few tens to a few thousand rpm; outside this the moving-integral
@@ -344,6 +344,19 @@ def _matrices(params: _LinearKey, spindle_rpm: float) -> _Matrices:
     cols = 4 * lag[:, None] + np.arange(4)
     big[np.arange(m, 2 * m)[:, None], cols] -= delayed
     return _Matrices(big, lags, filt_step)
+
+
+def sampled_model(params: TurningParams, spindle_rpm: float) -> tuple[np.ndarray, int]:
+    """The plant's exact sampled linear part at ``spindle_rpm``: ``(big, m)``.
+
+    ``big @ z`` gives, for the memory ``z = [x_k, u_k, x_{k-1}, u_{k-1}, ...]`` of servo
+    states ``x = [Vf, dVf/dt, I]`` and held commands (``TurningLanes.z``), the tool
+    position at the ``m`` sub-steps of the coming sample (rows ``0 .. m-1``), the feed per
+    revolution there (rows ``m .. 2m-1``) and the next servo state (rows ``2m .. 2m+2``);
+    the force is ``Kf max(feed, 0)^p a(position)`` (eq. 8). For model-based agents that
+    may know the truth (``agents.oracle``); controllers do not read it.
+    """
+    return _matrices(_LinearKey.of(params), float(spindle_rpm)).big, params.substeps
 
 
 @dataclass(slots=True)

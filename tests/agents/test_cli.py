@@ -15,13 +15,16 @@ def test_cli_benchmark_quick_writes_report(tmp_path):
         text=True,
         check=True,
     )
-    assert "| agent | scenario |" in out.stdout
-    assert "margin over" in out.stdout  # the pretrained policies against the best classical
+    assert "| agent | kind |" in out.stdout
+    assert "| physical bound | bound |" in out.stdout
+    assert "| tuned |" in out.stdout and "better than" in out.stdout
+    assert "time: " in out.stdout and "total" in out.stdout  # the run prints its times
     for name in (
         "benchmark.csv",
         "report.md",
+        "Turning-v0_scores.png",
+        "Turning-v0_profiles.png",
         "Turning-v0_trajectories.png",
-        "Turning-v0_metrics.png",
         "reproduce_turning.png",
     ):
         assert (tmp_path / name).stat().st_size > 0, name
@@ -96,16 +99,16 @@ import matplotlib
 matplotlib.use("svg")
 import gymnasium as gym
 import machining_envs
-from agents.bench.benchmark import _plot_trajectories
-from agents.bench.declarations import benchmark_spec
+from agents.bench.benchmark import run_benchmark
 env = gym.make("machining_envs/Turning-v0", render_mode="rgb_array")
 env.reset(seed=0)
 env.step(env.action_space.sample())
 assert env.render().ndim == 3
-_plot_trajectories(benchmark_spec("machining_envs/Turning-v0"), {str(tmp_path / "t.png")!r}, 0)
+run_benchmark({str(tmp_path)!r}, quick=True, envs=["machining_envs/Turning-v0"],
+              reproductions=False, verbose=False)
 import matplotlib.pyplot as plt
 assert matplotlib.get_backend() == "svg", matplotlib.get_backend()
 assert plt.get_fignums() == []
 """
     subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
-    assert (tmp_path / "t.png").stat().st_size > 0
+    assert (tmp_path / "Turning-v0_trajectories.png").stat().st_size > 0

@@ -1,0 +1,168 @@
+"""MPC oracles: the best that control with perfect knowledge achieves, the row every other
+agent is read against.
+
+**An oracle reads the hidden truth.** Unlike every other agent of the library, which
+reads only the observation, an oracle is built from the env it runs in and reads that env's
+true plant (the cut's real force law), its true state and the whole workpiece ahead. No
+controller on a machine could; that is the point: it shows how far the task can be pushed.
+
+:class:`TurningMPCOracle` (Turning-v0) solves, every sample, a nonlinear program with
+CasADi and IPOPT over the next ``horizon`` samples: the commands that carry the tool
+furthest along the workpiece while the force at every sample instant stays at or below
+``margin`` x the limit. The model is the plant's own exact sampled linear part
+(``machining_envs.turning.plant.sampled_model``: servo, gear train and the feed per
+revolution as the moving integral of the feed velocity) with the cut's true force law
+``F = Kf f^p a(x)`` and the previewed depth ``a(x)``; what it leaves out is the force
+between sample instants (only the breakage check reads it, at 3x the limit). The force
+constraint is kept as ``f <= f*(x) = (margin L / (Kf a(x)))^(1/p)``, with ``f*`` tabulated
+along the workpiece on a 0.02 mm grid, each node taking the deepest cut within a node of it
+(so a depth step is never underestimated), and softened by a slack variable with a large
+cost so that IPOPT always returns a command.
+
+It runs one episode at a time on a single env (``evaluate(..., batched=False)``); under
+SB3's ``evaluate_policy``, build it from the env inside the ``DummyVecEnv``
+(``TurningMPCOracle.from_env(vec_env.envs[0])``). Needs CasADi (the ``bench`` extra).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agents.base import Agent, check_positive, unwrap_as
+from machining_envs.turning.env import TurningEnv
+from machining_envs.turning.plant import sampled_model
+
+__all__ = ["TurningMPCOracle"]
+
+#: Grid of the tabulated feed limit along the workpiece, mm.
+GRID_MM = 0.02
+#: Feed per revolution that stands for "no limit" (in air), mm/rev: above any the servo
+#: reaches (5.8 mm/s at 200 rpm is 1.7 mm/rev).
+FREE_FEED = 5.0
+
+
+def _casadi():
+    try:
+        import casadi
+    except ImportError as e:  # pragma: no cover - exercised without the extra
+        raise ImportError(
+            "the MPC oracle needs CasADi: pip install 'machining-envs[bench]'"
+        ) from e
+    return casadi
+
+
+class TurningMPCOracle(Agent):
+    """MPC with the true plant and the workpiece previewed (see the module docstring).
+
+    Parameters
+    ----------
+    env
+        The Turning-v0 env (any wrapper of it) the oracle acts in; it reads its truth.
+    horizon : int
+        Samples predicted (default 15: 1.5 s, three times the servo's settling time, and
+        up to 8 mm of workpiece at the top feed).
+    margin : float
+        Share of the limit the predicted force may reach (default 0.99: one per cent for
+        IPOPT's tolerances and the tabulated preview; the count rule charges every sample
+        over the limit itself).
+    """
+
+    state_size = 0
+    obs_dim = 7
+
+    def __init__(self, env, horizon: int = 15, margin: float = 0.99):
+        self.env = unwrap_as(env, TurningEnv, "TurningMPCOracle")
+        if isinstance(horizon, bool) or not isinstance(horizon, int) or not 2 <= horizon <= 100:
+            raise ValueError(f"horizon must be an integer in [2, 100], got {horizon!r}")
+        self.horizon = horizon
+        self.margin = check_positive("margin", margin, 1.0)
+        self.name = "MPC oracle"
+        self._episode = None
+        self._u_prev = None
+
+    @classmethod
+    def from_env(cls, env, horizon: int = 15, margin: float = 0.99) -> TurningMPCOracle:
+        return cls(env, horizon, margin)
+
+    # ---- the NLP, built once per episode ---------------------------------------------------
+    def _build(self, scenario) -> None:
+        ca = _casadi()
+        base = self.env
+        truth = scenario.true_params(base.params)
+        big, m = sampled_model(truth, scenario.spindle_rpm)
+        c = int(base.plant.cols[0])
+        rows = big.reshape(2 * m + 3, -1)[:, :c]
+        pick = rows[[m - 1, 2 * m - 1, 2 * m, 2 * m + 1, 2 * m + 2]]  # position, feed, state
+        kf, p = truth.force_coefficient, truth.feed_exponent
+        limit = self.margin * scenario.force_limit_N
+        prof = scenario.profile
+        length = prof.length_mm
+        reach = truth.max_feed_velocity_mm_s * truth.sample_time_s * (self.horizon + 2)
+        grid = np.arange(-1.0, length + reach + 1.0, GRID_MM)
+        depth = np.asarray(prof(grid), dtype=float)
+        deepest = np.maximum.reduce([depth, np.roll(depth, 1), np.roll(depth, -1)])
+        with np.errstate(divide="ignore"):
+            fstar = np.where(deepest > 0, (limit / (kf * deepest)) ** (1.0 / p), FREE_FEED)
+        fstar = np.minimum(fstar, FREE_FEED)
+        f_of_x = ca.interpolant("fstar", "linear", [grid], fstar)
+
+        opti = ca.Opti()
+        u = opti.variable(self.horizon)
+        slack = opti.variable(self.horizon)
+        z0 = opti.parameter(c)
+        b = ca.DM(pick)
+        z = ca.vertcat(z0[0:3], u[0], z0[4:c])
+        cost = 0
+        pos = None
+        for k in range(self.horizon):
+            y = ca.mtimes(b, z)
+            pos, feed = y[0], y[1]
+            opti.subject_to(feed <= f_of_x(pos) + slack[k])
+            cost += 1e3 * slack[k]
+            if k + 1 < self.horizon:
+                z = ca.vertcat(y[2:5], u[k + 1], z[0 : c - 4])
+        opti.minimize(-pos + cost + 1e-9 * ca.sumsqr(ca.diff(u)))
+        opti.subject_to(opti.bounded(0.0, u, truth.command_max))
+        opti.subject_to(slack >= 0)
+        opti.solver(
+            "ipopt",
+            {"print_time": False},
+            {"print_level": 0, "sb": "yes", "max_iter": 200, "tol": 1e-8},
+        )
+        self._opti, self._u, self._slack, self._z0 = opti, u, slack, z0
+        self._c = c
+        self._umax = truth.command_max
+        self._u_prev = np.zeros(self.horizon)
+
+    def _solve(self, z: np.ndarray) -> float:
+        opti = self._opti
+        opti.set_value(self._z0, z)
+        guess = np.append(self._u_prev[1:], self._u_prev[-1])
+        opti.set_initial(self._u, guess)
+        opti.set_initial(self._slack, 0.0)
+        try:
+            sol = opti.solve()
+            u = np.asarray(sol.value(self._u), dtype=float).reshape(-1)
+        except RuntimeError:  # IPOPT did not converge: take its last iterate
+            u = np.asarray(opti.debug.value(self._u), dtype=float).reshape(-1)
+        if not np.all(np.isfinite(u)):
+            u = guess
+        u = np.clip(u, 0.0, self._umax)
+        self._u_prev = u
+        return float(u[0])
+
+    # ---- the agent protocol ---------------------------------------------------------------
+    def _act(self, obs, state):
+        if obs.shape[0] != 1:
+            raise ValueError("TurningMPCOracle runs one env at a time (batched=False)")
+        base = self.env
+        lanes = base.plant
+        if lanes is None:
+            raise RuntimeError("TurningMPCOracle: reset the env before predicting")
+        t = float(lanes.lane_f[0, 5])
+        if self._episode is not base.scenario or t == 0.0:
+            self._build(base.scenario)
+            self._episode = base.scenario
+        z = lanes.z[0, : self._c].copy()
+        command = self._solve(z)
+        return np.array([[2.0 * command / self._umax - 1.0]])
