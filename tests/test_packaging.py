@@ -33,8 +33,8 @@ from agents import VariableGainPI
 from agents.eval import evaluate
 ev = evaluate(VariableGainPI.from_env, "machining_envs/Turning-v0", ["paper_405"], n_episodes=2)
 assert len(ev.rows) == 2
-from agents.bench.benchmark import _rl_installed
-assert not _rl_installed()
+from agents.bench.benchmark import _installed
+assert not _installed("stable_baselines3")
 from agents.bench.cli import main
 try:
     main(["--version"])

@@ -71,7 +71,7 @@ VELOCITY_SCALE_MM_S = 100.0
 #: Contour-error tolerance of Contouring-v0, mm (a finishing tolerance, the reward's
 #: ``contour_scale_mm``): ``info["cost"]`` is 1 on a servo period whose contour error is
 #: above it. The score is the largest contour error itself; the floor of a contour error
-#: is zero, so the env reports no ``score_bound`` (NaN).
+#: is zero, so the env reports no ``score_bound``.
 CONTOUR_TOLERANCE_MM = 0.01
 #: The observation previews the set point this many servo periods ahead (0.2, 2 and 10 ms
 #: at 5 kHz), as the mean reference velocity over each horizon.
@@ -524,7 +524,6 @@ class _ContouringCore:
             "contour_error_mm": o[8],
             "contour_tolerance_mm": CONTOUR_TOLERANCE_MM,
             "cost": 1.0 if o[8] > CONTOUR_TOLERANCE_MM else 0.0,
-            "score_bound": math.nan,
             "tracking_error_mm": o[9],
             "vx_mm_s": o[10],
             "vy_mm_s": o[11],
@@ -565,7 +564,6 @@ class _ContouringCore:
             info[name] = o[:, i].copy()
         info["contour_tolerance_mm"] = np.full(self.n, CONTOUR_TOLERANCE_MM)
         info["cost"] = (o[:, 8] > CONTOUR_TOLERANCE_MM).astype(np.float64)
-        info["score_bound"] = np.full(self.n, math.nan)
         info["path_length_mm"] = self.lf[:, _LLEN].copy()
         info["segment"] = self.li[:, _ISEG].copy()
         info["feed_mm_s"] = self.feeds.copy()
@@ -664,7 +662,7 @@ class ContouringEnv(gym.Env):
     * v0: first version. The step now runs compiled, shared with the vector env (the same
       numbers to the last bit). ``info`` gives ``contour_tolerance_mm``
       (``CONTOUR_TOLERANCE_MM``, 10 um), ``cost`` (1 on a servo period whose contour error
-      is above it) and ``score_bound`` (NaN: the floor of a contour error is zero); the
+      is above it); no ``score_bound`` (the floor of a contour error is zero); the
       scenarios ``train``, ``validation``, ``test`` (one distribution, separate streams)
       and ``ood`` (the former ``test`` ranges) replace ``train``/``test``.
 

@@ -46,7 +46,7 @@ def test_cli_help_shows_defaults_and_version(capsys):
         main(["evaluate", "--help"])
     text = capsys.readouterr().out
     assert (
-        "(default: ['test'])" in text
+        "(default: ['validation'])" in text
         and "(default: None)" not in text
         and "--force" in text
         and "--stats" in text

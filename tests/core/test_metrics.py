@@ -17,7 +17,9 @@ def _traj(force, segment=None, dt=0.1, finished_at=None):
     return {
         "t_s": t,
         "force_N": np.asarray(force, dtype=float),
-        "force_ref_N": np.full(n, 1000.0),
+        "force_limit_N": np.full(n, 1000.0),
+        # The env's cost: the force above the limit.
+        "cost": (np.asarray(force, dtype=float) > 1000.0).astype(float),
         "depth_mm": np.ones(n),
         "segment": np.zeros(n) if segment is None else np.asarray(segment),
         "finished": fin,
@@ -35,10 +37,12 @@ def test_metrics_of_a_constant_error():
     assert m["oscillation"] == pytest.approx(0.0, abs=1e-12)
     assert m["n_unsettled"] == 1.0 and m["time_over_limit"] == 0.0
     assert m["machining_time_s"] == 9.95 and m["finished"] == 1.0
+    assert np.isnan(m["score_bound"])  # the record has none
 
 
 def test_metrics_of_a_step_response():
-    # Settles into the band at sample 11, overshoots 20 % once, then stays at 1 kN.
+    # Settles into the band at sample 11, overshoots the 1 kN limit by 20 % once, then
+    # stays at it (a cost only on the overshoot).
     f = [0.0] + [500.0] * 10 + [1000.0, 1200.0] + [1000.0] * 60
     m = regulation_metrics(_traj(f))
     assert m["max_overshoot"] == pytest.approx(0.2)
