@@ -29,8 +29,9 @@ from machining_envs.core.splits import split_seeds
 
 __all__ = ["run_benchmark", "SIZES"]
 
-#: Episodes per split: (test, ood, robustness grid cells' episodes) for the quick and full run.
-SIZES = {"quick": (20, 10), "full": (100, 50)}
+#: Episodes per agent for the quick and the full run: (test, ood, at most this many test
+#: episodes for an oracle, which also stops at its spec's ``oracle_episodes``).
+SIZES = {"quick": (20, 10, 1), "full": (100, 50, 100)}
 _KIND_COLOUR = {"bound": "0.3", "oracle": "C3", "paper": "C0", "tuned": "C2", "learned": "C1"}
 
 
@@ -100,7 +101,7 @@ def _factories(spec: BenchmarkSpec, tuned: dict, verbose: bool):
     return out
 
 
-def _run_env(spec: BenchmarkSpec, n_test: int, n_ood: int, tuned: dict, verbose: bool, t0):
+def _run_env(spec: BenchmarkSpec, n_test, n_ood, n_oracle, tuned: dict, verbose: bool, t0):
     run = _EnvRun(spec)
     env_name = spec.env_id.split("/")[-1]
     jobs = _factories(spec, tuned, verbose)
@@ -127,7 +128,7 @@ def _run_env(spec: BenchmarkSpec, n_test: int, n_ood: int, tuned: dict, verbose:
             if verbose:
                 print("  oracle skipped: it needs casadi (pip install 'machining-envs[bench]')")
         else:
-            n = min(spec.oracle_episodes, n_test)
+            n = min(spec.oracle_episodes, n_oracle)
             ev = evaluate(
                 spec.oracle,
                 spec.env_id,
@@ -226,12 +227,12 @@ def run_benchmark(
 ) -> Evaluation:  # fmt: skip
     """Run every env's benchmark (or those in ``envs``); return all episode rows.
 
-    ``quick``: 20 test and 10 ood episodes per agent instead of 100 and 50, no robustness
-    grid. ``seed`` seeds the bootstrap only: the episodes are the splits' fixed ones.
+    ``quick``: 20 test and 10 ood episodes per agent instead of 100 and 50, one for the
+    oracles, no robustness grid. ``seed`` seeds the bootstrap only: the episodes are the splits' fixed ones.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    n_test, n_ood = SIZES["quick" if quick else "full"]
+    n_test, n_ood, n_oracle = SIZES["quick" if quick else "full"]
     tuned = load_tuned()
     report = [
         "# machining_envs benchmark",
@@ -254,7 +255,7 @@ def run_benchmark(
             continue
         t_env = time.perf_counter()
         env_name = spec.env_id.split("/")[-1]
-        run = _run_env(spec, n_test, n_ood, tuned, verbose, t0)
+        run = _run_env(spec, n_test, n_ood, n_oracle, tuned, verbose, t0)
         ref = _reference(run, tuned)
         test_table, stats = _table(run, "test", ref, seed)
         ood_table, _ = _table(run, "ood", ref, seed)

@@ -406,6 +406,13 @@ def plot_milling_reproduction(runs: dict, fig5: dict, gains: dict, path) -> None
 # --- The declaration: what the benchmark, the CLI and the docs know of milling -------------
 
 
+def _oracle(env):
+    """The MPC oracle (``agents.oracle``; imported when the benchmark runs it: CasADi)."""
+    from agents.oracle import MillingMPCOracle
+
+    return MillingMPCOracle.from_env(env)
+
+
 def _grid_cut(spindle_scale: float, depth_mm: float) -> MillingScenario:
     """One constant-depth cut of the robustness grid (nominal process constants)."""
     prof = DepthProfile.steps((depth_mm,), PAPER_LENGTH_MM, name=f"{depth_mm:g} mm")
@@ -422,6 +429,8 @@ PROCESS = Process(
             "paper_step",
             tuned=(MillingConstantFeed, FixedGainIntegral, IntegralACC),
             learned=("end_milling_ppo",),
+            oracle=_oracle,
+            oracle_episodes=3,
             robustness=Robustness(
                 "spindle speed (x nominal)",
                 (0.7, 0.85, 1.0, 1.2, 1.4),
