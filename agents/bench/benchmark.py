@@ -31,7 +31,7 @@ __all__ = ["run_benchmark", "SIZES"]
 
 #: Episodes per agent for the quick and the full run: (test, ood, at most this many test
 #: episodes for an oracle, which also stops at its spec's ``oracle_episodes``).
-SIZES = {"quick": (20, 10, 1), "full": (100, 50, 100)}
+SIZES = {"quick": (10, 5, 1), "full": (100, 25, 100)}
 _KIND_COLOUR = {"bound": "0.3", "oracle": "C3", "paper": "C0", "tuned": "C2", "learned": "C1"}
 
 
@@ -123,7 +123,10 @@ def _run_env(spec: BenchmarkSpec, n_test, n_ood, n_oracle, tuned: dict, verbose:
             print(
                 f"[{env_name}] {k + 1}/{len(jobs)} {kind} {name}{tag} ({time.perf_counter() - t0:.0f} s)"
             )
-    if spec.oracle is not None:
+    if spec.oracle is not None and n_oracle < spec.oracle_episodes and not spec.oracle_in_quick:
+        if verbose:
+            print(f"  oracle skipped in --quick ({spec.oracle_seconds:g} s an episode)")
+    elif spec.oracle is not None:
         if not _installed("casadi"):
             if verbose:
                 print("  oracle skipped: it needs casadi (pip install 'machining-envs[bench]')")
@@ -227,8 +230,8 @@ def run_benchmark(
 ) -> Evaluation:  # fmt: skip
     """Run every env's benchmark (or those in ``envs``); return all episode rows.
 
-    ``quick``: 20 test and 10 ood episodes per agent instead of 100 and 50, one for the
-    oracles, no robustness grid. ``seed`` seeds the bootstrap only: the episodes are the splits' fixed ones.
+    ``quick``: 10 test and 5 ood episodes per agent instead of 100 and 25, one for the
+    oracles that are fast enough (``oracle_in_quick``), no robustness grid. ``seed`` seeds the bootstrap only: the episodes are the splits' fixed ones.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

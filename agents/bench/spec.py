@@ -73,6 +73,10 @@ class BenchmarkSpec:
     oracle: Callable | None = None
     """Factory of the MPC oracle (single env; reads the episode's truth)."""
     oracle_episodes: int = 10
+    oracle_in_quick: bool = True
+    """Whether ``--quick`` runs the oracle (on one episode)."""
+    oracle_seconds: float = 10.0
+    """About how long the oracle takes an episode on 2 cores, s (for the skip message)."""
     env_kwargs: dict = field(default_factory=dict)
     """Keyword arguments of ``gym.make`` for every row (tuning uses them too)."""
     robustness: Robustness | None = None
