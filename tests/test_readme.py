@@ -19,7 +19,7 @@ def test_quickstart_runs(capsys):
     code = re.search(r"```python\n(.*?)```", quick, re.S).group(1)
     exec(compile(code, "README quickstart", "exec"), {})
     out = capsys.readouterr().out
-    assert "cut in" in out and "| adaptive PI K=0.5 | test | 3 |" in out
+    assert "cut in" in out and "| adaptive PI K=0.5 | validation | 3 |" in out
 
 
 def test_ci_runs_the_readme_test_command():
