@@ -127,17 +127,23 @@ class TurningMPCOracle(Agent):
             cost += 1e3 * slack[k]
             if k + 1 < self.horizon:
                 z = ca.vertcat(y[2:5], u[k + 1], z[0 : c - 4])
-        opti.minimize(-pos + cost + 1e-9 * ca.sumsqr(ca.diff(u)))
-        opti.subject_to(opti.bounded(0.0, u, truth.command_max))
+        self._c = c
+        self._finish(opti, u, slack, z0, -pos + cost, truth.command_max)
+
+    def _finish(self, opti, u, slack, values, objective, umax: float) -> None:
+        """Objective (with a tiny penalty on command changes), bounds and IPOPT on the
+        built NLP; kept for the episode's solves."""
+        ca = _casadi()
+        opti.minimize(objective + 1e-9 * ca.sumsqr(ca.diff(u)))
+        opti.subject_to(opti.bounded(0.0, u, umax))
         opti.subject_to(slack >= 0)
         opti.solver(
             "ipopt",
             {"print_time": False},
             {"print_level": 0, "sb": "yes", "max_iter": 200, "tol": 1e-8},
         )
-        self._opti, self._u, self._slack, self._z0 = opti, u, slack, z0
-        self._c = c
-        self._umax = truth.command_max
+        self._opti, self._u, self._slack, self._z0 = opti, u, slack, values
+        self._umax = umax
         self._u_prev = np.zeros(self.horizon)
 
     def _solve(self, z: np.ndarray) -> float:
@@ -245,17 +251,7 @@ class MillingMPCOracle(TurningMPCOracle):
             cost += slack[k]  # 1 mm of progress per N·mm over: never worth it
             x3 = w[2 * m : 2 * m + 3]
             pos = x3[2]
-        opti.minimize(-pos + cost + 1e-9 * ca.sumsqr(ca.diff(u)))
-        opti.subject_to(opti.bounded(0.0, u, umax))
-        opti.subject_to(slack >= 0)
-        opti.solver(
-            "ipopt",
-            {"print_time": False},
-            {"print_level": 0, "sb": "yes", "max_iter": 200, "tol": 1e-8},
-        )
-        self._opti, self._u, self._slack, self._z0 = opti, u, slack, s0
-        self._umax = umax
-        self._u_prev = np.zeros(self.horizon)
+        self._finish(opti, u, slack, s0, -pos + cost, umax)
 
     def _command_to_action(self, command: float) -> np.ndarray:
         return np.array([[float(self.env.command_map.command_to_action(command))]])

@@ -1,14 +1,13 @@
 """The contouring tasks: ContouringFeed-v0's cost marks the steps past the tolerance, its
-bound (the path at the largest override) is never beaten, the look-ahead planner slows for
-curves, and every contouring agent's free parameters are accepted and checked."""
+bound (the path at the largest override) is never beaten, and the look-ahead planner slows
+for curves (the agents' free parameters are checked in ``tests/envs/test_task.py``)."""
 
 import gymnasium as gym
 import numpy as np
 import pytest
 
-from agents import ConstantOverride, HInf2DOF, LookAheadFeed, PIPosition
+from agents import ConstantOverride, LookAheadFeed
 from agents.eval import evaluate
-from tests.helpers import CONTOURING
 
 FEED = "machining_envs/ContouringFeed-v0"
 
@@ -52,26 +51,3 @@ def test_look_ahead_slows_down_before_a_turn_not_on_a_straight():
     override = (action[:, 0] + 1.0) / 2.0 * env.unwrapped.override_max
     assert override[0] == pytest.approx(1.0)  # the cap: the programmed feed
     assert 0.02 <= override[1] < 0.5
-
-
-@pytest.mark.parametrize(
-    "env_id, cls",
-    [
-        (CONTOURING, PIPosition),
-        (CONTOURING, HInf2DOF),
-        (FEED, ConstantOverride),
-        (FEED, LookAheadFeed),
-    ],
-    ids=lambda v: getattr(v, "__name__", v),
-)
-def test_tunable_parameters_are_accepted_and_checked(env_id, cls):
-    env = gym.make(env_id)
-    mid = {
-        k: (lo * hi) ** 0.5 if log else 0.5 * (lo + hi) for k, (lo, hi, log) in cls.TUNABLE.items()
-    }
-    agent = cls.from_env(env, **mid)
-    for k, v in mid.items():
-        assert getattr(agent, k) == pytest.approx(v)
-    key = next(iter(cls.TUNABLE))
-    with pytest.raises(ValueError, match=key):
-        cls.from_env(env, **{key: -1.0})

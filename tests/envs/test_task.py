@@ -10,15 +10,23 @@ import numpy as np
 import pytest
 
 from agents import (
+    PD,
     ConstantFeed,
+    ConstantOverride,
     FixedGainIntegral,
     FixedGainPI,
+    HInf2DOF,
     IntegralACC,
+    LookAheadFeed,
     MillingConstantFeed,
+    PIPosition,
+    SlidingMode,
     VariableGainPI,
 )
 from agents.eval import evaluate
-from tests.helpers import MILLING, TURNING
+from tests.helpers import CONTOURING, DRILLING, MILLING, TURNING
+
+FEED = "machining_envs/ContouringFeed-v0"
 
 
 def _turning_speed(env, sc, truth, a):
@@ -63,6 +71,15 @@ def _flat_milling():
 #: A flat cut whose limit is 1.2x the nominal one.
 FLAT = {TURNING: _flat_turning, MILLING: _flat_milling}
 AGENT_CASES = [(env_id, cls) for env_id, c in CASES.items() for cls in c[2]]
+#: Every classical agent with free parameters, for the TUNABLE check.
+TUNABLE_CASES = AGENT_CASES + [
+    (DRILLING, PD),
+    (DRILLING, SlidingMode),
+    (CONTOURING, PIPosition),
+    (CONTOURING, HInf2DOF),
+    (FEED, ConstantOverride),
+    (FEED, LookAheadFeed),
+]
 
 
 @pytest.mark.parametrize("env_id", CASES)
@@ -123,8 +140,10 @@ def test_counting_episodes_never_beat_the_bound(env_id, cls):
                 assert r[score.value_key] >= r["score_bound"] * (1 - 1e-9), (cls.__name__, r)
 
 
-@pytest.mark.parametrize("env_id, cls", AGENT_CASES, ids=lambda v: getattr(v, "__name__", v))
+@pytest.mark.parametrize("env_id, cls", TUNABLE_CASES, ids=lambda v: getattr(v, "__name__", v))
 def test_tunable_parameters_are_accepted_and_checked(env_id, cls):
+    """Every key of ``TUNABLE`` is a keyword of ``from_env`` kept by the agent; a value
+    outside the allowed range is refused with the parameter's name."""
     env = gym.make(env_id)
     mid = {
         k: (lo * hi) ** 0.5 if log else 0.5 * (lo + hi) for k, (lo, hi, log) in cls.TUNABLE.items()
@@ -132,8 +151,9 @@ def test_tunable_parameters_are_accepted_and_checked(env_id, cls):
     agent = cls.from_env(env, **mid)
     for k, v in mid.items():
         assert getattr(agent, k) == pytest.approx(v)
-    with pytest.raises(ValueError, match="setpoint"):
-        cls.from_env(env, setpoint=-0.5)
+    for key in cls.TUNABLE:
+        with pytest.raises(ValueError, match=key):
+            cls.from_env(env, **{key: -0.5})
 
 
 @pytest.mark.parametrize("env_id, cls", [(TURNING, VariableGainPI), (MILLING, IntegralACC)])
