@@ -247,7 +247,7 @@ class VariableGainPI(Agent):
             _positive("min_command_fraction", min_command_fraction, 1.0) * io.command_max
         )
         self.min_force_fraction = _positive("min_force_fraction", min_force_fraction, 1.0)
-        self.name = f"adaptive PI K={k:g}"
+        self.name = f"adaptive PI K={k:.3g}"
 
     @classmethod
     def from_env(
