@@ -172,8 +172,10 @@ class NoControl(Agent):
     nominal one): the same cut.
     """
 
-    #: Nothing to tune: the paper's free-running spindle.
-    TUNABLE: dict = {}
+    #: Free parameters for tuning: the constant voltage (the paper's runs at the nominal
+    #: 5 V). A faster spindle cuts a thinner chip, so a constant high speed is a baseline
+    #: the regulators must beat: the task charges nothing for spindle speed.
+    TUNABLE = {"voltage": (2.0, 10.0, False)}
     state_size = 0
     obs_dim = _OBS_DIM
     obs_index = _I
@@ -184,11 +186,12 @@ class NoControl(Agent):
         if io.control == "voltage":
             u = p.nominal_voltage if voltage is None else voltage
             self.command = _in_range("voltage", u, 0.0, p.voltage_max)
+            self.voltage = self.command
         else:
             if voltage is not None:
                 raise ValueError("voltage applies to control='voltage' only")
             self.command = p.feed_velocity_mm_s
-        self.name = "no control"
+        self.name = "no control" if voltage is None else f"constant {self.command:.3g} V"
 
     @classmethod
     def from_env(cls, env, voltage: float | None = None) -> NoControl:

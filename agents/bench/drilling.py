@@ -344,7 +344,7 @@ PROCESS = Process(
             (NoControl.from_env, PD.from_env, SlidingMode.from_env),
             ("paper_0.5", "paper_0.6", "paper_0.7", "paper_0.8"),
             "paper_0.8",
-            tuned=(PD, SlidingMode),
+            tuned=(NoControl, PD, SlidingMode),
             learned=("micro_drilling_ppo",),
             table_metrics=(
                 "drilling_time_s",

@@ -128,8 +128,7 @@ def tune_agent(
         return s if math.isfinite(s) else 1e12
 
     sampler = optuna.samplers.TPESampler(seed=budget.seed, n_startup_trials=budget.startup)
-    if not verbose:
-        optuna.logging.set_verbosity(optuna.logging.WARNING)
+    optuna.logging.set_verbosity(optuna.logging.WARNING)  # one summary line per agent instead
     study = optuna.create_study(direction="minimize", sampler=sampler)
     study.enqueue_trial({k: float(v) for k, v in paper.items()})
     study.optimize(objective, n_trials=budget.trials)

@@ -19,6 +19,7 @@ from agents import (
     IntegralACC,
     LookAheadFeed,
     MillingConstantFeed,
+    NoControl,
     PIPosition,
     SlidingMode,
     VariableGainPI,
@@ -73,6 +74,7 @@ FLAT = {TURNING: _flat_turning, MILLING: _flat_milling}
 AGENT_CASES = [(env_id, cls) for env_id, c in CASES.items() for cls in c[2]]
 #: Every classical agent with free parameters, for the TUNABLE check.
 TUNABLE_CASES = AGENT_CASES + [
+    (DRILLING, NoControl),
     (DRILLING, PD),
     (DRILLING, SlidingMode),
     (CONTOURING, PIPosition),
