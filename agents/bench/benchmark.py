@@ -32,7 +32,7 @@ __all__ = ["run_benchmark", "SIZES"]
 #: Episodes per agent for the quick and the full run: (test, ood, at most this many test
 #: episodes for an oracle, which also stops at its spec's ``oracle_episodes``).
 SIZES = {"quick": (10, 5, 1), "full": (100, 25, 100)}
-_KIND_COLOUR = {"bound": "0.3", "oracle": "C3", "paper": "C0", "tuned": "C2", "learned": "C1"}
+_KIND_COLOUR = {"bound": "0.3", "oracle": "k", "paper": "C0", "tuned": "C2", "learned": "C1"}
 
 
 def _installed(module: str) -> bool:
@@ -430,7 +430,7 @@ def _plot_trajectories(run: _EnvRun, path: Path) -> Path:
             kind = run.kind[name]
             agent = factory(env)
             tr = rollout(agent, env, "test", seed)
-            c = _KIND_COLOUR[kind] if kind == "oracle" else f"C{i % 10}"
+            c = _KIND_COLOUR[kind] if kind == "oracle" else f"C{i % 10}"  # the oracle in black
             axes[0].plot(tr["t_s"], tr[key], color=c, lw=1, label=f"{agent_name(agent)} [{kind}]")
             axes[1].plot(tr["t_s"], tr[low_key], color=c, lw=1)
             peaks.append(float(np.nanmax(np.abs(tr[key]))))
