@@ -75,8 +75,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     b.add_argument(
         "--quick", action="store_true",
-        help="10 test and 5 ood episodes per agent instead of 100 and 25, the fast oracles on "
-        "one episode, no robustness grid",
+        help="8 test episodes per agent instead of 100, no ood (25 in the full run), the fast "
+        "oracles on one episode, no robustness grid",
     )  # fmt: skip
     b.add_argument("--out", default="results", help="output folder (default: results)")
     b.add_argument("--env", nargs="+", default=None, help="only these env ids (default: all)")
