@@ -148,3 +148,29 @@ def test_statistics_pair_episodes_and_bracket_the_truth():
     broken = _rows(base)
     broken[0]["breakage"] = 1.0
     assert agent_stats(broken, REGULATION_SCORE, 200.0).count_rate == 0.99
+
+
+def _tuned_cases():
+    from agents.bench.declarations import BENCHMARKS
+
+    return [(spec, cls) for spec in BENCHMARKS for cls in spec.tuned]
+
+
+@pytest.mark.parametrize(
+    "spec, cls", _tuned_cases(), ids=lambda v: getattr(v, "__name__", getattr(v, "env_id", v))
+)
+def test_tuned_agents_run_under_sb3_evaluate_policy(spec, cls):
+    """The benchmark's tuned rows are plain agents: SB3's ``evaluate_policy`` runs them."""
+    pytest.importorskip("stable_baselines3")
+    from stable_baselines3.common.evaluation import evaluate_policy
+    from stable_baselines3.common.monitor import Monitor
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    scenario = spec.paper_scenarios[0]
+    venv = DummyVecEnv(
+        [lambda: Monitor(gym.make(spec.env_id, scenario=scenario, **spec.env_kwargs))]
+    )
+    agent = tuned_factory(cls, spec.env_id)(venv.envs[0])
+    assert agent.name.endswith("(tuned)")
+    mean, _ = evaluate_policy(agent, venv, n_eval_episodes=1)
+    assert np.isfinite(mean)
