@@ -472,7 +472,7 @@ def _plot_robustness(run: _EnvRun, ref: str | None, path: Path) -> Path | None:
     who = [n for n in (ref, learned[0] if learned else None) if n is not None]
     if not who:
         return None
-    fig = Figure(figsize=(4.6 * len(who), 4))
+    fig = Figure(figsize=(4.8 * len(who) + 1.0, 4), layout="constrained")
     axes = fig.subplots(1, len(who), squeeze=False)[0]
     env = gym.make(run.spec.env_id, **run.spec.env_kwargs)
     score, failed = run.score, run.failed

@@ -27,7 +27,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-from agents.bench.spec import BenchmarkSpec, Process
+from agents.bench.spec import BenchmarkSpec, Process, Robustness
 from agents.drilling import PD, NoControl, PeckDrilling, SlidingMode
 from agents.eval import rollout
 from machining_envs.drilling.metrics import drilling_mask, drilling_metrics
@@ -336,6 +336,13 @@ def plot_drilling_reproduction(
 
 # --- The declaration: what the benchmark, the CLI and the docs know of drilling -------------
 
+def _grid_hole(cutting_scale: float, aspect_ratio: float) -> DrillingScenario:
+    """One 0.6 mm hole of the robustness grid (nominal chips, fluctuation and noise)."""
+    return DrillingScenario(
+        f"grid_{cutting_scale:g}_{aspect_ratio:g}", 0.6, aspect_ratio, cutting_scale=cutting_scale
+    )
+
+
 PROCESS = Process(
     "drilling",
     benchmarks=(
@@ -346,6 +353,11 @@ PROCESS = Process(
             "paper_0.8",
             tuned=(NoControl, PD, SlidingMode),
             learned=("micro_drilling_ppo",),
+            robustness=Robustness(
+                "cutting constant (x nominal)", (0.85, 1.0, 1.15),
+                "hole depth / diameter", (6.0, 8.0, 10.0, 12.0),
+                _grid_hole,
+            ),  # fmt: skip
             table_metrics=(
                 "drilling_time_s",
                 "torque_mean_rel",
