@@ -49,6 +49,15 @@ GRID_MM = 0.02
 FREE_FEED = 5.0
 
 
+def _deepest_depth(profile, end_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """The preview table: a ``GRID_MM`` grid from 1 mm before the workpiece to ``end_mm``
+    + 1 mm, and at each node the deepest cut within one node of it (so that linear
+    interpolation between nodes never underestimates a depth step)."""
+    grid = np.arange(-1.0, end_mm + 1.0, GRID_MM)
+    depth = np.asarray(profile(grid), dtype=float)
+    return grid, np.maximum.reduce([depth, np.roll(depth, 1), np.roll(depth, -1)])
+
+
 def _casadi():
     try:
         import casadi
@@ -104,9 +113,7 @@ class TurningMPCOracle(Agent):
         prof = scenario.profile
         length = prof.length_mm
         reach = truth.max_feed_velocity_mm_s * truth.sample_time_s * (self.horizon + 2)
-        grid = np.arange(-1.0, length + reach + 1.0, GRID_MM)
-        depth = np.asarray(prof(grid), dtype=float)
-        deepest = np.maximum.reduce([depth, np.roll(depth, 1), np.roll(depth, -1)])
+        grid, deepest = _deepest_depth(prof, length + reach)
         with np.errstate(divide="ignore"):
             fstar = np.where(deepest > 0, (limit / (kf * deepest)) ** (1.0 / p), FREE_FEED)
         fstar = np.minimum(fstar, FREE_FEED)
@@ -227,9 +234,7 @@ class MillingMPCOracle(TurningMPCOracle):
         limit = self.margin * float(self.env._core.torque_limit[0])
         prof = scenario.profile
         reach = umax * self.env.params.servo_gain * self.env.params.sample_time_s
-        grid = np.arange(-1.0, prof.length_mm + reach * (self.horizon + 2) + 1.0, GRID_MM)
-        depth = np.asarray(prof(grid), dtype=float)
-        deepest = np.maximum.reduce([depth, np.roll(depth, 1), np.roll(depth, -1)])
+        grid, deepest = _deepest_depth(prof, prof.length_mm + reach * (self.horizon + 2))
         gain = ca.interpolant("gain", "linear", [grid], c * deepest**l_exp)
 
         opti = ca.Opti()

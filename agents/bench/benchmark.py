@@ -360,19 +360,15 @@ def _plot_profiles(run: _EnvRun, path: Path) -> Path:
 
     score, failed = run.score, run.failed
     names = [n for n in run.rows if "test" in run.rows[n]]
-    mats, has_bound = {}, True
-    for n in names:
-        rows = run.rows[n]["test"]
-        eff = [score.efficiency(r, failed) for r in rows]
-        has_bound = has_bound and all(math.isfinite(e) for e in eff)
+    eff = {n: [score.efficiency(r, failed) for r in run.rows[n]["test"]] for n in names}
+    has_bound = all(math.isfinite(e) for es in eff.values() for e in es)
+    mats = {}
     for n in names:
         rows = run.rows[n]["test"]
         if has_bound:
             by_p: dict = {}
-            for r in rows:
-                by_p.setdefault(r.get("policy_seed", 0), {})[r["seed"]] = score.efficiency(
-                    r, failed
-                )
+            for r, e in zip(rows, eff[n], strict=True):
+                by_p.setdefault(r.get("policy_seed", 0), {})[r["seed"]] = e
             seeds = sorted(next(iter(by_p.values())))
             mats[n] = np.array([[by_p[p][s] for p in sorted(by_p)] for s in seeds])
         else:

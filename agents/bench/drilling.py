@@ -336,6 +336,7 @@ def plot_drilling_reproduction(
 
 # --- The declaration: what the benchmark, the CLI and the docs know of drilling -------------
 
+
 def _grid_hole(cutting_scale: float, aspect_ratio: float) -> DrillingScenario:
     """One 0.6 mm hole of the robustness grid (nominal chips, fluctuation and noise)."""
     return DrillingScenario(
@@ -354,8 +355,10 @@ PROCESS = Process(
             tuned=(NoControl, PD, SlidingMode),
             learned=("micro_drilling_ppo",),
             robustness=Robustness(
-                "cutting constant (x nominal)", (0.85, 1.0, 1.15),
-                "hole depth / diameter", (6.0, 8.0, 10.0, 12.0),
+                "cutting constant (x nominal)",
+                (0.85, 1.0, 1.15),
+                "hole depth / diameter",
+                (6.0, 8.0, 10.0, 12.0),
                 _grid_hole,
             ),  # fmt: skip
             table_metrics=(

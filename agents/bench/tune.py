@@ -80,7 +80,9 @@ def paper_settings(cls, env) -> dict:
         ) from None
 
 
-def _score(cls, params: dict, env_id: str, split: str, episodes: int, env_kwargs: dict) -> float:
+def _score(cls, params: dict, env_id: str, split: str, episodes: int, env_kwargs: dict,
+           score, failed: float) -> float:  # fmt: skip
+    """The env's primary score of ``cls`` with ``params`` on the split's first episodes."""
     check_not_held_out([split], "tuning")
     factory = functools.partial(cls.from_env, **params)
     ev = evaluate(
@@ -91,12 +93,6 @@ def _score(cls, params: dict, env_id: str, split: str, episodes: int, env_kwargs
         seed=split_seeds(split, episodes)[0],
         env_kwargs=env_kwargs,
     )
-    env = gym.make(env_id, **env_kwargs)
-    try:
-        score = task_of(env).score
-        failed = score.failed_value(env)
-    finally:
-        env.close()
     return float(score(ev.rows, failed)["score"])
 
 
@@ -114,8 +110,12 @@ def tune_agent(
     env = gym.make(env_id, **env_kwargs)
     try:
         paper = paper_settings(cls, env)
+        score = task_of(env).score
+        failed = score.failed_value(env)
     finally:
         env.close()
+    run = functools.partial(_score, env_id=env_id, episodes=budget.episodes,
+                            env_kwargs=env_kwargs, score=score, failed=failed)  # fmt: skip
     if not space:
         raise ValueError(f"{cls.__name__} has no free parameters to tune (TUNABLE is empty)")
     t0 = time.perf_counter()
@@ -124,7 +124,7 @@ def tune_agent(
         params = {
             k: trial.suggest_float(k, lo, hi, log=bool(log)) for k, (lo, hi, log) in space.items()
         }
-        s = _score(cls, params, env_id, "train", budget.episodes, env_kwargs)
+        s = run(cls, params, split="train")
         return s if math.isfinite(s) else 1e12
 
     sampler = optuna.samplers.TPESampler(seed=budget.seed, n_startup_trials=budget.startup)
@@ -138,10 +138,8 @@ def tune_agent(
         "paper_params": {k: float(v) for k, v in paper.items()},
         "train_score": float(study.best_value),
         "paper_train_score": float(study.trials[0].value),
-        "validation_score": _score(cls, best, env_id, "validation", budget.episodes, env_kwargs),
-        "paper_validation_score": _score(
-            cls, paper, env_id, "validation", budget.episodes, env_kwargs
-        ),
+        "validation_score": run(cls, best, split="validation"),
+        "paper_validation_score": run(cls, paper, split="validation"),
         "wall_s": round(time.perf_counter() - t0, 1),
     }
     if verbose:
