@@ -30,6 +30,7 @@ from machining_envs.contouring.plant import (
 from machining_envs.contouring.scenarios import (
     CONTOURING_SCENARIOS,
     ContouringScenario,
+    check_feed,
     contouring_scenario,
 )
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
@@ -38,6 +39,7 @@ from machining_envs.core.env import (
     EpisodeLog,
     adopt_core,
     check_scenario_spec,
+    episode_ended,
     present_frame,
     ready_to_render,
     real_actions,
@@ -457,6 +459,7 @@ class _ContouringCore:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
         first observation goes to ``obs[lane]``; returns its reset info."""
         sc = contouring_scenario(spec, rng)
+        check_feed(sc, self.params)
         self.scenarios[lane] = sc
         plant = ContouringPlant(sc.true_params(self.params))
         self.plants[lane] = plant
@@ -723,6 +726,7 @@ class ContouringEnv(gym.Env):
     # ---- gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
+        self._ended = False
         core = self._core
         info = core.start(0, scenario_option(options, self.default_scenario), self.np_random)
         self.scenario = core.scenarios[0]
@@ -737,6 +741,8 @@ class ContouringEnv(gym.Env):
     def step(self, action):
         if self.plant is None:
             raise RuntimeError("ContouringEnv: call reset() before step()")
+        if self._ended:
+            raise episode_ended("ContouringEnv")
         (ax, ay), clipped = check_action_vector(action, 2, "ContouringEnv")
         core = self._core
         act = core.act[0]
@@ -747,6 +753,7 @@ class ContouringEnv(gym.Env):
         info = core.lane_info(0)
         record_step(self, self._log, info)
         f = core.flags[0]
+        self._ended = bool(f[2] or f[3])
         return core.obs[0].copy(), float(core.out[0, 0]), bool(f[2]), bool(f[3]), info
 
     def render(self):

@@ -36,6 +36,7 @@ from machining_envs.contouring.plant import AXES, ContouringParams
 from machining_envs.contouring.scenarios import (
     CONTOURING_SCENARIOS,
     ContouringScenario,
+    check_feed,
     contouring_scenario,
 )
 from machining_envs.contouring.servo import SERVO_KINDS, ServoLanes, run_block, servo_design
@@ -45,6 +46,7 @@ from machining_envs.core.env import (
     adopt_core,
     check_reward_weights,
     check_scenario_spec,
+    episode_ended,
     present_frame,
     ready_to_render,
     record_step,
@@ -401,6 +403,7 @@ class _FeedCore:
             raise ValueError(
                 f"scenario {sc.name!r} is a step command; ContouringFeed-v0 needs a path with a feed"
             )
+        check_feed(sc, self.params)
         self.scenarios[lane] = sc
         self._set_loops(lane, sc.true_params(self.params))
         self.state[lane] = 0.0
@@ -701,6 +704,7 @@ class ContouringFeedEnv(gym.Env):
     # ---- gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
+        self._ended = False
         core = self._core
         info = core.start(0, scenario_option(options, self.default_scenario), self.np_random)
         self.scenario = core.scenarios[0]
@@ -714,6 +718,8 @@ class ContouringFeedEnv(gym.Env):
     def step(self, action):
         if not self._started:
             raise RuntimeError("ContouringFeedEnv: call reset() before step()")
+        if self._ended:
+            raise episode_ended("ContouringFeedEnv")
         (a,), clipped = check_action_vector(action, 1, "ContouringFeedEnv")
         core = self._core
         core.in_action[0] = a
@@ -722,6 +728,7 @@ class ContouringFeedEnv(gym.Env):
         info = core.lane_info(0)
         record_step(self, self._log, info)
         f = core.flags[0]
+        self._ended = bool(f[2] or f[3])
         return core.obs[0].copy(), float(core.reward[0]), bool(f[2]), bool(f[3]), info
 
     def render(self):

@@ -16,7 +16,7 @@ import numpy as np
 
 from machining_envs.contouring.paths import PAPER_CORNER_FEED_MM_S, PAPER_FEED_MM_S, Path
 from machining_envs.contouring.plant import ContouringParams
-from machining_envs.core.checks import check_range
+from machining_envs.core.checks import check_below, check_range
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.splits import split_rng
 
@@ -28,6 +28,7 @@ __all__ = [
     "PAPER_LOAD_TORQUE_NM",
     "PAPER_LOAD_TIME_S",
     "FEED_RANGE_MM_S",
+    "check_feed",
 ]
 
 #: Size of the step of the paper's step-response tests (Fig. 4-5), mm. The paper plots a
@@ -215,6 +216,23 @@ CONTOURING_SCENARIOS: dict[str, Callable[[np.random.Generator], ContouringScenar
         "ood", (3, 6), (3.0, 20.0), (2.0, 40.0), (20.0, 240.0), (15.0, 90.0), (0.7, 1.4), 2.0
     ),
 }
+
+
+def check_feed(scenario: ContouringScenario, params: ContouringParams) -> None:
+    """``ValueError`` if the scenario's programmed feed is above the drives' top speed
+    (``params.command_max_mm_s``: ``motor_max_rpm`` through ``screw_lead_mm``). A CNC
+    never programs a feed its axes cannot reach; a step command (``feed_mm_s = inf``) is
+    the one deliberate exception, the paper's step-response test."""
+    if scenario.is_step:
+        return
+    check_below(
+        f"scenario {scenario.name!r}: feed_mm_s",
+        scenario.feed_mm_s,
+        "the drives' top speed (motor_max_rpm / 60 x screw_lead_mm, mm/s)",
+        params.command_max_mm_s,
+        "the axes could not follow the path at that feed",
+        strict=False,
+    )
 
 
 def contouring_scenario(spec, rng: np.random.Generator) -> ContouringScenario:

@@ -1,4 +1,5 @@
-"""Checks of single parameter values: a finite number in a range, an integer in a range.
+"""Checks of parameter values: a finite number in a range, an integer in a range, and one
+value below another (a check across fields).
 
 Every check raises ``ValueError`` with one message format, which names the parameter, the
 value and the allowed range: ``"{name} must be in [lo, hi], got {value!r}"`` (``(lo, hi]``
@@ -17,7 +18,14 @@ import math
 
 import numpy as np
 
-__all__ = ["REAL_TYPES", "PY_NUMBER_TYPES", "INTEGER_TYPES", "check_range", "check_integer"]
+__all__ = [
+    "REAL_TYPES",
+    "PY_NUMBER_TYPES",
+    "INTEGER_TYPES",
+    "check_range",
+    "check_integer",
+    "check_below",
+]
 
 #: Python's and numpy's real scalar types: what a parameter check accepts by default.
 REAL_TYPES: tuple[type, ...] = (int, float, np.integer, np.floating)
@@ -114,3 +122,20 @@ def check_integer(
     ):
         raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}")
     return value
+
+
+def check_below(
+    name: str, value: float, bound_name: str, bound: float, why: str, *, strict: bool = True
+) -> None:
+    """``ValueError`` unless ``value < bound`` (``<=`` with ``strict=False``): a check across
+    two fields, whose message names both, their values and why they must be ordered.
+
+    >>> check_below("force_limit_N", 4000.0, "breakage_force_N", 3000.0, "the tool breaks first")
+    Traceback (most recent call last):
+    ...
+    ValueError: force_limit_N (4000) must be below breakage_force_N (3000): the tool breaks first
+    """
+    if value < bound or (not strict and value == bound):
+        return
+    word = "below" if strict else "at most"
+    raise ValueError(f"{name} ({value:.6g}) must be {word} {bound_name} ({bound:.6g}): {why}")

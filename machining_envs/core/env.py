@@ -12,6 +12,7 @@ __all__ = [
     "ActionMap",
     "adopt_core",
     "check_action",
+    "episode_ended",
     "real_actions",
     "check_overrides",
     "render_signals",
@@ -147,6 +148,20 @@ def check_action(action, env_name: str) -> tuple[float, bool]:
     if v < -1.0:
         return -1.0, True
     return v, False
+
+
+def episode_ended(env_name: str) -> RuntimeError:
+    """The error every single env raises when ``step()`` is called after an episode ended.
+
+    Once a step has returned ``terminated`` or ``truncated``, the episode is over: the tool
+    broke, the part is finished or the time is up, and there is no next state to return.
+    The env refuses the step rather than return a made-up transition; call ``reset()``.
+    (The vector envs reset finished lanes themselves, see ``machining_envs.core.vector``.)
+    """
+    return RuntimeError(
+        f"{env_name}: the episode has ended (a step returned terminated or truncated); "
+        f"call reset() before step()"
+    )
 
 
 def check_overrides(owner: str, overrides: dict, allowed: Iterable[str]) -> None:

@@ -10,6 +10,7 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
+from machining_envs.core.checks import check_below
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
@@ -18,6 +19,7 @@ from machining_envs.core.env import (
     check_episode_time,
     check_reward_weights,
     check_scenario_spec,
+    episode_ended,
     present_frame,
     ready_to_render,
     record_step,
@@ -313,6 +315,13 @@ class _DrillingCore:
         self.block_rng[lane] = rng
         self.draw_normals(lane, rng)
         tr = sc.limit_Nmm(p)
+        check_below(
+            f"scenario {sc.name!r}: the torque limit (torque_limit_Nmm x torque_limit_scale)",
+            tr,
+            f"the {d:g} mm drill's breakage torque (breakage_coeff_N_per_mm2 x D^3)",
+            truth.breakage_torque_Nmm(d),
+            "the drill would break before the limit binds",
+        )
         s = lanes.state[lane]
         hz = float(s[_S_OMEGA]) / (2.0 * math.pi)
         position = float(s[_S_POS])
@@ -678,6 +687,7 @@ class MicroDrillingEnv(gym.Env):
     # ---- gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
+        self._ended = False
         core = self._core
         info = core.start(0, scenario_option(options, self.default_scenario), self.np_random)
         self.scenario = core.scenarios[0]
@@ -689,6 +699,8 @@ class MicroDrillingEnv(gym.Env):
     def step(self, action):
         if self.plant is None:
             raise RuntimeError("MicroDrillingEnv: call reset() before step()")
+        if self._ended:
+            raise episode_ended("MicroDrillingEnv")
         core = self._core
         a, clipped = check_action(action, "MicroDrillingEnv")
         core.ev[0, _E_ACTION] = a
@@ -699,6 +711,7 @@ class MicroDrillingEnv(gym.Env):
         info = core.lane_info(0)
         record_step(self, self._log, info)
         f = core.flags[0]
+        self._ended = bool(f[_F_TERMINATED] or f[_F_TRUNCATED])
         return (
             core.obs[0].copy(),
             float(core.ev[0, _E_REWARD]),

@@ -50,7 +50,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from machining_envs.core.checks import check_integer, check_range
+from machining_envs.core.checks import check_below, check_integer, check_range
 from machining_envs.core.lti import zoh
 
 __all__ = [
@@ -275,6 +275,14 @@ class DrillingParams:
         )
         check_range("feed_velocity_mm_s", self.feed_velocity_mm_s, 0.0, 100.0, lo_open=True)
         check_range("feed_speed_max_mm_s", self.feed_speed_max_mm_s, 0.0, 100.0, lo_open=True)
+        check_below(
+            "feed_velocity_mm_s",
+            self.feed_velocity_mm_s,
+            "feed_speed_max_mm_s",
+            self.feed_speed_max_mm_s,
+            "the stage cannot feed faster than its top speed",
+            strict=False,
+        )
         check_range("retract_limit_mm", self.retract_limit_mm, 0.0, 100.0)
         check_range("sensor_cutoff_hz", self.sensor_cutoff_hz, 0.0, 1e4, lo_open=True)
         check_range("torque_noise_Nmm", self.torque_noise_Nmm, 0.0, 100.0)

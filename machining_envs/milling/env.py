@@ -10,6 +10,7 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
+from machining_envs.core.checks import check_below
 from machining_envs.core.env import (
     ACTION_MAPS,
     ActionMap,
@@ -19,6 +20,7 @@ from machining_envs.core.env import (
     check_episode_time,
     check_reward_weights,
     check_scenario_spec,
+    episode_ended,
     present_frame,
     ready_to_render,
     record_step,
@@ -320,6 +322,13 @@ class _MillingCore:
         self.scenarios[lane] = sc
         self.truths[lane] = truth
         tr = sc.torque_limit_Nmm(nominal)
+        check_below(
+            f"scenario {sc.name!r}: the torque limit (torque_limit_Nmm x torque_limit_scale)",
+            tr,
+            "the tool's breakage_torque_Nmm",
+            truth.breakage_torque_Nmm,
+            "the tool would break before the limit binds",
+        )
         area = CutArea(sc.profile)
         cum = area.cumulative
         if len(cum) > self.cumulative.shape[1]:
@@ -735,6 +744,7 @@ class EndMillingEnv(gym.Env):
     # ---- gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
+        self._ended = False
         core = self._core
         core.start(0, scenario_option(options, self.default_scenario), self.np_random)
         info = core.reset_info(0)
@@ -748,6 +758,8 @@ class EndMillingEnv(gym.Env):
     def step(self, action):
         if self.plant is None:
             raise RuntimeError("EndMillingEnv: call reset() before step()")
+        if self._ended:
+            raise episode_ended("EndMillingEnv")
         core = self._core
         a, clipped = check_action(action, "EndMillingEnv")
         core.in_action[0] = a
@@ -757,6 +769,7 @@ class EndMillingEnv(gym.Env):
         info = core.lane_info(0)
         record_step(self, self._log, info)
         flags = core.flags[0]
+        self._ended = bool(flags[3] or flags[4])
         return core.obs[0].copy(), float(core.reward[0]), bool(flags[3]), bool(flags[4]), info
 
     def render(self):

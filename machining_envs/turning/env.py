@@ -10,7 +10,7 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
-from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
+from machining_envs.core.checks import PY_NUMBER_TYPES, check_below, check_range
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
@@ -19,6 +19,7 @@ from machining_envs.core.env import (
     check_episode_time,
     check_reward_weights,
     check_scenario_spec,
+    episode_ended,
     present_frame,
     ready_to_render,
     record_step,
@@ -220,6 +221,13 @@ class _TurningCore:
             sc = dataclasses.replace(sc, spindle_rpm=self.spindle_rpm_override)
         self.scenarios[lane] = sc
         truth = sc.true_params(self.params)
+        check_below(
+            f"scenario {sc.name!r}: force_limit_N",
+            sc.force_limit_N,
+            "the tool's breakage_force_N",
+            truth.breakage_force_N,
+            "the tool would break before the limit binds",
+        )
         self.lanes.start(lane, truth, sc.spindle_rpm, sc.profile)
         self.force_limit[lane] = float(sc.force_limit_N)
         self.bound[lane] = machining_time_bound(sc, truth)
@@ -567,6 +575,7 @@ class TurningEnv(gym.Env):
     # ---- gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
+        self._ended = False
         core = self._core
         info = core.start(0, scenario_option(options, self.default_scenario), self.np_random)
         self.scenario = core.scenarios[0]
@@ -579,6 +588,8 @@ class TurningEnv(gym.Env):
     def step(self, action):
         if self.plant is None:
             raise RuntimeError("TurningEnv: call reset() before step()")
+        if self._ended:
+            raise episode_ended("TurningEnv")
         core = self._core
         a, clipped = check_action(action, "TurningEnv")
         u = self.command_map.action_to_command(a)
@@ -590,6 +601,7 @@ class TurningEnv(gym.Env):
         info = core.lane_info(0)
         record_step(self, self._log, info)
         flags = core.flags[0]
+        self._ended = bool(flags[3] or flags[4])
         return core.obs[0].copy(), float(core.reward[0]), bool(flags[3]), bool(flags[4]), info
 
     def render(self):

@@ -62,3 +62,89 @@ def test_a_bool_is_not_a_number_for_any_parameter_or_reward_weight(env):
         if isinstance(getattr(base.reward_weights, f.name), (int, float)):
             with pytest.raises(ValueError, match=f.name):
                 reward_cls(**{f.name: True})
+
+
+# A few control periods of each env, so that an episode is truncated within tens of steps.
+SHORT_EPISODE_S = {
+    "machining_envs/Turning-v0": 2.0,
+    "machining_envs/EndMilling-v0": 2.0,
+    "machining_envs/MicroDrilling-v0": 0.5,
+    "machining_envs/Contouring-v0": 0.01,
+    "machining_envs/ContouringFeed-v0": 0.1,
+}
+
+
+@pytest.mark.parametrize("action_value", [1.0, -1.0])
+def test_stepping_after_the_episode_ended_is_refused_until_reset(env, action_value):
+    """One behaviour for every id: once a step returned terminated or truncated, the next
+    step raises RuntimeError naming the env, and a reset starts a new episode."""
+    short = gym.make(env.spec.id, max_episode_time_s=SHORT_EPISODE_S[env.spec.id])
+    name = type(short.unwrapped).__name__
+    action = np.full(short.action_space.shape, action_value, dtype=np.float32)
+    short.reset(seed=1)
+    for _ in range(10_000):
+        _, _, terminated, truncated, _ = short.step(action)
+        if terminated or truncated:
+            break
+    assert terminated or truncated
+    obs_before = short.unwrapped._core.obs[0].copy()
+    with pytest.raises(RuntimeError, match=f"{name}: the episode has ended"):
+        short.step(action)
+    assert np.array_equal(short.unwrapped._core.obs[0], obs_before)  # nothing was stepped
+    short.reset(seed=2)
+    short.step(action)
+    short.close()
+
+
+# ---- checks across fields: each message names both fields ----------------------------------
+def test_a_turning_limit_above_the_tools_breakage_force_is_refused():
+    env = gym.make("machining_envs/Turning-v0", scenario="paper_405", breakage_force_N=900.0)
+    with pytest.raises(ValueError, match="force_limit_N .* below the tool's breakage_force_N"):
+        env.reset(seed=0)
+    gym.make("machining_envs/Turning-v0", scenario="paper_405").reset(seed=0)  # 1 kN < 3 kN
+
+
+def test_an_end_milling_limit_above_the_tools_breakage_torque_is_refused():
+    from machining_envs import DepthProfile, MillingScenario
+
+    sc = MillingScenario("high", DepthProfile.steps((1.0,), 30.0), torque_limit_scale=4.0)
+    env = gym.make("machining_envs/EndMilling-v0", scenario=sc)
+    limit = sc.torque_limit_Nmm(env.unwrapped.params)
+    if limit < env.unwrapped.params.breakage_torque_Nmm:  # make it break below the limit
+        env = gym.make("machining_envs/EndMilling-v0", scenario=sc, breakage_torque_Nmm=0.9 * limit)
+    with pytest.raises(ValueError, match="torque limit .* below the tool's breakage_torque_Nmm"):
+        env.reset(seed=0)
+
+
+def test_a_drilling_limit_above_the_drills_breakage_torque_is_refused():
+    from machining_envs import DrillingScenario
+
+    sc = DrillingScenario("strong", 0.5, 10.0, torque_limit_Nmm=0.7)  # T_b = 0.625 N mm
+    env = gym.make("machining_envs/MicroDrilling-v0", scenario=sc)
+    with pytest.raises(ValueError, match="torque limit .* below the 0.5 mm drill's breakage"):
+        env.reset(seed=0)
+
+
+def test_a_drilling_feed_above_the_stages_top_speed_is_refused():
+    from machining_envs import DrillingParams
+
+    with pytest.raises(
+        ValueError, match=r"feed_velocity_mm_s \(5\) must be at most feed_speed_max"
+    ):
+        DrillingParams(feed_velocity_mm_s=5.0)
+    with pytest.raises(ValueError, match="feed_velocity_mm_s .* feed_speed_max_mm_s"):
+        gym.make("machining_envs/MicroDrilling-v0", feed_speed_max_mm_s=0.2)
+
+
+@pytest.mark.parametrize(
+    "env_id", ["machining_envs/Contouring-v0", "machining_envs/ContouringFeed-v0"]
+)
+def test_a_feed_above_the_drives_top_speed_is_refused(env_id):
+    from machining_envs import ContouringScenario, Path
+
+    fast = ContouringScenario("fast600", Path.line((0, 0), (600, 0)), 1000.0)
+    env = gym.make(env_id, scenario=fast)
+    with pytest.raises(ValueError, match=r"feed_mm_s \(1000\) must be at most the drives' top"):
+        env.reset(seed=0)
+    ok = ContouringScenario("ok600", Path.line((0, 0), (600, 0)), 300.0)  # below 333 mm/s
+    gym.make(env_id, scenario=ok).reset(seed=0)
