@@ -101,55 +101,92 @@ def _factories(spec: BenchmarkSpec, tuned: dict, verbose: bool):
     return out
 
 
+class _Progress:
+    """One progress bar per env (tqdm on stderr, where installed: the ``rl`` and ``bench``
+    extras bring it), advanced once per agent and split and once per oracle episode; without
+    tqdm, one printed line per agent. Silent when ``verbose`` is False."""
+
+    def __init__(self, env_name: str, total: int, verbose: bool, t0: float):
+        self.env_name, self.verbose, self.t0 = env_name, verbose, t0
+        self.bar = None
+        if verbose and _installed("tqdm"):
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, desc=env_name, unit="run", leave=True)
+
+    def note(self, text: str) -> None:
+        if not self.verbose:
+            return
+        if self.bar is not None:
+            self.bar.write(text)
+        else:
+            print(text)
+
+    def working_on(self, text: str) -> None:
+        if self.bar is not None:
+            self.bar.set_postfix_str(text)
+
+    def done(self, text: str, n: int = 1) -> None:
+        if self.bar is not None:
+            self.bar.update(n)
+        elif self.verbose:
+            print(f"[{self.env_name}] {text} ({time.perf_counter() - self.t0:.0f} s)")
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
 def _run_env(spec: BenchmarkSpec, n_test, n_ood, n_oracle, tuned: dict, verbose: bool, t0):
     run = _EnvRun(spec)
     env_name = spec.env_id.split("/")[-1]
     jobs = _factories(spec, tuned, verbose)
-    for k, (kind, factory, pseed) in enumerate(jobs):
-        for split, n in (("test", n_test), ("ood", n_ood)):
-            if n == 0:
-                continue
-            ev = evaluate(
-                factory,
-                spec.env_id,
-                [split],
-                n_episodes=n,
-                seed=split_seeds(split, n)[0],
-                env_kwargs=spec.env_kwargs,
-            )
-            name = ev.rows[0]["agent"]
-            run.factory.setdefault(name, factory)
-            run.add(name, kind, split, ev.rows, pseed)
-        if verbose:
-            tag = f" seed {pseed}" if pseed is not None else ""
-            print(
-                f"[{env_name}] {k + 1}/{len(jobs)} {kind} {name}{tag} ({time.perf_counter() - t0:.0f} s)"
-            )
+    splits = [(split, n) for split, n in (("test", n_test), ("ood", n_ood)) if n > 0]
+    oracle_skipped = None
     if spec.oracle is not None and n_oracle < spec.oracle_episodes and not spec.oracle_in_quick:
-        if verbose:
-            print(f"  oracle skipped in --quick ({spec.oracle_seconds:g} s an episode)")
-    elif spec.oracle is not None:
-        if not _installed("casadi"):
-            if verbose:
-                print("  oracle skipped: it needs casadi (pip install 'machining-envs[bench]')")
-        else:
-            n = min(spec.oracle_episodes, n_oracle)
+        oracle_skipped = f"  oracle skipped in --quick ({spec.oracle_seconds:g} s an episode)"
+    elif spec.oracle is not None and not _installed("casadi"):
+        oracle_skipped = "  oracle skipped: it needs casadi (pip install 'machining-envs[bench]')"
+    n_oracle_run = 0
+    if spec.oracle is not None and oracle_skipped is None:
+        n_oracle_run = min(spec.oracle_episodes, n_oracle)
+    progress = _Progress(env_name, len(jobs) * len(splits) + n_oracle_run, verbose, t0)
+    try:
+        for k, (kind, factory, pseed) in enumerate(jobs):
+            tag = f" seed {pseed}" if pseed is not None else ""
+            for split, n in splits:
+                progress.working_on(f"{kind}{tag} on {split}")
+                ev = evaluate(
+                    factory,
+                    spec.env_id,
+                    [split],
+                    n_episodes=n,
+                    seed=split_seeds(split, n)[0],
+                    env_kwargs=spec.env_kwargs,
+                )
+                name = ev.rows[0]["agent"]
+                run.factory.setdefault(name, factory)
+                run.add(name, kind, split, ev.rows, pseed)
+                progress.done(f"{k + 1}/{len(jobs)} {kind} {name}{tag} on {split}")
+        if oracle_skipped is not None:
+            progress.note(oracle_skipped)
+        elif spec.oracle is not None:
+            progress.working_on(f"oracle, {n_oracle_run} test episodes")
             ev = evaluate(
                 spec.oracle,
                 spec.env_id,
                 ["test"],
-                n_episodes=n,
-                seed=split_seeds("test", n)[0],
+                n_episodes=n_oracle_run,
+                seed=split_seeds("test", n_oracle_run)[0],
                 env_kwargs=spec.env_kwargs,
                 batched=False,
             )
             name = ev.rows[0]["agent"]
             run.factory.setdefault(name, spec.oracle)
             run.add(name, "oracle", "test", ev.rows)
-            if verbose:
-                print(
-                    f"[{env_name}] oracle {name}, {n} test episodes ({time.perf_counter() - t0:.0f} s)"
-                )
+            progress.done(f"oracle {name}, {n_oracle_run} test episodes", n_oracle_run)
+    finally:
+        progress.close()
     return run
 
 
