@@ -6,13 +6,16 @@ machining-bench reproduce turning [--out results] [--sensor-gain 17]
 machining-bench train --env ID --out runs/x [--algo ppo] [--resume]
 machining-bench evaluate --model runs/x/best_model.zip --env ID
 machining-bench export --onnx --model runs/x/best_model.zip
+machining-bench export --zoo --model runs/x/best_model.zip
 machining-bench convert-stats FILE_vecnormalize.pkl
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
+from pathlib import Path
 
 from agents.bench.declarations import PROCESSES, benchmark_spec, process
 
@@ -157,16 +160,21 @@ def build_parser() -> argparse.ArgumentParser:
 
     x = command(
         "export",
-        "write a learned policy as ONNX, checked against SB3",
-        "Write a saved SB3 model with its normalisation (and its action increment) folded "
-        "in as one ONNX graph, raw observation -> env action; check that onnxruntime "
+        "write a learned policy as ONNX (checked against SB3) or as an rl-zoo3 folder",
+        "--onnx: write a saved SB3 model with its normalisation (and its action increment) "
+        "folded in as one ONNX graph, raw observation -> env action; check that onnxruntime "
         "reproduces SB3's actions to 1e-5 on real episodes and print the per-decision "
-        "latency against the env's control period. Needs the onnx extra.",
+        "latency against the env's control period. Needs the onnx extra. --zoo: write the "
+        "policy of a run (its config.json beside the model) in rl-zoo3's layout, for "
+        "`python -m rl_zoo3.enjoy` (default: <run>/zoo).",
     )
-    x.add_argument("--onnx", action="store_true", required=True, help="write ONNX")
+    form = x.add_mutually_exclusive_group(required=True)
+    form.add_argument("--onnx", action="store_true", help="write ONNX")
+    form.add_argument("--zoo", action="store_true", help="write an rl-zoo3 folder")
     x.add_argument("--model", required=True, help="a saved model .zip")
     x.add_argument("--env", default=None, help="env id (default: from config.json)")
-    x.add_argument("--out", default=None, help="the .onnx file (default: beside the model)")
+    x.add_argument("--out", default=None,
+                   help="the .onnx file or the rl-zoo3 folder (default: beside the model)")  # fmt: skip
     x.add_argument("--algo", choices=["ppo", "sac", "td3"], default=None,
                    help="the model's algorithm (default: from config.json or the file name)")  # fmt: skip
     x.add_argument("--stats", default=None,
@@ -281,6 +289,22 @@ def main(argv: list[str] | None = None) -> int:
             return _evaluate(args)
         except (FileNotFoundError, ValueError) as exc:
             return _fail("evaluate", exc)
+    if args.command == "export" and args.zoo:
+        try:
+            from agents.rl.zoo import write_zoo_folder
+        except ImportError as exc:
+            return _fail("export", f"{exc}: pip install 'machining-envs[rl]'")
+        try:
+            exp = write_zoo_folder(args.model, args.out)
+        except (FileNotFoundError, ValueError, KeyError) as exc:
+            return _fail("export", exc)
+        algo, env_id = (
+            exp.parent.name,
+            json.loads((Path(args.model).parent / "config.json").read_text())["env_id"],
+        )
+        print(f"wrote {exp}; run it with:\n  python -m rl_zoo3.enjoy --algo {algo} --env {env_id} "
+              f"-f {exp.parent.parent} --gym-packages machining_envs --exp-id 1 --load-best")  # fmt: skip
+        return 0
     if args.command == "export":
         try:
             from agents.rl.export import export_onnx

@@ -1,5 +1,19 @@
-"""Training configurations: the YAML files in ``agents/rl/configs/`` (rl-zoo3 layout), read
-and checked before any training starts (see ``agents.rl``)."""
+"""Training configurations: the YAML files in ``agents/rl/configs/``, read and checked before
+any training starts (see ``agents.rl``).
+
+The files are rl-zoo3's hyperparameter files, so ``python -m rl_zoo3.train --conf-file`` runs
+them unmodified: one entry per env id with rl-zoo3's keys (``policy``, ``n_timesteps``,
+``n_envs``, ``normalize``, ``env_kwargs``, ``env_wrapper``, ``callback``, ``policy_kwargs``)
+and the algorithm's keywords. ``env_wrapper`` may name
+``machining_envs.wrappers.IncrementalAction`` (with ``max_step`` and ``hide_action``);
+``callback`` names ``agents.rl.callbacks.ValidationCallback`` (the held-out evaluation: its
+``eval_freq``, ``n_episodes``, ``scenarios``, ``checkpoint_freq``) and any other SB3
+callback by import path. rl-zoo3's value syntax is read too: ``!!float 1e6`` counts,
+``lin_<x>`` schedules, and ``"dict(...)"`` strings for ``policy_kwargs`` and ``normalize``
+(parsed as literals, never evaluated; ``nn.<Name>`` stands for ``torch.nn.<Name>``). The
+older keys of ours (``eval_freq``, ``eval_episodes``, ``eval_scenarios``,
+``checkpoint_freq``, ``action_increment``, ``hide_action``) are still read.
+"""
 
 from __future__ import annotations
 
@@ -7,18 +21,11 @@ import inspect
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from agents.rl.algos import ALGOS, algorithm_classes
+
 __all__ = ["ALGOS", "CONFIG_DIR", "ConfigError", "TrainConfig", "load_config"]
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
-
-
-def _algos():
-    from stable_baselines3 import PPO, SAC, TD3
-
-    return {"ppo": PPO, "sac": SAC, "td3": TD3}
-
-
-ALGOS = ("ppo", "sac", "td3")
 
 
 class ConfigError(ValueError):
@@ -38,7 +45,12 @@ _SETTINGS: dict[str, tuple[type, ...]] = {
     "checkpoint_freq": (int,),
     "action_increment": (float, int),
     "hide_action": (bool,),
+    "callback": (str, list),
+    "env_wrapper": (str, list),
 }
+#: The names ``callback`` and ``env_wrapper`` entries may give our own classes by.
+VALIDATION_CALLBACK = "agents.rl.callbacks.ValidationCallback"
+INCREMENT_WRAPPER = "machining_envs.wrappers.IncrementalAction"
 _NORMALIZE_KEYS = {"norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon"}
 
 _INF = float("inf")
@@ -137,6 +149,8 @@ class TrainConfig:
     hide_action: bool = False
     """With ``action_increment``: the policy does not see the action now applied."""
     hyperparams: dict = field(default_factory=dict)
+    callbacks: list = field(default_factory=list)
+    """Other SB3 callbacks named in ``callback``: ``(class, keywords)`` pairs."""
     source: str = ""
 
 
@@ -145,6 +159,148 @@ def _check_type(where: str, key: str, value, types: tuple[type, ...]) -> None:
     if not ok:
         names = " or ".join(t.__name__ for t in types)
         raise ConfigError(f"{where}: {key} must be {names}, got {type(value).__name__} {value!r}")
+
+
+def _entries(where: str, key: str, value) -> list[tuple[str, dict]]:
+    """rl-zoo3's list form of ``callback`` / ``env_wrapper``: a name, or a list of names and
+    one-key mappings ``{name: {keyword: value}}``."""
+    out = []
+    for item in value if isinstance(value, list) else [value]:
+        if isinstance(item, str):
+            out.append((item, {}))
+        elif isinstance(item, dict) and len(item) == 1:
+            ((name, kwargs),) = item.items()
+            kwargs = {} if kwargs is None else kwargs
+            if not isinstance(name, str) or not isinstance(kwargs, dict):
+                raise ConfigError(f"{where}: {key}: {item!r} must map a name to its keywords")
+            out.append((name, dict(kwargs)))
+        else:
+            raise ConfigError(
+                f"{where}: {key} entries must be names or {{name: {{keyword: value}}}}, got {item!r}"
+            )
+    return out
+
+
+def _import(where: str, key: str, name: str):
+    import importlib
+
+    module, _, attr = name.rpartition(".")
+    try:
+        return getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError, ValueError):
+        raise ConfigError(f"{where}: {key}: cannot import {name!r}") from None
+
+
+def _read_callbacks(where: str, value, cfg: TrainConfig) -> None:
+    """``callback``: the ValidationCallback's keywords become the run's evaluation settings;
+    any other name must be an SB3 callback class, made with its keywords at training."""
+    import inspect as _inspect
+
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    for name, kwargs in _entries(where, "callback", value):
+        if name in (VALIDATION_CALLBACK, "ValidationCallback"):
+            from agents.rl.callbacks import ValidationCallback
+
+            allowed = set(_inspect.signature(ValidationCallback.__init__).parameters) - {"self"}
+            bad = set(kwargs) - allowed
+            if bad:
+                raise ConfigError(
+                    f"{where}: callback {name}: unknown keywords {sorted(bad)}; allowed {sorted(allowed)}"
+                )
+            try:
+                cb = ValidationCallback(**kwargs)
+            except (TypeError, ValueError) as exc:
+                raise ConfigError(f"{where}: callback {name}: {exc}") from None
+            cfg.eval_freq, cfg.eval_episodes = cb.eval_freq, cb.n_episodes
+            cfg.eval_scenarios = cb.scenarios
+            if cb.checkpoint_freq is not None:
+                cfg.checkpoint_freq = cb.checkpoint_freq
+        else:
+            cls = _import(where, "callback", name)
+            if not (isinstance(cls, type) and issubclass(cls, BaseCallback)):
+                raise ConfigError(f"{where}: callback: {name} is not an SB3 callback class")
+            try:
+                _inspect.signature(cls).bind(**kwargs)
+            except TypeError as exc:
+                raise ConfigError(f"{where}: callback {name}: {exc}") from None
+            cfg.callbacks.append((cls, kwargs))
+
+
+def _read_wrappers(where: str, value, cfg: TrainConfig) -> None:
+    """``env_wrapper``: only ``IncrementalAction`` (the native vector envs run no gymnasium
+    wrappers, and a policy's wrapper must be known to replay it outside training)."""
+    for name, kwargs in _entries(where, "env_wrapper", value):
+        if name not in (INCREMENT_WRAPPER, "IncrementalAction"):
+            raise ConfigError(
+                f"{where}: env_wrapper: machining-bench train applies only {INCREMENT_WRAPPER}, "
+                f"got {name!r}"
+            )
+        bad = set(kwargs) - {"max_step", "hide_action"}
+        if bad:
+            raise ConfigError(
+                f"{where}: env_wrapper {name}: unknown keywords {sorted(bad)}; "
+                "allowed ['hide_action', 'max_step']"
+            )
+        if "max_step" not in kwargs:
+            raise ConfigError(f"{where}: env_wrapper {name}: max_step is required")
+        _check_type(where, "max_step", kwargs["max_step"], (float, int))
+        cfg.action_increment = kwargs["max_step"]
+        hide = kwargs.get("hide_action", False)
+        _check_type(where, "hide_action", hide, (bool,))
+        cfg.hide_action = hide
+
+
+def _literal(where: str, key: str, text: str):
+    """rl-zoo3 writes some values as Python source (``"dict(net_arch=[64, 64])"``), which it
+    evaluates. Here it is parsed: literals, ``dict(...)`` with keyword arguments, and
+    ``nn.<Name>`` / ``torch.nn.<Name>`` (torch's layer classes); anything else is refused."""
+    import ast
+
+    try:
+        tree = ast.parse(text.strip(), mode="eval").body
+    except SyntaxError:
+        raise ConfigError(f"{where}: {key}: cannot read {text!r}") from None
+
+    def value(node):
+        if (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Name)
+            and node.func.id == "dict"
+        ):
+            if node.args or any(k.arg is None for k in node.keywords):
+                raise ConfigError(f"{where}: {key}: dict(...) takes keyword arguments only")
+            return {k.arg: value(k.value) for k in node.keywords}
+        if isinstance(node, ast.Attribute):
+            parts = []
+            n = node
+            while isinstance(n, ast.Attribute):
+                parts.append(n.attr)
+                n = n.value
+            if isinstance(n, ast.Name):
+                parts.append(n.id)
+            path = ".".join(reversed(parts))
+            for prefix in ("torch.nn.", "th.nn.", "nn."):
+                if path.startswith(prefix) and path.count(".") == prefix.count("."):
+                    import torch
+
+                    layer = getattr(torch.nn, path[len(prefix) :], None)
+                    if isinstance(layer, type):
+                        return layer
+            raise ConfigError(f"{where}: {key}: unknown name {path!r} in {text!r}")
+        if isinstance(node, ast.Dict):
+            return {value(k): value(v) for k, v in zip(node.keys, node.values, strict=True)}
+        if isinstance(node, (ast.List, ast.Tuple)):
+            items = [value(e) for e in node.elts]
+            return items if isinstance(node, ast.List) else tuple(items)
+        if isinstance(node, ast.Name) and node.id in ("True", "False", "None"):
+            return {"True": True, "False": False, "None": None}[node.id]
+        try:
+            return ast.literal_eval(node)
+        except ValueError:
+            raise ConfigError(f"{where}: {key}: cannot read {text!r} (literals only)") from None
+
+    return value(tree)
 
 
 def load_config(env_id: str, algo: str, path=None) -> TrainConfig:
@@ -172,7 +328,7 @@ def load_config(env_id: str, algo: str, path=None) -> TrainConfig:
     if not isinstance(entry, dict):
         raise ConfigError(f"{path}: the entry for {env_id!r} must be a mapping")
     where = f"{path}:{env_id}"
-    algo_params = set(inspect.signature(_algos()[algo].__init__).parameters) - {
+    algo_params = set(inspect.signature(algorithm_classes()[algo].__init__).parameters) - {
         "self",
         "policy",
         "env",
@@ -180,7 +336,13 @@ def load_config(env_id: str, algo: str, path=None) -> TrainConfig:
     cfg = TrainConfig(env_id=env_id, algo=algo, source=str(path))
     hyper = {}
     for key, value in entry.items():
-        if key in _SETTINGS:
+        if key in ("policy_kwargs", "normalize") and isinstance(value, str):
+            value = _literal(where, key, value)
+        if key == "callback":
+            _read_callbacks(where, value, cfg)
+        elif key == "env_wrapper":
+            _read_wrappers(where, value, cfg)
+        elif key in _SETTINGS:
             if _SETTINGS[key] == (int,) and isinstance(value, float) and value.is_integer():
                 value = int(value)  # rl-zoo3 writes large counts as !!float 1e6
             _check_type(where, key, value, _SETTINGS[key])

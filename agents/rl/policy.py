@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from agents.base import check_observation
-from agents.rl.config import ALGOS, _algos
+from agents.rl.algos import ALGOS, algorithm_classes
 from agents.rl.stats import read_stats, stats_path
 
 __all__ = ["PolicyAgent", "load_policy", "pretrained", "pretrained_seeds", "PRETRAINED_DIR"]
@@ -147,7 +147,7 @@ def load_policy(
         if stats.suffix != ".json":
             raise ValueError(f"stats must be a .json statistics file, got {stats}")
     norm = read_stats(stats) if stats.is_file() else None
-    model = _algos()[algo].load(model_path, device="cpu")
+    model = algorithm_classes()[algo].load(model_path, device="cpu")
     obs_rms, clip, eps = None, 10.0, 1e-8
     if norm is not None and norm.norm_obs:
         from stable_baselines3.common.running_mean_std import RunningMeanStd

@@ -3,9 +3,7 @@ evaluation by the env's own task (metrics and primary score), checkpoints and re
 
 from __future__ import annotations
 
-import csv
 import json
-import math
 import re
 import sys
 import time
@@ -15,19 +13,16 @@ from pathlib import Path
 import gymnasium as gym
 
 import machining_envs  # noqa: F401  (registers the env ids)
-from agents.eval import Evaluation, evaluate, task_of
-from agents.rl.config import ConfigError, TrainConfig, _algos, load_config
-from agents.rl.policy import PolicyAgent, load_policy
+from agents.eval import Evaluation, evaluate
+from agents.rl.algos import algorithm_classes
+from agents.rl.callbacks import FAILED_EPISODE_TIME_S, ValidationCallback, evaluation_setup
+from agents.rl.config import ConfigError, TrainConfig, load_config
+from agents.rl.policy import load_policy
 from agents.rl.stats import read_stats, restore_stats, save_stats, stats_path
 from machining_envs.core.score import REGULATION_SCORE, PrimaryScore
-from machining_envs.core.splits import check_not_held_out, split_seeds
+from machining_envs.core.splits import check_not_held_out
 
 __all__ = ["train", "evaluate_policy_file", "primary_score", "FAILED_EPISODE_TIME_S"]
-
-
-#: What an episode that does not count costs in the primary score, s: Turning-v0's time
-#: limit, i.e. the cut is charged as if it had used the whole budget.
-FAILED_EPISODE_TIME_S = 200.0
 
 
 def primary_score(rows: list[dict], failed_time_s: float = FAILED_EPISODE_TIME_S) -> dict:
@@ -133,20 +128,6 @@ def _check_env_setup(cfg: TrainConfig) -> None:
         env.close()
 
 
-def _evaluation_setup(env_id: str, env_kwargs: dict):
-    """The env's task (its metrics function and primary score, ``agents.eval.task_of``) and
-    the failure cost of that score for the env."""
-    env = gym.make(env_id, **dict(env_kwargs))
-    try:
-        task = task_of(env)
-        failed = task.score.failed_value(env)
-    finally:
-        env.close()
-    if not math.isfinite(failed):
-        failed = FAILED_EPISODE_TIME_S
-    return task.metrics, task.score, failed
-
-
 def _model_steps(path: Path) -> int:
     """``num_timesteps`` recorded in a saved SB3 model (read from its JSON, not unpickled)."""
     import zipfile
@@ -174,27 +155,6 @@ def _resume_point(out: Path):
     return best, steps
 
 
-def _checkpoint_callback(cfg: TrainConfig, folder: Path):
-    """SB3's CheckpointCallback, with the VecNormalize statistics written as JSON beside
-    each checkpoint (``rl_model_vecnormalize_<steps>_steps.json``) instead of a pickle."""
-    from stable_baselines3.common.callbacks import CheckpointCallback
-    from stable_baselines3.common.vec_env import VecNormalize
-
-    class JsonStatsCheckpoint(CheckpointCallback):
-        def _on_step(self) -> bool:
-            keep = super()._on_step()
-            if self.n_calls % self.save_freq == 0:
-                venv = self.model.get_vec_normalize_env()
-                if isinstance(venv, VecNormalize):
-                    path = self._checkpoint_path("vecnormalize_", extension="json")
-                    save_stats(venv, path)
-            return keep
-
-    return JsonStatsCheckpoint(
-        max(1, cfg.checkpoint_freq // cfg.n_envs), str(folder), save_vecnormalize=False
-    )
-
-
 def train(
     env_id: str,
     algo: str = "ppo",
@@ -209,7 +169,7 @@ def train(
 ) -> Path:
     """Train ``algo`` on ``env_id``; returns the run folder. See the module docstring."""
     import torch
-    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+    from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.vec_env import VecNormalize
 
     cfg = load_config(env_id, algo, config_path)  # all validation before anything starts
@@ -237,7 +197,7 @@ def train(
         raise FileExistsError(f"{out} is not empty: choose another --out or pass --resume")
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(1)
-    AlgoCls = _algos()[cfg.algo]
+    AlgoCls = algorithm_classes()[cfg.algo]
 
     # ``increment``: the wrapper's ActionIncrement, for evaluation and the run record.
     venv, increment = _make_vec(cfg, seed, vec_kind)
@@ -272,72 +232,14 @@ def train(
             meta["action_increment"] = increment._asdict()
         (out / "config.json").write_text(json.dumps(meta, indent=2, default=str))
 
-    eval_csv = out / "eval.csv"
-    metrics_fn, score_fn, failed_value = _evaluation_setup(env_id, cfg.env_kwargs)
-
-    class HeldOutEval(BaseCallback):
-        """Every ``eval_freq`` env steps: the harness on the held-out scenarios; keep the best."""
-
-        def __init__(self):
-            super().__init__()
-            self.best = math.inf
-            self.next_at = 0
-
-        def _on_training_start(self) -> None:
-            self.next_at = self.model.num_timesteps + cfg.eval_freq
-            if eval_csv.is_file():
-                with open(eval_csv) as fh:
-                    scores = [float(r["score"]) for r in csv.DictReader(fh)]
-                self.best = min(scores, default=math.inf)
-
-        def _on_step(self) -> bool:
-            if self.model.num_timesteps >= self.next_at:
-                self.next_at += cfg.eval_freq
-                self.evaluate_now()
-            return True
-
-        def evaluate_now(self) -> None:
-            obs_rms = venv.obs_rms if isinstance(venv, VecNormalize) else None
-            clip = venv.clip_obs if isinstance(venv, VecNormalize) else 10.0
-            agent = PolicyAgent(self.model, obs_rms, clip, increment=increment)
-            ev = evaluate(
-                agent,
-                env_id,
-                cfg.eval_scenarios,
-                n_episodes=cfg.eval_episodes,
-                seed=split_seeds("validation", cfg.eval_episodes)[0],
-                env_kwargs=dict(cfg.env_kwargs),
-                metrics_fn=metrics_fn,
-            )
-            s = score_fn(ev.rows, failed_value)
-            sec = score_fn.secondary_key or "secondary"
-            s = {"score": s["score"], "valid": s["valid"], sec: s["secondary"]}
-            new = not eval_csv.is_file()
-            with open(eval_csv, "a", newline="") as fh:
-                w = csv.DictWriter(fh, fieldnames=["timesteps", "wall_s", "score", "valid", sec])
-                if new:
-                    w.writeheader()
-                w.writerow(
-                    {
-                        "timesteps": self.model.num_timesteps,
-                        "wall_s": round(time.perf_counter() - t0, 1),
-                        **s,
-                    }
-                )
-            self.logger.record("eval/score", s["score"])
-            self.logger.record("eval/valid", s["valid"])
-            if s["score"] < self.best:
-                self.best = s["score"]
-                self.model.save(out / "best_model.zip")
-                if isinstance(venv, VecNormalize):
-                    save_stats(venv, out / "best_vecnormalize.json")
-
-    ckpt_cb = _checkpoint_callback(cfg, ckpt_dir)
-    eval_cb = HeldOutEval()
+    eval_cb = ValidationCallback(
+        cfg.eval_freq, cfg.eval_episodes, cfg.eval_scenarios, cfg.checkpoint_freq, verbose=0
+    ).bind(env_id, cfg.env_kwargs, increment, out)
+    callbacks = [eval_cb, *(cls(**kwargs) for cls, kwargs in cfg.callbacks)]
     t0 = time.perf_counter()
     model.learn(
         remaining,
-        callback=CallbackList([ckpt_cb, eval_cb]),
+        callback=CallbackList(callbacks),
         progress_bar=progress_bar,
         reset_num_timesteps=not resume,
         tb_log_name=cfg.algo,
@@ -346,7 +248,6 @@ def train(
     model.save(out / "final_model.zip")
     if isinstance(venv, VecNormalize):
         save_stats(venv, out / "final_vecnormalize.json")
-    eval_cb.evaluate_now()
     if not (out / "best_model.zip").is_file():  # e.g. every evaluation scored inf
         model.save(out / "best_model.zip")
         if isinstance(venv, VecNormalize):
@@ -374,7 +275,7 @@ def evaluate_policy_file(
     """The harness on a saved policy (with its VecNormalize statistics: ``stats``, or the
     JSON beside the model), with the env's own metrics; returns the evaluation, its primary
     score and the env's ``PrimaryScore``."""
-    metrics_fn, score_fn, failed = _evaluation_setup(env_id, {})
+    metrics_fn, score_fn, failed = evaluation_setup(env_id, {})
     ev = evaluate(
         load_policy(model_path, algo=algo, stats=stats),
         env_id,

@@ -50,7 +50,7 @@ def test_pretrained_policy_was_selected_without_the_test_split(folder):
 def test_recorded_configuration_is_the_shipped_config_entry(folder):
     """The regeneration command trains with ``agents/rl/configs/<algo>.yml``: its entry must
     still be the configuration the shipped policy was trained with."""
-    from dataclasses import asdict, fields
+    from dataclasses import MISSING, asdict, fields
 
     from agents.rl import TrainConfig, load_config
 
@@ -60,7 +60,10 @@ def test_recorded_configuration_is_the_shipped_config_entry(folder):
     for key in ("source",):
         now.pop(key), recorded.pop(key)
     # Settings added after a policy was trained: its run behaved as their default does.
-    defaults = {f.name: f.default for f in fields(TrainConfig)}
+    defaults = {
+        f.name: f.default if f.default_factory is MISSING else f.default_factory()
+        for f in fields(TrainConfig)
+    }
     for key in set(now) - set(recorded):
         assert now.pop(key) == defaults[key], key
     assert json.loads(json.dumps(now, default=str)) == recorded

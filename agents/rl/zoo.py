@@ -1,0 +1,101 @@
+"""A trained policy in rl-zoo3's folder layout, so that ``python -m rl_zoo3.enjoy`` runs it.
+
+``machining-bench export --zoo --model <run>/best_model.zip`` writes one (by default in
+``<run>/zoo``) for any saved policy with its run's ``config.json``: a run folder of
+``machining-bench train``, or a shipped policy. The layout is the one rl-zoo3's trainer
+leaves::
+
+    <zoo>/<algo>/<env name>_1/
+        best_model.zip, <env name>.zip      the validation-chosen policy (both names)
+        <env name>/config.yml               the hyperparameters: normalize, env_kwargs, env_wrapper
+        <env name>/vecnormalize.pkl         the policy's normalisation statistics
+
+where ``<env name>`` is the id with ``/`` replaced by ``-``. Run it with::
+
+    python -m rl_zoo3.enjoy --algo ppo --env machining_envs/Turning-v0 -f <zoo> \\
+        --gym-packages machining_envs --exp-id 1 --load-best
+
+``vecnormalize.pkl`` is a pickle because rl-zoo3 reads only that; this library never reads
+one (``agents.rl.stats``), and its runs hold none until the view is asked for. It holds the
+policy's own statistics (the JSON file beside the model), so the view's final-model name
+runs the chosen policy too.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+__all__ = ["write_zoo_folder", "zoo_env_name"]
+
+
+def zoo_env_name(env_id: str) -> str:
+    """rl-zoo3's folder name of an env id (``machining_envs/Turning-v0`` ->
+    ``machining_envs-Turning-v0``)."""
+    return env_id.replace("/", "-")
+
+
+def _hyperparams(meta: dict) -> dict:
+    """The run's configuration in rl-zoo3's keys (what its ``config.yml`` holds)."""
+    cfg = meta["config"]
+    hyper = {
+        "policy": cfg.get("policy", "MlpPolicy"),
+        "n_timesteps": cfg.get("n_timesteps"),
+        "n_envs": cfg.get("n_envs"),
+        "normalize": cfg.get("normalize", False),
+        "env_kwargs": cfg.get("env_kwargs", {}),
+    }
+    inc = meta.get("action_increment")
+    if inc:
+        hyper["env_wrapper"] = [
+            {
+                "machining_envs.wrappers.IncrementalAction": {
+                    "max_step": inc["max_step"],
+                    "hide_action": inc.get("hide_action", False),
+                }
+            }
+        ]
+    return hyper
+
+
+def write_zoo_folder(model_path, out=None) -> Path:
+    """Write the rl-zoo3 view of the saved policy ``model_path`` (with the run's
+    ``config.json`` and the statistics JSON beside it) under ``out`` (default: the
+    ``zoo`` folder beside the model); returns the experiment folder."""
+    import gymnasium as gym
+    import yaml
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from agents.rl.stats import read_stats, restore_stats, stats_path
+
+    model_path = Path(model_path)
+    if not model_path.is_file():
+        raise FileNotFoundError(f"no model at {model_path}")
+    meta_path = model_path.parent / "config.json"
+    if not meta_path.is_file():
+        raise FileNotFoundError(
+            f"no config.json beside {model_path}: the rl-zoo3 view needs the run's configuration"
+        )
+    meta = json.loads(meta_path.read_text())
+    env_id, algo = meta["env_id"], meta["algo"]
+    name = zoo_env_name(env_id)
+    root = Path(out) if out is not None else model_path.parent / "zoo"
+    exp = root / algo / f"{name}_1"
+    params = exp / name
+    params.mkdir(parents=True, exist_ok=True)
+    for target in ("best_model.zip", f"{name}.zip"):
+        shutil.copyfile(model_path, exp / target)
+    hyper = _hyperparams(meta)
+    stats = stats_path(model_path)
+    if hyper["normalize"]:
+        if not stats.is_file():
+            raise FileNotFoundError(f"the run normalises observations but {stats} is missing")
+        env = gym.make(env_id, **hyper["env_kwargs"])
+        kw = hyper["normalize"] if isinstance(hyper["normalize"], dict) else {}
+        venv = VecNormalize(DummyVecEnv([lambda: env]), **kw)
+        restore_stats(venv, read_stats(stats))
+        venv.save(str(params / "vecnormalize.pkl"))
+        venv.close()
+    (params / "config.yml").write_text(yaml.safe_dump(hyper, sort_keys=True))
+    return exp
