@@ -13,7 +13,7 @@ RESULTS ?= results
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[rl,onnx,bench,zoo,dev]'
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[rl,onnx,bench,zoo,ray,dev]'
 	touch $(STAMP)
 
 demo: $(STAMP)

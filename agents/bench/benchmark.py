@@ -308,6 +308,7 @@ def run_benchmark(
         ]
         if spec.robustness is not None and not quick:
             pngs.append(_plot_robustness(run, ref, out / f"{env_name}_robustness.png"))
+        curve_lines = _learning_curves(run, ref, out / f"{env_name}_learning.png", pngs, seed)
         times[env_name] = time.perf_counter() - t_env
         report += [
             f"## {env_name}",
@@ -320,12 +321,15 @@ def run_benchmark(
             "",
             ood_table,
             "",
+            *curve_lines,
             *[f"![{p.stem}]({p.name})" for p in pngs if p is not None],
             "",
         ]
         if verbose:
             print(f"\n### {env_name} ({times[env_name]:.0f} s)\n\n`test`:\n\n{test_table}\n\n"
                   f"`ood`:\n\n{ood_table}\n")  # fmt: skip
+            for line in curve_lines[2:-1]:
+                print(line)
         all_rows += run.all_rows()
     allev = Evaluation(rows=all_rows)
     allev.to_csv(out / "benchmark.csv")
@@ -357,6 +361,37 @@ def run_benchmark(
         print(f"\nwrote {out / 'benchmark.csv'}, {out / 'report.md'} and plots")
         print(f"time: {per_env}; total {total:.0f} s")
     return allev
+
+
+def _learning_curves(run: _EnvRun, ref: str | None, path: Path, pngs: list, seed: int) -> list:
+    """The report's lines on the shipped policies' learning curves (and their plot, added
+    to ``pngs``); none without learned rows."""
+    from agents.bench.curves import learning_curve, plot_learning_curves
+
+    learned = [n for n, kind in run.kind.items() if kind == "learned"]
+    if not learned:
+        return []
+    from agents.rl.policy import pretrained_seeds
+
+    reference = (ref, run.factory[ref]) if ref is not None else None
+    curves = []
+    for name in learned:
+        c = learning_curve(
+            name, pretrained_seeds(name), run.spec.env_id, run.spec.env_kwargs, run.score,
+            run.failed, reference, seed,
+        )  # fmt: skip
+        if c is not None:
+            curves.append(c)
+    if not curves:
+        return []
+    k, unit = run.score.scale, run.score.label.split(" (")[-1].rstrip(")")
+    pngs.append(plot_learning_curves(curves, run.spec.env_id, k, run.score.label, path))
+    return [
+        "Learning curves (`validation`, as recorded while training):",
+        "",
+        *[f"- {c.summary(k, unit)}" for c in curves],
+        "",
+    ]
 
 
 # ---- plots ---------------------------------------------------------------------------------

@@ -138,6 +138,36 @@ def build_parser() -> argparse.ArgumentParser:
         "SB3's SubprocVecEnv or DummyVecEnv (default otherwise)",
     )
 
+    w = command(
+        "sweep",
+        "hyperparameter search or multi-seed training as Ray Tune trials",
+        "Run training trials on Ray Tune: with --search N, N trials whose hyperparameters "
+        "Optuna's sampler draws (agents.rl.sweep.SEARCH_SPACES) to minimise the best "
+        "validation score; without it, one trial per --seeds value with the config as it "
+        "is. Ray starts on this machine unless --address names a cluster. The results "
+        "folder keeps every trial's run, results.csv, curves.csv (learning curves) and the "
+        "best model in best/. Needs the rl and ray extras.",
+    )
+    w.add_argument("--env", required=True, help="env id, e.g. machining_envs/Turning-v0")
+    w.add_argument("--algo", default="ppo", choices=["ppo", "sac", "td3"])
+    w.add_argument("--out", required=True, help="results folder (must be new unless --resume)")
+    w.add_argument("--search", type=int, default=0, metavar="N",
+                   help="trials of the hyperparameter search (0: train --seeds as configured)")  # fmt: skip
+    w.add_argument("--seeds", type=int, nargs="+", default=[0],
+                   help="training seeds, one trial each (a search uses one)")  # fmt: skip
+    w.add_argument("--timesteps", type=int, default=None, help="override n_timesteps of the config")
+    w.add_argument(
+        "--config", default=None, help="YAML file (default agents/rl/configs/<algo>.yml)"
+    )
+    w.add_argument("--workers", type=int, default=2,
+                   help="trials at once (CPUs of the local Ray instance)")  # fmt: skip
+    w.add_argument("--address", default=None,
+                   help="a running Ray cluster ('auto', 'ray://host:10001'); default: start "
+                   "Ray on this machine")  # fmt: skip
+    w.add_argument("--vec", choices=["native", "subproc", "dummy"], default=None,
+                   help="how each trial runs its envs (as in train)")  # fmt: skip
+    w.add_argument("--resume", action="store_true", help="continue an interrupted sweep")
+
     e = command(
         "evaluate",
         "the harness on a saved policy",
@@ -283,6 +313,31 @@ def main(argv: list[str] | None = None) -> int:
             )
         except (ConfigError, FileExistsError, FileNotFoundError) as exc:
             return _fail("train", exc)
+        return 0
+    if args.command == "sweep":
+        try:
+            import ray.tune  # noqa: F401
+
+            from agents.rl.sweep import SweepSettings, sweep
+        except ImportError as exc:
+            return _fail("sweep", f"{exc}: pip install 'machining-envs[rl,ray]'")
+        from agents.rl import ConfigError
+
+        settings = SweepSettings(
+            args.env,
+            args.algo,
+            n_search=args.search,
+            seeds=list(args.seeds),
+            n_timesteps=args.timesteps,
+            config_path=args.config,
+            workers=args.workers,
+            address=args.address,
+            vec=args.vec,
+        )
+        try:
+            sweep(settings, args.out, resume=args.resume)
+        except (ConfigError, ValueError, FileExistsError, FileNotFoundError, RuntimeError) as exc:
+            return _fail("sweep", exc)
         return 0
     if args.command == "evaluate":
         try:

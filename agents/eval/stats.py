@@ -26,7 +26,14 @@ import numpy as np
 
 from machining_envs.core.score import PrimaryScore
 
-__all__ = ["AgentStats", "score_matrix", "agent_stats", "paired_difference", "BOOTSTRAP_REPS"]
+__all__ = [
+    "AgentStats",
+    "score_matrix",
+    "iqm_interval",
+    "agent_stats",
+    "paired_difference",
+    "BOOTSTRAP_REPS",
+]
 
 #: Bootstrap resamples for every interval (rliable's default is 50 000; 2 000 keeps the
 #: interval's end points within about 1 % of it at 100 episodes and the table fast).
@@ -74,30 +81,37 @@ def score_matrix(rows: Sequence[dict], score: PrimaryScore, failed_value: float)
     return seeds, m
 
 
-def agent_stats(
-    rows: Sequence[dict], score: PrimaryScore, failed_value: float, seed: int = 0
-) -> AgentStats:
-    """Mean, IQM with its 95 % stratified-bootstrap interval, count rate and efficiency."""
+def iqm_interval(m: np.ndarray, seed: int = 0) -> tuple[float, float, float]:
+    """IQM of ``m`` (runs x strata: episodes x policy seeds, or policy seeds x 1) with its
+    95 % stratified-bootstrap interval (rliable): ``(iqm, low, high)``."""
     import warnings
 
     library, metrics = _rliable()
-    _, m = score_matrix(rows, score, failed_value)
     with warnings.catch_warnings():
         # rliable passes arch a RandomState, which arch has deprecated (same numbers).
         warnings.simplefilter("ignore", FutureWarning)
         point, ci = library.get_interval_estimates(
-            {"a": m},
+            {"a": np.asarray(m, dtype=float)},
             lambda x: np.array([metrics.aggregate_iqm(x)]),
             reps=BOOTSTRAP_REPS,
             random_state=np.random.RandomState(seed),
         )
+    return float(point["a"][0]), float(ci["a"][0, 0]), float(ci["a"][1, 0])
+
+
+def agent_stats(
+    rows: Sequence[dict], score: PrimaryScore, failed_value: float, seed: int = 0
+) -> AgentStats:
+    """Mean, IQM with its 95 % stratified-bootstrap interval, count rate and efficiency."""
+    _, m = score_matrix(rows, score, failed_value)
+    iqm, low, high = iqm_interval(m, seed)
     eff = [score.efficiency(r, failed_value) for r in rows]
     eff = float(np.mean(eff)) if all(math.isfinite(e) for e in eff) else math.nan
     return AgentStats(
         mean=float(m.mean()),
-        iqm=float(point["a"][0]),
-        iqm_low=float(ci["a"][0, 0]),
-        iqm_high=float(ci["a"][1, 0]),
+        iqm=iqm,
+        iqm_low=low,
+        iqm_high=high,
         count_rate=float(np.mean([score.counts(r) for r in rows])),
         efficiency=eff,
         n_episodes=m.shape[0],

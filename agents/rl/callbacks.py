@@ -121,17 +121,23 @@ class ValidationCallback(BaseCallback):
         self.env_id: str | None = None
         self.env_kwargs: dict = {}
         self.increment = None
+        self.residual = None
         self.out: Path | None = None
         self._t0 = time.perf_counter()
         self._checkpoints: JsonStatsCheckpoint | None = None
         self._setup = None
+        #: Called with each evaluation's row (``timesteps``, ``wall_s``, ``score``, ``valid``,
+        #: the secondary metric, ``best``): a sweep reports it to Ray Tune.
+        self.on_evaluation = None
 
     def bind(
-        self, env_id: str, env_kwargs: dict, increment, out: Path | None
+        self, env_id: str, env_kwargs: dict, increment, out: Path | None, residual=None
     ) -> ValidationCallback:
         """Tell the callback what it would otherwise read from the training env, and the run
-        folder to write ``eval.csv``, the best model and the checkpoints to."""
+        folder to write ``eval.csv``, the best model and the checkpoints to. ``residual``:
+        the ``ResidualSpec`` fields of a policy that sets a regulator's setpoint."""
         self.env_id, self.env_kwargs, self.increment = env_id, dict(env_kwargs), increment
+        self.residual = residual
         self.out = None if out is None else Path(out)
         return self
 
@@ -183,6 +189,10 @@ class ValidationCallback(BaseCallback):
         self.env_kwargs = {k: v for k, v in (spec.kwargs or {}).items() if k != "render_mode"}
         if self.training_env.env_is_wrapped(IncrementalAction, [0])[0]:
             self.increment = self.training_env.get_attr("increment", [0])[0]
+        from agents.rl.residual import SetpointResidual
+
+        if self.training_env.env_is_wrapped(SetpointResidual, [0])[0]:
+            self.residual = self.training_env.get_attr("residual", [0])[0]._asdict()
 
     def _eval_csv(self) -> Path | None:
         return None if self.out is None else self.out / "eval.csv"
@@ -199,6 +209,14 @@ class ValidationCallback(BaseCallback):
         clip = venv.clip_obs if isinstance(venv, VecNormalize) else 10.0
         eps = venv.epsilon if isinstance(venv, VecNormalize) else 1e-8
         agent = PolicyAgent(self.model, obs_rms, clip, eps, increment=self.increment)
+        if self.residual is not None:
+            from agents.rl.residual import ResidualAgent, ResidualSpec
+
+            spec, policy = ResidualSpec(**self.residual), agent
+
+            def agent(env):
+                return ResidualAgent(policy, spec, spec.make_base(env, self.env_id))
+
         ev = evaluate(
             agent,
             self.env_id,
@@ -234,8 +252,17 @@ class ValidationCallback(BaseCallback):
                     }
                 )
             if s["score"] < self.best:
-                self.best = s["score"]
                 self.model.save(self.out / "best_model.zip")
                 if isinstance(venv, VecNormalize):
                     save_stats(venv, self.out / "best_vecnormalize.json")
+        self.best = min(self.best, s["score"])
+        if self.on_evaluation is not None:
+            self.on_evaluation(
+                {
+                    "timesteps": self.model.num_timesteps,
+                    "wall_s": time.perf_counter() - self._t0,
+                    **s,
+                    "best": self.best,
+                }
+            )
         return s

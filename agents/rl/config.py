@@ -51,6 +51,7 @@ _SETTINGS: dict[str, tuple[type, ...]] = {
 #: The names ``callback`` and ``env_wrapper`` entries may give our own classes by.
 VALIDATION_CALLBACK = "agents.rl.callbacks.ValidationCallback"
 INCREMENT_WRAPPER = "machining_envs.wrappers.IncrementalAction"
+RESIDUAL_WRAPPER = "agents.rl.residual.SetpointResidual"
 _NORMALIZE_KEYS = {"norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon"}
 
 _INF = float("inf")
@@ -151,6 +152,9 @@ class TrainConfig:
     hyperparams: dict = field(default_factory=dict)
     callbacks: list = field(default_factory=list)
     """Other SB3 callbacks named in ``callback``: ``(class, keywords)`` pairs."""
+    residual: dict | None = None
+    """``env_wrapper: SetpointResidual``: the ``ResidualSpec`` fields (the policy sets the
+    setpoint of a classical regulator; ``agents.rl.residual``)."""
     source: str = ""
 
 
@@ -228,13 +232,25 @@ def _read_callbacks(where: str, value, cfg: TrainConfig) -> None:
 
 
 def _read_wrappers(where: str, value, cfg: TrainConfig) -> None:
-    """``env_wrapper``: only ``IncrementalAction`` (the native vector envs run no gymnasium
-    wrappers, and a policy's wrapper must be known to replay it outside training)."""
-    for name, kwargs in _entries(where, "env_wrapper", value):
+    """``env_wrapper``: ``IncrementalAction`` or ``SetpointResidual`` (the native vector envs
+    run no gymnasium wrappers, and a policy's wrapper must be known to replay it outside
+    training)."""
+    entries = _entries(where, "env_wrapper", value)
+    if len(entries) > 1:
+        raise ConfigError(f"{where}: env_wrapper: one wrapper at most, got {len(entries)}")
+    for name, kwargs in entries:
+        if name in (RESIDUAL_WRAPPER, "SetpointResidual"):
+            from agents.rl.residual import ResidualSpec
+
+            try:
+                cfg.residual = ResidualSpec(**kwargs).checked()._asdict()
+            except (TypeError, ValueError) as exc:
+                raise ConfigError(f"{where}: env_wrapper {name}: {exc}") from None
+            continue
         if name not in (INCREMENT_WRAPPER, "IncrementalAction"):
             raise ConfigError(
-                f"{where}: env_wrapper: machining-bench train applies only {INCREMENT_WRAPPER}, "
-                f"got {name!r}"
+                f"{where}: env_wrapper: machining-bench train applies {INCREMENT_WRAPPER} or "
+                f"{RESIDUAL_WRAPPER}, got {name!r}"
             )
         bad = set(kwargs) - {"max_step", "hide_action"}
         if bad:
@@ -303,10 +319,11 @@ def _literal(where: str, key: str, text: str):
     return value(tree)
 
 
-def load_config(env_id: str, algo: str, path=None) -> TrainConfig:
+def load_config(env_id: str, algo: str, path=None, overrides: dict | None = None) -> TrainConfig:
     """Read and validate the configuration of ``algo`` on ``env_id``.
 
-    ``path`` defaults to ``agents/rl/configs/<algo>.yml``. Raises ``ConfigError`` (a
+    ``path`` defaults to ``agents/rl/configs/<algo>.yml``. ``overrides`` replaces keys of the
+    entry (a sweep's sampled hyperparameters) before the checks. Raises ``ConfigError`` (a
     ``ValueError``) for a missing file or entry, an unknown key, or a wrong type.
     """
     import yaml
@@ -328,6 +345,11 @@ def load_config(env_id: str, algo: str, path=None) -> TrainConfig:
     if not isinstance(entry, dict):
         raise ConfigError(f"{path}: the entry for {env_id!r} must be a mapping")
     where = f"{path}:{env_id}"
+    if overrides:
+        if not isinstance(overrides, dict):
+            raise ConfigError(f"overrides must be a mapping, got {type(overrides).__name__}")
+        entry = {**entry, **overrides}
+        where += f" with {sorted(overrides)} replaced"
     algo_params = set(inspect.signature(algorithm_classes()[algo].__init__).parameters) - {
         "self",
         "policy",

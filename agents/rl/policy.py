@@ -98,9 +98,7 @@ class PolicyAgent:
         return self.increment.absolute_action(raw, delta), state
 
 
-def load_policy(
-    model_path, name: str | None = None, algo: str | None = None, stats=None
-) -> PolicyAgent:
+def load_policy(model_path, name: str | None = None, algo: str | None = None, stats=None):
     """Load ``*.zip`` and its VecNormalize statistics (``*_vecnormalize.json`` beside it,
     or ``stats``).
 
@@ -110,6 +108,10 @@ def load_policy(
     refused, since reading it could run code; convert one you trust with
     ``machining-bench convert-stats FILE.pkl``. SB3's ``.zip`` itself unpickles parts of its
     content: load models only from sources you trust.
+
+    Returns a :class:`PolicyAgent`, or, for a run trained with ``SetpointResidual``
+    (``residual`` in its ``config.json``), an ``agents.rl.residual.ResidualAgent``: the
+    policy over the regulator whose setpoint it sets.
     """
     model_path = Path(model_path)
     if not model_path.is_file():
@@ -155,7 +157,7 @@ def load_policy(
         obs_rms = RunningMeanStd(shape=norm.obs_mean.shape)
         obs_rms.mean, obs_rms.var, obs_rms.count = norm.obs_mean, norm.obs_var, norm.obs_count
         clip, eps = norm.clip_obs, norm.epsilon
-    return PolicyAgent(
+    agent = PolicyAgent(
         model,
         obs_rms,
         clip,
@@ -163,6 +165,19 @@ def load_policy(
         name=name or f"{algo.upper()} ({model_path.parent.name})",
         increment=increment,
     )
+    if meta.get("residual"):  # the policy sets the setpoint of a classical regulator
+        import gymnasium as gym
+
+        from agents.rl.residual import ResidualAgent, ResidualSpec
+
+        spec = ResidualSpec(**meta["residual"])
+        env = gym.make(meta["env_id"])
+        try:
+            base = spec.make_base(env, meta["env_id"])
+        finally:
+            env.close()
+        return ResidualAgent(agent, spec, base, name=agent.name)
+    return agent
 
 
 PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"

@@ -95,6 +95,10 @@ def _make_vec(cfg: TrainConfig, seed: int, vec: str | None = None):
             vec_env_cls=SubprocVecEnv if vec == "subproc" else None,
         )
         increment = venv.get_attr("increment", [0])[0] if wrapper_kwargs is not None else None
+    if cfg.residual is not None:  # the policy sets a classical regulator's setpoint
+        from agents.rl.residual import ResidualSpec, vec_setpoint_residual
+
+        venv = vec_setpoint_residual(venv, ResidualSpec(**cfg.residual), cfg.env_id, cfg.env_kwargs)
     if cfg.normalize:
         kw = cfg.normalize if isinstance(cfg.normalize, dict) else {}
         venv = VecNormalize(venv, **kw)
@@ -166,13 +170,19 @@ def train(
     progress_bar: bool = True,
     verbose: bool = True,
     vec: str | None = None,
+    overrides: dict | None = None,
+    on_evaluation=None,
 ) -> Path:
-    """Train ``algo`` on ``env_id``; returns the run folder. See the module docstring."""
+    """Train ``algo`` on ``env_id``; returns the run folder. See the module docstring.
+
+    ``overrides`` replaces keys of the config entry (checked like the file's);
+    ``on_evaluation`` is called with each validation evaluation's row (a sweep reports it).
+    """
     import torch
     from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.vec_env import VecNormalize
 
-    cfg = load_config(env_id, algo, config_path)  # all validation before anything starts
+    cfg = load_config(env_id, algo, config_path, overrides)  # all checks before anything starts
     _check_env_setup(cfg)
     vec_kind = _vec_kind(env_id, vec)
     if n_timesteps is not None:
@@ -228,13 +238,18 @@ def train(
             "command": " ".join(sys.argv),
             "vec": vec_kind,
         }
+        if overrides:
+            meta["overrides"] = overrides
         if increment is not None:
             meta["action_increment"] = increment._asdict()
+        if cfg.residual is not None:
+            meta["residual"] = cfg.residual
         (out / "config.json").write_text(json.dumps(meta, indent=2, default=str))
 
     eval_cb = ValidationCallback(
         cfg.eval_freq, cfg.eval_episodes, cfg.eval_scenarios, cfg.checkpoint_freq, verbose=0
-    ).bind(env_id, cfg.env_kwargs, increment, out)
+    ).bind(env_id, cfg.env_kwargs, increment, out, cfg.residual)
+    eval_cb.on_evaluation = on_evaluation
     callbacks = [eval_cb, *(cls(**kwargs) for cls, kwargs in cfg.callbacks)]
     t0 = time.perf_counter()
     model.learn(

@@ -1,0 +1,227 @@
+"""Residual setpoint policies: a learned supervisor over a tuned classical regulator.
+
+The classical regulators of the force- and torque-holding envs (the adaptive PI of
+Turning-v0, for one) regulate at ``setpoint`` x the process limit. In this formulation the
+policy does not command the feed: each step its action ``a`` in [-1, 1] sets the
+regulator's setpoint, ``clip(centre + span * a, lo, hi)``, where ``centre`` is the
+regulator's own (tuned) setpoint; the regulator then computes the command as it always does,
+so its integrator and its gain estimate see the command the machine gets. A policy that
+outputs 0 is the tuned regulator, exactly: learning starts from the classical agent and may
+only move its setpoint within ``span``.
+
+Three pieces share one definition (:class:`ResidualSpec`): :class:`SetpointResidual`, a
+gymnasium wrapper (rl-zoo3's ``env_wrapper``, ``DummyVecEnv``), :class:`VecSetpointResidual`
+for SB3 vector envs (the native batched ones), and :class:`ResidualAgent`, which replays a
+trained policy over its regulator behind the agent protocol (``agents.rl.load_policy``
+returns one for a run trained so).
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+from pathlib import Path
+from typing import NamedTuple
+
+import gymnasium as gym
+import numpy as np
+
+__all__ = ["ResidualSpec", "SetpointResidual", "VecSetpointResidual", "ResidualAgent"]
+
+TUNED_FILE = Path(__file__).resolve().parents[1] / "bench" / "tuned.json"
+WRAPPER = "agents.rl.residual.SetpointResidual"
+
+
+class ResidualSpec(NamedTuple):
+    """The regulator under the policy and the setpoint range the policy may use.
+
+    ``base``: import path of the regulator's class (an ``agents.base.Agent`` with a
+    ``setpoint`` setting and ``from_env``); ``params``: its settings, or ``"tuned"`` for the
+    env's entry in ``agents/bench/tuned.json``; ``span``: the setpoint moves at most this much
+    from the regulator's own; ``lo``, ``hi``: the setpoint never leaves ``[lo, hi]``.
+    """
+
+    base: str
+    params: dict | str = "tuned"
+    span: float = 0.2
+    lo: float = 0.3
+    hi: float = 1.0
+
+    def checked(self) -> ResidualSpec:
+        """This spec if its values are usable (``ValueError`` naming the field otherwise)."""
+        if not isinstance(self.base, str) or "." not in self.base:
+            raise ValueError(f"base must be an import path 'module.Class', got {self.base!r}")
+        if not (self.params == "tuned" or isinstance(self.params, dict)):
+            raise ValueError(f"params must be a mapping or 'tuned', got {self.params!r}")
+        for name in ("span", "lo", "hi"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+                raise ValueError(f"{name} must be a finite number, got {v!r}")
+        if not 0.0 < self.span <= 1.0:
+            raise ValueError(f"span must be in (0, 1], got {self.span!r}")
+        if not 0.0 < self.lo < self.hi <= 1.5:
+            raise ValueError(f"lo and hi must satisfy 0 < lo < hi <= 1.5, got {self.lo}, {self.hi}")
+        cls = self.base_class()
+        if not hasattr(cls, "from_env") or "setpoint" not in getattr(cls, "TUNABLE", {}):
+            raise ValueError(f"base {self.base} has no tunable setpoint to supervise")
+        return self
+
+    def base_class(self):
+        module, _, name = self.base.rpartition(".")
+        try:
+            return getattr(importlib.import_module(module), name)
+        except (ImportError, AttributeError):
+            raise ValueError(f"base: cannot import {self.base!r}") from None
+
+    def settings(self, env_id: str | None) -> dict:
+        """The regulator's settings: ``params``, or its tuned entry for ``env_id``."""
+        if isinstance(self.params, dict):
+            return dict(self.params)
+        name = self.base.rpartition(".")[2]
+        data = json.loads(TUNED_FILE.read_text()) if TUNED_FILE.is_file() else {}
+        entry = data.get("envs", {}).get(env_id, {}).get(name)
+        if entry is None:
+            raise ValueError(
+                f"params='tuned': {TUNED_FILE} has no {name} entry for {env_id!r} "
+                "(run `machining-bench tune`, or give params)"
+            )
+        return dict(entry["params"])
+
+    def make_base(self, env, env_id: str | None = None):
+        """The regulator for ``env`` (its id from ``env.spec`` unless given)."""
+        if env_id is None:
+            spec = getattr(env, "spec", None) or getattr(env.unwrapped, "spec", None)
+            env_id = spec.id if spec is not None else None
+        base = self.base_class().from_env(env, **self.settings(env_id))
+        if not self.lo <= base.setpoint <= self.hi:
+            raise ValueError(
+                f"the regulator's setpoint {base.setpoint:.3g} is outside [lo, hi] = "
+                f"[{self.lo}, {self.hi}]"
+            )
+        return base
+
+    def setpoints(self, base, action) -> np.ndarray:
+        """The setpoint of each lane for the policy's actions ``(n, 1)`` (or ``(1,)``)."""
+        a = np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
+        return np.clip(base.setpoint + self.span * a, self.lo, self.hi)
+
+    def act(self, base, obs: np.ndarray, state: np.ndarray, action) -> np.ndarray:
+        """The regulator's command for the batch ``obs`` at the policy's setpoints; ``state``
+        is updated in place (the regulator's own state)."""
+        centre = base.setpoint
+        base.setpoint = self.setpoints(base, action)
+        try:
+            u = base._act(np.asarray(obs, dtype=np.float64), state)
+        finally:
+            base.setpoint = centre
+        return np.clip(u, -1.0, 1.0).astype(np.float32).reshape(len(obs), -1)
+
+
+def _single_action_space() -> gym.spaces.Box:
+    return gym.spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+
+
+class SetpointResidual(gym.Wrapper):
+    """The env with the policy setting the regulator's setpoint (see the module doc).
+
+    Parameters are :class:`ResidualSpec`'s. ``info["setpoint"]`` is the setpoint used.
+    """
+
+    def __init__(self, env, base: str, params="tuned", span=0.2, lo=0.3, hi=1.0):
+        super().__init__(env)
+        self.residual = ResidualSpec(base, params, span, lo, hi).checked()
+        self.base = self.residual.make_base(env)
+        self.action_space = _single_action_space()
+        self._obs = None
+        self._state = None
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        self._obs = np.asarray(obs, dtype=np.float64)[None, :]
+        self._state = self.base.initial_state(1, self._obs)
+        return obs, info
+
+    def step(self, action):
+        if self._obs is None:
+            raise RuntimeError("SetpointResidual: call reset() before step()")
+        if not np.all(np.isfinite(np.asarray(action, dtype=np.float64))):
+            raise ValueError(f"SetpointResidual: action must be finite, got {action!r}")
+        sp = float(self.residual.setpoints(self.base, action)[0])
+        u = self.residual.act(self.base, self._obs, self._state, action)[0]
+        obs, reward, terminated, truncated, info = self.env.step(u)
+        self._obs = np.asarray(obs, dtype=np.float64)[None, :]
+        info = {**info, "setpoint": sp}
+        return obs, reward, terminated, truncated, info
+
+
+def vec_setpoint_residual(venv, residual: ResidualSpec, env_id: str, env_kwargs: dict):
+    """``venv`` (an SB3 VecEnv of ``env_id``) under the policy-set setpoint."""
+    probe = gym.make(env_id, **dict(env_kwargs))
+    try:
+        base = residual.make_base(probe, env_id)
+    finally:
+        probe.close()
+    return VecSetpointResidual(venv, residual, base)
+
+
+def _vec_wrapper_base():
+    from stable_baselines3.common.vec_env import VecEnvWrapper
+
+    return VecEnvWrapper
+
+
+class VecSetpointResidual(_vec_wrapper_base()):
+    """:class:`SetpointResidual` for an SB3 VecEnv: one regulator state per lane, reset
+    with the lane (SB3 vector envs reset a finished lane in the same step)."""
+
+    def __init__(self, venv, residual: ResidualSpec, base):
+        super().__init__(venv, action_space=_single_action_space())
+        self.residual, self.base = residual, base
+        self._obs = None
+        self._state = None
+
+    def reset(self):
+        obs = self.venv.reset()
+        self._obs = np.asarray(obs, dtype=np.float64)
+        self._state = self.base.initial_state(self.num_envs, self._obs)
+        return obs
+
+    def step_async(self, actions):
+        u = self.residual.act(self.base, self._obs, self._state, actions)
+        self.venv.step_async(u)
+
+    def step_wait(self):
+        obs, rewards, dones, infos = self.venv.step_wait()
+        self._obs = np.asarray(obs, dtype=np.float64)
+        if np.any(dones):
+            self._state[dones] = self.base.initial_state(int(np.sum(dones)), self._obs[dones])
+        return obs, rewards, dones, infos
+
+
+class ResidualAgent:
+    """A trained residual policy over its regulator, behind the agent protocol.
+
+    ``policy``: the trained policy (an ``agents.rl.PolicyAgent``); ``base``: the regulator
+    (built by ``ResidualSpec.make_base``). The state is the regulator's, one row per env.
+    """
+
+    learned = True
+
+    def __init__(self, policy, residual: ResidualSpec, base, name: str | None = None):
+        self.policy, self.residual, self.base = policy, residual, base
+        self.name = name or f"{policy.name} over {base.name}"
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        batch, single = self.base._observations(observation)
+        n = batch.shape[0]
+        if state is None:
+            st = self.base.initial_state(n, batch)
+        else:
+            st = self.base._state(state, n)
+            if episode_start is not None:
+                starts = self.base._starts(episode_start, n)
+                if starts.any():
+                    st[starts] = self.base.initial_state(int(starts.sum()), batch[starts])
+        a, _ = self.policy.predict(batch, deterministic=deterministic)
+        u = self.residual.act(self.base, batch, st, a)
+        return (u[0] if single else u), st

@@ -1,0 +1,134 @@
+"""Residual setpoint policies: the wrapper, its vector form and the replaying agent agree, and
+a zero policy is the tuned regulator."""
+
+import csv
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+from agents.bench.tune import tuned_factory  # noqa: E402
+from agents.rl import ConfigError, load_config  # noqa: E402
+from agents.rl.residual import (  # noqa: E402
+    ResidualAgent,
+    ResidualSpec,
+    SetpointResidual,
+    vec_setpoint_residual,
+)
+from agents.rl.vec import SB3VecEnv  # noqa: E402
+from agents.turning import VariableGainPI  # noqa: E402
+from tests.helpers import TURNING  # noqa: E402
+
+BASE = "agents.turning.VariableGainPI"
+
+
+class _Policy:
+    """A deterministic stand-in for a trained policy: the setpoint action from the force."""
+
+    name = "stand-in"
+
+    def predict(self, obs, state=None, episode_start=None, deterministic=True):
+        obs = np.atleast_2d(obs).astype(np.float32)  # as SB3 sees observations
+        return np.tanh(np.float32(3.0) * (np.float32(0.6) - obs[:, :1])), state
+
+
+def test_a_zero_policy_is_the_tuned_regulator_step_for_step():
+    env = SetpointResidual(gym.make(TURNING), BASE)
+    plain = gym.make(TURNING)
+    agent = tuned_factory(VariableGainPI, TURNING)(plain)
+    o, _ = env.reset(seed=5)
+    p, _ = plain.reset(seed=5)
+    st = None
+    for _ in range(600):
+        a, st = agent.predict(p, st)
+        o, r, te, tr, info = env.step(np.zeros(1, np.float32))
+        p, rp, tep, trp, _ = plain.step(a)
+        np.testing.assert_array_equal(o, p)
+        assert (r, te, tr) == (rp, tep, trp)
+        assert info["setpoint"] == pytest.approx(agent.setpoint)
+        if te or tr:
+            break
+
+
+def test_the_replaying_agent_runs_what_the_wrapper_ran():
+    policy = _Policy()
+    wrapped = SetpointResidual(gym.make(TURNING), BASE, span=0.3)
+    plain = gym.make(TURNING)
+    agent = ResidualAgent(policy, wrapped.residual, wrapped.residual.make_base(plain))
+    o, _ = wrapped.reset(seed=11)
+    p, _ = plain.reset(seed=11)
+    st, setpoints = None, set()
+    for _ in range(300):
+        u, st = agent.predict(p, st)
+        o, r, te, tr, info = wrapped.step(policy.predict(o)[0][0])
+        p, rp, *_ = plain.step(u)
+        np.testing.assert_array_equal(o, p)
+        setpoints.add(round(info["setpoint"], 6))
+        if te or tr:
+            break
+    assert len(setpoints) > 10  # the stand-in moves the setpoint: a real test of the replay
+
+
+def test_the_vector_form_runs_each_lane_as_the_wrapper_does_across_resets():
+    n, policy = 3, _Policy()
+    spec = ResidualSpec(BASE, span=0.3)
+    venv = vec_setpoint_residual(SB3VecEnv(gym.make_vec(TURNING, num_envs=n)), spec, TURNING, {})
+    venv.seed(20)
+    obs = venv.reset()
+    singles = [SetpointResidual(gym.make(TURNING), BASE, span=0.3) for _ in range(n)]
+    single_obs = [e.reset(seed=20 + i)[0] for i, e in enumerate(singles)]
+    ends = 0
+    for _ in range(700):
+        np.testing.assert_array_equal(obs, np.stack(single_obs))
+        actions = policy.predict(obs)[0]
+        obs, _, dones, _ = venv.step(actions)
+        for i, e in enumerate(singles):
+            single_obs[i], _, te, tr, _ = e.step(actions[i])
+            if te or tr:
+                single_obs[i] = e.reset()[0]
+                ends += 1
+        assert list(dones) == [bool(x) for x in dones]
+    assert ends >= 1  # at least one lane finished and was reset on both sides
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"base": "agents.drilling.NoControl"}, "no tunable setpoint"),
+        ({"base": "agents.turning.Nope"}, "cannot import"),
+        ({"base": BASE, "span": 0.0}, "span must be in"),
+        ({"base": BASE, "lo": 0.8, "hi": 0.5}, "lo and hi"),
+        ({"base": BASE, "params": 3}, "params must be"),
+        ({"base": BASE, "spam": 1}, "spam"),
+    ],
+)
+def test_bad_residual_settings_are_refused_naming_them(tmp_path, kwargs, match):
+    import yaml
+
+    cfg = {TURNING: {"policy": "MlpPolicy", "env_wrapper": [
+        {"agents.rl.residual.SetpointResidual": kwargs}]}}  # fmt: skip
+    path = tmp_path / "c.yml"
+    path.write_text(yaml.safe_dump(cfg))
+    with pytest.raises(ConfigError, match=match):
+        load_config(TURNING, "ppo", path)
+
+
+def test_a_trained_residual_run_reloads_as_a_residual_agent_and_reproduces_its_score(tmp_path):
+    from agents.rl import load_policy, train
+    from agents.rl.config import CONFIG_DIR
+    from agents.rl.train import evaluate_policy_file
+    from machining_envs.core.splits import split_seeds
+
+    out = train(TURNING, "ppo", tmp_path / "run", config_path=CONFIG_DIR / "ppo_residual.yml",
+                n_timesteps=2048, progress_bar=False, verbose=False)  # fmt: skip
+    agent = load_policy(out / "best_model.zip")
+    assert isinstance(agent, ResidualAgent) and agent.base.name.startswith("adaptive PI")
+    with open(out / "eval.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    best = min(float(r["score"]) for r in rows)
+    _, score, _ = evaluate_policy_file(
+        out / "best_model.zip", TURNING, ["validation"], 10, split_seeds("validation", 10)[0]
+    )
+    assert score["score"] == pytest.approx(best, rel=1e-12)
