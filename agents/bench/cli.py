@@ -57,6 +57,24 @@ def _version() -> str:
         return machining_envs.__version__
 
 
+def _training_arguments(p: argparse.ArgumentParser, out_help: str) -> None:
+    """The arguments ``train`` and ``sweep`` share."""
+    p.add_argument("--env", required=True, help="env id, e.g. machining_envs/Turning-v0")
+    p.add_argument("--algo", default="ppo", choices=["ppo", "sac", "td3"])
+    p.add_argument("--out", required=True, help=out_help)
+    p.add_argument("--timesteps", type=int, default=None, help="override n_timesteps of the config")
+    p.add_argument(
+        "--config", default=None, help="YAML file (default agents/rl/configs/<algo>.yml)"
+    )
+    p.add_argument(
+        "--vec",
+        choices=["native", "subproc", "dummy"],
+        default=None,
+        help="how the envs run: the native batched vector env (default where the id has one), "
+        "SB3's SubprocVecEnv or DummyVecEnv (default otherwise)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="machining-bench", description=__doc__, formatter_class=_TopFormatter
@@ -120,23 +138,10 @@ def build_parser() -> argparse.ArgumentParser:
         "agents/rl/configs/<algo>.yml (or --config); the run folder keeps the model, its "
         "normalisation statistics, checkpoints and held-out evaluations.",
     )
-    t.add_argument("--env", required=True, help="env id, e.g. machining_envs/Turning-v0")
-    t.add_argument("--algo", default="ppo", choices=["ppo", "sac", "td3"])
-    t.add_argument("--out", required=True, help="run folder (must be new unless --resume)")
+    _training_arguments(t, "run folder (must be new unless --resume)")
     t.add_argument("--seed", type=int, default=0)
-    t.add_argument("--timesteps", type=int, default=None, help="override n_timesteps of the config")
-    t.add_argument(
-        "--config", default=None, help="YAML file (default agents/rl/configs/<algo>.yml)"
-    )
     t.add_argument("--resume", action="store_true", help="continue from the run's last checkpoint")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
-    t.add_argument(
-        "--vec",
-        choices=["native", "subproc", "dummy"],
-        default=None,
-        help="how the envs run: the native batched vector env (default where the id has one), "
-        "SB3's SubprocVecEnv or DummyVecEnv (default otherwise)",
-    )
 
     w = command(
         "sweep",
@@ -148,24 +153,16 @@ def build_parser() -> argparse.ArgumentParser:
         "folder keeps every trial's run, results.csv, curves.csv (learning curves) and the "
         "best model in best/. Needs the rl and ray extras.",
     )
-    w.add_argument("--env", required=True, help="env id, e.g. machining_envs/Turning-v0")
-    w.add_argument("--algo", default="ppo", choices=["ppo", "sac", "td3"])
-    w.add_argument("--out", required=True, help="results folder (must be new unless --resume)")
+    _training_arguments(w, "results folder (must be new unless --resume)")
     w.add_argument("--search", type=int, default=0, metavar="N",
                    help="trials of the hyperparameter search (0: train --seeds as configured)")  # fmt: skip
     w.add_argument("--seeds", type=int, nargs="+", default=[0],
                    help="training seeds, one trial each (a search uses one)")  # fmt: skip
-    w.add_argument("--timesteps", type=int, default=None, help="override n_timesteps of the config")
-    w.add_argument(
-        "--config", default=None, help="YAML file (default agents/rl/configs/<algo>.yml)"
-    )
     w.add_argument("--workers", type=int, default=2,
                    help="trials at once (CPUs of the local Ray instance)")  # fmt: skip
     w.add_argument("--address", default=None,
                    help="a running Ray cluster ('auto', 'ray://host:10001'); default: start "
                    "Ray on this machine")  # fmt: skip
-    w.add_argument("--vec", choices=["native", "subproc", "dummy"], default=None,
-                   help="how each trial runs its envs (as in train)")  # fmt: skip
     w.add_argument("--resume", action="store_true", help="continue an interrupted sweep")
 
     e = command(

@@ -254,7 +254,7 @@ PROCESS = Process(
             ("paper_245", "paper_405", "paper_700", "taper_405"),
             "paper_405",
             tuned=(ConstantFeed, FixedGainPI, VariableGainPI),
-            learned=("turning_ppo",),
+            learned=("turning_ppo", "turning_ppo_residual"),
             oracle=_oracle,
             oracle_episodes=10,
             robustness=Robustness(

@@ -4,8 +4,9 @@ any training starts (see ``agents.rl``).
 The files are rl-zoo3's hyperparameter files, so ``python -m rl_zoo3.train --conf-file`` runs
 them unmodified: one entry per env id with rl-zoo3's keys (``policy``, ``n_timesteps``,
 ``n_envs``, ``normalize``, ``env_kwargs``, ``env_wrapper``, ``callback``, ``policy_kwargs``)
-and the algorithm's keywords. ``env_wrapper`` may name
-``machining_envs.wrappers.IncrementalAction`` (with ``max_step`` and ``hide_action``);
+and the algorithm's keywords. ``env_wrapper`` may name one of
+``machining_envs.wrappers.IncrementalAction`` (with ``max_step`` and ``hide_action``) and
+``agents.rl.residual.SetpointResidual`` (the policy moves a tuned classical agent's setting);
 ``callback`` names ``agents.rl.callbacks.ValidationCallback`` (the held-out evaluation: its
 ``eval_freq``, ``n_episodes``, ``scenarios``, ``checkpoint_freq``) and any other SB3
 callback by import path. rl-zoo3's value syntax is read too: ``!!float 1e6`` counts,

@@ -164,6 +164,11 @@ def export_onnx(
 
     model_path = Path(model_path)
     agent = load_policy(model_path, algo=algo, stats=stats)
+    if not isinstance(agent, PolicyAgent):
+        raise ValueError(
+            f"{model_path} is a residual policy: it runs over a classical regulator, which "
+            "the ONNX graph does not hold; export plain policies only"
+        )
     if env_id is None:
         meta = model_path.parent / "config.json"
         if not meta.is_file():

@@ -35,10 +35,12 @@ WRAPPER = "agents.rl.residual.SetpointResidual"
 class ResidualSpec(NamedTuple):
     """The regulator under the policy and the setpoint range the policy may use.
 
-    ``base``: import path of the regulator's class (an ``agents.base.Agent`` with a
-    ``setpoint`` setting and ``from_env``); ``params``: its settings, or ``"tuned"`` for the
-    env's entry in ``agents/bench/tuned.json``; ``span``: the setpoint moves at most this much
-    from the regulator's own; ``lo``, ``hi``: the setpoint never leaves ``[lo, hi]``.
+    ``base``: import path of the regulator's class (an ``agents.base.Agent`` with
+    ``from_env``); ``params``: its settings, or ``"tuned"`` for the env's entry in
+    ``agents/bench/tuned.json``; ``knob``: the tunable setting the policy moves (default
+    ``setpoint``; ``override_cap`` for the contouring look-ahead planner); ``span``: it moves
+    at most this much from the regulator's own value; ``lo``, ``hi``: it never leaves
+    ``[lo, hi]``.
     """
 
     base: str
@@ -46,6 +48,7 @@ class ResidualSpec(NamedTuple):
     span: float = 0.2
     lo: float = 0.3
     hi: float = 1.0
+    knob: str = "setpoint"
 
     def checked(self) -> ResidualSpec:
         """This spec if its values are usable (``ValueError`` naming the field otherwise)."""
@@ -59,11 +62,11 @@ class ResidualSpec(NamedTuple):
                 raise ValueError(f"{name} must be a finite number, got {v!r}")
         if not 0.0 < self.span <= 1.0:
             raise ValueError(f"span must be in (0, 1], got {self.span!r}")
-        if not 0.0 < self.lo < self.hi <= 1.5:
-            raise ValueError(f"lo and hi must satisfy 0 < lo < hi <= 1.5, got {self.lo}, {self.hi}")
+        if not 0.0 < self.lo < self.hi <= 10.0:
+            raise ValueError(f"lo and hi must satisfy 0 < lo < hi <= 10, got {self.lo}, {self.hi}")
         cls = self.base_class()
-        if not hasattr(cls, "from_env") or "setpoint" not in getattr(cls, "TUNABLE", {}):
-            raise ValueError(f"base {self.base} has no tunable setpoint to supervise")
+        if not hasattr(cls, "from_env") or self.knob not in getattr(cls, "TUNABLE", {}):
+            raise ValueError(f"base {self.base} has no tunable {self.knob!r} to supervise")
         return self
 
     def base_class(self):
@@ -93,27 +96,28 @@ class ResidualSpec(NamedTuple):
             spec = getattr(env, "spec", None) or getattr(env.unwrapped, "spec", None)
             env_id = spec.id if spec is not None else None
         base = self.base_class().from_env(env, **self.settings(env_id))
-        if not self.lo <= base.setpoint <= self.hi:
+        value = getattr(base, self.knob)
+        if not self.lo <= value <= self.hi:
             raise ValueError(
-                f"the regulator's setpoint {base.setpoint:.3g} is outside [lo, hi] = "
+                f"the regulator's {self.knob} {value:.3g} is outside [lo, hi] = "
                 f"[{self.lo}, {self.hi}]"
             )
         return base
 
     def setpoints(self, base, action) -> np.ndarray:
-        """The setpoint of each lane for the policy's actions ``(n, 1)`` (or ``(1,)``)."""
+        """The knob's value in each lane for the policy's actions ``(n, 1)`` (or ``(1,)``)."""
         a = np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
-        return np.clip(base.setpoint + self.span * a, self.lo, self.hi)
+        return np.clip(getattr(base, self.knob) + self.span * a, self.lo, self.hi)
 
     def act(self, base, obs: np.ndarray, state: np.ndarray, action) -> np.ndarray:
         """The regulator's command for the batch ``obs`` at the policy's setpoints; ``state``
         is updated in place (the regulator's own state)."""
-        centre = base.setpoint
-        base.setpoint = self.setpoints(base, action)
+        centre = getattr(base, self.knob)
+        setattr(base, self.knob, self.setpoints(base, action))
         try:
             u = base._act(np.asarray(obs, dtype=np.float64), state)
         finally:
-            base.setpoint = centre
+            setattr(base, self.knob, centre)
         return np.clip(u, -1.0, 1.0).astype(np.float32).reshape(len(obs), -1)
 
 
@@ -124,12 +128,12 @@ def _single_action_space() -> gym.spaces.Box:
 class SetpointResidual(gym.Wrapper):
     """The env with the policy setting the regulator's setpoint (see the module doc).
 
-    Parameters are :class:`ResidualSpec`'s. ``info["setpoint"]`` is the setpoint used.
+    Parameters are :class:`ResidualSpec`'s. ``info["setpoint"]`` is the knob's value used.
     """
 
-    def __init__(self, env, base: str, params="tuned", span=0.2, lo=0.3, hi=1.0):
+    def __init__(self, env, base: str, params="tuned", span=0.2, lo=0.3, hi=1.0, knob="setpoint"):
         super().__init__(env)
-        self.residual = ResidualSpec(base, params, span, lo, hi).checked()
+        self.residual = ResidualSpec(base, params, span, lo, hi, knob).checked()
         self.base = self.residual.make_base(env)
         self.action_space = _single_action_space()
         self._obs = None

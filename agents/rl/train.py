@@ -242,8 +242,11 @@ def train(
             meta["overrides"] = overrides
         if increment is not None:
             meta["action_increment"] = increment._asdict()
-        if cfg.residual is not None:
-            meta["residual"] = cfg.residual
+        if cfg.residual is not None:  # the regulator's settings as trained with, resolved
+            from agents.rl.residual import ResidualSpec
+
+            spec = ResidualSpec(**cfg.residual)
+            meta["residual"] = {**cfg.residual, "params": spec.settings(env_id)}
         (out / "config.json").write_text(json.dumps(meta, indent=2, default=str))
 
     eval_cb = ValidationCallback(

@@ -78,6 +78,12 @@ def write_zoo_folder(model_path, out=None) -> Path:
             f"no config.json beside {model_path}: the rl-zoo3 view needs the run's configuration"
         )
     meta = json.loads(meta_path.read_text())
+    if meta.get("residual"):
+        raise ValueError(
+            f"{model_path} is a residual policy over a classical regulator: rl-zoo3 replays it "
+            "with the env_wrapper agents.rl.residual.SetpointResidual, which this folder "
+            "does not record; export plain policies only"
+        )
     env_id, algo = meta["env_id"], meta["algo"]
     name = zoo_env_name(env_id)
     root = Path(out) if out is not None else model_path.parent / "zoo"

@@ -96,7 +96,8 @@ def test_the_vector_form_runs_each_lane_as_the_wrapper_does_across_resets():
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        ({"base": "agents.drilling.NoControl"}, "no tunable setpoint"),
+        ({"base": "agents.drilling.NoControl"}, "no tunable .setpoint."),
+        ({"base": BASE, "knob": "voltage"}, "no tunable .voltage."),
         ({"base": "agents.turning.Nope"}, "cannot import"),
         ({"base": BASE, "span": 0.0}, "span must be in"),
         ({"base": BASE, "lo": 0.8, "hi": 0.5}, "lo and hi"),
