@@ -354,7 +354,7 @@ PROCESS = Process(
             ("paper_circle", "paper_involute"),
             "paper_involute",
             tuned=(ConstantOverride, LookAheadFeed),
-            learned=("contouring_feed_ppo",),
+            learned=("contouring_feed_ppo", "contouring_feed_ppo_residual"),
             table_metrics=(
                 "cycle_time_s",
                 "max_contour_error_mm",
