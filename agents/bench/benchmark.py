@@ -309,6 +309,7 @@ def run_benchmark(
         if spec.robustness is not None and not quick:
             pngs.append(_plot_robustness(run, ref, out / f"{env_name}_robustness.png"))
         curve_lines = _learning_curves(run, ref, out / f"{env_name}_learning.png", pngs, seed)
+        curve_lines += _margin_table(run)
         times[env_name] = time.perf_counter() - t_env
         report += [
             f"## {env_name}",
@@ -392,6 +393,45 @@ def _learning_curves(run: _EnvRun, ref: str | None, path: Path, pngs: list, seed
         *[f"- {c.summary(k, unit)}" for c in curves],
         "",
     ]
+
+
+def _margin_table(run: _EnvRun) -> list:
+    """The report's loop-margin table (``spec.margin_points``): gain margin, phase margin and
+    sensitivity peak of every paper, tuned and learned agent (a learned row: its first
+    training seed) linearised at each operating point."""
+    points = run.spec.margin_points
+    if not points:
+        return []
+    from agents.eval.margins import loop_margins
+
+    env = gym.make(run.spec.env_id, **run.spec.env_kwargs)
+    lines = [
+        "Loop margins at steady cuts (2 mm deep, no noise; the agent linearised around its own "
+        "steady state, the plant as eq. 11/14 with the tangent process gain; "
+        "`agents.eval.margins`): gain margin / phase margin / sensitivity peak Ms.",
+        "",
+        "| agent | " + " | ".join(f"{p.spindle_rpm:.0f} rpm" for p in points) + " |",
+        "|---|" + "---|" * len(points),
+    ]
+    for name, kind in run.kind.items():
+        if kind not in ("paper", "tuned", "learned"):
+            continue
+        cells = []
+        for point in points:
+            try:
+                m = loop_margins(run.factory[name](env), point)
+            except ValueError as exc:
+                cells.append("does not settle" if "settled" in str(exc) else "ends the cut")
+                continue
+            if math.isinf(m.gain_margin_db) and math.isinf(m.phase_margin_deg):
+                cells.append("no feedback")
+                continue
+            gm = "∞" if math.isinf(m.gain_margin_db) else f"{m.gain_margin_db:.1f} dB"
+            pm = "∞" if math.isinf(m.phase_margin_deg) else f"{m.phase_margin_deg:.0f}°"
+            cells.append(f"{gm} / {pm} / {m.sensitivity_peak:.2f}")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    env.close()
+    return [*lines, ""]
 
 
 # ---- plots ---------------------------------------------------------------------------------

@@ -80,6 +80,9 @@ class BenchmarkSpec:
     env_kwargs: dict = field(default_factory=dict)
     """Keyword arguments of ``gym.make`` for every row (tuning uses them too)."""
     robustness: Robustness | None = None
+    margin_points: tuple = ()
+    """Operating points (``agents.eval.margins.OperatingPoint``) of the loop-margin table:
+    every feedback agent linearised there (turning only)."""
     table_metrics: tuple[str, ...] = TABLE_METRICS
     """Metrics ``machining-bench evaluate`` prints."""
     #: (info key, limit key or None, axis label) of the trajectory plot's upper panel,

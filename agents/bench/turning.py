@@ -25,6 +25,7 @@ import numpy as np
 
 from agents.bench.spec import BenchmarkSpec, Process, Robustness
 from agents.eval import rollout
+from agents.eval.margins import OperatingPoint
 from agents.turning import ConstantFeed, FixedGainPI, VariableGainPI
 from machining_envs.core.metrics import (
     OSC_WINDOW_S,
@@ -255,6 +256,7 @@ PROCESS = Process(
             "paper_405",
             tuned=(ConstantFeed, FixedGainPI, VariableGainPI),
             learned=("turning_ppo", "turning_ppo_residual"),
+            margin_points=tuple(OperatingPoint(rpm, 2.0) for rpm in (245.0, 405.0, 700.0)),
             oracle=_oracle,
             oracle_episodes=10,
             robustness=Robustness(
