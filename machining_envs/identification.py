@@ -68,6 +68,10 @@ __all__ = [
     "fit_servo_sine",
     "SEED_002_C",
     "SEED_002_CUTS",
+    "TURNING_RECORD_COLUMNS",
+    "TurningRecordFit",
+    "read_turning_record",
+    "fit_turning_record",
 ]
 
 #: The calibration matrix [C] Ahn & Choi fitted on Al6061 (seed 002, eq. 9): rows are the
@@ -676,3 +680,182 @@ def fit_servo_sine(
     t = _vector("t_s", t_s)
     u = offset + amplitude * np.sin(2.0 * math.pi * freq_hz * (t - t[0]))
     return fit_servo(t, u, response, base)
+
+
+# ---- a turning force record -------------------------------------------------------------------
+
+#: Columns of a turning record (CSV with a header row); ``depth_mm`` may be left out when the
+#: depth is given as one number.
+TURNING_RECORD_COLUMNS = ("time_s", "command", "force_N", "spindle_rpm", "depth_mm")
+
+
+@dataclass(frozen=True)
+class TurningRecordFit:
+    """The plant fitted to a turning record, with what the fit rests on.
+
+    ``fit`` is the cutting-law fit (:func:`fit_turning_force`) on the record's quasi-steady
+    samples; ``used`` marks them. ``feed_mm_per_rev`` is the feed the servo model gives for
+    the record's commands, ``force_fit_N`` the fitted law's force at every sample.
+    """
+
+    fit: PowerLawFit
+    time_s: np.ndarray
+    force_N: np.ndarray
+    force_fit_N: np.ndarray
+    feed_mm_per_rev: np.ndarray
+    depth_mm: np.ndarray
+    spindle_rpm: np.ndarray
+    position_mm: np.ndarray
+    used: np.ndarray
+
+    @property
+    def params(self) -> TurningParams:
+        return self.fit.params
+
+    def interval(self, name: str, z: float = 1.96) -> tuple[float, float]:
+        """Approximate 95 % interval (``z`` standard errors) of ``"force_coefficient"`` (Kf,
+        from the log-space error) or ``"feed_exponent"`` (p)."""
+        if name == "force_coefficient":
+            c, se = self.fit.coefficient, self.fit.std_errors["log_coefficient"]
+            return c * math.exp(-z * se), c * math.exp(z * se)
+        if name == "feed_exponent":
+            p, se = self.fit.exponents["feed"], self.fit.std_errors["feed"]
+            return p - z * se, p + z * se
+        raise ValueError(f"name must be 'force_coefficient' or 'feed_exponent', got {name!r}")
+
+    def scenario(self, name: str = "record", force_limit_N: float = 1000.0):
+        """A ``TurningScenario`` that replays the record's workpiece (its depth against the
+        position the servo model integrates) at the record's median spindle speed; the env
+        holds one spindle speed per episode. Use it with ``params=fit.params``."""
+        from machining_envs.core.workpieces import DepthProfile
+        from machining_envs.turning.scenarios import TurningScenario
+
+        x, d = self.position_mm, self.depth_mm
+        length = float(x[-1] - x[0])
+        if length <= 0:
+            raise IdentificationError("the record does not move the tool: no workpiece to replay")
+        # constant-depth segments, each starting where the recorded depth changes
+        change = np.flatnonzero(np.abs(np.diff(d)) > 1e-9) + 1
+        starts = [0, *[int(i) for i in change if 1e-6 < x[i] - x[0] < length - 1e-6]]
+        edges = [float(x[i] - x[0]) for i in starts] + [length]
+        depths = tuple(float(d[i]) for i in starts)
+        profile = DepthProfile(tuple(edges), depths, depths, name)
+        rpm = float(np.median(self.spindle_rpm))
+        return TurningScenario(name, profile, rpm, force_limit_N)
+
+    def plot(self, path=None):
+        """Measured and fitted force against time, and the relative residual of the samples
+        the fit used; a ``matplotlib.figure.Figure`` (saved to ``path`` if given)."""
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(8, 5))
+        top, bottom = fig.subplots(2, 1, sharex=True)
+        top.plot(self.time_s, self.force_N, lw=0.8, color="0.5", label="measured")
+        top.plot(self.time_s, self.force_fit_N, lw=1.2, color="C0", label="fitted law")
+        top.set_ylabel("force (N)")
+        top.legend(fontsize=8)
+        u = self.used
+        resid = self.force_N[u] / self.force_fit_N[u] - 1.0
+        bottom.plot(self.time_s[u], 100 * resid, ".", ms=2, color="C1")
+        bottom.axhline(0.0, color="0.3", lw=0.8)
+        bottom.set_ylabel("residual (%)")
+        bottom.set_xlabel("time (s)")
+        fig.suptitle(
+            f"Kf = {self.fit.coefficient:.0f}, p = {self.fit.exponents['feed']:.3f}, "
+            f"R² = {self.fit.r_squared:.3f} ({u.sum()} of {u.size} samples)",
+            fontsize=10,
+        )
+        fig.tight_layout()
+        if path is not None:
+            fig.savefig(path, dpi=90)
+        return fig
+
+
+def read_turning_record(path) -> dict[str, np.ndarray]:
+    """The columns of a turning record CSV (``TURNING_RECORD_COLUMNS``, header row first)."""
+    import csv
+
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    if not rows:
+        raise IdentificationError(f"{path}: no rows")
+    missing = [c for c in TURNING_RECORD_COLUMNS[:4] if c not in rows[0]]
+    if missing:
+        raise IdentificationError(
+            f"{path}: missing columns {missing}; a record has {list(TURNING_RECORD_COLUMNS)}"
+        )
+    cols = [c for c in TURNING_RECORD_COLUMNS if c in rows[0]]
+    try:
+        return {c: np.array([float(r[c]) for r in rows]) for c in cols}
+    except ValueError as exc:
+        raise IdentificationError(f"{path}: {exc}") from None
+
+
+def fit_turning_record(
+    record, depth_mm=None, base: TurningParams | None = None, steady_tolerance: float = 0.02
+) -> TurningRecordFit:
+    """Fit ``F = Kf f^p a`` to a measured turning record (a CSV path or a mapping of columns,
+    ``TURNING_RECORD_COLUMNS``): time, servo command (counts), measured force, spindle speed
+    and depth (a column, or ``depth_mm`` for the whole record).
+
+    The feed per revolution at each sample comes from the commands through the servo and
+    cutting lag of eq. (11) (``base``'s servo constants, default the paper's lathe, at each
+    sample's spindle speed): ``f = Ks Km (60 / n) U_eff``. Samples where ``U_eff`` is within
+    ``steady_tolerance`` of the command (the lags have settled), with a positive command,
+    force and depth, enter the fit. Raises :class:`IdentificationError` for a record it cannot
+    fit (columns, non-finite values, uneven time steps, too few steady samples).
+    """
+    base = base if base is not None else TurningParams()
+    if not isinstance(base, TurningParams):
+        raise IdentificationError(f"base must be a TurningParams, got {type(base).__name__}")
+    cols = read_turning_record(record) if not isinstance(record, Mapping) else dict(record)
+    t = _vector("time_s", cols.get("time_s"))
+    n = t.size
+    u = _vector("command", cols.get("command"), n)
+    force = _vector("force_N", cols.get("force_N"), n)
+    rpm = _positive("spindle_rpm", _vector("spindle_rpm", cols.get("spindle_rpm"), n))
+    if depth_mm is not None and "depth_mm" in cols:
+        raise IdentificationError("give depth_mm as a column or as an argument, not both")
+    depth_src = cols.get("depth_mm") if depth_mm is None else np.full(n, float(depth_mm))
+    if depth_src is None:
+        raise IdentificationError("the record has no depth_mm column: pass depth_mm=")
+    depth = _vector("depth_mm", depth_src, n)
+    dt = np.diff(t)
+    if n < 3 or not np.all(dt > 0) or np.ptp(dt) > 1e-6 * dt.mean():
+        raise IdentificationError("time_s must increase in equal steps (one sample time)")
+    dt_s = float(dt.mean())
+    # The unit-gain servo + cutting lag of eq. (11) on the commands, at each sample's speed
+    # (a piecewise-constant speed changes the lag: the filter is rebuilt where it changes).
+    u_eff = np.empty(n)
+    params = dataclasses.replace(base, sample_time_s=dt_s)
+    state_u, state_y = np.zeros(4), np.zeros(4)
+    cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+    for k in range(n):
+        key = round(float(rpm[k]), 3)
+        if key not in cache:
+            b, a = params.discrete_open_loop(key)
+            cache[key] = (np.pad(b, (0, 4 - b.size)), np.pad(a, (0, 4 - a.size)))
+        b, a = cache[key]
+        state_u = np.concatenate([[u[k]], state_u[:3]])
+        y = float(b @ state_u - a[1:] @ state_y[:3])
+        state_y = np.concatenate([[y], state_y[:3]])
+        u_eff[k] = y
+    feed_velocity = base.servo_gain * base.gear_ratio * u_eff  # mm/s
+    feed = feed_velocity * 60.0 / rpm
+    position = np.concatenate([[0.0], np.cumsum(feed_velocity[:-1] * dt)])
+    used = (
+        (u > 0)
+        & (force > 0)
+        & (depth > 0)
+        & (np.abs(u_eff - u) <= steady_tolerance * np.maximum(np.abs(u), 1e-12))
+    )
+    if used.sum() < 5:
+        raise IdentificationError(
+            f"only {int(used.sum())} quasi-steady samples with cutting: hold the command "
+            "for a few tenths of a second at several feeds (or raise steady_tolerance)"
+        )
+    fit = fit_turning_force(feed[used], depth[used], force[used], base)
+    force_fit = np.where(
+        feed > 0, fit.coefficient * np.maximum(feed, 0.0) ** fit.exponents["feed"] * depth, 0.0
+    )
+    return TurningRecordFit(fit, t, force, force_fit, feed, depth, rpm, position, used)
