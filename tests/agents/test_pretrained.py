@@ -13,26 +13,39 @@ from machining_envs.core.splits import HELD_OUT
 FOLDERS = sorted(p for p in PRETRAINED_DIR.iterdir() if p.is_dir())
 
 
+def _records(folder) -> list[dict]:
+    """The run record (``config.json``) of every policy in the folder, one per seed."""
+    return [
+        json.loads((model.parent / "config.json").read_text())
+        for _, model in pretrained_seeds(folder.name)
+    ]
+
+
 def test_every_env_has_a_pretrained_policy_in_the_benchmark():
-    envs_with_policy = {json.loads((f / "config.json").read_text())["env_id"] for f in FOLDERS}
+    envs_with_policy = {_records(f)[0]["env_id"] for f in FOLDERS}
     assert envs_with_policy == set(machining_envs.ENV_IDS)
     listed = {name for spec in BENCHMARKS for name in spec.learned}
     assert listed == {f.name for f in FOLDERS}
     for spec in BENCHMARKS:
         for name in spec.learned:
-            cfg = json.loads((PRETRAINED_DIR / name / "config.json").read_text())
-            assert cfg["env_id"] == spec.env_id, name
+            assert {r["env_id"] for r in _records(PRETRAINED_DIR / name)} == {spec.env_id}, name
 
 
 @pytest.mark.parametrize("folder", FOLDERS, ids=lambda p: p.name)
 def test_each_pretrained_policy_has_its_regeneration_command_and_is_small(folder):
     readme = (folder / "README.md").read_text()
-    cfg = json.loads((folder / "config.json").read_text())
-    assert f"machining-bench train --env {cfg['env_id']}" in readme
+    env_id = _records(folder)[0]["env_id"]
     size = sum(p.stat().st_size for p in folder.rglob("*") if p.is_file())
     assert size < 5 * 2**20, folder
-    for seed, model in pretrained_seeds(folder.name):
-        assert f"--seed {seed}" in readme, (folder, seed)
+    seeds = [seed for seed, _ in pretrained_seeds(folder.name)]
+    assert len(seeds) >= 5, folder
+    if f"machining-bench sweep --env {env_id}" in readme:  # all seeds by one sweep
+        assert f"--seeds {' '.join(str(s) for s in seeds)}" in readme, folder
+    else:
+        assert f"machining-bench train --env {env_id}" in readme
+        for seed in seeds:
+            assert f"--seed {seed}" in readme, (folder, seed)
+    for _, model in pretrained_seeds(folder.name):
         assert (model.parent / "best_vecnormalize.json").is_file(), model
 
 
@@ -40,23 +53,26 @@ def test_each_pretrained_policy_has_its_regeneration_command_and_is_small(folder
 def test_pretrained_policy_was_selected_without_the_test_split(folder):
     """Model selection used ``validation``: the recorded configuration names no held-out
     split for evaluation or training."""
-    for cfg_path in [folder / "config.json", *folder.glob("seed_*/config.json")]:
-        cfg = json.loads(cfg_path.read_text())["config"]
-        assert not set(cfg["eval_scenarios"]) & set(HELD_OUT), cfg_path
-        assert cfg["env_kwargs"].get("scenario", "train") not in HELD_OUT, cfg_path
+    for record in _records(folder):
+        cfg = record["config"]
+        assert not set(cfg["eval_scenarios"]) & set(HELD_OUT), folder
+        assert cfg["env_kwargs"].get("scenario", "train") not in HELD_OUT, folder
 
 
 @pytest.mark.parametrize("folder", FOLDERS, ids=lambda p: p.name)
 def test_recorded_configuration_is_the_shipped_config_entry(folder):
-    """The regeneration command trains with ``agents/rl/configs/<algo>.yml``: its entry must
-    still be the configuration the shipped policy was trained with."""
+    """The regeneration command trains with the shipped config file
+    (``agents/rl/configs/<file>.yml``, recorded as the run's source): its entry must still be
+    the configuration the shipped policy was trained with."""
     from dataclasses import MISSING, asdict, fields
+    from pathlib import Path
 
-    from agents.rl import TrainConfig, load_config
+    from agents.rl import CONFIG_DIR, TrainConfig, load_config
 
-    rec = json.loads((folder / "config.json").read_text())
-    now = asdict(load_config(rec["env_id"], rec["algo"]))
+    rec = _records(folder)[0]
     recorded = rec["config"]
+    source = CONFIG_DIR / Path(recorded["source"]).name
+    now = asdict(load_config(rec["env_id"], rec["algo"], source))
     for key in ("source",):
         now.pop(key), recorded.pop(key)
     # Settings added after a policy was trained: its run behaved as their default does.
