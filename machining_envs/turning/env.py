@@ -10,6 +10,7 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
+from machining_envs.core.actuation import Actuation, ActuationLanes, resolve_actuation
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_below, check_range
 from machining_envs.core.env import (
     ActionMap,
@@ -158,9 +159,17 @@ class _TurningCore:
     lane of the vector env and the single env agree to the last bit."""
 
     def __init__(self, owner, n, scenario, params, spindle_rpm, reward, max_episode_time_s,
-                 overrides):  # fmt: skip
+                 overrides, actuation=None):  # fmt: skip
         self.params = resolve_params(
             owner, params, TurningParams, TurningParams.noh_kim_kim_1992, overrides
+        )
+        self.actuation = resolve_actuation(actuation)
+        self.act_lanes = (
+            None
+            if self.actuation is None
+            else ActuationLanes(
+                self.actuation, n, self.params.command_max, 0.0, self.params.sample_time_s
+            )
         )
         if spindle_rpm is not None:
             spindle_rpm = check_range(
@@ -238,6 +247,8 @@ class _TurningCore:
         self.fr_obs[lane] = min(self.force_limit[lane] / self.params.force_scale_N, 10.0)
         self.rpm_obs[lane] = sc.spindle_rpm / 1000.0
         self.prev_action[lane] = -1.0
+        if self.act_lanes is not None:
+            self.act_lanes.reset(lane)
         self.n_clipped[lane] = 0
         self.normal_i[lane] = _NORMAL_BLOCK  # a new episode draws a new block
         self.spindle[lane] = float(sc.spindle_rpm)
@@ -345,7 +356,10 @@ class _TurningCore:
     def step(self) -> None:
         """Advance every lane with the inputs in ``in_action`` (clipped to the box),
         ``in_clipped`` (whether it was clipped), ``in_command`` (the command it maps to) and
-        ``in_noise`` (sensor noise, counts)."""
+        ``in_noise`` (sensor noise, counts); with CNC actuation on, the commands pass
+        through it first (``machining_envs.core.actuation``)."""
+        if self.act_lanes is not None:
+            self.in_command[:] = self.act_lanes.apply(self.in_command)
         _step(*self._kernel_args())
 
     def lane_info(self, k: int) -> dict:
@@ -478,12 +492,17 @@ class TurningEnv(gym.Env):
 
     ## Arguments
     ``gym.make("machining_envs/Turning-v0", scenario="train", render_mode=None,
-    params=None, spindle_rpm=None, reward=None, max_episode_time_s=200.0, **overrides)``:
+    params=None, spindle_rpm=None, reward=None, max_episode_time_s=200.0, actuation=None,
+    **overrides)``:
     ``scenario`` is the default for resets without one (a name of ``TURNING_SCENARIOS`` or a
     ``TurningScenario``); ``params`` a ``TurningParams`` (nominal: what controllers are
     designed from); ``overrides`` change single fields of it (``sensor_gain=15``);
-    ``spindle_rpm`` fixes the spindle speed of every scenario. Unknown keywords raise
-    ``TypeError``; out-of-range values raise ``ValueError`` naming the parameter.
+    ``spindle_rpm`` fixes the spindle speed of every scenario; ``actuation`` (off by
+    default) puts a real CNC between the action and the servo: interpolator delay, override
+    quantisation and rate limit (``machining_envs.core.actuation.Actuation`` or a dict,
+    e.g. ``{"quantum": 0.01, "max_rate_per_s": 2.0, "delay_steps": 2}``; ``info["command"]``
+    is then what the servo got). Unknown keywords raise ``TypeError``; out-of-range values
+    raise ``ValueError`` naming the parameter.
 
     Reset options: ``{"scenario": name_or_TurningScenario}``.
 
@@ -540,6 +559,7 @@ class TurningEnv(gym.Env):
         spindle_rpm: float | None = None,
         reward: TurningReward | dict | None = None,
         max_episode_time_s: float = 200.0,
+        actuation: Actuation | dict | None = None,
         **overrides,
     ):
         self._core = _TurningCore(
@@ -551,6 +571,7 @@ class TurningEnv(gym.Env):
             reward,
             max_episode_time_s,
             overrides,
+            actuation,
         )
         core = self._core
         adopt_core(self, core, scenario, render_mode)
@@ -649,6 +670,7 @@ class TurningVectorEnv(LaneVectorEnv):
         spindle_rpm: float | None = None,
         reward: TurningReward | dict | None = None,
         max_episode_time_s: float = 200.0,
+        actuation: Actuation | dict | None = None,
         **overrides,
     ):
         self._core = _TurningCore(
@@ -660,6 +682,7 @@ class TurningVectorEnv(LaneVectorEnv):
             reward,
             max_episode_time_s,
             overrides,
+            actuation,
         )
         super().__init__(num_envs, self._core.observation_space, self._core.action_space)
         self.default_scenario = scenario

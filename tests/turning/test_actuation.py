@@ -1,0 +1,92 @@
+"""CNC actuation on Turning-v0: each option changes the command as documented, the vector env
+does the same per lane, and the default is the ideal actuator."""
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from machining_envs.core.actuation import Actuation
+from tests.helpers import TURNING
+
+ACTIONS = np.random.default_rng(3).uniform(-1.0, 0.2, size=60)  # force stays below breakage
+
+
+def _commands(**actuation):
+    env = gym.make(TURNING, scenario="paper_405", actuation=actuation or None)
+    env.reset(seed=0)
+    out = []
+    for a in ACTIONS:
+        *_, terminated, truncated, info = env.step(np.array([a], dtype=np.float32))
+        out.append(info["command"])
+        assert not (terminated or truncated)
+    return np.array(out), env.unwrapped.params.command_max
+
+
+def test_off_by_default_the_servo_gets_the_action():
+    plain, cmax = _commands()
+    np.testing.assert_allclose(plain, (ACTIONS.astype(np.float32) + 1) / 2 * cmax, rtol=1e-6)
+    same, _ = _commands(quantum=0.0, max_rate_per_s=math.inf, delay_steps=0)
+    np.testing.assert_array_equal(same, plain)
+
+
+def test_the_delay_is_exactly_n_periods():
+    plain, _ = _commands()
+    delayed, _ = _commands(delay_steps=3)
+    np.testing.assert_array_equal(delayed[:3], 0.0)
+    np.testing.assert_array_equal(delayed[3:], plain[:-3])
+
+
+@pytest.mark.parametrize("quantum", [0.01, 0.1])
+def test_quantised_commands_lie_on_the_grid(quantum):
+    plain, cmax = _commands()
+    q, _ = _commands(quantum=quantum)
+    steps = q / (quantum * cmax)
+    np.testing.assert_allclose(steps, np.round(steps), atol=1e-9)
+    assert np.max(np.abs(q - plain)) <= quantum * cmax / 2 + 1e-9
+    assert len(np.unique(q)) <= 1 / quantum + 1
+
+
+def test_the_rate_never_exceeds_its_limit_even_on_the_grid():
+    for actuation in ({"max_rate_per_s": 1.0}, {"max_rate_per_s": 1.0, "quantum": 0.01}):
+        c, cmax = _commands(**actuation)
+        steps = np.abs(np.diff(np.concatenate([[0.0], c])))
+        assert steps.max() <= 1.0 * cmax * 0.1 + 1e-9, actuation
+        assert steps.max() >= 0.9 * cmax * 0.1  # the limit binds on these commands
+
+
+def test_every_vector_lane_runs_the_same_actuation():
+    act = {"quantum": 0.05, "max_rate_per_s": 2.0, "delay_steps": 2}
+    vec = gym.make_vec(TURNING, num_envs=3, scenario="paper_405", actuation=act)
+    vec.reset(seed=0)
+    singles = [gym.make(TURNING, scenario="paper_405", actuation=act) for _ in range(3)]
+    for i, e in enumerate(singles):
+        e.reset(seed=i)
+    for a in ACTIONS[:40]:
+        _, _, _, _, info = vec.step(np.full((3, 1), a, dtype=np.float32))
+        for i, e in enumerate(singles):
+            assert e.step(np.array([a], dtype=np.float32))[4]["command"] == info["command"][i]
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"quantum": 0.3}, "quantum must divide"),
+        ({"quantum": -0.1}, "quantum"),
+        ({"max_rate_per_s": 0.0}, "max_rate_per_s"),
+        ({"delay_steps": 1.5}, "delay_steps"),
+        ({"quantum": 0.1, "max_rate_per_s": 0.5}, "less than one quantum"),
+    ],
+)
+def test_bad_actuation_is_refused_naming_it(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        gym.make(TURNING, actuation=kwargs)
+    if "less than" not in match:
+        with pytest.raises(ValueError, match=match):
+            Actuation(**kwargs)
+
+
+def test_unknown_actuation_settings_are_refused():
+    with pytest.raises(TypeError, match="delay"):
+        gym.make(TURNING, actuation={"delay": 2})
