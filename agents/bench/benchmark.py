@@ -32,6 +32,8 @@ __all__ = ["run_benchmark", "SIZES"]
 #: Episodes per agent for the quick and the full run: (test, ood, at most this many test
 #: episodes for an oracle, which also stops at its spec's ``oracle_episodes``).
 SIZES = {"quick": (8, 0, 1), "full": (100, 25, 100)}
+#: What the extra held-out splits are, for the report.
+_SPLIT_NOTES = {"wear": "the training ranges with a tool that dulls within the cut"}
 _KIND_COLOUR = {"bound": "0.3", "oracle": "k", "paper": "C0", "tuned": "C2", "learned": "C1"}
 
 
@@ -141,7 +143,8 @@ def _run_env(spec: BenchmarkSpec, n_test, n_ood, n_oracle, tuned: dict, verbose:
     run = _EnvRun(spec)
     env_name = spec.env_id.split("/")[-1]
     jobs = _factories(spec, tuned, verbose)
-    splits = [(split, n) for split, n in (("test", n_test), ("ood", n_ood)) if n > 0]
+    named = (("test", n_test), ("ood", n_ood), *((x, n_ood) for x in spec.extra_splits))
+    splits = [(split, n) for split, n in named if n > 0]
     oracle_skipped = None
     if spec.oracle is not None and n_oracle < spec.oracle_episodes and not spec.oracle_in_quick:
         oracle_skipped = f"  oracle skipped in --quick ({spec.oracle_seconds:g} s an episode)"
@@ -301,6 +304,7 @@ def run_benchmark(
         ref = _reference(run, tuned)
         test_table, stats = _table(run, "test", ref, seed)
         ood_table = _table(run, "ood", ref, seed)[0] if n_ood else "skipped in --quick."
+        extra = [(split, _table(run, split, ref, seed)[0]) for split in spec.extra_splits if n_ood]
         pngs = [
             _plot_scores(run, stats, out / f"{env_name}_scores.png"),
             _plot_profiles(run, out / f"{env_name}_profiles.png"),
@@ -322,6 +326,16 @@ def run_benchmark(
             "",
             ood_table,
             "",
+            *[
+                line
+                for split, table in extra
+                for line in (
+                    f"`{split}` ({_SPLIT_NOTES.get(split, '')}), {n_ood} episodes:",
+                    "",
+                    table,
+                    "",
+                )
+            ],  # fmt: skip
             *curve_lines,
             *[f"![{p.stem}]({p.name})" for p in pngs if p is not None],
             "",
@@ -329,6 +343,8 @@ def run_benchmark(
         if verbose:
             print(f"\n### {env_name} ({times[env_name]:.0f} s)\n\n`test`:\n\n{test_table}\n\n"
                   f"`ood`:\n\n{ood_table}\n")  # fmt: skip
+            for split, table in extra:
+                print(f"`{split}`:\n\n{table}\n")
             for line in curve_lines[2:-1]:
                 print(line)
         all_rows += run.all_rows()

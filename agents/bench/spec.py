@@ -80,6 +80,9 @@ class BenchmarkSpec:
     env_kwargs: dict = field(default_factory=dict)
     """Keyword arguments of ``gym.make`` for every row (tuning uses them too)."""
     robustness: Robustness | None = None
+    extra_splits: tuple[str, ...] = ()
+    """Held-out splits beyond ``test`` and ``ood`` reported beside them (``wear``), with as
+    many episodes as ``ood``."""
     margin_points: tuple = ()
     """Operating points (``agents.eval.margins.OperatingPoint``) of the loop-margin table:
     every feedback agent linearised there (turning only)."""

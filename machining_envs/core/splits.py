@@ -37,12 +37,13 @@ __all__ = [
     "check_not_held_out",
 ]
 
-#: The split names, in the order tables show them.
-SPLITS = ("train", "validation", "test", "ood")
+#: The split names, in the order tables show them. ``wear``: the training ranges with a tool
+#: that dulls within the cut (the envs that model wear; Turning-v0).
+SPLITS = ("train", "validation", "test", "ood", "wear")
 #: Splits only the final table may evaluate on.
-HELD_OUT = ("test", "ood")
+HELD_OUT = ("test", "ood", "wear")
 #: First reset seed of each split's fixed episodes (``split_seeds``).
-SPLIT_SEED_BASE = {"train": 0, "validation": 5000, "test": 10000, "ood": 20000}
+SPLIT_SEED_BASE = {"train": 0, "validation": 5000, "test": 10000, "ood": 20000, "wear": 30000}
 #: Fixed episodes each split holds.
 MAX_SPLIT_EPISODES = 5000
 

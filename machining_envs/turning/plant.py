@@ -110,6 +110,15 @@ class TurningParams:
     """Standard deviation of the white measurement noise at the ADC, in newtons (1 % of the
     1 kN reference). Not given; scaled by a scenario's ``noise_scale``."""
 
+    wear_per_100mm: float = 0.0
+    """Tool wear within the cut: the force coefficient at position ``x`` along the workpiece
+    is ``Kf (1 + w x / 100 mm)``. Cutting forces grow almost linearly with the flank-wear
+    land (Koren & Lenz 1972, the flank-wear model for turning steel with carbide that
+    Koren's adaptive-control work builds on; Sikdar & Chen 2002 measure it on AISI 4340),
+    and the land grows linearly with the length cut in the steady zone of the wear curve,
+    so the coefficient is linear in ``x``. 0 (default): the papers' sharp tool; the
+    ``wear`` scenarios draw ``w`` (see ``machining_envs.turning.scenarios``)."""
+
     force_scale_N: float = 1000.0
     """Normalisation of forces in observations, N (the paper's reference force)."""
 
@@ -131,6 +140,7 @@ class TurningParams:
         _check("command_max", self.command_max, 0.0, 1e9, lo_open=True)
         _check("breakage_force_N", self.breakage_force_N, 0.0, 1e7, lo_open=True)
         _check("noise_std_N", self.noise_std_N, 0.0, 1e5)
+        _check("wear_per_100mm", self.wear_per_100mm, 0.0, 10.0)
         _check("force_scale_N", self.force_scale_N, 0.0, 1e7, lo_open=True)
 
     @classmethod
@@ -414,12 +424,13 @@ def step_lane(
 ):  # fmt: skip
     """Advance lane ``k`` by one sample (see :class:`TurningLanes` for the layout).
 
-    ``lane_f[k]`` holds ``[Kf, p, Ke, U_max, length, t, margin, Ts]``; ``out_f[k]`` gets
+    ``lane_f[k]`` holds ``[Kf, p, Ke, U_max, length, t, margin, Ts, wear per mm]``;
+    ``out_f[k]`` gets
     ``[force, peak force, measured counts, feed per rev, feed velocity, position, depth]``.
     The arithmetic is that of one cut, whatever the number of lanes.
     """
     n_rows = 2 * m + 3
-    kf, pexp, gain, cmax, length, t, margin, ts = lane_f[k]
+    kf, pexp, gain, cmax, length, t, margin, ts, wear = lane_f[k]
     c = cols[k]
     zk = z[k, :c]
     zk[3] = min(max(command, 0.0), cmax)
@@ -457,6 +468,9 @@ def step_lane(
         i = np.searchsorted(e[: nseg[k] + 1], p_end, side="right") - 1
         i = min(max(i, 0), nseg[k] - 1)
         seg[k] = i
+    if wear != 0.0:  # Kf (1 + w x): the tool dulls along the cut (wear_per_100mm)
+        for j in range(m):
+            force[j] *= 1.0 + wear * y[j]
     fl = filt[k, : n_f * b.shape[0]].reshape(n_f, b.shape[0])
     fo = np.dot(fl, b)
     b[:n_f] = fo
@@ -540,8 +554,8 @@ class TurningLanes:
         self.slope = np.zeros((self.n, 1))
         self.nseg = np.ones(self.n, dtype=np.int64)
         self.seg = np.zeros(self.n, dtype=np.int64)
-        #: Per lane ``[Kf, p, Ke, U_max, length, t, margin, Ts]``.
-        self.lane_f = np.zeros((self.n, 8))
+        #: Per lane ``[Kf, p, Ke, U_max, length, t, margin, Ts, wear per mm]``.
+        self.lane_f = np.zeros((self.n, 9))
         self.finished = np.zeros(self.n, dtype=np.bool_)
         self.spindle_rpm = np.zeros(self.n)
         self.lane_params: list[TurningParams] = [params] * self.n
@@ -593,6 +607,7 @@ class TurningLanes:
             0.0,
             margin,
             params.sample_time_s,
+            params.wear_per_100mm / 100.0,
         )
         self.finished[lane] = False
         self.spindle_rpm[lane] = float(spindle_rpm)
