@@ -104,7 +104,7 @@ def test_callback_and_wrapper_entries_are_checked(tmp_path):
         (
             "machining_envs.wrappers.IncrementalAction",
             "gymnasium.wrappers.ClipAction",
-            "applies only machining_envs.wrappers.IncrementalAction",
+            "applies machining_envs.wrappers.IncrementalAction or agents.rl.residual.SetpointResidual",
         ),
         ("agents.rl.callbacks.ValidationCallback", "agents.rl.callbacks.Nope", "cannot import"),
         ("agents.rl.callbacks.ValidationCallback", "numpy.ndarray", "not an SB3 callback"),
