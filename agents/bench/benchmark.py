@@ -74,8 +74,9 @@ class _EnvRun:
         return [r for by in self.rows.values() for rs in by.values() for r in rs]
 
 
-def _factories(spec: BenchmarkSpec, tuned: dict, verbose: bool):
-    """``(kind, factory, policy_seed)`` of every row the env's benchmark runs."""
+def _factories(spec: BenchmarkSpec, tuned: dict, verbose: bool, one_seed: bool = False):
+    """``(kind, factory, policy_seed)`` of every row the env's benchmark runs (with
+    ``one_seed``, each learned row's first training seed only)."""
     out = [("paper", f, None) for f in spec.paper_agents]
     for cls in spec.tuned:
         f = tuned_factory(cls, spec.env_id, tuned)
@@ -94,7 +95,7 @@ def _factories(spec: BenchmarkSpec, tuned: dict, verbose: bool):
             from agents.rl.policy import load_policy, pretrained_seeds
 
             for name in spec.learned:
-                for seed, path in pretrained_seeds(name):
+                for seed, path in pretrained_seeds(name)[: 1 if one_seed else None]:
 
                     def make(env, path=path, name=name):
                         return load_policy(path, name=f"{name}")
@@ -139,10 +140,11 @@ class _Progress:
             self.bar.close()
 
 
-def _run_env(spec: BenchmarkSpec, n_test, n_ood, n_oracle, tuned: dict, verbose: bool, t0):
+def _run_env(spec: BenchmarkSpec, n_test, n_ood, n_oracle, tuned: dict, verbose: bool, t0,
+             one_seed: bool = False):  # fmt: skip
     run = _EnvRun(spec)
     env_name = spec.env_id.split("/")[-1]
-    jobs = _factories(spec, tuned, verbose)
+    jobs = _factories(spec, tuned, verbose, one_seed)
     named = (("test", n_test), ("ood", n_ood), *((x, n_ood) for x in spec.extra_splits))
     splits = [(split, n) for split, n in named if n > 0]
     oracle_skipped = None
@@ -273,7 +275,8 @@ def run_benchmark(
     """Run every env's benchmark (or those in ``envs``); return all episode rows.
 
     ``quick``: 8 test episodes per agent instead of 100, no ood (25 in the full run), one
-    episode for the oracles that are fast enough (``oracle_in_quick``), no robustness grid. ``seed`` seeds the bootstrap only: the episodes are the splits' fixed ones.
+    episode for the oracles that are fast enough (``oracle_in_quick``), each learned row's
+    first training seed only, no robustness grid, learning curves or loop margins. ``seed`` seeds the bootstrap only: the episodes are the splits' fixed ones.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -300,7 +303,7 @@ def run_benchmark(
             continue
         t_env = time.perf_counter()
         env_name = spec.env_id.split("/")[-1]
-        run = _run_env(spec, n_test, n_ood, n_oracle, tuned, verbose, t0)
+        run = _run_env(spec, n_test, n_ood, n_oracle, tuned, verbose, t0, one_seed=quick)
         ref = _reference(run, tuned)
         test_table, stats = _table(run, "test", ref, seed)
         ood_table = _table(run, "ood", ref, seed)[0] if n_ood else "skipped in --quick."
@@ -312,8 +315,10 @@ def run_benchmark(
         ]
         if spec.robustness is not None and not quick:
             pngs.append(_plot_robustness(run, ref, out / f"{env_name}_robustness.png"))
-        curve_lines = _learning_curves(run, ref, out / f"{env_name}_learning.png", pngs, seed)
-        curve_lines += _margin_table(run)
+        curve_lines = []
+        if not quick:  # the full run's extras: learning curves and loop margins
+            curve_lines = _learning_curves(run, ref, out / f"{env_name}_learning.png", pngs, seed)
+            curve_lines += _margin_table(run)
         times[env_name] = time.perf_counter() - t_env
         report += [
             f"## {env_name}",

@@ -159,6 +159,10 @@ def margins_of(loop, force_N: float = math.nan, control=None) -> Margins:
     """Margins of a discrete open loop ``L`` (negative feedback)."""
     if control is None:
         import control
-    gm, pm, sm, *_ = control.stability_margins(loop)
+    import warnings
+
+    with warnings.catch_warnings():  # python-control warns where a margin is infinite
+        warnings.simplefilter("ignore")
+        gm, pm, sm, *_ = control.stability_margins(loop)
     gm_db = 20.0 * math.log10(gm) if gm and math.isfinite(gm) and gm > 0 else math.inf
     return Margins(gm_db, float(pm), 1.0 / sm if sm > 0 else math.inf, force_N)

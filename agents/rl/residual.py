@@ -40,7 +40,9 @@ class ResidualSpec(NamedTuple):
     ``agents/bench/tuned.json``; ``knob``: the tunable setting the policy moves (default
     ``setpoint``; ``override_cap`` for the contouring look-ahead planner); ``span``: it moves
     at most this much from the regulator's own value; ``lo``, ``hi``: it never leaves
-    ``[lo, hi]``.
+    ``[lo, hi]``. ``mode="add"`` instead adds the policy's correction, ``span`` x action, to
+    every component of the regulator's action (the contouring servo: a correction on top of
+    the H-infinity loop); ``knob``, ``lo`` and ``hi`` are then unused.
     """
 
     base: str
@@ -49,6 +51,7 @@ class ResidualSpec(NamedTuple):
     lo: float = 0.3
     hi: float = 1.0
     knob: str = "setpoint"
+    mode: str = "knob"
 
     def checked(self) -> ResidualSpec:
         """This spec if its values are usable (``ValueError`` naming the field otherwise)."""
@@ -64,8 +67,12 @@ class ResidualSpec(NamedTuple):
             raise ValueError(f"span must be in (0, 1], got {self.span!r}")
         if not 0.0 < self.lo < self.hi <= 10.0:
             raise ValueError(f"lo and hi must satisfy 0 < lo < hi <= 10, got {self.lo}, {self.hi}")
+        if self.mode not in ("knob", "add"):
+            raise ValueError(f"mode must be 'knob' or 'add', got {self.mode!r}")
         cls = self.base_class()
-        if not hasattr(cls, "from_env") or self.knob not in getattr(cls, "TUNABLE", {}):
+        if not hasattr(cls, "from_env"):
+            raise ValueError(f"base {self.base} is not an agent class with from_env")
+        if self.mode == "knob" and self.knob not in getattr(cls, "TUNABLE", {}):
             raise ValueError(f"base {self.base} has no tunable {self.knob!r} to supervise")
         return self
 
@@ -96,6 +103,8 @@ class ResidualSpec(NamedTuple):
             spec = getattr(env, "spec", None) or getattr(env.unwrapped, "spec", None)
             env_id = spec.id if spec is not None else None
         base = self.base_class().from_env(env, **self.settings(env_id))
+        if self.mode == "add":
+            return base
         value = getattr(base, self.knob)
         if not self.lo <= value <= self.hi:
             raise ValueError(
@@ -109,9 +118,18 @@ class ResidualSpec(NamedTuple):
         a = np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
         return np.clip(getattr(base, self.knob) + self.span * a, self.lo, self.hi)
 
+    def action_dim(self, env_action_dim: int) -> int:
+        """Components of the policy's action: one knob, or one correction per env action."""
+        return env_action_dim if self.mode == "add" else 1
+
     def act(self, base, obs: np.ndarray, state: np.ndarray, action) -> np.ndarray:
-        """The regulator's command for the batch ``obs`` at the policy's setpoints; ``state``
-        is updated in place (the regulator's own state)."""
+        """The regulator's command for the batch ``obs`` at the policy's setpoints (or with
+        its correction added); ``state`` is updated in place (the regulator's own state)."""
+        obs = np.asarray(obs, dtype=np.float64)
+        if self.mode == "add":
+            u = np.clip(base._act(obs, state), -1.0, 1.0).astype(np.float32)
+            a = np.clip(np.asarray(action, dtype=np.float64).reshape(u.shape), -1.0, 1.0)
+            return np.clip(u.astype(np.float64) + self.span * a, -1.0, 1.0).astype(np.float32)
         centre = getattr(base, self.knob)
         setattr(base, self.knob, self.setpoints(base, action))
         try:
@@ -121,8 +139,8 @@ class ResidualSpec(NamedTuple):
         return np.clip(u, -1.0, 1.0).astype(np.float32).reshape(len(obs), -1)
 
 
-def _single_action_space() -> gym.spaces.Box:
-    return gym.spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+def _action_space(n: int) -> gym.spaces.Box:
+    return gym.spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
 
 
 class SetpointResidual(gym.Wrapper):
@@ -131,11 +149,12 @@ class SetpointResidual(gym.Wrapper):
     Parameters are :class:`ResidualSpec`'s. ``info["setpoint"]`` is the knob's value used.
     """
 
-    def __init__(self, env, base: str, params="tuned", span=0.2, lo=0.3, hi=1.0, knob="setpoint"):
+    def __init__(self, env, base: str, params="tuned", span=0.2, lo=0.3, hi=1.0,
+                 knob="setpoint", mode="knob"):  # fmt: skip
         super().__init__(env)
-        self.residual = ResidualSpec(base, params, span, lo, hi, knob).checked()
+        self.residual = ResidualSpec(base, params, span, lo, hi, knob, mode).checked()
         self.base = self.residual.make_base(env)
-        self.action_space = _single_action_space()
+        self.action_space = _action_space(self.residual.action_dim(env.action_space.shape[0]))
         self._obs = None
         self._state = None
 
@@ -150,11 +169,11 @@ class SetpointResidual(gym.Wrapper):
             raise RuntimeError("SetpointResidual: call reset() before step()")
         if not np.all(np.isfinite(np.asarray(action, dtype=np.float64))):
             raise ValueError(f"SetpointResidual: action must be finite, got {action!r}")
-        sp = float(self.residual.setpoints(self.base, action)[0])
         u = self.residual.act(self.base, self._obs, self._state, action)[0]
         obs, reward, terminated, truncated, info = self.env.step(u)
         self._obs = np.asarray(obs, dtype=np.float64)[None, :]
-        info = {**info, "setpoint": sp}
+        if self.residual.mode == "knob":
+            info = {**info, "setpoint": float(self.residual.setpoints(self.base, action)[0])}
         return obs, reward, terminated, truncated, info
 
 
@@ -179,7 +198,8 @@ class VecSetpointResidual(_vec_wrapper_base()):
     with the lane (SB3 vector envs reset a finished lane in the same step)."""
 
     def __init__(self, venv, residual: ResidualSpec, base):
-        super().__init__(venv, action_space=_single_action_space())
+        dim = residual.action_dim(venv.action_space.shape[0])
+        super().__init__(venv, action_space=_action_space(dim))
         self.residual, self.base = residual, base
         self._obs = None
         self._state = None

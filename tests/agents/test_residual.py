@@ -133,3 +133,31 @@ def test_a_trained_residual_run_reloads_as_a_residual_agent_and_reproduces_its_s
         out / "best_model.zip", TURNING, ["validation"], 10, split_seeds("validation", 10)[0]
     )
     assert score["score"] == pytest.approx(best, rel=1e-12)
+
+
+def test_an_added_correction_of_zero_is_the_tuned_hinf_loop_and_is_bounded():
+    from agents.contouring import HInf2DOF
+    from tests.helpers import CONTOURING
+
+    hinf = "agents.contouring.HInf2DOF"
+    env = SetpointResidual(gym.make(CONTOURING), hinf, mode="add", span=0.05)
+    assert env.action_space.shape == (2,)
+    plain = gym.make(CONTOURING)
+    agent = tuned_factory(HInf2DOF, CONTOURING)(plain)
+    o, _ = env.reset(seed=5)
+    p, _ = plain.reset(seed=5)
+    st = None
+    for _ in range(2000):
+        a, st = agent.predict(p, st)
+        o, r, *_ = env.step(np.zeros(2, np.float32))
+        p, rp, *_ = plain.step(a)
+        np.testing.assert_array_equal(o, p)
+        assert r == rp
+    # a full correction moves each axis's command by exactly span (inside the range)
+    base = env.residual.make_base(plain)
+    obs = np.asarray(o, dtype=np.float64)[None, :]
+    st0 = base.initial_state(1, obs)
+    u0 = env.residual.act(base, obs, st0.copy(), np.zeros((1, 2)))
+    u1 = env.residual.act(base, obs, st0.copy(), np.ones((1, 2)))
+    inside = np.abs(u0) < 0.95
+    np.testing.assert_allclose((u1 - u0)[inside], 0.05, rtol=1e-5)
