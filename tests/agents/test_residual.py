@@ -34,22 +34,30 @@ class _Policy:
         return np.tanh(np.float32(3.0) * (np.float32(0.6) - obs[:, :1])), state
 
 
-def test_a_zero_policy_is_the_tuned_regulator_step_for_step():
-    env = SetpointResidual(gym.make(TURNING), BASE)
-    plain = gym.make(TURNING)
-    agent = tuned_factory(VariableGainPI, TURNING)(plain)
+def _zero_policy_runs_the_tuned_agent(env_id, cls, steps, **residual):
+    """Step the residual env with zero actions beside the tuned agent on the plain env;
+    every observation, reward and end flag must agree. Returns the two envs, the last
+    observation, the tuned agent and the last info."""
+    env = SetpointResidual(gym.make(env_id), f"{cls.__module__}.{cls.__name__}", **residual)
+    plain = gym.make(env_id)
+    agent = tuned_factory(cls, env_id)(plain)
     o, _ = env.reset(seed=5)
     p, _ = plain.reset(seed=5)
-    st = None
-    for _ in range(600):
+    st, info = None, {}
+    for _ in range(steps):
         a, st = agent.predict(p, st)
-        o, r, te, tr, info = env.step(np.zeros(1, np.float32))
+        o, r, te, tr, info = env.step(np.zeros(env.action_space.shape, np.float32))
         p, rp, tep, trp, _ = plain.step(a)
         np.testing.assert_array_equal(o, p)
         assert (r, te, tr) == (rp, tep, trp)
-        assert info["setpoint"] == pytest.approx(agent.setpoint)
         if te or tr:
             break
+    return env, plain, o, agent, info
+
+
+def test_a_zero_policy_is_the_tuned_regulator_step_for_step():
+    *_, agent, info = _zero_policy_runs_the_tuned_agent(TURNING, VariableGainPI, 600)
+    assert info["setpoint"] == pytest.approx(agent.setpoint)
 
 
 def test_the_replaying_agent_runs_what_the_wrapper_ran():
@@ -139,20 +147,10 @@ def test_an_added_correction_of_zero_is_the_tuned_hinf_loop_and_is_bounded():
     from agents.contouring import HInf2DOF
     from tests.helpers import CONTOURING
 
-    hinf = "agents.contouring.HInf2DOF"
-    env = SetpointResidual(gym.make(CONTOURING), hinf, mode="add", span=0.05)
+    env, plain, o, *_ = _zero_policy_runs_the_tuned_agent(
+        CONTOURING, HInf2DOF, 2000, mode="add", span=0.05
+    )
     assert env.action_space.shape == (2,)
-    plain = gym.make(CONTOURING)
-    agent = tuned_factory(HInf2DOF, CONTOURING)(plain)
-    o, _ = env.reset(seed=5)
-    p, _ = plain.reset(seed=5)
-    st = None
-    for _ in range(2000):
-        a, st = agent.predict(p, st)
-        o, r, *_ = env.step(np.zeros(2, np.float32))
-        p, rp, *_ = plain.step(a)
-        np.testing.assert_array_equal(o, p)
-        assert r == rp
     # a full correction moves each axis's command by exactly span (inside the range)
     base = env.residual.make_base(plain)
     obs = np.asarray(o, dtype=np.float64)[None, :]
