@@ -332,7 +332,7 @@ PROCESS = Process(
             ("paper_circle", "paper_involute"),
             "paper_circle",
             tuned=(PIPosition, HInf2DOF),
-            learned=("contouring_ppo",),
+            learned=("contouring_ppo", "contouring_ppo_residual"),
             table_metrics=(
                 "max_contour_error_mm",
                 "rms_contour_error_mm",
