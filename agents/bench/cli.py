@@ -32,6 +32,16 @@ def _positive_float(text: str) -> float:
     return v
 
 
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {text}")
+    return v
+
+
 class _Formatter(argparse.HelpFormatter):
     """Shows each option's default where it has one its help does not already state."""
 
@@ -103,6 +113,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--env", nargs="+", default=None, help="only these env ids (default: all)")
     b.add_argument("--no-reproductions", action="store_true", help="skip the paper reproductions")
     b.add_argument("--seed", type=int, default=0, help="seed of the bootstrap intervals")
+    b.add_argument("--jobs", type=_positive_int, default=None,
+                   help="envs run at once, one process each (default: 1)")  # fmt: skip
 
     tu = command(
         "tune",
@@ -266,7 +278,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             run_benchmark(
                 args.out, quick=args.quick, seed=args.seed, envs=args.env,
-                reproductions=not args.no_reproductions,
+                reproductions=not args.no_reproductions, jobs=args.jobs,
             )  # fmt: skip
         except (FileExistsError, NotADirectoryError, PermissionError, ImportError) as exc:
             return _fail("benchmark", exc)
