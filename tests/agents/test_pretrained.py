@@ -83,3 +83,24 @@ def test_recorded_configuration_is_the_shipped_config_entry(folder):
     for key in set(now) - set(recorded):
         assert now.pop(key) == defaults[key], key
     assert json.loads(json.dumps(now, default=str)) == recorded
+
+
+@pytest.mark.parametrize("folder", FOLDERS, ids=lambda p: p.name)
+def test_the_direct_mean_action_is_sb3s_deterministic_predict_bit_for_bit(folder):
+    """``PolicyAgent`` skips SB3's per-call set-up for actor-critic policies; its action must
+    be exactly what ``model.predict(..., deterministic=True)`` returns."""
+    import numpy as np
+
+    from agents.rl import load_policy
+
+    rng = np.random.default_rng(0)
+    for _, model in pretrained_seeds(folder.name)[:2]:
+        agent = load_policy(model)
+        policy = getattr(agent, "policy", agent)  # a residual agent's own policy
+        assert policy._fast
+        obs = rng.normal(size=(32, *policy.model.observation_space.shape)).astype(np.float32)
+        want, _ = policy.model.predict(obs, deterministic=True)
+        np.testing.assert_array_equal(policy._mean_action(obs), want)
+        np.testing.assert_array_equal(
+            policy._mean_action(obs[0]), policy.model.predict(obs[0], deterministic=True)[0]
+        )
