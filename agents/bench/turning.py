@@ -256,7 +256,7 @@ PROCESS = Process(
             "paper_405",
             tuned=(ConstantFeed, FixedGainPI, VariableGainPI),
             learned=("turning_ppo", "turning_ppo_residual"),
-            extra_splits=("wear",),
+            extra_splits=("wear", "shopfloor"),
             margin_points=tuple(OperatingPoint(rpm, 2.0) for rpm in (245.0, 405.0, 700.0)),
             oracle=_oracle,
             oracle_episodes=10,

@@ -8,12 +8,15 @@ feed override, which the control
 - **quantises**: the override moves in steps of ``quantum`` of the command range (1 % or
   10 % on common controls);
 - **rate-limits**: the override changes by at most ``max_rate_per_s`` of the range per
-  second, in whole quanta where it is quantised.
+  second, in whole quanta where it is quantised;
+- **acceleration-limits**: the override's rate changes by at most ``max_accel_per_s2`` of
+  the range per second squared, and the ramp brakes in time to stop on the target (no
+  overshoot from the limit itself); in whole quanta where it is quantised.
 
 :class:`Actuation` holds the settings (checked); :class:`ActuationLanes` applies them to N
 lanes at once, so the single env and every lane of the vector env do the same arithmetic.
-The env's ``info["command"]`` is then the command the drives got. Not modelled: the
-override's acceleration limit and the spindle power limit.
+The env's ``info["command"]`` is then the command the drives got. The spindle power limit
+is a property of the plant, not of the command path: see the envs' ``power_limit_W``.
 """
 
 from __future__ import annotations
@@ -38,6 +41,9 @@ class Actuation:
     """Largest change of the command per second, as a share of its range (inf: none)."""
     delay_steps: int = 0
     """Control periods between a command and its effect, 0 to 50."""
+    max_accel_per_s2: float = math.inf
+    """Largest change of the command's rate per second squared, as a share of its range
+    (inf: none)."""
 
     def __post_init__(self) -> None:
         check_range("quantum", self.quantum, 0.0, 0.5)
@@ -49,10 +55,17 @@ class Actuation:
         if self.max_rate_per_s != math.inf:  # inf: no rate limit
             check_range("max_rate_per_s", self.max_rate_per_s, 0.0, 1e6, lo_open=True)
         check_integer("delay_steps", self.delay_steps, 0, 50)
+        if self.max_accel_per_s2 != math.inf:  # inf: no acceleration limit
+            check_range("max_accel_per_s2", self.max_accel_per_s2, 0.0, 1e9, lo_open=True)
 
     @property
     def active(self) -> bool:
-        return self.quantum > 0 or math.isfinite(self.max_rate_per_s) or self.delay_steps > 0
+        return (
+            self.quantum > 0
+            or math.isfinite(self.max_rate_per_s)
+            or math.isfinite(self.max_accel_per_s2)
+            or self.delay_steps > 0
+        )
 
 
 def resolve_actuation(actuation) -> Actuation | None:
@@ -77,9 +90,12 @@ def resolve_actuation(actuation) -> Actuation | None:
 class ActuationLanes:
     """The actuation state of N lanes: the interpolator's queue and the last applied command.
 
+    Each lane has its own settings (:meth:`configure`; a scenario may bring its own, see the
+    ``shopfloor`` scenarios), so the single env and every lane of the vector env run the
+    same arithmetic on the same settings.
+
     Parameters
     ----------
-    actuation : Actuation
     n : int
         Lanes.
     command_range : float
@@ -88,40 +104,98 @@ class ActuationLanes:
         Lowest command (applied before the episode's first command arrives).
     sample_time_s : float
         The control period.
+    actuation : Actuation or None
+        The settings every lane starts with (None: ideal, the command passes unchanged).
     """
 
-    def __init__(self, actuation: Actuation, n: int, command_range: float, low: float,
-                 sample_time_s: float):  # fmt: skip
-        self.a = actuation
+    def __init__(self, n: int, command_range: float, low: float, sample_time_s: float,
+                 actuation: Actuation | None = None):  # fmt: skip
+        self.range = float(command_range)
         self.low = float(low)
-        self.q = actuation.quantum * command_range
-        step = actuation.max_rate_per_s * command_range * sample_time_s
-        if self.q > 0 and math.isfinite(step):
-            if step < self.q:
-                raise ValueError(
-                    f"actuation: max_rate_per_s {actuation.max_rate_per_s:g} moves less than one "
-                    f"quantum ({actuation.quantum:g}) per control period: the command could "
-                    "never change"
-                )
-            step = math.floor(step / self.q) * self.q  # whole quanta: stays on the grid
-        self.max_step = step
-        self.queue = np.full((n, actuation.delay_steps + 1), self.low)
+        self.ts = float(sample_time_s)
+        self.q = np.zeros(n)
+        self.max_step = np.full(n, math.inf)
+        self.max_dstep = np.full(n, math.inf)
+        self.delay = np.zeros(n, dtype=np.int64)
+        self.queue = np.full((n, 1), self.low)
         self.last = np.full(n, self.low)
+        self.rate = np.zeros(n)
+        self._lanes = np.arange(n)
+        for k in range(n):
+            self.configure(k, actuation)
+
+    def configure(self, lane: int, actuation: Actuation | None) -> None:
+        """Give ``lane`` the settings ``actuation`` (None: ideal) and reset it."""
+        a = actuation if actuation is not None else Actuation()
+        q = a.quantum * self.range
+        step = a.max_rate_per_s * self.range * self.ts
+        if q > 0 and math.isfinite(step):
+            if step < q:
+                raise ValueError(
+                    f"actuation: max_rate_per_s {a.max_rate_per_s:g} moves less than one "
+                    f"quantum ({a.quantum:g}) per control period: the command could never change"
+                )
+            step = math.floor(step / q) * q  # whole quanta: stays on the grid
+        dv = a.max_accel_per_s2 * self.range * self.ts**2
+        if q > 0 and math.isfinite(dv):
+            if dv < q:
+                raise ValueError(
+                    f"actuation: max_accel_per_s2 {a.max_accel_per_s2:g} changes the rate by "
+                    f"less than one quantum ({a.quantum:g}) per control period: the command "
+                    "could never move"
+                )
+            dv = math.floor(dv / q) * q
+        self.q[lane] = q
+        self.max_step[lane] = step
+        #: Largest change of the per-period step between two periods (inf: none).
+        self.max_dstep[lane] = dv
+        self.delay[lane] = a.delay_steps
+        if a.delay_steps + 1 > self.queue.shape[1]:
+            grow = a.delay_steps + 1 - self.queue.shape[1]
+            self.queue = np.pad(self.queue, ((0, 0), (0, grow)), constant_values=self.low)
+        self.reset(lane)
 
     def reset(self, lane: int) -> None:
         self.queue[lane] = self.low
         self.last[lane] = self.low
+        self.rate[lane] = 0.0
 
     def apply(self, commands: np.ndarray) -> np.ndarray:
         """The commands the drives get this step for the commands ``commands`` (n,) issued."""
-        q = self.queue
-        if q.shape[1] > 1:
-            q[:, 1:] = q[:, :-1].copy()
-        q[:, 0] = commands
-        target = q[:, -1].copy()
-        if self.q > 0:
-            target = self.low + np.round((target - self.low) / self.q) * self.q
-        if math.isfinite(self.max_step):
-            target = self.last + np.clip(target - self.last, -self.max_step, self.max_step)
+        queue = self.queue
+        if queue.shape[1] > 1:
+            queue[:, 1:] = queue[:, :-1].copy()
+        queue[:, 0] = commands
+        target = queue[self._lanes, self.delay]
+        qq = self.q
+        grid = qq > 0
+        if grid.any():
+            safe = np.where(grid, qq, 1.0)
+            target = np.where(grid, self.low + np.round((target - self.low) / safe) * safe, target)
+        limited = np.isfinite(self.max_step) | np.isfinite(self.max_dstep)
+        if limited.any():
+            step = target - self.last
+            acc = np.flatnonzero(np.isfinite(self.max_dstep))
+            if acc.size:
+                # Brake in time: with the step shrinking by at most dv a period, the steps
+                # v, v - dv, ..., v - K dv (v = (K + r) dv, 0 <= r < 1) cover
+                # (K + 1) dv (K / 2 + r), which must not pass the distance d still to go.
+                dv = self.max_dstep[acc]
+                x = np.abs(step[acc]) / dv
+                kk = np.floor((np.sqrt(1.0 + 8.0 * x) - 1.0) / 2.0)
+                v_brake = (kk + np.clip(x / (kk + 1.0) - kk / 2.0, 0.0, 1.0)) * dv
+                g = qq[acc] > 0
+                if g.any():
+                    safe = np.where(g, qq[acc], 1.0)
+                    v_brake = np.where(g, np.floor(v_brake / safe + 1e-9) * safe, v_brake)
+                s = np.sign(step[acc]) * np.minimum(np.abs(step[acc]), v_brake)
+                r = self.rate[acc]
+                step[acc] = np.clip(s, r - dv, r + dv)
+            step = np.clip(step, -self.max_step, self.max_step)
+            if grid.any():
+                safe = np.where(grid, qq, 1.0)
+                step = np.where(grid, np.round(step / safe) * safe, step)  # no rounding dust
+            target = np.where(limited, self.last + step, target)
+        self.rate = target - self.last
         self.last = target
         return target.copy()

@@ -31,7 +31,13 @@ from machining_envs.core.env import (
 )
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs
 from machining_envs.turning.metrics import TURNING_TASK
-from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningLanes, TurningParams, step_lane
+from machining_envs.turning.plant import (
+    SPINDLE_RPM_RANGE,
+    TurningLanes,
+    TurningParams,
+    spindle_drive,
+    step_lane,
+)
 from machining_envs.turning.scenarios import (
     TURNING_SCENARIOS,
     TurningScenario,
@@ -168,7 +174,7 @@ class _TurningCore:
             None
             if self.actuation is None
             else ActuationLanes(
-                self.actuation, n, self.params.command_max, 0.0, self.params.sample_time_s
+                n, self.params.command_max, 0.0, self.params.sample_time_s, self.actuation
             )
         )
         if spindle_rpm is not None:
@@ -213,6 +219,13 @@ class _TurningCore:
         self.normal_i = np.full(n, _NORMAL_BLOCK)
         self._lane_index = np.arange(n)
         self.spindle = np.zeros(n)
+        self.spindle_set = np.zeros(n)
+        #: Drive power delivered and cutting power at the last sample, W.
+        self.power = np.zeros((n, 2))
+        self.truths: list[TurningParams | None] = [None] * n
+        self.diameter = np.ones(n)
+        #: Lanes whose spindle is power-limited (their speed may change within the cut).
+        self.power_lanes: set[int] = set()
         self.length = np.zeros(n)
         self.names = np.full(n, "", dtype=object)
         self.in_action = np.zeros(n)
@@ -247,11 +260,24 @@ class _TurningCore:
         self.fr_obs[lane] = min(self.force_limit[lane] / self.params.force_scale_N, 10.0)
         self.rpm_obs[lane] = sc.spindle_rpm / 1000.0
         self.prev_action[lane] = -1.0
+        act = sc.actuation if sc.actuation is not None else self.actuation
+        if act is not None and self.act_lanes is None:  # the first scenario with its own
+            self.act_lanes = ActuationLanes(
+                self.n, self.params.command_max, 0.0, self.params.sample_time_s
+            )
         if self.act_lanes is not None:
-            self.act_lanes.reset(lane)
+            self.act_lanes.configure(lane, act)
         self.n_clipped[lane] = 0
         self.normal_i[lane] = _NORMAL_BLOCK  # a new episode draws a new block
         self.spindle[lane] = float(sc.spindle_rpm)
+        self.spindle_set[lane] = float(sc.spindle_rpm)
+        self.power[lane] = 0.0
+        self.truths[lane] = truth
+        self.diameter[lane] = truth.workpiece_diameter_mm
+        if np.isfinite(truth.spindle_power_W):
+            self.power_lanes.add(lane)
+        else:
+            self.power_lanes.discard(lane)
         self.length[lane] = sc.profile.length_mm
         self.names[lane] = sc.name
         o = self.obs[lane]
@@ -271,6 +297,8 @@ class _TurningCore:
             "measured": 0.0,
             "measured_counts": 0.0,
             "spindle_rpm": float(sc.spindle_rpm),
+            "spindle_power_W": 0.0,
+            "cutting_power_W": 0.0,
             "workpiece_length_mm": sc.profile.length_mm,
             "scenario": sc.name,
             "feed_mm_per_rev": 0.0,
@@ -361,12 +389,51 @@ class _TurningCore:
         if self.act_lanes is not None:
             self.in_command[:] = self.act_lanes.apply(self.in_command)
         _step(*self._kernel_args())
+        if self.power_lanes:
+            self._spindle_drives()
+
+    def _spindle_drives(self) -> None:
+        """The power-limited spindles (``TurningParams.spindle_power_W``): each lane's speed
+        for the next sample from :func:`~machining_envs.turning.plant.spindle_drive`; the
+        next observation shows it."""
+        for k in self.power_lanes:
+            if self.flags[k, 3]:
+                continue
+            rpm = float(self.spindle[k])
+            new, p_drive, p_cut = spindle_drive(
+                self.truths[k], rpm, float(self.spindle_set[k]), float(self.lanes.out[k, 0])
+            )
+            self.power[k] = (p_drive, p_cut)
+            if new != rpm:
+                self.lanes.set_speed(k, new)
+                self.spindle[k] = new
+                self.rpm_obs[k] = new / 1000.0
+                self.obs[k, 3] = self.rpm_obs[k]
+
+    def _power(self, k: int) -> tuple[float, float]:
+        """``(drive power, cutting power)`` of lane ``k`` at the last sample, W (an ideal
+        spindle delivers what the cut asks)."""
+        if k in self.power_lanes:
+            return float(self.power[k, 0]), float(self.power[k, 1])
+        p = max(float(self.lanes.out[k, 0]), 0.0) * float(self.spindle[k]) * (np.pi / 30.0)
+        p = p * (float(self.diameter[k]) * 0.0005)
+        return p, p
+
+    def _power_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_power` of every lane, as arrays (the same arithmetic)."""
+        p = np.maximum(self.lanes.out[:, 0], 0.0) * self.spindle * (np.pi / 30.0)
+        p = p * (self.diameter * 0.0005)
+        drive, cut = p.copy(), p
+        for k in self.power_lanes:
+            drive[k], cut[k] = self.power[k]
+        return drive, cut
 
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""
         force, peak, counts, feed, vel, pos, depth = self.lanes.out[k].tolist()
         diverged, breakage, finished = self.flags[k, :3].tolist()
         sc = self.scenarios[k]
+        p_drive, p_cut = self._power(k)
         info = {
             "t_s": float(self.lanes.lane_f[k, 5]),
             "command": float(self.command[k]),
@@ -387,7 +454,9 @@ class _TurningCore:
             "position_mm": pos if not diverged else 0.0,
             "depth_mm": depth,
             "segment": int(self.lanes.out_segment[k]),
-            "spindle_rpm": float(sc.spindle_rpm),
+            "spindle_rpm": float(self.spindle[k]),
+            "spindle_power_W": p_drive,
+            "cutting_power_W": p_cut,
             "workpiece_length_mm": sc.profile.length_mm,
             "scenario": sc.name,
         }
@@ -400,6 +469,7 @@ class _TurningCore:
         o = self.lanes.out
         f = self.flags
         ok = ~f[:, 0]
+        power = self._power_arrays()
         info = {
             "t_s": self.lanes.lane_f[:, 5].copy(),
             "command": self.command.copy(),
@@ -421,6 +491,8 @@ class _TurningCore:
             "depth_mm": o[:, 6].copy(),
             "segment": self.lanes.out_segment.copy(),
             "spindle_rpm": self.spindle.copy(),
+            "spindle_power_W": power[0],
+            "cutting_power_W": power[1],
             "workpiece_length_mm": self.length.copy(),
             "scenario": self.names.copy(),
             "machining_time_s": np.where(f[:, 2], self.lanes.out_finish, np.nan),

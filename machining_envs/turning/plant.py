@@ -34,7 +34,14 @@ import numpy as np
 from machining_envs.core.checks import check_integer, check_range
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
 
-__all__ = ["TurningParams", "TurningPlant", "TurningStep", "SPINDLE_RPM_RANGE", "sampled_model"]
+__all__ = [
+    "TurningParams",
+    "TurningPlant",
+    "TurningStep",
+    "SPINDLE_RPM_RANGE",
+    "sampled_model",
+    "spindle_drive",
+]
 
 #: Spindle speeds the plant accepts, rpm. A conventional lathe of the paper's size (2.2 kW
 #: spindle) runs from a few tens to a few thousand rpm; outside this the moving-integral
@@ -119,6 +126,23 @@ class TurningParams:
     so the coefficient is linear in ``x``. 0 (default): the papers' sharp tool; the
     ``wear`` scenarios draw ``w`` (see ``machining_envs.turning.scenarios``)."""
 
+    spindle_power_W: float = float("inf")
+    """Spindle drive power P_max, W. inf (default): the papers' ideal spindle, which holds
+    its speed whatever the cut asks. Finite: the drive delivers at most ``P_max``; when the
+    cutting power ``F v_c`` (``v_c = pi D n``) asks for more, the spindle slows (see
+    ``spindle_inertia_kg_m2``). The lathe of the paper is of the 2.2 kW class (about the
+    power of a 1 kN cut at 405 rpm on the bar below), so 2200 is a natural setting; the
+    ``shopfloor`` scenarios use it."""
+
+    spindle_inertia_kg_m2: float = 0.1
+    """J of the spindle, chuck and workpiece, kg m^2, for the power limit. Not given: a
+    100 mm x 300 mm steel bar is 0.023, a 200 mm chuck about 0.05, the spindle and the
+    motor's reflected rotor the rest."""
+
+    workpiece_diameter_mm: float = 100.0
+    """Workpiece diameter D, mm, for the cutting speed ``v_c = pi D n`` of the power limit.
+    Not given: the 100 mm bar of a lathe of the paper's size."""
+
     force_scale_N: float = 1000.0
     """Normalisation of forces in observations, N (the paper's reference force)."""
 
@@ -141,6 +165,10 @@ class TurningParams:
         _check("breakage_force_N", self.breakage_force_N, 0.0, 1e7, lo_open=True)
         _check("noise_std_N", self.noise_std_N, 0.0, 1e5)
         _check("wear_per_100mm", self.wear_per_100mm, 0.0, 10.0)
+        if self.spindle_power_W != float("inf"):  # inf: no power limit
+            _check("spindle_power_W", self.spindle_power_W, 0.0, 1e7, lo_open=True)
+        _check("spindle_inertia_kg_m2", self.spindle_inertia_kg_m2, 0.0, 1e3, lo_open=True)
+        _check("workpiece_diameter_mm", self.workpiece_diameter_mm, 0.0, 1e4, lo_open=True)
         _check("force_scale_N", self.force_scale_N, 0.0, 1e7, lo_open=True)
 
     @classmethod
@@ -501,6 +529,35 @@ def step_lane(
     lane_f[k, 5] = t + ts
 
 
+def spindle_drive(params: TurningParams, rpm: float, rpm_set: float, force_N: float):
+    """One control period of a power-limited spindle: ``(next rpm, drive power W, cutting
+    power W)`` for a spindle at ``rpm`` set to ``rpm_set``, under the cutting force
+    ``force_N`` at the period's end.
+
+    The cutting power is ``P_c = F v_c``, ``v_c = pi D n / 60`` (m/s with D in m). The speed
+    regulator asks for the power that brings the spindle back to its set speed within the
+    period, ``P_c + J (w_set^2 - w^2) / (2 Ts)``; the drive delivers that, at most
+    ``P_max``, and the energy balance ``J (w'^2 - w^2) / 2 = (P_drive - P_c) Ts`` gives the
+    next speed ``w'``. So the drive never delivers more than ``P_max``; a cut that asks for
+    more slows the spindle (its kinetic energy pays the difference), which raises the feed
+    per revolution and with it the force: the stall of an overloaded lathe. The speed does
+    not fall below the lowest the plant accepts (``SPINDLE_RPM_RANGE``).
+    """
+    j = params.spindle_inertia_kg_m2
+    ts = params.sample_time_s
+    w = rpm * (math.pi / 30.0)
+    w_set = rpm_set * (math.pi / 30.0)
+    p_cut = max(force_N, 0.0) * w * params.workpiece_diameter_mm * 0.0005  # F w D/2
+    p_need = p_cut + j * (w_set * w_set - w * w) / (2.0 * ts)
+    if p_need <= params.spindle_power_W:
+        return rpm_set, max(p_need, 0.0), p_cut
+    p_drive = params.spindle_power_W
+    w2 = w * w + 2.0 * ts * (p_drive - p_cut) / j
+    w_min = SPINDLE_RPM_RANGE[0] * (math.pi / 30.0)
+    w_next = math.sqrt(max(w2, w_min * w_min))
+    return min(w_next * (30.0 / math.pi), rpm_set), p_drive, p_cut
+
+
 #: Fields of ``TurningLanes.out`` (one row per lane after each step).
 LANE_SIGNALS = (
     "force_N",
@@ -574,10 +631,7 @@ class TurningLanes:
                 "a lane's servo, filter, sample time and sub-steps must be those of the "
                 f"batch ({self._key}), got {_LinearKey.of(params)}"
             )
-        mx = _matrices(self._key, float(spindle_rpm))
-        c = mx.big.shape[1]
-        self.big[lane, : mx.big.size] = mx.big.ravel()
-        self.cols[lane] = c
+        self._load_matrices(lane, float(spindle_rpm), math.isfinite(params.spindle_power_W))
         self.z[lane] = 0.0
         self.buf[lane] = 0.0
         edges, d0, slope = (np.array(v) for v in profile.segment_table())
@@ -613,6 +667,29 @@ class TurningLanes:
         self.spindle_rpm[lane] = float(spindle_rpm)
         self.lane_params[lane] = params
         self.profiles[lane] = profile
+
+    def _load_matrices(self, lane: int, spindle_rpm: float, full_history: bool) -> None:
+        """The step matrix of ``lane`` at ``spindle_rpm``. With ``full_history`` it is padded
+        with zero columns to the memory of the slowest speed, so that the lane keeps every
+        sample instant it could ever need and its speed may change between samples."""
+        big = _matrices(self._key, spindle_rpm).big
+        if full_history:
+            c = self.z.shape[1]
+            padded = np.zeros((big.shape[0], c))
+            padded[:, : big.shape[1]] = big
+            big = padded
+        self.big[lane, : big.size] = big.ravel()
+        self.cols[lane] = big.shape[1]
+
+    def set_speed(self, lane: int, spindle_rpm: float) -> None:
+        """Change the spindle speed of a running ``lane`` from the next sample on (a lane
+        started with a finite ``spindle_power_W``). The feed per revolution is then the
+        travel over the last ``60 / n`` seconds at the new speed ``n``: the revolution time is
+        taken at the speed of the sample (quasi-static), exact while the speed is constant."""
+        if self.cols[lane] != self.z.shape[1]:
+            raise RuntimeError("set_speed: the lane was started without a power limit")
+        self._load_matrices(lane, float(spindle_rpm), True)
+        self.spindle_rpm[lane] = float(spindle_rpm)
 
     def step(self, commands: np.ndarray, noise_counts: np.ndarray) -> None:
         """Hold ``commands[k]`` (counts; clipped to [0, U_max]) in every lane for one sample,

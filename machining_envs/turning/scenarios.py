@@ -16,12 +16,15 @@ that dulls along the cut (force coefficient +30-100 % per 100 mm, ``wear_per_100
 
 from __future__ import annotations
 
+import math
+
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.integrate import trapezoid
 
+from machining_envs.core.actuation import Actuation
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.splits import split_rng
 from machining_envs.core.workpieces import DepthProfile
@@ -64,6 +67,12 @@ class TurningScenario:
     wear_per_100mm : float
         Tool wear within the cut: the force coefficient grows by this share per 100 mm
         (``TurningParams.wear_per_100mm``; 0 to 10, 0 a sharp tool).
+    spindle_power_W : float
+        The spindle's power limit for this cut, W (``TurningParams.spindle_power_W``); inf
+        (default): the env's parameters decide (by default an ideal spindle).
+    actuation : Actuation or None
+        The CNC's actuation for this cut (``machining_envs.core.actuation``); None (default):
+        the env's ``actuation`` option decides.
     """
 
     name: str
@@ -74,6 +83,8 @@ class TurningScenario:
     feed_exponent_scale: float = 1.0
     noise_scale: float = 1.0
     wear_per_100mm: float = 0.0
+    spindle_power_W: float = math.inf
+    actuation: Actuation | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.profile, DepthProfile):
@@ -84,6 +95,12 @@ class TurningScenario:
         _check("feed_exponent_scale", self.feed_exponent_scale, 0.5, 2.0)
         _check("noise_scale", self.noise_scale, 0.0, 10.0)
         _check("wear_per_100mm", self.wear_per_100mm, 0.0, 10.0)
+        if self.spindle_power_W != math.inf:
+            _check("spindle_power_W", self.spindle_power_W, 0.0, 1e7, lo_open=True)
+        if self.actuation is not None and not isinstance(self.actuation, Actuation):
+            raise ValueError(
+                f"actuation must be an Actuation or None, got {type(self.actuation).__name__}"
+            )
 
     def true_params(self, nominal: TurningParams) -> TurningParams:
         """The plant parameters this cut really has (hidden from controllers)."""
@@ -92,6 +109,11 @@ class TurningScenario:
             feed_exponent=nominal.feed_exponent * self.feed_exponent_scale,
             noise_std_N=nominal.noise_std_N * self.noise_scale,
             wear_per_100mm=self.wear_per_100mm,
+            spindle_power_W=(
+                self.spindle_power_W
+                if math.isfinite(self.spindle_power_W)
+                else nominal.spindle_power_W
+            ),
         )
 
 
@@ -120,6 +142,7 @@ def _random(
     segments: tuple[int, int],
     limit_N: tuple[float, float] = (1000.0, 1000.0),
     wear: tuple[float, float] | None = None,
+    shopfloor: bool = False,
 ):
     def make(env_rng: np.random.Generator) -> TurningScenario:
         rng = split_rng(env_rng, name)
@@ -128,9 +151,26 @@ def _random(
         kf, p, noise = rng.uniform(0.8, 1.2), rng.uniform(0.8, 1.2), rng.uniform(0.5, 2.0)
         limit = float(rng.uniform(*limit_N)) if limit_N[1] > limit_N[0] else limit_N[0]
         w = float(rng.uniform(*wear)) if wear is not None else 0.0  # drawn last: same cuts
+        if shopfloor:
+            return TurningScenario(
+                name, prof, spindle, limit, float(kf), float(p), float(noise), w,
+                spindle_power_W=SHOPFLOOR_SPINDLE_POWER_W, actuation=SHOPFLOOR_ACTUATION,
+            )  # fmt: skip
         return TurningScenario(name, prof, spindle, limit, float(kf), float(p), float(noise), w)
 
     return make
+
+
+#: The spindle power of the ``shopfloor`` scenarios, W (``TurningParams.spindle_power_W``).
+SHOPFLOOR_SPINDLE_POWER_W = 2200.0
+
+#: The actuation of the ``shopfloor`` scenarios: the feed override in 1 % steps, at most
+#: 50 % of its range per second and 200 % per second squared (0.25 s from rest to full
+#: rate), two control periods (0.2 s) of interpolator delay. Chosen, not measured: of the
+#: order of a production control's override handling, strict enough that a design for an
+#: ideal actuator notices.
+SHOPFLOOR_ACTUATION = Actuation(quantum=0.01, max_rate_per_s=0.5, delay_steps=2,
+                                max_accel_per_s2=2.0)  # fmt: skip
 
 
 #: name -> factory drawing a scenario from the env's generator: the paper's experiments and
@@ -151,6 +191,11 @@ TURNING_SCENARIOS: dict[str, Callable[[np.random.Generator], TurningScenario]] =
     # rate is chosen, not identified: large enough that a controller tuned on a sharp tool
     # meets a clearly duller one within one workpiece.
     "wear": _random("wear", (245.0, 700.0), (0.5, 3.0), (2, 5), wear=(0.3, 1.0)),
+    # The training ranges on a real machine: the CNC's override in 1 % steps, rate- and
+    # acceleration-limited, two periods of interpolator delay (SHOPFLOOR_ACTUATION), and the
+    # paper's 2.2 kW spindle, which slows when a cut asks for more (at 700 rpm on the 100 mm
+    # bar that is any force above 600 N, below the 1 kN limit).
+    "shopfloor": _random("shopfloor", (245.0, 700.0), (0.5, 3.0), (2, 5), shopfloor=True),
 }
 
 
@@ -179,7 +224,13 @@ def machining_time_bound(scenario: TurningScenario, truth: TurningParams) -> flo
     in principle beat the floor by about that much.
     """
     kf, p = truth.force_coefficient, truth.feed_exponent
-    c = 60.0 / scenario.spindle_rpm * (kf / scenario.force_limit_N) ** (1.0 / p)
+    limit = scenario.force_limit_N
+    if math.isfinite(truth.spindle_power_W):
+        # With a power-limited spindle the force that keeps the set speed is at most
+        # P_max / v_c: above it the spindle slows and the force rises further.
+        v_c = math.pi * truth.workpiece_diameter_mm * 1e-3 * scenario.spindle_rpm / 60.0
+        limit = min(limit, truth.spindle_power_W / v_c)
+    c = 60.0 / scenario.spindle_rpm * (kf / limit) ** (1.0 / p)
     if truth.wear_per_100mm == 0.0:
         return scenario.profile.traverse_time_s(c, 1.0 / p, truth.max_feed_velocity_mm_s)
     # With wear, Kf (1 + w x) in f*(x): integrated numerically (trapezoid on a fine grid,

@@ -171,10 +171,16 @@ def pack(data: dict) -> dict:
 
 
 def main(argv=None) -> int:
+    """Record every case, or with arguments only the cases whose name starts with one of
+    them (``python -m tests.golden.record Turning-v0``), keeping the other files."""
+    prefixes = tuple(sys.argv[1:] if argv is None else argv)
     for old in HERE.glob("*.npz"):
-        old.unlink()
+        if not prefixes or old.stem.startswith(prefixes):
+            old.unlink()
     total = 0
     for stem, env_id, kwargs, factory, sc, seed in cases():
+        if prefixes and not stem.startswith(prefixes):
+            continue
         data = run_case(env_id, kwargs, factory, sc, seed)
         path = HERE / f"{stem}.npz"
         np.savez_compressed(path, **pack(data))

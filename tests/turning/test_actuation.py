@@ -56,8 +56,31 @@ def test_the_rate_never_exceeds_its_limit_even_on_the_grid():
         assert steps.max() >= 0.9 * cmax * 0.1  # the limit binds on these commands
 
 
+@pytest.mark.parametrize("quantum", [0.0, 0.01])
+def test_the_acceleration_never_exceeds_its_limit_and_the_ramp_brakes_on_target(quantum):
+    act = {"max_accel_per_s2": 2.0, "max_rate_per_s": 3.0, "quantum": quantum}
+    c, cmax = _commands(**act)
+    steps = np.diff(np.concatenate([[0.0, 0.0], c]))
+    dv = 2.0 * cmax * 0.1**2
+    assert np.abs(np.diff(steps)).max() <= dv + 1e-9
+    assert np.abs(np.diff(steps)).max() >= 0.99 * dv  # the limit binds on these commands
+    assert np.abs(steps).max() <= 3.0 * cmax * 0.1 + 1e-9
+    if quantum:
+        grid = c / (quantum * cmax)
+        np.testing.assert_allclose(grid, np.round(grid), atol=1e-9)
+    # A step to a constant command: the ramp accelerates, cruises, brakes and stops on it
+    # (no overshoot of its own), and every change of rate stays within the limit.
+    from machining_envs.core.actuation import ActuationLanes
+
+    lanes = ActuationLanes(1, cmax, 0.0, 0.1, Actuation(max_accel_per_s2=2.0))
+    out = np.array([lanes.apply(np.array([0.8 * cmax]))[0] for _ in range(40)])
+    assert out.max() <= 0.8 * cmax + 1e-9
+    assert out[-1] == pytest.approx(0.8 * cmax)
+    assert np.abs(np.diff(np.diff(np.concatenate([[0.0, 0.0], out])))).max() <= dv + 1e-9
+
+
 def test_every_vector_lane_runs_the_same_actuation():
-    act = {"quantum": 0.05, "max_rate_per_s": 2.0, "delay_steps": 2}
+    act = {"quantum": 0.05, "max_rate_per_s": 2.0, "delay_steps": 2, "max_accel_per_s2": 10.0}
     vec = gym.make_vec(TURNING, num_envs=3, scenario="paper_405", actuation=act)
     vec.reset(seed=0)
     singles = [gym.make(TURNING, scenario="paper_405", actuation=act) for _ in range(3)]
@@ -77,6 +100,8 @@ def test_every_vector_lane_runs_the_same_actuation():
         ({"max_rate_per_s": 0.0}, "max_rate_per_s"),
         ({"delay_steps": 1.5}, "delay_steps"),
         ({"quantum": 0.1, "max_rate_per_s": 0.5}, "less than one quantum"),
+        ({"max_accel_per_s2": -1.0}, "max_accel_per_s2"),
+        ({"quantum": 0.1, "max_accel_per_s2": 5.0}, "less than one quantum"),
     ],
 )
 def test_bad_actuation_is_refused_naming_it(kwargs, match):
