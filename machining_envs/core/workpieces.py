@@ -222,3 +222,26 @@ class DepthProfile:
                     au, aw = a0 + slope * (u - x0), a0 + slope * (w - x0)
                     total += c * (aw ** (q + 1.0) - au ** (q + 1.0)) / ((q + 1.0) * slope)
         return float(total)
+
+    def worn_traverse_time_s(
+        self, c: float, q: float, v_max: float, wear_per_mm: float, wear_exponent: float
+    ) -> float:
+        r""":meth:`traverse_time_s` with a tool that dulls along the cut:
+        ``\int_0^{\ell} \max(1 / v_{max}, c\, a(x)^q (1 + w x)^r)\, dx`` (``w`` =
+        ``wear_per_mm``, ``r`` = ``wear_exponent``), by the trapezoid rule on 20001 points
+        with every change of depth resolved to 1e-4 of the length (the same as the closed
+        form to about 1e-6 for ``w = 0``)."""
+        from scipy.integrate import trapezoid
+
+        if wear_per_mm == 0.0:
+            return self.traverse_time_s(c, q, v_max)
+        length = self.length_mm
+        x = np.unique(np.concatenate([
+            np.linspace(0.0, length, 20001),
+            *[[e - 1e-4 * length, e] for e in self.change_positions_mm()],
+        ]))  # fmt: skip
+        x = x[(x >= 0.0) & (x <= length)]
+        a = self(x)
+        with np.errstate(divide="ignore"):
+            slowness = np.where(a > 0, c * a**q * (1.0 + wear_per_mm * x) ** wear_exponent, 0.0)
+        return float(trapezoid(np.maximum(slowness, 1.0 / v_max), x))

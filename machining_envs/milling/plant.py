@@ -196,6 +196,15 @@ class MillingParams:
     machining time with AC (3.117 min, Table 1): 3613 N·mm exactly, rounded to 3600
     (3.145 min). Observations are normalised by it."""
 
+    wear_per_100mm: float = 0.0
+    """Tool wear within the cut: the torque coefficient (Ks of eq. 8, or Kt of the
+    average-force model) at position ``x`` along the workpiece is ``Ks (1 + w x / 100 mm)``.
+    The tangential cutting coefficient grows almost linearly with the flank-wear land, and
+    the land grows linearly with the length cut in the steady zone of the wear curve (the
+    law of ``TurningParams.wear_per_100mm``, Koren & Lenz 1972, applied to the tangential
+    force of each tooth). 0 (default): the papers' sharp tool; the ``wear`` scenarios draw
+    ``w``."""
+
     breakage_torque_Nmm: float = 15000.0
     """Torque at which the tool is taken to break, N·mm (1530 kgf·mm). Not given: above the
     ~1200 kgf·mm that the paper's own regression cuts reached without failure (3 mm,
@@ -381,6 +390,7 @@ _FIELD_RULES: dict[str, tuple] = {
     "substeps": ("int", 1, 10000),
     "command_max": (0.0, 1e9, True),
     "torque_limit_Nmm": (0.0, 1e8, True),
+    "wear_per_100mm": (0.0, 10.0, False),
     "breakage_torque_Nmm": (0.0, 1e9, True),
 }
 assert tuple(_FIELD_RULES) == tuple(f.name for f in dataclasses.fields(MillingParams))
@@ -592,6 +602,7 @@ LANE_CONSTANTS = (
     "rev_per_s",  # N / 60
     "plateau_scale",  # c d^l of the plateau the tool was last in (d constant)
     "plateau",  # index of that plateau (-1: none yet)
+    "wear_per_mm",  # w of the torque coefficient's growth Ks (1 + w x) (0: a sharp tool)
 )
 _T = LANE_CONSTANTS.index("t_s")
 
@@ -803,6 +814,10 @@ def step_lanes(
                 buf[k, 2 + j] *= c * depth_end**dexp if power else c * depth_end
             i = bisect_right(edges, k, n_s + 1, p_end) - 1
             seg[k] = min(max(i, 0), n_s - 1)
+        wear = lane_f[k, 15]
+        if wear != 0.0:  # Ks (1 + w x): the tool dulls along the cut (wear_per_100mm)
+            for j in range(m):
+                buf[k, 2 + j] *= 1.0 + wear * work[k, m + j]
         out[k, 7] = depth_end
     lagged = work[:, tq:]
     matvec(lag, m, m + 2, buf, lagged)
@@ -986,6 +1001,7 @@ class MillingLanes:
             rpm / 60.0,
             0.0,
             -1.0,
+            params.wear_per_100mm / 100.0,
         )
         self.finished[lane] = False
         self.lane_params[lane] = params

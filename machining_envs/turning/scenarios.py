@@ -17,12 +17,10 @@ that dulls along the cut (force coefficient +30-100 % per 100 mm, ``wear_per_100
 from __future__ import annotations
 
 import math
-
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.integrate import trapezoid
 
 from machining_envs.core.actuation import Actuation
 from machining_envs.core.env import resolve_scenario
@@ -231,19 +229,7 @@ def machining_time_bound(scenario: TurningScenario, truth: TurningParams) -> flo
         v_c = math.pi * truth.workpiece_diameter_mm * 1e-3 * scenario.spindle_rpm / 60.0
         limit = min(limit, truth.spindle_power_W / v_c)
     c = 60.0 / scenario.spindle_rpm * (kf / limit) ** (1.0 / p)
-    if truth.wear_per_100mm == 0.0:
-        return scenario.profile.traverse_time_s(c, 1.0 / p, truth.max_feed_velocity_mm_s)
-    # With wear, Kf (1 + w x) in f*(x): integrated numerically (trapezoid on a fine grid,
-    # the depth's steps resolved to 1e-4 of the length).
-    length = scenario.profile.length_mm
-    x = np.unique(np.concatenate([
-        np.linspace(0.0, length, 20001),
-        *[[e - 1e-4 * length, e] for e in scenario.profile.change_positions_mm()],
-    ]))  # fmt: skip
-    x = x[(x >= 0.0) & (x <= length)]
-    wear = 1.0 + truth.wear_per_100mm * x / 100.0
-    a = scenario.profile(x)
-    with np.errstate(divide="ignore"):
-        slowness = np.where(a > 0, c * (wear * a) ** (1.0 / p), 0.0)  # s/mm at the limit
-    slowness = np.maximum(slowness, 1.0 / truth.max_feed_velocity_mm_s)
-    return float(trapezoid(slowness, x))
+    # Kf (1 + w x) in f*(x): with wear the integrand gains (1 + w x)^(1/p).
+    return scenario.profile.worn_traverse_time_s(
+        c, 1.0 / p, truth.max_feed_velocity_mm_s, truth.wear_per_100mm / 100.0, 1.0 / p
+    )

@@ -44,11 +44,13 @@ def test_the_drive_never_delivers_more_than_p_max_and_the_spindle_slows_by_the_e
     slowed = 0
     # Re-derive every speed from the recorded force with the documented drive law: the
     # speed held over a sample is the one reported at the sample before.
-    for (_, before), (obs, info) in zip(rows[:-1], rows[1:]):
+    for (_, before), (obs, info) in zip(rows[:-1], rows[1:], strict=True):
         rpm = before["spindle_rpm"]
         new, p_drive, p_cut = spindle_drive(params, rpm, 700.0, info["force_N"])
         assert (new, p_drive, p_cut) == (
-            info["spindle_rpm"], info["spindle_power_W"], info["cutting_power_W"]
+            info["spindle_rpm"],
+            info["spindle_power_W"],
+            info["cutting_power_W"],
         )
         assert p_drive <= p_max
         if p_cut > p_max:  # the cut asks for more than the drive has: the spindle slows
@@ -73,7 +75,7 @@ def test_a_slower_spindle_raises_the_feed_per_revolution_and_the_force():
 def test_a_limit_the_cut_never_reaches_changes_nothing():
     ideal = _run(ACTIONS)
     roomy = _run(ACTIONS, spindle_power_W=1e6)
-    for (o1, i1), (o2, i2) in zip(ideal, roomy):
+    for (o1, i1), (o2, i2) in zip(ideal, roomy, strict=True):
         np.testing.assert_allclose(o2, o1, rtol=1e-12)
         assert i2["force_N"] == pytest.approx(i1["force_N"], rel=1e-12)
 
