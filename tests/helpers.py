@@ -30,6 +30,26 @@ def random_action(rng: np.random.Generator, env: gym.Env, bound: float = 1.0) ->
     return rng.uniform(-bound, bound, size=env.action_space.shape).astype(np.float32)
 
 
+def run_cut(env_id: str, agent_or_action, scenario, keys: Sequence[str], steps: int,
+            max_episode_time_s: float) -> tuple[np.ndarray, gym.Env]:  # fmt: skip
+    """One episode of ``env_id`` on ``scenario`` (seed 0), driven by a constant action (a
+    float) or an agent's ``predict``, for at most ``steps`` steps: the ``info[key]`` of every
+    step for ``keys`` as rows of an array, and the unwrapped env."""
+    env = gym.make(env_id, max_episode_time_s=max_episode_time_s).unwrapped
+    obs, _ = env.reset(seed=0, options={"scenario": scenario})
+    state, rows = None, []
+    for _ in range(steps):
+        if isinstance(agent_or_action, float):
+            action = np.array([agent_or_action])
+        else:
+            action, state = agent_or_action.predict(obs, state)
+        obs, _, terminated, truncated, info = env.step(action)
+        rows.append([info[k] for k in keys])
+        if terminated or truncated:
+            break
+    return np.array(rows), env
+
+
 def random_rollout(env: gym.Env, n_steps: int, seed: int, signal: str):
     """Random in-box actions from a seeded generator, resetting on episode end.
 

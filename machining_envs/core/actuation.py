@@ -16,7 +16,8 @@ feed override, which the control
 :class:`Actuation` holds the settings (checked); :class:`ActuationLanes` applies them to N
 lanes at once, so the single env and every lane of the vector env do the same arithmetic.
 The env's ``info["command"]`` is then the command the drives got. The spindle power limit
-is a property of the plant, not of the command path: see the envs' ``power_limit_W``.
+is a property of the plant, not of the command path: see
+``TurningParams.spindle_power_W``.
 """
 
 from __future__ import annotations
@@ -153,6 +154,13 @@ class ActuationLanes:
         if a.delay_steps + 1 > self.queue.shape[1]:
             grow = a.delay_steps + 1 - self.queue.shape[1]
             self.queue = np.pad(self.queue, ((0, 0), (0, grow)), constant_values=self.low)
+        # What apply() needs of the settings, worked out here and not every step.
+        self._grid = self.q > 0
+        self._safe_q = np.where(self._grid, self.q, 1.0)
+        self._limited = np.isfinite(self.max_step) | np.isfinite(self.max_dstep)
+        self._acc = np.flatnonzero(np.isfinite(self.max_dstep))
+        self._any_grid = bool(self._grid.any())
+        self._any_limited = bool(self._limited.any())
         self.reset(lane)
 
     def reset(self, lane: int) -> None:
@@ -167,15 +175,12 @@ class ActuationLanes:
             queue[:, 1:] = queue[:, :-1].copy()
         queue[:, 0] = commands
         target = queue[self._lanes, self.delay]
-        qq = self.q
-        grid = qq > 0
-        if grid.any():
-            safe = np.where(grid, qq, 1.0)
+        grid, safe = self._grid, self._safe_q
+        if self._any_grid:
             target = np.where(grid, self.low + np.round((target - self.low) / safe) * safe, target)
-        limited = np.isfinite(self.max_step) | np.isfinite(self.max_dstep)
-        if limited.any():
+        if self._any_limited:
             step = target - self.last
-            acc = np.flatnonzero(np.isfinite(self.max_dstep))
+            acc = self._acc
             if acc.size:
                 # Brake in time: with the step shrinking by at most dv a period, the steps
                 # v, v - dv, ..., v - K dv (v = (K + r) dv, 0 <= r < 1) cover
@@ -184,18 +189,15 @@ class ActuationLanes:
                 x = np.abs(step[acc]) / dv
                 kk = np.floor((np.sqrt(1.0 + 8.0 * x) - 1.0) / 2.0)
                 v_brake = (kk + np.clip(x / (kk + 1.0) - kk / 2.0, 0.0, 1.0)) * dv
-                g = qq[acc] > 0
-                if g.any():
-                    safe = np.where(g, qq[acc], 1.0)
-                    v_brake = np.where(g, np.floor(v_brake / safe + 1e-9) * safe, v_brake)
+                g, sq = grid[acc], safe[acc]
+                v_brake = np.where(g, np.floor(v_brake / sq + 1e-9) * sq, v_brake)
                 s = np.sign(step[acc]) * np.minimum(np.abs(step[acc]), v_brake)
                 r = self.rate[acc]
                 step[acc] = np.clip(s, r - dv, r + dv)
             step = np.clip(step, -self.max_step, self.max_step)
-            if grid.any():
-                safe = np.where(grid, qq, 1.0)
+            if self._any_grid:
                 step = np.where(grid, np.round(step / safe) * safe, step)  # no rounding dust
-            target = np.where(limited, self.last + step, target)
+            target = np.where(self._limited, self.last + step, target)
         self.rate = target - self.last
         self.last = target
         return target.copy()

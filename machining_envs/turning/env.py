@@ -35,6 +35,7 @@ from machining_envs.turning.plant import (
     SPINDLE_RPM_RANGE,
     TurningLanes,
     TurningParams,
+    cutting_power_W,
     spindle_drive,
     step_lane,
 )
@@ -415,15 +416,13 @@ class _TurningCore:
         spindle delivers what the cut asks)."""
         if k in self.power_lanes:
             return float(self.power[k, 0]), float(self.power[k, 1])
-        p = max(float(self.lanes.out[k, 0]), 0.0) * float(self.spindle[k]) * (np.pi / 30.0)
-        p = p * (float(self.diameter[k]) * 0.0005)
+        p = float(cutting_power_W(self.lanes.out[k, 0], self.spindle[k], self.diameter[k]))
         return p, p
 
     def _power_arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`_power` of every lane, as arrays (the same arithmetic)."""
-        p = np.maximum(self.lanes.out[:, 0], 0.0) * self.spindle * (np.pi / 30.0)
-        p = p * (self.diameter * 0.0005)
-        drive, cut = p.copy(), p
+        cut = cutting_power_W(self.lanes.out[:, 0], self.spindle, self.diameter)
+        drive = cut.copy()
         for k in self.power_lanes:
             drive[k], cut[k] = self.power[k]
         return drive, cut

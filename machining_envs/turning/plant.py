@@ -41,6 +41,7 @@ __all__ = [
     "SPINDLE_RPM_RANGE",
     "sampled_model",
     "spindle_drive",
+    "cutting_power_W",
 ]
 
 #: Spindle speeds the plant accepts, rpm. A conventional lathe of the paper's size (2.2 kW
@@ -529,6 +530,12 @@ def step_lane(
     lane_f[k, 5] = t + ts
 
 
+def cutting_power_W(force_N, spindle_rpm, diameter_mm):
+    """Cutting power ``F v_c`` (W) of a force ``force_N`` (N, negative read as 0) at
+    ``spindle_rpm`` on a workpiece of ``diameter_mm``: ``F w D / 2``. Scalars or arrays."""
+    return np.maximum(force_N, 0.0) * (spindle_rpm * (math.pi / 30.0)) * (diameter_mm * 0.0005)
+
+
 def spindle_drive(params: TurningParams, rpm: float, rpm_set: float, force_N: float):
     """One control period of a power-limited spindle: ``(next rpm, drive power W, cutting
     power W)`` for a spindle at ``rpm`` set to ``rpm_set``, under the cutting force
@@ -547,7 +554,7 @@ def spindle_drive(params: TurningParams, rpm: float, rpm_set: float, force_N: fl
     ts = params.sample_time_s
     w = rpm * (math.pi / 30.0)
     w_set = rpm_set * (math.pi / 30.0)
-    p_cut = max(force_N, 0.0) * w * params.workpiece_diameter_mm * 0.0005  # F w D/2
+    p_cut = float(cutting_power_W(force_N, rpm, params.workpiece_diameter_mm))
     p_need = p_cut + j * (w_set * w_set - w * w) / (2.0 * ts)
     if p_need <= params.spindle_power_W:
         return rpm_set, max(p_need, 0.0), p_cut
@@ -673,13 +680,11 @@ class TurningLanes:
         with zero columns to the memory of the slowest speed, so that the lane keeps every
         sample instant it could ever need and its speed may change between samples."""
         big = _matrices(self._key, spindle_rpm).big
-        if full_history:
-            c = self.z.shape[1]
-            padded = np.zeros((big.shape[0], c))
-            padded[:, : big.shape[1]] = big
-            big = padded
-        self.big[lane, : big.size] = big.ravel()
-        self.cols[lane] = big.shape[1]
+        rows, c = big.shape[0], (self.z.shape[1] if full_history else big.shape[1])
+        view = self.big[lane, : rows * c].reshape(rows, c)
+        view[:, : big.shape[1]] = big
+        view[:, big.shape[1] :] = 0.0
+        self.cols[lane] = c
 
     def set_speed(self, lane: int, spindle_rpm: float) -> None:
         """Change the spindle speed of a running ``lane`` from the next sample on (a lane

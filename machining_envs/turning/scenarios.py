@@ -149,12 +149,14 @@ def _random(
         kf, p, noise = rng.uniform(0.8, 1.2), rng.uniform(0.8, 1.2), rng.uniform(0.5, 2.0)
         limit = float(rng.uniform(*limit_N)) if limit_N[1] > limit_N[0] else limit_N[0]
         w = float(rng.uniform(*wear)) if wear is not None else 0.0  # drawn last: same cuts
-        if shopfloor:
-            return TurningScenario(
-                name, prof, spindle, limit, float(kf), float(p), float(noise), w,
-                spindle_power_W=SHOPFLOOR_SPINDLE_POWER_W, actuation=SHOPFLOOR_ACTUATION,
-            )  # fmt: skip
-        return TurningScenario(name, prof, spindle, limit, float(kf), float(p), float(noise), w)
+        shop = (
+            {"spindle_power_W": SHOPFLOOR_SPINDLE_POWER_W, "actuation": SHOPFLOOR_ACTUATION}
+            if shopfloor
+            else {}
+        )
+        return TurningScenario(
+            name, prof, spindle, limit, float(kf), float(p), float(noise), w, **shop
+        )
 
     return make
 

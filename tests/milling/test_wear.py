@@ -10,7 +10,7 @@ from agents.bench.tune import tuned_factory
 from agents.milling import IntegralACC
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.milling.scenarios import MillingScenario, machining_time_bound
-from tests.helpers import MILLING
+from tests.helpers import MILLING, run_cut
 
 
 def _cut(wear):
@@ -19,21 +19,8 @@ def _cut(wear):
 
 
 def _run(agent_or_action, scenario, steps=600):
-    env = gym.make(MILLING, max_episode_time_s=1e4).unwrapped
-    obs, _ = env.reset(seed=0, options={"scenario": scenario})
-    state, rows = None, []
-    for _ in range(steps):
-        if isinstance(agent_or_action, float):
-            action = np.array([agent_or_action])
-        else:
-            action, state = agent_or_action.predict(obs, state)
-        obs, _, terminated, truncated, info = env.step(action)
-        rows.append(
-            (info["position_mm"], info["torque_Nmm"], info["feed_velocity_mm_s"], info["cost"])
-        )
-        if terminated or truncated:
-            break
-    return np.array(rows), env
+    keys = ("position_mm", "torque_Nmm", "feed_velocity_mm_s", "cost")
+    return run_cut(MILLING, agent_or_action, scenario, keys, steps, 1e4)
 
 
 @pytest.mark.parametrize("wear", [0.5, 1.5])

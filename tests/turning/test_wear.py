@@ -11,7 +11,7 @@ from agents.turning import VariableGainPI
 from machining_envs.core.splits import HELD_OUT, check_not_held_out
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.turning.scenarios import TurningScenario, machining_time_bound
-from tests.helpers import TURNING
+from tests.helpers import TURNING, run_cut
 
 
 def _cut(wear, rpm=405.0):
@@ -20,19 +20,8 @@ def _cut(wear, rpm=405.0):
 
 
 def _run(agent_or_action, scenario, steps=400):
-    env = gym.make(TURNING, max_episode_time_s=1e3).unwrapped
-    obs, _ = env.reset(seed=0, options={"scenario": scenario})
-    state, rows = None, []
-    for _ in range(steps):
-        if isinstance(agent_or_action, float):
-            action = np.array([agent_or_action])
-        else:
-            action, state = agent_or_action.predict(obs, state)
-        obs, _, terminated, truncated, info = env.step(action)
-        rows.append((info["position_mm"], info["force_N"], info["cost"]))
-        if terminated or truncated:
-            break
-    return np.array(rows), env
+    keys = ("position_mm", "force_N", "cost")
+    return run_cut(TURNING, agent_or_action, scenario, keys, steps, 1e3)
 
 
 @pytest.mark.parametrize("wear", [0.4, 1.0])
