@@ -354,6 +354,7 @@ PROCESS = Process(
             "paper_0.8",
             tuned=(NoControl, PD, SlidingMode),
             learned=("micro_drilling_ppo",),
+            extra_splits=("wear",),
             robustness=Robustness(
                 "cutting constant (x nominal)",
                 (0.85, 1.0, 1.15),

@@ -15,7 +15,7 @@ speed (rad/s) and ``k_4`` the torque constant of the current cut:
 
 .. math::
 
-    k_4 = 2\pi\, c_T(D)\, v_f\, \epsilon(z)\, \bigl(1 + g(L)\,(1 + \sigma_c \xi_c)\bigr)
+    k_4 = 2\pi\, c_T(D)\, v_f\, \epsilon(z)\, \bigl(1 + w z + g(L)\,(1 + \sigma_c \xi_c)\bigr)
           (1 + \sigma_0 \xi_0)
 
 - ``c_T(D)`` (N·mm per mm/rev) comes from the cutting model of §3.2, evaluated once per drill:
@@ -26,6 +26,8 @@ speed (rad/s) and ``k_4`` the torque constant of the current cut:
 - ``g(L) = g_0 (e^{L / (\ell D)} - 1)`` is the friction of the chips packed in the flutes,
   growing with the length ``L`` drilled since the chips were last cleared (Fig. 12, §5.1);
   leaving the hole (a peck) clears them;
+- ``w`` is the drill's wear per mm drilled (``wear_per_mm``, 0 by default: the paper's
+  sharp drill); the edge does not recover when the chips are cleared;
 - ``\xi_c``, ``\xi_0`` are unit Ornstein-Uhlenbeck processes: the chip packing is irregular.
 
 The paper's eq. (19) leaves out the drilling torque acting back on the spindle; here it is
@@ -178,6 +180,18 @@ class DrillingParams:
     chip_fluctuation_time_s: float = 0.2
     """Correlation time of the chip-friction fluctuation, s (an Ornstein-Uhlenbeck process)."""
 
+    # ---- drill wear within the hole (off by default) ----------------------------------------
+    wear_per_mm: float = 0.0
+    """Drill wear within the hole: the chip-free cutting torque and thrust at hole depth
+    ``z`` are ``(1 + w z / mm)`` times the sharp drill's, ``w`` this share per mm drilled.
+    Cutting forces grow almost linearly with the flank-wear land (the flank-wear force model
+    of Koren & Lenz, 1972), and the land grows linearly with the length cut in the steady
+    zone of the wear curve, so the coefficient grows linearly with the depth drilled. Kept
+    apart from the chips: the chip friction ``g(L)`` is a share of the sharp drill's
+    torque and a peck clears it; a peck does not restore the edge. 0 (default) is the
+    paper's sharp drill, bit for bit; the ``wear`` scenarios draw ``w`` (see
+    ``machining_envs.drilling.scenarios``)."""
+
     cutting_fluctuation: float = 0.03
     """sigma_0, relative standard deviation of the chip-free cutting torque and thrust
     (material and edge irregularity); correlation time ``cutting_fluctuation_time_s``."""
@@ -263,6 +277,7 @@ class DrillingParams:
         check_range("chip_friction", self.chip_friction, 0.0, 100.0)
         check_range("chip_length_diameters", self.chip_length_diameters, 0.0, 1e3, lo_open=True)
         check_range("chip_fluctuation", self.chip_fluctuation, 0.0, 2.0)
+        check_range("wear_per_mm", self.wear_per_mm, 0.0, 10.0)
         check_range(
             "chip_fluctuation_time_s", self.chip_fluctuation_time_s, 0.0, 100.0, lo_open=True
         )
@@ -775,7 +790,7 @@ class DrillingStep:
  _G_HALF) = range(19)  # fmt: skip
 #: Columns of ``DrillingLanes.par`` (one row of parameters per lane).
 (_P_G0, _P_SIG_C, _P_SIG_0, _P_KT, _P_KH, _P_KH2, _P_FULL, _P_D, _P_TARGET, _P_NOISE_T,
- _P_NOISE_H, _P_NOISE_S, _P_BREAK, _N_PAR) = range(14)  # fmt: skip
+ _P_NOISE_H, _P_NOISE_S, _P_BREAK, _P_WEAR, _N_PAR) = range(15)  # fmt: skip
 #: Columns of ``DrillingLanes.state``.
 (_S_X1, _S_X2, _S_OMEGA, _S_T, _S_POS, _S_DEPTH, _S_PACKED, _S_XI_CHIP, _S_XI_CUT, _S_TQ_F,
  _S_TH_F, _S_TQ, _S_TH, _S_VOLT, _S_FINISHED, _N_STATE) = range(16)  # fmt: skip
@@ -963,7 +978,8 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
             packed = state[k, _S_PACKED] + 0.5 * cut_len
             ratio = par[k, _P_G0] * (math.exp(packed / (g[_G_CHIP_LEN] * d)) - 1.0)
             ratio *= _pymax(0.0, 1.0 + par[k, _P_SIG_C] * xi_chip)
-            load = (1.0 + ratio) * _pymax(0.0, 1.0 + par[k, _P_SIG_0] * xi_cut)
+            wear = 1.0 + par[k, _P_WEAR] * mid  # the edge dulls with the depth drilled
+            load = (wear + ratio) * _pymax(0.0, 1.0 + par[k, _P_SIG_0] * xi_cut)
             k4 = par[k, _P_KT] * v_cut * eng_t * load
             kh = par[k, _P_KH] * v_cut * eng_h * load
             kh2 = par[k, _P_KH2] * math.pow(v_cut * eng_h, g[_G_SQUARE])
@@ -1212,6 +1228,7 @@ class DrillingLanes:
             p.thrust_noise_N,
             p.speed_noise_hz,
             p.breakage_torque_Nmm(diameter_mm),
+            p.wear_per_mm,
         )
         e = self.eng[lane]
         e[0] = c.engage_depth_mm
