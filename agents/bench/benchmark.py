@@ -37,7 +37,8 @@ _SPLIT_NOTES = {
     "wear": "the training ranges with a tool that dulls within the cut",
     "shopfloor": (
         "the training ranges on a real CNC: feed override in 1 % steps, rate- and "
-        "acceleration-limited, delayed 2 periods; a 2.2 kW spindle that slows when overloaded"
+        "acceleration-limited, delayed 2 periods; in Turning-v0 also a 2.2 kW spindle that "
+        "slows when overloaded"
     ),
 }
 _KIND_COLOUR = {"bound": "0.3", "oracle": "k", "paper": "C0", "tuned": "C2", "learned": "C1"}

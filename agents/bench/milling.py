@@ -433,7 +433,7 @@ PROCESS = Process(
             oracle_episodes=3,
             oracle_in_quick=False,  # a cut of some 2000 samples: 40 s
             oracle_seconds=40.0,
-            extra_splits=("wear",),
+            extra_splits=("wear", "shopfloor"),
             robustness=Robustness(
                 "spindle speed (x nominal)",
                 (0.7, 0.85, 1.0, 1.2, 1.4),

@@ -29,7 +29,7 @@ import numpy as np
 
 from machining_envs.core.checks import check_integer, check_range
 
-__all__ = ["Actuation", "ActuationLanes", "resolve_actuation"]
+__all__ = ["Actuation", "ActuationLanes", "resolve_actuation", "SHOPFLOOR_ACTUATION"]
 
 
 @dataclass(frozen=True)
@@ -67,6 +67,15 @@ class Actuation:
             or math.isfinite(self.max_accel_per_s2)
             or self.delay_steps > 0
         )
+
+
+#: The actuation of the ``shopfloor`` scenarios (Turning-v0, EndMilling-v0): the feed
+#: override in 1 % steps, at most 50 % of its range per second and 200 % per second squared
+#: (0.25 s from rest to full rate), two control periods (0.2 s at both envs' 10 Hz) of
+#: interpolator delay. Chosen, not measured: of the order of a production control's override
+#: handling, strict enough that a design for an ideal actuator notices.
+SHOPFLOOR_ACTUATION = Actuation(quantum=0.01, max_rate_per_s=0.5, delay_steps=2,
+                                max_accel_per_s2=2.0)  # fmt: skip
 
 
 def resolve_actuation(actuation) -> Actuation | None:

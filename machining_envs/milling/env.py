@@ -10,6 +10,7 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
+from machining_envs.core.actuation import Actuation, ActuationLanes, resolve_actuation
 from machining_envs.core.checks import check_below
 from machining_envs.core.env import (
     ACTION_MAPS,
@@ -126,9 +127,11 @@ def _clamp(x, lo, hi):
 def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noise, big, lag,
           z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, out, out_seg, out_finish, work,
           ke, tr, brk, vmax, n_teeth, w_axial, cumulative, max_t, w, meas, prev_action,
-          tr_obs, rpm_obs, obs, reward, flags, n_clipped, info_f):  # fmt: skip
-    """One step of every lane: the actions' commands and the sensor noise, the plant
-    (:func:`step_lanes`), then each lane's reward, observation, episode flags and info.
+          tr_obs, rpm_obs, obs, reward, flags, n_clipped, info_f, stage):  # fmt: skip
+    """One step of every lane: the actions' commands and the sensor noise (``stage`` 1),
+    then the plant (:func:`step_lanes`) and each lane's reward, observation, episode flags
+    and info (``stage`` 2); ``stage`` 3 does both. Between the two, the CNC's actuation may
+    change ``commands`` (``machining_envs.core.actuation``).
 
     ``cmap`` = ``[log, command_min, span, c, g, mid, half]`` of the action map
     (:class:`machining_envs.core.env.ActionMap`): the command is
@@ -141,7 +144,7 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
     """
     n = z.shape[0]
     log_map = cmap[0] != 0.0
-    for k in range(n):
+    for k in range(n if stage & 1 else 0):
         a = actions[k]
         if log_map:
             cmd = cmap[1] + cmap[2] * math.expm1(cmap[3] * (a + 1.0)) / cmap[4]
@@ -158,6 +161,8 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
             noise[k] = 0.0
         prev_action[k] = a
         n_clipped[k] += clipped[k]
+    if not stage & 2:
+        return
     step_lanes(big, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, commands,
                noise, out, out_seg, out_finish, work)  # fmt: skip
     lo, hi = _TORQUE_OBS
@@ -248,9 +253,17 @@ class _MillingCore:
     last bit."""
 
     def __init__(self, owner, n, scenario, params, reward, max_episode_time_s, action_map,
-                 overrides):  # fmt: skip
+                 overrides, actuation=None):  # fmt: skip
         self.params = resolve_params(
             owner, params, MillingParams, MillingParams.park_yoon_1986, overrides
+        )
+        self.actuation = resolve_actuation(actuation)
+        self.act_lanes = (
+            None
+            if self.actuation is None
+            else ActuationLanes(
+                n, self.params.command_max, 0.0, self.params.sample_time_s, self.actuation
+            )
         )
         self.reward_weights = resolve_reward(reward, MillingReward)
         w = self.reward_weights
@@ -351,6 +364,13 @@ class _MillingCore:
         self.tr_obs[lane] = tr_obs
         self.rpm_obs[lane] = rpm / 1000.0
         self.prev_action[lane] = -1.0
+        act = sc.actuation if sc.actuation is not None else self.actuation
+        if act is not None and self.act_lanes is None:  # the first scenario with its own
+            self.act_lanes = ActuationLanes(
+                self.n, self.params.command_max, 0.0, self.params.sample_time_s
+            )
+        if self.act_lanes is not None:
+            self.act_lanes.configure(lane, act)
         self.n_clipped[lane] = 0
         self.normal_i[lane] = _NORMAL_BLOCK  # a new episode draws a new block
         self.spindle[lane] = rpm
@@ -494,8 +514,16 @@ class _MillingCore:
     def step(self) -> None:
         """Advance every lane with the actions in ``in_action`` (inside the box) and
         ``in_clipped`` (1 where the action was clipped to the box), after
-        :meth:`draw_noise`."""
-        _step(*self._kernel_args())
+        :meth:`draw_noise`; with CNC actuation on, the commands pass through it first
+        (``machining_envs.core.actuation``) and ``info["command"]`` is what the drives got."""
+        args = self._kernel_args()
+        if self.act_lanes is None:
+            _step(*args, 3)
+            return
+        _step(*args, 1)
+        self.commands[:] = self.act_lanes.apply(self.commands)
+        self.info_f[1] = self.commands
+        _step(*args, 2)
 
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""
@@ -642,9 +670,14 @@ class EndMillingEnv(gym.Env):
 
     ## Arguments
     ``gym.make("machining_envs/EndMilling-v0", scenario="train", render_mode=None,
-    params=None, reward=None, max_episode_time_s=1200.0, action_map="log", **overrides)``:
+    params=None, reward=None, max_episode_time_s=1200.0, action_map="log", actuation=None,
+    **overrides)``:
     ``scenario`` is the default for resets without one (a name of ``MILLING_SCENARIOS`` or
     a ``MillingScenario``); ``action_map`` is ``"log"`` or ``"linear"`` (Action Space);
+    ``actuation`` (off by default: the papers' ideal actuator) puts a real CNC's feed
+    override between the command and the servo: delay, quantisation, rate and acceleration
+    limits (``machining_envs.core.actuation.Actuation`` or a dict of its fields; a
+    scenario's own ``actuation``, as in the ``shopfloor`` split, wins for its episode);
     ``params`` a ``MillingParams`` (nominal: what controllers are
     designed from; ``MillingParams.ahn_choi_al6061()`` for the Al6061 set); ``overrides``
     change single fields of it (``servo_gain=0.025``, ``force_model="average_force"``,
@@ -710,6 +743,7 @@ class EndMillingEnv(gym.Env):
         reward: MillingReward | dict | None = None,
         max_episode_time_s: float = 1200.0,
         action_map: str = "log",
+        actuation: Actuation | dict | None = None,
         **overrides,
     ):
         self._core = _MillingCore(
@@ -721,6 +755,7 @@ class EndMillingEnv(gym.Env):
             max_episode_time_s,
             action_map,
             overrides,
+            actuation,
         )
         core = self._core
         adopt_core(self, core, scenario, render_mode)
@@ -820,6 +855,7 @@ class EndMillingVectorEnv(LaneVectorEnv):
         reward: MillingReward | dict | None = None,
         max_episode_time_s: float = 1200.0,
         action_map: str = "log",
+        actuation: Actuation | dict | None = None,
         **overrides,
     ):
         self._core = _MillingCore(
@@ -831,6 +867,7 @@ class EndMillingVectorEnv(LaneVectorEnv):
             max_episode_time_s,
             action_map,
             overrides,
+            actuation,
         )
         super().__init__(num_envs, self._core.observation_space, self._core.action_space)
         self.default_scenario = scenario

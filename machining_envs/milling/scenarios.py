@@ -7,8 +7,9 @@ multiples of the nominal torque coefficient and feed exponent). Pass a name or a
 object to ``env.reset(options={"scenario": ...})``.
 
 Splits (``machining_envs.core.splits``): ``train``, ``validation`` and ``test`` share one
-distribution, each drawing through its own stream; ``ood`` goes beyond it (see
-``MILLING_SCENARIOS``).
+distribution, each drawing through its own stream; ``ood`` goes beyond it; ``wear`` (a
+tool that dulls within the cut) and ``shopfloor`` (a real CNC's feed override) are the
+training distribution on a less ideal machine (see ``MILLING_SCENARIOS``).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
 from machining_envs.core.checks import check_range
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.splits import split_rng
@@ -80,6 +82,9 @@ class MillingScenario:
     wear_per_100mm : float
         Tool wear within the cut: the torque coefficient grows by this share per 100 mm
         (``MillingParams.wear_per_100mm``; 0 to 10, 0 a sharp tool).
+    actuation : Actuation or None
+        The CNC's actuation for this cut (``machining_envs.core.actuation``); None (default):
+        the env's ``actuation`` option decides.
     """
 
     name: str
@@ -90,6 +95,7 @@ class MillingScenario:
     feed_exponent_scale: float = 1.0
     noise_scale: float = 1.0
     wear_per_100mm: float = 0.0
+    actuation: Actuation | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.profile, DepthProfile):
@@ -100,6 +106,10 @@ class MillingScenario:
         check_range("feed_exponent_scale", self.feed_exponent_scale, 0.5, 2.0)
         check_range("noise_scale", self.noise_scale, 0.0, 10.0)
         check_range("wear_per_100mm", self.wear_per_100mm, 0.0, 10.0)
+        if self.actuation is not None and not isinstance(self.actuation, Actuation):
+            raise ValueError(
+                f"actuation must be an Actuation or None, got {type(self.actuation).__name__}"
+            )
 
     def spindle_rpm(self, nominal: MillingParams) -> float:
         """Spindle speed of this cut, rpm (``ValueError`` outside ``SPINDLE_RPM_RANGE``)."""
@@ -206,6 +216,7 @@ def _random(
     ref: tuple[float, float],
     truth: float,
     wear: tuple[float, float] | None = None,
+    actuation: Actuation | None = None,
 ):
     def make(env_rng: np.random.Generator) -> MillingScenario:
         rng = split_rng(env_rng, name)
@@ -215,7 +226,9 @@ def _random(
         ks, m = rng.uniform(1.0 - truth, 1.0 + truth, size=2)
         noise = rng.uniform(0.5, 2.0)
         w = float(rng.uniform(*wear)) if wear is not None else 0.0  # drawn last: same cuts
-        return MillingScenario(name, prof, sp, tr, float(ks), float(m), float(noise), w)
+        return MillingScenario(
+            name, prof, sp, tr, float(ks), float(m), float(noise), w, actuation=actuation
+        )
 
     return make
 
@@ -234,6 +247,11 @@ def _random(
 #:   workpiece). Chosen, not identified: end mills wear faster per length than the turning
 #:   insert (each tooth cuts a share of the time, hot, interrupted), and a controller tuned
 #:   on a sharp tool must meet a clearly duller one within one workpiece.
+#: - ``shopfloor``: the training ranges on a real CNC: the feed override in 1 % steps,
+#:   rate- and acceleration-limited, two periods of interpolator delay
+#:   (``machining_envs.core.actuation.SHOPFLOOR_ACTUATION``, as in Turning-v0). The
+#:   spindle is ideal: this plant's torque lag is set by the spindle speed, and a speed that
+#:   sags under load is modelled in Turning-v0 only.
 MILLING_SCENARIOS: dict[str, Callable[[np.random.Generator], MillingScenario]] = {
     "paper_step": _fixed("paper_step", paper_step_profile),
     "paper_taper": _fixed("paper_taper", paper_taper_profile),
@@ -243,6 +261,15 @@ MILLING_SCENARIOS: dict[str, Callable[[np.random.Generator], MillingScenario]] =
     },
     "ood": _random("ood", (0.4, 3.5), (2, 6), (0.7, 1.4), (0.7, 1.4), 0.25),
     "wear": _random("wear", (0.5, 3.0), (2, 5), (0.8, 1.25), (0.8, 1.25), 0.2, (0.5, 1.5)),
+    "shopfloor": _random(
+        "shopfloor",
+        (0.5, 3.0),
+        (2, 5),
+        (0.8, 1.25),
+        (0.8, 1.25),
+        0.2,
+        actuation=SHOPFLOOR_ACTUATION,
+    ),
 }
 
 

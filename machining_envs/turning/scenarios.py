@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from machining_envs.core.actuation import Actuation
+from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.splits import split_rng
 from machining_envs.core.workpieces import DepthProfile
@@ -163,15 +163,6 @@ def _random(
 
 #: The spindle power of the ``shopfloor`` scenarios, W (``TurningParams.spindle_power_W``).
 SHOPFLOOR_SPINDLE_POWER_W = 2200.0
-
-#: The actuation of the ``shopfloor`` scenarios: the feed override in 1 % steps, at most
-#: 50 % of its range per second and 200 % per second squared (0.25 s from rest to full
-#: rate), two control periods (0.2 s) of interpolator delay. Chosen, not measured: of the
-#: order of a production control's override handling, strict enough that a design for an
-#: ideal actuator notices.
-SHOPFLOOR_ACTUATION = Actuation(quantum=0.01, max_rate_per_s=0.5, delay_steps=2,
-                                max_accel_per_s2=2.0)  # fmt: skip
-
 
 #: name -> factory drawing a scenario from the env's generator: the paper's experiments and
 #: the splits (see the module docstring).

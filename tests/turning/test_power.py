@@ -9,8 +9,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from machining_envs.core.actuation import SHOPFLOOR_ACTUATION
 from machining_envs.turning.plant import TurningParams, spindle_drive
-from machining_envs.turning.scenarios import SHOPFLOOR_ACTUATION, SHOPFLOOR_SPINDLE_POWER_W
+from machining_envs.turning.scenarios import SHOPFLOOR_SPINDLE_POWER_W
 from tests.helpers import TURNING
 
 #: Half a second of a heavy cut (more than 1.5 kW at 700 rpm), then a light one.

@@ -1,5 +1,5 @@
-"""CNC actuation on Turning-v0: each option changes the command as documented, the vector env
-does the same per lane, and the default is the ideal actuator."""
+"""CNC actuation on Turning-v0 and EndMilling-v0: each option changes the command as
+documented, the vector env does the same per lane, and the default is the ideal actuator."""
 
 import math
 
@@ -8,13 +8,30 @@ import numpy as np
 import pytest
 
 from machining_envs.core.actuation import Actuation
-from tests.helpers import TURNING
+from machining_envs.core.workpieces import DepthProfile
+from machining_envs.milling.scenarios import MillingScenario
+from tests.helpers import MILLING, TURNING
 
-ACTIONS = np.random.default_rng(3).uniform(-1.0, 0.2, size=60)  # force stays below breakage
+ACTIONS = np.random.default_rng(3).uniform(-1.0, 0.2, size=60)  # below breakage (see _make)
+ENVS = (TURNING, MILLING)
 
 
-def _commands(**actuation):
-    env = gym.make(TURNING, scenario="paper_405", actuation=actuation or None)
+def _kwargs(env_id) -> dict:
+    """A cut whose force (torque) stays below breakage for every command of ``ACTIONS``: the
+    paper's 405 rpm bar; for milling a 0.1 mm radial depth with the linear action map, so
+    that the commands span 60 % of the range as in turning."""
+    if env_id == TURNING:
+        return {"scenario": "paper_405"}
+    light = MillingScenario("light", DepthProfile.steps((0.1,), 500.0, name="0.1 mm"))
+    return {"scenario": light, "action_map": "linear"}
+
+
+def _make(env_id, **kwargs):
+    return gym.make(env_id, **_kwargs(env_id), **kwargs)
+
+
+def _commands(env_id=TURNING, **actuation):
+    env = _make(env_id, actuation=actuation or None)
     env.reset(seed=0)
     out = []
     for a in ACTIONS:
@@ -24,42 +41,47 @@ def _commands(**actuation):
     return np.array(out), env.unwrapped.params.command_max
 
 
-def test_off_by_default_the_servo_gets_the_action():
-    plain, cmax = _commands()
+@pytest.mark.parametrize("env_id", ENVS)
+def test_off_by_default_the_servo_gets_the_action(env_id):
+    plain, cmax = _commands(env_id)
     np.testing.assert_allclose(plain, (ACTIONS.astype(np.float32) + 1) / 2 * cmax, rtol=1e-6)
-    same, _ = _commands(quantum=0.0, max_rate_per_s=math.inf, delay_steps=0)
+    same, _ = _commands(env_id, quantum=0.0, max_rate_per_s=math.inf, delay_steps=0)
     np.testing.assert_array_equal(same, plain)
 
 
-def test_the_delay_is_exactly_n_periods():
-    plain, _ = _commands()
-    delayed, _ = _commands(delay_steps=3)
+@pytest.mark.parametrize("env_id", ENVS)
+def test_the_delay_is_exactly_n_periods(env_id):
+    plain, _ = _commands(env_id)
+    delayed, _ = _commands(env_id, delay_steps=3)
     np.testing.assert_array_equal(delayed[:3], 0.0)
     np.testing.assert_array_equal(delayed[3:], plain[:-3])
 
 
+@pytest.mark.parametrize("env_id", ENVS)
 @pytest.mark.parametrize("quantum", [0.01, 0.1])
-def test_quantised_commands_lie_on_the_grid(quantum):
-    plain, cmax = _commands()
-    q, _ = _commands(quantum=quantum)
+def test_quantised_commands_lie_on_the_grid(env_id, quantum):
+    plain, cmax = _commands(env_id)
+    q, _ = _commands(env_id, quantum=quantum)
     steps = q / (quantum * cmax)
     np.testing.assert_allclose(steps, np.round(steps), atol=1e-9)
     assert np.max(np.abs(q - plain)) <= quantum * cmax / 2 + 1e-9
     assert len(np.unique(q)) <= 1 / quantum + 1
 
 
-def test_the_rate_never_exceeds_its_limit_even_on_the_grid():
+@pytest.mark.parametrize("env_id", ENVS)
+def test_the_rate_never_exceeds_its_limit_even_on_the_grid(env_id):
     for actuation in ({"max_rate_per_s": 1.0}, {"max_rate_per_s": 1.0, "quantum": 0.01}):
-        c, cmax = _commands(**actuation)
+        c, cmax = _commands(env_id, **actuation)
         steps = np.abs(np.diff(np.concatenate([[0.0], c])))
         assert steps.max() <= 1.0 * cmax * 0.1 + 1e-9, actuation
         assert steps.max() >= 0.9 * cmax * 0.1  # the limit binds on these commands
 
 
+@pytest.mark.parametrize("env_id", ENVS)
 @pytest.mark.parametrize("quantum", [0.0, 0.01])
-def test_the_acceleration_never_exceeds_its_limit_and_the_ramp_brakes_on_target(quantum):
+def test_the_acceleration_never_exceeds_its_limit_and_the_ramp_brakes_on_target(env_id, quantum):
     act = {"max_accel_per_s2": 2.0, "max_rate_per_s": 3.0, "quantum": quantum}
-    c, cmax = _commands(**act)
+    c, cmax = _commands(env_id, **act)
     steps = np.diff(np.concatenate([[0.0, 0.0], c]))
     dv = 2.0 * cmax * 0.1**2
     assert np.abs(np.diff(steps)).max() <= dv + 1e-9
@@ -79,11 +101,12 @@ def test_the_acceleration_never_exceeds_its_limit_and_the_ramp_brakes_on_target(
     assert np.abs(np.diff(np.diff(np.concatenate([[0.0, 0.0], out])))).max() <= dv + 1e-9
 
 
-def test_every_vector_lane_runs_the_same_actuation():
+@pytest.mark.parametrize("env_id", ENVS)
+def test_every_vector_lane_runs_the_same_actuation(env_id):
     act = {"quantum": 0.05, "max_rate_per_s": 2.0, "delay_steps": 2, "max_accel_per_s2": 10.0}
-    vec = gym.make_vec(TURNING, num_envs=3, scenario="paper_405", actuation=act)
+    vec = gym.make_vec(env_id, num_envs=3, actuation=act, **_kwargs(env_id))
     vec.reset(seed=0)
-    singles = [gym.make(TURNING, scenario="paper_405", actuation=act) for _ in range(3)]
+    singles = [_make(env_id, actuation=act) for _ in range(3)]
     for i, e in enumerate(singles):
         e.reset(seed=i)
     for a in ACTIONS[:40]:
@@ -104,14 +127,16 @@ def test_every_vector_lane_runs_the_same_actuation():
         ({"quantum": 0.1, "max_accel_per_s2": 5.0}, "less than one quantum"),
     ],
 )
-def test_bad_actuation_is_refused_naming_it(kwargs, match):
+@pytest.mark.parametrize("env_id", ENVS)
+def test_bad_actuation_is_refused_naming_it(env_id, kwargs, match):
     with pytest.raises(ValueError, match=match):
-        gym.make(TURNING, actuation=kwargs)
+        gym.make(env_id, actuation=kwargs)
     if "less than" not in match:
         with pytest.raises(ValueError, match=match):
             Actuation(**kwargs)
 
 
-def test_unknown_actuation_settings_are_refused():
+@pytest.mark.parametrize("env_id", ENVS)
+def test_unknown_actuation_settings_are_refused(env_id):
     with pytest.raises(TypeError, match="delay"):
-        gym.make(TURNING, actuation={"delay": 2})
+        gym.make(env_id, actuation={"delay": 2})
