@@ -355,6 +355,7 @@ PROCESS = Process(
             "paper_involute",
             tuned=(ConstantOverride, LookAheadFeed),
             learned=("contouring_feed_ppo", "contouring_feed_ppo_residual"),
+            extra_splits=("shopfloor",),
             table_metrics=(
                 "cycle_time_s",
                 "max_contour_error_mm",

@@ -460,6 +460,11 @@ class _ContouringCore:
         first observation goes to ``obs[lane]``; returns its reset info."""
         sc = contouring_scenario(spec, rng)
         check_feed(sc, self.params)
+        if sc.actuation is not None:
+            raise ValueError(
+                f"scenario {sc.name!r} has a feed-override actuation; Contouring-v0 commands "
+                "the axes directly (run it on ContouringFeed-v0)"
+            )
         self.scenarios[lane] = sc
         plant = ContouringPlant(sc.true_params(self.params))
         self.plants[lane] = plant

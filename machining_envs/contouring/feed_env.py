@@ -40,6 +40,7 @@ from machining_envs.contouring.scenarios import (
     contouring_scenario,
 )
 from machining_envs.contouring.servo import SERVO_KINDS, ServoLanes, run_block, servo_design
+from machining_envs.core.actuation import Actuation, ActuationLanes, resolve_actuation
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
@@ -143,12 +144,14 @@ def _bound(o, i, x, lo, hi):
 
 
 @numba.njit(cache=True, _nrt=False)
-def _feed_step(actions, clipped, tabs, nseg, pf, load_t, load_v, n_load, sf, sh, sa, sb, scu,
-               sdu, sgu, stq, sumax, state, s, kk, override, prev_action, n_clipped, c, w,
-               look, lo, hi, obs, reward, flags, out, segment, sc):  # fmt: skip
+def _feed_step(actions, clipped, applied, tabs, nseg, pf, load_t, load_v, n_load, sf, sh, sa,
+               sb, scu, sdu, sgu, stq, sumax, state, s, kk, override, prev_action, n_clipped,
+               c, w, look, lo, hi, obs, reward, flags, out, segment, sc):  # fmt: skip
     """One decision step of every lane (``ContouringFeedEnv.step`` after its input checks).
 
-    ``c`` = ``[n_sub, Ts, tolerance, in_position, divergence, override mid, override half]``;
+    ``c`` = ``[n_sub, Ts, tolerance, in_position, divergence, override mid, override half,
+    actuated]``: where ``actuated`` is 1 the override is ``applied[k]`` (what the CNC's
+    actuation made of the action's), else the action's;
     ``w`` = the reward weights; ``flags[k]`` = ``[diverged, finished, terminated,
     truncated]``; ``sc`` = scratch arrays (``_FeedCore._scratch``)."""
     n = int(c[0])
@@ -162,7 +165,7 @@ def _feed_step(actions, clipped, tabs, nseg, pf, load_t, load_v, n_load, sf, sh,
         y0 = pf[k, 2]
         a = actions[k]
         n_clipped[k] += clipped[k]
-        ov = c[5] + c[6] * a
+        ov = applied[k] if c[7] != 0.0 else c[5] + c[6] * a
         v = pf[k, 5] * ov
         vts = v * ts
         s0 = s[k]
@@ -285,10 +288,11 @@ class _FeedCore:
 
     def __init__(self, owner, n, scenario, params, servo, tolerance_mm, reward,
                  decision_interval_s, override_max, max_episode_time_s, in_position_mm,
-                 divergence_mm, overrides):  # fmt: skip
+                 divergence_mm, overrides, actuation=None):  # fmt: skip
         self.params = resolve_params(
             owner, params, ContouringParams, ContouringParams.choi_et_al, overrides
         )
+        self.actuation = resolve_actuation(actuation)
         if servo not in SERVO_KINDS:
             raise ValueError(f"servo must be one of {SERVO_KINDS}, got {servo!r}")
         self.servo = servo
@@ -327,8 +331,12 @@ class _FeedCore:
         self._w = np.array([w.progress, w.time, w.tolerance, w.divergence])
         cm = self.command_map
         self._c = np.array([n_sub, ts, self.tolerance_mm, self.in_position_mm,
-                            self.divergence_mm, cm._mid, cm._half])  # fmt: skip
+                            self.divergence_mm, cm._mid, cm._half, 0.0])  # fmt: skip
         self.n = n
+        self.act_lanes: ActuationLanes | None = None
+        if self.actuation is not None:
+            self._actuate()
+        self.applied = np.zeros(n)
         self.loops = ServoLanes(designs, n_sub, n)
         self._loop_cache: dict = {}
         self.state = np.zeros((n, 2 * self.loops.n_states_axis))
@@ -368,6 +376,14 @@ class _FeedCore:
             np.zeros(self.tabs.shape[1], dtype=np.int64),
         )  # fmt: skip
 
+    def _actuate(self) -> None:
+        """Put the CNC's actuation between the actions and the override (every lane; a lane
+        without settings passes its override unchanged)."""
+        self.act_lanes = ActuationLanes(
+            self.n, self.override_max, 0.0, self.decision_interval_s, self.actuation
+        )
+        self._c[7] = 1.0
+
     # ---- per-lane episodes ---------------------------------------------------------------
     def _set_loops(self, lane: int, truth: ContouringParams) -> None:
         cached = self._loop_cache.get(truth)
@@ -404,6 +420,11 @@ class _FeedCore:
                 f"scenario {sc.name!r} is a step command; ContouringFeed-v0 needs a path with a feed"
             )
         check_feed(sc, self.params)
+        act = sc.actuation if sc.actuation is not None else self.actuation
+        if act is not None and self.act_lanes is None:  # the first scenario with its own
+            self._actuate()
+        if self.act_lanes is not None:
+            self.act_lanes.configure(lane, act)
         self.scenarios[lane] = sc
         self._set_loops(lane, sc.true_params(self.params))
         self.state[lane] = 0.0
@@ -453,10 +474,14 @@ class _FeedCore:
 
     def step(self) -> None:
         """Advance every lane with the (checked, clipped) actions in ``in_action``; whether
-        each was clipped is in ``in_clipped``."""
+        each was clipped is in ``in_clipped``. With CNC actuation on, the overrides the
+        actions ask for pass through it first (``machining_envs.core.actuation``)."""
         lp = self.loops
+        if self.act_lanes is not None:
+            asked = self._c[5] + self._c[6] * self.in_action
+            self.applied[:] = self.act_lanes.apply(asked)
         _feed_step(
-            self.in_action, self.in_clipped, self.tabs, self.nseg, self.pf, self.load_t,
+            self.in_action, self.in_clipped, self.applied, self.tabs, self.nseg, self.pf, self.load_t,
             self.load_v, self.n_load, lp.f, lp.h, lp.a, lp.b, lp.cu, lp.du, lp.gu, lp.tq,
             lp.umax, self.state, self.s, self.k, self.override, self.prev_action,
             self.n_clipped, self._c, self._w, _LOOK, self._lo, self._hi, self.obs,
@@ -612,7 +637,13 @@ class ContouringFeedEnv(gym.Env):
     ``gym.make("machining_envs/ContouringFeed-v0", scenario="train", render_mode=None,
     params=None, servo="hinf", tolerance_mm=None, reward=None, decision_interval_s=0.01,
     override_max=2.0, max_episode_time_s=None, in_position_mm=0.005, divergence_mm=50.0,
-    **overrides)``: ``servo`` is ``"hinf"`` (``agents.HInf2DOF``'s design, the default) or
+    actuation=None, **overrides)``: ``actuation`` (off by default: the override takes
+    effect as asked) puts a real CNC's override handling between the action and the
+    interpolator: delay in decisions, quantisation, rate and acceleration limits
+    (``machining_envs.core.actuation.Actuation`` or a dict of its fields, as shares of
+    ``[0, override_max]``; a scenario's own ``actuation``, as in the ``shopfloor`` split,
+    wins for its episode), and ``info["feed_override"]`` is the override applied; ``servo``
+    is ``"hinf"`` (``agents.HInf2DOF``'s design, the default) or
     ``"pi"`` (``agents.PIPosition``'s); ``tolerance_mm`` defaults to
     ``DEFAULT_TOLERANCE_MM[servo]`` (5 um for H-infinity, 50 um for PI); ``overrides`` change
     fields of ``ContouringParams``. Unknown keywords raise ``TypeError``; out-of-range values
@@ -670,12 +701,13 @@ class ContouringFeedEnv(gym.Env):
         max_episode_time_s: float | None = None,
         in_position_mm: float = 0.005,
         divergence_mm: float = 50.0,
+        actuation: Actuation | dict | None = None,
         **overrides,
     ):
         self._core = core = _FeedCore(
             type(self).__name__, 1, scenario, params, servo, tolerance_mm, reward,
             decision_interval_s, override_max, max_episode_time_s, in_position_mm,
-            divergence_mm, overrides,
+            divergence_mm, overrides, actuation,
         )  # fmt: skip
         adopt_core(self, core, scenario, render_mode)
         self.servo = core.servo
@@ -770,12 +802,13 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
         max_episode_time_s: float | None = None,
         in_position_mm: float = 0.005,
         divergence_mm: float = 50.0,
+        actuation: Actuation | dict | None = None,
         **overrides,
     ):
         self._core = core = _FeedCore(
             type(self).__name__, check_num_envs(num_envs), scenario, params, servo,
             tolerance_mm, reward, decision_interval_s, override_max, max_episode_time_s,
-            in_position_mm, divergence_mm, overrides,
+            in_position_mm, divergence_mm, overrides, actuation,
         )  # fmt: skip
         super().__init__(num_envs, core.observation_space, core.action_space)
         self.default_scenario = scenario

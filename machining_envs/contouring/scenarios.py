@@ -16,6 +16,7 @@ import numpy as np
 
 from machining_envs.contouring.paths import PAPER_CORNER_FEED_MM_S, PAPER_FEED_MM_S, Path
 from machining_envs.contouring.plant import ContouringParams
+from machining_envs.core.actuation import Actuation
 from machining_envs.core.checks import check_below, check_range
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.splits import split_rng
@@ -28,6 +29,7 @@ __all__ = [
     "PAPER_LOAD_TORQUE_NM",
     "PAPER_LOAD_TIME_S",
     "FEED_RANGE_MM_S",
+    "SHOPFLOOR_OVERRIDE",
     "check_feed",
 ]
 
@@ -66,6 +68,10 @@ class ContouringScenario:
     dwell_s : float
         The run continues at least this long after the reference reaches the path's end
         (0 to 10 s), e.g. to watch a load step after a step response settles.
+    actuation : Actuation or None
+        The CNC's handling of the feed override for this run (ContouringFeed-v0 only,
+        ``machining_envs.core.actuation``); None (default): the env's ``actuation`` option
+        decides. Contouring-v0 commands the axes directly and refuses it.
     """
 
     name: str
@@ -74,6 +80,7 @@ class ContouringScenario:
     load_steps: tuple[tuple[float, float, float], ...] = ()
     inertia_scale: tuple[float, float] = (1.0, 1.0)
     dwell_s: float = 0.0
+    actuation: Actuation | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.path, Path):
@@ -110,6 +117,10 @@ class ContouringScenario:
             ),
         )
         check_range("dwell_s", self.dwell_s, 0.0, 10.0)
+        if self.actuation is not None and not isinstance(self.actuation, Actuation):
+            raise ValueError(
+                f"actuation must be an Actuation or None, got {type(self.actuation).__name__}"
+            )
 
     @property
     def is_step(self) -> bool:
@@ -152,6 +163,16 @@ def _paper(name: str, path: Callable[[], Path], feed: float, loads=()):
     return make
 
 
+#: The feed-override handling of the ``shopfloor`` scenarios of ContouringFeed-v0, as shares
+#: of the default override range [0, 2]: 1 % steps of the programmed feed, at most 5x the
+#: programmed feed per second (0.2 s from rest to it) and 120x per second squared, two
+#: decisions (20 ms) of delay. Chosen, not measured: a CNC applies the override through its
+#: feed planner, which limits how fast the path speed may change; these limits bind on the
+#: paths' corners, where an ideal override would brake within one decision.
+SHOPFLOOR_OVERRIDE = Actuation(quantum=0.005, max_rate_per_s=2.5, delay_steps=2,
+                               max_accel_per_s2=60.0)  # fmt: skip
+
+
 def _random(
     name: str,
     segments: tuple[int, int],
@@ -161,6 +182,7 @@ def _random(
     feed: tuple[float, float],
     inertia: tuple[float, float],
     load_max: float,
+    actuation: Actuation | None = None,
 ):
     def make(env_rng: np.random.Generator) -> ContouringScenario:
         rng = split_rng(env_rng, name)
@@ -179,10 +201,14 @@ def _random(
             t = float(rng.uniform(0.0, path.length / f))
             a, b = (float(v) for v in rng.uniform(-load_max, load_max, 2))
             loads = ((t, a, b),)
-        return ContouringScenario(name, path, f, loads, (sx, sy))
+        return ContouringScenario(name, path, f, loads, (sx, sy), actuation=actuation)
 
     return make
 
+
+#: The ranges of the training distribution (segments, line length, radius, sweep, feed,
+#: inertia scale, largest load): see ``CONTOURING_SCENARIOS``.
+_TRAINING_RANGES = ((3, 5), (5.0, 20.0), (3.0, 30.0), (30.0, 180.0), (20.0, 60.0), (0.8, 1.25), 1.5)
 
 #: name -> factory drawing a scenario from the env's generator. The paper's tests:
 #: ``paper_step`` / ``paper_step_load`` (Fig. 4-5: a 0.1 mm X step; with a 1 N m load step at
@@ -193,7 +219,8 @@ def _random(
 #: mm, 30-180 degrees), feed log-uniform 20-60 mm/s, inertias log-uniform x0.8-1.25, half
 #: the runs with one load step of up to 1.5 N m per axis at a random time. ``ood`` (wider):
 #: 3-6 segments, lines 3-20 mm, radius 2-40 mm, 20-240 degrees, feed 15-90 mm/s, inertias
-#: x0.7-1.4, loads up to 2 N m.
+#: x0.7-1.4, loads up to 2 N m. ``shopfloor`` (ContouringFeed-v0 only): the training ranges
+#: with a real CNC's override handling (``SHOPFLOOR_OVERRIDE``).
 CONTOURING_SCENARIOS: dict[str, Callable[[np.random.Generator], ContouringScenario]] = {
     "paper_step": _step(False),
     "paper_step_load": _step(True),
@@ -206,15 +233,11 @@ CONTOURING_SCENARIOS: dict[str, Callable[[np.random.Generator], ContouringScenar
         PAPER_FEED_MM_S,
         ((0.5, PAPER_LOAD_TORQUE_NM, PAPER_LOAD_TORQUE_NM),),
     ),
-    **{
-        split: _random(
-            split, (3, 5), (5.0, 20.0), (3.0, 30.0), (30.0, 180.0), (20.0, 60.0), (0.8, 1.25), 1.5
-        )
-        for split in ("train", "validation", "test")
-    },
+    **{split: _random(split, *_TRAINING_RANGES) for split in ("train", "validation", "test")},
     "ood": _random(
         "ood", (3, 6), (3.0, 20.0), (2.0, 40.0), (20.0, 240.0), (15.0, 90.0), (0.7, 1.4), 2.0
     ),
+    "shopfloor": _random("shopfloor", *_TRAINING_RANGES, actuation=SHOPFLOOR_OVERRIDE),
 }
 
 

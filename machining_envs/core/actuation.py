@@ -139,22 +139,23 @@ class ActuationLanes:
         a = actuation if actuation is not None else Actuation()
         q = a.quantum * self.range
         step = a.max_rate_per_s * self.range * self.ts
+        # A limit that is a whole number of quanta up to rounding (0.3 / 0.1 s) counts as one.
         if q > 0 and math.isfinite(step):
-            if step < q:
+            if step < q * (1.0 - 1e-9):
                 raise ValueError(
                     f"actuation: max_rate_per_s {a.max_rate_per_s:g} moves less than one "
                     f"quantum ({a.quantum:g}) per control period: the command could never change"
                 )
-            step = math.floor(step / q) * q  # whole quanta: stays on the grid
+            step = math.floor(step / q + 1e-9) * q  # whole quanta: stays on the grid
         dv = a.max_accel_per_s2 * self.range * self.ts**2
         if q > 0 and math.isfinite(dv):
-            if dv < q:
+            if dv < q * (1.0 - 1e-9):
                 raise ValueError(
                     f"actuation: max_accel_per_s2 {a.max_accel_per_s2:g} changes the rate by "
                     f"less than one quantum ({a.quantum:g}) per control period: the command "
                     "could never move"
                 )
-            dv = math.floor(dv / q) * q
+            dv = math.floor(dv / q + 1e-9) * q
         self.q[lane] = q
         self.max_step[lane] = step
         #: Largest change of the per-period step between two periods (inf: none).
