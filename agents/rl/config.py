@@ -48,7 +48,11 @@ _SETTINGS: dict[str, tuple[type, ...]] = {
     "hide_action": (bool,),
     "callback": (str, list),
     "env_wrapper": (str, list),
+    "noise_type": (str,),
+    "noise_std": (float, int),
 }
+#: rl-zoo3's exploration noise of the off-policy algorithms (``noise_type``, ``noise_std``).
+NOISE_TYPES = ("normal", "ornstein-uhlenbeck")
 #: The names ``callback`` and ``env_wrapper`` entries may give our own classes by.
 VALIDATION_CALLBACK = "agents.rl.callbacks.ValidationCallback"
 INCREMENT_WRAPPER = "machining_envs.wrappers.IncrementalAction"
@@ -150,6 +154,10 @@ class TrainConfig:
     (``machining_envs.wrappers.IncrementalAction``); the saved policy applies it by itself."""
     hide_action: bool = False
     """With ``action_increment``: the policy does not see the action now applied."""
+    noise_type: str | None = None
+    """Exploration noise added to the actions of SAC and TD3 (rl-zoo3's key): ``"normal"``
+    or ``"ornstein-uhlenbeck"``, of standard deviation ``noise_std`` in action units."""
+    noise_std: float = 0.1
     hyperparams: dict = field(default_factory=dict)
     callbacks: list = field(default_factory=list)
     """Other SB3 callbacks named in ``callback``: ``(class, keywords)`` pairs."""
@@ -389,6 +397,14 @@ def load_config(env_id: str, algo: str, path=None, overrides: dict | None = None
             )
     if cfg.hide_action and cfg.action_increment is None:
         raise ConfigError(f"{where}: hide_action needs action_increment")
+    if cfg.noise_type is not None:
+        if cfg.noise_type not in NOISE_TYPES:
+            raise ConfigError(
+                f"{where}: noise_type must be one of {list(NOISE_TYPES)}, got {cfg.noise_type!r}"
+            )
+        if cfg.algo == "ppo":
+            raise ConfigError(f"{where}: noise_type is for SAC and TD3; PPO samples its actions")
+    cfg.noise_std = _in_range(where, "noise_std", cfg.noise_std, 0.0, 10.0, True, False)
     if isinstance(cfg.normalize, dict):
         bad = set(cfg.normalize) - _NORMALIZE_KEYS
         if bad:

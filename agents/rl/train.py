@@ -105,6 +105,19 @@ def _make_vec(cfg: TrainConfig, seed: int, vec: str | None = None):
     return venv, increment
 
 
+def _action_noise(cfg: TrainConfig, venv) -> dict:
+    """``{"action_noise": ...}`` of the config's ``noise_type`` (SB3's noise objects, one
+    process per action dimension), or nothing."""
+    if cfg.noise_type is None:
+        return {}
+    import numpy as np
+    from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
+
+    n = venv.action_space.shape[0]
+    kind = NormalActionNoise if cfg.noise_type == "normal" else OrnsteinUhlenbeckActionNoise
+    return {"action_noise": kind(mean=np.zeros(n), sigma=cfg.noise_std * np.ones(n))}
+
+
 def _check_env_setup(cfg: TrainConfig) -> None:
     """Make the env with the config's ``env_kwargs`` and reset it on every evaluation
     scenario, so that a wrong keyword or scenario name fails before training starts."""
@@ -227,6 +240,7 @@ def train(
             device="cpu",
             tensorboard_log=str(out / "tb"),
             verbose=0,
+            **_action_noise(cfg, venv),
             **cfg.hyperparams,
         )
         remaining = cfg.n_timesteps

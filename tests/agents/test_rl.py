@@ -72,6 +72,34 @@ def test_bad_configs_fail_before_training(tmp_path, text, message):
     assert not (tmp_path / "run").exists()
 
 
+@pytest.mark.parametrize("algo", ["sac", "td3"])
+def test_shipped_residual_configs_of_the_off_policy_algorithms_load(algo):
+    """The residual formulation's configs of SAC and TD3 share PPO's wrapper and reward (the
+    equal-budget comparison); TD3 explores with rl-zoo3's Gaussian action noise."""
+    from agents.rl.config import CONFIG_DIR
+
+    cfg = load_config(TURNING, algo, CONFIG_DIR / f"{algo}_residual.yml")
+    ppo = load_config(TURNING, "ppo", CONFIG_DIR / "ppo_residual.yml")
+    assert cfg.residual == ppo.residual and cfg.env_kwargs == ppo.env_kwargs
+    assert cfg.noise_type == ("normal" if algo == "td3" else None)
+
+
+@pytest.mark.parametrize(
+    "entry, message",
+    [
+        ({"noise_type": "pink"}, "noise_type must be one of"),
+        ({"noise_type": "normal", "noise_std": 0.0}, r"noise_std must be a number in \(0, 10\]"),
+    ],
+)
+def test_bad_exploration_noise_is_refused_naming_it(entry, message):
+    from agents.rl.config import CONFIG_DIR
+
+    with pytest.raises(ConfigError, match=message):
+        load_config(TURNING, "td3", CONFIG_DIR / "td3_residual.yml", entry)
+    with pytest.raises(ConfigError, match="noise_type is for SAC and TD3"):
+        load_config(TURNING, "ppo", CONFIG_DIR / "ppo_residual.yml", {"noise_type": "normal"})
+
+
 def test_rl_zoo3_value_syntax_is_read(tmp_path):
     """rl-zoo3 writes counts as ``!!float 1e6`` and schedules as ``lin_<x>``."""
     path = tmp_path / "zoo.yml"
