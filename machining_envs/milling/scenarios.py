@@ -249,9 +249,10 @@ def _random(
 #:   on a sharp tool must meet a clearly duller one within one workpiece.
 #: - ``shopfloor``: the training ranges on a real CNC: the feed override in 1 % steps,
 #:   rate- and acceleration-limited, two periods of interpolator delay
-#:   (``machining_envs.core.actuation.SHOPFLOOR_ACTUATION``, as in Turning-v0). The
-#:   spindle is ideal: this plant's torque lag is set by the spindle speed, and a speed that
-#:   sags under load is modelled in Turning-v0 only.
+#:   (``machining_envs.core.actuation.SHOPFLOOR_ACTUATION``, as in Turning-v0). No spindle
+#:   power limit: at the papers' 400 rpm even the tool's breakage torque (15 N m) asks for
+#:   under 0.8 kW at 1.25x the speed, far below a machining centre's spindle (5-15 kW), so
+#:   a limit could not bind.
 MILLING_SCENARIOS: dict[str, Callable[[np.random.Generator], MillingScenario]] = {
     "paper_step": _fixed("paper_step", paper_step_profile),
     "paper_taper": _fixed("paper_taper", paper_taper_profile),
