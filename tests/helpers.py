@@ -184,3 +184,21 @@ def assert_splits_share_a_distribution_not_episodes(env: gym.Env, key, n: int = 
     span = hi - lo
     for s in ("validation", "test"):
         assert abs(min(draws[s]) - lo) < 0.1 * span and abs(max(draws[s]) - hi) < 0.1 * span, s
+
+
+def held_out_draws(env_id: str, split: str, field: str, n: int = 20) -> list:
+    """``scenario.<field>`` of the first ``n`` seeds' draws of the held-out ``split`` of
+    ``env_id``, after checking that training and tuning refuse the split."""
+    import pytest
+
+    from machining_envs.core.splits import HELD_OUT, check_not_held_out
+
+    assert split in HELD_OUT
+    with pytest.raises(ValueError, match=split):
+        check_not_held_out([split], "training")
+    env = gym.make(env_id).unwrapped
+    draws = []
+    for seed in range(n):
+        env.reset(seed=seed, options={"scenario": split})
+        draws.append(getattr(env.scenario, field))
+    return draws

@@ -40,7 +40,12 @@ from machining_envs.contouring.scenarios import (
     contouring_scenario,
 )
 from machining_envs.contouring.servo import SERVO_KINDS, ServoLanes, run_block, servo_design
-from machining_envs.core.actuation import Actuation, ActuationLanes, resolve_actuation
+from machining_envs.core.actuation import (
+    Actuation,
+    ActuationLanes,
+    configure_lane,
+    resolve_actuation,
+)
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
@@ -333,9 +338,9 @@ class _FeedCore:
         self._c = np.array([n_sub, ts, self.tolerance_mm, self.in_position_mm,
                             self.divergence_mm, cm._mid, cm._half, 0.0])  # fmt: skip
         self.n = n
-        self.act_lanes: ActuationLanes | None = None
-        if self.actuation is not None:
-            self._actuate()
+        # The CNC's override handling, made now if the option sets it (its checks fail
+        # here), else when a scenario first brings its own.
+        self.act_lanes = None if self.actuation is None else self._actuation_lanes()
         self.applied = np.zeros(n)
         self.loops = ServoLanes(designs, n_sub, n)
         self._loop_cache: dict = {}
@@ -376,13 +381,13 @@ class _FeedCore:
             np.zeros(self.tabs.shape[1], dtype=np.int64),
         )  # fmt: skip
 
-    def _actuate(self) -> None:
-        """Put the CNC's actuation between the actions and the override (every lane; a lane
+    def _actuation_lanes(self) -> ActuationLanes:
+        """The CNC's actuation between the actions and the override, for every lane (a lane
         without settings passes its override unchanged)."""
-        self.act_lanes = ActuationLanes(
+        self._c[7] = 1.0
+        return ActuationLanes(
             self.n, self.override_max, 0.0, self.decision_interval_s, self.actuation
         )
-        self._c[7] = 1.0
 
     # ---- per-lane episodes ---------------------------------------------------------------
     def _set_loops(self, lane: int, truth: ContouringParams) -> None:
@@ -420,11 +425,9 @@ class _FeedCore:
                 f"scenario {sc.name!r} is a step command; ContouringFeed-v0 needs a path with a feed"
             )
         check_feed(sc, self.params)
-        act = sc.actuation if sc.actuation is not None else self.actuation
-        if act is not None and self.act_lanes is None:  # the first scenario with its own
-            self._actuate()
-        if self.act_lanes is not None:
-            self.act_lanes.configure(lane, act)
+        self.act_lanes = configure_lane(
+            self.act_lanes, lane, sc.actuation, self.actuation, self._actuation_lanes
+        )
         self.scenarios[lane] = sc
         self._set_loops(lane, sc.true_params(self.params))
         self.state[lane] = 0.0

@@ -29,7 +29,13 @@ import numpy as np
 
 from machining_envs.core.checks import check_integer, check_range
 
-__all__ = ["Actuation", "ActuationLanes", "resolve_actuation", "SHOPFLOOR_ACTUATION"]
+__all__ = [
+    "Actuation",
+    "ActuationLanes",
+    "resolve_actuation",
+    "configure_lane",
+    "SHOPFLOOR_ACTUATION",
+]
 
 
 @dataclass(frozen=True)
@@ -95,6 +101,18 @@ def resolve_actuation(actuation) -> Actuation | None:
             f"actuation must be an Actuation, a dict or None, got {type(actuation).__name__}"
         )
     return actuation if actuation.active else None
+
+
+def configure_lane(act_lanes, lane: int, scenario_actuation, env_actuation, make):
+    """The lanes' actuation once ``lane`` starts an episode: the scenario's own settings win
+    over the env's option (None: ideal); ``make()`` builds the :class:`ActuationLanes` the
+    first time a lane needs them (until then every command passes unchanged)."""
+    act = scenario_actuation if scenario_actuation is not None else env_actuation
+    if act is not None and act_lanes is None:
+        act_lanes = make()
+    if act_lanes is not None:
+        act_lanes.configure(lane, act)
+    return act_lanes
 
 
 class ActuationLanes:

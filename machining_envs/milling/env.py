@@ -10,7 +10,12 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
-from machining_envs.core.actuation import Actuation, ActuationLanes, resolve_actuation
+from machining_envs.core.actuation import (
+    Actuation,
+    ActuationLanes,
+    configure_lane,
+    resolve_actuation,
+)
 from machining_envs.core.checks import check_below
 from machining_envs.core.env import (
     ACTION_MAPS,
@@ -258,13 +263,6 @@ class _MillingCore:
             owner, params, MillingParams, MillingParams.park_yoon_1986, overrides
         )
         self.actuation = resolve_actuation(actuation)
-        self.act_lanes = (
-            None
-            if self.actuation is None
-            else ActuationLanes(
-                n, self.params.command_max, 0.0, self.params.sample_time_s, self.actuation
-            )
-        )
         self.reward_weights = resolve_reward(reward, MillingReward)
         w = self.reward_weights
         self._w = np.array(
@@ -289,6 +287,9 @@ class _MillingCore:
         )
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         self.n = n
+        # The CNC's actuation, made now if the option sets it (its checks fail here), else
+        # when a scenario first brings its own.
+        self.act_lanes = None if self.actuation is None else self._actuation_lanes()
         self._ke = float(self.params.sensor_gain)
         self.lanes = MillingLanes(self.params, n)
         self.scenarios: list[MillingScenario | None] = [None] * n
@@ -323,6 +324,12 @@ class _MillingCore:
         self.noise = np.zeros(n)
         self._args: tuple | None = None
         self._args_version = -1
+
+    def _actuation_lanes(self) -> ActuationLanes:
+        """The CNC's actuation between the commands and the servo, every lane on the env's
+        option until its scenario says otherwise."""
+        p = self.params
+        return ActuationLanes(self.n, p.command_max, 0.0, p.sample_time_s, self.actuation)
 
     def start(self, lane: int, spec, rng: np.random.Generator) -> None:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
@@ -364,13 +371,9 @@ class _MillingCore:
         self.tr_obs[lane] = tr_obs
         self.rpm_obs[lane] = rpm / 1000.0
         self.prev_action[lane] = -1.0
-        act = sc.actuation if sc.actuation is not None else self.actuation
-        if act is not None and self.act_lanes is None:  # the first scenario with its own
-            self.act_lanes = ActuationLanes(
-                self.n, self.params.command_max, 0.0, self.params.sample_time_s
-            )
-        if self.act_lanes is not None:
-            self.act_lanes.configure(lane, act)
+        self.act_lanes = configure_lane(
+            self.act_lanes, lane, sc.actuation, self.actuation, self._actuation_lanes
+        )
         self.n_clipped[lane] = 0
         self.normal_i[lane] = _NORMAL_BLOCK  # a new episode draws a new block
         self.spindle[lane] = rpm

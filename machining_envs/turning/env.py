@@ -10,7 +10,12 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
-from machining_envs.core.actuation import Actuation, ActuationLanes, resolve_actuation
+from machining_envs.core.actuation import (
+    Actuation,
+    ActuationLanes,
+    configure_lane,
+    resolve_actuation,
+)
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_below, check_range
 from machining_envs.core.env import (
     ActionMap,
@@ -171,13 +176,6 @@ class _TurningCore:
             owner, params, TurningParams, TurningParams.noh_kim_kim_1992, overrides
         )
         self.actuation = resolve_actuation(actuation)
-        self.act_lanes = (
-            None
-            if self.actuation is None
-            else ActuationLanes(
-                n, self.params.command_max, 0.0, self.params.sample_time_s, self.actuation
-            )
-        )
         if spindle_rpm is not None:
             spindle_rpm = check_range(
                 "spindle_rpm", spindle_rpm, *SPINDLE_RPM_RANGE, types=PY_NUMBER_TYPES
@@ -199,6 +197,9 @@ class _TurningCore:
         )
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         self.n = n
+        # The CNC's actuation, made now if the option sets it (its checks fail here), else
+        # when a scenario first brings its own.
+        self.act_lanes = None if self.actuation is None else self._actuation_lanes()
         self.lanes = TurningLanes(self.params, n)
         self.scenarios: list[TurningScenario | None] = [None] * n
         self.force_limit = np.ones(n)
@@ -236,6 +237,12 @@ class _TurningCore:
         self._args: tuple | None = None
         self._args_version = -1
 
+    def _actuation_lanes(self) -> ActuationLanes:
+        """The CNC's actuation between the commands and the servo, every lane on the env's
+        option until its scenario says otherwise."""
+        p = self.params
+        return ActuationLanes(self.n, p.command_max, 0.0, p.sample_time_s, self.actuation)
+
     def start(self, lane: int, spec, rng: np.random.Generator) -> dict:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
         first observation goes to ``obs[lane]``; returns its reset info."""
@@ -261,13 +268,9 @@ class _TurningCore:
         self.fr_obs[lane] = min(self.force_limit[lane] / self.params.force_scale_N, 10.0)
         self.rpm_obs[lane] = sc.spindle_rpm / 1000.0
         self.prev_action[lane] = -1.0
-        act = sc.actuation if sc.actuation is not None else self.actuation
-        if act is not None and self.act_lanes is None:  # the first scenario with its own
-            self.act_lanes = ActuationLanes(
-                self.n, self.params.command_max, 0.0, self.params.sample_time_s
-            )
-        if self.act_lanes is not None:
-            self.act_lanes.configure(lane, act)
+        self.act_lanes = configure_lane(
+            self.act_lanes, lane, sc.actuation, self.actuation, self._actuation_lanes
+        )
         self.n_clipped[lane] = 0
         self.normal_i[lane] = _NORMAL_BLOCK  # a new episode draws a new block
         self.spindle[lane] = float(sc.spindle_rpm)

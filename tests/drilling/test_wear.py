@@ -8,10 +8,9 @@ import pytest
 
 from agents.bench.tune import tuned_factory
 from agents.drilling import SlidingMode
-from machining_envs.core.splits import HELD_OUT, check_not_held_out
 from machining_envs.drilling.plant import DrillingParams
 from machining_envs.drilling.scenarios import DrillingScenario
-from tests.helpers import DRILLING, run_cut
+from tests.helpers import DRILLING, held_out_draws, run_cut
 
 KEYS = ("torque_Nmm", "spindle_hz", "chip_ratio", "depth_mm", "feed_velocity_mm_s",
         "engagement", "voltage_V", "torque_limit_Nmm", "cost")  # fmt: skip
@@ -67,15 +66,8 @@ def test_sliding_mode_holds_its_setpoint_while_the_spindle_has_speed_in_hand():
 
 
 def test_the_wear_split_draws_worn_drills_and_is_held_out():
-    env = gym.make(DRILLING, scenario="wear")
-    rates = []
-    for seed in range(20):
-        env.reset(seed=seed)
-        rates.append(env.unwrapped.scenario.wear_per_mm)
+    rates = held_out_draws(DRILLING, "wear", "wear_per_mm")
     assert min(rates) >= 0.03 and max(rates) <= 0.10 and len(set(rates)) == 20
-    assert "wear" in HELD_OUT
-    with pytest.raises(ValueError, match="wear"):
-        check_not_held_out(["wear"], "training")
 
 
 @pytest.mark.parametrize("bad", [-0.1, 11.0, float("nan")])

@@ -10,7 +10,7 @@ from agents.bench.tune import tuned_factory
 from agents.milling import IntegralACC
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.milling.scenarios import MillingScenario, machining_time_bound
-from tests.helpers import MILLING, run_cut
+from tests.helpers import MILLING, held_out_draws, run_cut
 
 
 def _cut(wear):
@@ -67,13 +67,5 @@ def test_the_bound_counts_the_wear_and_meets_the_closed_form_without_it():
 
 
 def test_the_wear_split_draws_worn_tools_and_is_held_out():
-    env = gym.make(MILLING, scenario="wear")
-    rates = []
-    for seed in range(20):
-        env.reset(seed=seed)
-        rates.append(env.unwrapped.scenario.wear_per_100mm)
+    rates = held_out_draws(MILLING, "wear", "wear_per_100mm")
     assert min(rates) >= 0.5 and max(rates) <= 1.5 and len(set(rates)) == 20
-    from machining_envs.core.splits import check_not_held_out
-
-    with pytest.raises(ValueError, match="wear"):
-        check_not_held_out(["wear"], "training")

@@ -8,10 +8,9 @@ import pytest
 
 from agents.bench.tune import tuned_factory
 from agents.turning import VariableGainPI
-from machining_envs.core.splits import HELD_OUT, check_not_held_out
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.turning.scenarios import TurningScenario, machining_time_bound
-from tests.helpers import TURNING, run_cut
+from tests.helpers import TURNING, held_out_draws, run_cut
 
 
 def _cut(wear, rpm=405.0):
@@ -66,12 +65,5 @@ def test_the_bound_counts_the_wear_and_meets_the_closed_form_without_it():
 
 
 def test_the_wear_split_is_held_out_and_draws_worn_tools():
-    assert "wear" in HELD_OUT
-    with pytest.raises(ValueError, match="wear"):
-        check_not_held_out(["wear"], "training")
-    env = gym.make(TURNING).unwrapped
-    rates = []
-    for seed in range(20):
-        env.reset(seed=seed, options={"scenario": "wear"})
-        rates.append(env.scenario.wear_per_100mm)
+    rates = held_out_draws(TURNING, "wear", "wear_per_100mm")
     assert 0.3 <= min(rates) and max(rates) <= 1.0 and np.ptp(rates) > 0.3
