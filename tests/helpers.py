@@ -202,3 +202,18 @@ def held_out_draws(env_id: str, split: str, field: str, n: int = 20) -> list:
         env.reset(seed=seed, options={"scenario": split})
         draws.append(getattr(env.scenario, field))
     return draws
+
+
+def assert_actuated(commands, actuation, command_range: float, period_s: float) -> None:
+    """``commands``, the commands the drives got from the episode's start, obey
+    ``actuation``: nothing before the delay, on the grid of quanta, rate and change of rate
+    within their limits."""
+    c = np.asarray(commands, dtype=np.float64)
+    a = actuation
+    np.testing.assert_array_equal(c[: a.delay_steps], 0.0)
+    if a.quantum:
+        grid = c / (a.quantum * command_range)
+        np.testing.assert_allclose(grid, np.round(grid), atol=1e-9)
+    steps = np.diff(np.concatenate([[0.0, 0.0], c]))
+    assert np.abs(steps).max() <= a.max_rate_per_s * command_range * period_s + 1e-9
+    assert np.abs(np.diff(steps)).max() <= a.max_accel_per_s2 * command_range * period_s**2 + 1e-9

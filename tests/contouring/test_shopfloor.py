@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 
 from machining_envs.contouring.scenarios import SHOPFLOOR_OVERRIDE
-from machining_envs.core.splits import HELD_OUT, check_not_held_out
-from tests.helpers import CONTOURING, CONTOURING_FEED
+from tests.helpers import CONTOURING, CONTOURING_FEED, assert_actuated, held_out_draws
 
 
 def test_the_shopfloor_split_runs_the_override_handling_and_is_held_out():
@@ -25,15 +24,8 @@ def test_the_shopfloor_split_runs_the_override_handling_and_is_held_out():
         if terminated or truncated:
             break
     o = np.array(overrides)
-    np.testing.assert_array_equal(o[: a.delay_steps], 0.0)  # two decisions of delay
-    grid = o / (a.quantum * top)
-    np.testing.assert_allclose(grid, np.round(grid), atol=1e-9)  # 1 % of the programmed feed
-    steps = np.diff(np.concatenate([[0.0, 0.0], o]))
-    assert np.abs(steps).max() <= a.max_rate_per_s * top * ts + 1e-9
-    assert np.abs(np.diff(steps)).max() <= a.max_accel_per_s2 * top * ts**2 + 1e-9
-    assert "shopfloor" in HELD_OUT
-    with pytest.raises(ValueError, match="shopfloor"):
-        check_not_held_out(["shopfloor"], "training")
+    assert_actuated(o, a, top, ts)
+    held_out_draws(CONTOURING_FEED, "shopfloor", "actuation", n=1)
 
 
 def test_contouring_commands_the_axes_and_refuses_an_override_actuation():

@@ -3,11 +3,9 @@ override (``SHOPFLOOR_ACTUATION``), held out, and every command the servo gets o
 
 import gymnasium as gym
 import numpy as np
-import pytest
 
 from machining_envs.core.actuation import SHOPFLOOR_ACTUATION
-from machining_envs.core.splits import HELD_OUT, check_not_held_out
-from tests.helpers import MILLING
+from tests.helpers import MILLING, assert_actuated, held_out_draws
 
 
 def test_the_shopfloor_split_runs_the_cnc_actuation_and_is_held_out():
@@ -25,17 +23,8 @@ def test_the_shopfloor_split_runs_the_cnc_actuation_and_is_held_out():
             commands.append(info["command"])
             if terminated or truncated:
                 break
-        c = np.array(commands)
-        np.testing.assert_array_equal(c[: a.delay_steps], 0.0)  # the interpolator's delay
-        grid = c / (a.quantum * cmax)
-        np.testing.assert_allclose(grid, np.round(grid), atol=1e-9)  # 1 % steps
-        steps = np.diff(np.concatenate([[0.0, 0.0], c]))
-        ts = env.unwrapped.params.sample_time_s
-        assert np.abs(steps).max() <= a.max_rate_per_s * cmax * ts + 1e-9
-        assert np.abs(np.diff(steps)).max() <= a.max_accel_per_s2 * cmax * ts**2 + 1e-9
-    assert "shopfloor" in HELD_OUT
-    with pytest.raises(ValueError, match="shopfloor"):
-        check_not_held_out(["shopfloor"], "training")
+        assert_actuated(commands, a, cmax, env.unwrapped.params.sample_time_s)
+    assert held_out_draws(MILLING, "shopfloor", "actuation", n=3) == [a] * 3
 
 
 def test_a_scenario_without_its_own_actuation_runs_the_envs_option():

@@ -12,7 +12,7 @@ import pytest
 from machining_envs.core.actuation import SHOPFLOOR_ACTUATION
 from machining_envs.turning.plant import TurningParams, spindle_drive
 from machining_envs.turning.scenarios import SHOPFLOOR_SPINDLE_POWER_W
-from tests.helpers import TURNING
+from tests.helpers import TURNING, assert_actuated
 
 #: Half a second of a heavy cut (more than 1.5 kW at 700 rpm), then a light one.
 ACTIONS = [-0.45] * 12 + [-0.9] * 40
@@ -105,11 +105,7 @@ def test_the_shopfloor_scenarios_turn_on_the_power_limit_and_the_actuation():
         assert info["spindle_power_W"] <= SHOPFLOOR_SPINDLE_POWER_W
         if terminated or truncated:
             break
-    c = np.array(commands)
-    np.testing.assert_array_equal(c[: SHOPFLOOR_ACTUATION.delay_steps], 0.0)
-    grid = c / (SHOPFLOOR_ACTUATION.quantum * cmax)
-    np.testing.assert_allclose(grid, np.round(grid), atol=1e-9)
-    assert np.abs(np.diff(c)).max() <= SHOPFLOOR_ACTUATION.max_rate_per_s * cmax * 0.1 + 1e-9
+    assert_actuated(commands, SHOPFLOOR_ACTUATION, cmax, env.unwrapped.params.sample_time_s)
 
 
 def test_vector_lanes_run_the_shopfloor_as_the_single_env():
