@@ -88,7 +88,8 @@ def test_recorded_configuration_is_the_shipped_config_entry(folder):
 @pytest.mark.parametrize("folder", FOLDERS, ids=lambda p: p.name)
 def test_the_direct_mean_action_is_sb3s_deterministic_predict_bit_for_bit(folder):
     """``PolicyAgent`` skips SB3's per-call set-up for actor-critic policies; its action must
-    be exactly what ``model.predict(..., deterministic=True)`` returns."""
+    be exactly what ``model.predict(..., deterministic=True)`` returns. Other policies (TD3's
+    deterministic actor) go through SB3's ``predict`` itself."""
     import numpy as np
 
     from agents.rl import load_policy
@@ -97,8 +98,14 @@ def test_the_direct_mean_action_is_sb3s_deterministic_predict_bit_for_bit(folder
     for _, model in pretrained_seeds(folder.name)[:2]:
         agent = load_policy(model)
         policy = getattr(agent, "policy", agent)  # a residual agent's own policy
-        assert policy._fast
+        algo = json.loads((model.parent / "config.json").read_text())["algo"]
+        assert policy._fast == (algo == "ppo")
         obs = rng.normal(size=(32, *policy.model.observation_space.shape)).astype(np.float32)
+        if not policy._fast:
+            got, _ = policy.predict(obs)
+            want, _ = policy.model.predict(policy.normalize(obs), deterministic=True)
+            np.testing.assert_array_equal(got, want)
+            continue
         want, _ = policy.model.predict(obs, deterministic=True)
         np.testing.assert_array_equal(policy._mean_action(obs), want)
         np.testing.assert_array_equal(
