@@ -40,7 +40,8 @@ __all__ = [
 #: The split names, in the order tables show them. ``wear``: the training ranges with a tool
 #: that dulls within the cut; ``shopfloor``: the training ranges on a real CNC (quantised,
 #: rate- and acceleration-limited, delayed feed override; a power-limited spindle). Each
-#: exists in the envs that model it (Turning-v0).
+#: exists in the envs that model it: ``wear`` in Turning-v0, EndMilling-v0 and
+#: MicroDrilling-v0, ``shopfloor`` in Turning-v0, EndMilling-v0 and ContouringFeed-v0.
 SPLITS = ("train", "validation", "test", "ood", "wear", "shopfloor")
 #: Splits only the final table may evaluate on.
 HELD_OUT = ("test", "ood", "wear", "shopfloor")

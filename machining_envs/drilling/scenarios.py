@@ -160,6 +160,10 @@ def _random(
     return make
 
 
+#: The ranges of the training distribution (aspect ratio, cutting constant, chip friction,
+#: fluctuation and noise scales), which ``wear`` shares.
+_TRAINING_RANGES = ((6.0, 12.0), (0.85, 1.15), (0.6, 1.6), (0.5, 1.5), (0.5, 2.0))
+
 #: name -> factory drawing a scenario from the env's generator.
 #:
 #: - ``paper_0.5`` ... ``paper_0.8``: Table 1 (545 Hz, 0.32 mm/s, SS40) with the paper's
@@ -178,14 +182,9 @@ def _random(
 #:   sharp drills meets on the shop floor.
 DRILLING_SCENARIOS: dict[str, Callable[[np.random.Generator], DrillingScenario]] = {
     **{f"paper_{d:g}": _paper(d) for d in PAPER_DIAMETERS_MM},
-    **{
-        split: _random(split, (6.0, 12.0), (0.85, 1.15), (0.6, 1.6), (0.5, 1.5), (0.5, 2.0))
-        for split in ("train", "validation", "test")
-    },
+    **{split: _random(split, *_TRAINING_RANGES) for split in ("train", "validation", "test")},
     "ood": _random("ood", (8.0, 14.0), (0.8, 1.2), (0.5, 2.0), (0.5, 2.0), (0.5, 3.0), (0.8, 1.2)),
-    "wear": _random(
-        "wear", (6.0, 12.0), (0.85, 1.15), (0.6, 1.6), (0.5, 1.5), (0.5, 2.0), wear=(0.03, 0.10)
-    ),
+    "wear": _random("wear", *_TRAINING_RANGES, wear=(0.03, 0.10)),
 }
 
 

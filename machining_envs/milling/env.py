@@ -149,7 +149,7 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
     """
     n = z.shape[0]
     log_map = cmap[0] != 0.0
-    for k in range(n if stage & 1 else 0):
+    for k in range(n if stage & 1 else 0):  # stage 1: the commands
         a = actions[k]
         if log_map:
             cmd = cmap[1] + cmap[2] * math.expm1(cmap[3] * (a + 1.0)) / cmap[4]

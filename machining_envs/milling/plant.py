@@ -605,6 +605,7 @@ LANE_CONSTANTS = (
     "wear_per_mm",  # w of the torque coefficient's growth Ks (1 + w x) (0: a sharp tool)
 )
 _T = LANE_CONSTANTS.index("t_s")
+_WEAR = LANE_CONSTANTS.index("wear_per_mm")
 
 #: Fields of ``MillingLanes.out`` (one row per lane after each step).
 LANE_SIGNALS = (
@@ -814,7 +815,7 @@ def step_lanes(
                 buf[k, 2 + j] *= c * depth_end**dexp if power else c * depth_end
             i = bisect_right(edges, k, n_s + 1, p_end) - 1
             seg[k] = min(max(i, 0), n_s - 1)
-        wear = lane_f[k, 15]
+        wear = lane_f[k, _WEAR]
         if wear != 0.0:  # Ks (1 + w x): the tool dulls along the cut (wear_per_100mm)
             for j in range(m):
                 buf[k, 2 + j] *= 1.0 + wear * work[k, m + j]

@@ -233,6 +233,10 @@ def _random(
     return make
 
 
+#: The ranges of the training distribution (depth mm, segments, spindle and limit scales,
+#: truth spread), which ``wear`` and ``shopfloor`` share.
+_TRAINING_RANGES = ((0.5, 3.0), (2, 5), (0.8, 1.25), (0.8, 1.25), 0.2)
+
 #: name -> factory drawing a scenario from the env's generator.
 #:
 #: - ``paper_step``, ``paper_taper``: Park & Yoon's workpieces (Fig. 4) at the nominal
@@ -256,21 +260,10 @@ def _random(
 MILLING_SCENARIOS: dict[str, Callable[[np.random.Generator], MillingScenario]] = {
     "paper_step": _fixed("paper_step", paper_step_profile),
     "paper_taper": _fixed("paper_taper", paper_taper_profile),
-    **{
-        split: _random(split, (0.5, 3.0), (2, 5), (0.8, 1.25), (0.8, 1.25), 0.2)
-        for split in ("train", "validation", "test")
-    },
+    **{split: _random(split, *_TRAINING_RANGES) for split in ("train", "validation", "test")},
     "ood": _random("ood", (0.4, 3.5), (2, 6), (0.7, 1.4), (0.7, 1.4), 0.25),
-    "wear": _random("wear", (0.5, 3.0), (2, 5), (0.8, 1.25), (0.8, 1.25), 0.2, (0.5, 1.5)),
-    "shopfloor": _random(
-        "shopfloor",
-        (0.5, 3.0),
-        (2, 5),
-        (0.8, 1.25),
-        (0.8, 1.25),
-        0.2,
-        actuation=SHOPFLOOR_ACTUATION,
-    ),
+    "wear": _random("wear", *_TRAINING_RANGES, wear=(0.5, 1.5)),
+    "shopfloor": _random("shopfloor", *_TRAINING_RANGES, actuation=SHOPFLOOR_ACTUATION),
 }
 
 

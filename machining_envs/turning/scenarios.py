@@ -161,6 +161,10 @@ def _random(
     return make
 
 
+#: The ranges of the training distribution (spindle rpm, depth mm, segments), which
+#: ``wear`` and ``shopfloor`` share.
+_TRAINING_RANGES = ((245.0, 700.0), (0.5, 3.0), (2, 5))
+
 #: The spindle power of the ``shopfloor`` scenarios, W (``TurningParams.spindle_power_W``).
 SHOPFLOOR_SPINDLE_POWER_W = 2200.0
 
@@ -172,21 +176,18 @@ TURNING_SCENARIOS: dict[str, Callable[[np.random.Generator], TurningScenario]] =
     "paper_700": _paper(700),
     "taper_405": _taper,
     "step_range": _step_range,
-    **{
-        split: _random(split, (245.0, 700.0), (0.5, 3.0), (2, 5))
-        for split in ("train", "validation", "test")
-    },
+    **{split: _random(split, *_TRAINING_RANGES) for split in ("train", "validation", "test")},
     "ood": _random("ood", (200.0, 800.0), (0.5, 3.5), (2, 6), (700.0, 1300.0)),
     # The training ranges with a tool that dulls along the cut: the force coefficient grows
     # by 30-100 % per 100 mm (up to +60 % at the end of the longest, 60 mm, workpiece). The
     # rate is chosen, not identified: large enough that a controller tuned on a sharp tool
     # meets a clearly duller one within one workpiece.
-    "wear": _random("wear", (245.0, 700.0), (0.5, 3.0), (2, 5), wear=(0.3, 1.0)),
+    "wear": _random("wear", *_TRAINING_RANGES, wear=(0.3, 1.0)),
     # The training ranges on a real machine: the CNC's override in 1 % steps, rate- and
     # acceleration-limited, two periods of interpolator delay (SHOPFLOOR_ACTUATION), and the
     # paper's 2.2 kW spindle, which slows when a cut asks for more (at 700 rpm on the 100 mm
     # bar that is any force above 600 N, below the 1 kN limit).
-    "shopfloor": _random("shopfloor", (245.0, 700.0), (0.5, 3.0), (2, 5), shopfloor=True),
+    "shopfloor": _random("shopfloor", *_TRAINING_RANGES, shopfloor=True),
 }
 
 
