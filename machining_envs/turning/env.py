@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import gymnasium as gym
@@ -41,6 +42,7 @@ from machining_envs.turning.plant import (
     TurningLanes,
     TurningParams,
     cutting_power_W,
+    lane_ints,
     spindle_drive,
     step_lane,
 )
@@ -144,12 +146,39 @@ def _env_lane(k, out, finish, t, gain, fs, meas, fr, vmax, brk, max_t, w, prev_a
         o[3 + i] = min(max(m[i] / fs, lo), hi)
 
 
+#: Columns of ``_TurningCore.ef``, the env's per-lane floats.
+_EF = ("in_action", "in_command", "in_noise", "force_limit", "vmax", "breakage_force",
+       "prev_action", "fr_obs", "rpm_obs", "reward", "command")  # fmt: skip
+#: Columns of ``_TurningCore.eb``, the env's per-lane flags: the six of ``flags``, then
+#: ``in_clipped`` and ``clipped``.
+_EB = ("diverged", "breakage", "finished", "terminated", "truncated", "over", "in_clipped",
+       "clipped")  # fmt: skip
+
+
+_EF_COMMAND = _EF.index("command")
+_EF_REWARD = _EF.index("reward")
+_EF_FORCE_LIMIT = _EF.index("force_limit")
+
+
+@numba.njit(cache=True, inline="always")
+def _env_floats(ef):
+    """The columns of ``ef`` (``_EF``), as views."""
+    return (ef[:, 0], ef[:, 1], ef[:, 2], ef[:, 3], ef[:, 4], ef[:, 5], ef[:, 6], ef[:, 7],
+            ef[:, 8], ef[:, 9], ef[:, 10])  # fmt: skip
+
+
 @numba.njit(cache=True)
-def _step(actions, clipped, commands, noise, big, cols, filt, z, buf, edges, d0, slope, nseg,
-          seg, lane_f, finished, m, n_f, out, out_seg, out_finish, gain, fs, meas, fr, vmax,
-          brk, max_t, w, prev_action, fr_obs, rpm_obs, obs, reward, flags, n_clipped,
-          last_clipped, last_command):  # fmt: skip
-    """One step of every lane: the actions' bookkeeping, the plant, the env's outputs."""
+def _step(ef, eb, big, li, filt, z, buf, work, edges, d0, slope, lane_f, finished, m, n_f,
+          out, out_finish, gain, fs, meas, max_t, w, obs, n_clipped):  # fmt: skip
+    """One step of every lane: the actions' bookkeeping, the plant, the env's outputs.
+
+    ``ef`` and ``eb`` hold the env's per-lane floats and flags (``_TurningCore``'s ``_EF``
+    and ``_EB`` columns), ``li`` the plant's integers (``TurningLanes.li``): few arguments,
+    as each costs the call time."""
+    (actions, commands, noise, fr, vmax, brk, prev_action, fr_obs, rpm_obs, reward,
+     last_command) = _env_floats(ef)  # fmt: skip
+    flags, clipped, last_clipped = eb[:, :6], eb[:, 6], eb[:, 7]
+    cols, nseg, seg, out_seg, lag = lane_ints(li)
     t = lane_f[:, 5]
     for k in range(z.shape[0]):
         prev_action[k] = actions[k]
@@ -157,8 +186,8 @@ def _step(actions, clipped, commands, noise, big, cols, filt, z, buf, edges, d0,
         last_clipped[k] = clipped[k]
         n_clipped[k] += clipped[k]
         step_lane(
-            k, big, cols, filt, z, buf, edges, d0, slope, nseg, seg, lane_f, finished, m, n_f,
-            commands[k], noise[k], out, out_seg, out_finish,
+            k, big, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f,
+            finished, m, n_f, commands[k], noise[k], out, out_seg, out_finish,
         )  # fmt: skip
         _env_lane(k, out, out_finish, t, gain, fs, meas, fr, vmax, brk, max_t, w, prev_action,
                   fr_obs, rpm_obs, obs, reward, flags)  # fmt: skip
@@ -202,21 +231,20 @@ class _TurningCore:
         self.act_lanes = None if self.actuation is None else self._actuation_lanes()
         self.lanes = TurningLanes(self.params, n)
         self.scenarios: list[TurningScenario | None] = [None] * n
-        self.force_limit = np.ones(n)
+        # The per-lane floats and flags the kernel reads and writes, each set in one array
+        # (one argument of the kernel) and named here by views of its columns.
+        self.ef = np.zeros((n, len(_EF)))
+        self.eb = np.zeros((n, len(_EB)), dtype=np.bool_)
+        self._bind_views()
+        self.force_limit[:] = 1.0
+        self.vmax[:] = 1.0
+        self.breakage_force[:] = 1.0
+        self.prev_action[:] = -1.0
         self.bound = np.full(n, np.nan)
-        self.vmax = np.ones(n)
-        self.breakage_force = np.ones(n)
         self.noise_counts = np.zeros(n)
         self.meas = np.zeros((n, _HISTORY + 1))  # newest first, N
-        self.fr_obs = np.zeros(n)
-        self.rpm_obs = np.zeros(n)
-        self.prev_action = np.full(n, -1.0)
         self.n_clipped = np.zeros(n, dtype=np.int64)
-        self.command = np.zeros(n)
-        self.clipped = np.zeros(n, dtype=bool)
         self.obs = np.zeros((n, 4 + _HISTORY), dtype=np.float32)
-        self.reward = np.zeros(n)
-        self.flags = np.zeros((n, 6), dtype=np.bool_)
         self.normals = np.zeros((n, _NORMAL_BLOCK))
         self.normal_i = np.full(n, _NORMAL_BLOCK)
         self._lane_index = np.arange(n)
@@ -230,12 +258,26 @@ class _TurningCore:
         self.power_lanes: set[int] = set()
         self.length = np.zeros(n)
         self.names = np.full(n, "", dtype=object)
-        self.in_action = np.zeros(n)
-        self.in_clipped = np.zeros(n, dtype=np.bool_)
-        self.in_command = np.zeros(n)
-        self.in_noise = np.zeros(n)
         self._args: tuple | None = None
         self._args_version = -1
+
+    def _bind_views(self) -> None:
+        """Name the columns of ``ef`` (``_EF``) and ``eb`` (``_EB``)."""
+        for i, name in enumerate(_EF):
+            setattr(self, name, self.ef[:, i])
+        self.flags = self.eb[:, :6]
+        self.in_clipped = self.eb[:, 6]
+        self.clipped = self.eb[:, 7]
+
+    def __getstate__(self) -> dict:
+        # A pickled view is a copy: the views are made anew from ef and eb on loading.
+        views = {*_EF, "flags", "in_clipped", "clipped", "_args"}
+        return {k: v for k, v in self.__dict__.items() if k not in views}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._args = None
+        self._bind_views()
 
     def _actuation_lanes(self) -> ActuationLanes:
         """The CNC's actuation between the commands and the servo, every lane on the env's
@@ -343,44 +385,30 @@ class _TurningCore:
         lanes = self.lanes
         if self._args is None or self._args_version != lanes.version:
             self._args = (
-                self.in_action,
-                self.in_clipped,
-                self.in_command,
-                self.in_noise,
+                self.ef,
+                self.eb,
                 lanes.big,
-                lanes.cols,
+                lanes.li,
                 lanes.filt,
                 lanes.z,
                 lanes.buf,
+                lanes.work,
                 lanes.edges,
                 lanes.d0,
                 lanes.slope,
-                lanes.nseg,
-                lanes.seg,
                 lanes.lane_f,
                 lanes.finished,
                 lanes.m,
                 lanes.n_f,
                 lanes.out,
-                lanes.out_segment,
                 lanes.out_finish,
                 self._gain,
                 self._fs,
                 self.meas,
-                self.force_limit,
-                self.vmax,
-                self.breakage_force,
                 self.max_episode_time_s,
                 self._w,
-                self.prev_action,
-                self.fr_obs,
-                self.rpm_obs,
                 self.obs,
-                self.reward,
-                self.flags,
                 self.n_clipped,
-                self.clipped,
-                self.command,
             )
             self._args_version = lanes.version
         return self._args
@@ -419,7 +447,9 @@ class _TurningCore:
         spindle delivers what the cut asks)."""
         if k in self.power_lanes:
             return float(self.power[k, 0]), float(self.power[k, 1])
-        p = float(cutting_power_W(self.lanes.out[k, 0], self.spindle[k], self.diameter[k]))
+        # cutting_power_W's arithmetic, in its order, on Python floats (the same numbers)
+        force, rpm, d = float(self.lanes.out[k, 0]), float(self.spindle[k]), float(self.diameter[k])
+        p = max(force, 0.0) * (rpm * (math.pi / 30.0)) * (d * 0.0005)
         return p, p
 
     def _power_arrays(self) -> tuple[np.ndarray, np.ndarray]:
@@ -432,21 +462,23 @@ class _TurningCore:
 
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""
-        force, peak, counts, feed, vel, pos, depth = self.lanes.out[k].tolist()
-        diverged, breakage, finished = self.flags[k, :3].tolist()
+        lanes = self.lanes
+        force, peak, counts, feed, vel, pos, depth = lanes.out[k].tolist()
+        diverged, breakage, finished, _, _, over, _, clipped = self.eb[k].tolist()
+        ef = self.ef[k].tolist()
         sc = self.scenarios[k]
         p_drive, p_cut = self._power(k)
         info = {
-            "t_s": float(self.lanes.lane_f[k, 5]),
-            "command": float(self.command[k]),
-            "action_clipped": bool(self.clipped[k]),
+            "t_s": float(lanes.lane_f[k, 5]),
+            "command": ef[_EF_COMMAND],
+            "action_clipped": clipped,
             "n_action_clipped": int(self.n_clipped[k]),
             "breakage": breakage,
             "diverged": diverged,
             "finished": finished,
             "force_N": force,
-            "force_limit_N": float(self.force_limit[k]),
-            "cost": 1.0 if self.flags[k, 5] else 0.0,
+            "force_limit_N": ef[_EF_FORCE_LIMIT],
+            "cost": 1.0 if over else 0.0,
             "score_bound": float(self.bound[k]),
             "measured": float(self.meas[k, 0]),
             "measured_counts": counts,
@@ -455,7 +487,7 @@ class _TurningCore:
             "feed_velocity_mm_s": vel if not diverged else 0.0,
             "position_mm": pos if not diverged else 0.0,
             "depth_mm": depth,
-            "segment": int(self.lanes.out_segment[k]),
+            "segment": int(lanes.out_segment[k]),
             "spindle_rpm": float(self.spindle[k]),
             "spindle_power_W": p_drive,
             "cutting_power_W": p_cut,
@@ -463,7 +495,7 @@ class _TurningCore:
             "scenario": sc.name,
         }
         if finished:
-            info["machining_time_s"] = float(self.lanes.out_finish[k])
+            info["machining_time_s"] = float(lanes.out_finish[k])
         return info
 
     def info_arrays(self) -> dict:
@@ -687,17 +719,17 @@ class TurningEnv(gym.Env):
             raise episode_ended("TurningEnv")
         core = self._core
         a, clipped = check_action(action, "TurningEnv")
-        u = self.command_map.action_to_command(a)
-        core.in_action[0] = a
+        ef = core.ef[0]
+        ef[0] = a  # in_action, in_command (_EF)
+        ef[1] = self.command_map.action_to_command(a)
         core.in_clipped[0] = clipped
-        core.in_command[0] = u
         core.draw_noise(self._rngs)
         core.step()
         info = core.lane_info(0)
         record_step(self, self._log, info)
-        flags = core.flags[0]
-        self._ended = bool(flags[3] or flags[4])
-        return core.obs[0].copy(), float(core.reward[0]), bool(flags[3]), bool(flags[4]), info
+        terminated, truncated = core.eb[0, 3:5].tolist()
+        self._ended = terminated or truncated
+        return core.obs[0].copy(), float(ef[_EF_REWARD]), terminated, truncated, info
 
     def render(self):
         if not ready_to_render(self, "TurningEnv"):

@@ -32,6 +32,7 @@ import numba
 import numpy as np
 
 from machining_envs.core.checks import check_integer, check_range
+from machining_envs.core.kernels import fma, matvec
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
 
 __all__ = [
@@ -246,6 +247,8 @@ class _Matrices:
 
     big: np.ndarray  # (2M + 3, 4(L + 1)): rows = positions, feeds, next state
     lags: int  # L
+    delay_group: np.ndarray  # (M,): the group of four columns of each feed row's delayed
+    # instant (0 where it lies in the current sample, merged with the other terms)
     filt_step: np.ndarray  # (n_f, n_f + M + 1): next filter state from [state, F_1..F_M, F_0]
 
 
@@ -382,7 +385,7 @@ def _matrices(params: _LinearKey, spindle_rpm: float) -> _Matrices:
     # Each feed row has one delayed block; where it is block 0 it overlaps the terms above.
     cols = 4 * lag[:, None] + np.arange(4)
     big[np.arange(m, 2 * m)[:, None], cols] -= delayed
-    return _Matrices(big, lags, filt_step)
+    return _Matrices(big, lags, lag.astype(np.int64), filt_step)
 
 
 def sampled_model(params: TurningParams, spindle_rpm: float) -> tuple[np.ndarray, int]:
@@ -435,21 +438,75 @@ def _depth_at(x, edges, d0, slope, nseg):
 
 @numba.njit(cache=True)
 def _step_lanes(
-    big, cols, filt, z, buf, edges, d0, slope, nseg, seg, lane_f, finished, m, n_f,
-    commands, noise, out_f, out_seg, out_finish,
+    big, li, filt, z, buf, work, edges, d0, slope, lane_f, finished, m, n_f, commands, noise,
+    out_f, out_finish,
 ):  # fmt: skip
-    """Advance every lane by one sample (:func:`step_lane` on each)."""
+    """Advance every lane by one sample (:func:`step_lane` on each; ``li`` holds the
+    lanes' integers, ``TurningLanes.li``)."""
+    cols, nseg, seg, out_seg, lag = lane_ints(li)
     for k in range(z.shape[0]):
         step_lane(
-            k, big, cols, filt, z, buf, edges, d0, slope, nseg, seg, lane_f, finished, m, n_f,
-            commands[k], noise[k], out_f, out_seg, out_finish,
+            k, big, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f,
+            finished, m, n_f, commands[k], noise[k], out_f, out_seg, out_finish,
         )  # fmt: skip
+
+
+@numba.njit(cache=True, inline="always")
+def lane_ints(li):
+    """The columns of ``TurningLanes.li``: ``(cols, nseg, seg, out_segment, lag)``."""
+    return li[:, 0], li[:, 1], li[:, 2], li[:, 3], li[:, 4:]
+
+
+@numba.njit(cache=True)
+def _sampled_rows(a, c, lag, zk, m, y):
+    """``y = A @ zk`` for the lane's step matrix ``A`` (``(2M + 3, c)``, row after row in
+    ``a``), reading only the groups of four columns that hold its non-zeros.
+
+    Every row reads the current pair ``(x_k, u_k)`` (columns 0-3); a feed row also reads
+    the pair of its delayed instant (group ``lag[j]``, none where that is 0). The others
+    are zero, and :func:`~machining_envs.core.kernels.matvec`'s sums gain nothing from a
+    zero group (a fused ``0 x + s`` is ``s`` for finite ``x``), so the rows here, summed in
+    its order over the non-zero groups only, are its numbers (numpy's) to the last bit.
+    """
+    n_rows = 2 * m + 3
+    nb = n_rows & ~3  # rows summed in fused groups of four; the feed rows are among them
+    z0 = zk[0]
+    z1 = zk[1]
+    z2 = zk[2]
+    z3 = zk[3]
+    for r in range(nb):
+        b = r * c
+        s0 = fma(a[b], z0, 0.0)
+        s1 = fma(a[b + 1], z1, 0.0)
+        s2 = fma(a[b + 2], z2, 0.0)
+        s3 = fma(a[b + 3], z3, 0.0)
+        if m <= r < 2 * m and lag[r - m] > 0:
+            q = 4 * lag[r - m]
+            s0 = fma(a[b + q], zk[q], s0)
+            s1 = fma(a[b + q + 1], zk[q + 1], s1)
+            s2 = fma(a[b + q + 2], zk[q + 2], s2)
+            s3 = fma(a[b + q + 3], zk[q + 3], s3)
+        y[r] = 0.0 + ((s0 + s2) + (s1 + s3))
+    r = nb
+    if (n_rows - nb) & 2:  # two rows of two sums of rounded products
+        for r in range(nb, nb + 2):
+            b = r * c
+            s0 = 0.0 + a[b] * z0
+            s1 = 0.0 + a[b + 1] * z1
+            y[r] = 0.0 + ((s0 + a[b + 2] * z2) + (s1 + a[b + 3] * z3))
+        r = nb + 2
+    if (n_rows - nb) & 1:  # one row of four sums of rounded products
+        b = r * c
+        y[r] = 0.0 + (
+            ((0.0 + a[b] * z0) + (0.0 + a[b + 2] * z2))
+            + ((0.0 + a[b + 1] * z1) + (0.0 + a[b + 3] * z3))
+        )
 
 
 @numba.njit(cache=True)
 def step_lane(
-    k, big, cols, filt, z, buf, edges, d0, slope, nseg, seg, lane_f, finished, m, n_f,
-    command, noise, out_f, out_seg, out_finish,
+    k, big, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f, finished, m,
+    n_f, command, noise, out_f, out_seg, out_finish,
 ):  # fmt: skip
     """Advance lane ``k`` by one sample (see :class:`TurningLanes` for the layout).
 
@@ -463,7 +520,8 @@ def step_lane(
     c = cols[k]
     zk = z[k, :c]
     zk[3] = min(max(command, 0.0), cmax)
-    y = np.dot(big[k, : n_rows * c].reshape(n_rows, c), zk)
+    y = work[k, :n_rows]
+    _sampled_rows(big[k], c, lag[k], zk, m, y)
     p_start = zk[2]
     p_end = y[m - 1]
     b = buf[k]
@@ -500,14 +558,14 @@ def step_lane(
     if wear != 0.0:  # Kf (1 + w x): the tool dulls along the cut (wear_per_100mm)
         for j in range(m):
             force[j] *= 1.0 + wear * y[j]
-    fl = filt[k, : n_f * b.shape[0]].reshape(n_f, b.shape[0])
-    fo = np.dot(fl, b)
-    b[:n_f] = fo
+    fo = work[k : k + 1, n_rows:]
+    matvec(filt[k : k + 1], n_f, b.shape[0], buf[k : k + 1], fo)
+    b[:n_f] = fo[0]
     f_end = force[m - 1]
     out = out_f[k]
     out[0] = f_end
     out[1] = force.max()
-    out[2] = gain * fo[0] + noise
+    out[2] = gain * fo[0, 0] + noise
     out[3] = y[2 * m - 1]
     b[b.shape[0] - 1] = f_end
     for q in range(c - 1, 3, -1):
@@ -606,18 +664,24 @@ class TurningLanes:
         filt = _speed_free_rows(self._key)[1]
         self.m, self.n_f = m, filt.shape[0]
         self.big = np.zeros((self.n, (2 * m + 3) * c_max))
-        self.cols = np.full(self.n, 4, dtype=np.int64)
+        #: The lanes' integers in one array (one argument of the kernel), read through the
+        #: views below: the step matrix's columns, the workpiece's segments, the segment the
+        #: tool is in and was in after the last step, and the delay groups of the feed rows.
+        self.li = np.zeros((self.n, 4 + m), dtype=np.int64)
+        self._bind_views()
+        self.cols[:] = 4
+        self.nseg[:] = 1
         self.filt = np.tile(filt.ravel(), (self.n, 1))
         self.z = np.zeros((self.n, c_max))
         self.buf = np.zeros((self.n, filt.shape[1]))
+        #: Scratch of the kernel: the step matrix's rows, then the filter's next state.
+        self.work = np.zeros((self.n, 2 * m + 3 + self.n_f))
         self._s_max = 1
         #: Counts replacements of the lane arrays (by a profile with more segments).
         self.version = 0
         self.edges = np.zeros((self.n, 2))
         self.d0 = np.zeros((self.n, 1))
         self.slope = np.zeros((self.n, 1))
-        self.nseg = np.ones(self.n, dtype=np.int64)
-        self.seg = np.zeros(self.n, dtype=np.int64)
         #: Per lane ``[Kf, p, Ke, U_max, length, t, margin, Ts, wear per mm]``.
         self.lane_f = np.zeros((self.n, 9))
         self.finished = np.zeros(self.n, dtype=np.bool_)
@@ -626,9 +690,22 @@ class TurningLanes:
         self.profiles: list = [None] * self.n
         #: Signals of the last step, one row per lane (columns: ``LANE_SIGNALS``).
         self.out = np.zeros((self.n, len(LANE_SIGNALS)))
-        self.out_segment = np.zeros(self.n, dtype=np.int64)
         #: Time at which each lane finished its workpiece in the last step (NaN if not).
         self.out_finish = np.full(self.n, np.nan)
+
+    def _bind_views(self) -> None:
+        """Name the columns of ``li``."""
+        self.cols, self.nseg, self.seg, self.out_segment = (self.li[:, i] for i in range(4))
+        self.lag = self.li[:, 4:]
+
+    def __getstate__(self) -> dict:
+        # A pickled view is a copy: the views are made anew from li on loading.
+        views = {"cols", "nseg", "seg", "out_segment", "lag"}
+        return {k: v for k, v in self.__dict__.items() if k not in views}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._bind_views()
 
     def start(self, lane: int, params: TurningParams, spindle_rpm: float, profile) -> None:
         """Start a new cut in ``lane``: machine at rest at the workpiece's start."""
@@ -679,7 +756,9 @@ class TurningLanes:
         """The step matrix of ``lane`` at ``spindle_rpm``. With ``full_history`` it is padded
         with zero columns to the memory of the slowest speed, so that the lane keeps every
         sample instant it could ever need and its speed may change between samples."""
-        big = _matrices(self._key, spindle_rpm).big
+        mats = _matrices(self._key, spindle_rpm)
+        big = mats.big
+        self.lag[lane] = mats.delay_group
         rows, c = big.shape[0], (self.z.shape[1] if full_history else big.shape[1])
         view = self.big[lane, : rows * c].reshape(rows, c)
         view[:, : big.shape[1]] = big
@@ -702,15 +781,14 @@ class TurningLanes:
         ``out_segment`` and ``out_finish``."""
         _step_lanes(
             self.big,
-            self.cols,
+            self.li,
             self.filt,
             self.z,
             self.buf,
+            self.work,
             self.edges,
             self.d0,
             self.slope,
-            self.nseg,
-            self.seg,
             self.lane_f,
             self.finished,
             self.m,
@@ -718,7 +796,6 @@ class TurningLanes:
             np.asarray(commands, dtype=np.float64),
             np.asarray(noise_counts, dtype=np.float64),
             self.out,
-            self.out_segment,
             self.out_finish,
         )
 

@@ -13,7 +13,6 @@ from machining_envs.milling.plant import (
     MillingParams,
     MillingPlant,
     immersion_angles,
-    matvec,
     mean_forces,
     mean_torque_average_force,
 )
@@ -204,50 +203,6 @@ def test_bad_parameters_raise_naming_the_field():
         MillingPlant(MillingParams(tool_diameter_mm=4.0), 400.0, DepthProfile.steps((3.0, 5.0)))
     with pytest.raises(ValueError, match="radial_depth_mm"):
         immersion_angles(13.0, 6.0)
-
-
-def _random_matrix(rng, shape):
-    """Entries over sixteen decades, both signs, with zeros and negative zeros."""
-    v = rng.standard_normal(shape) * 10.0 ** rng.uniform(-8, 8, size=shape)
-    u = rng.random(shape)
-    v[u < 0.05] = 0.0
-    v[(u >= 0.05) & (u < 0.08)] = -0.0
-    return v
-
-
-def _numpy_blas_orders_as_matvec() -> bool:
-    """numpy's matrix-vector products come from OpenBLAS's x86-64 dgemv kernel for Haswell
-    and its successors (the order ``matvec`` follows, in which the golden data were
-    recorded); other libraries or processors may sum in another order."""
-    from threadpoolctl import threadpool_info
-
-    blas = [i for i in threadpool_info() if "numpy" in i.get("filepath", "")]
-    arch = str(blas[0].get("architecture", "")).lower() if blas else ""
-    return bool(blas) and blas[0].get("internal_api") == "openblas" and arch in {
-        "haswell", "zen", "steamroller", "excavator", "skylakex", "cooperlake", "sapphirerapids"
-    }  # fmt: skip
-
-
-@pytest.mark.skipif(not _numpy_blas_orders_as_matvec(), reason="numpy's BLAS sums in another order")
-@pytest.mark.parametrize("substeps", [1, 2, 3, 6, 10, 14, 30])
-def test_matvec_rounds_as_numpy_does(substeps):
-    """The kernel's matrix-vector products equal numpy's to the last bit, for the servo's
-    (2M + 3, 4) and the lag's (M, M + 2) shapes (those numpy's order does not cover go to
-    np.dot), one matrix for all rows or one per row, with inf and NaN too."""
-    rng = np.random.default_rng(substeps)
-    for n, m in ((2 * substeps + 3, 4), (substeps, substeps + 2)):
-        for shared in (True, False):
-            rows = 50
-            a = _random_matrix(rng, (1 if shared else rows, n * m))
-            x = _random_matrix(rng, (rows, m))
-            x[7, rng.integers(m)] = np.inf
-            a[-1, rng.integers(n * m)] = np.nan
-            out = np.full((rows, n), 7.0)
-            matvec(a, n, m, x, out)
-            for k in range(rows):
-                with np.errstate(invalid="ignore"):
-                    expected = a[0 if shared else k].reshape(n, m) @ x[k]
-                assert out[k].tobytes() == expected.tobytes(), (n, m, k)
 
 
 def test_a_lane_of_a_batch_is_the_one_lane_plant():

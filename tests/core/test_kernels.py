@@ -1,0 +1,58 @@
+"""The shared compiled products (``machining_envs.core.kernels``) against numpy's."""
+
+import numpy as np
+import pytest
+
+from machining_envs.core.kernels import matvec
+
+
+def _random_matrix(rng, shape):
+    """Entries over sixteen decades, both signs, with zeros and negative zeros."""
+    v = rng.standard_normal(shape) * 10.0 ** rng.uniform(-8, 8, size=shape)
+    u = rng.random(shape)
+    v[u < 0.05] = 0.0
+    v[(u >= 0.05) & (u < 0.08)] = -0.0
+    return v
+
+
+def _numpy_blas_orders_as_matvec() -> bool:
+    """numpy's matrix-vector products come from OpenBLAS's x86-64 dgemv kernel for Haswell
+    and its successors (the order ``matvec`` follows, in which the golden data were
+    recorded); other libraries or processors may sum in another order."""
+    from threadpoolctl import threadpool_info
+
+    blas = [i for i in threadpool_info() if "numpy" in i.get("filepath", "")]
+    arch = str(blas[0].get("architecture", "")).lower() if blas else ""
+    return bool(blas) and blas[0].get("internal_api") == "openblas" and arch in {
+        "haswell", "zen", "steamroller", "excavator", "skylakex", "cooperlake", "sapphirerapids"
+    }  # fmt: skip
+
+
+def _shapes(substeps):
+    """The plants' shapes at ``substeps`` sub-steps: milling's servo (2M + 3, 4) and lag
+    (M, M + 2), turning's servo (2M + 3, 4 (L + 1)) and sensor filter (2, M + 3), and
+    every kind of tail: rows in whole groups of four or not, columns 0-3 past them."""
+    m = substeps
+    return [(2 * m + 3, 4), (m, m + 2), (2 * m + 3, 16), (2, m + 3), (1, m + 3), (5, 1)]
+
+
+@pytest.mark.skipif(not _numpy_blas_orders_as_matvec(), reason="numpy's BLAS sums in another order")
+@pytest.mark.parametrize("substeps", [1, 2, 3, 6, 10, 14, 30, 50])
+def test_matvec_rounds_as_numpy_does(substeps):
+    """The kernel's matrix-vector products equal numpy's to the last bit (those numpy's
+    order does not cover go to np.dot), one matrix for all rows or one per row, with inf
+    and NaN too."""
+    rng = np.random.default_rng(substeps)
+    for n, m in _shapes(substeps):
+        for shared in (True, False):
+            rows = 50
+            a = _random_matrix(rng, (1 if shared else rows, n * m))
+            x = _random_matrix(rng, (rows, m))
+            x[7, rng.integers(m)] = np.inf
+            a[-1, rng.integers(n * m)] = np.nan
+            out = np.full((rows, n), 7.0)
+            matvec(a, n, m, x, out)
+            for k in range(rows):
+                with np.errstate(invalid="ignore"):
+                    expected = a[0 if shared else k].reshape(n, m) @ x[k]
+                assert out[k].tobytes() == expected.tobytes(), (n, m, k)
