@@ -253,6 +253,9 @@ class _TurningCore:
         #: Drive power delivered and cutting power at the last sample, W.
         self.power = np.zeros((n, 2))
         self.truths: list[TurningParams | None] = [None] * n
+        #: Per lane: (score bound, workpiece length, scenario name, set spindle speed,
+        #: diameter) of its episode.
+        self.episode_info: list[tuple] = [(math.nan, 0.0, "", 0.0, 0.0)] * n
         self.diameter = np.ones(n)
         #: Lanes whose spindle is power-limited (their speed may change within the cut).
         self.power_lanes: set[int] = set()
@@ -326,6 +329,14 @@ class _TurningCore:
             self.power_lanes.discard(lane)
         self.length[lane] = sc.profile.length_mm
         self.names[lane] = sc.name
+        # What the episode's infos repeat, as Python values: read once, not at every step.
+        self.episode_info[lane] = (
+            float(self.bound[lane]),
+            sc.profile.length_mm,
+            sc.name,
+            float(sc.spindle_rpm),
+            float(truth.workpiece_diameter_mm),
+        )
         o = self.obs[lane]
         o[:] = (0.0, self.fr_obs[lane], -1.0, self.rpm_obs[lane], 0.0, 0.0, 0.0)
         return {
@@ -447,8 +458,10 @@ class _TurningCore:
         spindle delivers what the cut asks)."""
         if k in self.power_lanes:
             return float(self.power[k, 0]), float(self.power[k, 1])
-        # cutting_power_W's arithmetic, in its order, on Python floats (the same numbers)
-        force, rpm, d = float(self.lanes.out[k, 0]), float(self.spindle[k]), float(self.diameter[k])
+        # cutting_power_W's arithmetic, in its order, on Python floats (the same numbers);
+        # an ideal spindle keeps the episode's set speed
+        _, _, _, rpm, d = self.episode_info[k]
+        force = float(self.lanes.out[k, 0])
         p = max(force, 0.0) * (rpm * (math.pi / 30.0)) * (d * 0.0005)
         return p, p
 
@@ -466,8 +479,12 @@ class _TurningCore:
         force, peak, counts, feed, vel, pos, depth = lanes.out[k].tolist()
         diverged, breakage, finished, _, _, over, _, clipped = self.eb[k].tolist()
         ef = self.ef[k].tolist()
-        sc = self.scenarios[k]
-        p_drive, p_cut = self._power(k)
+        bound, length, name, rpm, diameter = self.episode_info[k]
+        if k in self.power_lanes:
+            p_drive, p_cut = self._power(k)
+            rpm = float(self.spindle[k])
+        else:  # cutting_power_W's arithmetic, in its order, on Python floats
+            p_drive = p_cut = max(force, 0.0) * (rpm * (math.pi / 30.0)) * (diameter * 0.0005)
         info = {
             "t_s": float(lanes.lane_f[k, 5]),
             "command": ef[_EF_COMMAND],
@@ -479,7 +496,7 @@ class _TurningCore:
             "force_N": force,
             "force_limit_N": ef[_EF_FORCE_LIMIT],
             "cost": 1.0 if over else 0.0,
-            "score_bound": float(self.bound[k]),
+            "score_bound": bound,
             "measured": float(self.meas[k, 0]),
             "measured_counts": counts,
             "peak_force_N": peak,
@@ -488,11 +505,11 @@ class _TurningCore:
             "position_mm": pos if not diverged else 0.0,
             "depth_mm": depth,
             "segment": int(lanes.out_segment[k]),
-            "spindle_rpm": float(self.spindle[k]),
+            "spindle_rpm": rpm,
             "spindle_power_W": p_drive,
             "cutting_power_W": p_cut,
-            "workpiece_length_mm": sc.profile.length_mm,
-            "scenario": sc.name,
+            "workpiece_length_mm": length,
+            "scenario": name,
         }
         if finished:
             info["machining_time_s"] = float(lanes.out_finish[k])
