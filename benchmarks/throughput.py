@@ -5,7 +5,7 @@ Both envs are made with ``gym.make`` (same default wrappers) and stepped in the 
 interleaved over several rounds, with uniformly random actions drawn beforehand from a
 seeded generator so that action sampling is not timed. Two rates per env:
 
-- ``step``: env.step calls only (the target: Turning-v0 >= 0.5x Pendulum-v1);
+- ``step``: env.step calls only (the target: every env >= 1.0x Pendulum-v1);
 - ``with resets``: the whole loop, resets included. Random feed commands break the tool
   within about 50 steps, so Turning-v0 resets every ~50 steps (each reset draws a workpiece
   and discretises the plant at a new spindle speed, ~0.5 ms), Pendulum-v1 every 200.
