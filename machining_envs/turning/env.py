@@ -453,20 +453,8 @@ class _TurningCore:
                 self.rpm_obs[k] = new / 1000.0
                 self.obs[k, 3] = self.rpm_obs[k]
 
-    def _power(self, k: int) -> tuple[float, float]:
-        """``(drive power, cutting power)`` of lane ``k`` at the last sample, W (an ideal
-        spindle delivers what the cut asks)."""
-        if k in self.power_lanes:
-            return float(self.power[k, 0]), float(self.power[k, 1])
-        # cutting_power_W's arithmetic, in its order, on Python floats (the same numbers);
-        # an ideal spindle keeps the episode's set speed
-        _, _, _, rpm, d = self.episode_info[k]
-        force = float(self.lanes.out[k, 0])
-        p = max(force, 0.0) * (rpm * (math.pi / 30.0)) * (d * 0.0005)
-        return p, p
-
     def _power_arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`_power` of every lane, as arrays (the same arithmetic)."""
+        """Drive and cutting power of every lane, W, as arrays (``lane_info``'s arithmetic)."""
         cut = cutting_power_W(self.lanes.out[:, 0], self.spindle, self.diameter)
         drive = cut.copy()
         for k in self.power_lanes:
@@ -480,10 +468,11 @@ class _TurningCore:
         diverged, breakage, finished, _, _, over, _, clipped = self.eb[k].tolist()
         ef = self.ef[k].tolist()
         bound, length, name, rpm, diameter = self.episode_info[k]
-        if k in self.power_lanes:
-            p_drive, p_cut = self._power(k)
+        if k in self.power_lanes:  # drive and cutting power from the spindle's drive
+            p_drive, p_cut = self.power[k].tolist()
             rpm = float(self.spindle[k])
-        else:  # cutting_power_W's arithmetic, in its order, on Python floats
+        else:  # an ideal spindle delivers what the cut asks: cutting_power_W's arithmetic,
+            # in its order, on Python floats (the same numbers as _power_arrays)
             p_drive = p_cut = max(force, 0.0) * (rpm * (math.pi / 30.0)) * (diameter * 0.0005)
         info = {
             "t_s": float(lanes.lane_f[k, 5]),
