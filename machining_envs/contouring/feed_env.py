@@ -148,21 +148,59 @@ def _bound(o, i, x, lo, hi):
     o[i] = lo[i] if x < lo[i] else (hi[i] if x > hi[i] else x)
 
 
+def _scratch_size(nb: int, n_y: int, n_state: int, n_seg: int) -> int:
+    """Values of ``_feed_step``'s float scratch (see :func:`_carve`)."""
+    return (nb + 1) + 6 * nb + 4 * nb + (8 * nb + 2) + n_y + n_state + n_seg
+
+
+@numba.njit(cache=True, inline="always")
+def _carve(sc, nb, n_y, n_state, n_seg):
+    """The scratch arrays of ``_feed_step`` as views of one float array (one argument to
+    pass instead of sixteen): the set point's path positions (nb + 1), reference and table
+    x, y, contour errors, a spare run (nb each), references and loads (nb, 2), positions
+    (nb, 2), velocities (nb + 1, 2), commands and torques (nb, 2), ``run_block``'s scratch,
+    two states, the distances' lower bounds per segment."""
+    o = nb + 1
+    st = sc[:o]
+    rx = sc[o : o + nb]
+    ry = sc[o + nb : o + 2 * nb]
+    px = sc[o + 2 * nb : o + 3 * nb]
+    py = sc[o + 3 * nb : o + 4 * nb]
+    eps = sc[o + 4 * nb : o + 5 * nb]
+    tmp = sc[o + 5 * nb : o + 6 * nb]
+    o += 6 * nb
+    ref = sc[o : o + 2 * nb].reshape((nb, 2))
+    load = sc[o + 2 * nb : o + 4 * nb].reshape((nb, 2))
+    o += 4 * nb
+    pos = sc[o : o + 2 * nb].reshape((nb, 2))
+    vel = sc[o + 2 * nb : o + 4 * nb + 2].reshape((nb + 1, 2))
+    cmd = sc[o + 4 * nb + 2 : o + 6 * nb + 2].reshape((nb, 2))
+    torque = sc[o + 6 * nb + 2 : o + 8 * nb + 2].reshape((nb, 2))
+    o += 8 * nb + 2
+    y = sc[o : o + n_y]
+    zs = sc[o + n_y : o + n_y + n_state]
+    lower = sc[o + n_y + n_state : o + n_y + n_state + n_seg]
+    assert lower.size == n_seg  # the buffer has room for every view
+    return st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, y, zs, lower
+
+
 @numba.njit(cache=True, _nrt=False)
-def _feed_step(actions, clipped, applied, tabs, nseg, pf, load_t, load_v, n_load, sf, sh, sa,
+def _feed_step(actions, clipped, applied, tabs, nseg, pf, load_t, load_v, n_load, sf, sg, she, sa,
                sb, scu, sdu, sgu, stq, sumax, state, s, kk, override, prev_action, n_clipped,
-               c, w, look, lo, hi, obs, reward, flags, out, segment, sc):  # fmt: skip
+               c, w, look, lo, hi, obs, reward, flags, out, segment, sc, order):  # fmt: skip
     """One decision step of every lane (``ContouringFeedEnv.step`` after its input checks).
 
     ``c`` = ``[n_sub, Ts, tolerance, in_position, divergence, override mid, override half,
     actuated]``: where ``actuated`` is 1 the override is ``applied[k]`` (what the CNC's
     actuation made of the action's), else the action's;
     ``w`` = the reward weights; ``flags[k]`` = ``[diverged, finished, terminated,
-    truncated]``; ``sc`` = scratch arrays (``_FeedCore._scratch``)."""
+    truncated]``; ``sc``, ``order`` = float and integer scratch (``_FeedCore._scratch``)."""
     n = int(c[0])
     ts = c[1]
     tol = c[2]
-    st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, x, lifted, zs, lower, order = sc
+    st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, y, zs, lower = _carve(
+        sc, n, sf.shape[-1], state.shape[1], order.size
+    )
     for k in range(actions.shape[0]):
         tab = tabs[k, : nseg[k]]
         length = pf[k, 0]
@@ -187,8 +225,8 @@ def _feed_step(actions, clipped, applied, tabs, nseg, pf, load_t, load_v, n_load
                 i += 1
             load[j, 0] = load_v[k, i, 0]
             load[j, 1] = load_v[k, i, 1]
-        run_block(sf[k], sh[k], sa[k], sb[k], scu[k], sdu[k], sgu[k], stq[k], sumax[k],
-                  state[k], ref, load, pos, vel, cmd, torque, x, lifted, zs)  # fmt: skip
+        run_block(sf[k], sg[k], she[k], sa[k], sb[k], scu[k], sdu[k], sgu[k], stq[k], sumax[k],
+                  state[k], ref, load, pos, vel, cmd, torque, y, zs)  # fmt: skip
         diverged = False
         for j in range(n):
             px[j] = pos[j, 0] + x0
@@ -368,18 +406,15 @@ class _FeedCore:
         self.paths: list = [None] * n
         self.names = np.full(n, "", dtype=object)
         self.servos = np.full(n, servo, dtype=object)
-        self.circles: list[dict] = [{}] * n
+        self.episode_info: list[dict] = [{}] * n
         self.has_circle = np.zeros(n, dtype=bool)
         self.circle = np.zeros((n, 3))
-        nb = n_sub
-        self._scratch = (
-            np.zeros(nb + 1), np.zeros(nb), np.zeros(nb), np.zeros(nb), np.zeros(nb),
-            np.zeros(nb), np.zeros(nb), np.zeros((nb, 2)), np.zeros((nb, 2)),
-            np.zeros((nb, 2)), np.zeros((nb + 1, 2)), np.zeros((nb, 2)), np.zeros((nb, 2)),
-            np.zeros(self.loops.width), np.zeros(self.loops.height),
-            np.zeros(2 * self.loops.n_states_axis), np.zeros(self.tabs.shape[1]),
-            np.zeros(self.tabs.shape[1], dtype=np.int64),
-        )  # fmt: skip
+        n_seg = self.tabs.shape[1]
+        self._scratch = (self._float_scratch(n_seg), np.zeros(n_seg, dtype=np.int64))
+
+    def _float_scratch(self, n_seg: int) -> np.ndarray:
+        lp = self.loops
+        return np.zeros(_scratch_size(self.n_sub, lp.scratch_size, 2 * lp.n_states_axis, n_seg))
 
     def _actuation_lanes(self) -> ActuationLanes:
         """The CNC's actuation between the actions and the override, for every lane (a lane
@@ -407,8 +442,7 @@ class _FeedCore:
             tabs = np.zeros((self.n, n_seg, SEGMENT_COLUMNS))
             tabs[:, : self.tabs.shape[1]] = self.tabs
             self.tabs = tabs
-            sc = self._scratch
-            self._scratch = (*sc[:-2], np.zeros(n_seg), np.zeros(n_seg, dtype=np.int64))
+            self._scratch = (self._float_scratch(n_seg), np.zeros(n_seg, dtype=np.int64))
         if n_load > self.load_t.shape[1]:
             lt = np.full((self.n, n_load), np.inf)
             lt[:, : self.load_t.shape[1]] = self.load_t
@@ -458,9 +492,21 @@ class _FeedCore:
         self.prev_action[lane] = -1.0
         self.n_clipped[lane] = 0
         self.names[lane] = sc.name
-        self.circles[lane] = _circle_info(path)
-        self.has_circle[lane] = bool(self.circles[lane])
-        self.circle[lane] = tuple(self.circles[lane].values()) or (0.0, 0.0, 0.0)
+        circles = _circle_info(path)
+        self.has_circle[lane] = bool(circles)
+        self.circle[lane] = tuple(circles.values()) or (0.0, 0.0, 0.0)
+        # The values of info that hold for the whole episode.
+        self.episode_info[lane] = {
+            "contour_tolerance_mm": self.tolerance_mm,
+            "score_bound": float(self.bound[lane]),
+            "path_length_mm": float(self.pf[lane, 0]),
+            "feed_mm_s": sc.feed_mm_s,
+            "programmed_time_s": float(self.pf[lane, 6]),
+            "time_limit_s": float(self.pf[lane, 7]),
+            "servo": self.servo,
+            "scenario": sc.name,
+            **circles,
+        }
         _feed_reset_obs(lane, self.tabs, self.nseg, self.pf, self.s, self.override,
                         self.prev_action, self.tolerance_mm, _LOOK, self._lo, self._hi,
                         self.obs)  # fmt: skip
@@ -485,22 +531,20 @@ class _FeedCore:
             self.applied[:] = self.act_lanes.apply(asked)
         _feed_step(
             self.in_action, self.in_clipped, self.applied, self.tabs, self.nseg, self.pf,
-            self.load_t, self.load_v, self.n_load, lp.f, lp.h, lp.a, lp.b, lp.cu, lp.du, lp.gu,
+            self.load_t, self.load_v, self.n_load, lp.ft, lp.g, lp.he, lp.a, lp.b, lp.cu, lp.du, lp.gu,
             lp.tq, lp.umax, self.state, self.s, self.k, self.override, self.prev_action,
             self.n_clipped, self._c, self._w, _LOOK, self._lo, self._hi, self.obs,
-            self.reward, self.flags, self.out, self.segment, self._scratch,
+            self.reward, self.flags, self.out, self.segment, *self._scratch,
         )  # fmt: skip
 
     def lane_info(self, k: int, clipped: bool | None = None) -> dict:
         """The info of lane ``k`` after its reset or its last step (``clipped``: whether
         the action was clipped; by default as recorded by the last step)."""
         o = self.out[k].tolist()
-        sc = self.scenarios[k]
         diverged, finished = self.flags[k, :2].tolist()
-        length = float(self.pf[k, 0])
         info = {
             "t_s": o[0],
-            "command": np.array(o[1:3]),
+            "command": self.out[k, 1:3].copy(),
             "command_x_mm_s": o[1],
             "command_y_mm_s": o[2],
             "action_clipped": bool(self.in_clipped[k]) if clipped is None else clipped,
@@ -515,9 +559,7 @@ class _FeedCore:
             "contour_error_mm": o[7],
             "peak_contour_error_mm": o[8],
             "tracking_error_mm": o[9],
-            "contour_tolerance_mm": self.tolerance_mm,
             "cost": 1.0 if o[8] > self.tolerance_mm else 0.0,
-            "score_bound": float(self.bound[k]),
             "vx_mm_s": o[10],
             "vy_mm_s": o[11],
             "torque_x_Nm": o[12],
@@ -528,15 +570,9 @@ class _FeedCore:
             "feed_override": o[17],
             "path_speed_mm_s": o[18],
             "path_s_mm": o[19],
-            "path_length_mm": length,
             "segment": int(self.segment[k]),
-            "feed_mm_s": sc.feed_mm_s,
-            "programmed_time_s": float(self.pf[k, 6]),
-            "time_limit_s": float(self.pf[k, 7]),
-            "servo": self.servo,
-            "scenario": sc.name,
+            **self.episode_info[k],
         }
-        info.update(self.circles[k])
         if finished:
             info["machining_time_s"] = o[20]
         return info
@@ -762,9 +798,9 @@ class ContouringFeedEnv(gym.Env):
         core.step()
         info = core.lane_info(0)
         record_step(self, self._log, info)
-        f = core.flags[0]
-        self._ended = bool(f[2] or f[3])
-        return core.obs[0].copy(), float(core.reward[0]), bool(f[2]), bool(f[3]), info
+        terminated, truncated = core.flags[0, 2:].tolist()
+        self._ended = terminated or truncated
+        return core.obs[0].copy(), float(core.reward[0]), terminated, truncated, info
 
     def render(self):
         if not ready_to_render(self, "ContouringFeedEnv", started=self._started):

@@ -38,16 +38,10 @@ import numpy as np
 from scipy.linalg import schur, solve_continuous_are
 from scipy.signal import cont2discrete
 
-from machining_envs.contouring._exact import dot, fma, gemm_entry, gemv_row
-from machining_envs.contouring._simd import (
-    lanes_fma,
-    lanes_fma_masked,
-    lanes_fma_one,
-    lanes_sum,
-    lanes_zero,
-)
+from machining_envs.contouring._exact import dot, gemm_entry, gemv_row
 from machining_envs.contouring.plant import AXES, ContouringParams
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_integer, check_range
+from machining_envs.core.kernels import add_scaled8, load8, store8, zero8
 
 __all__ = [
     "ServoDesign",
@@ -400,17 +394,29 @@ def servo_design(kind: str, params: ContouringParams, axis: str) -> ServoDesign:
 # are Toeplitz in the inputs (the coefficient of an input depends only on how many periods
 # ago it was applied: ``A^m B``), so a lane keeps only the distinct coefficients:
 #
-# - ``F`` (3 nb + 1 + n, n): the state's coefficients of every row (positions, velocities,
-#   commands, end state, in that order);
-# - ``H`` (2 n + 2, nb + 1): row ``2q`` / ``2q + 1`` holds ``(A^m B)[q, 0 / 1]`` for
-#   ``m = nb - 1 - i`` at column ``i`` (so a row of the lifted matrix reads a contiguous
-#   run of it); rows ``2n`` / ``2n + 1`` the commands' ``Cu A^m B`` likewise, with the
-#   command's direct feed-through of the set point in the last column.
+# - ``FT`` (n, 3 (nb + S) + 8, rounded up to eights): the state's coefficients of every value, stored by state
+#   column, in the layout of ``run_block``'s scratch: the positions after each period, the
+#   velocities at the nb + 1 instants, the commands, each in a run of ``nb + S`` values
+#   (S = ``_SPARE``; zeros after the signal's end), then the end state (eight values);
+# - ``G`` (6, nb + S): the response ``m`` periods after an input at column ``L + m``
+#   (L = ``_LEAD``; zeros before and after): rows ``(A^m B)[0, 0 / 1]`` (position from
+#   set point / load), ``(A^m B)[1, 0 / 1]`` (velocity), ``Cu A^m B`` (command, whose
+#   own period's set point enters through the feed-through at column ``L - 1``);
+# - ``HE`` (2, 8 nb): what input ``i`` leaves in the end state, ``(A^(nb-1-i) B)[q, 0 / 1]``
+#   at ``8 i + q`` (eight values per input, zeros past the state).
 #
-# ``run_block`` evaluates every row as OpenBLAS's dgemv evaluates that row of the full
-# matrix (``_exact.gemv_row``: four interleaved FMA chains over the columns), skipping the
-# zeros (an FMA with a zero coefficient leaves its chain unchanged), so it returns what
-# ``lifted_matrix(...) @ vector`` returns, to the last bit, at a fraction of the work.
+# ``run_block`` sums each output over the state, then over the inputs in their order (a
+# convolution), eight outputs at a time in one vector register, by fused multiply-adds: the result does not depend on the processor's
+# vector width, and a lane gives the same numbers alone or in a batch. It agrees with the
+# BLAS product ``lifted_matrix(...) @ vector`` to rounding (a few units in the last place of
+# the terms' magnitude; ``tests/contouring/test_exact.py``).
+
+
+#: Values after each signal's ``nb + 1`` in ``run_block``'s scratch and columns of ``g``
+#: besides its ``nb``: room for the overhang of the groups of eight.
+_SPARE = 16
+#: Zero columns of ``g`` before the response to an input (the feed-through in the last).
+_LEAD = 8
 
 
 def lifted_matrix(truth: ContouringParams, designs, block: int) -> np.ndarray:
@@ -459,19 +465,19 @@ def lifted_matrix(truth: ContouringParams, designs, block: int) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def _lift_axis(phi, gam, da, db, dc, dd, nb, f, h, a, b, cu):
+def _lift_axis(phi, gam, da, db, dc, dd, nb, ft, g, he, a, b, cu):
     """Closed loop of one axis (``closed_loop``'s arithmetic) and its block coefficients
-    (``lifted_matrix``'s), into ``f``, ``h`` (layout above), ``a``, ``b``, ``cu``; returns
-    the command's feed-through of the set point."""
+    (``lifted_matrix``'s), into ``ft``, ``g``, ``he`` (layout above), ``a``, ``b``, ``cu``;
+    returns the command's feed-through of the set point."""
     nk = da.shape[0]
     n = nk + 2
     dr = dd[0, 0]
     dy = dd[0, 1]
     a[:, :] = 0.0
     for i in range(2):
-        g = gam[i, 0] * dy
-        a[i, 0] = phi[i, 0] + g * 1.0
-        a[i, 1] = phi[i, 1] + g * 0.0
+        gy = gam[i, 0] * dy
+        a[i, 0] = phi[i, 0] + gy * 1.0
+        a[i, 1] = phi[i, 1] + gy * 0.0
         for j in range(nk):
             a[i, 2 + j] = gam[i, 0] * dc[0, j]
         b[i, 0] = gam[i, 0] * dr
@@ -488,36 +494,40 @@ def _lift_axis(phi, gam, da, db, dc, dd, nb, f, h, a, b, cu):
     for j in range(nk):
         cu[2 + j] = dc[0, j]
     # Powers A^j (dgemm: one FMA chain per entry) and A^m B.
+    sl = nb + _SPARE  # ``ft``'s columns are laid out as ``run_block``'s scratch
     p = np.eye(n)
     nxt = np.empty((n, n))
     pb = np.empty((n, 2))
-    h[:, :] = 0.0
+    ft[:, :] = 0.0
+    g[:, :] = 0.0
+    he[:, :] = 0.0
+    g[4, _LEAD - 1] = 0.0 + dr  # the command's feed-through of its own period's set point
     for j in range(nb + 1):
-        # the state's coefficients in the rows of this power: the position after period
-        # j (row j - 1), the velocity at j, the command of period j, the end state
+        # the state's coefficients in the values of this power: the position after period
+        # j (value j - 1), the velocity at j, the command of period j, the end state
         if j >= 1:
             for q in range(n):
-                f[j - 1, q] = p[0, q]
+                ft[q, j - 1] = p[0, q]
         for q in range(n):
-            f[nb + j, q] = p[1, q]
+            ft[q, sl + j] = p[1, q]
         if j < nb:
             for q in range(n):
                 acc = 0.0
                 for k in range(n):
                     acc += cu[k] * p[k, q]
-                f[2 * nb + 1 + j, q] = acc
+                ft[q, 2 * sl + j] = acc
             for r in range(n):
                 for c in range(2):
                     pb[r, c] = gemm_entry(p, b, r, c)
-            col = nb - 1 - j
-            for r in range(n):
-                h[2 * r, col] = pb[r, 0]
-                h[2 * r + 1, col] = pb[r, 1]
             for c in range(2):
+                g[c, _LEAD + j] = pb[0, c]
+                g[2 + c, _LEAD + j] = pb[1, c]
                 acc = 0.0
                 for k in range(n):
                     acc += cu[k] * pb[k, c]
-                h[2 * n + c, col] = acc
+                g[4 + c, _LEAD + j] = acc
+                for r in range(n):
+                    he[c, 8 * (nb - 1 - j) + r] = pb[r, c]
             for r in range(n):
                 for c in range(n):
                     nxt[r, c] = gemm_entry(a, p, r, c)
@@ -525,302 +535,90 @@ def _lift_axis(phi, gam, da, db, dc, dd, nb, f, h, a, b, cu):
         else:
             for r in range(n):
                 for q in range(n):
-                    f[3 * nb + 1 + r, q] = p[r, q]
-    h[2 * n, nb] = 0.0 + dr
+                    ft[q, 3 * sl + r] = p[r, q]
     return dr
 
 
 @numba.njit(cache=True, _nrt=False)
-def _coef_at(c, h, hi, off, cs, length):
-    if cs <= c < cs + length:
-        return h[hi, off + c - cs]
-    return 0.0
-
-
-@numba.njit(cache=True, _nrt=False)
-def _finish_row(v, x, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t):
-    """A row's sum of chains ``v`` plus the columns after the last whole block of four
-    (``_exact.gemv_row``'s ending)."""
-    n_cols = x.size
-    m3 = n_cols & 3
-    y = 0.0 + v
-    if m3 == 0:
-        return y
-    nbc = n_cols - m3
-    t0 = _coef_full(nbc, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t)
-    if m3 == 1:
-        return fma(t0, x[nbc], y)
-    t1 = _coef_full(nbc + 1, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t)
-    if m3 == 2:
-        return y + fma(t0, x[nbc], t1 * x[nbc + 1])
-    t2 = _coef_full(nbc + 2, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t)
-    return y + fma(t2, x[nbc + 2], fma(t0, x[nbc], t1 * x[nbc + 1]))
-
-
-@numba.njit(cache=True, _nrt=False)
-def _coef_full(c, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t):
-    """The row's coefficient in column ``c``."""
-    fq = f[fi, c - s0] if s0 <= c < s0 + n else 0.0
-    return fq + _coef_at(c, h, hr, off, cr, len_r) + _coef_at(c, h, ht, off, ct, len_t)
-
-
-@numba.njit(cache=True, inline="always")
-def _lane_add(mode, lane, v, xv, c0, c1, c2, c3):
-    """Add ``v * xv`` to chain ``lane``: an FMA (mode 0) or a multiply and an add."""
-    if mode == 0:
-        p = 0.0
-    else:
-        p = v * xv
-    if lane == 0:
-        c0 = fma(v, xv, c0) if mode == 0 else c0 + p
-    elif lane == 1:
-        c1 = fma(v, xv, c1) if mode == 0 else c1 + p
-    elif lane == 2:
-        c2 = fma(v, xv, c2) if mode == 0 else c2 + p
-    else:
-        c3 = fma(v, xv, c3) if mode == 0 else c3 + p
-    return c0, c1, c2, c3
-
-
-@numba.njit(cache=True, _nrt=False)
-def _lifted_row(x, r, n_rows, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t):
-    """Row ``r`` of ``lifted_matrix(...) @ x`` as ``_exact.gemv_row`` computes it, from the
-    row's state coefficients ``f[fi]`` (columns ``s0 ..``), its set-point coefficients
-    ``h[hr, off:]`` (columns ``cr ..``, ``len_r`` of them) and load coefficients
-    ``h[ht, off:]`` (columns ``ct ..``, ``len_t``); every other column of the row is zero."""
-    n_cols = x.size
-    nbc = n_cols - (n_cols & 3)
-    full = n_rows - (n_rows & 3)
-    two = (n_rows & 2) and r < full + 2
-    mode = 0 if r < full else 1
-    c0 = 0.0
-    c1 = 0.0
-    c2 = 0.0
-    c3 = 0.0
-    for q in range(n):
-        c = s0 + q
-        if c < nbc:
-            c0, c1, c2, c3 = _lane_add(mode, (c & 1) if (mode and two) else (c & 3),
-                                       f[fi, q], x[c], c0, c1, c2, c3)  # fmt: skip
-    for c in range(cr, min(cr + len_r, nbc)):
-        c0, c1, c2, c3 = _lane_add(mode, (c & 1) if (mode and two) else (c & 3),
-                                   h[hr, off + c - cr], x[c], c0, c1, c2, c3)  # fmt: skip
-    for c in range(ct, min(ct + len_t, nbc)):
-        c0, c1, c2, c3 = _lane_add(mode, (c & 1) if (mode and two) else (c & 3),
-                                   h[ht, off + c - ct], x[c], c0, c1, c2, c3)  # fmt: skip
-    if mode and two:
-        v = c0 + c1
-    else:
-        v = (c0 + c2) + (c1 + c3)
-    return _finish_row(v, x, f, fi, s0, n, h, hr, cr, ht, ct, off, len_r, len_t)
-
-
-@numba.njit(cache=True, inline="always")
-def _fma3(lane, xv, ca, cb, cc, a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3):
-    """Add ``ca * xv``, ``cb * xv``, ``cc * xv`` to chain ``lane`` of three rows."""
-    if lane == 0:
-        a0 = fma(ca, xv, a0)
-        b0 = fma(cb, xv, b0)
-        c0 = fma(cc, xv, c0)
-    elif lane == 1:
-        a1 = fma(ca, xv, a1)
-        b1 = fma(cb, xv, b1)
-        c1 = fma(cc, xv, c1)
-    elif lane == 2:
-        a2 = fma(ca, xv, a2)
-        b2 = fma(cb, xv, b2)
-        c2 = fma(cc, xv, c2)
-    else:
-        a3 = fma(ca, xv, a3)
-        b3 = fma(cb, xv, b3)
-        c3 = fma(cc, xv, c3)
-    return a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3
-
-
-@numba.njit(cache=True, _nrt=False)
-def _rows3(x, s0, n, f, fa, fb, fc, cr, h, hra, hrb, hrc, ct, hta, htb, htc, off, length, extra):
-    """Three rows of the lifted product that share their columns (all in whole blocks of
-    four rows of the matrix): the state (``f[fa]``, ``f[fb]``, ``f[fc]``), ``length`` set
-    points and loads (rows ``hr*`` and ``ht*`` of ``h`` from ``off``) and ``extra`` more
-    set points of the third row. Returns the three sums of chains.
-
-    The chains of a row are one register of four lanes (column ``c`` in lane ``c % 4``),
-    advanced a block of four columns at a time as the BLAS kernel advances them; the
-    columns of a range's first and last blocks that lie outside it are masked (``h`` has
-    ``_PAD`` columns of room on either side)."""
-    n_cols = x.size
-    nbc = n_cols - (n_cols & 3)
-    a = lanes_zero()
-    b = lanes_zero()
-    c = lanes_zero()
-    for q in range(n):
-        col = s0 + q
-        if col < nbc:
-            xv = x[col]
-            a = lanes_fma_one(a, col & 3, f[fa, q], xv)
-            b = lanes_fma_one(b, col & 3, f[fb, q], xv)
-            c = lanes_fma_one(c, col & 3, f[fc, q], xv)
-    ka = h[hra]
-    kb = h[hrb]
-    kc = h[hrc]
-    for part in range(2):
-        if part == 1:
-            ka = h[hta]
-            kb = h[htb]
-            kc = h[htc]
-        cs = cr if part == 0 else ct
-        end = min(cs + length, nbc)
-        if end > cs:
-            d = off - cs
-            col = cs - (cs & 3)
-            last = (end - 1) - ((end - 1) & 3)
-            if col < cs or col == last:  # the first block, masked
-                lo = cs - col
-                hi = min(end - col, 4)
-                a = lanes_fma_masked(a, ka, d + col, x, col, lo, hi)
-                b = lanes_fma_masked(b, kb, d + col, x, col, lo, hi)
-                c = lanes_fma_masked(c, kc, d + col, x, col, lo, hi)
-                col += 4
-            while col < last:
-                a = lanes_fma(a, ka, d + col, x, col)
-                b = lanes_fma(b, kb, d + col, x, col)
-                c = lanes_fma(c, kc, d + col, x, col)
-                col += 4
-            if col == last:  # the last block, masked
-                hi = end - col
-                a = lanes_fma_masked(a, ka, d + col, x, col, 0, hi)
-                b = lanes_fma_masked(b, kb, d + col, x, col, 0, hi)
-                c = lanes_fma_masked(c, kc, d + col, x, col, 0, hi)
-        if part == 0:
-            for e in range(extra):  # the third row's further set points
-                col = cr + length + e
-                if col < nbc:
-                    c = lanes_fma_one(c, col & 3, kc[off + length + e], x[col])
-    return lanes_sum(a), lanes_sum(b), lanes_sum(c)
-
-
-@numba.njit(cache=True, inline="always")
-def _full_row(g, nb, r0):
-    """Row ``g`` of the rows that read every column (the last position, the last
-    velocity, the end state): its row of ``f``, its first row of ``h``, its row of the
-    lifted matrix (axis rows from ``r0``)."""
-    if g == 0:
-        return nb - 1, 0, r0 + nb - 1
-    if g == 1:
-        return 2 * nb, 2, r0 + 2 * nb
-    q = g - 2
-    return 3 * nb + 1 + q, 2 * q, r0 + 3 * nb + 1 + q
-
-
-@numba.njit(cache=True, _nrt=False)
-def run_block(f, h, a, b, cu, du, gu, tq, umax, state, ref, load, pos, vel, cmd, torque, x, out,
-              zs):  # fmt: skip
+def run_block(ft, g, he, a, b, cu, du, gu, tq, umax, state, ref, load, pos, vel, cmd, torque,
+              y, zs):  # fmt: skip
     """Advance both axes of one loop by one block (``ServoLoop.run``; see there).
 
-    ``f``, ``h``, ``a``, ``b``, ``cu``, ``du``, ``gu``, ``tq`` are the lane's per-axis
-    arrays (leading dimension 2); ``x``, ``out`` and ``zs`` are scratch of the lifted
-    matrix's width and height and of two states. Writes ``pos``, ``vel`` (``nb + 1`` rows: the start, then after each
-    period), ``cmd``, ``torque``; updates ``state``; returns whether a command clipped.
+    ``ft``, ``g``, ``he``, ``a``, ``b``, ``cu``, ``du``, ``gu``, ``tq`` are the lane's
+    per-axis arrays (leading dimension 2; layout above); ``y`` and ``zs`` are scratch of
+    ``ServoLanes.scratch_size`` values and of two states. Writes ``pos``, ``vel``
+    (``nb + 1`` rows: the start, then after each period), ``cmd``, ``torque``; updates
+    ``state``; returns whether a command clipped.
+
+    In ``y`` each signal has a run of ``nb + _SPARE`` values (the positions after each
+    period, the velocities at each instant, the commands), then the end state: a group of
+    eight outputs may pass its signal's end into spare values, which are never read.
     """
     nb = ref.shape[0]
     n = a.shape[1]
-    ns = 2 * n
-    rows_axis = 3 * nb + 1 + n
-    n_rows = 2 * rows_axis
-    for q in range(ns):
-        x[q] = state[q]
-    for j in range(nb):
-        x[ns + j] = ref[j, 0]
-        x[ns + nb + j] = load[j, 0]
-        x[ns + 2 * nb + j] = ref[j, 1]
-        x[ns + 3 * nb + j] = load[j, 1]
-    hp, hpl, hv, hvl, hu, hul = 0, 1, 2, 3, 2 * n, 2 * n + 1
-    nbc = x.size - (x.size & 3)
-    for k in range(2):
-        fk = f[k]
-        hk = h[k]
-        s0 = k * n
-        cr = ns + 2 * nb * k
-        ct = cr + nb
-        r0 = k * rows_axis
-        # The position after period j, the velocity at j + 1 and the command of period
-        # j + 1 read the same columns: three rows at a time.
-        for j in range(nb - 1):
-            off = nb - 1 - j
-            fp, fv, fu = j, nb + j + 1, 2 * nb + 2 + j
-            vp, vv, vu = _rows3(x, s0, n, fk, fp, fv, fu, cr, hk, hp, hv, hu, ct, hpl, hvl,
-                                hul, off, j + 1, 1)  # fmt: skip
-            if ct + j + 1 <= nbc:  # no coefficient after the last whole block of four
-                out[r0 + j] = 0.0 + vp
-                out[r0 + nb + j + 1] = 0.0 + vv
-                out[r0 + 2 * nb + 2 + j] = 0.0 + vu
-                continue
-            out[r0 + j] = _finish_row(vp, x, fk, fp, s0, n, hk, hp, cr, hpl, ct, off, j + 1,
-                                      j + 1)  # fmt: skip
-            out[r0 + nb + j + 1] = _finish_row(vv, x, fk, fv, s0, n, hk, hv, cr, hvl, ct, off,
-                                               j + 1, j + 1)  # fmt: skip
-            out[r0 + 2 * nb + 2 + j] = _finish_row(vu, x, fk, fu, s0, n, hk, hu, cr, hul, ct,
-                                                   off, j + 2, j + 1)  # fmt: skip
-        r = r0 + nb  # the velocity at the start
-        out[r] = _lifted_row(x, r, n_rows, fk, nb, s0, n, hk, hv, cr, hvl, ct, nb, 0, 0)
-        r = r0 + 2 * nb + 1  # the first command
-        out[r] = _lifted_row(x, r, n_rows, fk, 2 * nb + 1, s0, n, hk, hu, cr, hul, ct, nb, 1, 0)
-        # The last position, the last velocity and the end state read every column:
-        # three rows at a time while they lie in whole blocks of four rows.
-        nfull = n + 2
-        full = n_rows - (n_rows & 3)
-        g = 0
-        while g < nfull and _full_row(g, nb, r0)[2] < full:
-            ga = g
-            gb = min(g + 1, nfull - 1)
-            gc = min(g + 2, nfull - 1)
-            if _full_row(gb, nb, r0)[2] >= full:
-                gb = ga
-            if _full_row(gc, nb, r0)[2] >= full:
-                gc = gb
-            fa, ha, _ = _full_row(ga, nb, r0)
-            fb, hb, _ = _full_row(gb, nb, r0)
-            fc, hc, _ = _full_row(gc, nb, r0)
-            va, vb, vc = _rows3(x, s0, n, fk, fa, fb, fc, cr, hk, ha, hb, hc, ct, ha + 1,
-                                hb + 1, hc + 1, 0, nb, 0)  # fmt: skip
-            for gg, vg in ((ga, va), (gb, vb), (gc, vc)):
-                fi, hi, r = _full_row(gg, nb, r0)
-                if ct + nb <= nbc:
-                    out[r] = 0.0 + vg
-                else:
-                    out[r] = _finish_row(vg, x, fk, fi, s0, n, hk, hi, cr, hi + 1, ct, 0, nb, nb)
-            g = max(ga, gb, gc) + 1
-        while g < nfull:  # rows past the last whole block of four
-            fi, hi, r = _full_row(g, nb, r0)
-            out[r] = _lifted_row(x, r, n_rows, fk, fi, s0, n, hk, hi, cr, hi + 1, ct, 0, nb, nb)
-            g += 1
+    sl = nb + _SPARE
+    rv = sl  # the velocities
+    ru = 2 * sl  # the commands
+    re = 3 * sl  # the end state
     clipped = False
     for k in range(2):
-        r0 = k * rows_axis
-        ru = r0 + 2 * nb + 1
+        fk = ft[k]
+        gk = g[k]
+        s0 = k * n
+        # The state's part of every value (``ft``'s columns are laid out as ``y``).
+        for r0 in range(0, fk.shape[1], 8):  # a whole number of groups of eight
+            v = zero8()
+            for q in range(0, n - 1, 2):
+                v = add_scaled8(v, fk[q], fk[q + 1], r0, state[s0 + q], state[s0 + q + 1])
+            if n & 1:
+                v = add_scaled8(v, fk[n - 1], fk[n - 1], r0, state[s0 + n - 1], 0.0)
+            store8(y, r0, v)
+        # Eight outputs of each signal at a time, over the inputs that reach them: position
+        # j from inputs i <= j, velocity j and command j from i < j (and the command's own
+        # set point), the zeros of g's lead standing for the inputs after an output.
+        g0, g1, g2, g3, g4, g5 = gk[0], gk[1], gk[2], gk[3], gk[4], gk[5]
+        for j0 in range(0, nb + 1, 8):
+            vp = load8(y, j0)
+            vv = load8(y, rv + j0)
+            vc = load8(y, ru + j0)
+            for i in range(min(nb, j0 + 8)):
+                ri = ref[i, k]
+                li = load[i, k]
+                vp = add_scaled8(vp, g0, g1, _LEAD + j0 - i, ri, li)
+                vv = add_scaled8(vv, g2, g3, _LEAD - 1 + j0 - i, ri, li)
+                vc = add_scaled8(vc, g4, g5, _LEAD - 1 + j0 - i, ri, li)
+            store8(y, j0, vp)
+            store8(y, rv + j0, vv)
+            store8(y, ru + j0, vc)
+        ve = load8(y, re)
+        hr = he[k, 0]
+        hl = he[k, 1]
+        for i in range(nb):
+            ve = add_scaled8(ve, hr, hl, 8 * i, ref[i, k], load[i, k])
+        store8(y, re, ve)
         # numpy's max(u.max(), -u.min()) > umax: never true when a command is NaN
         hi = -math.inf
         lo = math.inf
         nan = False
         for j in range(nb):
-            u = out[ru + j]
+            u = y[ru + j]
             if u != u:
                 nan = True
             hi = max(hi, u)
             lo = min(lo, u)
         if not nan and max(hi, -lo) > umax:
             clipped = True
-            _clipped_axis(a[k], b[k], cu[k], du[k], gu[k], umax, state[k * n : k * n + n],
+            _clipped_axis(a[k], b[k], cu[k], du[k], gu[k], umax, state[s0 : s0 + n],
                           ref[:, k], load[:, k], pos[:, k], vel[:, k], cmd[:, k], zs[:n],
                           zs[n:])  # fmt: skip
         else:
             for j in range(nb):
-                pos[j, k] = out[r0 + j]
-                cmd[j, k] = out[ru + j]
+                pos[j, k] = y[j]
+                cmd[j, k] = y[ru + j]
             for j in range(nb + 1):
-                vel[j, k] = out[r0 + nb + j]
+                vel[j, k] = y[rv + j]
             for q in range(n):
-                state[k * n + q] = out[r0 + 3 * nb + 1 + q]
+                state[s0 + q] = y[re + q]
         for j in range(nb):
             torque[j, k] = (vel[j + 1, k] - vel[j, k]) * tq[k] + load[j, k]
     return clipped
@@ -878,8 +676,15 @@ class ServoLanes:
             raise ValueError("the X and Y designs must have as many states")
         ns = nk + 2
         self.n_states_axis = ns
-        self.f = np.zeros((n, 2, 3 * block + 1 + ns, ns))
-        self.h = np.zeros((n, 2, 2 * ns + 2, block + 1))
+        if ns > 8:
+            raise ValueError(
+                f"the block update holds an axis's closed-loop state in eight values; "
+                f"the designs have {nk} states (at most 6)"
+            )
+        width = 3 * (block + _SPARE) + 8
+        self.ft = np.zeros((n, 2, ns, width + (-width) % 8))
+        self.g = np.zeros((n, 2, 6, block + _SPARE))
+        self.he = np.zeros((n, 2, 2, 8 * block))
         self.a = np.zeros((n, 2, ns, ns))
         self.b = np.zeros((n, 2, ns, 2))
         self.cu = np.zeros((n, 2, ns))
@@ -892,14 +697,9 @@ class ServoLanes:
         )
 
     @property
-    def width(self) -> int:
-        """Columns of the lifted matrix (state of both axes, then four inputs per period)."""
-        return 2 * self.n_states_axis + 4 * self.block
-
-    @property
-    def height(self) -> int:
-        """Rows of the lifted matrix."""
-        return 2 * (3 * self.block + 1 + self.n_states_axis)
+    def scratch_size(self) -> int:
+        """Values of the scratch :func:`run_block` needs (``ft``'s columns)."""
+        return self.ft.shape[-1]
 
     def start(self, lane: int, truth: ContouringParams) -> None:
         """Set ``lane``'s loops to the designs on the plant ``truth``."""
@@ -907,8 +707,8 @@ class ServoLanes:
             phi, gam = truth.discrete_axis(axis)
             da, db, dc, dd = self._design_arrays[k]
             self.du[lane, k] = _lift_axis(
-                phi, gam, da, db, dc, dd, self.block, self.f[lane, k], self.h[lane, k],
-                self.a[lane, k], self.b[lane, k], self.cu[lane, k],
+                phi, gam, da, db, dc, dd, self.block, self.ft[lane, k], self.g[lane, k],
+                self.he[lane, k], self.a[lane, k], self.b[lane, k], self.cu[lane, k],
             )  # fmt: skip
             self.gu[lane, k] = gam[:, 0]
             self.tq[lane, k] = truth.inertia_kgm2(axis) / (truth.mm_per_rad * truth.sample_time_s)
@@ -916,7 +716,7 @@ class ServoLanes:
 
     def copy_lane(self, dst: int, src: ServoLanes, lane: int) -> None:
         """Copy lane ``lane`` of ``src`` (same designs and block) into lane ``dst``."""
-        for name in ("f", "h", "a", "b", "cu", "du", "gu", "tq", "umax"):
+        for name in ("ft", "g", "he", "a", "b", "cu", "du", "gu", "tq", "umax"):
             getattr(self, name)[dst] = getattr(src, name)[lane]
 
 
@@ -948,8 +748,7 @@ class ServoLoop:
         self.designs = self.lanes.designs
         self.block = block
         self.n_states = 2 * self.lanes.n_states_axis
-        self._x = np.zeros(self.lanes.width)
-        self._out = np.zeros(self.lanes.height)
+        self._y = np.zeros(self.lanes.scratch_size)
         self._zs = np.zeros(self.n_states)
 
     def initial_state(self) -> np.ndarray:
@@ -981,9 +780,9 @@ class ServoLoop:
         cmd = np.empty((nb, 2))
         torque = np.empty((nb, 2))
         clipped = run_block(
-            ln.f[0], ln.h[0], ln.a[0], ln.b[0], ln.cu[0], ln.du[0], ln.gu[0], ln.tq[0],
+            ln.ft[0], ln.g[0], ln.he[0], ln.a[0], ln.b[0], ln.cu[0], ln.du[0], ln.gu[0], ln.tq[0],
             float(ln.umax[0]), state, np.ascontiguousarray(ref, dtype=np.float64),
-            np.ascontiguousarray(load, dtype=np.float64), pos, vel, cmd, torque, self._x,
-            self._out, self._zs,
+            np.ascontiguousarray(load, dtype=np.float64), pos, vel, cmd, torque, self._y,
+            self._zs,
         )  # fmt: skip
         return pos, vel[1:], cmd, torque, bool(clipped)

@@ -1,5 +1,6 @@
-"""Compiled building blocks the process kernels share: the fused multiply-add and the small
-matrix-vector products of the sampled plants, with numpy's rounding.
+"""Compiled building blocks the process kernels share: the fused multiply-add, the small
+matrix-vector products of the sampled plants with numpy's rounding, and eight-wide fused
+multiply-adds for the convolutions of the lifted servo blocks.
 
 The plants' sampled linear parts are products of small matrices with short vectors, once per
 lane and control period. A library call for each costs more than the arithmetic, so the
@@ -13,10 +14,11 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from numba.core import types
-from numba.extending import intrinsic
+from llvmlite import ir
+from numba.core import cgutils, types
+from numba.extending import intrinsic, models, register_model
 
-__all__ = ["fma", "matvec"]
+__all__ = ["add_scaled8", "fma", "load8", "matvec", "store8", "vec8", "zero8"]
 
 
 @intrinsic
@@ -26,6 +28,96 @@ def fma(typingctx, a, b, c):
 
     def codegen(context, builder, signature, args):
         return builder.fma(*args)
+
+    return sig, codegen
+
+
+class Vec8Type(types.Type):
+    """Eight float64 values held as one LLVM ``<8 x double>`` (a register, or two or four
+    on processors with narrower vector units)."""
+
+    def __init__(self) -> None:
+        super().__init__(name="Vec8")
+
+
+vec8 = Vec8Type()
+_V8 = ir.VectorType(ir.DoubleType(), 8)
+_F64 = types.Array(types.float64, 1, "C")
+
+
+@register_model(Vec8Type)
+class _Vec8Model(models.PrimitiveModel):
+    def __init__(self, dmm, fe_type):
+        super().__init__(dmm, fe_type, _V8)
+
+
+def _vector_at(context, builder, ary, idx):
+    """Pointer to ``ary[idx : idx + 8]`` (a 1-d float64 array) as one vector."""
+    arr = context.make_array(_F64)(context, builder, ary)
+    return builder.bitcast(builder.gep(arr.data, [idx]), _V8.as_pointer())
+
+
+def _splat8(builder, value):
+    v = ir.Constant(_V8, ir.Undefined)
+    for k in range(8):
+        v = builder.insert_element(v, value, ir.Constant(ir.IntType(32), k))
+    return v
+
+
+@intrinsic
+def load8(typingctx, x, o):
+    """``x[o : o + 8]`` as a :class:`Vec8Type` value (indices not checked)."""
+    if x != _F64:
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.load(_vector_at(context, builder, args[0], args[1]), align=8)
+
+    return vec8(_F64, types.intp), codegen
+
+
+@intrinsic
+def store8(typingctx, x, o, v):
+    """``x[o : o + 8] = v`` (indices not checked)."""
+    if x != _F64 or v != vec8:
+        return None
+
+    def codegen(context, builder, signature, args):
+        builder.store(args[2], _vector_at(context, builder, args[0], args[1]), align=8)
+        return context.get_dummy_value()
+
+    return types.none(_F64, types.intp, vec8), codegen
+
+
+@intrinsic
+def zero8(typingctx):
+    """Eight zeros as a :class:`Vec8Type` value."""
+
+    def codegen(context, builder, signature, args):
+        return ir.Constant(_V8, [0.0] * 8)
+
+    return vec8(), codegen
+
+
+@intrinsic
+def add_scaled8(typingctx, acc, a, b, o, sa, sb):
+    """``acc + a[o : o + 8] * sa + b[o : o + 8] * sb`` as two fused multiply-adds per value
+    (``fma(b, sb, fma(a, sa, acc))``, each rounded once), so the result does not depend on
+    how many lanes the processor's vectors have. Indices not checked: the caller keeps
+    ``[o, o + 8)`` inside the 1-d float64 arrays ``a`` and ``b``."""
+    if not (acc == vec8 and a == _F64 and b == _F64):
+        return None
+    sig = vec8(vec8, _F64, _F64, types.intp, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        accv, av, bv, o_, sa_, sb_ = args
+        fn = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(_V8, [_V8, _V8, _V8]), "llvm.fma.v8f64"
+        )
+        ta = builder.load(_vector_at(context, builder, av, o_), align=8)
+        tb = builder.load(_vector_at(context, builder, bv, o_), align=8)
+        accv = builder.call(fn, [ta, _splat8(builder, sa_), accv])
+        return builder.call(fn, [tb, _splat8(builder, sb_), accv])
 
     return sig, codegen
 
