@@ -531,10 +531,10 @@ class _FeedCore:
             self.applied[:] = self.act_lanes.apply(asked)
         _feed_step(
             self.in_action, self.in_clipped, self.applied, self.tabs, self.nseg, self.pf,
-            self.load_t, self.load_v, self.n_load, lp.ft, lp.g, lp.he, lp.a, lp.b, lp.cu, lp.du, lp.gu,
-            lp.tq, lp.umax, self.state, self.s, self.k, self.override, self.prev_action,
-            self.n_clipped, self._c, self._w, _LOOK, self._lo, self._hi, self.obs,
-            self.reward, self.flags, self.out, self.segment, *self._scratch,
+            self.load_t, self.load_v, self.n_load, lp.ft, lp.g, lp.he, lp.a, lp.b, lp.cu,
+            lp.du, lp.gu, lp.tq, lp.umax, self.state, self.s, self.k, self.override,
+            self.prev_action, self.n_clipped, self._c, self._w, _LOOK, self._lo, self._hi,
+            self.obs, self.reward, self.flags, self.out, self.segment, *self._scratch,
         )  # fmt: skip
 
     def lane_info(self, k: int, clipped: bool | None = None) -> dict:

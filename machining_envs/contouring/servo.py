@@ -394,10 +394,11 @@ def servo_design(kind: str, params: ContouringParams, axis: str) -> ServoDesign:
 # are Toeplitz in the inputs (the coefficient of an input depends only on how many periods
 # ago it was applied: ``A^m B``), so a lane keeps only the distinct coefficients:
 #
-# - ``FT`` (n, 3 (nb + S) + 8, rounded up to eights): the state's coefficients of every value, stored by state
-#   column, in the layout of ``run_block``'s scratch: the positions after each period, the
-#   velocities at the nb + 1 instants, the commands, each in a run of ``nb + S`` values
-#   (S = ``_SPARE``; zeros after the signal's end), then the end state (eight values);
+# - ``FT`` (n, 3 (nb + S) + 8, rounded up to a multiple of eight): the state's coefficients
+#   of every value, stored by state column, in the layout of ``run_block``'s scratch: the
+#   positions after each period, the velocities at the nb + 1 instants, the commands, each
+#   in a run of ``nb + S`` values (S = ``_SPARE``; zeros after the signal's end), then the
+#   end state (eight values);
 # - ``G`` (6, nb + S): the response ``m`` periods after an input at column ``L + m``
 #   (L = ``_LEAD``; zeros before and after): rows ``(A^m B)[0, 0 / 1]`` (position from
 #   set point / load), ``(A^m B)[1, 0 / 1]`` (velocity), ``Cu A^m B`` (command, whose
@@ -406,10 +407,11 @@ def servo_design(kind: str, params: ContouringParams, axis: str) -> ServoDesign:
 #   at ``8 i + q`` (eight values per input, zeros past the state).
 #
 # ``run_block`` sums each output over the state, then over the inputs in their order (a
-# convolution), eight outputs at a time in one vector register, by fused multiply-adds: the result does not depend on the processor's
-# vector width, and a lane gives the same numbers alone or in a batch. It agrees with the
-# BLAS product ``lifted_matrix(...) @ vector`` to rounding (a few units in the last place of
-# the terms' magnitude; ``tests/contouring/test_exact.py``).
+# convolution), eight outputs at a time in one vector register, by fused multiply-adds:
+# the result does not depend on the vector width, and a lane gives the same numbers alone
+# or in a batch. It agrees with the BLAS product ``lifted_matrix(...) @ vector`` to
+# rounding (a few units in the last place of the terms' magnitude;
+# ``tests/contouring/test_exact.py``).
 
 
 #: Values after each signal's ``nb + 1`` in ``run_block``'s scratch and columns of ``g``
