@@ -264,13 +264,21 @@ _PTICKS = np.array(PREVIEW_TICKS)
 def _contour_step(act, clipped, lf, li, cf, tabs, nseg, rb, loads, obs, out, flags):
     """One servo period of every lane (``ContouringEnv.step`` after its input checks).
 
-    ``flags[k]`` = ``[diverged, finished, terminated, truncated, action clipped]``."""
+    ``act`` holds finite actions; one outside the box is clipped here (and ``clipped[lane]``
+    set, as it is already where the caller clipped it). ``flags[k]`` = ``[diverged,
+    finished, terminated, truncated, action clipped]``."""
     ts = cf[_CTS]
     umax = cf[_CUMAX]
     two = cf[_CTWO]
     for lane in range(act.shape[0]):
         ax = act[lane, 0]
         ay = act[lane, 1]
+        if not (-1.0 <= ax <= 1.0 and -1.0 <= ay <= 1.0):  # finite here: clip to the box
+            ax = min(max(ax, -1.0), 1.0)
+            ay = min(max(ay, -1.0), 1.0)
+            act[lane, 0] = ax
+            act[lane, 1] = ay
+            clipped[lane] = True
         li[lane, _ICLIP] += clipped[lane]
         ux = ax * umax
         uy = ay * umax
@@ -554,22 +562,22 @@ class _ContouringCore:
 
     def info_arrays(self) -> dict:
         """The step info of every lane, as arrays (keys that only some lanes have come with
-        their ``_key`` masks)."""
-        o = self.out
-        f = self.flags
+        their ``_key`` masks): mostly views of one copy of the outputs and one of the flags."""
+        o = self.out.copy()
+        f = self.flags.copy()
         info = {
-            "t_s": o[:, 1].copy(),
+            "t_s": o[:, 1],
             "command": o[:, 2:4].copy(),
-            "command_x_mm_s": o[:, 2].copy(),
-            "command_y_mm_s": o[:, 3].copy(),
-            "action_clipped": f[:, 4].copy(),
+            "command_x_mm_s": o[:, 2],
+            "command_y_mm_s": o[:, 3],
+            "action_clipped": f[:, 4],
             "n_action_clipped": self.li[:, _ICLIP].copy(),
             "breakage": np.zeros(self.n, dtype=bool),
-            "diverged": f[:, 0].copy(),
-            "finished": f[:, 1].copy(),
+            "diverged": f[:, 0],
+            "finished": f[:, 1],
         }
         for i, name in enumerate(_OUT[4:-1], start=4):
-            info[name] = o[:, i].copy()
+            info[name] = o[:, i]
         info["contour_tolerance_mm"] = np.full(self.n, CONTOUR_TOLERANCE_MM)
         info["cost"] = (o[:, 8] > CONTOUR_TOLERANCE_MM).astype(np.float64)
         info["path_length_mm"] = self.lf[:, _LLEN].copy()
@@ -582,7 +590,7 @@ class _ContouringCore:
                 info[key] = self.circle[:, i].copy()
                 info["_" + key] = self.has_circle.copy()
         info["machining_time_s"] = np.where(f[:, 1], o[:, 18], np.nan)
-        info["_machining_time_s"] = f[:, 1].copy()
+        info["_machining_time_s"] = f[:, 1]
         return info
 
 
@@ -811,8 +819,8 @@ class ContouringVectorEnv(LaneVectorEnv):
 
     def _step_lanes(self, actions):
         core = self._core
-        core.clipped[:] = ((actions < -1.0) | (actions > 1.0)).any(axis=1)
-        np.clip(actions, -1.0, 1.0, out=core.act)
+        core.clipped[:] = False
+        core.act[:] = actions  # clipped to the box by the kernel
         core.step()
         f = core.flags
         return (

@@ -133,8 +133,8 @@ class LaneVectorEnv(gym.vector.VectorEnv):
                 raise ValueError(
                     f"{self.env_name} (vector): actions must have shape {shape}, got {a.shape}"
                 )
-        finite = np.isfinite(a).reshape(self.num_envs, -1).all(axis=1)
-        if not finite.all():
+        if not np.isfinite(a).all():
+            finite = np.isfinite(a).reshape(self.num_envs, -1).all(axis=1)
             lane = int(np.flatnonzero(~finite)[0])
             raise ValueError(
                 f"{self.env_name} (vector): the action of lane {lane} is {a[lane].tolist()} "

@@ -61,7 +61,7 @@ _TORQUE_OBS = (-1.0, 10.0)
 #: Rows of five standard normals drawn from the generator at a time (a block), and rows
 #: held in memory at a time.
 _NOISE_BLOCK = 256
-_NOISE_ROWS = 64
+_NOISE_ROWS = 256
 #: What the action commands: the valve voltage (the paper's loop) or the feed velocity.
 CONTROL_MODES = ("voltage", "feed")
 #: The signals render() draws: name -> the info key each is read from.
