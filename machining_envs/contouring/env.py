@@ -107,14 +107,12 @@ def check_action_vector(action, n: int, env_name: str) -> tuple[list[float], boo
     vals = a.tolist()
     clipped = False
     for i, v in enumerate(vals):
+        if -1.0 <= v <= 1.0:  # the usual case: one test (false for NaN)
+            continue
         if not math.isfinite(v):
             raise ValueError(f"{env_name}: action must be finite, got {a!r}")
-        if v > 1.0:
-            vals[i] = 1.0
-            clipped = True
-        elif v < -1.0:
-            vals[i] = -1.0
-            clipped = True
+        vals[i] = 1.0 if v > 1.0 else -1.0
+        clipped = True
     return vals, clipped
 
 

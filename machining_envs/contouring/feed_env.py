@@ -39,7 +39,13 @@ from machining_envs.contouring.scenarios import (
     check_feed,
     contouring_scenario,
 )
-from machining_envs.contouring.servo import SERVO_KINDS, ServoLanes, run_block, servo_design
+from machining_envs.contouring.servo import (
+    SERVO_KINDS,
+    ServoLanes,
+    lane_loops,
+    run_block,
+    servo_design,
+)
 from machining_envs.core.actuation import (
     Actuation,
     ActuationLanes,
@@ -116,7 +122,6 @@ _OUT = ("t_s", "command_x_mm_s", "command_y_mm_s", "x_mm", "y_mm", "x_ref_mm", "
         "vy_mm_s", "torque_x_Nm", "torque_y_Nm", "torque_sq_Nm2", "load_x_Nm", "load_y_Nm",
         "feed_override", "path_speed_mm_s", "path_s_mm", "machining_time_s")  # fmt: skip
 _O = {name: i for i, name in enumerate(_OUT)}
-_LOOK = np.array(LOOKAHEAD_MM)
 
 
 @numba.njit(cache=True)
@@ -184,22 +189,48 @@ def _carve(sc, nb, n_y, n_state, n_seg):
     return st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, y, zs, lower
 
 
+#: Columns of ``_FeedCore.lf`` (per-lane floats) and ``_FeedCore.li`` (per-lane integers).
+_LF = ("in_action", "applied", "s", "override", "prev_action", "reward")
+_LI = ("in_clipped", "nseg", "n_load", "k", "n_clipped", "segment")
+#: ``_FeedCore.consts``: ``c`` (see :func:`_feed_step`), the reward weights, the lookahead
+#: distances, the observation's lower and upper bounds; where each starts.
+_C_W = 8
+_C_LOOK = _C_W + 4
+_C_LO = _C_LOOK + len(LOOKAHEAD_MM)
+_C_HI = _C_LO + len(_LIMS)
+_N_OBS = len(_LIMS)
+
+
 @numba.njit(cache=True, _nrt=False)
-def _feed_step(actions, clipped, applied, tabs, nseg, pf, load_t, load_v, n_load, sf, sg, she, sa,
-               sb, scu, sdu, sgu, stq, sumax, state, s, kk, override, prev_action, n_clipped,
-               c, w, look, lo, hi, obs, reward, flags, out, segment, sc, order):  # fmt: skip
+def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, lay, state, consts, obs, flags, out, sc,
+               order):  # fmt: skip
     """One decision step of every lane (``ContouringFeedEnv.step`` after its input checks).
 
-    ``c`` = ``[n_sub, Ts, tolerance, in_position, divergence, override mid, override half,
-    actuated]``: where ``actuated`` is 1 the override is ``applied[k]`` (what the CNC's
-    actuation made of the action's), else the action's;
-    ``w`` = the reward weights; ``flags[k]`` = ``[diverged, finished, terminated,
-    truncated]``; ``sc``, ``order`` = float and integer scratch (``_FeedCore._scratch``)."""
+    ``lf`` and ``li`` hold the per-lane floats and integers (columns ``_LF``, ``_LI``),
+    ``loops`` and ``lay`` the lanes' closed loops (``ServoLanes.buf`` and ``.layout``),
+    ``consts`` the env's constants: ``c`` = ``consts[:8]`` = ``[n_sub, Ts, tolerance,
+    in_position, divergence, override mid, override half, actuated]``: where ``actuated``
+    is 1 the override is ``applied[k]`` (what the CNC's actuation made of the action's),
+    else the action's; then the reward weights ``w``, the lookahead distances and the
+    observation's bounds (offsets ``_C_*``). ``flags[k]`` = ``[diverged, finished,
+    terminated, truncated]``; ``sc``, ``order`` = float and integer scratch
+    (``_FeedCore._scratch``). Few arguments: each costs the call about 0.05 µs."""
+    actions, applied, s, override, prev_action, reward = (
+        lf[:, 0], lf[:, 1], lf[:, 2], lf[:, 3], lf[:, 4], lf[:, 5]
+    )  # fmt: skip
+    clipped, nseg, n_load, kk, n_clipped, segment = (
+        li[:, 0], li[:, 1], li[:, 2], li[:, 3], li[:, 4], li[:, 5]
+    )  # fmt: skip
+    c = consts[:_C_W]
+    w = consts[_C_W:_C_LOOK]
+    look = consts[_C_LOOK:_C_LO]
+    lo = consts[_C_LO:_C_HI]
+    hi = consts[_C_HI : _C_HI + _N_OBS]
     n = int(c[0])
     ts = c[1]
     tol = c[2]
     st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, y, zs, lower = _carve(
-        sc, n, sf.shape[-1], state.shape[1], order.size
+        sc, n, lay[1], state.shape[1], order.size
     )
     for k in range(actions.shape[0]):
         tab = tabs[k, : nseg[k]]
@@ -225,8 +256,9 @@ def _feed_step(actions, clipped, applied, tabs, nseg, pf, load_t, load_v, n_load
                 i += 1
             load[j, 0] = load_v[k, i, 0]
             load[j, 1] = load_v[k, i, 1]
-        run_block(sf[k], sg[k], she[k], sa[k], sb[k], scu[k], sdu[k], sgu[k], stq[k], sumax[k],
-                  state[k], ref, load, pos, vel, cmd, torque, y, zs)  # fmt: skip
+        ft, g, he, sa, sb, cu, du, gu, tq, umax = lane_loops(loops[k], lay)
+        run_block(ft, g, he, sa, sb, cu, du, gu, tq, umax[0], state[k], ref, load, pos, vel, cmd,
+                  torque, y, zs)  # fmt: skip
         diverged = False
         for j in range(n):
             px[j] = pos[j, 0] + x0
@@ -367,41 +399,37 @@ class _FeedCore:
         low = -high
         low[[0, 1, 4, 5, 6, 12]] = 0.0
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
-        # The bounds as the observation clips to them (Python floats of the float32 box).
-        self._lo = np.array(low.tolist())
-        self._hi = np.array(high.tolist())
         w = self.reward_weights
-        self._w = np.array([w.progress, w.time, w.tolerance, w.divergence])
         cm = self.command_map
-        self._c = np.array([n_sub, ts, self.tolerance_mm, self.in_position_mm,
-                            self.divergence_mm, cm._mid, cm._half, 0.0])  # fmt: skip
+        # The kernel's constants (_C_* offsets), with the bounds as the observation clips to
+        # them (Python floats of the float32 box); named by views.
+        self.consts = np.array([
+            n_sub, ts, self.tolerance_mm, self.in_position_mm, self.divergence_mm, cm._mid,
+            cm._half, 0.0, w.progress, w.time, w.tolerance, w.divergence, *LOOKAHEAD_MM,
+            *low.tolist(), *high.tolist(),
+        ])  # fmt: skip
         self.n = n
+        # Per-lane floats and integers, each set in one array (one argument of the kernel)
+        # and named by views of its columns (_LF, _LI).
+        self.lf = np.zeros((n, len(_LF)))
+        self.li = np.zeros((n, len(_LI)), dtype=np.int64)
+        self._bind_views()
+        self.prev_action[:] = -1.0
         # The CNC's override handling, made now if the option sets it (its checks fail
         # here), else when a scenario first brings its own.
         self.act_lanes = None if self.actuation is None else self._actuation_lanes()
-        self.applied = np.zeros(n)
+        self.nseg[:] = 1
         self.loops = ServoLanes(designs, n_sub, n)
         self._loop_cache: dict = {}
         self.state = np.zeros((n, 2 * self.loops.n_states_axis))
         self.tabs = np.zeros((n, 4, SEGMENT_COLUMNS))
-        self.nseg = np.ones(n, dtype=np.int64)
         self.pf = np.ones((n, len(_PF)))
         self.bound = np.full(n, np.nan)
         self.load_t = np.full((n, 1), np.inf)
         self.load_v = np.zeros((n, 2, 2))
-        self.n_load = np.zeros(n, dtype=np.int64)
-        self.s = np.zeros(n)
-        self.k = np.zeros(n, dtype=np.int64)
-        self.override = np.zeros(n)
-        self.prev_action = np.full(n, -1.0)
-        self.n_clipped = np.zeros(n, dtype=np.int64)
         self.obs = np.zeros((n, 16), dtype=np.float32)
-        self.reward = np.zeros(n)
         self.flags = np.zeros((n, 4), dtype=np.bool_)
         self.out = np.zeros((n, len(_OUT)))
-        self.segment = np.zeros(n, dtype=np.int64)
-        self.in_action = np.zeros(n)
-        self.in_clipped = np.zeros(n, dtype=np.int64)
         self.scenarios: list[ContouringScenario | None] = [None] * n
         self.paths: list = [None] * n
         self.names = np.full(n, "", dtype=object)
@@ -411,6 +439,27 @@ class _FeedCore:
         self.circle = np.zeros((n, 3))
         n_seg = self.tabs.shape[1]
         self._scratch = (self._float_scratch(n_seg), np.zeros(n_seg, dtype=np.int64))
+        self._bind()
+
+    def _bind_views(self) -> None:
+        """Name the columns of ``lf`` (``_LF``), ``li`` (``_LI``) and ``consts``."""
+        for i, name in enumerate(_LF):
+            setattr(self, name, self.lf[:, i])
+        for i, name in enumerate(_LI):
+            setattr(self, name, self.li[:, i])
+        self._c = self.consts[:_C_W]
+        self._lo = self.consts[_C_LO:_C_HI]
+        self._hi = self.consts[_C_HI:]
+
+    def __getstate__(self) -> dict:
+        # A pickled view is a copy: the views are made anew on loading.
+        views = {*_LF, *_LI, "_c", "_lo", "_hi", "_args"}
+        return {k: v for k, v in self.__dict__.items() if k not in views}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._bind_views()
+        self._bind()
 
     def _float_scratch(self, n_seg: int) -> np.ndarray:
         lp = self.loops
@@ -449,6 +498,7 @@ class _FeedCore:
             lv = np.zeros((self.n, n_load + 1, 2))
             lv[:, : self.load_v.shape[1]] = self.load_v
             self.load_t, self.load_v = lt, lv
+        self._bind()
 
     def start(self, lane: int, spec, rng: np.random.Generator) -> dict:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
@@ -508,8 +558,8 @@ class _FeedCore:
             **circles,
         }
         _feed_reset_obs(lane, self.tabs, self.nseg, self.pf, self.s, self.override,
-                        self.prev_action, self.tolerance_mm, _LOOK, self._lo, self._hi,
-                        self.obs)  # fmt: skip
+                        self.prev_action, self.tolerance_mm, self.consts[_C_LOOK:_C_LO],
+                        self._lo, self._hi, self.obs)  # fmt: skip
         rx, ry = path.point(0.0)
         o = self.out[lane]
         o[:] = 0.0
@@ -525,16 +575,18 @@ class _FeedCore:
         """Advance every lane with the (checked, clipped) actions in ``in_action``; whether
         each was clipped is in ``in_clipped``. With CNC actuation on, the overrides the
         actions ask for pass through it first (``machining_envs.core.actuation``)."""
-        lp = self.loops
         if self.act_lanes is not None:
             asked = self._c[5] + self._c[6] * self.in_action
             self.applied[:] = self.act_lanes.apply(asked)
-        _feed_step(
-            self.in_action, self.in_clipped, self.applied, self.tabs, self.nseg, self.pf,
-            self.load_t, self.load_v, self.n_load, lp.ft, lp.g, lp.he, lp.a, lp.b, lp.cu,
-            lp.du, lp.gu, lp.tq, lp.umax, self.state, self.s, self.k, self.override,
-            self.prev_action, self.n_clipped, self._c, self._w, _LOOK, self._lo, self._hi,
-            self.obs, self.reward, self.flags, self.out, self.segment, *self._scratch,
+        _feed_step(*self._args)
+
+    def _bind(self) -> None:
+        """Gather the kernel's arguments once (again whenever an array is replaced, as
+        :meth:`_grow` does), not attribute by attribute every step."""
+        self._args = (
+            self.lf, self.li, self.tabs, self.pf, self.load_t, self.load_v, self.loops.buf,
+            self.loops.layout, self.state, self.consts, self.obs, self.flags, self.out,
+            *self._scratch,
         )  # fmt: skip
 
     def lane_info(self, k: int, clipped: bool | None = None) -> dict:
@@ -542,13 +594,14 @@ class _FeedCore:
         the action was clipped; by default as recorded by the last step)."""
         o = self.out[k].tolist()
         diverged, finished = self.flags[k, :2].tolist()
+        in_clipped, _, _, _, n_clipped, segment = self.li[k].tolist()  # _LI
         info = {
             "t_s": o[0],
             "command": self.out[k, 1:3].copy(),
             "command_x_mm_s": o[1],
             "command_y_mm_s": o[2],
-            "action_clipped": bool(self.in_clipped[k]) if clipped is None else clipped,
-            "n_action_clipped": int(self.n_clipped[k]),
+            "action_clipped": in_clipped != 0 if clipped is None else clipped,
+            "n_action_clipped": n_clipped,
             "breakage": False,
             "diverged": diverged,
             "finished": finished,
@@ -570,7 +623,7 @@ class _FeedCore:
             "feed_override": o[17],
             "path_speed_mm_s": o[18],
             "path_s_mm": o[19],
-            "segment": int(self.segment[k]),
+            "segment": segment,
             **self.episode_info[k],
         }
         if finished:

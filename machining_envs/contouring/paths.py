@@ -880,10 +880,28 @@ def _segment_distances(row, px, py, n, out):
             out[j] = math.hypot(px[j] - (x0 + ux * t), py[j] - (y0 + uy * t))
         return
     if kind == _ARC:
+        # A point well inside the arc's wedge (by two cross products with the unit vectors
+        # to its ends) has the distance |rho - R| without the angle; a sweep under 3 rad
+        # keeps the wedge the meet of two half-planes, a radius not tiny beside the centre's
+        # coordinates keeps those unit vectors within 1e-10 of the angles' (margin 1e-8).
+        cx = row[6]
+        cy = row[7]
+        r = row[8]
+        sg = row[10]
+        wedge = row[11] < 3.0 and r >= 1e-5 * (abs(cx) + abs(cy) + 1.0)
+        u0x = (row[12] - cx) / r
+        u0y = (row[13] - cy) / r
+        u1x = (row[14] - cx) / r
+        u1y = (row[15] - cy) / r
         for j in range(n):
             dx = px[j] - row[6]
             dy = py[j] - row[7]
             rho = math.hypot(dx, dy)
+            if wedge:
+                m = 1e-8 * rho
+                if sg * (u0x * dy - u0y * dx) > m and sg * (dx * u1y - dy * u1x) > m:
+                    out[j] = abs(rho - r)
+                    continue
             rel = (math.atan2(dy, dx) - row[9]) * row[10] % _TWO_PI
             if rel <= row[11] and rho > 0.0:
                 out[j] = abs(rho - row[8])
@@ -927,22 +945,30 @@ def path_distances(tab, px, py, n, out, scratch, lower, order):
     """``Path.distances(px[:n], py[:n])`` into ``out[:n]`` (scratch: ``scratch`` of ``n``
     floats, ``lower`` and ``order`` of one float and one integer per segment).
 
-    As there: the segments are tried from the one whose bounding circle lies nearest the
-    points' centroid, and a segment is skipped when its circle lies beyond the largest
-    distance found so far."""
+    The numbers are those of ``Path.distances`` (each point's least distance over the
+    segments, each distance computed as there), found with less work: the segments are
+    tried from the one nearest the points' centroid, and a segment is skipped when it can
+    be no nearer to any point than the largest distance found so far. A distance moves by
+    at most what its point moves, so a point lies no nearer to a segment than the
+    centroid's distance to it less the points' spread about the centroid; the test
+    leaves a margin far above the rounding of these numbers."""
     ns = tab.shape[0]
     if ns == 1:
         _segment_distances(tab[0], px, py, n, out)
         return
     mx = np_mean(px[:n])
     my = np_mean(py[:n])
-    spread = 0.0
+    spread2 = 0.0
     for j in range(n):
-        h = math.hypot(px[j] - mx, py[j] - my)
-        if j == 0 or h > spread or h != h:
-            spread = h
+        dx = px[j] - mx
+        dy = py[j] - my
+        h2 = dx * dx + dy * dy
+        if h2 > spread2 or h2 != h2:
+            spread2 = h2
+    spread = math.sqrt(spread2)  # NaN where a point is not finite: then nothing is skipped
+    scale = abs(mx) + abs(my) + spread
     for k in range(ns):  # a stable insertion sort of the segments by their lower bound
-        v = py_hypot(mx - tab[k, 3], my - tab[k, 4]) - tab[k, 5]
+        v = _segment_distance(tab[k], mx, my) - spread
         lower[k] = v
         i = k
         while i > 0 and lower[order[i - 1]] > v:
@@ -956,7 +982,7 @@ def path_distances(tab, px, py, n, out, scratch, lower, order):
         for j in range(1, n):
             if out[j] > dmax or out[j] != out[j]:
                 dmax = out[j]
-        if lower[k] - spread >= dmax:
+        if lower[k] - 1e-9 * (scale + abs(lower[k]) + dmax) >= dmax:
             continue
         _segment_distances(tab[k], px, py, n, scratch)
         for j in range(n):

@@ -50,6 +50,7 @@ __all__ = [
     "closed_loop",
     "ServoLoop",
     "ServoLanes",
+    "lane_loops",
     "lifted_matrix",
     "run_block",
     "SERVO_KINDS",
@@ -654,6 +655,43 @@ def _clipped_axis(a, b, cu, du, gu, umax, z0, ref, load, pos, vel, cmd, z, zn):
         z0[q] = z[q]
 
 
+#: The arrays of a lane's loops (:class:`ServoLanes`), in their order in its row.
+_LANE_ARRAYS = ("ft", "g", "he", "a", "b", "cu", "du", "gu", "tq", "umax")
+
+
+@numba.njit(cache=True)
+def _row_size(lay):
+    """Values in a lane's row of ``ServoLanes.buf`` (``lay`` = ``ServoLanes.layout``): its
+    arrays, then up to seven unused, so that every row starts 64 bytes after the last."""
+    ns, w, gl, hl = lay[0], lay[1], lay[2], lay[3]
+    size = 2 * ns * w + 12 * gl + 4 * hl + 2 * ns * ns + 6 * ns + 9
+    return size + (-size) % 8
+
+
+@numba.njit(cache=True, inline="always")
+def lane_loops(row, lay):
+    """A lane's loops as views of its row of ``ServoLanes.buf`` (``lay`` =
+    ``ServoLanes.layout``): ``(ft, g, he, a, b, cu, du, gu, tq, umax)`` as
+    :func:`run_block` takes them, except ``umax``, an array of one value."""
+    ns, w, gl, hl = lay[0], lay[1], lay[2], lay[3]
+    ft = row[: 2 * ns * w].reshape((2, ns, w))
+    o = 2 * ns * w
+    g = row[o : o + 12 * gl].reshape((2, 6, gl))
+    o += 12 * gl
+    he = row[o : o + 4 * hl].reshape((2, 2, hl))
+    o += 4 * hl
+    a = row[o : o + 2 * ns * ns].reshape((2, ns, ns))
+    o += 2 * ns * ns
+    b = row[o : o + 4 * ns].reshape((2, ns, 2))
+    o += 4 * ns
+    cu = row[o : o + 2 * ns].reshape((2, ns))
+    o += 2 * ns
+    du = row[o : o + 2]
+    gu = row[o + 2 : o + 6].reshape((2, 2))
+    tq = row[o + 6 : o + 8]
+    return ft, g, he, a, b, cu, du, gu, tq, row[o + 8 : o + 9]
+
+
 class ServoLanes:
     """The closed loops of N lanes (each a pair of designs on its own true plant), in the
     arrays :func:`run_block` reads.
@@ -684,19 +722,36 @@ class ServoLanes:
                 f"the designs have {nk} states (at most 6)"
             )
         width = 3 * (block + _SPARE) + 8
-        self.ft = np.zeros((n, 2, ns, width + (-width) % 8))
-        self.g = np.zeros((n, 2, 6, block + _SPARE))
-        self.he = np.zeros((n, 2, 2, 8 * block))
-        self.a = np.zeros((n, 2, ns, ns))
-        self.b = np.zeros((n, 2, ns, 2))
-        self.cu = np.zeros((n, 2, ns))
-        self.du = np.zeros((n, 2))
-        self.gu = np.zeros((n, 2, 2))
-        self.tq = np.zeros((n, 2))
-        self.umax = np.zeros(n)
+        #: The sizes :func:`lane_loops` carves a lane's row of :attr:`buf` by.
+        self.layout = np.array([ns, width + (-width) % 8, block + _SPARE, 8 * block])
+        one = lane_loops(np.zeros(_row_size(self.layout)), self.layout)
+        #: Every lane's arrays in one row each (one argument for a compiled step); the
+        #: named arrays below are views of it over all lanes, laid out by lane_loops.
+        self.buf = np.zeros((n, _row_size(self.layout)))
+        self._shapes = tuple(v.shape for v in one)
+        self._bind_views()
         self._design_arrays = tuple(
             tuple(np.ascontiguousarray(m) for m in (d.a, d.b, d.c, d.d)) for d in self.designs
         )
+
+    def _bind_views(self) -> None:
+        """Name the runs of :attr:`buf` over all lanes (``_LANE_ARRAYS``)."""
+        o = 0
+        for name, shape in zip(_LANE_ARRAYS, self._shapes, strict=True):
+            size = math.prod(shape)
+            view = self.buf[:, o : o + size].reshape((self.n, *shape))
+            assert np.shares_memory(view, self.buf)
+            setattr(self, name, view)
+            o += size
+        self.umax = self.umax[:, 0]
+
+    def __getstate__(self) -> dict:
+        # A pickled view is a copy: the views are made anew from buf on loading.
+        return {k: v for k, v in self.__dict__.items() if k not in _LANE_ARRAYS}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._bind_views()
 
     @property
     def scratch_size(self) -> int:
@@ -718,8 +773,7 @@ class ServoLanes:
 
     def copy_lane(self, dst: int, src: ServoLanes, lane: int) -> None:
         """Copy lane ``lane`` of ``src`` (same designs and block) into lane ``dst``."""
-        for name in ("ft", "g", "he", "a", "b", "cu", "du", "gu", "tq", "umax"):
-            getattr(self, name)[dst] = getattr(src, name)[lane]
+        self.buf[dst] = src.buf[lane]
 
 
 class ServoLoop:
