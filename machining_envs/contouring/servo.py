@@ -41,7 +41,7 @@ from scipy.signal import cont2discrete
 from machining_envs.contouring._exact import dot, gemm_entry, gemv_row
 from machining_envs.contouring.plant import AXES, ContouringParams
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_integer, check_range
-from machining_envs.core.kernels import add_scaled8, load8, store8, zero8
+from machining_envs.core.kernels import add_scaled8, add_scaled_vec8, load8, store8, zero8
 
 __all__ = [
     "ServoDesign",
@@ -570,17 +570,17 @@ def run_block(ft, g, he, a, b, cu, du, gu, tq, umax, state, ref, load, pos, vel,
         s0 = k * n
         # The state's part of every value (``ft``'s columns are laid out as ``y``).
         for r0 in range(0, fk.shape[1], 8):  # a whole number of groups of eight
-            v = zero8()
-            for q in range(0, n - 1, 2):
-                v = add_scaled8(v, fk[q], fk[q + 1], r0, state[s0 + q], state[s0 + q + 1])
-            if n & 1:
-                v = add_scaled8(v, fk[n - 1], fk[n - 1], r0, state[s0 + n - 1], 0.0)
-            store8(y, r0, v)
+            store8(y, r0, _state_part(fk, state, s0, n, r0))
         # Eight outputs of each signal at a time, over the inputs that reach them: position
         # j from inputs i <= j, velocity j and command j from i < j (and the command's own
         # set point), the zeros of g's lead standing for the inputs after an output.
         g0, g1, g2, g3, g4, g5 = gk[0], gk[1], gk[2], gk[3], gk[4], gk[5]
-        for j0 in range(0, nb + 1, 8):
+        # The groups with the most inputs (the last) four at a time, the rest one at a time.
+        j = nb - nb % 8 - 24
+        while j >= 0:
+            _four_groups(y, j, rv, ru, nb, g0, g1, g2, g3, g4, g5, ref, load, k)
+            j -= 32
+        for j0 in range(0, j + 32, 8):
             vp = load8(y, j0)
             vv = load8(y, rv + j0)
             vc = load8(y, ru + j0)
@@ -625,6 +625,90 @@ def run_block(ft, g, he, a, b, cu, du, gu, tq, umax, state, ref, load, pos, vel,
         for j in range(nb):
             torque[j, k] = (vel[j + 1, k] - vel[j, k]) * tq[k] + load[j, k]
     return clipped
+
+
+@numba.njit(cache=True, inline="always")
+def _state_part(fk, state, s0, n, r0):
+    """The state's part of values ``r0 .. r0 + 7`` of one axis (``ft[k]``, its state at
+    ``state[s0 : s0 + n]``)."""
+    v = zero8()
+    for q in range(0, n - 1, 2):
+        v = add_scaled8(v, fk[q], fk[q + 1], r0, state[s0 + q], state[s0 + q + 1])
+    if n & 1:
+        v = add_scaled8(v, fk[n - 1], fk[n - 1], r0, state[s0 + n - 1], 0.0)
+    return v
+
+
+@numba.njit(cache=True, inline="always")
+def _four_groups(y, j0, rv, ru, nb, g0, g1, g2, g3, g4, g5, ref, load, k):
+    """Four groups of eight outputs of :func:`run_block`'s forced part, from output ``j0``
+    (``j0 + 24 <= nb``), with each output's terms summed as there, in the order of its
+    inputs; the coefficients a term of input ``i`` reads for output group ``j`` depend on
+    ``d = j - i`` only, so each is loaded once for the four groups (``d`` falling is ``i``
+    rising in every group)."""
+    j1 = j0 + 8
+    j2 = j0 + 16
+    j3 = j0 + 24
+    # Group jb takes the inputs i < min(nb, jb + 8): d from jb down to lo_b.
+    lo0 = j0 - min(nb, j0 + 8) + 1
+    lo1 = j1 - min(nb, j1 + 8) + 1
+    lo2 = j2 - min(nb, j2 + 8) + 1
+    lo3 = j3 - min(nb, j3 + 8) + 1
+    p0 = load8(y, j0)
+    v0 = load8(y, rv + j0)
+    c0 = load8(y, ru + j0)
+    p1 = load8(y, j1)
+    v1 = load8(y, rv + j1)
+    c1 = load8(y, ru + j1)
+    p2 = load8(y, j2)
+    v2 = load8(y, rv + j2)
+    c2 = load8(y, ru + j2)
+    p3 = load8(y, j3)
+    v3 = load8(y, rv + j3)
+    c3 = load8(y, ru + j3)
+    for d in range(j3, min(lo0, lo1, lo2, lo3) - 1, -1):
+        ap = load8(g0, _LEAD + d)
+        bp = load8(g1, _LEAD + d)
+        av = load8(g2, _LEAD - 1 + d)
+        bv = load8(g3, _LEAD - 1 + d)
+        ac = load8(g4, _LEAD - 1 + d)
+        bc = load8(g5, _LEAD - 1 + d)
+        if lo3 <= d:
+            ri = ref[j3 - d, k]
+            li = load[j3 - d, k]
+            p3 = add_scaled_vec8(p3, ap, bp, ri, li)
+            v3 = add_scaled_vec8(v3, av, bv, ri, li)
+            c3 = add_scaled_vec8(c3, ac, bc, ri, li)
+        if lo2 <= d <= j2:
+            ri = ref[j2 - d, k]
+            li = load[j2 - d, k]
+            p2 = add_scaled_vec8(p2, ap, bp, ri, li)
+            v2 = add_scaled_vec8(v2, av, bv, ri, li)
+            c2 = add_scaled_vec8(c2, ac, bc, ri, li)
+        if lo1 <= d <= j1:
+            ri = ref[j1 - d, k]
+            li = load[j1 - d, k]
+            p1 = add_scaled_vec8(p1, ap, bp, ri, li)
+            v1 = add_scaled_vec8(v1, av, bv, ri, li)
+            c1 = add_scaled_vec8(c1, ac, bc, ri, li)
+        if lo0 <= d <= j0:
+            ri = ref[j0 - d, k]
+            li = load[j0 - d, k]
+            p0 = add_scaled_vec8(p0, ap, bp, ri, li)
+            v0 = add_scaled_vec8(v0, av, bv, ri, li)
+            c0 = add_scaled_vec8(c0, ac, bc, ri, li)
+    store8(y, j0, p0)
+    store8(y, rv + j0, v0)
+    store8(y, ru + j0, c0)
+    store8(y, j1, p1)
+    store8(y, rv + j1, v1)
+    store8(y, ru + j1, c1)
+    store8(y, j2, p2)
+    store8(y, rv + j2, v2)
+    store8(y, ru + j2, c2)
+    store8(y, j3, p3)
+    store8(y, rv + j3, v3)
+    store8(y, ru + j3, c3)
 
 
 @numba.njit(cache=True)

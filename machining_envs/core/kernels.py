@@ -18,7 +18,7 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic, models, register_model
 
-__all__ = ["add_scaled8", "fma", "load8", "matvec", "store8", "vec8", "zero8"]
+__all__ = ["add_scaled8", "add_scaled_vec8", "fma", "load8", "matvec", "store8", "vec8", "zero8"]
 
 
 @intrinsic
@@ -118,6 +118,25 @@ def add_scaled8(typingctx, acc, a, b, o, sa, sb):
         tb = builder.load(_vector_at(context, builder, bv, o_), align=8)
         accv = builder.call(fn, [ta, _splat8(builder, sa_), accv])
         return builder.call(fn, [tb, _splat8(builder, sb_), accv])
+
+    return sig, codegen
+
+
+@intrinsic
+def add_scaled_vec8(typingctx, acc, a, b, sa, sb):
+    """``acc + a * sa + b * sb`` for eight-value vectors ``a`` and ``b`` (loaded once with
+    :func:`load8`, to be used many times), with the roundings of :func:`add_scaled8`."""
+    if not (acc == vec8 and a == vec8 and b == vec8):
+        return None
+    sig = vec8(vec8, vec8, vec8, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        accv, av, bv, sa_, sb_ = args
+        fn = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(_V8, [_V8, _V8, _V8]), "llvm.fma.v8f64"
+        )
+        accv = builder.call(fn, [av, _splat8(builder, sa_), accv])
+        return builder.call(fn, [bv, _splat8(builder, sb_), accv])
 
     return sig, codegen
 

@@ -1,9 +1,10 @@
 """The shared compiled products (``machining_envs.core.kernels``) against numpy's."""
 
+import numba
 import numpy as np
 import pytest
 
-from machining_envs.core.kernels import matvec
+from machining_envs.core.kernels import add_scaled8, add_scaled_vec8, fma, load8, matvec, store8
 
 
 def _random_matrix(rng, shape):
@@ -56,3 +57,32 @@ def test_matvec_rounds_as_numpy_does(substeps):
                 with np.errstate(invalid="ignore"):
                     expected = a[0 if shared else k].reshape(n, m) @ x[k]
                 assert out[k].tobytes() == expected.tobytes(), (n, m, k)
+
+
+@numba.njit
+def _eight_wide(acc, a, b, o, sa, sb):
+    """The two eight-wide forms (loading inside, and from loaded vectors) and the scalar
+    chain they stand for, for the values ``o .. o + 7``."""
+    out = np.empty((3, 8))
+    store8(out[0], 0, add_scaled8(load8(acc, o), a, b, o, sa, sb))
+    store8(out[1], 0, add_scaled_vec8(load8(acc, o), load8(a, o), load8(b, o), sa, sb))
+    for i in range(8):
+        out[2, i] = fma(b[o + i], sb, fma(a[o + i], sa, acc[o + i]))
+    return out
+
+
+def test_eight_wide_fused_multiply_adds_are_the_scalar_chain():
+    rng = np.random.default_rng(7)
+    n = 24
+    acc, a, b = (_random_matrix(rng, n) for _ in range(3))
+    # Values where a fused multiply-add and a rounded product then a sum differ: with
+    # e = 2**-30, (1 + e)(1 - e) - 1 is -2**-60 fused and 0 otherwise.
+    e = 2.0**-30
+    acc[5], a[5], b[5] = -1.0, 1.0 + e, 0.0
+    for o in (0, 3, 16):
+        for sa, sb in ((1.0 - e, 0.5), (-3.25e-7, 8.5e4), (0.0, -0.0)):
+            got = _eight_wide(acc, a, b, o, sa, sb)
+            np.testing.assert_array_equal(got[0], got[2])
+            np.testing.assert_array_equal(got[1], got[2])
+    fused = _eight_wide(acc, a, b, 0, 1.0 - e, 0.0)
+    assert fused[0, 5] == -(2.0**-60)
