@@ -592,12 +592,13 @@ class _FeedCore:
     def lane_info(self, k: int, clipped: bool | None = None) -> dict:
         """The info of lane ``k`` after its reset or its last step (``clipped``: whether
         the action was clipped; by default as recorded by the last step)."""
-        o = self.out[k].tolist()
-        diverged, finished = self.flags[k, :2].tolist()
+        out = self.out[k]
+        o = out.tolist()
+        diverged, finished, _, _ = self.flags[k].tolist()
         in_clipped, _, _, _, n_clipped, segment = self.li[k].tolist()  # _LI
         info = {
             "t_s": o[0],
-            "command": self.out[k, 1:3].copy(),
+            "command": out[1:3].copy(),
             "command_x_mm_s": o[1],
             "command_y_mm_s": o[2],
             "action_clipped": in_clipped != 0 if clipped is None else clipped,
