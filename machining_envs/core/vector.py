@@ -154,12 +154,17 @@ class LaneVectorEnv(gym.vector.VectorEnv):
                 final_obs[i] = obs[i].copy()
             final_info: dict = {}
             top: dict = {}
+            kept = ~done
             for k, v in info.items():
                 if k.startswith("_"):
                     continue
                 mask = info["_" + k]
-                final_info[k], final_info["_" + k] = v, mask & done
-                top[k], top["_" + k] = v.copy(), mask & ~done
+                if mask is every:  # the keys of every lane share their masks, as above
+                    final_info[k], final_info["_" + k] = v, done
+                    top[k], top["_" + k] = v.copy(), kept
+                else:
+                    final_info[k], final_info["_" + k] = v, mask & done
+                    top[k], top["_" + k] = v.copy(), mask & kept
             new_obs, part = self._reset_lanes(lanes, None)
             obs = obs.copy()
             obs[lanes] = new_obs
