@@ -34,22 +34,42 @@ def zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray
     return e[:n, :n], e[:n, n:]
 
 
-_BLAS = None
+_BLAS_LIBS = None
 
 
-def _one_blas_thread():
+def _one_blas_thread() -> _OneBlasThread:
+    """A context that runs the enclosed BLAS calls on one thread (:class:`_OneBlasThread`)."""
+    return _OneBlasThread()
+
+
+class _OneBlasThread:
     """Run the enclosed BLAS calls on one thread.
 
     The matrices here are a few rows square; OpenBLAS's threads only add synchronisation,
     which on a busy machine makes a 4x4 exponential take milliseconds instead of tens of
-    microseconds (every reset of an env at a new spindle speed pays it).
+    microseconds (every reset of an env at a new spindle speed pays it). The BLAS libraries
+    loaded at the first call are found once (threadpoolctl); each call then reads and sets
+    their thread counts directly, a few microseconds where ``threadpoolctl``'s ``limit``
+    context takes some 30.
     """
-    global _BLAS
-    if _BLAS is None:
-        from threadpoolctl import ThreadpoolController
 
-        _BLAS = ThreadpoolController()
-    return _BLAS.limit(limits=1, user_api="blas")
+    def __enter__(self):
+        global _BLAS_LIBS
+        if _BLAS_LIBS is None:
+            from threadpoolctl import ThreadpoolController
+
+            ctl = ThreadpoolController()
+            _BLAS_LIBS = [lib for lib in ctl.lib_controllers if lib.user_api == "blas"]
+        self._saved = [(lib, lib.num_threads) for lib in _BLAS_LIBS]
+        for lib, n in self._saved:
+            if n != 1:
+                lib.set_num_threads(1)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for lib, n in self._saved:
+            if n != 1:
+                lib.set_num_threads(n)
 
 
 def zoh_tf(num, den, dt: float) -> tuple[np.ndarray, np.ndarray]:
