@@ -250,6 +250,7 @@ class _Matrices:
     delay_group: np.ndarray  # (M,): the group of four columns of each feed row's delayed
     # instant (0 where it lies in the current sample, merged with the other terms)
     filt_step: np.ndarray  # (n_f, n_f + M + 1): next filter state from [state, F_1..F_M, F_0]
+    packed: np.ndarray  # (2M + 3, 8): big's non-zero groups, as TurningLanes holds it
 
 
 class _LinearKey(NamedTuple):
@@ -385,7 +386,12 @@ def _matrices(params: _LinearKey, spindle_rpm: float) -> _Matrices:
     # Each feed row has one delayed block; where it is block 0 it overlaps the terms above.
     cols = 4 * lag[:, None] + np.arange(4)
     big[np.arange(m, 2 * m)[:, None], cols] -= delayed
-    return _Matrices(big, lags, lag.astype(np.int64), filt_step)
+    # The same numbers with only the groups that hold them: the current pair's, and each
+    # feed row's delayed pair where that is not the current one (_sampled_rows).
+    packed = np.zeros((2 * m + 3, 8))
+    packed[:, :4] = big[:, :4]
+    packed[m : 2 * m, 4:] = np.where(lag[:, None] > 0, big[np.arange(m, 2 * m)[:, None], cols], 0.0)
+    return _Matrices(big, lags, lag.astype(np.int64), filt_step, packed)
 
 
 def sampled_model(params: TurningParams, spindle_rpm: float) -> tuple[np.ndarray, int]:
@@ -458,15 +464,17 @@ def lane_ints(li):
 
 
 @numba.njit(cache=True)
-def _sampled_rows(a, c, lag, zk, m, y):
-    """``y = A @ zk`` for the lane's step matrix ``A`` (``(2M + 3, c)``, row after row in
-    ``a``), reading only the groups of four columns that hold its non-zeros.
+def _sampled_rows(a, lag, zk, m, y):
+    """``y = A @ zk`` for the lane's step matrix ``A`` (``(2M + 3, 4 (L + 1))``), held as
+    its non-zero groups of four columns only: ``a`` row after row, eight values a row.
 
-    Every row reads the current pair ``(x_k, u_k)`` (columns 0-3); a feed row also reads
-    the pair of its delayed instant (group ``lag[j]``, none where that is 0). The others
-    are zero, and :func:`~machining_envs.core.kernels.matvec`'s sums gain nothing from a
-    zero group (a fused ``0 x + s`` is ``s`` for finite ``x``), so the rows here, summed in
-    its order over the non-zero groups only, are its numbers (numpy's) to the last bit.
+    Every row reads the current pair ``(x_k, u_k)`` (columns 0-3 of ``A``, the first four
+    of its row in ``a``); a feed row also reads the pair of its delayed instant (group
+    ``lag[j]`` of ``A``, the last four of its row in ``a``; none where ``lag[j]`` is 0, the
+    group then merged in the first). The others are zero, and
+    :func:`~machining_envs.core.kernels.matvec`'s sums gain nothing from a zero group (a
+    fused ``0 x + s`` is ``s`` for finite ``x``), so the rows here, summed in its order over
+    the non-zero groups only, are its numbers for ``A @ zk`` (numpy's) to the last bit.
     """
     n_rows = 2 * m + 3
     nb = n_rows & ~3  # rows summed in fused groups of four; the feed rows are among them
@@ -475,28 +483,28 @@ def _sampled_rows(a, c, lag, zk, m, y):
     z2 = zk[2]
     z3 = zk[3]
     for r in range(nb):
-        b = r * c
+        b = 8 * r
         s0 = fma(a[b], z0, 0.0)
         s1 = fma(a[b + 1], z1, 0.0)
         s2 = fma(a[b + 2], z2, 0.0)
         s3 = fma(a[b + 3], z3, 0.0)
         if m <= r < 2 * m and lag[r - m] > 0:
             q = 4 * lag[r - m]
-            s0 = fma(a[b + q], zk[q], s0)
-            s1 = fma(a[b + q + 1], zk[q + 1], s1)
-            s2 = fma(a[b + q + 2], zk[q + 2], s2)
-            s3 = fma(a[b + q + 3], zk[q + 3], s3)
+            s0 = fma(a[b + 4], zk[q], s0)
+            s1 = fma(a[b + 5], zk[q + 1], s1)
+            s2 = fma(a[b + 6], zk[q + 2], s2)
+            s3 = fma(a[b + 7], zk[q + 3], s3)
         y[r] = 0.0 + ((s0 + s2) + (s1 + s3))
     r = nb
     if (n_rows - nb) & 2:  # two rows of two sums of rounded products
         for r in range(nb, nb + 2):
-            b = r * c
+            b = 8 * r
             s0 = 0.0 + a[b] * z0
             s1 = 0.0 + a[b + 1] * z1
             y[r] = 0.0 + ((s0 + a[b + 2] * z2) + (s1 + a[b + 3] * z3))
         r = nb + 2
     if (n_rows - nb) & 1:  # one row of four sums of rounded products
-        b = r * c
+        b = 8 * r
         y[r] = 0.0 + (
             ((0.0 + a[b] * z0) + (0.0 + a[b + 2] * z2))
             + ((0.0 + a[b + 1] * z1) + (0.0 + a[b + 3] * z3))
@@ -521,7 +529,7 @@ def step_lane(
     zk = z[k, :c]
     zk[3] = min(max(command, 0.0), cmax)
     y = work[k, :n_rows]
-    _sampled_rows(big[k], c, lag[k], zk, m, y)
+    _sampled_rows(big[k], lag[k], zk, m, y)
     p_start = zk[2]
     p_end = y[m - 1]
     b = buf[k]
@@ -663,7 +671,9 @@ class TurningLanes:
         c_max = 4 * (lags_max + 1)
         filt = _speed_free_rows(self._key)[1]
         self.m, self.n_f = m, filt.shape[0]
-        self.big = np.zeros((self.n, (2 * m + 3) * c_max))
+        #: The lanes' step matrices, each as its non-zero groups of columns: eight values
+        #: a row (``_sampled_rows``).
+        self.big = np.zeros((self.n, (2 * m + 3) * 8))
         #: The lanes' integers in one array (one argument of the kernel), read through the
         #: views below: the step matrix's columns, the workpiece's segments, the segment the
         #: tool is in and was in after the last step, and the delay groups of the feed rows.
@@ -757,13 +767,9 @@ class TurningLanes:
         with zero columns to the memory of the slowest speed, so that the lane keeps every
         sample instant it could ever need and its speed may change between samples."""
         mats = _matrices(self._key, spindle_rpm)
-        big = mats.big
         self.lag[lane] = mats.delay_group
-        rows, c = big.shape[0], (self.z.shape[1] if full_history else big.shape[1])
-        view = self.big[lane, : rows * c].reshape(rows, c)
-        view[:, : big.shape[1]] = big
-        view[:, big.shape[1] :] = 0.0
-        self.cols[lane] = c
+        self.big[lane] = mats.packed.ravel()
+        self.cols[lane] = self.z.shape[1] if full_history else mats.big.shape[1]
 
     def set_speed(self, lane: int, spindle_rpm: float) -> None:
         """Change the spindle speed of a running ``lane`` from the next sample on (a lane

@@ -128,3 +128,23 @@ def test_force_across_a_step_edge_matches_direct_evaluation():
     ref = TurningPlant(TurningParams(substeps=1000), 405.0, prof)
     forces_ref = [ref.step(3000.0).force_N for _ in range(12)]
     np.testing.assert_allclose(forces, forces_ref, rtol=1e-9)
+
+
+@pytest.mark.parametrize("rpm", [100.0, 173.3, 600.0, 1234.5, 2500.0, 4000.0])
+def test_packed_step_matrix_is_the_step_matrix(rpm):
+    """The lanes hold the step matrix as its non-zero groups of four columns (the current
+    pair, and a feed row's delayed pair where that is another): unpacked, it is the matrix,
+    every entry to the last bit."""
+    from machining_envs.turning.plant import _LinearKey, _matrices
+
+    p = TurningParams.noh_kim_kim_1992()
+    mats = _matrices(_LinearKey.of(p), rpm)
+    m = p.substeps
+    full = np.zeros_like(mats.big)
+    full[:, :4] = mats.packed[:, :4]
+    for j, lag in enumerate(mats.delay_group.tolist()):
+        if lag > 0:
+            full[m + j, 4 * lag : 4 * lag + 4] = mats.packed[m + j, 4:]
+    np.testing.assert_array_equal(full, mats.big)
+    assert not mats.packed[:m, 4:].any() and not mats.packed[2 * m :, 4:].any()  # feeds only
+    assert (mats.delay_group > 0).any()  # the delayed groups are tested
