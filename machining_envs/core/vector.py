@@ -39,7 +39,9 @@ __all__ = ["LaneVectorEnv", "check_num_envs", "merge_lane_info"]
 
 def merge_lane_info(info: dict, lanes: np.ndarray, part: dict, num_envs: int) -> None:
     """Write ``part`` (arrays over ``lanes``) into ``info`` (arrays over all lanes, with
-    ``_key`` masks), in place."""
+    ``_key`` masks), in place. Masks shared between keys that every one of ``lanes`` has
+    stay shared (one new mask for them all)."""
+    merged: dict[int, tuple] = {}  # id(old mask) -> (old mask, kept alive; new mask)
     for key, values in part.items():
         if key.startswith("_"):
             continue
@@ -49,15 +51,23 @@ def merge_lane_info(info: dict, lanes: np.ndarray, part: dict, num_envs: int) ->
         if key not in info:
             info[key] = np.zeros((num_envs, *values.shape[1:]), dtype=values.dtype)
             info["_" + key] = np.zeros(num_envs, dtype=bool)
-        else:
-            info["_" + key] = info["_" + key].copy()  # masks may be shared between keys
-            if info[key].dtype != values.dtype and info[key].dtype != object:
-                info[key] = info[key].astype(np.result_type(info[key], values))
+        elif info[key].dtype != values.dtype and info[key].dtype != object:
+            info[key] = info[key].astype(np.result_type(info[key], values))
         mask = part.get("_" + key)
-        sel = lanes if mask is None else lanes[np.asarray(mask, dtype=bool)]
-        src = values if mask is None else values[np.asarray(mask, dtype=bool)]
-        info[key][sel] = src
-        info["_" + key][sel] = True
+        if mask is None:
+            info[key][lanes] = values
+            old = info["_" + key]
+            if id(old) not in merged:
+                new = old.copy()  # masks may be shared between keys: never written in place
+                new[lanes] = True
+                merged[id(old)] = (old, new)
+            info["_" + key] = merged[id(old)][1]
+        else:
+            mask = np.asarray(mask, dtype=bool)
+            info[key][lanes[mask]] = values[mask]
+            new = info["_" + key].copy()
+            new[lanes[mask]] = True
+            info["_" + key] = new
 
 
 def check_num_envs(num_envs) -> int:
