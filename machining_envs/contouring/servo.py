@@ -640,6 +640,18 @@ def _state_part(fk, state, s0, n, r0):
 
 
 @numba.njit(cache=True, inline="always")
+def _input_terms(p, v, c, coef, ri, li):
+    """One input's terms (set point ``ri``, load ``li``) added to eight positions ``p``,
+    velocities ``v`` and commands ``c``; ``coef``: their six coefficient vectors."""
+    ap, bp, av, bv, ac, bc = coef
+    return (
+        add_scaled_vec8(p, ap, bp, ri, li),
+        add_scaled_vec8(v, av, bv, ri, li),
+        add_scaled_vec8(c, ac, bc, ri, li),
+    )
+
+
+@numba.njit(cache=True, inline="always")
 def _four_groups(y, j0, rv, ru, nb, g0, g1, g2, g3, g4, g5, ref, load, k):
     """Four groups of eight outputs of :func:`run_block`'s forced part, from output ``j0``
     (``j0 + 24 <= nb``), with each output's terms summed as there, in the order of its
@@ -673,30 +685,15 @@ def _four_groups(y, j0, rv, ru, nb, g0, g1, g2, g3, g4, g5, ref, load, k):
         bv = load8(g3, _LEAD - 1 + d)
         ac = load8(g4, _LEAD - 1 + d)
         bc = load8(g5, _LEAD - 1 + d)
+        coef = (ap, bp, av, bv, ac, bc)
         if lo3 <= d:
-            ri = ref[j3 - d, k]
-            li = load[j3 - d, k]
-            p3 = add_scaled_vec8(p3, ap, bp, ri, li)
-            v3 = add_scaled_vec8(v3, av, bv, ri, li)
-            c3 = add_scaled_vec8(c3, ac, bc, ri, li)
+            p3, v3, c3 = _input_terms(p3, v3, c3, coef, ref[j3 - d, k], load[j3 - d, k])
         if lo2 <= d <= j2:
-            ri = ref[j2 - d, k]
-            li = load[j2 - d, k]
-            p2 = add_scaled_vec8(p2, ap, bp, ri, li)
-            v2 = add_scaled_vec8(v2, av, bv, ri, li)
-            c2 = add_scaled_vec8(c2, ac, bc, ri, li)
+            p2, v2, c2 = _input_terms(p2, v2, c2, coef, ref[j2 - d, k], load[j2 - d, k])
         if lo1 <= d <= j1:
-            ri = ref[j1 - d, k]
-            li = load[j1 - d, k]
-            p1 = add_scaled_vec8(p1, ap, bp, ri, li)
-            v1 = add_scaled_vec8(v1, av, bv, ri, li)
-            c1 = add_scaled_vec8(c1, ac, bc, ri, li)
+            p1, v1, c1 = _input_terms(p1, v1, c1, coef, ref[j1 - d, k], load[j1 - d, k])
         if lo0 <= d <= j0:
-            ri = ref[j0 - d, k]
-            li = load[j0 - d, k]
-            p0 = add_scaled_vec8(p0, ap, bp, ri, li)
-            v0 = add_scaled_vec8(v0, av, bv, ri, li)
-            c0 = add_scaled_vec8(c0, ac, bc, ri, li)
+            p0, v0, c0 = _input_terms(p0, v0, c0, coef, ref[j0 - d, k], load[j0 - d, k])
     store8(y, j0, p0)
     store8(y, rv + j0, v0)
     store8(y, ru + j0, c0)
