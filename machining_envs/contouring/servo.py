@@ -666,18 +666,10 @@ def _four_groups(y, j0, rv, ru, nb, g0, g1, g2, g3, g4, g5, ref, load, k):
     lo1 = j1 - min(nb, j1 + 8) + 1
     lo2 = j2 - min(nb, j2 + 8) + 1
     lo3 = j3 - min(nb, j3 + 8) + 1
-    p0 = load8(y, j0)
-    v0 = load8(y, rv + j0)
-    c0 = load8(y, ru + j0)
-    p1 = load8(y, j1)
-    v1 = load8(y, rv + j1)
-    c1 = load8(y, ru + j1)
-    p2 = load8(y, j2)
-    v2 = load8(y, rv + j2)
-    c2 = load8(y, ru + j2)
-    p3 = load8(y, j3)
-    v3 = load8(y, rv + j3)
-    c3 = load8(y, ru + j3)
+    p0, v0, c0 = load8(y, j0), load8(y, rv + j0), load8(y, ru + j0)
+    p1, v1, c1 = load8(y, j1), load8(y, rv + j1), load8(y, ru + j1)
+    p2, v2, c2 = load8(y, j2), load8(y, rv + j2), load8(y, ru + j2)
+    p3, v3, c3 = load8(y, j3), load8(y, rv + j3), load8(y, ru + j3)
     for d in range(j3, min(lo0, lo1, lo2, lo3) - 1, -1):
         ap = load8(g0, _LEAD + d)
         bp = load8(g1, _LEAD + d)
@@ -694,18 +686,10 @@ def _four_groups(y, j0, rv, ru, nb, g0, g1, g2, g3, g4, g5, ref, load, k):
             p1, v1, c1 = _input_terms(p1, v1, c1, coef, ref[j1 - d, k], load[j1 - d, k])
         if lo0 <= d <= j0:
             p0, v0, c0 = _input_terms(p0, v0, c0, coef, ref[j0 - d, k], load[j0 - d, k])
-    store8(y, j0, p0)
-    store8(y, rv + j0, v0)
-    store8(y, ru + j0, c0)
-    store8(y, j1, p1)
-    store8(y, rv + j1, v1)
-    store8(y, ru + j1, c1)
-    store8(y, j2, p2)
-    store8(y, rv + j2, v2)
-    store8(y, ru + j2, c2)
-    store8(y, j3, p3)
-    store8(y, rv + j3, v3)
-    store8(y, ru + j3, c3)
+    for j, p, v, c in ((j0, p0, v0, c0), (j1, p1, v1, c1), (j2, p2, v2, c2), (j3, p3, v3, c3)):
+        store8(y, j, p)
+        store8(y, rv + j, v)
+        store8(y, ru + j, c)
 
 
 @numba.njit(cache=True)
