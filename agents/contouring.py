@@ -118,12 +118,12 @@ class LinearServoAgent(Agent):
         z[:, :nx] = state[:, :nx]
         z[:, nx::2] = r - origin
         z[:, nx + 1 :: 2] = y - origin
-        if z.shape[0] == 1:
-            out = z @ self._m
-        else:  # compiled, row by row: each env gets the numbers it gets alone (a batch's
-            # matrix product would sum in another order)
-            out = np.empty((z.shape[0], self._m.shape[1]))
-            vecmat_rows(z, self._mt, out)
+        # Compiled, row by row, in a fixed order (OpenBLAS's Haswell dgemv, as numpy sums a
+        # 1-D product here): each env gets the numbers it gets alone, on any CPU. The H-inf
+        # controller's near-integrator turns a BLAS kernel's different last bits into
+        # differences of 1e-6 of the torques over a long episode.
+        out = np.empty((z.shape[0], self._m.shape[1]))
+        vecmat_rows(z, self._mt, out)
         state[:, :nx] = out[:, :nx]
         u = out[:, nx:]
         umax = self.command_max_mm_s
@@ -162,7 +162,9 @@ class LinearServoAgent(Agent):
             rx, ry = o[i] * POSITION_SCALE_MM, o[i + 1] * POSITION_SCALE_MM
             yx, yy = rx - o[j] * ERROR_SCALE_MM, ry - o[j + 1] * ERROR_SCALE_MM
             z = np.concatenate([st[0, :nx], (rx - ox, yx - ox, ry - oy, yy - oy)])
-            out = z @ self._m
+            out = np.empty((1, self._m.shape[1]))
+            vecmat_rows(z.reshape(1, -1), self._mt, out)  # as in _act
+            out = out[0]
             st[0, :nx] = out[:nx]
             umax = self.command_max_mm_s
             ux, uy = out[nx:].tolist()
