@@ -242,15 +242,27 @@ class _Matrices:
     servo state at any instant is an exact linear function of one pair ``(x_i, u_i)``, so
     the tool position ``I(t_j)``, the feed per revolution ``I(t_j) - I(t_j - T)`` at every
     sub-step ``t_j`` of the coming sample, and the next state ``x_{k+1}`` are all rows of one
-    matrix applied to ``z``.
+    matrix applied to ``z`` (:attr:`big`). Most of its entries are zero: the lanes hold only
+    its non-zero groups of four columns (``packed``).
     """
 
-    big: np.ndarray  # (2M + 3, 4(L + 1)): rows = positions, feeds, next state
     lags: int  # L
     delay_group: np.ndarray  # (M,): the group of four columns of each feed row's delayed
     # instant (0 where it lies in the current sample, merged with the other terms)
     filt_step: np.ndarray  # (n_f, n_f + M + 1): next filter state from [state, F_1..F_M, F_0]
-    packed: np.ndarray  # (2M + 3, 8): big's non-zero groups, as TurningLanes holds it
+    packed: np.ndarray  # (2M + 3, 8): the current pair's group, then each feed row's delayed
+    # group where that is not the current one (zeros elsewhere)
+
+    @property
+    def big(self) -> np.ndarray:
+        """The step matrix ``(2M + 3, 4(L + 1))``: rows = positions, feeds, next state."""
+        m = self.delay_group.size
+        out = np.zeros((2 * m + 3, 4 * (self.lags + 1)))
+        out[:, :4] = self.packed[:, :4]
+        for j, lag in enumerate(self.delay_group.tolist()):
+            if lag > 0:
+                out[m + j, 4 * lag : 4 * lag + 4] = self.packed[m + j, 4:]
+        return out
 
 
 class _LinearKey(NamedTuple):
@@ -366,8 +378,6 @@ def _matrices(params: _LinearKey, spindle_rpm: float) -> _Matrices:
     base, filt_step = _speed_free_rows(params)
     period = 60.0 / spindle_rpm
     lags = int(math.ceil(period / ts + 1e-12)) + 1
-    big = np.zeros((2 * m + 3, 4 * (lags + 1)))
-    big[:, 0:4] = base
     # Every delayed instant t_j - T sits the same fraction rho of a sub-step past a sub-step
     # point, so one exponential over rho and the powers over i*h give all of them exactly.
     rho = (-period) % h
@@ -377,21 +387,39 @@ def _matrices(params: _LinearKey, spindle_rpm: float) -> _Matrices:
         phi_r, gam_r = zoh(*_servo_system(params), rho)
     else:
         phi_r, gam_r = np.eye(3), np.zeros((3, 1))
-    back = np.arange(1, m + 1) * h - period  # t_j - T relative to t_k
-    lag = np.where(back < 0, np.ceil(-back / ts - 1e-9), 0).astype(int)
-    i = np.rint((back + lag * ts - rho) / h).astype(int)  # offset = i h + rho in [0, Ts)
-    delayed = np.empty((m, 4))
-    delayed[:, 0:3] = phi_r[2] @ phis[i]  # I-row of Phi(rho) Phi(i h)
-    delayed[:, 3] = gams[i] @ phi_r[2] + gam_r[2, 0]  # I-entry of Phi(rho) Gamma(i h) + Gamma(rho)
-    # Each feed row has one delayed block; where it is block 0 it overlaps the terms above.
-    cols = 4 * lag[:, None] + np.arange(4)
-    big[np.arange(m, 2 * m)[:, None], cols] -= delayed
-    # The same numbers with only the groups that hold them: the current pair's, and each
-    # feed row's delayed pair where that is not the current one (_sampled_rows).
-    packed = np.zeros((2 * m + 3, 8))
-    packed[:, :4] = big[:, :4]
-    packed[m : 2 * m, 4:] = np.where(lag[:, None] > 0, big[np.arange(m, 2 * m)[:, None], cols], 0.0)
-    return _Matrices(big, lags, lag.astype(np.int64), filt_step, packed)
+    packed = np.empty((2 * m + 3, 8))
+    lag = np.empty(m, dtype=np.int64)
+    _delayed_rows(phis, gams, base, phi_r[2].copy(), float(gam_r[2, 0]), period, ts, rho,
+                  packed, lag)  # fmt: skip
+    return _Matrices(lags, lag, filt_step, packed)
+
+
+@numba.njit(cache=True)
+def _delayed_rows(phis, gams, base, phi_r2, gam_r2, period, ts, rho, packed, lag):
+    """The packed step matrix (``_Matrices.packed``) and each feed row's delayed group
+    ``lag``: the rows on the current pair (``base``), less, in each feed row ``m + j``, the
+    position at its delayed instant ``t_j - T`` (``period``), which lies ``lag[j]`` samples
+    back, ``i h + rho`` past that sample's start: the I-row of ``Phi(rho) Phi(i h)`` and the
+    I-entry of ``Phi(rho) Gamma(i h) + Gamma(rho)`` (``phi_r2``, ``gam_r2``: the I-row of
+    ``Phi(rho)`` and the I-entry of ``Gamma(rho)``). Each sum in a fixed order."""
+    m = lag.size
+    h = ts / m
+    packed[:, :4] = base
+    packed[:, 4:] = 0.0
+    for j in range(m):
+        back = float(j + 1) * h - period  # t_j - T relative to t_k
+        lj = int(math.ceil(-back / ts - 1e-9)) if back < 0 else 0
+        i = int(np.rint((back + lj * ts - rho) / h))  # offset = i h + rho in [0, Ts)
+        if not 0 <= i <= m:
+            raise ValueError("a delayed instant fell outside its sample")
+        lag[j] = lj
+        row = packed[m + j]
+        off = 0 if lj == 0 else 4  # block 0 overlaps the current pair's terms
+        for c in range(3):
+            d = phi_r2[0] * phis[i, 0, c] + phi_r2[1] * phis[i, 1, c] + phi_r2[2] * phis[i, 2, c]
+            row[off + c] -= d
+        d = gams[i, 0] * phi_r2[0] + gams[i, 1] * phi_r2[1] + gams[i, 2] * phi_r2[2] + gam_r2
+        row[off + 3] -= d
 
 
 def sampled_model(params: TurningParams, spindle_rpm: float) -> tuple[np.ndarray, int]:
@@ -769,7 +797,7 @@ class TurningLanes:
         mats = _matrices(self._key, spindle_rpm)
         self.lag[lane] = mats.delay_group
         self.big[lane] = mats.packed.ravel()
-        self.cols[lane] = self.z.shape[1] if full_history else mats.big.shape[1]
+        self.cols[lane] = self.z.shape[1] if full_history else 4 * (mats.lags + 1)
 
     def set_speed(self, lane: int, spindle_rpm: float) -> None:
         """Change the spindle speed of a running ``lane`` from the next sample on (a lane

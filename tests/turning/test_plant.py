@@ -130,21 +130,55 @@ def test_force_across_a_step_edge_matches_direct_evaluation():
     np.testing.assert_allclose(forces, forces_ref, rtol=1e-9)
 
 
+def _step_matrix_reference(p, rpm):
+    """The step matrix built directly with numpy (the derivation of ``_Matrices``): the
+    rows on the current pair, less, in each feed row, the position at its delayed instant
+    placed in the group of its sample."""
+    import math
+
+    from machining_envs.core.lti import zoh
+    from machining_envs.turning.plant import _LinearKey, _servo_system, _speed_free
+
+    key = _LinearKey.of(p)
+    m, ts = p.substeps, p.sample_time_s
+    h = ts / m
+    phis, gams = _speed_free(key)[:2]
+    period = 60.0 / rpm
+    lags = int(math.ceil(period / ts + 1e-12)) + 1
+    big = np.zeros((2 * m + 3, 4 * (lags + 1)))
+    big[:m, 0:3] = phis[1:, 2]
+    big[:m, 3] = gams[1:, 2]
+    big[m : 2 * m, :4] = big[:m, :4]
+    big[2 * m :, 0:3] = phis[m]
+    big[2 * m :, 3] = gams[m]
+    rho = (-period) % h
+    if rho > h - 1e-12 * h:
+        rho = 0.0
+    phi_r, gam_r = zoh(*_servo_system(key), rho) if rho > 0 else (np.eye(3), np.zeros((3, 1)))
+    for j in range(m):
+        back = (j + 1) * h - period
+        lag = math.ceil(-back / ts - 1e-9) if back < 0 else 0
+        i = round((back + lag * ts - rho) / h)
+        big[m + j, 4 * lag : 4 * lag + 3] -= phi_r[2] @ phis[i]
+        big[m + j, 4 * lag + 3] -= gams[i] @ phi_r[2] + gam_r[2, 0]
+    return big
+
+
 @pytest.mark.parametrize("rpm", [100.0, 173.3, 600.0, 1234.5, 2500.0, 4000.0])
 def test_packed_step_matrix_is_the_step_matrix(rpm):
     """The lanes hold the step matrix as its non-zero groups of four columns (the current
-    pair, and a feed row's delayed pair where that is another): unpacked, it is the matrix,
-    every entry to the last bit."""
+    pair, and a feed row's delayed pair where that is another): unpacked, it is the matrix
+    built directly, each entry to rounding (sums of three products, in another order)."""
     from machining_envs.turning.plant import _LinearKey, _matrices
 
     p = TurningParams.noh_kim_kim_1992()
     mats = _matrices(_LinearKey.of(p), rpm)
     m = p.substeps
-    full = np.zeros_like(mats.big)
-    full[:, :4] = mats.packed[:, :4]
-    for j, lag in enumerate(mats.delay_group.tolist()):
-        if lag > 0:
-            full[m + j, 4 * lag : 4 * lag + 4] = mats.packed[m + j, 4:]
-    np.testing.assert_array_equal(full, mats.big)
+    ref = _step_matrix_reference(p, rpm)
+    big = mats.big
+    assert big.shape == ref.shape
+    np.testing.assert_array_equal(big != 0, ref != 0)  # the same groups hold the numbers
+    scale = np.abs(ref).max(axis=1, keepdims=True)
+    assert np.all(np.abs(big - ref) <= 4 * np.finfo(float).eps * scale)
     assert not mats.packed[:m, 4:].any() and not mats.packed[2 * m :, 4:].any()  # feeds only
     assert (mats.delay_group > 0).any()  # the delayed groups are tested
