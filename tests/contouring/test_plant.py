@@ -101,7 +101,7 @@ def test_commands_clip_at_the_motor_top_speed_and_batch_agrees():
     w[:, 1::2] = rng.uniform(-3, 3, (6, 2))
     batch = plant.step_batch(z, w)
     for i in range(6):
-        plant.z = list(z[i])
+        plant.z = z[i].copy()  # the plant keeps its state as a float array
         s = plant.step(w[i, 0], w[i, 2], w[i, 1], w[i, 3])
         np.testing.assert_allclose(
             [s.x_mm, s.vx_mm_s, s.y_mm, s.vy_mm_s], batch[i], rtol=1e-12, atol=1e-12
