@@ -139,7 +139,7 @@ def test_hinf_synthesis_agrees_with_the_recorded_designs():
     recorded = _recorded_designs()
     assert recorded, "no golden file stores an H-infinity design"
     for args, stored in recorded:
-        fresh = servo._hinf.__wrapped__(*args)
+        fresh = servo._hinf(*args)  # synthesised on this machine (cached per process)
         assert fresh.gamma == pytest.approx(stored.gamma, rel=1e-6), args
         a_pole, ts = args[0], args[1]
         nominal = ContouringParams(sample_time_s=ts)
