@@ -106,6 +106,22 @@ def run_until_done(env: gym.Env, action) -> tuple[int, bool, bool, dict, float]:
     return n, term, trunc, info, r
 
 
+def servo_step_response(params, design, n: int, axis: str | None = None):
+    """Positions after each of ``n`` periods and the commands during them of ``design``'s
+    discrete closed loop (``machining_envs.contouring.servo.closed_loop``) for a unit step
+    of the set point from rest."""
+    from machining_envs.contouring.servo import closed_loop
+
+    a, b, cy, cu, du = closed_loop(params, design, axis)
+    z = np.zeros(a.shape[0])
+    y, u = np.empty(n), np.empty(n)
+    for k in range(n):
+        u[k] = cu[0] @ z + du[0, 0]
+        z = a @ z + b[:, 0]
+        y[k] = cy[0] @ z
+    return y, u
+
+
 def run_python(code: str) -> str:
     """Run ``code`` in a fresh interpreter (nothing imported beforehand); return its stdout."""
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -11,7 +11,7 @@ import machining_envs.contouring.servo as servo
 from agents import HInf2DOF
 from machining_envs.contouring.plant import ContouringParams
 from machining_envs.contouring.servo import ServoLoop, closed_loop, hinf_2dof_design, pi_design
-from tests.helpers import CONTOURING
+from tests.helpers import CONTOURING, servo_step_response
 
 P = ContouringParams()
 M0 = 500.0
@@ -19,13 +19,8 @@ M0 = 500.0
 
 def _step(params, design, t_end=0.1):
     """Unit step response of the discrete closed loop (position after each period)."""
-    a, b, cy, _, _ = closed_loop(params, design)
     n = int(round(t_end / params.sample_time_s))
-    z = np.zeros(a.shape[0])
-    y = np.empty(n)
-    for k in range(n):
-        z = a @ z + b[:, 0]
-        y[k] = cy[0] @ z
+    y = servo_step_response(params, design, n)[0]
     return (np.arange(n) + 1) * params.sample_time_s, y
 
 

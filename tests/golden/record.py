@@ -124,11 +124,12 @@ _HINF_FLOATS = (0, 1, 3, 4, 5, 6)
 _DESIGN_ARRAYS = ("a", "b", "c", "d")
 
 
-def _hinf_calls(designs: list | None):
-    """A stand-in for ``servo._hinf``: with ``designs`` None it synthesises, recording each
-    new ``(args, design)`` in the returned list; with a list of them it returns the stored
-    design whose arguments match (floats to 1e-12 relative: a scenario's numbers may differ
-    in the last bit between CPUs) and fails if there is none."""
+@contextlib.contextmanager
+def hinf_designs(designs: list | None = None):
+    """Within the block, ``servo._hinf`` is replaced: with ``designs`` None it synthesises,
+    recording each new ``(args, design)`` in the yielded list; with a list of them it returns
+    the stored design whose arguments match (floats to 1e-12 relative: a scenario's numbers
+    may differ in the last bit between CPUs) and fails if there is none."""
     from machining_envs.contouring import servo
 
     synthesise = servo._hinf
@@ -149,22 +150,11 @@ def _hinf_calls(designs: list | None):
         seen.append((args, design))
         return design
 
-    return lookup, seen
-
-
-@contextlib.contextmanager
-def hinf_designs(designs: list | None = None):
-    """Within the block, H-infinity designs are recorded into the yielded list (``designs``
-    None) or taken from ``designs`` (see :func:`_hinf_calls`)."""
-    from machining_envs.contouring import servo
-
-    lookup, seen = _hinf_calls(designs)
-    original = servo._hinf
     servo._hinf = lookup
     try:
         yield seen
     finally:
-        servo._hinf = original
+        servo._hinf = synthesise
 
 
 def pack_designs(designs: list) -> dict:

@@ -11,9 +11,9 @@ own scale (the largest magnitude of its stored rows, per column; a last-bit chan
 coefficient moves a signal in proportion to its size, not to each value, which may pass
 through zero), float32 signals (observations, actions) to one float32 step at that scale
 (a last-bit change may move a float32 rounding by one step), and the digests, which cannot
-see a last-bit change from a real one, are then not compared. The H-infinity designs a case uses are replayed from the
-file (``record.py`` says why); a fresh synthesis is checked against them separately, to
-the tolerance its conditioning allows. When the physics or a controller changes on
+see a last-bit change from a real one, are then not compared. The H-infinity designs a case
+uses are replayed from the file (``record.py`` says why); a fresh synthesis is checked
+against them separately, to the tolerance its conditioning allows. When the physics or a controller changes on
 purpose, regenerate the data (``python -m tests.golden.record``) in the same commit and say
 why in its message.
 """
@@ -29,6 +29,7 @@ import numpy as np
 import pytest
 
 from tests.golden.record import HERE, cases, digest, kept_rows, run_case, unpack_designs
+from tests.helpers import servo_step_response
 
 CASES = cases()
 
@@ -144,17 +145,9 @@ def test_hinf_synthesis_agrees_with_the_recorded_designs():
         a_pole, ts = args[0], args[1]
         nominal = ContouringParams(sample_time_s=ts)
         plant = nominal.replace(inertia_x_kgm2=nominal.loop_gain_Nms / a_pole)
-        responses = []
-        for design in (stored, fresh):
-            a, b, cy, cu, du = servo.closed_loop(plant, design, "x")
-            z = np.zeros(a.shape[0])
-            y, u = np.empty(500), np.empty(500)
-            for k in range(500):  # 0.1 s at 5 kHz: the step settles within it
-                u[k] = cu[0] @ z + du[0, 0]
-                z = a @ z + b[:, 0]
-                y[k] = cy[0] @ z
-            responses.append((y, u))
-        (y0, u0), (y1, u1) = responses
+        # 0.1 s at 5 kHz: the step settles within it.
+        y0, u0 = servo_step_response(plant, stored, 500, "x")
+        y1, u1 = servo_step_response(plant, fresh, 500, "x")
         assert np.max(np.abs(y1 - y0)) <= 5e-3, args
         assert np.max(np.abs(u1 - u0)) <= 5e-3 * np.max(np.abs(u0)), args
 
