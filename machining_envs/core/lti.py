@@ -20,6 +20,12 @@ def zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray
     Returns ``(Phi, Gamma)`` with ``x[k+1] = Phi x[k] + Gamma u[k]`` when ``u`` is held
     constant over the interval: ``Phi = e^{A dt}``, ``Gamma = int_0^dt e^{A s} ds B``, both read
     off one exponential of the block matrix ``[[A, B], [0, 0]] dt``.
+
+    The blocks here are a few rows square (4x4 for the resets that discretise a lane's
+    plant), far below the sizes at which OpenBLAS uses its threads, so the exponential
+    runs as it is: limiting them to one around each call cost a third more time and did
+    not shorten its tail on a loaded machine (median 52 -> 70-80 us; the 99th
+    percentile, some ms under two busy processes, set by the scheduler either way).
     """
     a = np.atleast_2d(np.asarray(a, dtype=np.float64))
     b = np.asarray(b, dtype=np.float64).reshape(a.shape[0], -1)
@@ -29,53 +35,13 @@ def zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray
     block = np.zeros((n + m, n + m))
     block[:n, :n] = a
     block[:n, n:] = b
-    with _one_blas_thread():
-        e = expm(block * dt)
+    e = expm(block * dt)
     return e[:n, :n], e[:n, n:]
-
-
-_BLAS_LIBS = None
-
-
-def _one_blas_thread() -> _OneBlasThread:
-    """A context that runs the enclosed BLAS calls on one thread (:class:`_OneBlasThread`)."""
-    return _OneBlasThread()
-
-
-class _OneBlasThread:
-    """Run the enclosed BLAS calls on one thread.
-
-    The matrices here are a few rows square; OpenBLAS's threads only add synchronisation,
-    which on a busy machine makes a 4x4 exponential take milliseconds instead of tens of
-    microseconds (every reset of an env at a new spindle speed pays it). The BLAS libraries
-    loaded at the first call are found once (threadpoolctl); each call then reads and sets
-    their thread counts directly, a few microseconds where ``threadpoolctl``'s ``limit``
-    context takes some 30.
-    """
-
-    def __enter__(self):
-        global _BLAS_LIBS
-        if _BLAS_LIBS is None:
-            from threadpoolctl import ThreadpoolController
-
-            ctl = ThreadpoolController()
-            _BLAS_LIBS = [lib for lib in ctl.lib_controllers if lib.user_api == "blas"]
-        self._saved = [(lib, lib.num_threads) for lib in _BLAS_LIBS]
-        for lib, n in self._saved:
-            if n != 1:
-                lib.set_num_threads(1)
-        return self
-
-    def __exit__(self, *exc) -> None:
-        for lib, n in self._saved:
-            if n != 1:
-                lib.set_num_threads(n)
 
 
 def zoh_tf(num, den, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """ZOH-discretise a transfer function; coefficients in powers of ``z^-1``, ``den[0] = 1``."""
-    with _one_blas_thread():
-        numd, dend, _ = cont2discrete((num, den), dt, method="zoh")
+    numd, dend, _ = cont2discrete((num, den), dt, method="zoh")
     numd = np.atleast_1d(np.squeeze(numd))
     dend = np.atleast_1d(np.squeeze(dend))
     return numd / dend[0], dend / dend[0]

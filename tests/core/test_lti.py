@@ -23,24 +23,3 @@ def test_butterworth_half_power_at_cutoff():
     h = c @ np.linalg.solve(1j * w * np.eye(2) - a, b)
     assert abs(h[0]) == pytest.approx(1 / np.sqrt(2), rel=1e-9)
     assert abs(c @ np.linalg.solve(-a, b))[0] == pytest.approx(1.0)
-
-
-def test_one_blas_thread_inside_and_the_counts_restored_after():
-    """Every BLAS library found at the first use (scipy's, numpy's) runs one thread inside
-    the context and gets its count back after."""
-    from threadpoolctl import threadpool_limits
-
-    from machining_envs.core import lti
-
-    with lti._one_blas_thread():
-        pass  # finds the libraries
-    assert lti._BLAS_LIBS
-    with threadpool_limits(limits=2, user_api="blas"):
-        before = [lib.num_threads for lib in lti._BLAS_LIBS]
-        with lti._one_blas_thread():
-            inside = [lib.num_threads for lib in lti._BLAS_LIBS]
-            zoh(np.array([[0.0, 1.0], [-4.0, -0.4]]), np.array([[0.0], [4.0]]), 0.01)
-        after = [lib.num_threads for lib in lti._BLAS_LIBS]
-    assert max(before) == 2
-    assert inside == [1] * len(before)
-    assert after == before
