@@ -152,37 +152,44 @@ class LaneVectorEnv(gym.vector.VectorEnv):
             )
         obs, reward, terminated, truncated, info = self._step_lanes(a)
         every = np.ones(self.num_envs, dtype=bool)
-        info = {
-            **info,
-            **{"_" + k: every for k in info if not k.startswith("_") and "_" + k not in info},
-        }
+        info = {**info, **{"_" + k: every for k in info if k[0] != "_" and "_" + k not in info}}
         done = np.logical_or(terminated, truncated)
-        if done.any():
-            lanes = np.flatnonzero(done)
-            final_obs = np.full(self.num_envs, None, dtype=object)
-            for i in lanes:
-                final_obs[i] = obs[i].copy()
-            final_info: dict = {}
-            top: dict = {}
-            kept = ~done
-            for k, v in info.items():
-                if k.startswith("_"):
-                    continue
-                mask = info["_" + k]
-                if mask is every:  # the keys of every lane share their masks, as above
-                    final_info[k], final_info["_" + k] = v, done
-                    top[k], top["_" + k] = v.copy(), kept
+        if not done.any():
+            return obs, reward, terminated, truncated, info
+        lanes = np.flatnonzero(done)
+        final_obs = np.full(self.num_envs, None, dtype=object)
+        for i in lanes.tolist():
+            final_obs[i] = obs[i].copy()
+        new_obs, part = self._reset_lanes(lanes, None)
+        obs = obs.copy()
+        obs[lanes] = new_obs
+        part = dict(part)
+        final_info: dict = {}
+        top: dict = {}
+        kept = ~done
+        for k, v in info.items():
+            if k[0] == "_":
+                continue
+            mask = info["_" + k]
+            if mask is every:  # the keys of every lane share their masks, as above
+                final_info[k], final_info["_" + k] = v, done
+                new = part.get(k)
+                if type(new) is np.ndarray and new.dtype == v.dtype and "_" + k not in part:
+                    # the common case: the kept lanes' step values and the new lanes'
+                    # reset values, every lane holding the key
+                    v = v.copy()
+                    v[lanes] = new
+                    top[k], top["_" + k] = v, every
+                    del part[k]
                 else:
-                    final_info[k], final_info["_" + k] = v, mask & done
-                    top[k], top["_" + k] = v.copy(), mask & kept
-            new_obs, part = self._reset_lanes(lanes, None)
-            obs = obs.copy()
-            obs[lanes] = new_obs
-            merge_lane_info(top, lanes, part, self.num_envs)
-            top["final_obs"], top["_final_obs"] = final_obs, done.copy()
-            top["final_info"], top["_final_info"] = final_info, done.copy()
-            info = top
-        return obs, reward, terminated, truncated, info
+                    top[k], top["_" + k] = v.copy(), kept
+            else:
+                final_info[k], final_info["_" + k] = v, mask & done
+                top[k], top["_" + k] = v.copy(), mask & kept
+        merge_lane_info(top, lanes, part, self.num_envs)
+        top["final_obs"], top["_final_obs"] = final_obs, done.copy()
+        top["final_info"], top["_final_info"] = final_info, done.copy()
+        return obs, reward, terminated, truncated, top
 
     def close_extras(self, **kwargs) -> None:
         return None
