@@ -55,6 +55,7 @@ class DepthProfile:
                 f"edges_mm must start at 0 and increase strictly, got {self.edges_mm!r}"
             )
         lo, hi = DEPTH_RANGE_MM
+        rows = []
         for label, d in (
             ("start_depths_mm", self.start_depths_mm),
             ("end_depths_mm", self.end_depths_mm),
@@ -65,15 +66,16 @@ class DepthProfile:
                 raise ValueError(f"{label} must be a sequence of numbers, got {d!r}") from None
             if len(vals) != len(e) - 1:
                 raise ValueError(f"{label} must hold {len(e) - 1} values, got {d!r}")
-            if not all(math.isfinite(v) and lo <= v <= hi for v in vals):
+            if not all(lo <= v <= hi for v in vals):  # NaN fails too; inf is out of range
                 raise ValueError(f"{label} must lie in [{lo}, {hi}] mm, got {d!r}")
-        edges = np.array(e)
-        d0 = np.array(self.start_depths_mm, dtype=np.float64)
-        object.__setattr__(self, "_e", edges)
-        object.__setattr__(self, "_d0", d0)
-        object.__setattr__(
-            self, "_slope", (np.array(self.end_depths_mm, dtype=np.float64) - d0) / np.diff(edges)
-        )
+            rows.append(vals)
+        starts, ends = rows
+        slopes = [
+            (b - a) / (x1 - x0) for a, b, x0, x1 in zip(starts, ends, e[:-1], e[1:], strict=True)
+        ]
+        object.__setattr__(self, "_e", np.array(e))
+        object.__setattr__(self, "_d0", np.array(starts))
+        object.__setattr__(self, "_slope", np.array(slopes))
 
     # ---- constructors ---------------------------------------------------------------------
     @classmethod
