@@ -160,10 +160,6 @@ class LaneVectorEnv(gym.vector.VectorEnv):
         final_obs = np.full(self.num_envs, None, dtype=object)
         for i in lanes.tolist():
             final_obs[i] = obs[i].copy()
-        new_obs, part = self._reset_lanes(lanes, None)
-        obs = obs.copy()
-        obs[lanes] = new_obs
-        part = dict(part)
         final_info: dict = {}
         top: dict = {}
         kept = ~done
@@ -173,20 +169,26 @@ class LaneVectorEnv(gym.vector.VectorEnv):
             mask = info["_" + k]
             if mask is every:  # the keys of every lane share their masks, as above
                 final_info[k], final_info["_" + k] = v, done
-                new = part.get(k)
-                if type(new) is np.ndarray and new.dtype == v.dtype and "_" + k not in part:
-                    # the common case: the kept lanes' step values and the new lanes'
-                    # reset values, every lane holding the key
-                    v = v.copy()
-                    v[lanes] = new
-                    top[k], top["_" + k] = v, every
-                    del part[k]
-                else:
-                    top[k], top["_" + k] = v.copy(), kept
+                top[k], top["_" + k] = v.copy(), kept
             else:
                 final_info[k], final_info["_" + k] = v, mask & done
                 top[k], top["_" + k] = v.copy(), mask & kept
-        merge_lane_info(top, lanes, part, self.num_envs)
+        new_obs, part = self._reset_lanes(lanes, None)
+        obs = obs.copy()
+        obs[lanes] = new_obs
+        rest = {}
+        for k, new in part.items():
+            if (
+                top.get("_" + k) is kept  # every other lane holds the key
+                and type(new) is np.ndarray
+                and new.dtype == top[k].dtype
+                and "_" + k not in part
+            ):  # the common case, written straight in: then every lane holds it
+                top[k][lanes] = new
+                top["_" + k] = every
+            else:
+                rest[k] = new
+        merge_lane_info(top, lanes, rest, self.num_envs)
         top["final_obs"], top["_final_obs"] = final_obs, done.copy()
         top["final_info"], top["_final_info"] = final_info, done.copy()
         return obs, reward, terminated, truncated, top
