@@ -139,3 +139,42 @@ def check_below(
         return
     word = "below" if strict else "at most"
     raise ValueError(f"{name} ({value:.6g}) must be {word} {bound_name} ({bound:.6g}): {why}")
+
+
+def check_field(name: str, value, rule: tuple) -> None:
+    """Check a parameter-set field by its ``rule``: ``(lo, hi, lo_open)`` for a number
+    (:func:`check_range`), ``("int", lo, hi)`` for an integer (:func:`check_integer`),
+    ``("choice", allowed, how the message names them)`` for a choice."""
+    if rule[0] == "int":
+        check_integer(name, value, rule[1], rule[2])
+    elif rule[0] == "choice":
+        if value not in rule[1]:
+            raise ValueError(f"{name} must be {rule[2]}, got {value!r}")
+    else:
+        check_range(name, value, rule[0], rule[1], lo_open=rule[2])
+
+
+def replace_checked(params, changes: dict, rules: dict, cls: type):
+    """A copy of the frozen dataclass ``params`` (of exactly ``cls``) with ``changes``, of
+    which only the changed fields are checked, by ``rules`` (field -> rule of
+    :func:`check_field`; the others were checked when ``params`` was made). Envs draw a
+    cut's true parameters at every reset, and checking every field again was a good part
+    of a reset's cost. A field given the value it has (same type, equal) is no change. Any
+    other change ``rules`` does not cover (an unknown name, a subclass, a field checked
+    against another) goes through ``dataclasses.replace`` and the whole ``__post_init__``."""
+    import dataclasses
+
+    old = params.__dict__
+    changes = {
+        k: v
+        for k, v in changes.items()
+        if not (k in old and type(v) is type(old[k]) and v == old[k])
+    }
+    if type(params) is not cls or not changes.keys() <= rules.keys():
+        return dataclasses.replace(params, **changes)
+    for name, value in changes.items():
+        check_field(name, value, rules[name])
+    new = object.__new__(cls)
+    new.__dict__.update(params.__dict__)
+    new.__dict__.update(changes)
+    return new

@@ -52,7 +52,13 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from machining_envs.core.checks import check_below, check_integer, check_range
+from machining_envs.core.checks import (
+    check_below,
+    check_field,
+    check_integer,
+    check_range,
+    replace_checked,
+)
 from machining_envs.core.lti import zoh
 
 __all__ = [
@@ -255,41 +261,9 @@ class DrillingParams:
     """Normalisation of thrusts in observations, N."""
 
     def __post_init__(self) -> None:
-        check_range("valve_natural_freq_hz", self.valve_natural_freq_hz, 0.0, 1e3, lo_open=True)
-        check_range("valve_damping", self.valve_damping, 0.0, 10.0, lo_open=True)
-        check_range(
-            "valve_static_gain_per_V", self.valve_static_gain_per_V, 0.0, 10.0, lo_open=True
-        )
-        check_range("voltage_max", self.voltage_max, 0.0, 1e3, lo_open=True)
+        for name, rule in _FIELD_RULES.items():
+            check_field(name, getattr(self, name), rule)
         check_range("nominal_voltage", self.nominal_voltage, 0.0, self.voltage_max, lo_open=True)
-        check_range("spindle_friction_exponent", self.spindle_friction_exponent, 0.1, 1.0)
-        check_range("spindle_drive_gain", self.spindle_drive_gain, 0.0, 1e9, lo_open=True)
-        check_range("spindle_friction", self.spindle_friction, 0.0, 1e9, lo_open=True)
-        check_range("spindle_inertia_Nmm_s2", self.spindle_inertia_Nmm_s2, 0.0, 1e6, lo_open=True)
-        check_range("point_angle_deg", self.point_angle_deg, 60.0, 170.0)
-        check_range("helix_angle_deg", self.helix_angle_deg, 0.0, 50.0)
-        check_range("web_ratio", self.web_ratio, 0.0, 0.5, lo_open=True)
-        check_range("friction_angle_deg", self.friction_angle_deg, 0.0, 60.0)
-        check_range("chisel_rake_deg", self.chisel_rake_deg, -70.0, 0.0)
-        check_range("shear_stress_MPa", self.shear_stress_MPa, 0.0, 1e5, lo_open=True)
-        check_range("indentation_coeff_MPa", self.indentation_coeff_MPa, 0.0, 1e5)
-        check_range("indentation_wedge_deg", self.indentation_wedge_deg, 0.0, 89.0)
-        check_range("chip_friction", self.chip_friction, 0.0, 100.0)
-        check_range("chip_length_diameters", self.chip_length_diameters, 0.0, 1e3, lo_open=True)
-        check_range("chip_fluctuation", self.chip_fluctuation, 0.0, 2.0)
-        check_range("wear_per_mm", self.wear_per_mm, 0.0, 10.0)
-        check_range(
-            "chip_fluctuation_time_s", self.chip_fluctuation_time_s, 0.0, 100.0, lo_open=True
-        )
-        check_range("cutting_fluctuation", self.cutting_fluctuation, 0.0, 0.5)
-        check_range(
-            "cutting_fluctuation_time_s", self.cutting_fluctuation_time_s, 0.0, 100.0, lo_open=True
-        )
-        check_range(
-            "breakage_coeff_N_per_mm2", self.breakage_coeff_N_per_mm2, 0.0, 1e6, lo_open=True
-        )
-        check_range("feed_velocity_mm_s", self.feed_velocity_mm_s, 0.0, 100.0, lo_open=True)
-        check_range("feed_speed_max_mm_s", self.feed_speed_max_mm_s, 0.0, 100.0, lo_open=True)
         check_below(
             "feed_velocity_mm_s",
             self.feed_velocity_mm_s,
@@ -298,15 +272,6 @@ class DrillingParams:
             "the stage cannot feed faster than its top speed",
             strict=False,
         )
-        check_range("retract_limit_mm", self.retract_limit_mm, 0.0, 100.0)
-        check_range("sensor_cutoff_hz", self.sensor_cutoff_hz, 0.0, 1e4, lo_open=True)
-        check_range("torque_noise_Nmm", self.torque_noise_Nmm, 0.0, 100.0)
-        check_range("thrust_noise_N", self.thrust_noise_N, 0.0, 1e3)
-        check_range("speed_noise_hz", self.speed_noise_hz, 0.0, 1e3)
-        check_range("sample_time_s", self.sample_time_s, 0.0, 1.0, lo_open=True)
-        check_integer("substeps", self.substeps, 1, 1000)
-        check_range("torque_scale_Nmm", self.torque_scale_Nmm, 0.0, 1e6, lo_open=True)
-        check_range("thrust_scale_N", self.thrust_scale_N, 0.0, 1e6, lo_open=True)
 
     @classmethod
     def cheong_cho(cls) -> DrillingParams:
@@ -314,8 +279,10 @@ class DrillingParams:
         return cls()
 
     def replace(self, **changes) -> DrillingParams:
-        """A copy with fields changed; unknown names raise ``TypeError``."""
-        return dataclasses.replace(self, **changes)
+        """A copy with fields changed; unknown names raise ``TypeError``. Only the changed
+        fields are checked (:func:`~machining_envs.core.checks.replace_checked`), but for
+        those checked against another, which check the whole set again."""
+        return replace_checked(self, changes, _REPLACE_RULES, DrillingParams)
 
     # ---- derived quantities (never stored) -------------------------------------------------
     @property
@@ -385,6 +352,55 @@ class DrillingParams:
         """Chip-free torque at the nominal voltage's free speed and the nominal feed, N·mm:
         the default torque reference (the spindle then stays near 545 Hz, their Fig. 22)."""
         return self.chip_free_torque_Nmm(diameter_mm, self.free_speed_hz(self.nominal_voltage))
+
+
+#: How each field of :class:`DrillingParams` is checked on its own, in the order of the
+#: fields (rules of :func:`~machining_envs.core.checks.check_field`); ``__post_init__`` then
+#: checks ``nominal_voltage`` against ``voltage_max`` and the feed against the stage's top
+#: speed.
+_FIELD_RULES: dict[str, tuple] = {
+    "valve_natural_freq_hz": (0.0, 1e3, True),
+    "valve_damping": (0.0, 10.0, True),
+    "valve_static_gain_per_V": (0.0, 10.0, True),
+    "voltage_max": (0.0, 1e3, True),
+    "spindle_friction_exponent": (0.1, 1.0, False),
+    "spindle_drive_gain": (0.0, 1e9, True),
+    "spindle_friction": (0.0, 1e9, True),
+    "spindle_inertia_Nmm_s2": (0.0, 1e6, True),
+    "point_angle_deg": (60.0, 170.0, False),
+    "helix_angle_deg": (0.0, 50.0, False),
+    "web_ratio": (0.0, 0.5, True),
+    "friction_angle_deg": (0.0, 60.0, False),
+    "chisel_rake_deg": (-70.0, 0.0, False),
+    "shear_stress_MPa": (0.0, 1e5, True),
+    "indentation_coeff_MPa": (0.0, 1e5, False),
+    "indentation_wedge_deg": (0.0, 89.0, False),
+    "chip_friction": (0.0, 100.0, False),
+    "chip_length_diameters": (0.0, 1e3, True),
+    "chip_fluctuation": (0.0, 2.0, False),
+    "chip_fluctuation_time_s": (0.0, 100.0, True),
+    "wear_per_mm": (0.0, 10.0, False),
+    "cutting_fluctuation": (0.0, 0.5, False),
+    "cutting_fluctuation_time_s": (0.0, 100.0, True),
+    "breakage_coeff_N_per_mm2": (0.0, 1e6, True),
+    "feed_velocity_mm_s": (0.0, 100.0, True),
+    "feed_speed_max_mm_s": (0.0, 100.0, True),
+    "retract_limit_mm": (0.0, 100.0, False),
+    "sensor_cutoff_hz": (0.0, 1e4, True),
+    "torque_noise_Nmm": (0.0, 100.0, False),
+    "thrust_noise_N": (0.0, 1e3, False),
+    "speed_noise_hz": (0.0, 1e3, False),
+    "sample_time_s": (0.0, 1.0, True),
+    "substeps": ("int", 1, 1000),
+    "torque_scale_Nmm": (0.0, 1e6, True),
+    "thrust_scale_N": (0.0, 1e6, True),
+}
+#: The fields :meth:`DrillingParams.replace` checks alone (not against another field).
+_REPLACE_RULES = {
+    k: v
+    for k, v in _FIELD_RULES.items()
+    if k not in ("voltage_max", "feed_velocity_mm_s", "feed_speed_max_mm_s")
+}
 
 
 @dataclass(frozen=True)

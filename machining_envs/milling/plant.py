@@ -47,7 +47,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from machining_envs.core.checks import check_integer, check_range
+from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
 from machining_envs.core.kernels import matvec
 from machining_envs.core.lti import zoh, zoh_tf
 
@@ -211,8 +211,8 @@ class MillingParams:
     flutes of the 152 mm overhang. The episode terminates past it."""
 
     def __post_init__(self) -> None:
-        for name in _FIELD_RULES:
-            _check_field(name, getattr(self, name))
+        for name, rule in _FIELD_RULES.items():
+            check_field(name, getattr(self, name), rule)
 
     # ---- parameter sets ------------------------------------------------------------------
     @classmethod
@@ -252,20 +252,9 @@ class MillingParams:
         )
 
     def replace(self, **changes) -> MillingParams:
-        """A copy with fields changed; unknown names raise ``TypeError``.
-
-        Only the changed fields are checked (the others were when ``self`` was made), so
-        that the envs can draw a cut's true parameters at every reset cheaply.
-        """
-        if type(self) is not MillingParams or not all(k in _FIELD_RULES for k in changes):
-            return dataclasses.replace(self, **changes)
-        for name in _FIELD_RULES:
-            if name in changes:
-                _check_field(name, changes[name])
-        new = object.__new__(MillingParams)
-        new.__dict__.update(self.__dict__)
-        new.__dict__.update(changes)
-        return new
+        """A copy with fields changed; unknown names raise ``TypeError``. Only the changed
+        fields are checked (:func:`~machining_envs.core.checks.replace_checked`)."""
+        return replace_checked(self, changes, _FIELD_RULES, MillingParams)
 
     # ---- derived quantities (never stored) -----------------------------------------------
     @property
@@ -362,9 +351,8 @@ class MillingParams:
         return zoh_tf(num, den, self.sample_time_s)
 
 
-#: How each field of :class:`MillingParams` is checked, in the order of the fields:
-#: ``(lo, hi, lo_open)`` for a number, ``("int", lo, hi)`` for an integer,
-#: ``("choice", allowed, how the message names them)`` for a choice.
+#: How each field of :class:`MillingParams` is checked, in the order of the fields (rules
+#: of :func:`~machining_envs.core.checks.check_field`).
 _FIELD_RULES: dict[str, tuple] = {
     "tool_diameter_mm": (0.0, 200.0, True),
     "n_teeth": ("int", 1, 50),
@@ -393,18 +381,6 @@ _FIELD_RULES: dict[str, tuple] = {
     "breakage_torque_Nmm": (0.0, 1e9, True),
 }
 assert tuple(_FIELD_RULES) == tuple(f.name for f in dataclasses.fields(MillingParams))
-
-
-def _check_field(name: str, value) -> None:
-    """``ValueError`` (naming the field) unless ``value`` is allowed for field ``name``."""
-    rule = _FIELD_RULES[name]
-    if rule[0] == "int":
-        check_integer(name, value, rule[1], rule[2])
-    elif rule[0] == "choice":
-        if value not in rule[1]:
-            raise ValueError(f"{name} must be {rule[2]}, got {value!r}")
-    else:
-        check_range(name, value, rule[0], rule[1], lo_open=rule[2])
 
 
 # ---- average cutting-force model (seed 002) ----------------------------------------------

@@ -22,7 +22,6 @@ This module imports numpy and scipy only; it knows nothing of gymnasium.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 from dataclasses import dataclass
@@ -31,7 +30,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from machining_envs.core.checks import check_integer, check_range
+from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
 from machining_envs.core.kernels import fma, matvec
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
 
@@ -149,29 +148,14 @@ class TurningParams:
     """Normalisation of forces in observations, N (the paper's reference force)."""
 
     def __post_init__(self) -> None:
-        _check("servo_gain", self.servo_gain, 0.0, 1e6, lo_open=True)
-        _check("servo_natural_freq_hz", self.servo_natural_freq_hz, 0.0, 1e3, lo_open=True)
-        _check("servo_damping", self.servo_damping, 0.0, 10.0, lo_open=True)
-        _check("gear_ratio", self.gear_ratio, 0.0, 1e3, lo_open=True)
-        _check("force_coefficient", self.force_coefficient, 0.0, 1e6, lo_open=True)
-        _check("feed_exponent", self.feed_exponent, 0.0, 2.0, lo_open=True)
-        _check("sensor_gain", self.sensor_gain, 0.0, 1e6, lo_open=True)
-        _check("sensor_cutoff_hz", self.sensor_cutoff_hz, 0.0, 1e4, lo_open=True)
+        for name, rule in _FIELD_RULES.items():
+            check_field(name, getattr(self, name), rule)
         if isinstance(self.sensor_filter_order, bool) or self.sensor_filter_order not in (1, 2):
             raise ValueError(
                 f"sensor_filter_order must be 1 or 2, got {self.sensor_filter_order!r}"
             )
-        _check("sample_time_s", self.sample_time_s, 0.0, 10.0, lo_open=True)
-        check_integer("substeps", self.substeps, 1, 10000)
-        _check("command_max", self.command_max, 0.0, 1e9, lo_open=True)
-        _check("breakage_force_N", self.breakage_force_N, 0.0, 1e7, lo_open=True)
-        _check("noise_std_N", self.noise_std_N, 0.0, 1e5)
-        _check("wear_per_100mm", self.wear_per_100mm, 0.0, 10.0)
         if self.spindle_power_W != float("inf"):  # inf: no power limit
             _check("spindle_power_W", self.spindle_power_W, 0.0, 1e7, lo_open=True)
-        _check("spindle_inertia_kg_m2", self.spindle_inertia_kg_m2, 0.0, 1e3, lo_open=True)
-        _check("workpiece_diameter_mm", self.workpiece_diameter_mm, 0.0, 1e4, lo_open=True)
-        _check("force_scale_N", self.force_scale_N, 0.0, 1e7, lo_open=True)
 
     @classmethod
     def noh_kim_kim_1992(cls) -> TurningParams:
@@ -179,8 +163,9 @@ class TurningParams:
         return cls()
 
     def replace(self, **changes) -> TurningParams:
-        """A copy with fields changed; unknown names raise ``TypeError``."""
-        return dataclasses.replace(self, **changes)
+        """A copy with fields changed; unknown names raise ``TypeError``. Only the changed
+        fields are checked (:func:`~machining_envs.core.checks.replace_checked`)."""
+        return replace_checked(self, changes, _FIELD_RULES, TurningParams)
 
     # ---- derived quantities (never stored) -------------------------------------------------
     @property
@@ -230,6 +215,30 @@ class TurningParams:
         """ZOH discretisation of :meth:`open_loop_tf` at ``sample_time_s`` (eq. 14), in z^-1."""
         num, den = self.open_loop_tf(spindle_rpm)
         return zoh_tf(num, den, self.sample_time_s)
+
+
+#: How each field of :class:`TurningParams` is checked, in the order of the fields (rules
+#: of :func:`~machining_envs.core.checks.check_field`), but for ``sensor_filter_order`` (1
+#: or 2, not a bool) and ``spindle_power_W`` (inf for none), which ``__post_init__`` checks.
+_FIELD_RULES: dict[str, tuple] = {
+    "servo_gain": (0.0, 1e6, True),
+    "servo_natural_freq_hz": (0.0, 1e3, True),
+    "servo_damping": (0.0, 10.0, True),
+    "gear_ratio": (0.0, 1e3, True),
+    "force_coefficient": (0.0, 1e6, True),
+    "feed_exponent": (0.0, 2.0, True),
+    "sensor_gain": (0.0, 1e6, True),
+    "sensor_cutoff_hz": (0.0, 1e4, True),
+    "sample_time_s": (0.0, 10.0, True),
+    "substeps": ("int", 1, 10000),
+    "command_max": (0.0, 1e9, True),
+    "breakage_force_N": (0.0, 1e7, True),
+    "noise_std_N": (0.0, 1e5, False),
+    "wear_per_100mm": (0.0, 10.0, False),
+    "spindle_inertia_kg_m2": (0.0, 1e3, True),
+    "workpiece_diameter_mm": (0.0, 1e4, True),
+    "force_scale_N": (0.0, 1e7, True),
+}
 
 
 @dataclass(frozen=True)
