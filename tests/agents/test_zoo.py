@@ -133,8 +133,16 @@ def test_a_policy_of_ours_opens_with_rl_zoo3_enjoy(tmp_path, capsys):
     name = "machining_envs-EndMilling-v0"
     hyper, stats = get_saved_hyperparams(str(exp / name), test_mode=True)
     env_kwargs = hyper.pop("env_kwargs")
+    # should_render=False, as enjoy's --no-render: rl-zoo3 would otherwise open the env in
+    # "human" mode and draw every step (a third of a second each, two minutes in all)
     zoo_env = create_test_env(
-        ENDMILLING, n_envs=1, stats_path=stats, seed=7, hyperparams=hyper, env_kwargs=env_kwargs
+        ENDMILLING,
+        n_envs=1,
+        stats_path=stats,
+        seed=7,
+        should_render=False,
+        hyperparams=hyper,
+        env_kwargs=env_kwargs,
     )
     zoo_model = PPO.load(exp / "best_model.zip", device="cpu")
     obs = zoo_env.reset()
