@@ -164,13 +164,15 @@ def replace_checked(params, changes: dict, rules: dict, cls: type):
     against another) goes through ``dataclasses.replace`` and the whole ``__post_init__``."""
     import dataclasses
 
+    if type(params) is not cls:
+        return dataclasses.replace(params, **changes)
     old = params.__dict__
     changes = {
         k: v
         for k, v in changes.items()
         if not (k in old and type(v) is type(old[k]) and v == old[k])
     }
-    if type(params) is not cls or not changes.keys() <= rules.keys():
+    if not changes.keys() <= rules.keys():
         return dataclasses.replace(params, **changes)
     for name, value in changes.items():
         check_field(name, value, rules[name])
