@@ -14,6 +14,7 @@ value that one process accepts must not start failing there.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -162,8 +163,6 @@ def replace_checked(params, changes: dict, rules: dict, cls: type):
     of a reset's cost. A field given the value it has (same type, equal) is no change. Any
     other change ``rules`` does not cover (an unknown name, a subclass, a field checked
     against another) goes through ``dataclasses.replace`` and the whole ``__post_init__``."""
-    import dataclasses
-
     if type(params) is not cls:
         return dataclasses.replace(params, **changes)
     old = params.__dict__

@@ -13,9 +13,9 @@ through zero), float32 signals (observations, actions) to one float32 step at th
 (a last-bit change may move a float32 rounding by one step), and the digests, which cannot
 see a last-bit change from a real one, are then not compared. The H-infinity designs a case
 uses are replayed from the file (``record.py`` says why); a fresh synthesis is checked
-against them separately, to the tolerance its conditioning allows. When the physics or a controller changes on
-purpose, regenerate the data (``python -m tests.golden.record``) in the same commit and say
-why in its message.
+against them separately, to the tolerance its conditioning allows. When the physics or a
+controller changes on purpose, regenerate the data (``python -m tests.golden.record``) in
+the same commit and say why in its message.
 """
 
 from __future__ import annotations
