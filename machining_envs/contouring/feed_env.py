@@ -40,6 +40,7 @@ from machining_envs.contouring.scenarios import (
     contouring_scenario,
 )
 from machining_envs.contouring.servo import (
+    SCRATCH_SIZE,
     SERVO_KINDS,
     ServoLanes,
     lane_loops,
@@ -153,18 +154,18 @@ def _bound(o, i, x, lo, hi):
     o[i] = lo[i] if x < lo[i] else (hi[i] if x > hi[i] else x)
 
 
-def _scratch_size(nb: int, n_y: int, n_state: int, n_seg: int) -> int:
+def _scratch_size(nb: int, n_seg: int) -> int:
     """Values of ``_feed_step``'s float scratch (see :func:`_carve`)."""
-    return (nb + 1) + 6 * nb + 4 * nb + (8 * nb + 2) + n_y + n_state + n_seg
+    return (nb + 1) + 6 * nb + 4 * nb + (8 * nb + 2) + SCRATCH_SIZE + n_seg
 
 
 @numba.njit(cache=True, inline="always")
-def _carve(sc, nb, n_y, n_state, n_seg):
+def _carve(sc, nb, n_seg):
     """The scratch arrays of ``_feed_step`` as views of one float array (one argument to
     pass instead of sixteen): the set point's path positions (nb + 1), reference and table
     x, y, contour errors, a spare run (nb each), references and loads (nb, 2), positions
     (nb, 2), velocities (nb + 1, 2), commands and torques (nb, 2), ``run_block``'s scratch,
-    two states, the distances' lower bounds per segment."""
+    the distances' lower bounds per segment."""
     o = nb + 1
     st = sc[:o]
     rx = sc[o : o + nb]
@@ -182,11 +183,10 @@ def _carve(sc, nb, n_y, n_state, n_seg):
     cmd = sc[o + 4 * nb + 2 : o + 6 * nb + 2].reshape((nb, 2))
     torque = sc[o + 6 * nb + 2 : o + 8 * nb + 2].reshape((nb, 2))
     o += 8 * nb + 2
-    y = sc[o : o + n_y]
-    zs = sc[o + n_y : o + n_y + n_state]
-    lower = sc[o + n_y + n_state : o + n_y + n_state + n_seg]
+    zb = sc[o : o + SCRATCH_SIZE]
+    lower = sc[o + SCRATCH_SIZE : o + SCRATCH_SIZE + n_seg]
     assert lower.size == n_seg  # the buffer has room for every view
-    return st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, y, zs, lower
+    return st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, zb, lower
 
 
 #: Columns of ``_FeedCore.lf`` (per-lane floats) and ``_FeedCore.li`` (per-lane integers).
@@ -202,12 +202,12 @@ _N_OBS = len(_LIMS)
 
 
 @numba.njit(cache=True, _nrt=False)
-def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, lay, state, consts, obs, flags, out, sc,
+def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, state, consts, obs, flags, out, sc,
                order):  # fmt: skip
     """One decision step of every lane (``ContouringFeedEnv.step`` after its input checks).
 
     ``lf`` and ``li`` hold the per-lane floats and integers (columns ``_LF``, ``_LI``),
-    ``loops`` and ``lay`` the lanes' closed loops (``ServoLanes.buf`` and ``.layout``),
+    ``loops`` the lanes' closed loops (``ServoLanes.buf``),
     ``consts`` the env's constants: ``c`` = ``consts[:8]`` = ``[n_sub, Ts, tolerance,
     in_position, divergence, override mid, override half, actuated]``: where ``actuated``
     is 1 the override is ``applied[k]`` (what the CNC's actuation made of the action's),
@@ -229,8 +229,8 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, lay, state, consts, obs,
     n = int(c[0])
     ts = c[1]
     tol = c[2]
-    st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, y, zs, lower = _carve(
-        sc, n, lay[1], state.shape[1], order.size
+    st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, zb, lower = _carve(
+        sc, n, order.size
     )
     for k in range(actions.shape[0]):
         tab = tabs[k, : nseg[k]]
@@ -256,9 +256,8 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, lay, state, consts, obs,
                 i += 1
             load[j, 0] = load_v[k, i, 0]
             load[j, 1] = load_v[k, i, 1]
-        ft, g, he, sa, sb, cu, du, gu, tq, umax = lane_loops(loops[k], lay)
-        run_block(ft, g, he, sa, sb, cu, du, gu, tq, umax[0], state[k], ref, load, pos, vel, cmd,
-                  torque, y, zs)  # fmt: skip
+        ac, bc, cu, du, gu, tq, umax = lane_loops(loops[k])
+        run_block(ac, bc, cu, du, gu, tq, umax[0], state[k], ref, load, pos, vel, cmd, torque, zb)
         diverged = False
         for j in range(n):
             px[j] = pos[j, 0] + x0
@@ -462,8 +461,7 @@ class _FeedCore:
         self._bind()
 
     def _float_scratch(self, n_seg: int) -> np.ndarray:
-        lp = self.loops
-        return np.zeros(_scratch_size(self.n_sub, lp.scratch_size, 2 * lp.n_states_axis, n_seg))
+        return np.zeros(_scratch_size(self.n_sub, n_seg))
 
     def _actuation_lanes(self) -> ActuationLanes:
         """The CNC's actuation between the actions and the override, for every lane (a lane
@@ -585,7 +583,7 @@ class _FeedCore:
         :meth:`_grow` does), not attribute by attribute every step."""
         self._args = (
             self.lf, self.li, self.tabs, self.pf, self.load_t, self.load_v, self.loops.buf,
-            self.loops.layout, self.state, self.consts, self.obs, self.flags, self.out,
+            self.state, self.consts, self.obs, self.flags, self.out,
             *self._scratch,
         )  # fmt: skip
 

@@ -21,8 +21,8 @@ which keeps the numbers small and makes the loop indifferent to where on the tab
 
 Both are synthesised once per axis model and cached; nothing here runs per step except
 :class:`ServoLanes` (and :class:`ServoLoop`, one loop of it), which precomputes the closed
-loop of a design and a (true) plant and advances it a block of servo periods at a time as
-one lifted linear update, compiled (:func:`run_block`).
+loop of a design and a (true) plant and advances it a block of servo periods at a time,
+compiled (:func:`run_block`).
 
 python-control and slycot are imported only inside the H-infinity design.
 """
@@ -38,10 +38,9 @@ import numpy as np
 from scipy.linalg import schur, solve_continuous_are
 from scipy.signal import cont2discrete
 
-from machining_envs.contouring._exact import dot, gemm_entry, gemv_row
 from machining_envs.contouring.plant import AXES, ContouringParams
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_integer, check_range
-from machining_envs.core.kernels import add_scaled8, add_scaled_vec8, load8, store8, zero8
+from machining_envs.core.kernels import add8, add_scaled8, fma, get8, load8, store8, zero8
 
 __all__ = [
     "ServoDesign",
@@ -53,6 +52,8 @@ __all__ = [
     "lane_loops",
     "lifted_matrix",
     "run_block",
+    "ROW_SIZE",
+    "SCRATCH_SIZE",
     "SERVO_KINDS",
     "servo_design",
     "HINF_MODEL_POLE",
@@ -388,42 +389,26 @@ def servo_design(kind: str, params: ContouringParams, axis: str) -> ServoDesign:
 
 # ---- the block update -------------------------------------------------------------------
 #
-# A block of ``nb`` servo periods of one axis's closed loop ``z+ = A z + B w`` (w = [r, T_L])
-# is linear in the state at its start and the block's inputs: positions after each period,
-# velocities at every instant, the commands and the state at the block's end are rows of
-# one matrix (``lifted_matrix``) applied to ``[z_x, z_y, r_x, TL_x, r_y, TL_y]``. Its rows
-# are Toeplitz in the inputs (the coefficient of an input depends only on how many periods
-# ago it was applied: ``A^m B``), so a lane keeps only the distinct coefficients:
+# A block of ``nb`` servo periods of one axis's closed loop ``z+ = A z + B w`` (w = [r, T_L],
+# ``u = Cu z + Du r``) runs as its recursion, compiled: period by period, the next state is
+# the sum of A's columns scaled by the state's values and of B's by the inputs, all eight
+# values of a column at once (``core.kernels``: one fused multiply-add per value, so the
+# numbers do not depend on the processor's vector width and a lane equals the single env to
+# the last bit). A lane keeps per axis the columns of ``A`` (``ac``, eight of eight values,
+# zero past the state), of ``B`` (``bc``), ``Cu`` (``cu``, eight values), ``Du``, the
+# plant's input column (``gu``: where a clipped command's difference enters), the torque
+# factor and the command limit: 1.5 kB a lane, which stay in the cache at any N.
 #
-# - ``FT`` (n, 3 (nb + S) + 8, rounded up to a multiple of eight): the state's coefficients
-#   of every value, stored by state column, in the layout of ``run_block``'s scratch: the
-#   positions after each period, the velocities at the nb + 1 instants, the commands, each
-#   in a run of ``nb + S`` values (S = ``_SPARE``; zeros after the signal's end), then the
-#   end state (eight values);
-# - ``G`` (6, nb + S): the response ``m`` periods after an input at column ``L + m``
-#   (L = ``_LEAD``; zeros before and after): rows ``(A^m B)[0, 0 / 1]`` (position from
-#   set point / load), ``(A^m B)[1, 0 / 1]`` (velocity), ``Cu A^m B`` (command, whose
-#   own period's set point enters through the feed-through at column ``L - 1``);
-# - ``HE`` (2, 8 nb): what input ``i`` leaves in the end state, ``(A^(nb-1-i) B)[q, 0 / 1]``
-#   at ``8 i + q`` (eight values per input, zeros past the state).
-#
-# ``run_block`` sums each output over the state, then over the inputs in their order (a
-# convolution), eight outputs at a time in one vector register, by fused multiply-adds:
-# the result does not depend on the vector width, and a lane gives the same numbers alone
-# or in a batch. It agrees with the BLAS product ``lifted_matrix(...) @ vector`` to
-# rounding (a few units in the last place of the terms' magnitude;
-# ``tests/contouring/test_exact.py``).
-
-
-#: Values after each signal's ``nb + 1`` in ``run_block``'s scratch and columns of ``g``
-#: besides its ``nb``: room for the overhang of the groups of eight.
-_SPARE = 16
-#: Zero columns of ``g`` before the response to an input (the feed-through in the last).
-_LEAD = 8
+# The block is also one linear map (``lifted_matrix``, the numpy reference of the tests):
+# the recursion agrees with it to rounding (a few units in the last place of the terms'
+# magnitudes; ``tests/contouring/test_exact.py``). As a product, the block reads about
+# 20 000 coefficients a lane (40 kB) against 2 x 50 x 10 column updates here: the recursion
+# is 3x faster alone and 5x in a batch of 1024 lanes, whose matrices would not fit in the
+# cache.
 
 
 def lifted_matrix(truth: ContouringParams, designs, block: int) -> np.ndarray:
-    """The block update of both axes as one matrix (numpy; the reference of
+    """The block update of both axes as one matrix, unclipped (numpy; the reference of
     :func:`run_block`, for tests and inspection).
 
     Rows per axis (X, then Y): the positions after each of the ``block`` periods, the
@@ -468,293 +453,149 @@ def lifted_matrix(truth: ContouringParams, designs, block: int) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def _lift_axis(phi, gam, da, db, dc, dd, nb, ft, g, he, a, b, cu):
-    """Closed loop of one axis (``closed_loop``'s arithmetic) and its block coefficients
-    (``lifted_matrix``'s), into ``ft``, ``g``, ``he`` (layout above), ``a``, ``b``, ``cu``;
-    returns the command's feed-through of the set point."""
+def _close_axis(phi, gam, da, db, dc, dd, ac, bc, cu):
+    """Closed loop of one axis (``closed_loop``'s arithmetic) into ``ac`` (column ``q`` of
+    ``A`` in ``ac[q]``), ``bc`` (the set point's and the load's columns of ``B``) and ``cu``
+    (``Cu``), zero past the state; returns ``Du``'s set-point entry."""
     nk = da.shape[0]
-    n = nk + 2
     dr = dd[0, 0]
     dy = dd[0, 1]
-    a[:, :] = 0.0
+    ac[:, :] = 0.0
+    bc[:, :] = 0.0
+    cu[:] = 0.0
     for i in range(2):
         gy = gam[i, 0] * dy
-        a[i, 0] = phi[i, 0] + gy * 1.0
-        a[i, 1] = phi[i, 1] + gy * 0.0
+        ac[0, i] = phi[i, 0] + gy * 1.0
+        ac[1, i] = phi[i, 1] + gy * 0.0
         for j in range(nk):
-            a[i, 2 + j] = gam[i, 0] * dc[0, j]
-        b[i, 0] = gam[i, 0] * dr
-        b[i, 1] = gam[i, 1]
+            ac[2 + j, i] = gam[i, 0] * dc[0, j]
+        bc[0, i] = gam[i, 0] * dr
+        bc[1, i] = gam[i, 1]
     for i in range(nk):
-        a[2 + i, 0] = db[i, 1] * 1.0
-        a[2 + i, 1] = db[i, 1] * 0.0
+        ac[0, 2 + i] = db[i, 1] * 1.0
+        ac[1, 2 + i] = db[i, 1] * 0.0
         for j in range(nk):
-            a[2 + i, 2 + j] = da[i, j]
-        b[2 + i, 0] = db[i, 0]
-        b[2 + i, 1] = 0.0
+            ac[2 + j, 2 + i] = da[i, j]
+        bc[0, 2 + i] = db[i, 0]
     cu[0] = dy * 1.0
     cu[1] = dy * 0.0
     for j in range(nk):
         cu[2 + j] = dc[0, j]
-    # Powers A^j (dgemm: one FMA chain per entry) and A^m B.
-    sl = nb + _SPARE  # ``ft``'s columns are laid out as ``run_block``'s scratch
-    p = np.eye(n)
-    nxt = np.empty((n, n))
-    pb = np.empty((n, 2))
-    ft[:, :] = 0.0
-    g[:, :] = 0.0
-    he[:, :] = 0.0
-    g[4, _LEAD - 1] = 0.0 + dr  # the command's feed-through of its own period's set point
-    for j in range(nb + 1):
-        # the state's coefficients in the values of this power: the position after period
-        # j (value j - 1), the velocity at j, the command of period j, the end state
-        if j >= 1:
-            for q in range(n):
-                ft[q, j - 1] = p[0, q]
-        for q in range(n):
-            ft[q, sl + j] = p[1, q]
-        if j < nb:
-            for q in range(n):
-                acc = 0.0
-                for k in range(n):
-                    acc += cu[k] * p[k, q]
-                ft[q, 2 * sl + j] = acc
-            for r in range(n):
-                for c in range(2):
-                    pb[r, c] = gemm_entry(p, b, r, c)
-            for c in range(2):
-                g[c, _LEAD + j] = pb[0, c]
-                g[2 + c, _LEAD + j] = pb[1, c]
-                acc = 0.0
-                for k in range(n):
-                    acc += cu[k] * pb[k, c]
-                g[4 + c, _LEAD + j] = acc
-                for r in range(n):
-                    he[c, 8 * (nb - 1 - j) + r] = pb[r, c]
-            for r in range(n):
-                for c in range(n):
-                    nxt[r, c] = gemm_entry(a, p, r, c)
-            p[:, :] = nxt
-        else:
-            for r in range(n):
-                for q in range(n):
-                    ft[q, 3 * sl + r] = p[r, q]
     return dr
 
 
+@numba.njit(cache=True, inline="always")
+def _next_state(a, b, z, r, load):
+    """``A z + B [r, load]`` (``a``: A's columns, ``b``: B's, ``z``: eight values), in four
+    chains of fused multiply-adds (columns 0-1 and the inputs, 2-3, 4-5, 6-7), summed as
+    ``(c0 + c1) + (c2 + c3)``."""
+    c0 = add_scaled8(zero8(), a[0], a[1], 0, get8(z, 0), get8(z, 1))
+    c1 = add_scaled8(zero8(), a[2], a[3], 0, get8(z, 2), get8(z, 3))
+    c2 = add_scaled8(zero8(), a[4], a[5], 0, get8(z, 4), get8(z, 5))
+    c3 = add_scaled8(zero8(), a[6], a[7], 0, get8(z, 6), get8(z, 7))
+    c0 = add_scaled8(c0, b[0], b[1], 0, r, load)
+    return add8(add8(c0, c1), add8(c2, c3))
+
+
+@numba.njit(cache=True, inline="always")
+def _command(c, du, z, r):
+    """``Cu z + Du r`` (``c``: Cu's eight values)."""
+    s0 = fma(c[0], get8(z, 0), c[4] * get8(z, 4))
+    s1 = fma(c[1], get8(z, 1), c[5] * get8(z, 5))
+    s2 = fma(c[2], get8(z, 2), c[6] * get8(z, 6))
+    s3 = fma(c[3], get8(z, 3), c[7] * get8(z, 7))
+    return ((s0 + s1) + (s2 + s3)) + du * r
+
+
+@numba.njit(cache=True, inline="always")
+def _axis_period(a, b, c, du, gu, umax, z, r, load, zb, o):
+    """One servo period of one axis from the state ``z``: ``(next state, command applied,
+    whether it was clipped)``. A command past ``umax`` is clipped; the controller, which
+    does not know of the clip, carries on unchanged, and the plant's states (the first
+    two) get the difference through its input column ``gu`` (``zb[o : o + 8]``: scratch)."""
+    u = _command(c, du, z, r)
+    zn = _next_state(a, b, z, r, load)
+    uc = u
+    if u > umax:
+        uc = umax
+    elif u < -umax:
+        uc = -umax
+    if uc == u:  # a NaN command is not clipped: the NaN state shows the divergence
+        return zn, u, False
+    store8(zb, o, zn)
+    zb[o] += gu[0] * (uc - u)
+    zb[o + 1] += gu[1] * (uc - u)
+    return load8(zb, o), uc, True
+
+
 @numba.njit(cache=True, _nrt=False)
-def run_block(ft, g, he, a, b, cu, du, gu, tq, umax, state, ref, load, pos, vel, cmd, torque,
-              y, zs):  # fmt: skip
+def run_block(ac, bc, cu, du, gu, tq, umax, state, ref, load, pos, vel, cmd, torque, zb):
     """Advance both axes of one loop by one block (``ServoLoop.run``; see there).
 
-    ``ft``, ``g``, ``he``, ``a``, ``b``, ``cu``, ``du``, ``gu``, ``tq`` are the lane's
-    per-axis arrays (leading dimension 2; layout above); ``y`` and ``zs`` are scratch of
-    ``ServoLanes.scratch_size`` values and of two states. Writes ``pos``, ``vel``
-    (``nb + 1`` rows: the start, then after each period), ``cmd``, ``torque``; updates
-    ``state``; returns whether a command clipped.
-
-    In ``y`` each signal has a run of ``nb + _SPARE`` values (the positions after each
-    period, the velocities at each instant, the commands), then the end state: a group of
-    eight outputs may pass its signal's end into spare values, which are never read.
+    ``ac``, ``bc``, ``cu``, ``du``, ``gu``, ``tq`` are the lane's per-axis arrays (leading
+    dimension 2; see :func:`lane_loops`); ``state`` holds both axes' closed-loop states
+    (``n`` values each, ``n <= 8``); ``zb`` is scratch of 16 values. Writes ``pos``,
+    ``vel`` (``nb + 1`` rows: the start, then after each period), ``cmd``, ``torque``;
+    updates ``state``; returns whether a command clipped.
     """
     nb = ref.shape[0]
-    n = a.shape[1]
-    sl = nb + _SPARE
-    rv = sl  # the velocities
-    ru = 2 * sl  # the commands
-    re = 3 * sl  # the end state
-    clipped = False
+    n = state.shape[0] // 2
+    zb[:] = 0.0
     for k in range(2):
-        fk = ft[k]
-        gk = g[k]
-        s0 = k * n
-        # The state's part of every value (``ft``'s columns are laid out as ``y``).
-        for r0 in range(0, fk.shape[1], 8):  # a whole number of groups of eight
-            store8(y, r0, _state_part(fk, state, s0, n, r0))
-        # Eight outputs of each signal at a time, over the inputs that reach them: position
-        # j from inputs i <= j, velocity j and command j from i < j (and the command's own
-        # set point), the zeros of g's lead standing for the inputs after an output.
-        g0, g1, g2, g3, g4, g5 = gk[0], gk[1], gk[2], gk[3], gk[4], gk[5]
-        # The groups with the most inputs (the last) four at a time, the rest one at a time.
-        j = nb - nb % 8 - 24
-        while j >= 0:
-            _four_groups(y, j, rv, ru, nb, g0, g1, g2, g3, g4, g5, ref, load, k)
-            j -= 32
-        for j0 in range(0, j + 32, 8):
-            vp = load8(y, j0)
-            vv = load8(y, rv + j0)
-            vc = load8(y, ru + j0)
-            for i in range(min(nb, j0 + 8)):
-                ri = ref[i, k]
-                li = load[i, k]
-                vp = add_scaled8(vp, g0, g1, _LEAD + j0 - i, ri, li)
-                vv = add_scaled8(vv, g2, g3, _LEAD - 1 + j0 - i, ri, li)
-                vc = add_scaled8(vc, g4, g5, _LEAD - 1 + j0 - i, ri, li)
-            store8(y, j0, vp)
-            store8(y, rv + j0, vv)
-            store8(y, ru + j0, vc)
-        ve = load8(y, re)
-        hr = he[k, 0]
-        hl = he[k, 1]
-        for i in range(nb):
-            ve = add_scaled8(ve, hr, hl, 8 * i, ref[i, k], load[i, k])
-        store8(y, re, ve)
-        # numpy's max(u.max(), -u.min()) > umax: never true when a command is NaN
-        hi = -math.inf
-        lo = math.inf
-        nan = False
-        for j in range(nb):
-            u = y[ru + j]
-            if u != u:
-                nan = True
-            hi = max(hi, u)
-            lo = min(lo, u)
-        if not nan and max(hi, -lo) > umax:
-            clipped = True
-            _clipped_axis(a[k], b[k], cu[k], du[k], gu[k], umax, state[s0 : s0 + n],
-                          ref[:, k], load[:, k], pos[:, k], vel[:, k], cmd[:, k], zs[:n],
-                          zs[n:])  # fmt: skip
-        else:
-            for j in range(nb):
-                pos[j, k] = y[j]
-                cmd[j, k] = y[ru + j]
-            for j in range(nb + 1):
-                vel[j, k] = y[rv + j]
-            for q in range(n):
-                state[s0 + q] = y[re + q]
+        for q in range(n):
+            zb[8 * k + q] = state[k * n + q]
+        vel[0, k] = zb[8 * k + 1]
+    zx = load8(zb, 0)
+    zy = load8(zb, 8)
+    ax, ay, bx, by, cx, cy, gx, gy = ac[0], ac[1], bc[0], bc[1], cu[0], cu[1], gu[0], gu[1]
+    clipped = False
+    for j in range(nb):
+        # The two axes side by side: their chains overlap in the processor.
+        zx, ux, kx = _axis_period(ax, bx, cx, du[0], gx, umax, zx, ref[j, 0], load[j, 0], zb, 0)
+        zy, uy, ky = _axis_period(ay, by, cy, du[1], gy, umax, zy, ref[j, 1], load[j, 1], zb, 8)
+        clipped = clipped or kx or ky
+        cmd[j, 0] = ux
+        cmd[j, 1] = uy
+        pos[j, 0] = get8(zx, 0)
+        pos[j, 1] = get8(zy, 0)
+        vel[j + 1, 0] = get8(zx, 1)
+        vel[j + 1, 1] = get8(zy, 1)
+    store8(zb, 0, zx)
+    store8(zb, 8, zy)
+    for k in range(2):
+        for q in range(n):
+            state[k * n + q] = zb[8 * k + q]
         for j in range(nb):
             torque[j, k] = (vel[j + 1, k] - vel[j, k]) * tq[k] + load[j, k]
     return clipped
 
 
-@numba.njit(cache=True, inline="always")
-def _state_part(fk, state, s0, n, r0):
-    """The state's part of values ``r0 .. r0 + 7`` of one axis (``ft[k]``, its state at
-    ``state[s0 : s0 + n]``)."""
-    v = zero8()
-    for q in range(0, n - 1, 2):
-        v = add_scaled8(v, fk[q], fk[q + 1], r0, state[s0 + q], state[s0 + q + 1])
-    if n & 1:
-        v = add_scaled8(v, fk[n - 1], fk[n - 1], r0, state[s0 + n - 1], 0.0)
-    return v
+#: The arrays of a lane's loops (:class:`ServoLanes`), in their order in its row, and
+#: their shapes.
+_LANE_ARRAYS = (
+    ("ac", (2, 8, 8)),
+    ("bc", (2, 2, 8)),
+    ("cu", (2, 8)),
+    ("du", (2,)),
+    ("gu", (2, 2)),
+    ("tq", (2,)),
+    ("umax", (1,)),
+)
+#: Values in a lane's row of ``ServoLanes.buf``: its arrays (185), then seven unused, so
+#: that every row starts 64 bytes after the last.
+ROW_SIZE = 192
+#: Scratch values :func:`run_block` needs.
+SCRATCH_SIZE = 16
 
 
 @numba.njit(cache=True, inline="always")
-def _input_terms(p, v, c, coef, ri, li):
-    """One input's terms (set point ``ri``, load ``li``) added to eight positions ``p``,
-    velocities ``v`` and commands ``c``; ``coef``: their six coefficient vectors."""
-    ap, bp, av, bv, ac, bc = coef
-    return (
-        add_scaled_vec8(p, ap, bp, ri, li),
-        add_scaled_vec8(v, av, bv, ri, li),
-        add_scaled_vec8(c, ac, bc, ri, li),
-    )
-
-
-@numba.njit(cache=True, inline="always")
-def _four_groups(y, j0, rv, ru, nb, g0, g1, g2, g3, g4, g5, ref, load, k):
-    """Four groups of eight outputs of :func:`run_block`'s forced part, from output ``j0``
-    (``j0 + 24 <= nb``), with each output's terms summed as there, in the order of its
-    inputs; the coefficients a term of input ``i`` reads for output group ``j`` depend on
-    ``d = j - i`` only, so each is loaded once for the four groups (``d`` falling is ``i``
-    rising in every group)."""
-    j1 = j0 + 8
-    j2 = j0 + 16
-    j3 = j0 + 24
-    # Group jb takes the inputs i < min(nb, jb + 8): d from jb down to lo_b.
-    lo0 = j0 - min(nb, j0 + 8) + 1
-    lo1 = j1 - min(nb, j1 + 8) + 1
-    lo2 = j2 - min(nb, j2 + 8) + 1
-    lo3 = j3 - min(nb, j3 + 8) + 1
-    p0, v0, c0 = load8(y, j0), load8(y, rv + j0), load8(y, ru + j0)
-    p1, v1, c1 = load8(y, j1), load8(y, rv + j1), load8(y, ru + j1)
-    p2, v2, c2 = load8(y, j2), load8(y, rv + j2), load8(y, ru + j2)
-    p3, v3, c3 = load8(y, j3), load8(y, rv + j3), load8(y, ru + j3)
-    for d in range(j3, min(lo0, lo1, lo2, lo3) - 1, -1):
-        ap = load8(g0, _LEAD + d)
-        bp = load8(g1, _LEAD + d)
-        av = load8(g2, _LEAD - 1 + d)
-        bv = load8(g3, _LEAD - 1 + d)
-        ac = load8(g4, _LEAD - 1 + d)
-        bc = load8(g5, _LEAD - 1 + d)
-        coef = (ap, bp, av, bv, ac, bc)
-        if lo3 <= d:
-            p3, v3, c3 = _input_terms(p3, v3, c3, coef, ref[j3 - d, k], load[j3 - d, k])
-        if lo2 <= d <= j2:
-            p2, v2, c2 = _input_terms(p2, v2, c2, coef, ref[j2 - d, k], load[j2 - d, k])
-        if lo1 <= d <= j1:
-            p1, v1, c1 = _input_terms(p1, v1, c1, coef, ref[j1 - d, k], load[j1 - d, k])
-        if lo0 <= d <= j0:
-            p0, v0, c0 = _input_terms(p0, v0, c0, coef, ref[j0 - d, k], load[j0 - d, k])
-    for j, p, v, c in ((j0, p0, v0, c0), (j1, p1, v1, c1), (j2, p2, v2, c2), (j3, p3, v3, c3)):
-        store8(y, j, p)
-        store8(y, rv + j, v)
-        store8(y, ru + j, c)
-
-
-@numba.njit(cache=True)
-def _clipped_axis(a, b, cu, du, gu, umax, z0, ref, load, pos, vel, cmd, z, zn):
-    """One axis period by period with its command clipped (the controller, which does not
-    know of the clip, carries on unchanged); ``z0`` is updated to the block's end (``z``,
-    ``zn``: scratch of one state)."""
-    n = a.shape[0]
-    nb = ref.shape[0]
-    for q in range(n):
-        z[q] = z0[q]
-    vel[0] = z[1]
-    for j in range(nb):
-        uj = dot(cu, z) + du * ref[j]
-        uc = max(uj, -umax)
-        uc = min(uc, umax)
-        cmd[j] = uc
-        for q in range(n):
-            zn[q] = gemv_row(a, z, q, n) + b[q, 0] * ref[j] + b[q, 1] * load[j]
-        if uc != uj:
-            zn[0] += gu[0] * (uc - uj)
-            zn[1] += gu[1] * (uc - uj)
-        for q in range(n):
-            z[q] = zn[q]
-        pos[j] = z[0]
-        vel[j + 1] = z[1]
-    for q in range(n):
-        z0[q] = z[q]
-
-
-#: The arrays of a lane's loops (:class:`ServoLanes`), in their order in its row.
-_LANE_ARRAYS = ("ft", "g", "he", "a", "b", "cu", "du", "gu", "tq", "umax")
-
-
-@numba.njit(cache=True)
-def _row_size(lay):
-    """Values in a lane's row of ``ServoLanes.buf`` (``lay`` = ``ServoLanes.layout``): its
-    arrays, then up to seven unused, so that every row starts 64 bytes after the last."""
-    ns, w, gl, hl = lay[0], lay[1], lay[2], lay[3]
-    size = 2 * ns * w + 12 * gl + 4 * hl + 2 * ns * ns + 6 * ns + 9
-    return size + (-size) % 8
-
-
-@numba.njit(cache=True, inline="always")
-def lane_loops(row, lay):
-    """A lane's loops as views of its row of ``ServoLanes.buf`` (``lay`` =
-    ``ServoLanes.layout``): ``(ft, g, he, a, b, cu, du, gu, tq, umax)`` as
-    :func:`run_block` takes them, except ``umax``, an array of one value."""
-    ns, w, gl, hl = lay[0], lay[1], lay[2], lay[3]
-    ft = row[: 2 * ns * w].reshape((2, ns, w))
-    o = 2 * ns * w
-    g = row[o : o + 12 * gl].reshape((2, 6, gl))
-    o += 12 * gl
-    he = row[o : o + 4 * hl].reshape((2, 2, hl))
-    o += 4 * hl
-    a = row[o : o + 2 * ns * ns].reshape((2, ns, ns))
-    o += 2 * ns * ns
-    b = row[o : o + 4 * ns].reshape((2, ns, 2))
-    o += 4 * ns
-    cu = row[o : o + 2 * ns].reshape((2, ns))
-    o += 2 * ns
-    du = row[o : o + 2]
-    gu = row[o + 2 : o + 6].reshape((2, 2))
-    tq = row[o + 6 : o + 8]
-    return ft, g, he, a, b, cu, du, gu, tq, row[o + 8 : o + 9]
+def lane_loops(row):
+    """A lane's loops as views of its row of ``ServoLanes.buf``: ``(ac, bc, cu, du, gu,
+    tq, umax)`` as :func:`run_block` takes them, except ``umax``, an array of one value."""
+    ac = row[:128].reshape((2, 8, 8))
+    bc = row[128:160].reshape((2, 2, 8))
+    cu = row[160:176].reshape((2, 8))
+    return ac, bc, cu, row[176:178], row[178:182].reshape((2, 2)), row[182:184], row[184:185]
 
 
 class ServoLanes:
@@ -786,14 +627,9 @@ class ServoLanes:
                 f"the block update holds an axis's closed-loop state in eight values; "
                 f"the designs have {nk} states (at most 6)"
             )
-        width = 3 * (block + _SPARE) + 8
-        #: The sizes :func:`lane_loops` carves a lane's row of :attr:`buf` by.
-        self.layout = np.array([ns, width + (-width) % 8, block + _SPARE, 8 * block])
-        one = lane_loops(np.zeros(_row_size(self.layout)), self.layout)
         #: Every lane's arrays in one row each (one argument for a compiled step); the
         #: named arrays below are views of it over all lanes, laid out by lane_loops.
-        self.buf = np.zeros((n, _row_size(self.layout)))
-        self._shapes = tuple(v.shape for v in one)
+        self.buf = np.zeros((n, ROW_SIZE))
         self._bind_views()
         self._design_arrays = tuple(
             tuple(np.ascontiguousarray(m) for m in (d.a, d.b, d.c, d.d)) for d in self.designs
@@ -802,7 +638,7 @@ class ServoLanes:
     def _bind_views(self) -> None:
         """Name the runs of :attr:`buf` over all lanes (``_LANE_ARRAYS``)."""
         o = 0
-        for name, shape in zip(_LANE_ARRAYS, self._shapes, strict=True):
+        for name, shape in _LANE_ARRAYS:
             size = math.prod(shape)
             view = self.buf[:, o : o + size].reshape((self.n, *shape))
             assert np.shares_memory(view, self.buf)
@@ -812,26 +648,21 @@ class ServoLanes:
 
     def __getstate__(self) -> dict:
         # A pickled view is a copy: the views are made anew from buf on loading.
-        return {k: v for k, v in self.__dict__.items() if k not in _LANE_ARRAYS}
+        views = {name for name, _ in _LANE_ARRAYS}
+        return {k: v for k, v in self.__dict__.items() if k not in views}
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         self._bind_views()
-
-    @property
-    def scratch_size(self) -> int:
-        """Values of the scratch :func:`run_block` needs (``ft``'s columns)."""
-        return self.ft.shape[-1]
 
     def start(self, lane: int, truth: ContouringParams) -> None:
         """Set ``lane``'s loops to the designs on the plant ``truth``."""
         for k, axis in enumerate(AXES):
             phi, gam = truth.discrete_axis(axis)
             da, db, dc, dd = self._design_arrays[k]
-            self.du[lane, k] = _lift_axis(
-                phi, gam, da, db, dc, dd, self.block, self.ft[lane, k], self.g[lane, k],
-                self.he[lane, k], self.a[lane, k], self.b[lane, k], self.cu[lane, k],
-            )  # fmt: skip
+            self.du[lane, k] = _close_axis(
+                phi, gam, da, db, dc, dd, self.ac[lane, k], self.bc[lane, k], self.cu[lane, k]
+            )
             self.gu[lane, k] = gam[:, 0]
             self.tq[lane, k] = truth.inertia_kgm2(axis) / (truth.mm_per_rad * truth.sample_time_s)
         self.umax[lane] = truth.command_max_mm_s
@@ -844,13 +675,12 @@ class ServoLanes:
 class ServoLoop:
     """Both axes' closed loops (a design on a true plant), advanced a block at a time.
 
-    The loop is linear until a command reaches the drive's limit, so a block of ``n``
-    servo periods is one lifted linear update (:func:`lifted_matrix`, evaluated by the
-    compiled :func:`run_block`): state, positions, commands and velocities over the block
-    follow from the state at its start and the block's reference and load-torque samples.
-    Where a command would pass the limit, the block is run again period by period with the
-    command clipped (the controller, which does not know of the clip, carries on
-    unchanged). Positions are relative to the table's start.
+    A block of ``n`` servo periods runs as the closed loop's recursion, compiled
+    (:func:`run_block`): state, positions, commands and velocities over the block follow
+    from the state at its start and the block's reference and load-torque samples, linearly
+    (:func:`lifted_matrix`) until a command reaches the drive's limit. There the command is
+    clipped (the controller, which does not know of the clip, carries on unchanged).
+    Positions are relative to the table's start.
 
     Parameters
     ----------
@@ -869,8 +699,7 @@ class ServoLoop:
         self.designs = self.lanes.designs
         self.block = block
         self.n_states = 2 * self.lanes.n_states_axis
-        self._y = np.zeros(self.lanes.scratch_size)
-        self._zs = np.zeros(self.n_states)
+        self._zb = np.zeros(SCRATCH_SIZE)
 
     def initial_state(self) -> np.ndarray:
         """Table at rest at its start, controllers at rest: ``[z_x, z_y]``."""
@@ -901,9 +730,8 @@ class ServoLoop:
         cmd = np.empty((nb, 2))
         torque = np.empty((nb, 2))
         clipped = run_block(
-            ln.ft[0], ln.g[0], ln.he[0], ln.a[0], ln.b[0], ln.cu[0], ln.du[0], ln.gu[0], ln.tq[0],
-            float(ln.umax[0]), state, np.ascontiguousarray(ref, dtype=np.float64),
-            np.ascontiguousarray(load, dtype=np.float64), pos, vel, cmd, torque, self._y,
-            self._zs,
-        )  # fmt: skip
+            ln.ac[0], ln.bc[0], ln.cu[0], ln.du[0], ln.gu[0], ln.tq[0], float(ln.umax[0]), state,
+            np.ascontiguousarray(ref, dtype=np.float64),
+            np.ascontiguousarray(load, dtype=np.float64), pos, vel, cmd, torque, self._zb,
+        )
         return pos, vel[1:], cmd, torque, bool(clipped)

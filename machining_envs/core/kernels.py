@@ -1,6 +1,6 @@
 """Compiled building blocks the process kernels share: the fused multiply-add, the small
-matrix-vector products of the sampled plants with numpy's rounding, and eight-wide fused
-multiply-adds for the convolutions of the lifted servo blocks.
+matrix-vector products of the sampled plants with numpy's rounding, and eight-value vectors
+(fused multiply-adds of whole columns) for the contouring servo's closed-loop recursion.
 
 The plants' sampled linear parts are products of small matrices with short vectors, once per
 lane and control period. A library call for each costs more than the arithmetic, so the
@@ -18,7 +18,7 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic, models, register_model
 
-__all__ = ["add_scaled8", "add_scaled_vec8", "fma", "load8", "matvec", "store8", "vec8", "zero8"]
+__all__ = ["add8", "add_scaled8", "fma", "get8", "load8", "matvec", "store8", "vec8", "zero8"]
 
 
 @intrinsic
@@ -123,22 +123,28 @@ def add_scaled8(typingctx, acc, a, b, o, sa, sb):
 
 
 @intrinsic
-def add_scaled_vec8(typingctx, acc, a, b, sa, sb):
-    """``acc + a * sa + b * sb`` for eight-value vectors ``a`` and ``b`` (loaded once with
-    :func:`load8`, to be used many times), with the roundings of :func:`add_scaled8`."""
-    if not (acc == vec8 and a == vec8 and b == vec8):
+def get8(typingctx, v, i):
+    """Value ``i`` of a :class:`Vec8Type` value; ``i`` must be a literal integer 0-7."""
+    if v != vec8 or not isinstance(i, types.IntegerLiteral) or not 0 <= i.literal_value < 8:
         return None
-    sig = vec8(vec8, vec8, vec8, types.float64, types.float64)
+    idx = ir.Constant(ir.IntType(32), i.literal_value)
 
     def codegen(context, builder, signature, args):
-        accv, av, bv, sa_, sb_ = args
-        fn = cgutils.get_or_insert_function(
-            builder.module, ir.FunctionType(_V8, [_V8, _V8, _V8]), "llvm.fma.v8f64"
-        )
-        accv = builder.call(fn, [av, _splat8(builder, sa_), accv])
-        return builder.call(fn, [bv, _splat8(builder, sb_), accv])
+        return builder.extract_element(args[0], idx)
 
-    return sig, codegen
+    return types.float64(vec8, i), codegen
+
+
+@intrinsic
+def add8(typingctx, a, b):
+    """``a + b`` for two :class:`Vec8Type` values, value by value."""
+    if not (a == vec8 and b == vec8):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.fadd(args[0], args[1])
+
+    return vec8(vec8, vec8), codegen
 
 
 @numba.njit(cache=True)
