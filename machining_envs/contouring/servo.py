@@ -729,9 +729,8 @@ class ServoLoop:
         vel = np.empty((nb + 1, 2))
         cmd = np.empty((nb, 2))
         torque = np.empty((nb, 2))
-        clipped = run_block(
-            ln.ac[0], ln.bc[0], ln.cu[0], ln.du[0], ln.gu[0], ln.tq[0], float(ln.umax[0]), state,
-            np.ascontiguousarray(ref, dtype=np.float64),
-            np.ascontiguousarray(load, dtype=np.float64), pos, vel, cmd, torque, self._zb,
-        )
+        ref = np.ascontiguousarray(ref, dtype=np.float64)
+        load = np.ascontiguousarray(load, dtype=np.float64)
+        loops = (ln.ac[0], ln.bc[0], ln.cu[0], ln.du[0], ln.gu[0], ln.tq[0], float(ln.umax[0]))
+        clipped = run_block(*loops, state, ref, load, pos, vel, cmd, torque, self._zb)
         return pos, vel[1:], cmd, torque, bool(clipped)
