@@ -357,9 +357,6 @@ class _FeedCore:
     path (``Path.table``), loads and closed loops (``ServoLanes``), advanced by one compiled
     function (:func:`_feed_step`), so that a lane and the single env agree to the last bit."""
 
-    #: Closed loops kept per true plant (the paper's runs all use the nominal one).
-    CACHE_SIZE = 32
-
     def __init__(self, owner, n, scenario, params, servo, tolerance_mm, reward,
                  decision_interval_s, override_max, max_episode_time_s, in_position_mm,
                  divergence_mm, overrides, actuation=None):  # fmt: skip
@@ -419,7 +416,6 @@ class _FeedCore:
         self.act_lanes = None if self.actuation is None else self._actuation_lanes()
         self.nseg[:] = 1
         self.loops = ServoLanes(designs, n_sub, n)
-        self._loop_cache: dict = {}
         self.state = np.zeros((n, 2 * self.loops.n_states_axis))
         self.tabs = np.zeros((n, 4, SEGMENT_COLUMNS))
         self.pf = np.ones((n, len(_PF)))
@@ -472,18 +468,6 @@ class _FeedCore:
         )
 
     # ---- per-lane episodes ---------------------------------------------------------------
-    def _set_loops(self, lane: int, truth: ContouringParams) -> None:
-        cached = self._loop_cache.get(truth)
-        if cached is not None:
-            self.loops.copy_lane(lane, cached, 0)
-            return
-        self.loops.start(lane, truth)
-        if len(self._loop_cache) >= self.CACHE_SIZE:
-            self._loop_cache.pop(next(iter(self._loop_cache)))
-        one = ServoLanes(self.loops.designs, self.n_sub, 1)
-        one.copy_lane(0, self.loops, lane)
-        self._loop_cache[truth] = one
-
     def _grow(self, n_seg: int, n_load: int) -> None:
         if n_seg > self.tabs.shape[1]:
             tabs = np.zeros((self.n, n_seg, SEGMENT_COLUMNS))
@@ -511,7 +495,7 @@ class _FeedCore:
             self.act_lanes, lane, sc.actuation, self.actuation, self._actuation_lanes
         )
         self.scenarios[lane] = sc
-        self._set_loops(lane, sc.true_params(self.params))
+        self.loops.start(lane, sc.true_params(self.params))
         self.state[lane] = 0.0
         path = sc.path
         self.paths[lane] = path

@@ -667,10 +667,6 @@ class ServoLanes:
             self.tq[lane, k] = truth.inertia_kgm2(axis) / (truth.mm_per_rad * truth.sample_time_s)
         self.umax[lane] = truth.command_max_mm_s
 
-    def copy_lane(self, dst: int, src: ServoLanes, lane: int) -> None:
-        """Copy lane ``lane`` of ``src`` (same designs and block) into lane ``dst``."""
-        self.buf[dst] = src.buf[lane]
-
 
 class ServoLoop:
     """Both axes' closed loops (a design on a true plant), advanced a block at a time.
