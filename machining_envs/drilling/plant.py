@@ -586,40 +586,76 @@ def _cutting_geometry(shape: tuple, diameter_mm: float) -> _Geometry:
     w = web_ratio * radius
     # Main lips.
     dr = (radius - w) / _N_LIP
-    r = w + dr * _LIP_MID
-    w_r = w / r
-    web = np.arcsin(w_r)
-    incl = np.arcsin(w_r * sk)
-    tan_psi = r / radius * math.tan(math.radians(helix))
-    alpha = np.arctan(tan_psi * np.cos(web) / sk - np.sin(web) * ck)
     beta = math.radians(friction)
-    b_a = beta - alpha
-    phi = np.maximum(0.25 * math.pi - 0.5 * b_a, math.radians(5.0))
-    eta = incl
-    tan_eta = np.tan(eta)
     bt = 0.5 * dr  # b t per unit feed: (dr / sin k) (1/2 sin k)
-    q = np.sqrt(np.cos(phi + beta - alpha) ** 2 + tan_eta**2 * math.sin(beta) ** 2)
-    sin_phi = np.sin(phi)
-    fp_angle = np.cos(b_a) + tan_eta * tan_eta * math.sin(beta)
-    fq_den = sin_phi * np.cos(incl)
-    fq_angle = np.sin(b_a)
     # Chisel edge: secondary cutting between the indentation zone and the web.
     r_ind = min(v_f / (0.2 * _TWO_PI * n_rev), w)
     dc = (w - r_ind) / _N_CHISEL
-    rc = r_ind + dc * _CHISEL_MID
-    b_i = np.arctan(v_f / (_TWO_PI * n_rev * rc))
-    a_dc = math.radians(chisel_rake) + b_i
-    phi_c = 0.25 * math.pi + 0.5 * a_dc
-    den = 2.0 * np.sin(phi_c) * np.cos(phi_c - a_dc)
     indent = indent_c * math.tan(math.radians(wedge))
+    lips = np.empty((6, _N_LIP))
+    chisel = np.empty((6, _N_CHISEL))
+    depth = np.empty(_N_LIP + 2)
+    _geometry_arrays(
+        w, dr, sk, ck, radius, math.tan(math.radians(helix)), beta, math.sin(beta),
+        math.sin(beta) ** 2, r_ind, dc, _TWO_PI * n_rev, v_f, math.radians(chisel_rake),
+        math.tan(k), _LIP_MID, _CHISEL_MID, _LIP_EDGES, lips, chisel, depth,
+    )  # fmt: skip
+    r, sin_phi, fp_angle, fq_den, fq_angle, q = lips
+    rc, cos_a, neg_sin_a, cos_b, sin_b, den = chisel
+    return _Geometry(
+        sk, bt, r, sin_phi, fp_angle, fq_den, fq_angle, q, dc, rc, cos_a, neg_sin_a, cos_b,
+        sin_b, den, indent, depth,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _geometry_arrays(w, dr, sk, ck, radius, tan_helix, beta, sin_beta, sin_beta_sq, r_ind, dc,
+                     two_pi_n, v_f, chisel_rake, tan_k, lip_mid, chisel_mid, lip_edges, lips,
+                     chisel, depth):  # fmt: skip
+    """The element arrays of :func:`_cutting_geometry`, element by element: each value is
+    computed by the operations, in the order, that numpy's array expressions of the model
+    used, with libm's functions (numpy's own on processors without AVX-512), so that the
+    numbers are the same. ``lips`` gets ``r, sin_phi, fp_angle, fq_den, fq_angle, q``,
+    ``chisel`` ``rc, cos_a, neg_sin_a, cos_b, sin_b, den``, ``depth`` the point depths
+    of the engagement table."""
+    phi_min = math.radians(5.0)
+    for i in range(lip_mid.size):
+        r = w + dr * lip_mid[i]
+        w_r = w / r
+        web = math.asin(w_r)
+        incl = math.asin(w_r * sk)
+        tan_psi = r / radius * tan_helix
+        alpha = math.atan(tan_psi * math.cos(web) / sk - math.sin(web) * ck)
+        b_a = beta - alpha
+        phi = 0.25 * math.pi - 0.5 * b_a
+        if not (phi >= phi_min or phi != phi):  # np.maximum: NaN stays NaN
+            phi = phi_min
+        tan_eta = math.tan(incl)  # eta: the inclination angle
+        c = math.cos(phi + beta - alpha)
+        sin_phi = math.sin(phi)
+        lips[0, i] = r
+        lips[1, i] = sin_phi
+        lips[2, i] = math.cos(b_a) + tan_eta * tan_eta * sin_beta
+        lips[3, i] = sin_phi * math.cos(incl)
+        lips[4, i] = math.sin(b_a)
+        lips[5, i] = math.sqrt(c * c + tan_eta * tan_eta * sin_beta_sq)
+    for i in range(chisel_mid.size):
+        rc = r_ind + dc * chisel_mid[i]
+        b_i = math.atan(v_f / (two_pi_n * rc))
+        a_dc = chisel_rake + b_i
+        phi_c = 0.25 * math.pi + 0.5 * a_dc
+        chisel[0, i] = rc
+        chisel[1, i] = math.cos(a_dc)
+        chisel[2, i] = -math.sin(a_dc)
+        chisel[3, i] = math.cos(b_i)
+        chisel[4, i] = math.sin(b_i)
+        chisel[5, i] = 2.0 * math.sin(phi_c) * math.cos(phi_c - a_dc)
     # Engagement against point depth: the chisel cuts from the first touch (its height is
     # w / tan(kappa), a few microns), the lips out to radius z tan(kappa).
-    radii = np.concatenate([[0.0, w], w + dr * _LIP_EDGES])
-    depth = radii / math.tan(k)
-    return _Geometry(
-        sk, bt, r, sin_phi, fp_angle, fq_den, fq_angle, q, dc, rc, np.cos(a_dc),
-        -np.sin(a_dc), np.cos(b_i), np.sin(b_i), den, indent, depth,
-    )  # fmt: skip
+    depth[0] = 0.0 / tan_k
+    depth[1] = w / tan_k
+    for i in range(lip_edges.size):
+        depth[2 + i] = (w + dr * lip_edges[i]) / tan_k
 
 
 @numba.njit(cache=True)
