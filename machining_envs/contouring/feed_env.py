@@ -740,9 +740,9 @@ class ContouringFeedEnv(gym.Env):
 
     ## Version History
     * v0: first version. The step now runs compiled, shared with the vector env: the 50
-      servo periods of a step are still the one lifted linear update, evaluated from its
-      distinct coefficients as a convolution in vector registers (the numbers agree with
-      the BLAS product to rounding; the golden data were recorded anew).
+      servo periods of a step run as the closed loop's recursion, eight values of a
+      matrix column at a time in vector registers (the numbers agree with the block's
+      lifted linear map to rounding; the golden data were recorded anew).
       The contour tolerance is the task's limit: ``info["contour_tolerance_mm"]`` (was
       ``tolerance_mm``), ``cost`` (1 on a step whose largest contour error is above it) and
       ``score_bound`` (the path at the largest override of the programmed feed); the

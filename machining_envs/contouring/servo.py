@@ -397,14 +397,13 @@ def servo_design(kind: str, params: ContouringParams, axis: str) -> ServoDesign:
 # the last bit). A lane keeps per axis the columns of ``A`` (``ac``, eight of eight values,
 # zero past the state), of ``B`` (``bc``), ``Cu`` (``cu``, eight values), ``Du``, the
 # plant's input column (``gu``: where a clipped command's difference enters), the torque
-# factor and the command limit: 1.5 kB a lane, which stay in the cache at any N.
+# factor and the command limit: 1.5 kB a lane.
 #
 # The block is also one linear map (``lifted_matrix``, the numpy reference of the tests):
 # the recursion agrees with it to rounding (a few units in the last place of the terms'
-# magnitudes; ``tests/contouring/test_exact.py``). As a product, the block reads about
-# 20 000 coefficients a lane (40 kB) against 2 x 50 x 10 column updates here: the recursion
-# is 3x faster alone and 5x in a batch of 1024 lanes, whose matrices would not fit in the
-# cache.
+# magnitudes; ``tests/contouring/test_exact.py``). Evaluated as that map, a block reads
+# some 5 000 coefficients a lane (40 kB, out of the cache at N = 1024); the recursion's
+# 2 x 50 updates of ten columns are about 3x faster for one lane and 5x at N = 1024.
 
 
 def lifted_matrix(truth: ContouringParams, designs, block: int) -> np.ndarray:

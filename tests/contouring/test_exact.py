@@ -118,10 +118,10 @@ def test_compiled_geometry_is_the_path_methods(path):
 @pytest.mark.parametrize("kind", ["hinf", "pi"])
 def test_block_kernel_is_the_lifted_matrix_product(kind):
     """Unclipped, a block is ``lifted_matrix(...) @ [state, inputs]`` (numpy, BLAS) to
-    rounding: the compiled kernel reads only the distinct coefficients and sums each row in
-    its own order, so a row may differ from BLAS's by a few roundings of its terms. Bound:
-    64 units in the last place of the sum of the terms' magnitudes (``|big| @ |vec|``); a
-    wrong coefficient or a missed input moves a row by far more."""
+    rounding: the compiled kernel runs the closed loop period by period, so a value carries
+    the roundings of the periods before it, not BLAS's sum of its row. Bound: 64 units in
+    the last place of the sum of the terms' magnitudes (``|big| @ |vec|``; the largest seen
+    is 16); a wrong coefficient or a missed input moves a row by far more."""
     p = ContouringParams()
     designs = tuple(servo_design(kind, p, ax) for ax in "xy")
     for scale in (1.0, 0.8, 1.3):
