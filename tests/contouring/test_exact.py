@@ -118,10 +118,12 @@ def test_compiled_geometry_is_the_path_methods(path):
 @pytest.mark.parametrize("kind", ["hinf", "pi"])
 def test_block_kernel_is_the_lifted_matrix_product(kind):
     """Unclipped, a block is ``lifted_matrix(...) @ [state, inputs]`` (numpy, BLAS) to
-    rounding: the compiled kernel runs the closed loop period by period, so a value carries
-    the roundings of the periods before it, not BLAS's sum of its row. Bound: 64 units in
-    the last place of the sum of the terms' magnitudes (``|big| @ |vec|``; the largest seen
-    is 16); a wrong coefficient or a missed input moves a row by far more."""
+    rounding: the compiled kernel runs the closed loop period by period, so a value after
+    period ``j`` carries the roundings of ``j`` periods (each some ten fused multiply-adds
+    and three sums, carried on by a stable loop), not BLAS's sum of its row. Bound: 8 units
+    in the last place of the sum of the terms' magnitudes (``|big| @ |vec|``) per period
+    (the largest seen over 1800 random blocks is 2.4); a wrong coefficient or a missed
+    input moves a row by far more."""
     p = ContouringParams()
     designs = tuple(servo_design(kind, p, ax) for ax in "xy")
     for scale in (1.0, 0.8, 1.3):
@@ -129,13 +131,15 @@ def test_block_kernel_is_the_lifted_matrix_product(kind):
         big = lifted_matrix(truth, designs, 50)
         loop = ServoLoop(truth, designs, 50)
         n = loop.n_states // 2
+        # The periods each value has run: positions, velocities, commands, end state.
+        periods = np.concatenate([np.tile(np.arange(1, 51), 3), np.full(n, 50)])
         for _ in range(5):
             state = RNG.normal(0, 1e-3, loop.n_states)
             ref = np.cumsum(RNG.normal(0, 0.01, (50, 2)), axis=0)
             load = np.repeat(RNG.uniform(-1, 1, (1, 2)), 50, axis=0)
             vec = np.concatenate([state, ref[:, 0], load[:, 0], ref[:, 1], load[:, 1]])
             want = big @ vec
-            bound = 64 * np.finfo(float).eps * (np.abs(big) @ np.abs(vec))
+            bound = 8 * np.finfo(float).eps * (np.abs(big) @ np.abs(vec))
             s = state.copy()
             pos, vel, cmd, _, clipped = loop.run(s, ref, load)
             assert not clipped
@@ -147,6 +151,7 @@ def test_block_kernel_is_the_lifted_matrix_product(kind):
                     r0 : r0 + 50, r0 + 51 : r0 + 101, r0 + 101 : r0 + 151, r0 + 151 : r0 + rows
                 ]
                 err = np.abs(got - want[sl])
-                assert np.all(err <= bound[sl]), (k, np.max(err / bound[sl]))
+                tol = bound[sl] * periods
+                assert np.all(err <= tol), (k, np.max(err / tol))
                 # and a coefficient off by one part in 1e9 is seen
-                assert np.max(np.abs(want[sl]) * 1e-9) > np.max(bound[sl])
+                assert np.max(np.abs(want[sl]) * 1e-9) > np.max(tol)
