@@ -182,3 +182,22 @@ def test_packed_step_matrix_is_the_step_matrix(rpm):
     assert np.all(np.abs(big - ref) <= 4 * np.finfo(float).eps * scale)
     assert not mats.packed[:m, 4:].any() and not mats.packed[2 * m :, 4:].any()  # feeds only
     assert (mats.delay_group > 0).any()  # the delayed groups are tested
+
+
+def test_exponential_row_of_a_delayed_instant_is_the_exact_discretisation():
+    """The I-row of ``[Phi(rho), Gamma(rho)]`` that places a delayed instant between grid
+    points (compiled Taylor series) equals scipy's ``expm``-based ``zoh`` to 1e-15 of the
+    exponential's size (``zoh`` is exact to that, not to the last bit of its smallest
+    entries), and declines a step whose augmented matrix is too large for the series."""
+    from machining_envs.core.lti import zoh
+    from machining_envs.turning.plant import _exp_row, _LinearKey, _servo_system
+
+    key = _LinearKey.of(TurningParams())
+    a, b = _servo_system(key)
+    h = key.sample_time_s / key.substeps
+    out = np.zeros(4)
+    for rho in np.random.default_rng(0).uniform(0.0, h, 300):
+        phi, gam = zoh(a, b, rho)
+        assert _exp_row(a, b, rho, 2, out)
+        np.testing.assert_allclose(out, [*phi[2], gam[2, 0]], rtol=0, atol=1e-15)
+    assert not _exp_row(a, b, 10 * h, 2, out)  # norm about 5.6: zoh's job
