@@ -514,13 +514,9 @@ def _axis_period(a, b, c, du, gu, umax, z, r, load, zb, o):
     two) get the difference through its input column ``gu`` (``zb[o : o + 8]``: scratch)."""
     u = _command(c, du, z, r)
     zn = _next_state(a, b, z, r, load)
-    uc = u
-    if u > umax:
-        uc = umax
-    elif u < -umax:
-        uc = -umax
-    if uc == u:  # a NaN command is not clipped: the NaN state shows the divergence
+    if not (u > umax or u < -umax):  # within the limit, or NaN (the state is NaN then too)
         return zn, u, False
+    uc = umax if u > umax else -umax
     store8(zb, o, zn)
     zb[o] += gu[0] * (uc - u)
     zb[o + 1] += gu[1] * (uc - u)

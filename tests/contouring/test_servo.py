@@ -123,3 +123,29 @@ def test_servo_design_by_name():
     assert servo.servo_design("hinf", P, "y").kind == "hinf"
     with pytest.raises(ValueError, match="servo"):
         servo.servo_design("lqr", P, "x")
+
+
+def test_lane_rows_hold_the_arrays_the_kernel_reads():
+    """A lane's row of ``ServoLanes.buf`` carved by ``lane_loops`` (what the kernel reads)
+    gives the arrays ``ServoLanes`` names and writes."""
+    from machining_envs.contouring.servo import _LANE_ARRAYS, ServoLanes, lane_loops
+
+    lanes = ServoLanes(tuple(pi_design(P, ax) for ax in "xy"), 50, 3)
+    lanes.buf[:] = np.arange(lanes.buf.size).reshape(lanes.buf.shape)
+    carved = lane_loops(lanes.buf[1])
+    assert len(carved) == len(_LANE_ARRAYS)
+    for (name, shape), view in zip(_LANE_ARRAYS, carved, strict=True):
+        assert view.size == math.prod(shape)
+        named = np.asarray(getattr(lanes, name)[1]).reshape(view.shape)
+        np.testing.assert_array_equal(view, named, err_msg=name)
+
+
+def test_a_nan_state_runs_through_unclipped():
+    """A diverged loop (NaN state) gives NaN outputs and is not reported as clipped."""
+    loop = ServoLoop(P, tuple(pi_design(P, ax) for ax in "xy"), 50)
+    state = loop.initial_state()
+    state[0] = np.nan
+    pos, vel, cmd, torque, clipped = loop.run(state, np.zeros((50, 2)), np.zeros((50, 2)))
+    assert not clipped
+    assert np.isnan(pos[:, 0]).all() and np.isnan(cmd[:, 0]).all()
+    assert np.isfinite(pos[:, 1]).all()  # the other axis is its own loop
