@@ -15,9 +15,11 @@ N = 1, 64, 1024 and 8192 with random actions (finished lanes reset in the same s
 over about 200 000 env-steps from the first reset: with long episodes few lanes finish in
 that window, so these rates leave most resets out. The column ``steady`` runs the N = 1024
 env on past that: one mean episode of the single env under random actions untimed (the
-lanes' episodes then end at spread-out times), then as many steps timed (at least 200;
-both capped at 5 million env-steps), so that it pays its resets as the single env's rate
-(with resets) does. ``x single`` is that steady rate over the single env's; ``x sync`` is
+lanes' episodes then end at spread-out times), then as many steps timed, once per round
+(at least 200 steps; each window capped at 2.5 million env-steps), so that it pays its
+resets as the single env's rate (with resets) does. ``x single`` is the median of those
+rates over the single env's median rate with resets in the first table, and ``range`` the
+lowest and highest round over that same rate; ``x sync`` is
 the N = 1024 rate over Gymnasium's ``SyncVectorEnv`` of N copies of the single env over
 the same window from the first reset. The memory per lane is what ``tracemalloc`` counts
 for making and resetting the N = 1024 env, over 1024. Gymnasium's ``CartPoleVectorEnv``
@@ -91,10 +93,12 @@ def vector_steps_per_second(
     return rate
 
 
-def vector_steady_rate(env_id: str, num_envs: int, episode_steps: float, seed: int) -> float:
+def vector_steady_rates(
+    env_id: str, num_envs: int, episode_steps: float, seed: int, rounds: int
+) -> list[float]:
     """Env-steps per second of the native vector env once its lanes' episodes have spread
-    out (see the module docstring); random actions cycle through 256 batches drawn
-    beforehand."""
+    out (see the module docstring), in ``rounds`` consecutive windows; random actions cycle
+    through 256 batches drawn beforehand."""
     venv = gym.make_vec(env_id, num_envs=num_envs)
     n = min(max(200, int(episode_steps)), max(200, 2_500_000 // num_envs))
     rng = np.random.default_rng(seed)
@@ -104,12 +108,14 @@ def vector_steady_rate(env_id: str, num_envs: int, episode_steps: float, seed: i
     venv.reset(seed=seed)
     for i in range(n):
         venv.step(actions[i % 256])
-    t0 = time.perf_counter()
-    for i in range(n):
-        venv.step(actions[i % 256])
-    rate = n * num_envs / (time.perf_counter() - t0)
+    rates = []
+    for _ in range(rounds):
+        t0 = time.perf_counter()
+        for i in range(n):
+            venv.step(actions[i % 256])
+        rates.append(n * num_envs / (time.perf_counter() - t0))
     venv.close()
-    return rate
+    return rates
 
 
 def bytes_per_lane(env_id: str, num_envs: int) -> float:
@@ -124,15 +130,20 @@ def bytes_per_lane(env_id: str, num_envs: int) -> float:
     return used / num_envs
 
 
-def vector_table(lanes: list[int], env_steps: int, sync_steps: int) -> None:
+def vector_table(
+    lanes: list[int], env_steps: int, sync_steps: int, singles: dict, rounds: int
+) -> None:
+    """The vector envs' table; ``singles[id]`` = (the single env's median steps/s with
+    resets, its mean episode length in steps) from the first table."""
     ref_n = 1024 if 1024 in lanes else lanes[-1]
     print(
         f"\nnative vector envs: env-steps/s with random actions from the first reset; steady: "
-        f"N = {ref_n} with resets spread out; x single = steady / single env (with resets); "
-        f"x sync at N = {ref_n} from the first reset; memory per lane from N = {ref_n}"
+        f"N = {ref_n} with resets spread out, median of {rounds} rounds; x single = steady / "
+        f"single env (with resets, first table), range over the rounds; x sync at N = {ref_n} "
+        f"from the first reset; memory per lane from N = {ref_n}"
     )
     head = f"{'env':34s}" + "".join(f" {f'N={n}':>10s}" for n in lanes)
-    print(head + f" {'steady':>10s} {'x single':>9s} {'x sync':>7s} {'kB/lane':>8s}")
+    print(head + f" {'steady':>10s} {'x single':>9s} {'range':>11s} {'x sync':>7s} {'kB/lane':>8s}")
     cart = vector_steps_per_second("CartPole-v1", ref_n, env_steps, 0, "vector_entry_point")
     print(f"{'CartPoleVectorEnv (reference)':34s}" + "".join(
         f" {cart:10.0f}" if n == ref_n else f" {'':>10s}" for n in lanes
@@ -142,13 +153,17 @@ def vector_table(lanes: list[int], env_steps: int, sync_steps: int) -> None:
             print(f"{env_id:34s} no native vector env yet")
             continue
         rates = {n: vector_steps_per_second(env_id, n, env_steps, 0) for n in lanes}
-        n_single = max(2000, env_steps // 20)
-        _, single, resets = steps_per_second(env_id, n_single, 0)
-        steady = vector_steady_rate(env_id, ref_n, n_single / max(resets, 1), 0)
+        single, episode = singles[env_id]
+        steady = vector_steady_rates(env_id, ref_n, episode, 0, rounds)
+        mid = float(np.median(steady))
+        span = f"{min(steady) / single:.1f}-{max(steady) / single:.1f}"
         sync = vector_steps_per_second(env_id, ref_n, sync_steps, 0, "sync")
         kb = bytes_per_lane(env_id, ref_n) / 1024
         row = f"{env_id:34s}" + "".join(f" {rates[n]:10.0f}" for n in lanes)
-        print(row + f" {steady:10.0f} {steady / single:9.1f} {rates[ref_n] / sync:7.1f} {kb:8.1f}")
+        print(
+            row + f" {mid:10.0f} {mid / single:9.1f} {span:>11s} {rates[ref_n] / sync:7.1f}"
+            f" {kb:8.1f}"
+        )
 
 
 def main(argv=None) -> None:
@@ -179,7 +194,8 @@ def main(argv=None) -> None:
             f"{env_id:34s} {s:9.0f} {s / med[PEER][0]:6.2f} {w:14.0f} {w / med[PEER][1]:6.2f} {n:7.0f}"
         )
     if not args.no_vector:
-        vector_table(sorted(args.lanes), args.vector_steps, args.sync_steps)
+        singles = {i: (med[i][1], args.steps / max(med[i][2], 1)) for i in ids}
+        vector_table(sorted(args.lanes), args.vector_steps, args.sync_steps, singles, args.rounds)
 
 
 if __name__ == "__main__":
