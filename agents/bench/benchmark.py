@@ -24,7 +24,7 @@ from agents.bench.declarations import BENCHMARKS, PROCESSES
 from agents.bench.spec import BenchmarkSpec
 from agents.bench.tune import load_tuned, tuned_factory
 from agents.eval import Evaluation, agent_name, evaluate, rollout
-from agents.eval.stats import agent_stats, paired_difference
+from agents.eval.stats import agent_stats, iqm, paired_difference, rliable_seed
 from machining_envs.core.splits import split_seeds
 
 __all__ = ["run_benchmark", "SIZES"]
@@ -246,7 +246,7 @@ def _table(run: _EnvRun, split: str, ref: str | None, seed: int = 0) -> tuple[st
     if bounds and all(math.isfinite(b) for b in bounds):
         b = np.array(bounds) * k
         lines.append(
-            f"| physical bound | bound | {_fmt(_iqm(b))} | {_fmt(b.mean())} | – | 1 | – | – |"
+            f"| physical bound | bound | {_fmt(float(iqm(b)))} | {_fmt(b.mean())} | – | 1 | – | – |"
         )
     order = {"oracle": 0, "paper": 1, "tuned": 2, "learned": 3}
     for name in sorted(names, key=lambda n: order[run.kind[n]]):
@@ -267,12 +267,6 @@ def _table(run: _EnvRun, split: str, ref: str | None, seed: int = 0) -> tuple[st
             f"| {_fmt(s.mean * k)} | {s.count_rate:.0%} | {eff} | {cmp_} | {p} |"
         )
     return "\n".join(lines), stats
-
-
-def _iqm(x: np.ndarray) -> float:
-    from scipy.stats import trim_mean
-
-    return float(trim_mean(x, 0.25))
 
 
 def _env_section(env_id, n_test, n_ood, n_oracle, quick, seed, out, verbose, t0):
@@ -525,7 +519,7 @@ def _plot_scores(run: _EnvRun, stats: dict, path: Path) -> Path:
     rows = next(iter(run.rows.values()))["test"]
     bounds = np.array([r.get("score_bound", math.nan) for r in rows]) * k
     if np.all(np.isfinite(bounds)):
-        ax.axvline(_iqm(bounds), color="0.3", ls="--", lw=1, label="physical bound (IQM)")
+        ax.axvline(float(iqm(bounds)), color="0.3", ls="--", lw=1, label="physical bound (IQM)")
         ax.legend(fontsize=8, loc="lower right")
     ax.set_yticks(range(len(names)), [f"{n} [{run.kind[n]}]" for n in names], fontsize=8)
     ax.set_xlabel(f"{run.score.label}: IQM, 95 % CI (lower is better)")
@@ -565,7 +559,8 @@ def _plot_profiles(run: _EnvRun, path: Path) -> Path:
         lo = min(m.min() for m in mats.values())
         taus = np.linspace(lo, 0.0, 41)
         xlabel = f"-({score.label}) tau"
-    prof, ci = library.create_performance_profile(mats, taus, reps=min(BOOTSTRAP_REPS, 500))
+    with rliable_seed(0):
+        prof, ci = library.create_performance_profile(mats, taus, reps=min(BOOTSTRAP_REPS, 500))
     fig = Figure(figsize=(6.5, 4))
     ax = fig.subplots()
     for i, n in enumerate(names):

@@ -18,8 +18,9 @@ rliable needs the ``bench`` extra (``pip install 'machining-envs[bench]'``).
 
 from __future__ import annotations
 
+import contextlib
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,18 +82,50 @@ def score_matrix(rows: Sequence[dict], score: PrimaryScore, failed_value: float)
     return seeds, m
 
 
+@contextlib.contextmanager
+def rliable_seed(seed: int) -> Iterator[None]:
+    """Make rliable's bootstrap draws depend on ``seed`` alone. Its stratified bootstrap
+    (rliable 1.2, ``StratifiedBootstrap.update_indices``) draws the resamples from numpy's
+    global generator (``np.random.choice``), not from the ``random_state`` it is given, so
+    its intervals moved from run to run; this seeds the global generator for the call and
+    puts the caller's state back afterwards."""
+    # The legacy global generator is what rliable draws from.
+    state = np.random.get_state()  # noqa: NPY002
+    np.random.seed(seed)  # noqa: NPY002
+    try:
+        yield
+    finally:
+        np.random.set_state(state)  # noqa: NPY002
+
+
+def iqm(scores) -> np.float64:
+    """The interquartile mean of all of ``scores``: rliable's ``aggregate_iqm``, which is
+    scipy's ``trim_mean(scores, 0.25, axis=None)``, by the same arithmetic (numpy's
+    partition at the quartile cuts, then the mean of the middle half; NaN where a score is
+    NaN or there is none), so the same numbers to the last bit. It skips scipy's
+    argument-handling wrapper, which is most of ``trim_mean``'s cost, and the bootstrap
+    calls it 2000 times per interval (0.78 -> 0.15 s per interval)."""
+    x = np.asarray(scores, dtype=np.float64).ravel()
+    if x.size == 0 or np.isnan(x).any():
+        return np.float64(np.nan)
+    lo = int(0.25 * x.size)
+    hi = x.size - lo
+    return np.mean(np.partition(x, (lo, hi - 1))[lo:hi])
+
+
 def iqm_interval(m: np.ndarray, seed: int = 0) -> tuple[float, float, float]:
     """IQM of ``m`` (runs x strata: episodes x policy seeds, or policy seeds x 1) with its
     95 % stratified-bootstrap interval (rliable): ``(iqm, low, high)``."""
     import warnings
 
-    library, metrics = _rliable()
-    with warnings.catch_warnings():
-        # rliable passes arch a RandomState, which arch has deprecated (same numbers).
+    library, _ = _rliable()
+    with warnings.catch_warnings(), rliable_seed(seed):
+        # rliable passes arch a RandomState, which arch has deprecated (and rliable's
+        # resampling does not use: see rliable_seed).
         warnings.simplefilter("ignore", FutureWarning)
         point, ci = library.get_interval_estimates(
             {"a": np.asarray(m, dtype=float)},
-            lambda x: np.array([metrics.aggregate_iqm(x)]),
+            lambda x: np.array([iqm(x)]),
             reps=BOOTSTRAP_REPS,
             random_state=np.random.RandomState(seed),
         )

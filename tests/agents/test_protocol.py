@@ -150,6 +150,57 @@ def test_statistics_pair_episodes_and_bracket_the_truth():
     assert agent_stats(broken, REGULATION_SCORE, 200.0).count_rate == 0.99
 
 
+def test_iqm_is_rliables_to_the_last_bit():
+    """The benchmark's IQM (``agents.eval.stats.iqm``) is rliable's ``aggregate_iqm`` to the
+    last bit, NaN, infinities, ties and every size from 1 included; so are the bootstrap
+    intervals built on it."""
+    import warnings
+
+    from rliable import library, metrics
+
+    from agents.eval.stats import iqm, iqm_interval, rliable_seed
+
+    rng = np.random.default_rng(5)
+    for n in [*range(1, 40), 97, 100, 500]:
+        for cols in (1, 3):
+            m = rng.normal(30.0, 5.0, (n, cols)).round(rng.integers(0, 3))  # ties too
+            if n > 4 and rng.random() < 0.3:
+                m.flat[rng.integers(m.size)] = rng.choice([np.inf, -np.inf, np.nan])
+            want = metrics.aggregate_iqm(m)
+            got = iqm(m)
+            assert (np.isnan(want) and np.isnan(got)) or got.tobytes() == want.tobytes(), (n, m)
+    assert np.isnan(iqm(np.zeros((0, 3))))
+    m = rng.normal(30.0, 5.0, (40, 2))
+    with warnings.catch_warnings(), rliable_seed(3):
+        warnings.simplefilter("ignore", FutureWarning)
+        point, ci = library.get_interval_estimates(
+            {"a": m},
+            lambda x: np.array([metrics.aggregate_iqm(x)]),
+            reps=2000,
+            random_state=np.random.RandomState(3),
+        )
+    assert iqm_interval(m, 3) == (point["a"][0], ci["a"][0, 0], ci["a"][1, 0])
+
+
+def test_bootstrap_intervals_are_reproducible_and_leave_numpys_global_state_alone():
+    """rliable resamples from numpy's global generator whatever ``random_state`` it is
+    given; the benchmark seeds that generator for the call (``rliable_seed``): the same
+    seed gives the same interval, another seed another one, and the caller's global
+    state is as it was."""
+    from agents.eval.stats import iqm_interval
+
+    m = np.random.default_rng(1).normal(30.0, 5.0, (60, 1))
+    np.random.seed(123)  # noqa: NPY002 - the state a user's code may hold
+    before = np.random.get_state()[1].copy()  # noqa: NPY002
+    first = iqm_interval(m, 0)
+    np.random.random(7)  # noqa: NPY002 - the caller moves the global generator on
+    assert iqm_interval(m, 0) == first
+    assert iqm_interval(m, 1)[1:] != first[1:]
+    np.random.seed(123)  # noqa: NPY002
+    iqm_interval(m, 0)
+    assert np.array_equal(np.random.get_state()[1], before)  # noqa: NPY002
+
+
 def _tuned_cases():
     from agents.bench.declarations import BENCHMARKS
 
