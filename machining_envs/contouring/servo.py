@@ -576,9 +576,10 @@ _LANE_ARRAYS = (
     ("tq", (2,)),
     ("umax", (1,)),
 )
-#: Values in a lane's row of ``ServoLanes.buf``: its arrays (185), then seven unused, so
-#: that every row starts 64 bytes after the last.
-ROW_SIZE = 192
+_ROW_VALUES = sum(math.prod(shape) for _, shape in _LANE_ARRAYS)
+#: Values in a lane's row of ``ServoLanes.buf``: its arrays, then up to seven unused, so
+#: that every row starts 64 bytes after the last (192).
+ROW_SIZE = _ROW_VALUES + (-_ROW_VALUES) % 8
 #: Scratch values :func:`run_block` needs.
 SCRATCH_SIZE = 16
 

@@ -394,8 +394,9 @@ def _matrices(params: _LinearKey, spindle_rpm: float) -> _Matrices:
         rho = 0.0
     i_row = np.zeros(4)  # the I-rows of Phi(rho) and Gamma(rho), side by side
     i_row[2] = 1.0
-    if rho > 0 and not _exp_row(*_servo_system(params), rho, 2, i_row):
-        phi_r, gam_r = zoh(*_servo_system(params), rho)
+    servo = _servo_system(params)
+    if rho > 0 and not _exp_row(*servo, rho, 2, i_row):
+        phi_r, gam_r = zoh(*servo, rho)
         i_row[:3], i_row[3] = phi_r[2], gam_r[2, 0]
     packed = np.empty((2 * m + 3, 8))
     lag = np.empty(m, dtype=np.int64)
