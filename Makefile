@@ -19,8 +19,10 @@ $(STAMP): pyproject.toml constraints.txt
 demo: $(STAMP)
 	$(BIN)/machining-bench benchmark --quick --out $(RESULTS)
 
+# The suite runs on every core, at most four (pytest-xdist; each worker holds about 1 GB),
+# the long tests shared out as workers free up.
 test: $(STAMP)
-	$(BIN)/python -m pytest -m "not slow" -q
+	$(BIN)/python -m pytest -m "not slow" -q -n auto --maxprocesses 4 --dist worksteal
 
 lint: $(STAMP)
 	$(BIN)/lint-imports

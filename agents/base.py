@@ -154,7 +154,8 @@ class Agent:
                 starts = self._starts(episode_start, n)
                 if starts.any():
                     st[starts] = self.initial_state(int(starts.sum()), batch[starts])
-        action = np.clip(self._act(batch, st), -1.0, 1.0).astype(np.float32)
+        # np.clip's numbers without its wrapper (a few microseconds a call)
+        action = np.minimum(np.maximum(self._act(batch, st), -1.0), 1.0).astype(np.float32)
         return (action[0] if single else action), st
 
     def _observations(self, observation) -> tuple[np.ndarray, bool]:

@@ -127,7 +127,7 @@ class LinearServoAgent(Agent):
         state[:, :nx] = out[:, :nx]
         u = out[:, nx:]
         umax = self.command_max_mm_s
-        excess = np.clip(u, -umax, umax) - u
+        excess = np.minimum(np.maximum(u, -umax), umax) - u
         if excess.any():
             for axis, sl in enumerate(self._aw_slices):
                 state[:, sl] += excess[:, axis : axis + 1] * self._aw[axis]

@@ -9,8 +9,9 @@ its batched physics:
   of arrays of length ``len(lanes)``;
 - ``_step_lanes(actions)``: advance every lane by one control period with the checked
   actions ``(num_envs, *action_shape)``; return observations, rewards, terminations,
-  truncations and the step info as a dict of arrays of length ``num_envs`` (a key that
-  only some lanes have comes with a boolean mask under ``"_" + key``).
+  truncations and the step info as a new dict of arrays of length ``num_envs`` (a key
+  that only some lanes have comes with a boolean mask under ``"_" + key``; the base adds
+  the masks of the others to it).
 
 This base checks the actions (a non-finite action in any lane raises ``ValueError``
 naming the lane, and nothing is stepped), seeds lane ``i`` with ``seed + i`` exactly as
@@ -98,6 +99,9 @@ class LaneVectorEnv(gym.vector.VectorEnv):
         self.observation_space = batch_space(single_observation_space, self.num_envs)
         self.action_space = batch_space(single_action_space, self.num_envs)
         self.render_mode = None
+        #: The step info's keys (as ``_step_lanes`` returns them) -> the masks every lane
+        #: gets, worked out once per set of keys.
+        self._mask_keys: dict[tuple, tuple] = {}
         self.lane_rngs: list[np.random.Generator] = [
             seeding.np_random()[0] for _ in range(self.num_envs)
         ]
@@ -152,7 +156,14 @@ class LaneVectorEnv(gym.vector.VectorEnv):
             )
         obs, reward, terminated, truncated, info = self._step_lanes(a)
         every = np.ones(self.num_envs, dtype=bool)
-        info = {**info, **{"_" + k: every for k in info if k[0] != "_" and "_" + k not in info}}
+        keys = tuple(info)
+        masks = self._mask_keys.get(keys)
+        if masks is None:
+            masks = tuple("_" + k for k in keys if k[0] != "_" and "_" + k not in info)
+            if len(self._mask_keys) >= 64:  # a few sets of keys occur; never let it grow
+                self._mask_keys.clear()
+            self._mask_keys[keys] = masks
+        info.update(dict.fromkeys(masks, every))  # _step_lanes' dict is new at every step
         done = np.logical_or(terminated, truncated)
         if not done.any():
             return obs, reward, terminated, truncated, info

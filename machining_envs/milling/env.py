@@ -897,7 +897,7 @@ class EndMillingVectorEnv(LaneVectorEnv):
         core = self._core
         a = actions[:, 0]
         core.in_clipped[:] = (a < -1.0) | (a > 1.0)
-        np.clip(a, -1.0, 1.0, out=core.in_action)
+        np.minimum(np.maximum(a, -1.0), 1.0, out=core.in_action)  # np.clip, without its wrapper
         core.draw_noise(self.lane_rngs)
         core.step()
         f = core.flags
