@@ -11,8 +11,7 @@ operations here are those whose rounding differs from a plain loop:
 - :func:`np_sum` / :func:`np_mean`: numpy's pairwise summation of a contiguous float64
   array (``np.sum``, ``np.mean``);
 - :func:`gemv_row`: one element of OpenBLAS's ``dgemv`` (``A @ x`` of a C-ordered float64
-  matrix, x86-64 Haswell kernels, one thread): four interleaved FMA chains per row;
-- :func:`gemm_entry`: one element of OpenBLAS's ``dgemm`` (``A @ B``): one FMA chain.
+  matrix, x86-64 Haswell kernels, one thread): four interleaved FMA chains per row.
 
 CPython's ``x ** 2`` is libm's ``pow``, which differs from ``x * x`` for about one value
 in a thousand; compiled code gets it from ``math.pow(x, two)`` with ``two`` read at run
@@ -38,7 +37,6 @@ __all__ = [
     "np_sum",
     "np_mean",
     "gemv_row",
-    "gemm_entry",
     "py_mod",
     "vecmat_rows",
 ]
@@ -235,16 +233,6 @@ def np_mean(a):
     return np_sum(a) / float(a.size)
 
 
-@numba.njit(cache=True, inline="always")
-def gemm_entry(a, b, i, j):
-    """``(a @ b)[i, j]`` as OpenBLAS's ``dgemm`` computes it (one FMA chain over the inner
-    dimension, for ``a`` of two or more rows)."""
-    acc = 0.0
-    for q in range(a.shape[1]):
-        acc = fma(a[i, q], b[q, j], acc)
-    return acc
-
-
 @numba.njit(cache=True)
 def gemv_row(a, x, r, n_rows):
     """``(a @ x)[r]`` as OpenBLAS's ``dgemv`` computes it for a C-ordered ``a`` of
@@ -307,16 +295,6 @@ def gemv(a, x, out):
     n = a.shape[0]
     for r in range(n):
         out[r] = gemv_row(a, x, r, n)
-
-
-@numba.njit(cache=True)
-def dot(a, b):
-    """``a @ b`` of two short 1-d float64 arrays (fewer than 16 elements) as OpenBLAS's
-    ``ddot`` computes it: one chain of separate multiplies and adds."""
-    acc = 0.0
-    for q in range(a.size):
-        acc = acc + a[q] * b[q]
-    return acc
 
 
 @numba.njit(cache=True)

@@ -576,22 +576,34 @@ _LANE_ARRAYS = (
     ("tq", (2,)),
     ("umax", (1,)),
 )
-_ROW_VALUES = sum(math.prod(shape) for _, shape in _LANE_ARRAYS)
+#: Where each array starts in a lane's row, and where the last ends.
+_OFFSETS = tuple(
+    sum(math.prod(shape) for _, shape in _LANE_ARRAYS[:i]) for i in range(len(_LANE_ARRAYS) + 1)
+)
 #: Values in a lane's row of ``ServoLanes.buf``: its arrays, then up to seven unused, so
 #: that every row starts 64 bytes after the last (192).
-ROW_SIZE = _ROW_VALUES + (-_ROW_VALUES) % 8
+ROW_SIZE = _OFFSETS[-1] + (-_OFFSETS[-1]) % 8
 #: Scratch values :func:`run_block` needs.
 SCRATCH_SIZE = 16
+# The table as the compiled code's constants (numba freezes module globals).
+_O_AC, _O_BC, _O_CU, _O_DU, _O_GU, _O_TQ, _O_UMAX, _O_END = _OFFSETS
+_S_AC, _S_BC, _S_CU, _S_GU = (dict(_LANE_ARRAYS)[k] for k in ("ac", "bc", "cu", "gu"))
 
 
 @numba.njit(cache=True, inline="always")
 def lane_loops(row):
-    """A lane's loops as views of its row of ``ServoLanes.buf``: ``(ac, bc, cu, du, gu,
-    tq, umax)`` as :func:`run_block` takes them, except ``umax``, an array of one value."""
-    ac = row[:128].reshape((2, 8, 8))
-    bc = row[128:160].reshape((2, 2, 8))
-    cu = row[160:176].reshape((2, 8))
-    return ac, bc, cu, row[176:178], row[178:182].reshape((2, 2)), row[182:184], row[184:185]
+    """A lane's loops as views of its row of ``ServoLanes.buf`` (``_LANE_ARRAYS``):
+    ``(ac, bc, cu, du, gu, tq, umax)`` as :func:`run_block` takes them, except ``umax``, an
+    array of one value."""
+    return (
+        row[_O_AC:_O_BC].reshape(_S_AC),
+        row[_O_BC:_O_CU].reshape(_S_BC),
+        row[_O_CU:_O_DU].reshape(_S_CU),
+        row[_O_DU:_O_GU],
+        row[_O_GU:_O_TQ].reshape(_S_GU),
+        row[_O_TQ:_O_UMAX],
+        row[_O_UMAX:_O_END],
+    )
 
 
 class ServoLanes:
@@ -633,13 +645,10 @@ class ServoLanes:
 
     def _bind_views(self) -> None:
         """Name the runs of :attr:`buf` over all lanes (``_LANE_ARRAYS``)."""
-        o = 0
-        for name, shape in _LANE_ARRAYS:
-            size = math.prod(shape)
-            view = self.buf[:, o : o + size].reshape((self.n, *shape))
+        for (name, shape), o, end in zip(_LANE_ARRAYS, _OFFSETS[:-1], _OFFSETS[1:], strict=True):
+            view = self.buf[:, o:end].reshape((self.n, *shape))
             assert np.shares_memory(view, self.buf)
             setattr(self, name, view)
-            o += size
         self.umax = self.umax[:, 0]
 
     def __getstate__(self) -> dict:

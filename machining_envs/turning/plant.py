@@ -300,12 +300,15 @@ class _LinearKey(NamedTuple):
         )
 
 
+@functools.lru_cache(maxsize=16)
 def _servo_system(params: _LinearKey) -> tuple[np.ndarray, np.ndarray]:
-    """Continuous servo + running integral, state ``[Vf, dVf/dt, I]``, input U (counts)."""
+    """Continuous servo + running integral, state ``[Vf, dVf/dt, I]``, input U (counts);
+    built once per set of linear parameters (every reset reads it), read-only."""
     wn = params.servo_natural_freq_rad_s
     z = params.servo_damping
     a = np.array([[0.0, 1.0, 0.0], [-(wn**2), -2.0 * z * wn, 0.0], [1.0, 0.0, 0.0]])
     b = np.array([[0.0], [params.servo_gain * params.gear_ratio * wn**2], [0.0]])
+    a.flags.writeable = b.flags.writeable = False
     return a, b
 
 
