@@ -233,3 +233,21 @@ def assert_actuated(commands, actuation, command_range: float, period_s: float) 
     steps = np.diff(np.concatenate([[0.0, 0.0], c]))
     assert np.abs(steps).max() <= a.max_rate_per_s * command_range * period_s + 1e-9
     assert np.abs(np.diff(steps)).max() <= a.max_accel_per_s2 * command_range * period_s**2 + 1e-9
+
+
+def assert_drawn_scenarios_pass_their_checks(factories: dict, seeds: int = 150) -> None:
+    """Every factory of ``factories`` (name -> factory) builds scenarios that its scenario
+    class's checked constructor accepts unchanged: the factories build them without the
+    checks (``machining_envs.core.checks.drawn_instance``), which is right only if every
+    value they draw lies in the checked ranges. Numbers are Python floats, as the
+    constructor's callers give them."""
+    import dataclasses
+
+    for name, make in factories.items():
+        rng = np.random.default_rng(12345)
+        for _ in range(seeds):
+            sc = make(rng)
+            assert dataclasses.replace(sc) == sc, name  # runs __post_init__'s checks
+            for field in dataclasses.fields(sc):
+                value = getattr(sc, field.name)
+                assert not isinstance(value, np.generic), (name, field.name, type(value))

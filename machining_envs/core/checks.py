@@ -179,3 +179,16 @@ def replace_checked(params, changes: dict, rules: dict, cls: type):
     new.__dict__.update(params.__dict__)
     new.__dict__.update(changes)
     return new
+
+
+def drawn_instance(cls: type, fields: dict):
+    """An instance of the frozen dataclass ``cls`` with ``fields`` (every field, by name),
+    made without running ``__post_init__``.
+
+    For the scenario factories, which draw every field of a scenario at each reset from
+    ranges they checked once, when they were made (by building the scenarios at the ranges'
+    ends through the public constructor): checking every drawn value again was a good part
+    of a vector env's reset. Anything else builds its instances the public way."""
+    new = object.__new__(cls)
+    new.__dict__.update(fields)
+    return new

@@ -35,6 +35,7 @@ __all__ = [
     "SPLIT_SEED_BASE",
     "MAX_SPLIT_EPISODES",
     "split_rng",
+    "uniform_draws",
     "split_seeds",
     "check_not_held_out",
 ]
@@ -80,6 +81,15 @@ def split_rng(rng: np.random.Generator, split: str) -> np.random.Generator:
     words = np.empty(8, dtype=np.uint32)
     _seed_state(x & 0xFFFFFFFF, x >> 32, key, words)
     return np.random.Generator(np.random.PCG64(_SeedWords(words.view(np.uint64))))
+
+
+def uniform_draws(rng: np.random.Generator, lows: list, spans: list) -> list[float]:
+    """One uniform number in ``[low, low + span)`` for each pair, as Python floats: the
+    numbers ``rng.uniform(low, low + span)`` gives one call at a time, in order (numpy
+    computes each as ``low + (high - low) u`` from the generator's next double), drawn with
+    one call (a scenario's reset draws several; each call costs some microseconds)."""
+    u = rng.random(len(lows)).tolist()
+    return [lo + span * r for lo, span, r in zip(lows, spans, u, strict=True)]
 
 
 class _SeedWords(ISeedSequence):

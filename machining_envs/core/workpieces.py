@@ -8,6 +8,7 @@ end of the workpiece and before its start the depth is zero: the tool cuts air.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -73,9 +74,44 @@ class DepthProfile:
         slopes = [
             (b - a) / (x1 - x0) for a, b, x0, x1 in zip(starts, ends, e[:-1], e[1:], strict=True)
         ]
-        object.__setattr__(self, "_e", np.array(e))
-        object.__setattr__(self, "_d0", np.array(starts))
-        object.__setattr__(self, "_slope", np.array(slopes))
+        self._set_tables(e, starts, ends, slopes)
+
+    def _set_tables(self, edges: list, starts: list, ends: list, slopes: list) -> None:
+        """Keep the segments as lists of floats (for :meth:`segment_table` and the loops
+        over segments); :meth:`_arrays` makes arrays of them when first asked."""
+        object.__setattr__(self, "_table", (edges, starts, slopes))
+        object.__setattr__(self, "_ends", ends)
+
+    @functools.cached_property
+    def _arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Edges, start depths and slopes as arrays (for :meth:`__call__`)."""
+        return tuple(np.array(v) for v in self._table)
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        if "_ends" not in state:  # pickled by an earlier version: make the tables
+            self.__post_init__()
+
+    @classmethod
+    def _built(cls, edges: list, starts: list, ends: list, name: str) -> DepthProfile:
+        """A profile from segments this module built itself (lists of floats that
+        ``__post_init__`` would accept): the same object, without checking it again. A
+        vector env draws a workpiece at every lane's reset, and the checks were a fifth of
+        that reset's cost."""
+        new = object.__new__(cls)
+        for field, value in (
+            ("edges_mm", tuple(edges)),
+            ("start_depths_mm", tuple(starts)),
+            ("end_depths_mm", tuple(ends)),
+            ("name", name),
+        ):
+            object.__setattr__(new, field, value)
+        slopes = [
+            (b - a) / (x1 - x0)
+            for a, b, x0, x1 in zip(starts, ends, edges[:-1], edges[1:], strict=True)
+        ]
+        new._set_tables(edges, starts, ends, slopes)
+        return new
 
     # ---- constructors ---------------------------------------------------------------------
     @classmethod
@@ -131,11 +167,16 @@ class DepthProfile:
             )
         if not max_jump_ratio > 1.0:
             raise ValueError(f"max_jump_ratio must be > 1, got {max_jump_ratio!r}")
+        s_lo, s_hi = (float(v) for v in segment_mm)
+        if not (0.0 < s_lo <= s_hi < math.inf):
+            raise ValueError(f"segment_mm must satisfy 0 < lo <= hi < inf, got {segment_mm!r}")
         n = int(rng.integers(n_segments[0], n_segments[1] + 1))
+        if n < 1:
+            raise ValueError(f"n_segments must be a range of integers >= 1, got {n_segments!r}")
         draws = rng.random((4, n)).tolist()  # lengths, start depths, taper?, end depths
         edges = [0.0]
         for r in draws[0]:
-            edges.append(edges[-1] + segment_mm[0] + (segment_mm[1] - segment_mm[0]) * r)
+            edges.append(edges[-1] + s_lo + (s_hi - s_lo) * r)
         starts, ends = [], []
         prev = None
         for k in range(n):
@@ -149,7 +190,11 @@ class DepthProfile:
             starts.append(d0)
             ends.append(d1)
             prev = d1
-        return cls(tuple(edges), tuple(starts), tuple(ends), name)
+        # Built from checked ranges: every edge grows by at least s_lo > 0, every depth
+        # lies in [lo, hi] within DEPTH_RANGE_MM.
+        if cls is not DepthProfile:  # a subclass may check more: let it
+            return cls(tuple(edges), tuple(starts), tuple(ends), name)
+        return cls._built(edges, starts, ends, str(name))
 
     # ---- evaluation -----------------------------------------------------------------------
     @property
@@ -174,14 +219,15 @@ class DepthProfile:
             in segment ``i`` is ``start_depths[i] + slopes[i] * (x - edges[i])``, as
             :meth:`__call__` evaluates it.
         """
-        return self._e.tolist(), self._d0.tolist(), self._slope.tolist()
+        edges, starts, slopes = self._table
+        return list(edges), list(starts), list(slopes)
 
     def __call__(self, x_mm) -> np.ndarray:
         """Depth (mm) at positions ``x_mm`` (array); zero outside ``[0, length_mm)``."""
         x = np.asarray(x_mm, dtype=np.float64)
-        e = self._e
+        e, d0, slope = self._arrays
         i = np.clip(np.searchsorted(e, x, side="right") - 1, 0, e.size - 2)
-        d = self._d0[i] + self._slope[i] * (x - e[i])
+        d = d0[i] + slope[i] * (x - e[i])
         return np.where((x >= 0.0) & (x < e[-1]), d, 0.0)
 
     def change_positions_mm(self) -> tuple[float, ...]:
@@ -206,9 +252,11 @@ class DepthProfile:
             raise ValueError(f"c, q and v_max must be > 0, got {c!r}, {q!r}, {v_max!r}")
         a_star = (1.0 / (v_max * c)) ** (1.0 / q)  # the depth at which the two limits meet
         total = 0.0
-        for i in range(len(self.edges_mm) - 1):
-            x0, x1 = float(self.edges_mm[i]), float(self.edges_mm[i + 1])
-            a0, a1 = float(self.start_depths_mm[i]), float(self.end_depths_mm[i])
+        edges, starts, _ = self._table
+        ends = self._ends
+        for i in range(len(starts)):
+            x0, x1 = edges[i], edges[i + 1]
+            a0, a1 = starts[i], ends[i]
             if a0 == a1:
                 total += (x1 - x0) * max(1.0 / v_max, c * a0**q)
                 continue

@@ -524,13 +524,6 @@ def lag_rows(m, h, lag_s, out):
         out[j, :] = row
 
 
-def _lag_matrix(substeps: int, h: float, lag_s: float) -> np.ndarray:
-    """The lag matrix of :func:`lag_rows` as a new ``(substeps, substeps + 2)`` array."""
-    out = np.empty((substeps, substeps + 2))
-    lag_rows(substeps, h, lag_s, out)
-    return out
-
-
 @dataclass(slots=True)
 class MillingStep:
     """Signals of one sample period, at its end (the sample instant) unless stated."""
@@ -815,7 +808,6 @@ class MillingLanes:
         self.out_finish = np.full(self.n, np.nan)
         #: Scratch space of the kernel (see :func:`step_lanes`).
         self.work = np.zeros((self.n, 3 * m + 3))
-        self._lag_cache: dict[tuple[float, float], np.ndarray] = {}
 
     def start(self, lane: int, params: MillingParams, spindle_rpm: float, profile) -> None:
         """Start a new cut in ``lane``: tool at rest at the workpiece's start, no torque.
@@ -838,12 +830,7 @@ class MillingLanes:
         m = self.m
         h = params.sample_time_s / params.substeps
         lag_s = params.process_lag_s(rpm)
-        lag = self._lag_cache.get((h, lag_s))
-        if lag is None:
-            if len(self._lag_cache) >= 4096:
-                self._lag_cache.clear()
-            lag = self._lag_cache[(h, lag_s)] = _lag_matrix(m, h, lag_s)
-        self.lag[lane] = lag.ravel()
+        lag_rows(m, h, lag_s, self.lag[lane].reshape(m, m + 2))  # a view: filled in place
         self.z[lane] = 0.0
         self.buf[lane] = 0.0
         edges, d0, slope = profile.segment_table()

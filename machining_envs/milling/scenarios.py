@@ -21,9 +21,9 @@ import numba
 import numpy as np
 
 from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
-from machining_envs.core.checks import check_range
+from machining_envs.core.checks import check_range, drawn_instance
 from machining_envs.core.env import resolve_scenario
-from machining_envs.core.splits import split_rng
+from machining_envs.core.splits import split_rng, uniform_draws
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams, bisect_right
 
@@ -218,16 +218,41 @@ def _random(
     wear: tuple[float, float] | None = None,
     actuation: Actuation | None = None,
 ):
+    # After the workpiece, uniform in [low, high) each (uniform_draws: one call, the numbers
+    # of one scalar draw each, in order): the log spindle and limit scales, Ks, m, the noise
+    # scale and (with wear) the wear rate.
+    lows = [float(np.log(spindle[0])), float(np.log(ref[0])), 1.0 - truth, 1.0 - truth, 0.5]
+    highs = [float(np.log(spindle[1])), float(np.log(ref[1])), 1.0 + truth, 1.0 + truth, 2.0]
+    if wear is not None:
+        lows.append(float(wear[0]))
+        highs.append(float(wear[1]))
+    spans = [hi - lo for lo, hi in zip(lows, highs, strict=True)]
+    # Every drawn field lies between these two scenarios' (checked here, once): make()
+    # builds its scenarios without checking them again.
+    prof = DepthProfile.steps((depth[0],), 1.0)
+    for end in (0, 1):
+        w_end = wear[end] if wear is not None else 0.0
+        ranges = (spindle[end], ref[end], 1.0 + (2 * end - 1) * truth, 2.0 if end else 0.5)
+        sp, tr, ks, noise = ranges
+        MillingScenario(name, prof, sp, tr, ks, ks, noise, w_end, actuation=actuation)
+
     def make(env_rng: np.random.Generator) -> MillingScenario:
         rng = split_rng(env_rng, name)
         prof = DepthProfile.random(rng, depth, segments, (5.0, 12.0), 0.3, name=f"{name} profile")
-        sp = float(np.exp(rng.uniform(np.log(spindle[0]), np.log(spindle[1]))))
-        tr = float(np.exp(rng.uniform(np.log(ref[0]), np.log(ref[1]))))
-        ks, m = rng.uniform(1.0 - truth, 1.0 + truth, size=2)
-        noise = rng.uniform(0.5, 2.0)
-        w = float(rng.uniform(*wear)) if wear is not None else 0.0  # drawn last: same cuts
-        return MillingScenario(
-            name, prof, sp, tr, float(ks), float(m), float(noise), w, actuation=actuation
+        u = uniform_draws(rng, lows, spans)
+        return drawn_instance(
+            MillingScenario,
+            {
+                "name": name,
+                "profile": prof,
+                "spindle_scale": float(np.exp(u[0])),
+                "torque_limit_scale": float(np.exp(u[1])),
+                "torque_coefficient_scale": u[2],
+                "feed_exponent_scale": u[3],
+                "noise_scale": u[4],
+                "wear_per_100mm": u[5] if wear is not None else 0.0,
+                "actuation": actuation,
+            },
         )
 
     return make

@@ -23,8 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
+from machining_envs.core.checks import drawn_instance
 from machining_envs.core.env import resolve_scenario
-from machining_envs.core.splits import split_rng
+from machining_envs.core.splits import split_rng, uniform_draws
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams, _check
 
@@ -142,20 +143,51 @@ def _random(
     wear: tuple[float, float] | None = None,
     shopfloor: bool = False,
 ):
+    # The spindle speed log-uniform, then the workpiece, then uniform in [low, high) each
+    # (uniform_draws: one call, the numbers of one scalar draw each, in order): Kf, p, the
+    # noise scale, the force limit (where it varies) and the wear rate (with wear).
+    log_rpm = float(np.log(rpm[0]))
+    log_span = float(np.log(rpm[1])) - log_rpm
+    lows = [0.8, 0.8, 0.5]
+    highs = [1.2, 1.2, 2.0]
+    if limit_N[1] > limit_N[0]:
+        lows.append(float(limit_N[0]))
+        highs.append(float(limit_N[1]))
+    if wear is not None:  # drawn last: the same cuts as without wear
+        lows.append(float(wear[0]))
+        highs.append(float(wear[1]))
+    spans = [hi - lo for lo, hi in zip(lows, highs, strict=True)]
+    shop = (
+        {"spindle_power_W": SHOPFLOOR_SPINDLE_POWER_W, "actuation": SHOPFLOOR_ACTUATION}
+        if shopfloor
+        else {"spindle_power_W": math.inf, "actuation": None}
+    )
+    # Every drawn field lies between these two scenarios' (checked here, once): make()
+    # builds its scenarios without checking them again.
+    prof = DepthProfile.steps((depth[0],), 1.0)
+    for end in (0, 1):
+        w_end = wear[end] if wear is not None else 0.0
+        TurningScenario(name, prof, rpm[end], limit_N[end], *(highs if end else lows)[:3], w_end,
+                        **shop)  # fmt: skip
+
     def make(env_rng: np.random.Generator) -> TurningScenario:
         rng = split_rng(env_rng, name)
-        spindle = float(np.exp(rng.uniform(np.log(rpm[0]), np.log(rpm[1]))))
+        spindle = float(np.exp(log_rpm + log_span * rng.random()))
         prof = DepthProfile.random(rng, depth, segments, (4.0, 12.0), 0.3, name=f"{name} profile")
-        kf, p, noise = rng.uniform(0.8, 1.2), rng.uniform(0.8, 1.2), rng.uniform(0.5, 2.0)
-        limit = float(rng.uniform(*limit_N)) if limit_N[1] > limit_N[0] else limit_N[0]
-        w = float(rng.uniform(*wear)) if wear is not None else 0.0  # drawn last: same cuts
-        shop = (
-            {"spindle_power_W": SHOPFLOOR_SPINDLE_POWER_W, "actuation": SHOPFLOOR_ACTUATION}
-            if shopfloor
-            else {}
-        )
-        return TurningScenario(
-            name, prof, spindle, limit, float(kf), float(p), float(noise), w, **shop
+        u = uniform_draws(rng, lows, spans)
+        return drawn_instance(
+            TurningScenario,
+            {
+                "name": name,
+                "profile": prof,
+                "spindle_rpm": spindle,
+                "force_limit_N": u[3] if limit_N[1] > limit_N[0] else limit_N[0],
+                "force_coefficient_scale": u[0],
+                "feed_exponent_scale": u[1],
+                "noise_scale": u[2],
+                "wear_per_100mm": u[-1] if wear is not None else 0.0,
+                **shop,
+            },
         )
 
     return make

@@ -22,3 +22,36 @@ def test_depth_profiles():
         DepthProfile((0.0, 5.0, 3.0), (1.0, 1.0), (1.0, 1.0))
     with pytest.raises(ValueError, match="start_depths_mm"):
         DepthProfile((0.0, 5.0), (-1.0,), (1.0,))
+
+
+def test_random_profiles_are_those_the_public_constructor_makes():
+    """``random`` builds its profiles without checking them again (they are valid by
+    construction): each equals, field for field and in every table, the profile the checked
+    constructor makes of the same numbers, and survives pickling."""
+    import pickle
+
+    rng = np.random.default_rng(7)
+    ranges = [((0.5, 3.0), (2, 5), (4.0, 12.0)), ((0.4, 3.5), (1, 6), (5, 12))]
+    for i in range(300):
+        depth, segments, lengths = ranges[i % 2]
+        p = DepthProfile.random(rng, depth, segments, lengths, 0.3, name="drawn")
+        q = DepthProfile(p.edges_mm, p.start_depths_mm, p.end_depths_mm, "drawn")
+        assert p == q
+        assert p.segment_table() == q.segment_table()
+        assert all(type(v) is float for v in p.edges_mm + p.start_depths_mm + p.end_depths_mm)
+        x = np.linspace(-1.0, p.length_mm + 1.0, 97)
+        np.testing.assert_array_equal(p(x), q(x))
+        assert p.traverse_time_s(0.3, 0.7, 5.0) == q.traverse_time_s(0.3, 0.7, 5.0)
+        assert pickle.loads(pickle.dumps(p)).segment_table() == q.segment_table()
+
+
+def test_random_profile_refuses_bad_ranges():
+    rng = np.random.default_rng(0)
+    with pytest.raises(ValueError, match="segment_mm must satisfy 0 < lo <= hi"):
+        DepthProfile.random(rng, segment_mm=(0.0, 5.0))
+    with pytest.raises(ValueError, match="segment_mm must satisfy 0 < lo <= hi"):
+        DepthProfile.random(rng, segment_mm=(6.0, 5.0))
+    with pytest.raises(ValueError, match="segment_mm"):
+        DepthProfile.random(rng, segment_mm=(1.0, np.inf))
+    with pytest.raises(ValueError, match="n_segments must be a range of integers >= 1"):
+        DepthProfile.random(rng, n_segments=(0, 0))

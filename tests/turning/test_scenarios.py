@@ -30,3 +30,33 @@ def test_scenarios_by_name_and_object():
 
 def test_splits_share_a_distribution_but_not_episodes():
     assert_splits_share_a_distribution_not_episodes(gym.make(TURNING), lambda s: s.spindle_rpm)
+
+
+def test_split_draws_are_numpys_scalar_draws_in_order():
+    """The split scenarios are drawn as one scalar draw per field, in a fixed order (the
+    split's episodes must never change): the factories compute the same numbers from fewer
+    calls, and skip the checks of values drawn from checked ranges."""
+    import numpy as np
+
+    from machining_envs.core.splits import split_rng
+    from machining_envs.turning.scenarios import TURNING_SCENARIOS
+    from tests.helpers import assert_drawn_scenarios_pass_their_checks
+
+    assert_drawn_scenarios_pass_their_checks(TURNING_SCENARIOS)
+    for split in ("train", "ood", "wear", "shopfloor"):
+        ood = split == "ood"
+        for seed in range(40):
+            sc = TURNING_SCENARIOS[split](np.random.default_rng(seed))
+            rng = split_rng(np.random.default_rng(seed), split)
+            rpm = (200.0, 800.0) if ood else (245.0, 700.0)
+            assert sc.spindle_rpm == float(np.exp(rng.uniform(np.log(rpm[0]), np.log(rpm[1]))))
+            prof = DepthProfile.random(
+                rng, (0.5, 3.5) if ood else (0.5, 3.0), (2, 6) if ood else (2, 5), (4.0, 12.0)
+            )
+            assert sc.profile.edges_mm == prof.edges_mm
+            assert sc.profile.end_depths_mm == prof.end_depths_mm
+            assert sc.force_coefficient_scale == rng.uniform(0.8, 1.2)
+            assert sc.feed_exponent_scale == rng.uniform(0.8, 1.2)
+            assert sc.noise_scale == rng.uniform(0.5, 2.0)
+            assert sc.force_limit_N == (rng.uniform(700.0, 1300.0) if ood else 1000.0)
+            assert sc.wear_per_100mm == (rng.uniform(0.3, 1.0) if split == "wear" else 0.0)
