@@ -174,7 +174,12 @@ def replace_checked(params, changes: dict, rules: dict, cls: type):
     if not changes.keys() <= rules.keys():
         return dataclasses.replace(params, **changes)
     for name, value in changes.items():
-        check_field(name, value, rules[name])
+        rule = rules[name]
+        if type(value) is float and type(rule[0]) is not str:  # a number's rule: the common
+            lo, hi, lo_open = rule  # case checked here, with check_range's comparisons
+            if (value > lo if lo_open else value >= lo) and value <= hi and value - value == 0:
+                continue
+        check_field(name, value, rule)
     new = object.__new__(cls)
     new.__dict__.update(params.__dict__)
     new.__dict__.update(changes)

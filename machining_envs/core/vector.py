@@ -5,8 +5,11 @@ its batched physics:
 
 - ``_reset_lanes(lanes, options)``: start new episodes in the lanes ``lanes`` (an index
   array), drawing each lane's scenario from its own generator ``self.lane_rngs[i]``;
-  return their observations ``(len(lanes), *obs_shape)`` and their reset info as a dict
-  of arrays of length ``len(lanes)``;
+  return their observations ``(len(lanes), *obs_shape)`` and their reset info, either as
+  a dict of arrays of length ``len(lanes)`` or as a list of the lanes' own info dicts
+  (the single env's, Python values), which the base writes into its arrays directly (a
+  step resets one or two lanes: making arrays of their few values cost more than the
+  values);
 - ``_step_lanes(actions)``: advance every lane by one control period with the checked
   actions ``(num_envs, *action_shape)``; return observations, rewards, terminations,
   truncations and the step info as a new dict of arrays of length ``num_envs`` (a key
@@ -35,7 +38,61 @@ from gymnasium.vector.utils import batch_space
 
 from machining_envs.core.env import real_actions
 
-__all__ = ["LaneVectorEnv", "check_num_envs", "merge_lane_info"]
+__all__ = ["LaneVectorEnv", "check_num_envs", "merge_lane_info", "stack_lane_infos"]
+
+#: The dtype of the info arrays that hold values of these Python types (as ``np.array`` of
+#: such values makes them; strings are kept as objects).
+_SCALAR_DTYPES = {
+    float: np.dtype(np.float64),
+    bool: np.dtype(np.bool_),
+    int: np.dtype(np.int64),
+    str: np.dtype(object),
+}
+
+
+def stack_lane_infos(infos: list[dict]) -> dict:
+    """Per-lane info dicts as arrays over those lanes; a key that only some have comes with
+    its ``_key`` mask."""
+    keys = list(dict.fromkeys(k for d in infos for k in d))
+    part = {}
+    for key in keys:
+        have = np.array([key in d for d in infos])
+        vals = [d.get(key) for d in infos]
+        if not have.all():
+            fill = next(v for v in vals if v is not None)
+            zero = np.zeros_like(fill) if isinstance(fill, np.ndarray) else type(fill)(0)
+            vals = [v if h else zero for v, h in zip(vals, have, strict=True)]
+            part["_" + key] = have
+        part[key] = np.array(vals)
+    return part
+
+
+def _write_lane_infos(top: dict, lanes: list, infos: list[dict], kept, every) -> dict:
+    """Write the reset infos ``infos`` (one dict per lane of ``lanes``) into ``top``'s
+    arrays, in place, where that is exact: a key every other lane holds (its mask is
+    ``kept``), every one of the lanes has, with values of one Python type whose arrays have
+    the dtype of ``top``'s (float, bool, int, str). The key then holds in every lane. Returns
+    the other keys' values, stacked (:func:`stack_lane_infos`), for the general merge."""
+    first = infos[0]
+    others = infos[1:]
+    rest = []
+    for k, v in first.items():
+        arr = top.get(k)
+        t = type(v)
+        if (
+            arr is None
+            or top["_" + k] is not kept
+            or _SCALAR_DTYPES.get(t) != arr.dtype
+            or any(k not in d or type(d[k]) is not t for d in others)
+        ):
+            rest.append(k)
+            continue
+        for i, d in zip(lanes, infos, strict=True):
+            arr[i] = d[k]
+        top["_" + k] = every
+    if not rest and all(len(d) == len(first) for d in others):
+        return {}
+    return stack_lane_infos([{k: d[k] for k in d if k in rest or k not in first} for d in infos])
 
 
 def merge_lane_info(info: dict, lanes: np.ndarray, part: dict, num_envs: int) -> None:
@@ -130,6 +187,8 @@ class LaneVectorEnv(gym.vector.VectorEnv):
                     self.lane_rngs[i] = seeding.np_random(s)[0]
         lanes = np.arange(self.num_envs)
         obs, part = self._reset_lanes(lanes, options)
+        if isinstance(part, list):
+            part = stack_lane_infos(part)
         info: dict = {}
         merge_lane_info(info, lanes, part, self.num_envs)
         self._started = True
@@ -187,6 +246,8 @@ class LaneVectorEnv(gym.vector.VectorEnv):
         new_obs, part = self._reset_lanes(lanes, None)
         obs = obs.copy()
         obs[lanes] = new_obs
+        if isinstance(part, list):
+            part = _write_lane_infos(top, lanes.tolist(), part, kept, every)
         rest = {}
         for k, new in part.items():
             if (

@@ -794,9 +794,8 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
     def _reset_lanes(self, lanes, options):
         core = self._core
         spec = scenario_option(options, self.default_scenario)
-        infos = [core.start(int(i), spec, self.lane_rngs[i]) for i in lanes]
-        part = {k: np.array([d[k] for d in infos]) for k in infos[0]}
-        return core.obs[lanes].copy(), part
+        infos = [core.start(i, spec, self.lane_rngs[i]) for i in lanes.tolist()]
+        return core.obs[lanes].copy(), infos
 
     def _step_lanes(self, actions):
         core = self._core

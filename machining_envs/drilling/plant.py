@@ -403,9 +403,9 @@ _REPLACE_RULES = {
 }
 
 
-@dataclass(frozen=True)
-class _GeometryKey:
-    """The fields the cutting coefficients depend on (cached per drill diameter)."""
+class _GeometryKey(NamedTuple):
+    """The fields the cutting coefficients depend on (cached per drill diameter); a named
+    tuple, as a key made and hashed twice at every reset of a lane."""
 
     point_angle_deg: float
     helix_angle_deg: float

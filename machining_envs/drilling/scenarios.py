@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from machining_envs.core.checks import check_range
+from machining_envs.core.checks import check_range, drawn_instance
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.splits import split_rng
 from machining_envs.drilling.plant import DIAMETER_RANGE_MM, DrillingParams
@@ -142,6 +142,14 @@ def _random(
     limit: tuple[float, float] = (1.0, 1.0),
     wear: tuple[float, float] | None = None,
 ):
+    # Every drawn field lies between these two scenarios' (checked here, once): make()
+    # builds its scenarios without checking them again.
+    for end in (0, 1):
+        DrillingScenario(
+            name, 0.5 + 0.3 * end, aspect[end], None, cutting[end], chips[end], fluct[end],
+            noise[end], torque_limit_scale=limit[end], wear_per_mm=wear[end] if wear else 0.0,
+        )  # fmt: skip
+
     def make(env_rng: np.random.Generator) -> DrillingScenario:
         rng = split_rng(env_rng, name)
         u = rng.random(6).tolist()
@@ -153,8 +161,20 @@ def _random(
         ns = noise[0] + (noise[1] - noise[0]) * u[5]
         scale = 1.0 if limit == (1.0, 1.0) else float(rng.uniform(*limit))
         w = float(rng.uniform(*wear)) if wear is not None else 0.0  # drawn last
-        return DrillingScenario(
-            name, d, ar, None, cs, ch, fl, ns, torque_limit_scale=scale, wear_per_mm=w
+        return drawn_instance(
+            DrillingScenario,
+            {
+                "name": name,
+                "diameter_mm": d,
+                "aspect_ratio": ar,
+                "torque_limit_Nmm": None,
+                "cutting_scale": cs,
+                "chip_scale": ch,
+                "fluctuation_scale": fl,
+                "noise_scale": ns,
+                "torque_limit_scale": scale,
+                "wear_per_mm": w,
+            },
         )
 
     return make

@@ -25,7 +25,7 @@ def _numeric_fields(p):
 @pytest.mark.parametrize("p", PARAMS, ids=lambda p: type(p).__name__)
 def test_every_field_is_checked_by_replace_and_by_the_constructor(p):
     for f in dataclasses.fields(p):
-        for bad in (float("nan"), -1e30):
+        for bad in (float("nan"), float("-inf"), -1e30):  # +inf: a spindle without a limit
             with pytest.raises(ValueError, match=f.name):
                 dataclasses.replace(p, **{f.name: bad})
             with pytest.raises(ValueError, match=f.name):
@@ -58,3 +58,22 @@ def test_a_change_checked_against_another_field_checks_the_whole_set():
         p.replace(voltage_max=0.5 * p.nominal_voltage)
     with pytest.raises(ValueError, match="feed_velocity_mm_s"):
         p.replace(feed_speed_max_mm_s=0.5 * p.feed_velocity_mm_s)
+
+
+def test_replace_checked_applies_each_rule_exactly():
+    """The rules' bounds, as check_range applies them: an open bottom excludes its bound, a
+    closed one and the top include theirs; ints and non-finite values are refused or taken
+    by the same rules."""
+    from machining_envs.core.checks import replace_checked
+
+    @dataclasses.dataclass(frozen=True)
+    class P:
+        a: float = 1.0
+        b: float = 1.0
+
+    rules = {"a": (0.0, 2.0, True), "b": (0.0, 2.0, False)}
+    assert replace_checked(P(), {"a": 2.0, "b": 0.0}, rules, P) == P(2.0, 0.0)
+    assert replace_checked(P(), {"a": 1e-300, "b": 2}, rules, P) == P(1e-300, 2)
+    for name, bad in (("a", 0.0), ("a", 2.0000001), ("b", -1e-300), ("b", math.inf)):
+        with pytest.raises(ValueError, match=f"{name} must be in"):
+            replace_checked(P(), {name: bad}, rules, P)

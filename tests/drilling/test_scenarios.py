@@ -43,3 +43,12 @@ def test_bad_scenarios_name_the_field():
 
 def test_splits_share_a_distribution_but_not_episodes():
     assert_splits_share_a_distribution_not_episodes(gym.make(DRILLING), lambda s: s.aspect_ratio)
+
+
+def test_drawn_scenarios_pass_their_checks():
+    """The split factories build scenarios without checking them again: every value they
+    draw must lie in the checked ranges."""
+    from machining_envs.drilling.scenarios import DRILLING_SCENARIOS
+    from tests.helpers import assert_drawn_scenarios_pass_their_checks
+
+    assert_drawn_scenarios_pass_their_checks(DRILLING_SCENARIOS)
