@@ -384,10 +384,20 @@ def _speed_free_rows(params: _LinearKey) -> tuple[np.ndarray, np.ndarray]:
 @functools.lru_cache(maxsize=256)
 def _matrices(params: _LinearKey, spindle_rpm: float) -> _Matrices:
     m = params.substeps
+    packed = np.empty((2 * m + 3, 8))
+    lag = np.empty(m, dtype=np.int64)
+    lags = _fill_matrices(params, spindle_rpm, packed, lag)
+    return _Matrices(lags, lag, _speed_free_rows(params)[1], packed)
+
+
+def _fill_matrices(params: _LinearKey, spindle_rpm: float, packed, lag) -> int:
+    """``_Matrices.packed`` and ``delay_group`` at ``spindle_rpm`` into ``packed`` and ``lag``
+    (a lane's rows: a lane starting at a new speed needs no other copy); returns ``lags``."""
+    m = params.substeps
     ts = params.sample_time_s
     h = ts / m
     phis, gams = _speed_free(params)[:2]
-    base, filt_step = _speed_free_rows(params)
+    base = _speed_free_rows(params)[0]
     period = 60.0 / spindle_rpm
     lags = int(math.ceil(period / ts + 1e-12)) + 1
     # Every delayed instant t_j - T sits the same fraction rho of a sub-step past a sub-step
@@ -401,10 +411,8 @@ def _matrices(params: _LinearKey, spindle_rpm: float) -> _Matrices:
     if rho > 0 and not _exp_row(*servo, rho, 2, i_row):
         phi_r, gam_r = zoh(*servo, rho)
         i_row[:3], i_row[3] = phi_r[2], gam_r[2, 0]
-    packed = np.empty((2 * m + 3, 8))
-    lag = np.empty(m, dtype=np.int64)
     _delayed_rows(phis, gams, base, i_row[:3], i_row[3], period, ts, rho, packed, lag)
-    return _Matrices(lags, lag, filt_step, packed)
+    return lags
 
 
 @numba.njit(cache=True)
@@ -842,10 +850,10 @@ class TurningLanes:
         """The step matrix of ``lane`` at ``spindle_rpm``. With ``full_history`` it is padded
         with zero columns to the memory of the slowest speed, so that the lane keeps every
         sample instant it could ever need and its speed may change between samples."""
-        mats = _matrices(self._key, spindle_rpm)
-        self.lag[lane] = mats.delay_group
-        self.big[lane] = mats.packed.ravel()
-        self.cols[lane] = self.z.shape[1] if full_history else 4 * (mats.lags + 1)
+        m = self.m
+        lags = _fill_matrices(self._key, spindle_rpm, self.big[lane].reshape(2 * m + 3, 8),
+                              self.lag[lane])  # fmt: skip
+        self.cols[lane] = self.z.shape[1] if full_history else 4 * (lags + 1)
 
     def set_speed(self, lane: int, spindle_rpm: float) -> None:
         """Change the spindle speed of a running ``lane`` from the next sample on (a lane
