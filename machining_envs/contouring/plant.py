@@ -101,6 +101,20 @@ class ContouringParams:
         """A copy with fields changed; unknown names raise ``TypeError``."""
         return dataclasses.replace(self, **changes)
 
+    def _with_inertias(self, inertia_x_kgm2: float, inertia_y_kgm2: float) -> ContouringParams:
+        """:meth:`replace` of the two inertias, checking only them (the other fields are
+        this instance's, checked already): a vector env's lane pays this at every reset."""
+        new = object.__new__(ContouringParams)
+        fields = dict(self.__dict__)
+        fields["inertia_x_kgm2"] = check_range(
+            "inertia_x_kgm2", inertia_x_kgm2, 0.0, 10.0, lo_open=True
+        )
+        fields["inertia_y_kgm2"] = check_range(
+            "inertia_y_kgm2", inertia_y_kgm2, 0.0, 10.0, lo_open=True
+        )
+        object.__setattr__(new, "__dict__", fields)
+        return new
+
     # ---- derived quantities (never stored) -------------------------------------------------
     def inertia_kgm2(self, axis: str) -> float:
         """J of ``axis`` ('x' or 'y'), kg m^2."""
