@@ -22,6 +22,7 @@ of lines and arcs for training: :meth:`Path.random_smooth`.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 
@@ -461,11 +462,12 @@ def _largest_hypot(x, y, cx, cy, neighbours):
 
 
 @numba.njit(cache=True)
-def _bounding_circles(tab, lengths):
-    """:func:`_bounding_circle_of_row` of every row of ``tab`` (arc lengths ``lengths``)
-    into its columns 3-5, in one call (a reset builds a path of several segments)."""
+def _bounding_circles(tab):
+    """:func:`_bounding_circle_of_row` of every row of ``tab`` into its columns 3-5, in one
+    call (a reset builds a path of several segments); column 3 holds the segment's arc
+    length until then."""
     for k in range(tab.shape[0]):
-        cx, cy, r = _bounding_circle_of_row(tab[k], lengths[k])
+        cx, cy, r = _bounding_circle_of_row(tab[k], tab[k, 3])
         tab[k, 3] = cx
         tab[k, 4] = cy
         tab[k, 5] = r
@@ -524,8 +526,9 @@ class Path:
         self.segments = tuple(segs)
         self.name = name
         lengths = [seg.length for seg in segs]
-        self._starts = np.concatenate([[0.0], np.cumsum(lengths)])
-        self._start_list = self._starts.tolist()
+        # np.cumsum's running sum, in Python floats (one numpy call fewer per reset).
+        self._start_list = [0.0, *itertools.accumulate(lengths)]
+        self._starts = np.array(self._start_list)
         self._inner = self._starts[1:-1].copy()
         self.length = self._start_list[-1]
         # Unwrapped heading at each segment's start: corners add their turn in (-pi, pi].
@@ -535,11 +538,12 @@ class Path:
             head[-1] += _wrap(segs[k].heading0 - head[-1])
         self._heading_starts = np.array(head)
         rows = [seg._row() for seg in segs]
-        for row, start, h in zip(rows, self._start_list[:-1], head, strict=True):
+        for row, start, h, length in zip(rows, self._start_list, head, lengths, strict=False):
             row[1] = start
             row[2] = h
-        tab = np.array(rows)
-        _bounding_circles(tab, np.array(lengths))
+            row[3] = length  # read, then replaced, by _bounding_circles
+        tab = np.array(rows, dtype=np.float64)
+        _bounding_circles(tab)
         tab.setflags(write=False)
         self._table = tab
         self._bounds = [tuple(b) for b in tab[:, 3:6].tolist()]

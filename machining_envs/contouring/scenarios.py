@@ -194,6 +194,10 @@ def _random(
     load_max: float,
     actuation: Actuation | None = None,
 ):
+    # The log-uniform draws' bounds, as numpy computes them, once.
+    log_feed = (np.log(feed[0]), np.log(feed[1]))
+    log_inertia = (np.log(inertia[0]), np.log(inertia[1]))
+
     def make(env_rng: np.random.Generator) -> ContouringScenario:
         rng = split_rng(env_rng, name)
         path = Path.random_smooth(
@@ -204,12 +208,12 @@ def _random(
             sweep_deg=sweep,
             name=f"{name} path",
         )
-        f = float(np.exp(rng.uniform(np.log(feed[0]), np.log(feed[1]))))
-        sx, sy = (float(v) for v in np.exp(rng.uniform(np.log(inertia[0]), np.log(inertia[1]), 2)))
+        f = float(np.exp(rng.uniform(*log_feed)))
+        sx, sy = np.exp(rng.uniform(*log_inertia, 2)).tolist()
         loads = ()
         if rng.random() < 0.5:
             t = float(rng.uniform(0.0, path.length / f))
-            a, b = (float(v) for v in rng.uniform(-load_max, load_max, 2))
+            a, b = rng.uniform(-load_max, load_max, 2).tolist()
             loads = ((t, a, b),)
         # Every number is a Python float within the ranges ContouringScenario checks (the
         # ranges of CONTOURING_SCENARIOS lie inside them).
