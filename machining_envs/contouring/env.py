@@ -197,6 +197,9 @@ def _circle_info(path: Path) -> dict:
 
 _LZ, _LLEN, _LFTS, _LSTEP, _LEND, _LFIN, _LLOAD, _LPREV = 19, 23, 24, 25, 26, 28, 29, 31
 _NLF = 33
+# The plant's numbers fill the columns before the state (_ContouringCore.start writes a
+# lane's row in this order).
+assert _LZ == PLANT_COLUMNS and _NLF == _LPREV + 2
 _IK, _ILOAD, _INLOAD, _INMAX, _ICLIP, _ISEG = 0, 1, 2, 3, 4, 5
 _NLI = 6
 _CIRCLE_KEYS = ("circle_cx_mm", "circle_cy_mm", "circle_radius_mm")
@@ -484,17 +487,15 @@ class _ContouringCore:
         t_max = self.max_episode_time_s
         if t_max is None:
             t_max = ref_end + sc.dwell_s + 0.5
-        lf = self.lf[lane]
-        lf[:PLANT_COLUMNS] = plant.coefficients
         x0, y0 = path.start
-        lf[_LZ : _LZ + 4] = (x0, 0.0, y0, 0.0)
-        lf[_LLEN] = path.length
-        lf[_LFTS] = 0.0 if sc.is_step else sc.feed_mm_s * ts
-        lf[_LSTEP] = float(sc.is_step)
-        lf[_LEND : _LEND + 2] = path.end
-        lf[_LFIN] = ref_end + sc.dwell_s
-        lf[_LLOAD : _LLOAD + 2] = 0.0
-        lf[_LPREV : _LPREV + 2] = 0.0
+        # The lane's floats in one write, in the order of the _L* columns: the plant, its
+        # state, the path's length, the set point's advance, step or not, the path's end,
+        # the time from which it may finish, the loads and the previous action.
+        self.lf[lane] = [
+            *plant.coefficients.tolist(), x0, 0.0, y0, 0.0, path.length,
+            0.0 if sc.is_step else sc.feed_mm_s * ts, float(sc.is_step), *path.end,
+            ref_end + sc.dwell_s, 0.0, 0.0, 0.0, 0.0,
+        ]  # fmt: skip
         li = self.li[lane]
         li[:] = 0
         li[_INLOAD] = len(sc.load_steps)
@@ -833,6 +834,11 @@ class ContouringVectorEnv(LaneVectorEnv):
 def stack_lane_infos(infos: list[dict]) -> dict:
     """Per-lane info dicts as arrays over those lanes; a key that only some have comes with
     its ``_key`` mask."""
+    first = tuple(infos[0]) if infos else ()
+    if all(tuple(d) == first for d in infos[1:]):
+        # The usual case (every lane has every key, no masks): one array per key. A
+        # vector env's autoreset stacks the info of one or a few lanes at a step.
+        return {key: np.array([d[key] for d in infos]) for key in first}
     keys = list(dict.fromkeys(k for d in infos for k in d))
     part = {}
     for key in keys:

@@ -22,6 +22,7 @@ of lines and arcs for training: :meth:`Path.random_smooth`.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 
@@ -63,14 +64,31 @@ class Line:
     kind = "line"
 
     def __init__(self, start, end) -> None:
-        self.start = _point("start", start)
-        self.end = _point("end", end)
-        dx, dy = self.end[0] - self.start[0], self.end[1] - self.start[1]
+        self._set(_point("start", start), _point("end", end))
+
+    @classmethod
+    def _trusted(cls, start: tuple[float, float], end: tuple[float, float]) -> Line:
+        """A line between two pairs of finite Python floats the library computed itself
+        (:meth:`Path.random_smooth`), without checking their types again (a reset builds
+        several); the distinct ends are still checked."""
+        self = cls.__new__(cls)
+        self._set(start, end)
+        return self
+
+    def _set(self, start: tuple[float, float], end: tuple[float, float]) -> None:
+        self.start = start
+        self.end = end
+        dx, dy = end[0] - start[0], end[1] - start[1]
         self.length = math.hypot(dx, dy)
         if not self.length > 1e-9:
             raise ValueError(f"a Line needs distinct ends, got {start!r} and {end!r}")
         self._u = (dx / self.length, dy / self.length)
         self.heading0 = math.atan2(dy, dx)
+
+    def _row(self) -> list[float]:
+        """The segment's row of :meth:`Path.table` (its place in the path left at zero)."""
+        return [_LINE, 0.0, 0.0, 0.0, 0.0, 0.0, *self.start, *self._u, self.length,
+                0.0, 0.0, 0.0, 0.0, 0.0]  # fmt: skip
 
     def points(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return self.start[0] + self._u[0] * s, self.start[1] + self._u[1] * s
@@ -124,6 +142,25 @@ class Arc:
         self.sweep = _finite("sweep", sweep)
         if not 0 < abs(self.sweep) <= _TWO_PI + 1e-12:
             raise ValueError(f"sweep must satisfy 0 < |sweep| <= 2 pi rad, got {sweep!r}")
+        self._derive()
+
+    @classmethod
+    def _trusted(
+        cls, center: tuple[float, float], radius: float, start_angle: float, sweep: float
+    ) -> Arc:
+        """An arc from Python floats the library computed itself within the ranges the
+        constructor checks (:meth:`Path.random_smooth`: radius > 0, ``0 < |sweep| <= 2
+        pi``), without checking them again (a reset builds several)."""
+        self = cls.__new__(cls)
+        self.center = center
+        self.radius = radius
+        self.start_angle = start_angle
+        self.sweep = sweep
+        self._derive()
+        return self
+
+    def _derive(self) -> None:
+        """The arc's derived numbers, from its checked ones."""
         self.sign = 1.0 if self.sweep > 0 else -1.0
         self.length = self.radius * abs(self.sweep)
         self.start = self._at(self.start_angle)
@@ -155,6 +192,11 @@ class Arc:
     @property
     def heading1(self) -> float:
         return self.heading0 + self.sweep
+
+    def _row(self) -> list[float]:
+        """The segment's row of :meth:`Path.table` (its place in the path left at zero)."""
+        return [_ARC, 0.0, 0.0, 0.0, 0.0, 0.0, *self.center, self.radius, self.start_angle,
+                self.sign, abs(self.sweep), *self.start, *self.end]  # fmt: skip
 
     def closest(self, px: float, py: float) -> tuple[float, float, float]:
         cx, cy = self.center
@@ -272,6 +314,12 @@ class Involute:
     def heading1(self) -> float:
         return self.theta_end + self.theta1
 
+    def _row(self) -> list[float]:
+        """The segment's row of :meth:`Path.table` (its place in the path left at zero)."""
+        return [_INVOLUTE, 0.0, 0.0, 0.0, 0.0, 0.0, *self.center, self.radius, self.theta1,
+                self.theta_start, self.theta_end, self.theta_start**2, float(self._k_span),
+                0.0, 0.0]  # fmt: skip
+
     def _feet(self, px: float, py: float) -> list[float]:
         """Parameters of the feet of the normals from ``p`` that lie on the segment."""
         dx, dy = px - self.center[0], py - self.center[1]
@@ -353,19 +401,7 @@ def _bounding_circle(seg) -> tuple[float, float, float]:
 def _segment_row(seg) -> np.ndarray:
     """A segment's row of :meth:`Path.table` (its kind and own numbers; the columns of its
     place in the path left at zero)."""
-    row = np.zeros(SEGMENT_COLUMNS)
-    if isinstance(seg, Line):
-        row[0] = _LINE
-        row[6:11] = (*seg.start, *seg._u, seg.length)
-    elif isinstance(seg, Arc):
-        row[0] = _ARC
-        row[6:16] = (*seg.center, seg.radius, seg.start_angle, seg.sign, abs(seg.sweep),
-                     *seg.start, *seg.end)  # fmt: skip
-    else:
-        row[0] = _INVOLUTE
-        row[6:14] = (*seg.center, seg.radius, seg.theta1, seg.theta_start, seg.theta_end,
-                     seg.theta_start**2, seg._k_span)  # fmt: skip
-    return row
+    return np.array(seg._row())
 
 
 @numba.njit(cache=True)
@@ -382,13 +418,59 @@ def _bounding_circle_of_row(row, length):
         x[i], y[i] = _segment_point(row, s)
     cx = np_mean(x)
     cy = np_mean(y)
-    gap = -np.inf
-    far = -np.inf
-    for i in range(n):
-        if i + 1 < n:
-            gap = max(gap, math.hypot(x[i + 1] - x[i], y[i + 1] - y[i]))
-        far = max(far, math.hypot(x[i] - cx, y[i] - cy))
+    gap = _largest_hypot(x, y, 0.0, 0.0, True)
+    far = _largest_hypot(x, y, cx, cy, False)
     return cx, cy, far + gap
+
+
+@numba.njit(cache=True, inline="always")
+def _offset(x, y, i, cx, cy, neighbours):
+    """``(x[i + 1] - x[i], y[i + 1] - y[i])`` or ``(x[i] - cx, y[i] - cy)``."""
+    if neighbours:
+        return x[i + 1] - x[i], y[i + 1] - y[i]
+    return x[i] - cx, y[i] - cy
+
+
+@numba.njit(cache=True)
+def _largest_hypot(x, y, cx, cy, neighbours):
+    """The largest ``math.hypot`` of the gaps between neighbouring points
+    (``neighbours``) or of the points' offsets from ``(cx, cy)``, to the last bit.
+
+    ``hypot`` is evaluated only where the plain sum of squares comes within 1e-9 of its
+    largest value: a sum of squares is within a few units in the last place of the true
+    square of the distance and ``hypot`` within one of the distance, so every offset left
+    out has a smaller ``hypot`` than the one with the largest sum. Where the sums could
+    underflow, overflow or be NaN, every ``hypot`` is taken."""
+    n = x.shape[0] - 1 if neighbours else x.shape[0]
+    m2 = 0.0
+    bad = False
+    for i in range(n):
+        dx, dy = _offset(x, y, i, cx, cy, neighbours)
+        d2 = dx * dx + dy * dy
+        if d2 > m2:
+            m2 = d2
+        elif d2 != d2:
+            bad = True
+    full = bad or not (1e-280 < m2 < 1e280)
+    thr = m2 * (1.0 - 1e-9)
+    best = -np.inf
+    for i in range(n):
+        dx, dy = _offset(x, y, i, cx, cy, neighbours)
+        if full or dx * dx + dy * dy >= thr:
+            best = max(best, math.hypot(dx, dy))
+    return best
+
+
+@numba.njit(cache=True)
+def _bounding_circles(tab):
+    """:func:`_bounding_circle_of_row` of every row of ``tab`` into its columns 3-5, in one
+    call (a reset builds a path of several segments); column 3 holds the segment's arc
+    length until then."""
+    for k in range(tab.shape[0]):
+        cx, cy, r = _bounding_circle_of_row(tab[k], tab[k, 3])
+        tab[k, 3] = cx
+        tab[k, 4] = cy
+        tab[k, 5] = r
 
 
 def _wrap(a: float) -> float:
@@ -428,24 +510,43 @@ class Path:
                         f"segments[{k}] starts {gap:.3g} mm from where segments[{k - 1}] ends; "
                         "a path must be continuous"
                     )
+        self._build(segs, str(name))
+
+    @classmethod
+    def _trusted(cls, segs: list[Segment], name: str) -> Path:
+        """A path of segments the library chained itself (:meth:`random_smooth`: each
+        starts exactly where the previous one ends), without checking them again (a reset
+        builds one)."""
+        self = cls.__new__(cls)
+        self._build(segs, name)
+        return self
+
+    def _build(self, segs: list[Segment], name: str) -> None:
+        """The path's numbers from its checked segments, its :meth:`table` among them."""
         self.segments = tuple(segs)
-        self.name = str(name)
+        self.name = name
         lengths = [seg.length for seg in segs]
-        self._starts = np.concatenate([[0.0], np.cumsum(lengths)])
-        self._start_list = [float(v) for v in self._starts]
+        # np.cumsum's running sum, in Python floats (one numpy call fewer per reset).
+        self._start_list = [0.0, *itertools.accumulate(lengths)]
+        self._starts = np.array(self._start_list)
         self._inner = self._starts[1:-1].copy()
-        self.length = float(self._starts[-1])
-        self._rows = [_segment_row(seg) for seg in segs]
-        self._bounds = [
-            tuple(float(v) for v in _bounding_circle_of_row(row, float(seg.length)))
-            for row, seg in zip(self._rows, segs, strict=True)
-        ]
+        self.length = self._start_list[-1]
         # Unwrapped heading at each segment's start: corners add their turn in (-pi, pi].
         head = [segs[0].heading0]
         for k in range(1, len(segs)):
             head.append(head[-1] + (segs[k - 1].heading1 - segs[k - 1].heading0))
             head[-1] += _wrap(segs[k].heading0 - head[-1])
         self._heading_starts = np.array(head)
+        rows = [seg._row() for seg in segs]
+        for row, start, h, length in zip(rows, self._start_list, head, lengths, strict=False):
+            row[1] = start
+            row[2] = h
+            row[3] = length  # read, then replaced, by _bounding_circles
+        tab = np.array(rows, dtype=np.float64)
+        _bounding_circles(tab)
+        tab.setflags(write=False)
+        self._table = tab
+        self._bounds = [tuple(b) for b in tab[:, 3:6].tolist()]
 
     # ---- constructors: the paper's paths -------------------------------------------------
     @classmethod
@@ -512,22 +613,23 @@ class Path:
         segs: list[Segment] = []
         for k in range(n):
             if draws[0][k] < line_probability:
-                length = line_mm[0] + (line_mm[1] - line_mm[0]) * draws[1][k]
+                length = float(line_mm[0] + (line_mm[1] - line_mm[0]) * draws[1][k])
                 end = (p[0] + length * math.cos(heading), p[1] + length * math.sin(heading))
-                segs.append(Line(p, end))
+                segs.append(Line._trusted(p, end))
             else:
-                r = radius_mm[0] + (radius_mm[1] - radius_mm[0]) * draws[1][k]
+                r = float(radius_mm[0] + (radius_mm[1] - radius_mm[0]) * draws[1][k])
                 sweep = math.radians(sweep_deg[0] + (sweep_deg[1] - sweep_deg[0]) * draws[2][k])
                 sign = 1.0 if draws[3][k] < 0.5 else -1.0
                 # Centre to the left (sign +1) or right of the heading.
                 cx = p[0] - sign * r * math.sin(heading)
                 cy = p[1] + sign * r * math.cos(heading)
                 a0 = math.atan2(p[1] - cy, p[0] - cx)
-                seg = Arc((cx, cy), r, a0, sign * sweep)
-                segs.append(seg)
+                segs.append(Arc._trusted((cx, cy), r, a0, sign * sweep))
                 heading += sign * sweep
             p = segs[-1].end
-        return cls(segs, name=name)
+        # Every number above is a finite Python float in the segments' ranges (the ranges
+        # checked here, the start by _point) and each segment starts where the last ends.
+        return cls._trusted(segs, str(name))
 
     # ---- geometry ---------------------------------------------------------------------------
     @property
@@ -691,18 +793,7 @@ class Path:
         centre, radius, ``theta1``, ``theta_start``, ``theta_end``, ``theta_start**2``, the
         turns searched for feet of normals).
         """
-        tab = getattr(self, "_table", None)
-        if tab is not None:
-            return tab
-        tab = np.array(self._rows)
-        for k in range(len(self.segments)):
-            row = tab[k]
-            row[1] = self._start_list[k]
-            row[2] = self._heading_starts[k]
-            row[3:6] = self._bounds[k]
-        tab.setflags(write=False)
-        self._table = tab
-        return tab
+        return self._table
 
     def __repr__(self) -> str:
         return f"Path({self.name!r}, {len(self.segments)} segments, {self.length:.4g} mm)"

@@ -122,6 +122,18 @@ class ContouringScenario:
                 f"actuation must be an Actuation or None, got {type(self.actuation).__name__}"
             )
 
+    @classmethod
+    def _trusted(cls, name, path, feed_mm_s, load_steps, inertia_scale, actuation):
+        """A scenario of Python floats the library drew itself within the ranges
+        ``__post_init__`` checks (the random splits' factories), without checking them
+        again: a vector env's lane pays this at every reset."""
+        self = object.__new__(cls)
+        for field, value in (("name", name), ("path", path), ("feed_mm_s", feed_mm_s),
+                             ("load_steps", load_steps), ("inertia_scale", inertia_scale),
+                             ("dwell_s", 0.0), ("actuation", actuation)):  # fmt: skip
+            object.__setattr__(self, field, value)
+        return self
+
     @property
     def is_step(self) -> bool:
         """True for a step command (``feed_mm_s = inf``)."""
@@ -137,9 +149,7 @@ class ContouringScenario:
         sx, sy = self.inertia_scale
         if sx == 1.0 and sy == 1.0:
             return nominal
-        return nominal.replace(
-            inertia_x_kgm2=nominal.inertia_x_kgm2 * sx, inertia_y_kgm2=nominal.inertia_y_kgm2 * sy
-        )
+        return nominal._with_inertias(nominal.inertia_x_kgm2 * sx, nominal.inertia_y_kgm2 * sy)
 
 
 def _step(load: bool) -> Callable[[np.random.Generator], ContouringScenario]:
@@ -184,6 +194,10 @@ def _random(
     load_max: float,
     actuation: Actuation | None = None,
 ):
+    # The log-uniform draws' bounds, as numpy computes them, once.
+    log_feed = (np.log(feed[0]), np.log(feed[1]))
+    log_inertia = (np.log(inertia[0]), np.log(inertia[1]))
+
     def make(env_rng: np.random.Generator) -> ContouringScenario:
         rng = split_rng(env_rng, name)
         path = Path.random_smooth(
@@ -194,14 +208,16 @@ def _random(
             sweep_deg=sweep,
             name=f"{name} path",
         )
-        f = float(np.exp(rng.uniform(np.log(feed[0]), np.log(feed[1]))))
-        sx, sy = (float(v) for v in np.exp(rng.uniform(np.log(inertia[0]), np.log(inertia[1]), 2)))
+        f = float(np.exp(rng.uniform(*log_feed)))
+        sx, sy = np.exp(rng.uniform(*log_inertia, 2)).tolist()
         loads = ()
         if rng.random() < 0.5:
             t = float(rng.uniform(0.0, path.length / f))
-            a, b = (float(v) for v in rng.uniform(-load_max, load_max, 2))
+            a, b = rng.uniform(-load_max, load_max, 2).tolist()
             loads = ((t, a, b),)
-        return ContouringScenario(name, path, f, loads, (sx, sy), actuation=actuation)
+        # Every number is a Python float within the ranges ContouringScenario checks (the
+        # ranges of CONTOURING_SCENARIOS lie inside them).
+        return ContouringScenario._trusted(name, path, f, loads, (sx, sy), actuation)
 
     return make
 

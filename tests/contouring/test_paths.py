@@ -130,6 +130,71 @@ def test_random_smooth_paths_are_tangent_continuous_and_seeded():
         assert np.max(np.hypot(x1 - x0, y1 - y0)) < 1e-6  # continuous
 
 
+def test_random_smooth_builds_what_the_checked_constructors_build():
+    """random_smooth skips re-checking what it drew (a reset builds a path); the path is the
+    one the public, checked constructors make of the same numbers, to the last bit."""
+    for seed in range(30):
+        p = Path.random_smooth(np.random.default_rng(seed), n_segments=(1, 8), name="r")
+        segs = [
+            Line(s.start, s.end)
+            if isinstance(s, Line)
+            else Arc(s.center, s.radius, s.start_angle, s.sweep)
+            for s in p.segments
+        ]
+        q = Path(segs, name="r")
+        for a, b in zip(p.segments, q.segments, strict=True):
+            assert vars(a) == vars(b) and all(type(v) is not np.float64 for v in vars(a).values())
+        assert p.table().tobytes() == q.table().tobytes() and not p.table().flags.writeable
+        assert p._bounds == q._bounds and p._start_list == q._start_list
+        assert (p.length, p.start, p.end, p.name) == (q.length, q.start, q.end, q.name)
+        assert p._heading_starts.tobytes() == q._heading_starts.tobytes()
+    # numpy bounds give the same Python floats as Python ones.
+    a = Path.random_smooth(np.random.default_rng(3), line_mm=(5.0, 30.0), radius_mm=(3.0, 30.0))
+    b = Path.random_smooth(
+        np.random.default_rng(3), line_mm=np.array([5.0, 30.0]), radius_mm=np.array([3.0, 30.0])
+    )
+    assert repr(a.segments) == repr(b.segments)
+    with pytest.raises(ValueError, match="distinct"):  # a drawn line too short is still refused
+        Path.random_smooth(np.random.default_rng(0), line_mm=(1e-12, 1e-12), line_probability=1.0)
+
+
+def test_bounding_circles_hold_their_segments():
+    """Each row's bounding circle (table columns 3-5) holds its whole segment: the contour
+    error skips segments by it."""
+    rng = np.random.default_rng(2)
+    paths = [Path.random_smooth(rng, n_segments=(6, 6)) for _ in range(5)]
+    paths += [Path.paper_involute(), Path.paper_corner(), Path.paper_circle()]
+    for p in paths:
+        for seg, (cx, cy, r) in zip(p.segments, p.table()[:, 3:6], strict=True):
+            x, y = seg.points(np.linspace(0.0, seg.length, 5001))
+            assert np.max(np.hypot(x - cx, y - cy)) <= r
+
+
+def test_bounding_circles_are_numpys_to_the_last_bit():
+    """The compiled bounding circle (which takes hypot only near the largest sums of
+    squares) gives numpy's numbers over 257 points, at any scale."""
+    from machining_envs.contouring.paths import _bounding_circle
+
+    rng = np.random.default_rng(4)
+    segs = []
+    for scale in (1e-150, 1e-6, 1.0, 1e3, 1e150, 1e160):
+        for _ in range(20):
+            c = tuple(rng.normal(size=2) * scale * 10 ** rng.uniform(-3, 3))
+            r = scale * rng.uniform(0.01, 10)
+            segs.append(
+                Arc(c, r, rng.uniform(-7, 7), rng.uniform(0.01, 6.28) * rng.choice([-1, 1]))
+            )
+            segs.append(Involute(c, r, rng.uniform(-7, 7), 0.0, rng.uniform(0.01, 20)))
+            if scale >= 1e-6:
+                segs.append(Line(c, tuple(np.add(c, rng.normal(size=2) * scale))))
+    for seg in segs:
+        x, y = seg.points(np.linspace(0.0, seg.length, 257))
+        cx, cy = np.mean(x), np.mean(y)
+        far = np.max(np.hypot(x - cx, y - cy))
+        gap = np.max(np.hypot(np.diff(x), np.diff(y)))
+        assert _bounding_circle(seg) == (cx, cy, far + gap)
+
+
 def test_headings_and_scalar_queries_agree_with_vector_ones():
     p = Path.random_smooth(np.random.default_rng(11), n_segments=(6, 6))
     s = np.linspace(0.0, p.length, 301)

@@ -121,3 +121,34 @@ def test_bad_parameters_raise_naming_the_field():
         P.velocity_pole("z")
     with pytest.raises(ValueError, match="params"):
         ContouringPlant("not params")
+
+
+@pytest.mark.parametrize("fast", [True, False])
+def test_discretisation_is_the_zoh_of_core_to_the_last_bit(fast, monkeypatch):
+    """An axis's ZOH (scipy's compiled Pade step without ``expm``'s overhead, a reset
+    pays it) is ``core.lti.zoh``'s to the last bit: over the inertias the scenarios draw
+    and far beyond (where ``expm`` scales and runs itself), and without the fast path."""
+    from machining_envs.contouring import plant as plant_module
+    from machining_envs.core.lti import zoh
+
+    if fast and plant_module._PADE is None:
+        pytest.skip("this scipy has no usable Pade step; expm runs itself")
+    if not fast:
+        monkeypatch.setattr(plant_module, "_PADE", None)
+    rng = np.random.default_rng(0)
+    for k in range(400):
+        p = P.replace(
+            inertia_x_kgm2=P.inertia_x_kgm2 * math.exp(rng.uniform(-0.7, 0.7)),
+            inertia_y_kgm2=P.inertia_y_kgm2 * math.exp(rng.uniform(-0.7, 0.7)),
+        )
+        if k >= 300:
+            p = p.replace(
+                velocity_loop_gain=10.0 ** rng.uniform(-3.0, 4.0),
+                sample_time_s=10.0 ** rng.uniform(-6.0, -2.0),
+            )
+        for axis in "xy":
+            a, g = p.velocity_pole(axis), -p.mm_per_rad / p.inertia_kgm2(axis)
+            phi, gam = plant_module._axis_zoh.__wrapped__(a, g, p.sample_time_s)
+            ref_phi, ref_gam = zoh(*p.continuous_axis(axis), p.sample_time_s)
+            assert phi.tobytes() == ref_phi.tobytes() and gam.tobytes() == ref_gam.tobytes()
+            assert not phi.flags.writeable and not gam.flags.writeable
