@@ -813,8 +813,8 @@ class ContouringVectorEnv(LaneVectorEnv):
     def _reset_lanes(self, lanes, options):
         core = self._core
         spec = scenario_option(options, self.default_scenario)
-        infos = [core.start(int(i), spec, self.lane_rngs[i]) for i in lanes]
-        return core.obs[lanes].copy(), stack_lane_infos(infos)
+        infos = [core.start(i, spec, self.lane_rngs[i]) for i in lanes.tolist()]
+        return core.obs[lanes].copy(), infos
 
     def _step_lanes(self, actions):
         core = self._core
@@ -829,28 +829,6 @@ class ContouringVectorEnv(LaneVectorEnv):
             f[:, 3].copy(),
             core.info_arrays(),
         )
-
-
-def stack_lane_infos(infos: list[dict]) -> dict:
-    """Per-lane info dicts as arrays over those lanes; a key that only some have comes with
-    its ``_key`` mask."""
-    first = tuple(infos[0]) if infos else ()
-    if all(tuple(d) == first for d in infos[1:]):
-        # The usual case (every lane has every key, no masks): one array per key. A
-        # vector env's autoreset stacks the info of one or a few lanes at a step.
-        return {key: np.array([d[key] for d in infos]) for key in first}
-    keys = list(dict.fromkeys(k for d in infos for k in d))
-    part = {}
-    for key in keys:
-        have = np.array([key in d for d in infos])
-        vals = [d.get(key) for d in infos]
-        if not have.all():
-            fill = next(v for v in vals if v is not None)
-            zero = np.zeros_like(fill) if isinstance(fill, np.ndarray) else type(fill)(0)
-            vals = [v if h else zero for v, h in zip(vals, have, strict=True)]
-            part["_" + key] = have
-        part[key] = np.array(vals)
-    return part
 
 
 def render_trace(path: Path, log: EpisodeLog, title: str) -> np.ndarray:

@@ -21,7 +21,6 @@ from machining_envs.contouring.env import (
     _run_limits,
     check_action_vector,
     render_trace,
-    stack_lane_infos,
 )
 from machining_envs.contouring.metrics import FEED_TASK
 from machining_envs.contouring.paths import (
@@ -897,8 +896,8 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
     def _reset_lanes(self, lanes, options):
         core = self._core
         spec = scenario_option(options, self.default_scenario)
-        infos = [core.start(int(i), spec, self.lane_rngs[i]) for i in lanes]
-        return core.obs[lanes].copy(), stack_lane_infos(infos)
+        infos = [core.start(i, spec, self.lane_rngs[i]) for i in lanes.tolist()]
+        return core.obs[lanes].copy(), infos
 
     def _step_lanes(self, actions):
         core = self._core

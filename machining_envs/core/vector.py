@@ -53,6 +53,10 @@ _SCALAR_DTYPES = {
 def stack_lane_infos(infos: list[dict]) -> dict:
     """Per-lane info dicts as arrays over those lanes; a key that only some have comes with
     its ``_key`` mask."""
+    first = tuple(infos[0]) if infos else ()
+    if all(tuple(d) == first for d in infos[1:]):
+        # The usual case (every lane has every key, no masks): one array per key.
+        return {key: np.array([d[key] for d in infos]) for key in first}
     keys = list(dict.fromkeys(k for d in infos for k in d))
     part = {}
     for key in keys:

@@ -138,7 +138,7 @@ def test_stacked_reset_infos_are_the_general_stacking(env_id):
     """Reset infos whose lanes all have the same keys are stacked one array per key (the
     usual case, a lane or a few at a step): the arrays, dtypes and masks of the general
     stacking, which a different key order forces."""
-    from machining_envs.contouring.env import stack_lane_infos
+    from machining_envs.core.vector import stack_lane_infos
 
     core = gym.make_vec(env_id, num_envs=4).unwrapped._core
     for scenario in ("train", "paper_circle"):

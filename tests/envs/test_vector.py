@@ -192,3 +192,48 @@ def test_sb3_trains_and_evaluates_through_the_adapter(env_id):
     model.learn(256)
     mean, _ = evaluate_policy(model, venv, n_eval_episodes=2)
     assert np.isfinite(mean)
+
+
+def test_reset_info_dicts_written_in_place_equal_the_general_merge():
+    """A vector env may hand the base its lanes' reset info dicts: the values the base writes
+    straight into its arrays, and the keys it merges the general way (a vector value, a key
+    only some lanes have, a key the step did not give, a type that differs from the step's),
+    make the same arrays and masks as stacking the dicts and merging them."""
+    from machining_envs.core.vector import _write_lane_infos, merge_lane_info, stack_lane_infos
+
+    n = 6
+    done = np.array([False, True, False, False, True, False])
+    kept, every = ~done, np.ones(n, dtype=bool)
+    lanes = np.flatnonzero(done)
+
+    def step_info():
+        top = {
+            "t": np.arange(n, dtype=float),
+            "ok": np.ones(n, dtype=bool),
+            "seg": np.arange(n),
+            "name": np.array(list("abcdef"), dtype=object),
+            "vec": np.zeros((n, 2)),
+            "flag": np.zeros(n),
+            "some": np.full(n, 7.0),
+        }
+        masks = {"_" + k: kept for k in top}
+        masks["_some"] = kept & (np.arange(n) % 2 == 0)
+        return {**top, **masks}
+
+    infos = [
+        {"t": 0.0, "ok": False, "seg": 0, "name": "train", "vec": np.ones(2), "flag": True,
+         "some": 1.0, "new": 3.0, "circle": 1.5},
+        {"t": 0.0, "ok": True, "seg": 2, "name": "test", "vec": np.ones(2), "flag": False,
+         "some": 2.0, "new": 4.0},
+    ]  # fmt: skip
+    fast = step_info()
+    rest = _write_lane_infos(fast, lanes.tolist(), infos, kept, every)
+    merge_lane_info(fast, lanes, rest, n)
+    general = step_info()
+    merge_lane_info(general, lanes, stack_lane_infos(infos), n)
+    assert sorted(fast) == sorted(general)
+    for key in general:
+        np.testing.assert_array_equal(fast[key], general[key], err_msg=key)
+        assert fast[key].dtype == general[key].dtype, key
+    assert fast["_t"] is every  # written in place: every lane holds it
+    assert fast["name"].tolist() == ["a", "train", "c", "d", "test", "f"]
