@@ -308,18 +308,21 @@ class ContouringPlant:
     @functools.cached_property
     def phi(self) -> np.ndarray:
         """Both axes' ``Phi`` in block form on ``z = [x, vx, y, vy]``, (4, 4)."""
-        c = self.coefficients
-        phi = np.zeros((4, 4))
-        phi[:2, :2], phi[2:, 2:] = c[0:4].reshape(2, 2), c[8:12].reshape(2, 2)
-        return phi
+        return self._block_form(0)
 
     @functools.cached_property
     def gamma(self) -> np.ndarray:
         """Both axes' ``Gamma`` in block form on the inputs ``w = [ux, TLx, uy, TLy]``."""
+        return self._block_form(4)
+
+    def _block_form(self, first: int) -> np.ndarray:
+        """The X axis's 2x2 matrix at ``coefficients[first:first + 4]`` and the Y axis's
+        eight further on, as one block-diagonal (4, 4) matrix."""
         c = self.coefficients
-        gamma = np.zeros((4, 4))
-        gamma[:2, :2], gamma[2:, 2:] = c[4:8].reshape(2, 2), c[12:16].reshape(2, 2)
-        return gamma
+        out = np.zeros((4, 4))
+        out[:2, :2] = c[first : first + 4].reshape(2, 2)
+        out[2:, 2:] = c[first + 8 : first + 12].reshape(2, 2)
+        return out
 
     def reset(self, x0_mm: float = 0.0, y0_mm: float = 0.0) -> None:
         """Table at rest at ``(x0, y0)``."""
