@@ -17,9 +17,12 @@ that window, so these rates leave most resets out. The column ``steady`` runs th
 env on past that: one mean episode of the single env under random actions untimed (the
 lanes' episodes then end at spread-out times), then as many steps timed, once per round
 (at least 200 steps; each window capped at 2.5 million env-steps), so that it pays its
-resets as the single env's rate (with resets) does. ``x single`` is the median of those
-rates over the single env's median rate with resets in the first table, and ``range`` the
-lowest and highest round over that same rate; ``x sync`` is
+resets as the single env's rate (with resets) does. After each window the single env runs
+as in the first table (``--steps`` steps, resets included), so that each round gives a
+ratio of two rates taken seconds apart: this machine's speed drifts by up to a fifth within
+minutes, which moved the ratios by as much when the single env's rate came from the first
+table, minutes earlier. ``x single`` is the median of the rounds' ratios, ``range`` the
+lowest and highest; ``x sync`` is
 the N = 1024 rate over Gymnasium's ``SyncVectorEnv`` of N copies of the single env over
 the same window from the first reset. The memory per lane is what ``tracemalloc`` counts
 for making and resetting the N = 1024 env, over 1024. Gymnasium's ``CartPoleVectorEnv``
@@ -94,10 +97,12 @@ def vector_steps_per_second(
 
 
 def vector_steady_rates(
-    env_id: str, num_envs: int, episode_steps: float, seed: int, rounds: int
-) -> list[float]:
+    env_id: str, num_envs: int, episode_steps: float, seed: int, rounds: int, single_steps: int
+) -> tuple[list[float], list[float]]:
     """Env-steps per second of the native vector env once its lanes' episodes have spread
-    out (see the module docstring), in ``rounds`` consecutive windows; random actions cycle
+    out (see the module docstring), in ``rounds`` windows, and after each window the single
+    env's steps per second with resets over ``single_steps`` steps (:func:`steps_per_second`),
+    so that each round's ratio compares two rates taken seconds apart; random actions cycle
     through 256 batches drawn beforehand."""
     venv = gym.make_vec(env_id, num_envs=num_envs)
     n = min(max(200, int(episode_steps)), max(200, 2_500_000 // num_envs))
@@ -108,14 +113,15 @@ def vector_steady_rates(
     venv.reset(seed=seed)
     for i in range(n):
         venv.step(actions[i % 256])
-    rates = []
-    for _ in range(rounds):
+    rates, singles = [], []
+    for r in range(rounds):
         t0 = time.perf_counter()
         for i in range(n):
             venv.step(actions[i % 256])
         rates.append(n * num_envs / (time.perf_counter() - t0))
+        singles.append(steps_per_second(env_id, single_steps, seed=r)[1])
     venv.close()
-    return rates
+    return rates, singles
 
 
 def bytes_per_lane(env_id: str, num_envs: int) -> float:
@@ -131,16 +137,19 @@ def bytes_per_lane(env_id: str, num_envs: int) -> float:
 
 
 def vector_table(
-    lanes: list[int], env_steps: int, sync_steps: int, singles: dict, rounds: int
-) -> None:
-    """The vector envs' table; ``singles[id]`` = (the single env's median steps/s with
-    resets, its mean episode length in steps) from the first table."""
+    lanes: list[int], env_steps: int, sync_steps: int, singles: dict, rounds: int,
+    single_steps: int,
+) -> None:  # fmt: skip
+    """The vector envs' table; ``singles[id]`` = the single env's mean episode length in
+    steps (from the first table); each steady round is paired with ``single_steps`` steps of
+    the single env."""
     ref_n = 1024 if 1024 in lanes else lanes[-1]
     print(
         f"\nnative vector envs: env-steps/s with random actions from the first reset; steady: "
-        f"N = {ref_n} with resets spread out, median of {rounds} rounds; x single = steady / "
-        f"single env (with resets, first table), range over the rounds; x sync at N = {ref_n} "
-        f"from the first reset; memory per lane from N = {ref_n}"
+        f"N = {ref_n} with resets spread out, median of {rounds} rounds; x single = median "
+        f"over the rounds of steady / the single env with resets measured right after it, "
+        f"range over the rounds; x sync at N = {ref_n} from the first reset; memory per lane "
+        f"from N = {ref_n}"
     )
     head = f"{'env':34s}" + "".join(f" {f'N={n}':>10s}" for n in lanes)
     print(head + f" {'steady':>10s} {'x single':>9s} {'range':>11s} {'x sync':>7s} {'kB/lane':>8s}")
@@ -153,15 +162,17 @@ def vector_table(
             print(f"{env_id:34s} no native vector env yet")
             continue
         rates = {n: vector_steps_per_second(env_id, n, env_steps, 0) for n in lanes}
-        single, episode = singles[env_id]
-        steady = vector_steady_rates(env_id, ref_n, episode, 0, rounds)
+        steady, paired = vector_steady_rates(
+            env_id, ref_n, singles[env_id], 0, rounds, single_steps
+        )
         mid = float(np.median(steady))
-        span = f"{min(steady) / single:.1f}-{max(steady) / single:.1f}"
+        ratios = [v / s for v, s in zip(steady, paired, strict=True)]
+        span = f"{min(ratios):.1f}-{max(ratios):.1f}"
         sync = vector_steps_per_second(env_id, ref_n, sync_steps, 0, "sync")
         kb = bytes_per_lane(env_id, ref_n) / 1024
         row = f"{env_id:34s}" + "".join(f" {rates[n]:10.0f}" for n in lanes)
         print(
-            row + f" {mid:10.0f} {mid / single:9.1f} {span:>11s} {rates[ref_n] / sync:7.1f}"
+            row + f" {mid:10.0f} {np.median(ratios):9.1f} {span:>11s} {rates[ref_n] / sync:7.1f}"
             f" {kb:8.1f}"
         )
 
@@ -194,8 +205,11 @@ def main(argv=None) -> None:
             f"{env_id:34s} {s:9.0f} {s / med[PEER][0]:6.2f} {w:14.0f} {w / med[PEER][1]:6.2f} {n:7.0f}"
         )
     if not args.no_vector:
-        singles = {i: (med[i][1], args.steps / max(med[i][2], 1)) for i in ids}
-        vector_table(sorted(args.lanes), args.vector_steps, args.sync_steps, singles, args.rounds)
+        episodes = {i: args.steps / max(med[i][2], 1) for i in ids}
+        vector_table(
+            sorted(args.lanes), args.vector_steps, args.sync_steps, episodes, args.rounds,
+            args.steps,
+        )  # fmt: skip
 
 
 if __name__ == "__main__":
