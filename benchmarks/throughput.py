@@ -22,9 +22,8 @@ as in the first table (``--steps`` steps, resets included), so that each round g
 ratio of two rates taken seconds apart: this machine's speed drifts by up to a fifth within
 minutes, which moved the ratios by as much when the single env's rate came from the first
 table, minutes earlier. ``x single`` is the median of the rounds' ratios, ``range`` the
-lowest and highest; ``x sync`` is
-the N = 1024 rate over Gymnasium's ``SyncVectorEnv`` of N copies of the single env over
-the same window from the first reset. The memory per lane is what ``tracemalloc`` counts
+lowest and highest; ``x sync`` is the N = 1024 rate over Gymnasium's ``SyncVectorEnv`` of
+N copies of the single env over the same window from the first reset. The memory per lane is what ``tracemalloc`` counts
 for making and resetting the N = 1024 env, over 1024. Gymnasium's ``CartPoleVectorEnv``
 at N = 1024 is the reference row.
 
