@@ -34,7 +34,7 @@ import numba
 import numpy as np
 from scipy.linalg import expm
 
-from machining_envs.core.checks import check_range
+from machining_envs.core.checks import check_field, replace_checked
 
 __all__ = ["ContouringParams", "ContouringPlant", "ContouringStep", "AXES", "step_axes"]
 __all__ += ["PLANT_COLUMNS"]
@@ -82,15 +82,8 @@ class ContouringParams:
     overshoots 10 % and rings for 40 ms, at 2 kHz it overshoots 2 % (see docs/contouring.md)."""
 
     def __post_init__(self) -> None:
-        check_range("velocity_loop_gain", self.velocity_loop_gain, 0.0, 1e4, lo_open=True)
-        check_range(
-            "torque_constant_Nm_per_A", self.torque_constant_Nm_per_A, 0.0, 1e3, lo_open=True
-        )
-        check_range("inertia_x_kgm2", self.inertia_x_kgm2, 0.0, 10.0, lo_open=True)
-        check_range("inertia_y_kgm2", self.inertia_y_kgm2, 0.0, 10.0, lo_open=True)
-        check_range("screw_lead_mm", self.screw_lead_mm, 0.0, 1e3, lo_open=True)
-        check_range("motor_max_rpm", self.motor_max_rpm, 0.0, 1e5, lo_open=True)
-        check_range("sample_time_s", self.sample_time_s, 0.0, 0.01, lo_open=True)
+        for name, rule in _FIELD_RULES.items():
+            check_field(name, getattr(self, name), rule)
 
     @classmethod
     def choi_et_al(cls) -> ContouringParams:
@@ -98,22 +91,10 @@ class ContouringParams:
         return cls()
 
     def replace(self, **changes) -> ContouringParams:
-        """A copy with fields changed; unknown names raise ``TypeError``."""
-        return dataclasses.replace(self, **changes)
-
-    def _with_inertias(self, inertia_x_kgm2: float, inertia_y_kgm2: float) -> ContouringParams:
-        """:meth:`replace` of the two inertias, checking only them (the other fields are
-        this instance's, checked already): a vector env's lane pays this at every reset."""
-        new = object.__new__(ContouringParams)
-        fields = dict(self.__dict__)
-        fields["inertia_x_kgm2"] = check_range(
-            "inertia_x_kgm2", inertia_x_kgm2, 0.0, 10.0, lo_open=True
-        )
-        fields["inertia_y_kgm2"] = check_range(
-            "inertia_y_kgm2", inertia_y_kgm2, 0.0, 10.0, lo_open=True
-        )
-        object.__setattr__(new, "__dict__", fields)
-        return new
+        """A copy with fields changed; unknown names raise ``TypeError``. Only the changed
+        fields are checked (:func:`~machining_envs.core.checks.replace_checked`): a vector
+        env's lane draws its table's inertias at every reset."""
+        return replace_checked(self, changes, _FIELD_RULES, ContouringParams)
 
     # ---- derived quantities (never stored) -------------------------------------------------
     def inertia_kgm2(self, axis: str) -> float:
@@ -164,6 +145,20 @@ class ContouringParams:
         return _axis_zoh(
             self.velocity_pole(axis), -self.mm_per_rad / self.inertia_kgm2(axis), self.sample_time_s
         )
+
+
+#: How each field of :class:`ContouringParams` is checked (rules of
+#: :func:`~machining_envs.core.checks.check_field`): a positive number up to a bound.
+_FIELD_RULES: dict[str, tuple] = {
+    "velocity_loop_gain": (0.0, 1e4, True),
+    "torque_constant_Nm_per_A": (0.0, 1e3, True),
+    "inertia_x_kgm2": (0.0, 10.0, True),
+    "inertia_y_kgm2": (0.0, 10.0, True),
+    "screw_lead_mm": (0.0, 1e3, True),
+    "motor_max_rpm": (0.0, 1e5, True),
+    "sample_time_s": (0.0, 0.01, True),
+}
+assert tuple(_FIELD_RULES) == tuple(f.name for f in dataclasses.fields(ContouringParams))
 
 
 @functools.lru_cache(maxsize=64)

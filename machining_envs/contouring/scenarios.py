@@ -17,7 +17,7 @@ import numpy as np
 from machining_envs.contouring.paths import PAPER_CORNER_FEED_MM_S, PAPER_FEED_MM_S, Path
 from machining_envs.contouring.plant import ContouringParams
 from machining_envs.core.actuation import Actuation
-from machining_envs.core.checks import check_below, check_range
+from machining_envs.core.checks import check_below, check_range, drawn_instance
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.splits import split_rng
 
@@ -122,18 +122,6 @@ class ContouringScenario:
                 f"actuation must be an Actuation or None, got {type(self.actuation).__name__}"
             )
 
-    @classmethod
-    def _trusted(cls, name, path, feed_mm_s, load_steps, inertia_scale, actuation):
-        """A scenario of Python floats the library drew itself within the ranges
-        ``__post_init__`` checks (the random splits' factories), without checking them
-        again: a vector env's lane pays this at every reset."""
-        self = object.__new__(cls)
-        for field, value in (("name", name), ("path", path), ("feed_mm_s", feed_mm_s),
-                             ("load_steps", load_steps), ("inertia_scale", inertia_scale),
-                             ("dwell_s", 0.0), ("actuation", actuation)):  # fmt: skip
-            object.__setattr__(self, field, value)
-        return self
-
     @property
     def is_step(self) -> bool:
         """True for a step command (``feed_mm_s = inf``)."""
@@ -149,7 +137,9 @@ class ContouringScenario:
         sx, sy = self.inertia_scale
         if sx == 1.0 and sy == 1.0:
             return nominal
-        return nominal._with_inertias(nominal.inertia_x_kgm2 * sx, nominal.inertia_y_kgm2 * sy)
+        return nominal.replace(
+            inertia_x_kgm2=nominal.inertia_x_kgm2 * sx, inertia_y_kgm2=nominal.inertia_y_kgm2 * sy
+        )
 
 
 def _step(load: bool) -> Callable[[np.random.Generator], ContouringScenario]:
@@ -197,6 +187,13 @@ def _random(
     # The log-uniform draws' bounds, as numpy computes them, once.
     log_feed = (np.log(feed[0]), np.log(feed[1]))
     log_inertia = (np.log(inertia[0]), np.log(inertia[1]))
+    # Every drawn field lies between these two scenarios' (checked here, once): make()
+    # builds its scenarios without checking them again.
+    for end in (0, 1):
+        ContouringScenario(
+            name, Path.line((0.0, 0.0), (1.0, 0.0)), feed[end], ((0.0, load_max, -load_max),),
+            (inertia[end], inertia[end]), actuation=actuation,
+        )  # fmt: skip
 
     def make(env_rng: np.random.Generator) -> ContouringScenario:
         rng = split_rng(env_rng, name)
@@ -215,9 +212,18 @@ def _random(
             t = float(rng.uniform(0.0, path.length / f))
             a, b = rng.uniform(-load_max, load_max, 2).tolist()
             loads = ((t, a, b),)
-        # Every number is a Python float within the ranges ContouringScenario checks (the
-        # ranges of CONTOURING_SCENARIOS lie inside them).
-        return ContouringScenario._trusted(name, path, f, loads, (sx, sy), actuation)
+        return drawn_instance(
+            ContouringScenario,
+            {
+                "name": name,
+                "path": path,
+                "feed_mm_s": f,
+                "load_steps": loads,
+                "inertia_scale": (sx, sy),
+                "dwell_s": 0.0,
+                "actuation": actuation,
+            },
+        )
 
     return make
 

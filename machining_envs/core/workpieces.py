@@ -71,14 +71,16 @@ class DepthProfile:
                 raise ValueError(f"{label} must lie in [{lo}, {hi}] mm, got {d!r}")
             rows.append(vals)
         starts, ends = rows
-        slopes = [
-            (b - a) / (x1 - x0) for a, b, x0, x1 in zip(starts, ends, e[:-1], e[1:], strict=True)
-        ]
-        self._set_tables(e, starts, ends, slopes)
+        self._set_tables(e, starts, ends)
 
-    def _set_tables(self, edges: list, starts: list, ends: list, slopes: list) -> None:
-        """Keep the segments as lists of floats (for :meth:`segment_table` and the loops
-        over segments); :meth:`_arrays` makes arrays of them when first asked."""
+    def _set_tables(self, edges: list, starts: list, ends: list) -> None:
+        """Keep the segments, with their slopes, as lists of floats (for
+        :meth:`segment_table` and the loops over segments); :meth:`_arrays` makes arrays of
+        them when first asked."""
+        slopes = [
+            (b - a) / (x1 - x0)
+            for a, b, x0, x1 in zip(starts, ends, edges[:-1], edges[1:], strict=True)
+        ]
         object.__setattr__(self, "_table", (edges, starts, slopes))
         object.__setattr__(self, "_ends", ends)
 
@@ -106,11 +108,7 @@ class DepthProfile:
             ("name", name),
         ):
             object.__setattr__(new, field, value)
-        slopes = [
-            (b - a) / (x1 - x0)
-            for a, b, x0, x1 in zip(starts, ends, edges[:-1], edges[1:], strict=True)
-        ]
-        new._set_tables(edges, starts, ends, slopes)
+        new._set_tables(edges, starts, ends)
         return new
 
     # ---- constructors ---------------------------------------------------------------------

@@ -7,11 +7,12 @@ import math
 import numpy as np
 import pytest
 
+from machining_envs.contouring.plant import ContouringParams
 from machining_envs.drilling.plant import DrillingParams
 from machining_envs.milling.plant import MillingParams
 from machining_envs.turning.plant import TurningParams
 
-PARAMS = [TurningParams(), MillingParams(), DrillingParams()]
+PARAMS = [TurningParams(), MillingParams(), DrillingParams(), ContouringParams()]
 
 
 def _numeric_fields(p):
