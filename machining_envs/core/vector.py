@@ -6,10 +6,12 @@ its batched physics:
 - ``_reset_lanes(lanes, options)``: start new episodes in the lanes ``lanes`` (an index
   array), drawing each lane's scenario from its own generator ``self.lane_rngs[i]``;
   return their observations ``(len(lanes), *obs_shape)`` and their reset info, either as
-  a dict of arrays of length ``len(lanes)`` or as a list of the lanes' own info dicts
+  a dict of arrays of length ``len(lanes)``, or as a list of the lanes' own info dicts
   (the single env's, Python values), which the base writes into its arrays directly (a
   step resets one or two lanes: making arrays of their few values cost more than the
-  values);
+  values), or as ``None``: the reset lanes' info is then what ``_info_now()`` reports
+  for them (a process whose lanes hold their reset info from the moment they start
+  implements it: the step's info of every lane, as new arrays);
 - ``_step_lanes(actions)``: advance every lane by one control period with the checked
   actions ``(num_envs, *action_shape)``; return observations, rewards, terminations,
   truncations and the step info as a new dict of arrays of length ``num_envs`` (a key
@@ -191,12 +193,35 @@ class LaneVectorEnv(gym.vector.VectorEnv):
                     self.lane_rngs[i] = seeding.np_random(s)[0]
         lanes = np.arange(self.num_envs)
         obs, part = self._reset_lanes(lanes, options)
+        self._started = True
+        if part is None:
+            info = self._info_now()
+            self._with_masks(info)
+            return obs, info
         if isinstance(part, list):
             part = stack_lane_infos(part)
         info: dict = {}
         merge_lane_info(info, lanes, part, self.num_envs)
-        self._started = True
         return obs, info
+
+    def _info_now(self) -> dict:
+        """Every lane's info now, as new arrays (a key only some lanes hold comes with its
+        ``_key`` mask): needed by a process whose ``_reset_lanes`` returns ``None``."""
+        raise NotImplementedError(f"{type(self).__name__}: _reset_lanes returned no info")
+
+    def _with_masks(self, info: dict) -> np.ndarray:
+        """Add to ``info`` (a new dict) the mask of every lane for each key that has none:
+        one array, shared by those keys, which is returned."""
+        keys = tuple(info)
+        masks = self._mask_keys.get(keys)
+        if masks is None:
+            masks = tuple("_" + k for k in keys if k[0] != "_" and "_" + k not in info)
+            if len(self._mask_keys) >= 64:  # a few sets of keys occur; never let it grow
+                self._mask_keys.clear()
+            self._mask_keys[keys] = masks
+        every = np.ones(self.num_envs, dtype=bool)
+        info.update(dict.fromkeys(masks, every))
+        return every
 
     def step(self, actions):
         if not self._started:
@@ -218,15 +243,7 @@ class LaneVectorEnv(gym.vector.VectorEnv):
                 "(not finite); no lane was stepped"
             )
         obs, reward, terminated, truncated, info = self._step_lanes(a)
-        every = np.ones(self.num_envs, dtype=bool)
-        keys = tuple(info)
-        masks = self._mask_keys.get(keys)
-        if masks is None:
-            masks = tuple("_" + k for k in keys if k[0] != "_" and "_" + k not in info)
-            if len(self._mask_keys) >= 64:  # a few sets of keys occur; never let it grow
-                self._mask_keys.clear()
-            self._mask_keys[keys] = masks
-        info.update(dict.fromkeys(masks, every))  # _step_lanes' dict is new at every step
+        every = self._with_masks(info)  # _step_lanes' dict is new at every step
         done = np.logical_or(terminated, truncated)
         if not done.any():
             return obs, reward, terminated, truncated, info
@@ -234,7 +251,21 @@ class LaneVectorEnv(gym.vector.VectorEnv):
         final_obs = np.full(self.num_envs, None, dtype=object)
         for i in lanes.tolist():
             final_obs[i] = obs[i].copy()
+        # The step's info arrays are the final info; _reset_lanes does not write to them.
+        new_obs, part = self._reset_lanes(lanes, None)
+        obs = obs.copy()
+        obs[lanes] = new_obs
         final_info: dict = {}
+        if part is None:  # the lanes hold their reset info: every lane's info read again
+            for k, v in info.items():
+                if k[0] != "_":
+                    mask = info["_" + k]
+                    final_info[k], final_info["_" + k] = v, done if mask is every else mask & done
+            top = self._info_now()
+            self._with_masks(top)
+            top["final_obs"], top["_final_obs"] = final_obs, done.copy()
+            top["final_info"], top["_final_info"] = final_info, done.copy()
+            return obs, reward, terminated, truncated, top
         top: dict = {}
         kept = ~done
         for k, v in info.items():
@@ -247,9 +278,6 @@ class LaneVectorEnv(gym.vector.VectorEnv):
             else:
                 final_info[k], final_info["_" + k] = v, mask & done
                 top[k], top["_" + k] = v.copy(), mask & kept
-        new_obs, part = self._reset_lanes(lanes, None)
-        obs = obs.copy()
-        obs[lanes] = new_obs
         if isinstance(part, list):
             part = _write_lane_infos(top, lanes.tolist(), part, kept, every)
         rest = {}

@@ -297,9 +297,10 @@ class _DrillingCore:
         self.owed[lane] -= 5 * _NOISE_ROWS
         self.counts[lane, _C_NOISE] = 0
 
-    def start(self, lane: int, spec, rng: np.random.Generator) -> dict:
+    def start(self, lane: int, spec, rng: np.random.Generator) -> None:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
-        first observation goes to ``obs[lane]``; returns its reset info."""
+        first observation goes to ``obs[lane]``, its reset info is its :meth:`lane_info`
+        (and its column of :meth:`info_arrays`) until the first step."""
         check_scenario_spec(spec, DrillingScenario, DRILLING_SCENARIOS)
         if self.owed[lane] and self.block_rng[lane] is rng:
             rng.standard_normal(self.owed[lane])  # the rest of the last episode's block
@@ -352,42 +353,18 @@ class _DrillingCore:
             d,
             *(min(max(0.0 / p.torque_scale_Nmm, lo), hi) for _ in range(_HISTORY)),
         )
-        u = float(s[_S_VOLT])
-        return {
-            "t_s": 0.0,
-            "command": self._c0,
-            "action_clipped": False,
-            "n_action_clipped": 0,
-            "breakage": False,
-            "diverged": False,
-            "finished": False,
-            "torque_Nmm": 0.0,
-            "torque_limit_Nmm": float(tr),
-            "cost": 0.0,
-            "score_bound": float(self.bound[lane]),
-            "measured": 0.0,
-            "peak_torque_Nmm": 0.0,
-            "breakage_torque_Nmm": float(lanes.par[lane, _P_BREAK]),
-            "thrust_N": 0.0,
-            "measured_thrust_N": 0.0,
-            "spindle_hz": hz,
-            "measured_spindle_hz": hz,
-            "spindle_rpm": 60.0 * hz,
-            "voltage_V": u,
-            "valve_opening": float(s[_S_X1]),
-            "feed_velocity_mm_s": 0.0,
-            "feed_mm_per_rev": 0.0,
-            "cutting": False,
-            "engagement": 0.0,
-            "position_mm": position,
-            "depth_mm": 0.0,
-            "target_depth_mm": sc.target_depth_mm,
-            "packed_chip_mm": 0.0,
-            "chip_ratio": 0.0,
-            "diameter_mm": d,
-            "segment": 0,
-            "scenario": sc.name,
-        }
+        # The signals of a hole not yet begun, where lane_info and info_arrays read them
+        # until the first step (which writes every one before it reads it): the drill at
+        # rest at its start position, the spindle at its initial speed, the valve and the
+        # voltage as the plant starts, the command of the initial action.
+        e[_E_COMMAND] = self._c0
+        e[_E_VOLTAGE] = s[_S_VOLT]
+        o = lanes.out[lane]
+        o[:] = 0.0
+        o[5] = o[6] = hz
+        o[7] = s[_S_X1]
+        o[11] = position
+        o[17] = np.nan
 
     def step(self) -> None:
         """Advance every lane with its action ``ev[:, _E_ACTION]`` (finite; clipped to the
@@ -689,7 +666,8 @@ class MicroDrillingEnv(gym.Env):
         super().reset(seed=seed)
         self._ended = False
         core = self._core
-        info = core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         self.plant = core.lanes
         self._log = EpisodeLog(_LOG_FIELDS)
@@ -794,8 +772,12 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
     def _reset_lanes(self, lanes, options):
         core = self._core
         spec = scenario_option(options, self.default_scenario)
-        infos = [core.start(i, spec, self.lane_rngs[i]) for i in lanes.tolist()]
-        return core.obs[lanes].copy(), infos
+        for i in lanes.tolist():
+            core.start(i, spec, self.lane_rngs[i])
+        return core.obs[lanes], None  # the lanes' info is their reset info (_info_now)
+
+    def _info_now(self):
+        return self._core.info_arrays()
 
     def _step_lanes(self, actions):
         core = self._core

@@ -333,7 +333,8 @@ class _MillingCore:
 
     def start(self, lane: int, spec, rng: np.random.Generator) -> None:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
-        first observation goes to ``obs[lane]`` (its info: :meth:`reset_info`)."""
+        first observation goes to ``obs[lane]``, its reset info is its :meth:`lane_info` (and
+        its column of :meth:`info_arrays`) until the first step."""
         sc = milling_scenario(spec, rng)
         nominal = self.params
         rpm = sc.spindle_rpm(nominal)
@@ -382,71 +383,14 @@ class _MillingCore:
         self.depth0[lane] = sc.profile.start_depths_mm[0]
         self.names[lane] = sc.name
         self.obs[lane] = (0.0, tr_obs, -1.0, rpm / 1000.0, 0.0, 0.0, 0.0)
-
-    def reset_info(self, k: int) -> dict:
-        """The reset info of lane ``k`` (after :meth:`start`)."""
-        return {
-            "t_s": 0.0,
-            "command": 0.0,
-            "action_clipped": False,
-            "n_action_clipped": 0,
-            "breakage": False,
-            "diverged": False,
-            "finished": False,
-            "torque_Nmm": 0.0,
-            "torque_limit_Nmm": float(self.torque_limit[k]),
-            "cost": 0.0,
-            "score_bound": float(self.bound[k]),
-            "measured": 0.0,
-            "measured_counts": 0.0,
-            "peak_torque_Nmm": 0.0,
-            "feed_mm_per_rev": 0.0,
-            "mean_feed_mm_per_rev": 0.0,
-            "feed_per_tooth_mm": 0.0,
-            "feed_velocity_mm_s": 0.0,
-            "position_mm": 0.0,
-            "depth_mm": float(self.depth0[k]),
-            "segment": 0,
-            "spindle_rpm": float(self.spindle[k]),
-            "removed_volume_mm3": 0.0,
-            "workpiece_length_mm": float(self.length[k]),
-            "workpiece_volume_mm3": float(self.volume[k]),
-            "scenario": self.names[k],
-        }
-
-    def reset_info_arrays(self, lanes: np.ndarray) -> dict:
-        """The reset info of the lanes ``lanes``, as arrays (values of :meth:`reset_info`)."""
-        n = len(lanes)
-        zero = np.zeros(n)
-        no = np.zeros(n, dtype=bool)
-        return {
-            "t_s": zero,
-            "command": zero,
-            "action_clipped": no,
-            "n_action_clipped": np.zeros(n, dtype=np.int64),
-            "breakage": no,
-            "diverged": no,
-            "finished": no,
-            "torque_Nmm": zero,
-            "torque_limit_Nmm": self.torque_limit[lanes],
-            "cost": zero,
-            "score_bound": self.bound[lanes],
-            "measured": zero,
-            "measured_counts": zero,
-            "peak_torque_Nmm": zero,
-            "feed_mm_per_rev": zero,
-            "mean_feed_mm_per_rev": zero,
-            "feed_per_tooth_mm": zero,
-            "feed_velocity_mm_s": zero,
-            "position_mm": zero,
-            "depth_mm": self.depth0[lanes],
-            "segment": np.zeros(n, dtype=np.int64),
-            "spindle_rpm": self.spindle[lanes],
-            "removed_volume_mm3": zero,
-            "workpiece_length_mm": self.length[lanes],
-            "workpiece_volume_mm3": self.volume[lanes],
-            "scenario": self.names[lanes],
-        }
+        # The info of a cut not yet begun (what lane_info and info_arrays report until the
+        # first step): every signal zero but the depth, no flag, no clipped action.
+        self.info_f[:, lane] = 0.0
+        self.info_f[11, lane] = self.depth0[lane]
+        self.info_f[13, lane] = np.nan
+        self.flags[lane] = False
+        self.in_clipped[lane] = 0
+        self.lanes.out_segment[lane] = 0
 
     def draw_noise(self, rngs) -> None:
         """Give every lane with sensor noise a standard normal for this step: a lane whose
@@ -785,7 +729,7 @@ class EndMillingEnv(gym.Env):
         self._ended = False
         core = self._core
         core.start(0, scenario_option(options, self.default_scenario), self.np_random)
-        info = core.reset_info(0)
+        info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         self.plant = core.lanes
         self._rngs = (self.np_random,)
@@ -891,7 +835,10 @@ class EndMillingVectorEnv(LaneVectorEnv):
         spec = scenario_option(options, self.default_scenario)
         for i in lanes.tolist():
             core.start(i, spec, self.lane_rngs[i])
-        return core.obs[lanes], core.reset_info_arrays(lanes)
+        return core.obs[lanes], None  # the lanes' info is their reset info (_info_now)
+
+    def _info_now(self):
+        return self._core.info_arrays()
 
     def _step_lanes(self, actions):
         core = self._core

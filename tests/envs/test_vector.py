@@ -95,6 +95,53 @@ def test_every_lane_is_the_single_env_across_autoresets(env_id):
 
 
 @pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_an_autoreset_changes_the_info_of_the_ended_lanes_only(env_id):
+    """At a step where some lanes end, ``final_info`` holds the step's info of every lane
+    with the masks of the ended ones, and the returned info of the lanes that go on is that
+    same step's info; a key every reset and step gives is held by every lane
+    (``test_every_lane_is_the_single_env_...`` compares the ended lanes' values with the
+    single env). The time limits of ``ENV_KWARGS`` end all lanes at once; turning and milling
+    lanes end at different steps."""
+    n = 8
+    kwargs = ENV_KWARGS.get(env_id, {})
+    venv = gym.make_vec(env_id, num_envs=n, **kwargs)
+    _, info = venv.reset(seed=3)
+    always = [k for k in info if k[0] != "_" and info["_" + k].all()]
+    assert len(always) >= 5
+    rng = np.random.default_rng(1)
+    checked = partial = 0
+    for _ in range(1300):
+        actions = _actions(rng, env_id, venv.single_action_space, n)
+        _, _, terminated, truncated, info = venv.step(actions)
+        done = terminated | truncated
+        if not done.any():
+            continue
+        checked += 1
+        final = info["final_info"]
+        np.testing.assert_array_equal(info["_final_info"], done)
+        np.testing.assert_array_equal(info["_final_obs"], done)
+        going = ~done
+        for key, values in final.items():
+            if key[0] == "_":
+                continue
+            assert not (final["_" + key] & going).any(), key  # final values: ended lanes only
+            assert info[key].shape == values.shape, key
+            held = going & info["_" + key]  # lanes that go on and hold the key
+            same = values[held] == info[key][held]
+            if values.dtype.kind == "f":
+                same |= np.isnan(values[held]) & np.isnan(info[key][held])
+            assert np.asarray(same).all(), key
+        for key in always:  # a key of every step and reset: every lane holds it
+            assert info["_" + key].all(), key
+        partial += bool(going.any())
+        if checked >= 5:
+            break
+    assert checked >= 3, "the run should cross several autoresets"
+    if env_id in ("machining_envs/Turning-v0", "machining_envs/EndMilling-v0"):
+        assert partial >= 3, "some steps should end some lanes and not others"
+
+
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
 def test_vector_conventions(env_id):
     """Batched spaces, declared autoreset mode, dtypes, info as a dict of arrays with masks,
     observations inside the space."""
