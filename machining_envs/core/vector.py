@@ -165,6 +165,7 @@ class LaneVectorEnv(gym.vector.VectorEnv):
         #: The step info's keys (as ``_step_lanes`` returns them) -> the masks every lane
         #: gets, worked out once per set of keys.
         self._mask_keys: dict[tuple, tuple] = {}
+        self._every = np.ones(self.num_envs, dtype=bool)
         self.lane_rngs: list[np.random.Generator] = [
             seeding.np_random()[0] for _ in range(self.num_envs)
         ]
@@ -219,7 +220,7 @@ class LaneVectorEnv(gym.vector.VectorEnv):
             if len(self._mask_keys) >= 64:  # a few sets of keys occur; never let it grow
                 self._mask_keys.clear()
             self._mask_keys[keys] = masks
-        every = np.ones(self.num_envs, dtype=bool)
+        every = self._every.copy()  # a copy of a template: np.ones costs several times more
         info.update(dict.fromkeys(masks, every))
         return every
 

@@ -88,6 +88,9 @@ _INFO_F = (
     "removed_volume_mm3",
     "machining_time_s",
 )
+#: Each episode's constants held after the signals, in the rows of ``_MillingCore.info_f``
+#: (the core's arrays of these names are views of those rows).
+_INFO_LANE = ("torque_limit", "bound", "spindle", "length", "volume")
 
 
 @dataclass(frozen=True)
@@ -294,7 +297,6 @@ class _MillingCore:
         self.lanes = MillingLanes(self.params, n)
         self.scenarios: list[MillingScenario | None] = [None] * n
         self.truths: list[MillingParams | None] = [None] * n
-        self.torque_limit = np.ones(n)
         self.vmax = np.ones(n)
         self.breakage_torque = np.ones(n)
         self.noise_counts = np.zeros(n)
@@ -309,13 +311,13 @@ class _MillingCore:
         self.obs = np.zeros((n, 4 + _HISTORY), dtype=np.float32)
         self.reward = np.zeros(n)
         self.flags = np.zeros((n, 6), dtype=np.bool_)
-        self.bound = np.full(n, np.nan)
-        self.info_f = np.zeros((len(_INFO_F), n))  # one row per signal
+        # One row per signal, then one per episode constant (info_arrays copies them at once)
+        self.info_f = np.zeros((len(_INFO_F) + len(_INFO_LANE), n))
+        self._bind_views()
+        self.torque_limit[:] = 1.0
+        self.bound[:] = np.nan
         self.normals = np.zeros((n, _NORMAL_BLOCK))
         self.normal_i = np.full(n, _NORMAL_BLOCK, dtype=np.int64)
-        self.spindle = np.zeros(n)
-        self.length = np.zeros(n)
-        self.volume = np.zeros(n)
         self.depth0 = np.zeros(n)
         self.names = np.full(n, "", dtype=object)
         self.in_action = np.zeros(n)
@@ -324,6 +326,20 @@ class _MillingCore:
         self.noise = np.zeros(n)
         self._args: tuple | None = None
         self._args_version = -1
+
+    def _bind_views(self) -> None:
+        for i, name in enumerate(_INFO_LANE):
+            setattr(self, name, self.info_f[len(_INFO_F) + i])
+
+    def __getstate__(self) -> dict:
+        # A pickled view is a copy: the views (and the kernel's arguments, which hold them)
+        # are made anew from info_f on loading.
+        return {k: v for k, v in self.__dict__.items() if k not in {*_INFO_LANE, "_args"}}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._args = None
+        self._bind_views()
 
     def _actuation_lanes(self) -> ActuationLanes:
         """The CNC's actuation between the commands and the servo, every lane on the env's
@@ -385,7 +401,7 @@ class _MillingCore:
         self.obs[lane] = (0.0, tr_obs, -1.0, rpm / 1000.0, 0.0, 0.0, 0.0)
         # The info of a cut not yet begun (what lane_info and info_arrays report until the
         # first step): every signal zero but the depth, no flag, no clipped action.
-        self.info_f[:, lane] = 0.0
+        self.info_f[: len(_INFO_F), lane] = 0.0
         self.info_f[11, lane] = self.depth0[lane]
         self.info_f[13, lane] = np.nan
         self.flags[lane] = False
@@ -475,7 +491,7 @@ class _MillingCore:
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""
         (t, command, torque, measured, counts, peak, feed, mean_feed, feed_tooth, vf, pos,
-         depth, removed, finish) = self.info_f[:, k].tolist()  # fmt: skip
+         depth, removed, finish, limit, bound, rpm, length, volume) = self.info_f[:, k].tolist()  # fmt: skip
         diverged, breakage, finished = self.flags[k, :3].tolist()
         info = {
             "t_s": t,
@@ -486,9 +502,9 @@ class _MillingCore:
             "diverged": diverged,
             "finished": finished,
             "torque_Nmm": torque,
-            "torque_limit_Nmm": float(self.torque_limit[k]),
+            "torque_limit_Nmm": limit,
             "cost": 1.0 if self.flags[k, 5] else 0.0,
-            "score_bound": float(self.bound[k]),
+            "score_bound": bound,
             "measured": measured,
             "measured_counts": counts,
             "peak_torque_Nmm": peak,
@@ -499,10 +515,10 @@ class _MillingCore:
             "position_mm": pos,
             "depth_mm": depth,
             "segment": int(self.lanes.out_segment[k]),
-            "spindle_rpm": float(self.spindle[k]),
+            "spindle_rpm": rpm,
             "removed_volume_mm3": removed,
-            "workpiece_length_mm": float(self.length[k]),
-            "workpiece_volume_mm3": float(self.volume[k]),
+            "workpiece_length_mm": length,
+            "workpiece_volume_mm3": volume,
             "scenario": self.names[k],
         }
         if finished:
@@ -510,21 +526,23 @@ class _MillingCore:
         return info
 
     def info_arrays(self) -> dict:
-        """The step info of every lane, as arrays (``machining_time_s`` with its mask)."""
-        f = self.flags
+        """The step info of every lane, as arrays (``machining_time_s`` with its mask): views
+        of one copy of the signals and constants and one of the flags, so that a step copies
+        a few blocks of memory."""
         c = self.info_f.copy()
-        info = {
+        f = self.flags.copy()
+        return {
             "t_s": c[0],
             "command": c[1],
             "action_clipped": self.in_clipped.astype(bool),
             "n_action_clipped": self.n_clipped.copy(),
-            "breakage": f[:, 1].copy(),
-            "diverged": f[:, 0].copy(),
-            "finished": f[:, 2].copy(),
+            "breakage": f[:, 1],
+            "diverged": f[:, 0],
+            "finished": f[:, 2],
             "torque_Nmm": c[2],
-            "torque_limit_Nmm": self.torque_limit.copy(),
+            "torque_limit_Nmm": c[14],
             "cost": f[:, 5].astype(np.float64),
-            "score_bound": self.bound.copy(),
+            "score_bound": c[15],
             "measured": c[3],
             "measured_counts": c[4],
             "peak_torque_Nmm": c[5],
@@ -535,15 +553,14 @@ class _MillingCore:
             "position_mm": c[10],
             "depth_mm": c[11],
             "segment": self.lanes.out_segment.copy(),
-            "spindle_rpm": self.spindle.copy(),
+            "spindle_rpm": c[16],
             "removed_volume_mm3": c[12],
-            "workpiece_length_mm": self.length.copy(),
-            "workpiece_volume_mm3": self.volume.copy(),
+            "workpiece_length_mm": c[17],
+            "workpiece_volume_mm3": c[18],
             "scenario": self.names.copy(),
             "machining_time_s": np.where(f[:, 2], c[13], np.nan),
-            "_machining_time_s": f[:, 2].copy(),
+            "_machining_time_s": self.flags[:, 2].copy(),
         }
-        return info
 
 
 class EndMillingEnv(gym.Env):

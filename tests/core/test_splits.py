@@ -5,18 +5,7 @@ import zlib
 import numpy as np
 import pytest
 
-from machining_envs.core.splits import SPLITS, split_rng
-
-
-class _Draw:
-    """Stands in for the env's generator: its one draw is ``x``."""
-
-    def __init__(self, x: int) -> None:
-        self.x = x
-
-    def integers(self, high: int) -> int:
-        assert high == 2**63
-        return self.x
+from machining_envs.core.splits import SPLITS, _split_generator, draw_below_2_63, split_rng
 
 
 def _draws():
@@ -31,7 +20,7 @@ def _draws():
 def test_split_rng_is_numpys_default_rng_of_the_draw_and_the_split_key(split):
     key = zlib.crc32(split.encode())
     for x in _draws():
-        fast = split_rng(_Draw(x), split)
+        fast = _split_generator(x, key)
         ref = np.random.default_rng([x, key])
         assert fast.bit_generator.state == ref.bit_generator.state, x
     # and the numbers drawn from it, through the env's real generator
@@ -45,3 +34,26 @@ def test_split_rng_names_the_allowed_splits():
         split_rng(np.random.default_rng(0), "holdout")
     with pytest.raises(ValueError, match="split must be one of"):
         split_rng(np.random.default_rng(0), 3)
+
+
+@pytest.mark.parametrize(
+    "bits", [np.random.PCG64, np.random.MT19937, np.random.Philox, np.random.PCG64DXSM]
+)
+def test_the_draw_below_2_63_is_numpys_integers(bits):
+    """``draw_below_2_63`` gives ``integers(2**63)``'s numbers and leaves the generator in
+    its state, whatever was drawn before (doubles, normals, 32-bit integers whose other half
+    numpy keeps for the next one), on gymnasium's PCG64 and on other bit generators."""
+    for seed in range(300):
+        a = np.random.Generator(bits(seed))
+        b = np.random.Generator(bits(seed))
+        for g in (a, b):  # the same earlier draws on both
+            if seed % 4 == 1:
+                g.integers(0, 5)
+            elif seed % 4 == 2:
+                g.random(3)
+            elif seed % 4 == 3:
+                g.standard_normal(7)
+                g.integers(0, 3, size=3)
+        for _ in range(3):
+            assert draw_below_2_63(a) == int(b.integers(2**63)), seed
+        assert np.array_equal(a.random(4), b.random(4)), seed  # and on from the same state
