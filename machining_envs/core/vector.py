@@ -16,7 +16,8 @@ its batched physics:
   actions ``(num_envs, *action_shape)``; return observations, rewards, terminations,
   truncations and the step info as a new dict of arrays of length ``num_envs`` (a key
   that only some lanes have comes with a boolean mask under ``"_" + key``; the base adds
-  the masks of the others to it).
+  the masks of the others to it). The arrays are new, not views of the lanes' state: they
+  become the ``final_info`` of the lanes that end, which are reset after them.
 
 This base checks the actions (a non-finite action in any lane raises ``ValueError``
 naming the lane, and nothing is stepped), seeds lane ``i`` with ``seed + i`` exactly as

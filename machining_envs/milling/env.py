@@ -328,6 +328,7 @@ class _MillingCore:
         self._args_version = -1
 
     def _bind_views(self) -> None:
+        """Name the rows of ``info_f`` that hold the episode constants (``_INFO_LANE``)."""
         for i, name in enumerate(_INFO_LANE):
             setattr(self, name, self.info_f[len(_INFO_F) + i])
 
@@ -491,7 +492,8 @@ class _MillingCore:
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""
         (t, command, torque, measured, counts, peak, feed, mean_feed, feed_tooth, vf, pos,
-         depth, removed, finish, limit, bound, rpm, length, volume) = self.info_f[:, k].tolist()  # fmt: skip
+         depth, removed, finish,
+         limit, bound, rpm, length, volume) = self.info_f[:, k].tolist()  # fmt: skip
         diverged, breakage, finished = self.flags[k, :3].tolist()
         info = {
             "t_s": t,
