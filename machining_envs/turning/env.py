@@ -288,9 +288,10 @@ class _TurningCore:
         p = self.params
         return ActuationLanes(self.n, p.command_max, 0.0, p.sample_time_s, self.actuation)
 
-    def start(self, lane: int, spec, rng: np.random.Generator) -> dict:
+    def start(self, lane: int, spec, rng: np.random.Generator) -> None:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
-        first observation goes to ``obs[lane]``; returns its reset info."""
+        first observation goes to ``obs[lane]``, its reset info is its :meth:`lane_info`
+        (and its column of :meth:`info_arrays`) until the first step."""
         sc = turning_scenario(spec, rng)
         if self.spindle_rpm_override is not None:
             sc = dataclasses.replace(sc, spindle_rpm=self.spindle_rpm_override)
@@ -339,32 +340,15 @@ class _TurningCore:
         )
         o = self.obs[lane]
         o[:] = (0.0, self.fr_obs[lane], -1.0, self.rpm_obs[lane], 0.0, 0.0, 0.0)
-        return {
-            "t_s": 0.0,
-            "command": 0.0,
-            "action_clipped": False,
-            "n_action_clipped": 0,
-            "breakage": False,
-            "diverged": False,
-            "finished": False,
-            "force_N": 0.0,
-            "force_limit_N": float(self.force_limit[lane]),
-            "cost": 0.0,
-            "score_bound": float(self.bound[lane]),
-            "measured": 0.0,
-            "measured_counts": 0.0,
-            "spindle_rpm": float(sc.spindle_rpm),
-            "spindle_power_W": 0.0,
-            "cutting_power_W": 0.0,
-            "workpiece_length_mm": sc.profile.length_mm,
-            "scenario": sc.name,
-            "feed_mm_per_rev": 0.0,
-            "feed_velocity_mm_s": 0.0,
-            "position_mm": 0.0,
-            "depth_mm": float(sc.profile.start_depths_mm[0]),
-            "peak_force_N": 0.0,
-            "segment": 0,
-        }
+        # The signals of a cut not yet begun, where lane_info and info_arrays read them until
+        # the first step (which writes every one): the tool at rest at the workpiece's start.
+        self.eb[lane] = False
+        self.command[lane] = 0.0
+        out = self.lanes.out[lane]
+        out[:] = 0.0
+        out[6] = sc.profile.start_depths_mm[0]
+        self.lanes.out_segment[lane] = 0
+        self.lanes.out_finish[lane] = np.nan
 
     def draw_noise(self, rngs) -> None:
         """Sensor noise of this step into ``in_noise``: lane ``k`` takes the next standard
@@ -710,7 +694,8 @@ class TurningEnv(gym.Env):
         super().reset(seed=seed)
         self._ended = False
         core = self._core
-        info = core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         self.plant = core.lanes
         self._rngs = (self.np_random,)
@@ -805,8 +790,12 @@ class TurningVectorEnv(LaneVectorEnv):
     def _reset_lanes(self, lanes, options):
         core = self._core
         spec = scenario_option(options, self.default_scenario)
-        infos = [core.start(i, spec, self.lane_rngs[i]) for i in lanes.tolist()]
-        return core.obs[lanes].copy(), infos
+        for i in lanes.tolist():
+            core.start(i, spec, self.lane_rngs[i])
+        return core.obs[lanes], None  # the lanes' info is their reset info (_info_now)
+
+    def _info_now(self):
+        return self._core.info_arrays()
 
     def _step_lanes(self, actions):
         core = self._core
