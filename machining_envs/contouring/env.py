@@ -464,9 +464,10 @@ class _ContouringCore:
             loads[:, : self.loads.shape[1]] = self.loads
             self.loads = loads
 
-    def start(self, lane: int, spec, rng: np.random.Generator) -> dict:
+    def start(self, lane: int, spec, rng: np.random.Generator) -> None:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
-        first observation goes to ``obs[lane]``; returns its reset info."""
+        first observation goes to ``obs[lane]``, its reset info is its :meth:`lane_info`
+        (and its column of :meth:`info_arrays`) until the first step."""
         sc = contouring_scenario(spec, rng)
         check_feed(sc, self.params)
         if sc.actuation is not None:
@@ -510,7 +511,6 @@ class _ContouringCore:
         self.circle[lane] = tuple(self.circles[lane].values()) or (0.0, 0.0, 0.0)
         _contour_start(lane, self.lf, self.li, self.cf, self.tabs, self.nseg, self.rb,
                        self.loads, self.obs, self.out, self.flags)  # fmt: skip
-        return self.lane_info(lane)
 
     def step(self) -> None:
         """Advance every lane by one servo period with the (checked, clipped) actions in
@@ -740,7 +740,8 @@ class ContouringEnv(gym.Env):
         super().reset(seed=seed)
         self._ended = False
         core = self._core
-        info = core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         #: The table of this episode (its true parameters in ``plant.params``).
         self.plant = core.plants[0]
@@ -813,8 +814,12 @@ class ContouringVectorEnv(LaneVectorEnv):
     def _reset_lanes(self, lanes, options):
         core = self._core
         spec = scenario_option(options, self.default_scenario)
-        infos = [core.start(i, spec, self.lane_rngs[i]) for i in lanes.tolist()]
-        return core.obs[lanes].copy(), infos
+        for i in lanes.tolist():
+            core.start(i, spec, self.lane_rngs[i])
+        return core.obs[lanes]  # their info is their reset info until they step (_info_now)
+
+    def _info_now(self):
+        return self._core.info_arrays()
 
     def _step_lanes(self, actions):
         core = self._core

@@ -481,9 +481,10 @@ class _FeedCore:
             self.load_t, self.load_v = lt, lv
         self._bind()
 
-    def start(self, lane: int, spec, rng: np.random.Generator) -> dict:
+    def start(self, lane: int, spec, rng: np.random.Generator) -> None:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
-        first observation goes to ``obs[lane]``; returns its reset info."""
+        first observation goes to ``obs[lane]``, its reset info is its :meth:`lane_info`
+        (and its column of :meth:`info_arrays`) until the first step."""
         sc = contouring_scenario(spec, rng)
         if sc.is_step:
             raise ValueError(
@@ -549,8 +550,8 @@ class _FeedCore:
         o[_O["path_speed_mm_s"]] = 0.0 * sc.feed_mm_s if 0.0 < path.length else 0.0
         o[_O["machining_time_s"]] = np.nan
         self.flags[lane] = False
+        self.in_clipped[lane] = 0  # no action yet (the next step sets it)
         self.segment[lane] = path.segment_index(0.0)
-        return self.lane_info(lane, clipped=False)
 
     def step(self) -> None:
         """Advance every lane with the (checked, clipped) actions in ``in_action``; whether
@@ -570,9 +571,8 @@ class _FeedCore:
             *self._scratch,
         )  # fmt: skip
 
-    def lane_info(self, k: int, clipped: bool | None = None) -> dict:
-        """The info of lane ``k`` after its reset or its last step (``clipped``: whether
-        the action was clipped; by default as recorded by the last step)."""
+    def lane_info(self, k: int) -> dict:
+        """The info of lane ``k`` after its reset or its last step."""
         out = self.out[k]
         o = out.tolist()
         diverged, finished, _, _ = self.flags[k].tolist()
@@ -582,7 +582,7 @@ class _FeedCore:
             "command": out[1:3].copy(),
             "command_x_mm_s": o[1],
             "command_y_mm_s": o[2],
-            "action_clipped": in_clipped != 0 if clipped is None else clipped,
+            "action_clipped": in_clipped != 0,
             "n_action_clipped": n_clipped,
             "breakage": False,
             "diverged": diverged,
@@ -813,7 +813,8 @@ class ContouringFeedEnv(gym.Env):
         super().reset(seed=seed)
         self._ended = False
         core = self._core
-        info = core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         self._path = core.paths[0]
         self._started = True
@@ -896,8 +897,12 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
     def _reset_lanes(self, lanes, options):
         core = self._core
         spec = scenario_option(options, self.default_scenario)
-        infos = [core.start(i, spec, self.lane_rngs[i]) for i in lanes.tolist()]
-        return core.obs[lanes].copy(), infos
+        for i in lanes.tolist():
+            core.start(i, spec, self.lane_rngs[i])
+        return core.obs[lanes]  # their info is their reset info until they step (_info_now)
+
+    def _info_now(self):
+        return self._core.info_arrays()
 
     def _step_lanes(self, actions):
         core = self._core

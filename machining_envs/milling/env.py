@@ -854,7 +854,7 @@ class EndMillingVectorEnv(LaneVectorEnv):
         spec = scenario_option(options, self.default_scenario)
         for i in lanes.tolist():
             core.start(i, spec, self.lane_rngs[i])
-        return core.obs[lanes], None  # the lanes' info is their reset info (_info_now)
+        return core.obs[lanes]  # their info is their reset info until they step (_info_now)
 
     def _info_now(self):
         return self._core.info_arrays()

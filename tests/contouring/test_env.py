@@ -131,25 +131,3 @@ def test_hidden_quantities_stay_out_of_the_observation():
     oa, _ = env.reset(seed=0, options={"scenario": a})
     ob, _ = env.reset(seed=0, options={"scenario": b})
     assert oa.tobytes() == ob.tobytes()
-
-
-@pytest.mark.parametrize("env_id", [CONTOURING, CONTOURING_FEED])
-def test_stacked_reset_infos_are_the_general_stacking(env_id):
-    """Reset infos whose lanes all have the same keys are stacked one array per key (the
-    usual case, a lane or a few at a step): the arrays, dtypes and masks of the general
-    stacking, which a different key order forces."""
-    from machining_envs.core.vector import stack_lane_infos
-
-    core = gym.make_vec(env_id, num_envs=4).unwrapped._core
-    for scenario in ("train", "paper_circle"):
-        infos = [core.start(i, scenario, np.random.default_rng(i)) for i in range(4)]
-        fast = stack_lane_infos(infos)
-        general = stack_lane_infos([infos[0]] + [dict(reversed(d.items())) for d in infos[1:]])
-        assert list(fast) == list(general) == list(infos[0])
-        for key, value in fast.items():
-            assert value.dtype == general[key].dtype, key
-            np.testing.assert_array_equal(value, general[key], err_msg=key)
-        one = stack_lane_infos(infos[:1])
-        assert all(np.array_equal(one[k], np.array([v])) for k, v in infos[0].items())
-    mixed = stack_lane_infos([{"a": 1.0, "b": 2}, {"a": 3.0}])
-    assert mixed["_b"].tolist() == [True, False] and mixed["b"].tolist() == [2, 0]
