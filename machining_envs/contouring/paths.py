@@ -394,14 +394,8 @@ def _bounding_circle(seg) -> tuple[float, float, float]:
     Compiled (:func:`_bounding_circle_of_row`): the numbers of ``np.linspace``, the
     segment's ``points``, ``np.mean`` and ``np.hypot``, to the last bit.
     """
-    cx, cy, r = _bounding_circle_of_row(_segment_row(seg), float(seg.length))
+    cx, cy, r = _bounding_circle_of_row(np.array(seg._row()), float(seg.length))
     return float(cx), float(cy), float(r)
-
-
-def _segment_row(seg) -> np.ndarray:
-    """A segment's row of :meth:`Path.table` (its kind and own numbers; the columns of its
-    place in the path left at zero)."""
-    return np.array(seg._row())
 
 
 @numba.njit(cache=True)

@@ -27,6 +27,7 @@ info are in ``info["final_obs"]`` and ``info["final_info"]``, exactly as Gymnasi
 
 from __future__ import annotations
 
+import abc
 import math
 from typing import Any
 
@@ -50,7 +51,7 @@ def check_num_envs(num_envs) -> int:
     return int(num_envs)
 
 
-class LaneVectorEnv(gym.vector.VectorEnv):
+class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
     """Base of the native vector envs (see the module docstring)."""
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
@@ -105,19 +106,19 @@ class LaneVectorEnv(gym.vector.VectorEnv):
         self._with_masks(info)
         return obs, info
 
+    @abc.abstractmethod
     def _reset_lanes(self, lanes: np.ndarray, options: dict | None) -> np.ndarray:
         """Start new episodes in ``lanes``; their first observations (see the module
         docstring)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def _step_lanes(self, actions: np.ndarray) -> tuple:
         """Advance every lane by one control period (see the module docstring)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def _info_now(self) -> dict:
         """Every lane's info as it stands, as new arrays (a key only some lanes hold comes
         with its ``_key`` mask); a lane just reset reports its reset info."""
-        raise NotImplementedError
 
     def _with_masks(self, info: dict) -> np.ndarray:
         """Add to ``info`` (a new dict) the mask of every lane for each key that has none:
