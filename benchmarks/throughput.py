@@ -23,16 +23,24 @@ ratio of two rates taken seconds apart: this machine's speed drifts by up to a f
 minutes, which moved the ratios by as much when the single env's rate came from the first
 table, minutes earlier. ``x single`` is the median of the rounds' ratios, ``range`` the
 lowest and highest; ``x sync`` is the N = 1024 rate over Gymnasium's ``SyncVectorEnv`` of
-N copies of the single env over the same window from the first reset. The memory per lane is what ``tracemalloc`` counts
-for making and resetting the N = 1024 env, over 1024. Gymnasium's ``CartPoleVectorEnv``
-at N = 1024 is the reference row.
+N copies of the single env over the same window from the first reset. The memory per lane
+is what ``tracemalloc`` counts for making and resetting the N = 1024 env, over 1024.
+Gymnasium's ``CartPoleVectorEnv`` at N = 1024 is the reference row.
+
+Every rate above is of envs on one thread. The steady columns come again for
+``num_threads=T`` (``--threads``, by default the CPUs this process may use): the kernel
+then steps blocks of lanes on T threads, the rest of the step staying on one; each round
+takes the one-thread and the T-thread windows in turn, each paired with its own run of the
+single env (which always runs on one thread).
 
     python benchmarks/throughput.py [--steps 20000] [--rounds 5] [--lanes 1 64 1024 8192]
+                                    [--threads T]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import time
 import tracemalloc
@@ -43,6 +51,13 @@ import numpy as np
 import machining_envs
 
 PEER = "Pendulum-v1"
+
+
+def usable_cpus() -> int:
+    """The CPUs this process may run on."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 def steps_per_second(env_id: str, n_steps: int, seed: int) -> tuple[float, float, int]:
@@ -96,31 +111,37 @@ def vector_steps_per_second(
 
 
 def vector_steady_rates(
-    env_id: str, num_envs: int, episode_steps: float, seed: int, rounds: int, single_steps: int
-) -> tuple[list[float], list[float]]:
+    env_id: str, num_envs: int, episode_steps: float, seed: int, rounds: int, single_steps: int,
+    threads: list[int],
+) -> dict[int, tuple[list[float], list[float]]]:  # fmt: skip
     """Env-steps per second of the native vector env once its lanes' episodes have spread
     out (see the module docstring), in ``rounds`` windows, and after each window the single
     env's steps per second with resets over ``single_steps`` steps (:func:`steps_per_second`),
     so that each round's ratio compares two rates taken seconds apart; random actions cycle
-    through 256 batches drawn beforehand."""
-    venv = gym.make_vec(env_id, num_envs=num_envs)
+    through 256 batches drawn beforehand. One env per entry of ``threads`` (its
+    ``num_threads``), all on the same actions, their windows taken in turn in each round:
+    ``{num_threads: (rates, singles)}``."""
+    venvs = {t: gym.make_vec(env_id, num_envs=num_envs, num_threads=t) for t in threads}
     n = min(max(200, int(episode_steps)), max(200, 2_500_000 // num_envs))
     rng = np.random.default_rng(seed)
-    space = venv.single_action_space
+    space = venvs[threads[0]].single_action_space
     actions = rng.uniform(space.low, space.high, size=(256, num_envs, *space.shape))
     actions = actions.astype(space.dtype)
-    venv.reset(seed=seed)
-    for i in range(n):
-        venv.step(actions[i % 256])
-    rates, singles = [], []
-    for r in range(rounds):
-        t0 = time.perf_counter()
+    for venv in venvs.values():
+        venv.reset(seed=seed)
         for i in range(n):
             venv.step(actions[i % 256])
-        rates.append(n * num_envs / (time.perf_counter() - t0))
-        singles.append(steps_per_second(env_id, single_steps, seed=r)[1])
-    venv.close()
-    return rates, singles
+    out: dict[int, tuple[list[float], list[float]]] = {t: ([], []) for t in threads}
+    for r in range(rounds):
+        for t, venv in venvs.items():
+            t0 = time.perf_counter()
+            for i in range(n):
+                venv.step(actions[i % 256])
+            out[t][0].append(n * num_envs / (time.perf_counter() - t0))
+            out[t][1].append(steps_per_second(env_id, single_steps, seed=r)[1])
+    for venv in venvs.values():
+        venv.close()
+    return out
 
 
 def bytes_per_lane(env_id: str, num_envs: int) -> float:
@@ -137,21 +158,26 @@ def bytes_per_lane(env_id: str, num_envs: int) -> float:
 
 def vector_table(
     lanes: list[int], env_steps: int, sync_steps: int, singles: dict, rounds: int,
-    single_steps: int,
+    single_steps: int, threads: int,
 ) -> None:  # fmt: skip
     """The vector envs' table; ``singles[id]`` = the single env's mean episode length in
     steps (from the first table); each steady round is paired with ``single_steps`` steps of
-    the single env."""
+    the single env; the steady columns again with ``num_threads=threads`` if above 1."""
     ref_n = 1024 if 1024 in lanes else lanes[-1]
+    counts = [1, threads] if threads > 1 else [1]
     print(
-        f"\nnative vector envs: env-steps/s with random actions from the first reset; steady: "
-        f"N = {ref_n} with resets spread out, median of {rounds} rounds; x single = median "
-        f"over the rounds of steady / the single env with resets measured right after it, "
-        f"range over the rounds; x sync at N = {ref_n} from the first reset; memory per lane "
-        f"from N = {ref_n}"
+        f"\nnative vector envs: env-steps/s with random actions from the first reset, one "
+        f"thread; steady: N = {ref_n} with resets spread out, median of {rounds} rounds; "
+        f"x single = median over the rounds of steady / the single env with resets measured "
+        f"right after it, range over the rounds"
+        + (f"; again with num_threads={threads} (T{threads})" if threads > 1 else "")
+        + f"; x sync at N = {ref_n} from the first reset; memory per lane from N = {ref_n}"
     )
     head = f"{'env':34s}" + "".join(f" {f'N={n}':>10s}" for n in lanes)
-    print(head + f" {'steady':>10s} {'x single':>9s} {'range':>11s} {'x sync':>7s} {'kB/lane':>8s}")
+    for t in counts:
+        tag = "" if t == 1 else f" T{t}"
+        head += f" {'steady' + tag:>10s} {'x single' + tag:>11s} {'range':>11s}"
+    print(head + f" {'x sync':>7s} {'kB/lane':>8s}")
     cart = vector_steps_per_second("CartPole-v1", ref_n, env_steps, 0, "vector_entry_point")
     print(f"{'CartPoleVectorEnv (reference)':34s}" + "".join(
         f" {cart:10.0f}" if n == ref_n else f" {'':>10s}" for n in lanes
@@ -161,19 +187,18 @@ def vector_table(
             print(f"{env_id:34s} no native vector env yet")
             continue
         rates = {n: vector_steps_per_second(env_id, n, env_steps, 0) for n in lanes}
-        steady, paired = vector_steady_rates(
-            env_id, ref_n, singles[env_id], 0, rounds, single_steps
+        steady = vector_steady_rates(
+            env_id, ref_n, singles[env_id], 0, rounds, single_steps, counts
         )
-        mid = float(np.median(steady))
-        ratios = [v / s for v, s in zip(steady, paired, strict=True)]
-        span = f"{min(ratios):.1f}-{max(ratios):.1f}"
         sync = vector_steps_per_second(env_id, ref_n, sync_steps, 0, "sync")
         kb = bytes_per_lane(env_id, ref_n) / 1024
         row = f"{env_id:34s}" + "".join(f" {rates[n]:10.0f}" for n in lanes)
-        print(
-            row + f" {mid:10.0f} {np.median(ratios):9.1f} {span:>11s} {rates[ref_n] / sync:7.1f}"
-            f" {kb:8.1f}"
-        )
+        for t in counts:
+            vec, paired = steady[t]
+            ratios = [v / s for v, s in zip(vec, paired, strict=True)]
+            span = f"{min(ratios):.1f}-{max(ratios):.1f}"
+            row += f" {np.median(vec):10.0f} {np.median(ratios):11.1f} {span:>11s}"
+        print(row + f" {rates[ref_n] / sync:7.1f} {kb:8.1f}")
 
 
 def main(argv=None) -> None:
@@ -184,6 +209,10 @@ def main(argv=None) -> None:
     ap.add_argument("--vector-steps", type=int, default=200_000, help="env-steps per vector rate")
     ap.add_argument("--sync-steps", type=int, default=20_000, help="env-steps of SyncVectorEnv")
     ap.add_argument("--no-vector", action="store_true", help="single envs only")
+    ap.add_argument(
+        "--threads", type=int, default=usable_cpus(),
+        help="num_threads of the second steady columns (default: this process's CPUs; 1: none)",
+    )  # fmt: skip
     args = ap.parse_args(argv)
     ids = [PEER, *machining_envs.ENV_IDS]
     rates = {i: [] for i in ids}
@@ -207,7 +236,7 @@ def main(argv=None) -> None:
         episodes = {i: args.steps / max(med[i][2], 1) for i in ids}
         vector_table(
             sorted(args.lanes), args.vector_steps, args.sync_steps, episodes, args.rounds,
-            args.steps,
+            args.steps, args.threads,
         )  # fmt: skip
 
 

@@ -33,6 +33,7 @@ from machining_envs.contouring.scenarios import (
     check_feed,
     contouring_scenario,
 )
+from machining_envs.core.blocks import LaneBlocks, check_num_threads, one_blas_thread
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
 from machining_envs.core.env import (
     ActionMap,
@@ -261,7 +262,7 @@ _CTS, _CUMAX, _CINPOS, _CDIV, _CW, _CPRE, _CTWO = 0, 1, 2, 3, 4, 11, 14
 _PTICKS = np.array(PREVIEW_TICKS)
 
 
-@numba.njit(cache=True, _nrt=False)
+@numba.njit(cache=True, _nrt=False, nogil=True)
 def _contour_step(act, clipped, lf, li, cf, tabs, nseg, rb, loads, obs, out, flags):
     """One servo period of every lane (``ContouringEnv.step`` after its input checks).
 
@@ -368,6 +369,11 @@ def _contour_step(act, clipped, lf, li, cf, tabs, nseg, rb, loads, obs, out, fla
         _contour_obs(lane, k, x, y, vx, vy, lf, cf, rb, obs)
 
 
+#: Where :func:`_contour_step`'s arguments (``_ContouringCore._args``) hold the lanes: axis
+#: 0 or none (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
+_STEP_AXES = (0, 0, 0, 0, None, 0, 0, 0, 0, 0, 0, 0)
+
+
 @numba.njit(cache=True)
 def _contour_start(lane, lf, li, cf, tabs, nseg, rb, loads, obs, out, flags):
     """Set points ``0 .. 50``, the load at ``t = 0``, the first observation and the reset
@@ -453,16 +459,28 @@ class _ContouringCore:
         self.circles: list[dict] = [{}] * n
         self.has_circle = np.zeros(n, dtype=bool)
         self.circle = np.zeros((n, 3))
+        #: The blocks of lanes the kernel steps at once (one thread unless a vector env
+        #: asks for more).
+        self.blocks = LaneBlocks(n)
+        self._bind()
+
+    def _bind(self) -> None:
+        """Gather the kernel's arguments once (again whenever an array is replaced, as
+        :meth:`_grow` does)."""
+        self._args = (self.act, self.clipped, self.lf, self.li, self.cf, self.tabs, self.nseg,
+                      self.rb, self.loads, self.obs, self.out, self.flags)  # fmt: skip
 
     def _grow(self, n_seg: int, n_load: int) -> None:
         if n_seg > self.tabs.shape[1]:
             tabs = np.zeros((self.n, n_seg, SEGMENT_COLUMNS))
             tabs[:, : self.tabs.shape[1]] = self.tabs
             self.tabs = tabs
+            self._bind()
         if n_load > self.loads.shape[1]:
             loads = np.zeros((self.n, n_load, 3))
             loads[:, : self.loads.shape[1]] = self.loads
             self.loads = loads
+            self._bind()
 
     def start(self, lane: int, spec, rng: np.random.Generator) -> None:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
@@ -515,8 +533,7 @@ class _ContouringCore:
     def step(self) -> None:
         """Advance every lane by one servo period with the (checked, clipped) actions in
         ``act``; whether each was clipped is in ``clipped``."""
-        _contour_step(self.act, self.clipped, self.lf, self.li, self.cf, self.tabs, self.nseg,
-                      self.rb, self.loads, self.obs, self.out, self.flags)  # fmt: skip
+        self.blocks.run(_contour_step, self._args, _STEP_AXES)
 
     def lane_info(self, k: int) -> dict:
         """The info of lane ``k`` after its reset or its last step."""
@@ -740,7 +757,8 @@ class ContouringEnv(gym.Env):
         super().reset(seed=seed)
         self._ended = False
         core = self._core
-        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        with one_blas_thread():  # see machining_envs.core.blocks
+            core.start(0, scenario_option(options, self.default_scenario), self.np_random)
         info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         #: The table of this episode (its true parameters in ``plant.params``).
@@ -781,11 +799,12 @@ class ContouringVectorEnv(LaneVectorEnv):
     path with its own hidden inertias and loads, stepped by one compiled function.
 
     ``gym.make_vec("machining_envs/Contouring-v0", num_envs=N, **kwargs)`` takes the
-    keyword arguments of :class:`ContouringEnv` (but not ``render_mode``). Lane ``i`` after
-    ``reset(seed=s)`` runs exactly the episode ``ContouringEnv.reset(seed=s + i)`` runs,
-    with the same observations, rewards and ``info`` (here a dict of arrays; the circle's
-    keys and ``machining_time_s`` with their masks); every lane draws its own scenario from
-    its own generator. Finished lanes are reset in the same step
+    keyword arguments of :class:`ContouringEnv` (but not ``render_mode``), and
+    ``num_threads``: the threads that step the lanes (``machining_envs.core.vector``). Lane
+    ``i`` after ``reset(seed=s)`` runs exactly the episode ``ContouringEnv.reset(seed=s +
+    i)`` runs, with the same observations, rewards and ``info`` (here a dict of arrays; the
+    circle's keys and ``machining_time_s`` with their masks); every lane draws its own
+    scenario from its own generator. Finished lanes are reset in the same step
     (``metadata["autoreset_mode"]``): see ``machining_envs.core.vector``.
     """
 
@@ -800,13 +819,16 @@ class ContouringVectorEnv(LaneVectorEnv):
         max_episode_time_s: float | None = None,
         in_position_mm: float = 0.005,
         divergence_mm: float = 50.0,
+        num_threads: int = 1,
         **overrides,
     ):
+        check_num_threads(num_threads)
         self._core = core = _ContouringCore(
             type(self).__name__, check_num_envs(num_envs), scenario, params, reward,
             max_episode_time_s, in_position_mm, divergence_mm, overrides,
         )  # fmt: skip
-        super().__init__(num_envs, core.observation_space, core.action_space)
+        super().__init__(num_envs, core.observation_space, core.action_space, num_threads)
+        core.blocks = self.lane_blocks
         self.default_scenario = scenario
         self.params = core.params
         self.command_map = core.command_map

@@ -52,6 +52,7 @@ from machining_envs.core.actuation import (
     configure_lane,
     resolve_actuation,
 )
+from machining_envs.core.blocks import SCRATCH, LaneBlocks, check_num_threads, one_blas_thread
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
@@ -200,7 +201,7 @@ _C_HI = _C_LO + len(_LIMS)
 _N_OBS = len(_LIMS)
 
 
-@numba.njit(cache=True, _nrt=False)
+@numba.njit(cache=True, _nrt=False, nogil=True)
 def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, state, consts, obs, flags, out, sc,
                order):  # fmt: skip
     """One decision step of every lane (``ContouringFeedEnv.step`` after its input checks).
@@ -343,6 +344,11 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, state, consts, obs, flag
                   o[11], tol, look, lo, hi, obs)  # fmt: skip
 
 
+#: Where :func:`_feed_step`'s arguments (``_FeedCore._args``) hold the lanes: axis 0, none
+#: (shared) or scratch space, for :class:`~machining_envs.core.blocks.LaneBlocks`.
+_STEP_AXES = (0, 0, 0, 0, 0, 0, 0, 0, None, 0, 0, 0, SCRATCH, SCRATCH)
+
+
 @numba.njit(cache=True)
 def _feed_reset_obs(k, tabs, nseg, pf, s, override, prev_action, tol, look, lo, hi, obs):
     """The first observation of lane ``k``'s episode (table at rest at the path's start)."""
@@ -433,6 +439,9 @@ class _FeedCore:
         self.circle = np.zeros((n, 3))
         n_seg = self.tabs.shape[1]
         self._scratch = (self._float_scratch(n_seg), np.zeros(n_seg, dtype=np.int64))
+        #: The blocks of lanes the kernel steps at once (one thread unless a vector env
+        #: asks for more).
+        self.blocks = LaneBlocks(n)
         self._bind()
 
     def _bind_views(self) -> None:
@@ -560,7 +569,7 @@ class _FeedCore:
         if self.act_lanes is not None:
             asked = self._c[5] + self._c[6] * self.in_action
             self.applied[:] = self.act_lanes.apply(asked)
-        _feed_step(*self._args)
+        self.blocks.run(_feed_step, self._args, _STEP_AXES)
 
     def _bind(self) -> None:
         """Gather the kernel's arguments once (again whenever an array is replaced, as
@@ -813,7 +822,8 @@ class ContouringFeedEnv(gym.Env):
         super().reset(seed=seed)
         self._ended = False
         core = self._core
-        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        with one_blas_thread():  # see machining_envs.core.blocks
+            core.start(0, scenario_option(options, self.default_scenario), self.np_random)
         info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         self._path = core.paths[0]
@@ -855,9 +865,10 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
     own path with its own hidden inertias and loads, stepped by one compiled function.
 
     ``gym.make_vec("machining_envs/ContouringFeed-v0", num_envs=N, **kwargs)`` takes the
-    keyword arguments of :class:`ContouringFeedEnv` (but not ``render_mode``). Lane ``i``
-    after ``reset(seed=s)`` runs exactly the episode ``ContouringFeedEnv.reset(seed=s + i)``
-    runs, with the same observations, rewards and ``info`` (here a dict of arrays; the
+    keyword arguments of :class:`ContouringFeedEnv` (but not ``render_mode``), and
+    ``num_threads``: the threads that step the lanes (``machining_envs.core.vector``). Lane
+    ``i`` after ``reset(seed=s)`` runs exactly the episode ``ContouringFeedEnv.reset(seed=s +
+    i)`` runs, with the same observations, rewards and ``info`` (here a dict of arrays; the
     circle's keys and ``machining_time_s`` with their masks); every lane draws its own
     scenario from its own generator. Finished lanes are reset in the same step
     (``metadata["autoreset_mode"]``): see ``machining_envs.core.vector``.
@@ -879,14 +890,17 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
         in_position_mm: float = 0.005,
         divergence_mm: float = 50.0,
         actuation: Actuation | dict | None = None,
+        num_threads: int = 1,
         **overrides,
     ):
+        check_num_threads(num_threads)
         self._core = core = _FeedCore(
             type(self).__name__, check_num_envs(num_envs), scenario, params, servo,
             tolerance_mm, reward, decision_interval_s, override_max, max_episode_time_s,
             in_position_mm, divergence_mm, overrides, actuation,
         )  # fmt: skip
-        super().__init__(num_envs, core.observation_space, core.action_space)
+        super().__init__(num_envs, core.observation_space, core.action_space, num_threads)
+        core.blocks = self.lane_blocks
         self.default_scenario = scenario
         self.params = core.params
         self.servo = core.servo

@@ -23,6 +23,11 @@ step (``AutoresetMode.SAME_STEP``, declared in ``metadata["autoreset_mode"]``): 
 returned observation of such a lane is its new episode's first, its last observation and
 info are in ``info["final_obs"]`` and ``info["final_info"]``, exactly as Gymnasium's
 ``SyncVectorEnv(..., autoreset_mode=AutoresetMode.SAME_STEP)`` reports them.
+
+Every vector env takes ``num_threads`` (default 1): its kernel then steps blocks of lanes on
+that many threads at once (:mod:`machining_envs.core.blocks`; blocks of at least
+``MIN_BLOCK`` lanes, so a small N runs on fewer), with the same numbers in every lane. The
+rest of a step (the checks, resets, info) stays on the calling thread.
 """
 
 from __future__ import annotations
@@ -37,6 +42,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
+from machining_envs.core.blocks import LaneBlocks, one_blas_thread
 from machining_envs.core.env import real_actions
 
 __all__ = ["LaneVectorEnv", "check_num_envs"]
@@ -63,8 +69,12 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         num_envs: int,
         single_observation_space: gym.Space,
         single_action_space: gym.Space,
+        num_threads: int = 1,
     ) -> None:
         self.num_envs = check_num_envs(num_envs)
+        #: The blocks of lanes the process's kernel steps at once, on ``num_threads``
+        #: threads (the process's core runs its kernel through it).
+        self.lane_blocks = LaneBlocks(self.num_envs, num_threads)
         self.single_observation_space = single_observation_space
         self.single_action_space = single_action_space
         self.observation_space = batch_space(single_observation_space, self.num_envs)
@@ -100,7 +110,8 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             for i, s in enumerate(seeds):
                 if s is not None:
                     self.lane_rngs[i] = seeding.np_random(s)[0]
-        obs = self._reset_lanes(np.arange(self.num_envs), options)
+        with one_blas_thread():
+            obs = self._reset_lanes(np.arange(self.num_envs), options)
         self._started = True
         info = self._info_now()
         self._with_masks(info)
@@ -164,7 +175,8 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             final_obs[i] = obs[i].copy()
         # The step's info arrays are the final info; _reset_lanes does not write to them.
         obs = obs.copy()
-        obs[lanes] = self._reset_lanes(lanes, None)
+        with one_blas_thread():  # see machining_envs.core.blocks
+            obs[lanes] = self._reset_lanes(lanes, None)
         final_info: dict = {}
         for k, v in info.items():
             if k[0] != "_":
@@ -177,4 +189,6 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         return obs, reward, terminated, truncated, top
 
     def close_extras(self, **kwargs) -> None:
-        return None
+        blocks = getattr(self, "lane_blocks", None)  # None: the constructor raised before it
+        if blocks is not None:
+            blocks.close()

@@ -10,6 +10,7 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
+from machining_envs.core.blocks import LaneBlocks, check_num_threads, one_blas_thread
 from machining_envs.core.checks import check_below
 from machining_envs.core.env import (
     ActionMap,
@@ -175,7 +176,7 @@ def _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs):
         obs[k, 6] = _pymin(out[k, 12] / ls, 2.0)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, normals):
     """One step of every lane: the action's command, the plant, the env's outputs.
 
@@ -216,6 +217,11 @@ def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, normals):
                 inputs[k - k0, 2 + q] = normals[k, 5 * i + q]
         advance(k0, k1, m, g, par, eng, state, inputs, out, tmp)
         _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs)
+
+
+#: Where :func:`_step`'s arguments (``_DrillingCore._args``) hold the lanes: axis 0 or none
+#: (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
+_STEP_AXES = (None, None, 0, 0, 0, 0, None, 0, 0, 0, 0, 0)
 
 
 class _DrillingCore:
@@ -288,6 +294,9 @@ class _DrillingCore:
             lanes.m, lanes.shared, lanes.par, lanes.eng, lanes.state, lanes.out,
             self.consts, self.ev, self.flags, self.counts, self.obs, self.normals,
         )  # fmt: skip
+        #: The blocks of lanes the kernel steps at once (one thread unless a vector env
+        #: asks for more).
+        self.blocks = LaneBlocks(n)
 
     def draw_normals(self, lane: int, rng: np.random.Generator) -> None:
         """The next ``_NOISE_ROWS`` rows of ``lane``'s normals (a new block if one is due)."""
@@ -370,7 +379,7 @@ class _DrillingCore:
         """Advance every lane with its action ``ev[:, _E_ACTION]`` (finite; clipped to the
         box, ``flags[:, _F_IN_CLIPPED]`` saying whether it was clipped already); the lanes'
         normals must hold a row for this step (:meth:`draw_normals`)."""
-        _step(*self._args)
+        self.blocks.run(_step, self._args, _STEP_AXES)
 
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""
@@ -666,7 +675,8 @@ class MicroDrillingEnv(gym.Env):
         super().reset(seed=seed)
         self._ended = False
         core = self._core
-        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        with one_blas_thread():  # see machining_envs.core.blocks
+            core.start(0, scenario_option(options, self.default_scenario), self.np_random)
         info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         self.plant = core.lanes
@@ -732,7 +742,8 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
 
     ``gym.make_vec("machining_envs/MicroDrilling-v0", num_envs=N, **kwargs)`` takes the
     keyword arguments of :class:`MicroDrillingEnv` (but not ``render_mode``), ``control``
-    included. Lane ``i`` after ``reset(seed=s)`` runs exactly the episode
+    included, and ``num_threads``: the threads that step the lanes
+    (``machining_envs.core.vector``). Lane ``i`` after ``reset(seed=s)`` runs exactly the episode
     ``MicroDrillingEnv.reset(seed=s + i)`` runs, with the same observations, rewards and
     ``info`` (here a dict of arrays; ``drilling_time_s`` and ``machining_time_s`` come with
     masks); every lane draws its own scenario from its own generator. Finished lanes are
@@ -750,8 +761,10 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
         params: DrillingParams | None = None,
         reward: DrillingReward | dict | None = None,
         max_episode_time_s: float = 150.0,
+        num_threads: int = 1,
         **overrides,
     ):
+        check_num_threads(num_threads)
         self._core = _DrillingCore(
             type(self).__name__,
             check_num_envs(num_envs),
@@ -762,7 +775,10 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
             max_episode_time_s,
             overrides,
         )
-        super().__init__(num_envs, self._core.observation_space, self._core.action_space)
+        super().__init__(
+            num_envs, self._core.observation_space, self._core.action_space, num_threads
+        )
+        self._core.blocks = self.lane_blocks
         self.default_scenario = scenario
         self.params = self._core.params
         self.control = self._core.control

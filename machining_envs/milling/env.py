@@ -16,6 +16,7 @@ from machining_envs.core.actuation import (
     configure_lane,
     resolve_actuation,
 )
+from machining_envs.core.blocks import LaneBlocks, check_num_threads, one_blas_thread
 from machining_envs.core.checks import check_below
 from machining_envs.core.env import (
     ACTION_MAPS,
@@ -131,7 +132,7 @@ def _clamp(x, lo, hi):
     return x
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noise, big, lag,
           z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, out, out_seg, out_finish, work,
           ke, tr, brk, vmax, n_teeth, w_axial, cumulative, max_t, w, meas, prev_action,
@@ -244,6 +245,14 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
             obs[k, 3 + i] = _clamp(meas[k, i] / sc, lo, hi)
 
 
+#: Where :func:`_step`'s arguments (``_MillingCore._kernel_args``) hold the lanes: axis 0, axis
+#: 1 (``info_f``) or none (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
+_STEP_AXES = (
+    0, 0, None, 0, 0, 0, 0, 0, None, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, None, 0, 0, 0, 0, None,
+    0, 0, 0, 0, 0, 0, None, None, 0, 0, 0, 0, 0, 0, 0, 0, 1,
+)  # fmt: skip
+
+
 def _map_constants(command_map: ActionMap) -> np.ndarray:
     """The action map's constants as the compiled step reads them (see :func:`_step`)."""
     cm = command_map
@@ -326,6 +335,9 @@ class _MillingCore:
         self.noise = np.zeros(n)
         self._args: tuple | None = None
         self._args_version = -1
+        #: The blocks of lanes the kernel steps at once (one thread unless a vector env
+        #: asks for more).
+        self.blocks = LaneBlocks(n)
 
     def _bind_views(self) -> None:
         """Name the rows of ``info_f`` that hold the episode constants (``_INFO_LANE``)."""
@@ -481,13 +493,14 @@ class _MillingCore:
         :meth:`draw_noise`; with CNC actuation on, the commands pass through it first
         (``machining_envs.core.actuation``) and ``info["command"]`` is what the drives got."""
         args = self._kernel_args()
+        run = self.blocks.run
         if self.act_lanes is None:
-            _step(*args, 3)
+            run(_step, args, _STEP_AXES, 3)
             return
-        _step(*args, 1)
+        run(_step, args, _STEP_AXES, 1)
         self.commands[:] = self.act_lanes.apply(self.commands)
         self.info_f[1] = self.commands
-        _step(*args, 2)
+        run(_step, args, _STEP_AXES, 2)
 
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""
@@ -747,7 +760,8 @@ class EndMillingEnv(gym.Env):
         super().reset(seed=seed)
         self._ended = False
         core = self._core
-        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        with one_blas_thread():  # see machining_envs.core.blocks
+            core.start(0, scenario_option(options, self.default_scenario), self.np_random)
         info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         self.plant = core.lanes
@@ -804,7 +818,8 @@ class EndMillingVectorEnv(LaneVectorEnv):
     as arrays.
 
     ``gym.make_vec("machining_envs/EndMilling-v0", num_envs=N, **kwargs)`` takes the keyword
-    arguments of :class:`EndMillingEnv` (but not ``render_mode``). Lane ``i`` after
+    arguments of :class:`EndMillingEnv` (but not ``render_mode``), and ``num_threads``: the
+    threads that step the lanes (``machining_envs.core.vector``). Lane ``i`` after
     ``reset(seed=s)`` runs exactly the episode ``EndMillingEnv.reset(seed=s + i)`` runs,
     with the same observations, rewards and ``info`` (here a dict of arrays); every lane
     draws its own scenario from its own generator. Finished lanes are reset in the same
@@ -822,8 +837,10 @@ class EndMillingVectorEnv(LaneVectorEnv):
         max_episode_time_s: float = 1200.0,
         action_map: str = "log",
         actuation: Actuation | dict | None = None,
+        num_threads: int = 1,
         **overrides,
     ):
+        check_num_threads(num_threads)
         self._core = _MillingCore(
             type(self).__name__,
             check_num_envs(num_envs),
@@ -835,7 +852,10 @@ class EndMillingVectorEnv(LaneVectorEnv):
             overrides,
             actuation,
         )
-        super().__init__(num_envs, self._core.observation_space, self._core.action_space)
+        super().__init__(
+            num_envs, self._core.observation_space, self._core.action_space, num_threads
+        )
+        self._core.blocks = self.lane_blocks
         self.default_scenario = scenario
         self.params = self._core.params
         self.command_map = self._core.command_map

@@ -17,6 +17,7 @@ from machining_envs.core.actuation import (
     configure_lane,
     resolve_actuation,
 )
+from machining_envs.core.blocks import LaneBlocks, check_num_threads, one_blas_thread
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_below, check_range
 from machining_envs.core.env import (
     ActionMap,
@@ -167,7 +168,7 @@ def _env_floats(ef):
             ef[:, 8], ef[:, 9], ef[:, 10])  # fmt: skip
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _step(ef, eb, big, li, filt, z, buf, work, edges, d0, slope, lane_f, finished, m, n_f,
           out, out_finish, gain, fs, meas, max_t, w, obs, n_clipped):  # fmt: skip
     """One step of every lane: the actions' bookkeeping, the plant, the env's outputs.
@@ -191,6 +192,13 @@ def _step(ef, eb, big, li, filt, z, buf, work, edges, d0, slope, lane_f, finishe
         )  # fmt: skip
         _env_lane(k, out, out_finish, t, gain, fs, meas, fr, vmax, brk, max_t, w, prev_action,
                   fr_obs, rpm_obs, obs, reward, flags)  # fmt: skip
+
+
+#: Where :func:`_step`'s arguments (``_TurningCore._kernel_args``) hold the lanes: axis 0
+#: or none (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
+_STEP_AXES = (
+    0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, None, None, 0, 0, None, None, 0, None, None, 0, 0,
+)  # fmt: skip
 
 
 class _TurningCore:
@@ -263,6 +271,9 @@ class _TurningCore:
         self.names = np.full(n, "", dtype=object)
         self._args: tuple | None = None
         self._args_version = -1
+        #: The blocks of lanes the kernel steps at once (one thread unless a vector env
+        #: asks for more).
+        self.blocks = LaneBlocks(n)
 
     def _bind_views(self) -> None:
         """Name the columns of ``ef`` (``_EF``) and ``eb`` (``_EB``)."""
@@ -415,7 +426,7 @@ class _TurningCore:
         through it first (``machining_envs.core.actuation``)."""
         if self.act_lanes is not None:
             self.in_command[:] = self.act_lanes.apply(self.in_command)
-        _step(*self._kernel_args())
+        self.blocks.run(_step, self._kernel_args(), _STEP_AXES)
         if self.power_lanes:
             self._spindle_drives()
 
@@ -694,7 +705,8 @@ class TurningEnv(gym.Env):
         super().reset(seed=seed)
         self._ended = False
         core = self._core
-        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        with one_blas_thread():  # see machining_envs.core.blocks
+            core.start(0, scenario_option(options, self.default_scenario), self.np_random)
         info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         self.plant = core.lanes
@@ -750,7 +762,8 @@ class TurningVectorEnv(LaneVectorEnv):
     """``machining_envs/Turning-v0`` as a native vector env: N lathes stepped as arrays.
 
     ``gym.make_vec("machining_envs/Turning-v0", num_envs=N, **kwargs)`` takes the keyword
-    arguments of :class:`TurningEnv` (but not ``render_mode``). Lane ``i`` after
+    arguments of :class:`TurningEnv` (but not ``render_mode``), and ``num_threads``: the
+    threads that step the lanes (``machining_envs.core.vector``). Lane ``i`` after
     ``reset(seed=s)`` runs exactly the episode ``TurningEnv.reset(seed=s + i)`` runs, with
     the same observations, rewards and ``info`` (here a dict of arrays); every lane draws
     its own scenario from its own generator. Finished lanes are reset in the same step
@@ -768,8 +781,10 @@ class TurningVectorEnv(LaneVectorEnv):
         reward: TurningReward | dict | None = None,
         max_episode_time_s: float = 200.0,
         actuation: Actuation | dict | None = None,
+        num_threads: int = 1,
         **overrides,
     ):
+        check_num_threads(num_threads)
         self._core = _TurningCore(
             type(self).__name__,
             check_num_envs(num_envs),
@@ -781,7 +796,10 @@ class TurningVectorEnv(LaneVectorEnv):
             overrides,
             actuation,
         )
-        super().__init__(num_envs, self._core.observation_space, self._core.action_space)
+        super().__init__(
+            num_envs, self._core.observation_space, self._core.action_space, num_threads
+        )
+        self._core.blocks = self.lane_blocks
         self.default_scenario = scenario
         self.params = self._core.params
         self.command_map = self._core.command_map

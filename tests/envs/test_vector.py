@@ -239,3 +239,99 @@ def test_sb3_trains_and_evaluates_through_the_adapter(env_id):
     model.learn(256)
     mean, _ = evaluate_policy(model, venv, n_eval_episodes=2)
     assert np.isfinite(mean)
+
+
+#: Time limits that end every lane's episode within the 160 steps of the comparison on
+#: threads (Turning-v0's tools break sooner).
+THREAD_KWARGS = {
+    "machining_envs/EndMilling-v0": {"max_episode_time_s": 8.0},
+    "machining_envs/MicroDrilling-v0": {"max_episode_time_s": 0.5},
+    "machining_envs/Contouring-v0": {"max_episode_time_s": 0.01},
+    "machining_envs/ContouringFeed-v0": {"max_episode_time_s": 0.5},
+}
+
+
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_lanes_on_threads_step_as_on_one(env_id):
+    """``num_threads``: 300 lanes on two threads (blocks of 128 and 172 lanes) give every
+    lane's observations, rewards, ends and info, final ones included, bit for bit as on one
+    thread, across autoresets and a pickle round trip."""
+    import pickle
+
+    n = 300
+    kwargs = THREAD_KWARGS.get(env_id, {})
+    one = gym.make_vec(env_id, num_envs=n, **kwargs)
+    two = gym.make_vec(env_id, num_envs=n, num_threads=2, **kwargs)
+    assert one.unwrapped.lane_blocks.edges == [(0, n)]
+    assert two.unwrapped.lane_blocks.edges == [(0, 128), (128, n)]
+
+    def same(a, b, where):
+        for x, y in zip(a[:4], b[:4], strict=True):
+            np.testing.assert_array_equal(x, y, err_msg=where)
+        assert a[4].keys() == b[4].keys()
+        for k, v in a[4].items():
+            w = b[4][k]
+            if k == "final_info":
+                same((0, 0, 0, 0, v), (0, 0, 0, 0, w), where)
+            elif v.dtype == object:  # names, final observations
+                assert all(_same(p, q) for p, q in zip(v, w, strict=True)), (where, k)
+            else:
+                np.testing.assert_array_equal(v, w, err_msg=f"{where}: {k}")
+
+    o1, i1 = one.reset(seed=4)
+    o2, i2 = two.reset(seed=4)
+    same((o1, 0, 0, 0, i1), (o2, 0, 0, 0, i2), "reset")
+    rng = np.random.default_rng(2)
+    ends = 0
+    for step in range(160):
+        if step == 80:
+            two = pickle.loads(pickle.dumps(two))
+        a = _actions(rng, env_id, one.single_action_space, n)
+        r1, r2 = one.step(a), two.step(a)
+        same(r1, r2, f"step {step}")
+        ends += int(np.sum(r1[2] | r1[3]))
+    assert ends >= n, "the comparison should cross autoresets"
+    one.close()
+    two.close()
+
+
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_a_bad_thread_count_is_refused_naming_it(env_id):
+    with pytest.raises(ValueError, match=r"num_threads must be an integer in \[1, 256\], got 0"):
+        gym.make_vec(env_id, num_envs=2, num_threads=0)
+    with pytest.raises(TypeError, match="num_threads"):
+        gym.make_vec(env_id, num_envs=2, num_threads=1.5)
+
+
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_resets_run_with_one_blas_thread(env_id, monkeypatch):
+    """Every reset of a lane (the vector env's, at reset and autoreset, and the single
+    env's) runs with BLAS on one thread, whose threads would otherwise spin on the cores
+    after the discretisations' calls (``machining_envs.core.blocks``)."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    seen = []
+
+    def watch(core):
+        start = core.start
+
+        def watched(*args, **kwargs):
+            seen.append([i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"])
+            return start(*args, **kwargs)
+
+        monkeypatch.setattr(core, "start", watched)
+
+    kwargs = ENV_KWARGS.get(env_id, {})
+    with threadpool_limits(2, user_api="blas"):
+        venv = gym.make_vec(env_id, num_envs=3, **kwargs)
+        watch(venv.unwrapped._core)
+        venv.reset(seed=0)
+        rng = np.random.default_rng(0)
+        for _ in range(400):
+            venv.step(_actions(rng, env_id, venv.single_action_space, 3))
+        env = gym.make(env_id, **kwargs)
+        watch(env.unwrapped._core)
+        env.reset(seed=0)
+        assert all(i["num_threads"] == 2 for i in threadpool_info() if i["user_api"] == "blas")
+    assert len(seen) > 4, "the run should cross autoresets"
+    assert all(counts and all(n == 1 for n in counts) for counts in seen), seen

@@ -1,0 +1,169 @@
+"""Blocks of lanes stepped on threads (``machining_envs.core.blocks``)."""
+
+import pickle
+import threading
+
+import numpy as np
+import pytest
+
+from machining_envs.core.blocks import (
+    ALIGN,
+    MAX_THREADS,
+    MIN_BLOCK,
+    SCRATCH,
+    LaneBlocks,
+    block_edges,
+    check_num_threads,
+    one_blas_thread,
+)
+
+
+@pytest.mark.parametrize("n", [1, 5, 127, 128, 255, 256, 300, 1000, 1024, 8192, 10_001])
+@pytest.mark.parametrize("threads", [1, 2, 3, 4, 16, 256])
+def test_blocks_cover_the_lanes_in_order(n, threads):
+    edges = block_edges(n, threads)
+    assert edges[0][0] == 0 and edges[-1][1] == n
+    for (_, hi), (lo, _) in zip(edges[:-1], edges[1:], strict=True):
+        assert hi == lo and lo % ALIGN == 0
+    assert 1 <= len(edges) <= threads
+    # as many blocks as the lanes allow (a small batch stays on one thread), none much
+    # smaller than MIN_BLOCK (an edge moves by at most ALIGN / 2 to fall on a multiple)
+    assert len(edges) == max(1, min(threads, n // MIN_BLOCK))
+    if len(edges) > 1:
+        assert all(hi - lo >= MIN_BLOCK - ALIGN for lo, hi in edges)
+
+
+def test_bad_thread_counts_are_refused_naming_the_parameter():
+    for bad in (0, -1, MAX_THREADS + 1):
+        with pytest.raises(
+            ValueError, match=rf"num_threads must be an integer in \[1, {MAX_THREADS}\]"
+        ):
+            check_num_threads(bad)
+    for bad in (2.0, "2", None, True):
+        with pytest.raises(TypeError, match="num_threads"):
+            check_num_threads(bad)
+    assert check_num_threads(np.int64(3)) == 3
+
+
+def _fill(ids, cols, rows, scratch, shared, value):
+    """A kernel over lanes: lane k writes its own row and column, using ``scratch``."""
+    for k in range(ids.shape[0]):
+        scratch[:] = ids[k] * shared[0]
+        rows[k] = scratch.sum() + value
+        cols[:, k] = ids[k]
+
+
+def test_a_kernel_on_blocks_gives_what_it_gives_on_all_lanes():
+    n = 700
+    ids = np.arange(n, dtype=float)
+    shared = np.array([2.0])
+    out = []
+    for threads in (1, 2, 3):
+        rows, cols, scratch = np.zeros(n), np.zeros((2, n)), np.zeros(4)
+        blocks = LaneBlocks(n, threads)
+        args = (ids, cols, rows, scratch, shared)
+        blocks.run(_fill, args, (0, 1, 0, SCRATCH, None), 0.5)
+        blocks.close()
+        out.append((rows, cols))
+    for rows, cols in out[1:]:
+        np.testing.assert_array_equal(rows, out[0][0])
+        np.testing.assert_array_equal(cols, out[0][1])
+    np.testing.assert_array_equal(out[0][0], 8.0 * ids + 0.5)
+
+
+def test_the_blocks_run_at_once_on_several_threads():
+    n = 1024
+    blocks = LaneBlocks(n, 4)
+    assert len(blocks.edges) == 4
+    seen = []
+    barrier = threading.Barrier(4, timeout=10)  # breaks unless the four blocks run together
+
+    def kernel(lanes):
+        barrier.wait()
+        seen.append((threading.get_ident(), lanes[0], lanes[-1]))
+
+    blocks.run(kernel, (np.arange(n),), (0,))
+    blocks.close()
+    assert len({t for t, _, _ in seen}) == 4
+    assert sorted((lo, hi) for _, lo, hi in seen) == [(lo, hi - 1) for lo, hi in blocks.edges]
+
+
+def test_an_error_in_a_block_is_raised_after_every_block_has_finished():
+    n = 512
+    done = np.zeros(n, dtype=bool)
+
+    def kernel(lanes, flags):
+        flags[:] = True
+        if lanes[0] == 0:
+            raise RuntimeError("block 0 failed")
+
+    blocks = LaneBlocks(n, 4)
+    with pytest.raises(RuntimeError, match="block 0 failed"):
+        blocks.run(kernel, (np.arange(n), done), (0, 0))
+    assert done.all()
+
+    def late(lanes, flags):
+        if lanes[0] != 0:
+            raise ValueError(f"block at {lanes[0]} failed")
+
+    with pytest.raises(ValueError, match="failed"):
+        blocks.run(late, (np.arange(n), done), (0, 0))
+    blocks.close()
+
+
+def test_axis_codes_are_checked_against_the_arguments():
+    blocks = LaneBlocks(512, 2)
+    with pytest.raises(ValueError, match="2 kernel arguments but 1 axis codes"):
+        blocks.run(_fill, (np.zeros(512), np.zeros(512)), (0,))
+    with pytest.raises(ValueError, match="axis code"):
+        blocks.run(lambda a: None, (np.zeros(512),), (2,))
+    with pytest.raises(ValueError, match="argument 0 .* lanes on axis 0"):
+        blocks.run(lambda a: None, (np.zeros(100),), (0,))
+    with pytest.raises(ValueError, match="argument 1 .* lanes on axis 1"):
+        blocks.run(lambda a, b: None, (np.zeros(512), np.zeros((512, 3))), (0, 1))
+    blocks.close()
+
+
+def test_blocks_pickle_without_their_threads():
+    blocks = LaneBlocks(1024, 2)
+    blocks.run(lambda a: None, (np.zeros(1024),), (0,))
+    copy = pickle.loads(pickle.dumps(blocks))
+    assert copy.edges == blocks.edges and copy.num_threads == 2
+    hits = np.zeros(1024)
+
+    def kernel(a):
+        a += 1.0
+
+    copy.run(kernel, (hits,), (0,))
+    np.testing.assert_array_equal(hits, 1.0)
+    copy.close()
+    blocks.close()
+
+
+def _blas_threads() -> list[int]:
+    from threadpoolctl import threadpool_info
+
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+
+def test_one_blas_thread_holds_until_the_last_user_leaves():
+    import scipy.linalg  # noqa: F401  (its BLAS too)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(2, user_api="blas"):  # the counts to come back to
+        before = _blas_threads()
+        assert before and all(n == 2 for n in before)
+        with one_blas_thread():
+            assert all(n == 1 for n in _blas_threads())
+            with one_blas_thread():
+                assert all(n == 1 for n in _blas_threads())
+            assert all(n == 1 for n in _blas_threads())
+            other = threading.Thread(target=lambda: one_blas_thread().__enter__())
+            other.start()
+            other.join()
+            one_blas_thread().__exit__(None, None, None)  # the other thread's use ends
+            assert all(n == 1 for n in _blas_threads())
+        assert _blas_threads() == before
+        with pytest.raises(RuntimeError, match="inside"), one_blas_thread():
+            raise RuntimeError("inside")
+        assert _blas_threads() == before
