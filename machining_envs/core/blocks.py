@@ -164,44 +164,51 @@ class LaneBlocks:
         self._pool = None
 
 
-class _OneBlasThread:
-    """The context of :func:`one_blas_thread`: BLAS libraries set to one thread on entry
-    (the outermost one, whatever the thread) and back to their own counts on the last exit."""
+_BLAS_LOCK = threading.Lock()
+_BLAS_SEEN: list = [0, 0, []]  # pid, len(sys.modules), the BLAS libraries' controllers
 
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._depth = 0
-        self._pid = 0
-        self._n_modules = 0
-        self._libs: list = []
-        self._counts: list[int] = []
 
-    def _blas(self) -> list:
-        # Look the libraries up (a few ms) at the first use, in a forked copy, and after any
-        # import since the last look (a module may have brought a BLAS of its own).
-        if self._pid != os.getpid() or self._n_modules != len(sys.modules):
+def _blas_libraries() -> list:
+    """threadpoolctl's controllers of the BLAS libraries loaded, looked up (a few ms) at the
+    first use, in a forked copy, and after any import since the last look (a module may
+    have brought a BLAS of its own)."""
+    with _BLAS_LOCK:
+        if _BLAS_SEEN[0] != os.getpid() or _BLAS_SEEN[1] != len(sys.modules):
             from threadpoolctl import ThreadpoolController
 
-            self._libs = ThreadpoolController().select(user_api="blas").lib_controllers
-            self._pid = os.getpid()
-            self._n_modules = len(sys.modules)
-        return self._libs
+            libs = ThreadpoolController().select(user_api="blas").lib_controllers
+            _BLAS_SEEN[:] = [os.getpid(), len(sys.modules), libs]
+        return _BLAS_SEEN[2]
+
+
+class _OneBlasThread(threading.local):
+    """The context of :func:`one_blas_thread`, per Python thread: the outermost entry sets
+    the BLAS libraries to one thread, its exit puts back the counts it found and gives up
+    the control of OpenBLAS's pool as ``threadpoolctl.threadpool_limits`` does (while
+    another thread holds that control, this thread's settings do nothing: threadpoolctl's
+    rule for OpenBLAS's process-wide pool)."""
+
+    def __init__(self) -> None:
+        self.depth = 0
+        self.saved: list = []
 
     def __enter__(self) -> None:
-        with self._lock:
-            if self._depth == 0:
-                libs = self._blas()
-                self._counts = [lib.num_threads for lib in libs]
-                for lib in libs:
-                    lib.set_num_threads(1)
-            self._depth += 1
+        if self.depth == 0:
+            self.saved = [(lib, lib.num_threads) for lib in _blas_libraries()]
+            for lib, _ in self.saved:
+                lib.set_num_threads(1)
+        self.depth += 1
 
     def __exit__(self, *exc) -> None:
-        with self._lock:
-            self._depth -= 1
-            if self._depth == 0:
-                for lib, count in zip(self._libs, self._counts, strict=True):
-                    lib.set_num_threads(count)
+        self.depth -= 1
+        if self.depth == 0:
+            for lib, count in self.saved:
+                lib.set_num_threads(count)
+            for cls in {type(lib) for lib, _ in self.saved}:
+                clear = getattr(cls, "clear_controlling_thread", None)
+                if clear is not None:
+                    clear()
+            self.saved = []
 
 
 _ONE_BLAS_THREAD = _OneBlasThread()
@@ -209,6 +216,6 @@ _ONE_BLAS_THREAD = _OneBlasThread()
 
 def one_blas_thread() -> _OneBlasThread:
     """A context in which the BLAS libraries numpy and scipy loaded run on one thread (about
-    1 µs to enter and leave); nested and concurrent uses keep it until the last one leaves.
-    The resets of every env run in it (see the module docstring)."""
+    10 µs to enter and leave); a nested use keeps it until the outermost one leaves. The
+    resets of every env run in it (see the module docstring)."""
     return _ONE_BLAS_THREAD

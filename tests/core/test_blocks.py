@@ -146,7 +146,7 @@ def _blas_threads() -> list[int]:
     return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
 
 
-def test_one_blas_thread_holds_until_the_last_user_leaves():
+def test_one_blas_thread_holds_until_the_outermost_use_leaves():
     import scipy.linalg  # noqa: F401  (its BLAS too)
     from threadpoolctl import threadpool_limits
 
@@ -158,12 +158,25 @@ def test_one_blas_thread_holds_until_the_last_user_leaves():
             with one_blas_thread():
                 assert all(n == 1 for n in _blas_threads())
             assert all(n == 1 for n in _blas_threads())
+            # another thread's use, meanwhile, changes nothing of this one's
             other = threading.Thread(target=lambda: one_blas_thread().__enter__())
             other.start()
             other.join()
-            one_blas_thread().__exit__(None, None, None)  # the other thread's use ends
             assert all(n == 1 for n in _blas_threads())
         assert _blas_threads() == before
         with pytest.raises(RuntimeError, match="inside"), one_blas_thread():
             raise RuntimeError("inside")
         assert _blas_threads() == before
+    # and the control of OpenBLAS's pool is given up: a limit set in another thread applies
+    with one_blas_thread():
+        pass
+    seen = []
+
+    def limit_elsewhere():
+        with threadpool_limits(1, user_api="blas"):
+            seen.extend(_blas_threads())
+
+    worker = threading.Thread(target=limit_elsewhere)
+    worker.start()
+    worker.join()
+    assert seen and all(n == 1 for n in seen)
