@@ -33,7 +33,7 @@ from machining_envs.contouring.scenarios import (
     check_feed,
     contouring_scenario,
 )
-from machining_envs.core.blocks import LaneBlocks, check_num_threads, one_blas_thread
+from machining_envs.core.blocks import LaneBlocks, check_num_threads
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
 from machining_envs.core.env import (
     ActionMap,
@@ -533,7 +533,10 @@ class _ContouringCore:
     def step(self) -> None:
         """Advance every lane by one servo period with the (checked, clipped) actions in
         ``act``; whether each was clipped is in ``clipped``."""
-        self.blocks.run(_contour_step, self._args, _STEP_AXES)
+        if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
+            _contour_step(*self._args)
+        else:
+            self.blocks.run(_contour_step, self._args, _STEP_AXES)
 
     def lane_info(self, k: int) -> dict:
         """The info of lane ``k`` after its reset or its last step."""
@@ -757,8 +760,7 @@ class ContouringEnv(gym.Env):
         super().reset(seed=seed)
         self._ended = False
         core = self._core
-        with one_blas_thread():  # see machining_envs.core.blocks
-            core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
         info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         #: The table of this episode (its true parameters in ``plant.params``).

@@ -52,7 +52,7 @@ from machining_envs.core.actuation import (
     configure_lane,
     resolve_actuation,
 )
-from machining_envs.core.blocks import SCRATCH, LaneBlocks, check_num_threads, one_blas_thread
+from machining_envs.core.blocks import SCRATCH, LaneBlocks, check_num_threads
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
@@ -569,7 +569,10 @@ class _FeedCore:
         if self.act_lanes is not None:
             asked = self._c[5] + self._c[6] * self.in_action
             self.applied[:] = self.act_lanes.apply(asked)
-        self.blocks.run(_feed_step, self._args, _STEP_AXES)
+        if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
+            _feed_step(*self._args)
+        else:
+            self.blocks.run(_feed_step, self._args, _STEP_AXES)
 
     def _bind(self) -> None:
         """Gather the kernel's arguments once (again whenever an array is replaced, as
@@ -822,8 +825,7 @@ class ContouringFeedEnv(gym.Env):
         super().reset(seed=seed)
         self._ended = False
         core = self._core
-        with one_blas_thread():  # see machining_envs.core.blocks
-            core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
         info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         self._path = core.paths[0]

@@ -19,10 +19,12 @@ of:
   array of the same shape (the first block the array itself).
 
 Resets run on the calling thread, and some of them (the exact discretisations of the
-turning and contouring plants, through scipy) call OpenBLAS, whose threads then spin for a
-while after each call, on the cores the lane threads need (the kernels of a two-thread
-contouring env ran no faster than one). :func:`one_blas_thread` runs a reset with BLAS on
-one thread: the numbers are the same, the cores stay free.
+turning and contouring plants, through scipy) call OpenBLAS, whose threads spin for about
+0.1 ms after every call, even a 4x4 product. A single env resets now and then, but a vector
+env of many lanes resets some at almost every step, and its BLAS threads then kept the
+other cores busy: a two-thread ContouringFeed-v0 ran no faster than one. So a vector env
+runs its resets in :func:`one_blas_thread`, with BLAS on one thread: the numbers are the
+same, the cores stay free.
 
 This module imports numpy, threadpoolctl and the standard library only.
 """
@@ -89,6 +91,9 @@ class LaneBlocks:
         self.n = int(n)
         self.num_threads = check_num_threads(num_threads)
         self.edges = block_edges(self.n, self.num_threads)
+        #: One block: the kernel runs over all lanes on the calling thread (a core calls it
+        #: itself then, sparing :meth:`run`'s call, 0.7 µs of a single env's step).
+        self.one = len(self.edges) == 1
         self._pool: ThreadPoolExecutor | None = None
         self._pool_pid = 0
         # The last argument tuple seen (by identity) and its blocks' arguments.
@@ -138,7 +143,7 @@ class LaneBlocks:
         axis code per argument in ``axes``), at the same time on the threads, when there is
         more than one block; the kernel returns nothing. A kernel's error is raised once every
         block has finished."""
-        if len(self.edges) == 1:
+        if self.one:
             kernel(*args, *tail)
             return
         blocks = self._block_args(args, axes)
@@ -216,6 +221,6 @@ _ONE_BLAS_THREAD = _OneBlasThread()
 
 def one_blas_thread() -> _OneBlasThread:
     """A context in which the BLAS libraries numpy and scipy loaded run on one thread (about
-    10 µs to enter and leave); a nested use keeps it until the outermost one leaves. The
-    resets of every env run in it (see the module docstring)."""
+    20 µs to enter and leave); a nested use keeps it until the outermost one leaves. A
+    vector env's resets run in it (see the module docstring)."""
     return _ONE_BLAS_THREAD

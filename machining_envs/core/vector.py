@@ -27,7 +27,9 @@ info are in ``info["final_obs"]`` and ``info["final_info"]``, exactly as Gymnasi
 Every vector env takes ``num_threads`` (default 1): its kernel then steps blocks of lanes on
 that many threads at once (:mod:`machining_envs.core.blocks`; blocks of at least
 ``MIN_BLOCK`` lanes, so a small N runs on fewer), with the same numbers in every lane. The
-rest of a step (the checks, resets, info) stays on the calling thread.
+rest of a step (the checks, resets, info) stays on the calling thread; resets run with
+BLAS on one thread (``one_blas_thread``: OpenBLAS's threads spin after every call and would
+keep the other cores busy).
 """
 
 from __future__ import annotations

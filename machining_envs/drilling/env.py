@@ -10,7 +10,7 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
-from machining_envs.core.blocks import LaneBlocks, check_num_threads, one_blas_thread
+from machining_envs.core.blocks import LaneBlocks, check_num_threads
 from machining_envs.core.checks import check_below
 from machining_envs.core.env import (
     ActionMap,
@@ -379,7 +379,10 @@ class _DrillingCore:
         """Advance every lane with its action ``ev[:, _E_ACTION]`` (finite; clipped to the
         box, ``flags[:, _F_IN_CLIPPED]`` saying whether it was clipped already); the lanes'
         normals must hold a row for this step (:meth:`draw_normals`)."""
-        self.blocks.run(_step, self._args, _STEP_AXES)
+        if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
+            _step(*self._args)
+        else:
+            self.blocks.run(_step, self._args, _STEP_AXES)
 
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""
@@ -675,8 +678,7 @@ class MicroDrillingEnv(gym.Env):
         super().reset(seed=seed)
         self._ended = False
         core = self._core
-        with one_blas_thread():  # see machining_envs.core.blocks
-            core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
         info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         self.plant = core.lanes

@@ -16,7 +16,7 @@ from machining_envs.core.actuation import (
     configure_lane,
     resolve_actuation,
 )
-from machining_envs.core.blocks import LaneBlocks, check_num_threads, one_blas_thread
+from machining_envs.core.blocks import LaneBlocks, check_num_threads
 from machining_envs.core.checks import check_below
 from machining_envs.core.env import (
     ACTION_MAPS,
@@ -493,14 +493,23 @@ class _MillingCore:
         :meth:`draw_noise`; with CNC actuation on, the commands pass through it first
         (``machining_envs.core.actuation``) and ``info["command"]`` is what the drives got."""
         args = self._kernel_args()
-        run = self.blocks.run
         if self.act_lanes is None:
-            run(_step, args, _STEP_AXES, 3)
+            if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
+                _step(*args, 3)
+            else:
+                self.blocks.run(_step, args, _STEP_AXES, 3)
             return
-        run(_step, args, _STEP_AXES, 1)
+        self._run(args, 1)
         self.commands[:] = self.act_lanes.apply(self.commands)
         self.info_f[1] = self.commands
-        run(_step, args, _STEP_AXES, 2)
+        self._run(args, 2)
+
+    def _run(self, args: tuple, stage: int) -> None:
+        """:func:`_step` of ``stage`` over every lane (on the blocks of lanes, if several)."""
+        if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
+            _step(*args, stage)
+        else:
+            self.blocks.run(_step, args, _STEP_AXES, stage)
 
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""
@@ -760,8 +769,7 @@ class EndMillingEnv(gym.Env):
         super().reset(seed=seed)
         self._ended = False
         core = self._core
-        with one_blas_thread():  # see machining_envs.core.blocks
-            core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
         info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         self.plant = core.lanes

@@ -17,7 +17,7 @@ from machining_envs.core.actuation import (
     configure_lane,
     resolve_actuation,
 )
-from machining_envs.core.blocks import LaneBlocks, check_num_threads, one_blas_thread
+from machining_envs.core.blocks import LaneBlocks, check_num_threads
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_below, check_range
 from machining_envs.core.env import (
     ActionMap,
@@ -426,7 +426,10 @@ class _TurningCore:
         through it first (``machining_envs.core.actuation``)."""
         if self.act_lanes is not None:
             self.in_command[:] = self.act_lanes.apply(self.in_command)
-        self.blocks.run(_step, self._kernel_args(), _STEP_AXES)
+        if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
+            _step(*self._kernel_args())
+        else:
+            self.blocks.run(_step, self._kernel_args(), _STEP_AXES)
         if self.power_lanes:
             self._spindle_drives()
 
@@ -705,8 +708,7 @@ class TurningEnv(gym.Env):
         super().reset(seed=seed)
         self._ended = False
         core = self._core
-        with one_blas_thread():  # see machining_envs.core.blocks
-            core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
         info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         self.plant = core.lanes
