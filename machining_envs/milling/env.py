@@ -494,10 +494,7 @@ class _MillingCore:
         (``machining_envs.core.actuation``) and ``info["command"]`` is what the drives got."""
         args = self._kernel_args()
         if self.act_lanes is None:
-            if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
-                _step(*args, 3)
-            else:
-                self.blocks.run(_step, args, _STEP_AXES, 3)
+            self._run(args, 3)
             return
         self._run(args, 1)
         self.commands[:] = self.act_lanes.apply(self.commands)
