@@ -877,6 +877,8 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
     """
 
     env_name = "ContouringFeedEnv"
+    # Every reset discretises the lane's plant at its own parameters (scipy, BLAS).
+    resets_call_blas = True
 
     def __init__(
         self,

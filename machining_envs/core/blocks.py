@@ -22,9 +22,9 @@ Resets run on the calling thread, and some of them (the exact discretisations of
 turning and contouring plants, through scipy) call OpenBLAS, whose threads spin for about
 0.1 ms after every call, even a 4x4 product. A single env resets now and then, but a vector
 env of many lanes resets some at almost every step, and its BLAS threads then kept the
-other cores busy: a two-thread ContouringFeed-v0 ran no faster than one. So a vector env
-runs its resets in :func:`one_blas_thread`, with BLAS on one thread: the numbers are the
-same, the cores stay free.
+other cores busy: a two-thread ContouringFeed-v0 ran no faster than one. So the vector env
+of such a process runs its resets in :func:`one_blas_thread`, with BLAS on one thread: the
+numbers are the same, the cores stay free.
 
 This module imports numpy, threadpoolctl and the standard library only.
 """
@@ -221,6 +221,7 @@ _ONE_BLAS_THREAD = _OneBlasThread()
 
 def one_blas_thread() -> _OneBlasThread:
     """A context in which the BLAS libraries numpy and scipy loaded run on one thread (about
-    20 µs to enter and leave); a nested use keeps it until the outermost one leaves. A
-    vector env's resets run in it (see the module docstring)."""
+    20 µs to enter and leave, more in a busy step); a nested use keeps it until the
+    outermost one leaves. The resets of a vector env whose resets call BLAS run in it (see
+    the module docstring)."""
     return _ONE_BLAS_THREAD

@@ -27,14 +27,16 @@ info are in ``info["final_obs"]`` and ``info["final_info"]``, exactly as Gymnasi
 Every vector env takes ``num_threads`` (default 1): its kernel then steps blocks of lanes on
 that many threads at once (:mod:`machining_envs.core.blocks`; blocks of at least
 ``MIN_BLOCK`` lanes, so a small N runs on fewer), with the same numbers in every lane. The
-rest of a step (the checks, resets, info) stays on the calling thread; resets run with
-BLAS on one thread (``one_blas_thread``: OpenBLAS's threads spin after every call and would
-keep the other cores busy).
+rest of a step (the checks, resets, info) stays on the calling thread. A process whose
+resets call BLAS (``resets_call_blas``) runs them with BLAS on one thread
+(``one_blas_thread``: OpenBLAS's threads spin after every call and would keep the other
+cores busy).
 """
 
 from __future__ import annotations
 
 import abc
+import contextlib
 import math
 from typing import Any
 
@@ -48,6 +50,8 @@ from machining_envs.core.blocks import LaneBlocks, one_blas_thread
 from machining_envs.core.env import real_actions
 
 __all__ = ["LaneVectorEnv", "check_num_envs"]
+
+_NO_CONTEXT = contextlib.nullcontext()
 
 
 def check_num_envs(num_envs) -> int:
@@ -65,6 +69,9 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
     #: Name used in error messages (the single env's class name, say).
     env_name: str = "LaneVectorEnv"
+    #: Whether the process's resets call BLAS (a plant discretised through scipy at every
+    #: reset): they then run with BLAS on one thread (``core.blocks.one_blas_thread``).
+    resets_call_blas: bool = False
 
     def __init__(
         self,
@@ -85,6 +92,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         #: The step info's keys (as ``_step_lanes`` returns them) -> the masks every lane
         #: gets, worked out once per set of keys.
         self._mask_keys: dict[tuple, tuple] = {}
+        self._pair_keys: dict[tuple, tuple] = {}
         self._every = np.ones(self.num_envs, dtype=bool)
         self.lane_rngs: list[np.random.Generator] = [
             seeding.np_random()[0] for _ in range(self.num_envs)
@@ -112,7 +120,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             for i, s in enumerate(seeds):
                 if s is not None:
                     self.lane_rngs[i] = seeding.np_random(s)[0]
-        with one_blas_thread():
+        with one_blas_thread() if self.resets_call_blas else _NO_CONTEXT:
             obs = self._reset_lanes(np.arange(self.num_envs), options)
         self._started = True
         info = self._info_now()
@@ -147,6 +155,18 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         info.update(dict.fromkeys(masks, every))
         return every
 
+    def _mask_pairs(self, info: dict) -> tuple:
+        """``(key, "_" + key)`` for every key of ``info`` but the masks, worked out once per
+        set of keys."""
+        keys = tuple(info)
+        pairs = self._pair_keys.get(keys)
+        if pairs is None:
+            pairs = tuple((k, "_" + k) for k in keys if k[0] != "_")
+            if len(self._pair_keys) >= 64:  # a few sets of keys occur; never let it grow
+                self._pair_keys.clear()
+            self._pair_keys[keys] = pairs
+        return pairs
+
     def step(self, actions):
         if not self._started:
             raise RuntimeError(f"{self.env_name} (vector): call reset() before step()")
@@ -172,18 +192,17 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         if not done.any():
             return obs, reward, terminated, truncated, info
         lanes = np.flatnonzero(done)
-        final_obs = np.full(self.num_envs, None, dtype=object)
+        final_obs = np.empty(self.num_envs, dtype=object)  # all None
         for i in lanes.tolist():
             final_obs[i] = obs[i].copy()
         # The step's info arrays are the final info; _reset_lanes does not write to them.
         obs = obs.copy()
-        with one_blas_thread():  # see machining_envs.core.blocks
+        with one_blas_thread() if self.resets_call_blas else _NO_CONTEXT:
             obs[lanes] = self._reset_lanes(lanes, None)
         final_info: dict = {}
-        for k, v in info.items():
-            if k[0] != "_":
-                mask = info["_" + k]
-                final_info[k], final_info["_" + k] = v, done if mask is every else mask & done
+        for k, mk in self._mask_pairs(info):
+            mask = info[mk]
+            final_info[k], final_info[mk] = info[k], done if mask is every else mask & done
         top = self._info_now()  # every lane's info again: the reset lanes' is their reset info
         self._with_masks(top)
         top["final_obs"], top["_final_obs"] = final_obs, done.copy()

@@ -773,6 +773,8 @@ class TurningVectorEnv(LaneVectorEnv):
     """
 
     env_name = "TurningEnv"
+    # Every reset discretises the lane's plant at its own parameters (scipy, BLAS).
+    resets_call_blas = True
 
     def __init__(
         self,

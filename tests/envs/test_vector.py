@@ -303,11 +303,21 @@ def test_a_bad_thread_count_is_refused_naming_it(env_id):
         gym.make_vec(env_id, num_envs=2, num_threads=1.5)
 
 
+#: The processes whose every reset discretises a plant through scipy, and so calls BLAS.
+BLAS_RESETS = {
+    "machining_envs/Turning-v0",
+    "machining_envs/Contouring-v0",
+    "machining_envs/ContouringFeed-v0",
+}
+
+
 @pytest.mark.parametrize("env_id", VECTOR_IDS)
-def test_resets_run_with_one_blas_thread(env_id, monkeypatch):
-    """Every reset of a vector env's lane (at reset and autoreset) runs with BLAS on one
-    thread, whose threads would otherwise spin on the cores after the discretisations'
-    calls (``machining_envs.core.blocks``); the counts are as they were afterwards."""
+def test_resets_that_call_blas_run_with_one_blas_thread(env_id, monkeypatch):
+    """A vector env whose resets call BLAS runs every lane's reset (at reset and autoreset)
+    with BLAS on one thread, whose threads would otherwise spin on the cores after the
+    discretisations' calls (``machining_envs.core.blocks``); the others leave BLAS as it is
+    (entering and leaving the limit costs tens of µs a step); the counts are as they were
+    afterwards."""
     from threadpoolctl import threadpool_info, threadpool_limits
 
     seen = []
@@ -324,6 +334,7 @@ def test_resets_run_with_one_blas_thread(env_id, monkeypatch):
     kwargs = ENV_KWARGS.get(env_id, {})
     with threadpool_limits(2, user_api="blas"):
         venv = gym.make_vec(env_id, num_envs=3, **kwargs)
+        assert venv.unwrapped.resets_call_blas == (env_id in BLAS_RESETS)
         watch(venv.unwrapped._core)
         venv.reset(seed=0)
         rng = np.random.default_rng(0)
@@ -331,4 +342,5 @@ def test_resets_run_with_one_blas_thread(env_id, monkeypatch):
             venv.step(_actions(rng, env_id, venv.single_action_space, 3))
         assert all(i["num_threads"] == 2 for i in threadpool_info() if i["user_api"] == "blas")
     assert len(seen) > 4, "the run should cross autoresets"
-    assert all(counts and all(n == 1 for n in counts) for counts in seen), seen
+    expected = 1 if env_id in BLAS_RESETS else 2
+    assert all(counts and all(n == expected for n in counts) for counts in seen), seen
