@@ -90,9 +90,8 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         self.action_space = batch_space(single_action_space, self.num_envs)
         self.render_mode = None
         #: The step info's keys (as ``_step_lanes`` returns them) -> the masks every lane
-        #: gets, worked out once per set of keys.
+        #: gets and the (key, mask) pairs, worked out once per set of keys.
         self._mask_keys: dict[tuple, tuple] = {}
-        self._pair_keys: dict[tuple, tuple] = {}
         self._every = np.ones(self.num_envs, dtype=bool)
         self.lane_rngs: list[np.random.Generator] = [
             seeding.np_random()[0] for _ in range(self.num_envs)
@@ -141,31 +140,21 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         """Every lane's info as it stands, as new arrays (a key only some lanes hold comes
         with its ``_key`` mask); a lane just reset reports its reset info."""
 
-    def _with_masks(self, info: dict) -> np.ndarray:
+    def _with_masks(self, info: dict) -> tuple[np.ndarray, tuple]:
         """Add to ``info`` (a new dict) the mask of every lane for each key that has none:
-        one array, shared by those keys, which is returned."""
+        one array, shared by those keys. Returns it, and ``(key, "_" + key)`` for every key
+        but the masks; both worked out once per set of keys."""
         keys = tuple(info)
-        masks = self._mask_keys.get(keys)
-        if masks is None:
+        known = self._mask_keys.get(keys)
+        if known is None:
             masks = tuple("_" + k for k in keys if k[0] != "_" and "_" + k not in info)
+            pairs = tuple((k, "_" + k) for k in keys if k[0] != "_")
             if len(self._mask_keys) >= 64:  # a few sets of keys occur; never let it grow
                 self._mask_keys.clear()
-            self._mask_keys[keys] = masks
+            known = self._mask_keys[keys] = (masks, pairs)
         every = self._every.copy()  # a copy of a template: np.ones costs several times more
-        info.update(dict.fromkeys(masks, every))
-        return every
-
-    def _mask_pairs(self, info: dict) -> tuple:
-        """``(key, "_" + key)`` for every key of ``info`` but the masks, worked out once per
-        set of keys."""
-        keys = tuple(info)
-        pairs = self._pair_keys.get(keys)
-        if pairs is None:
-            pairs = tuple((k, "_" + k) for k in keys if k[0] != "_")
-            if len(self._pair_keys) >= 64:  # a few sets of keys occur; never let it grow
-                self._pair_keys.clear()
-            self._pair_keys[keys] = pairs
-        return pairs
+        info.update(dict.fromkeys(known[0], every))
+        return every, known[1]
 
     def step(self, actions):
         if not self._started:
@@ -187,7 +176,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
                 "(not finite); no lane was stepped"
             )
         obs, reward, terminated, truncated, info = self._step_lanes(a)
-        every = self._with_masks(info)  # _step_lanes' dict is new at every step
+        every, pairs = self._with_masks(info)  # _step_lanes' dict is new at every step
         done = np.logical_or(terminated, truncated)
         if not done.any():
             return obs, reward, terminated, truncated, info
@@ -200,7 +189,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         with one_blas_thread() if self.resets_call_blas else _NO_CONTEXT:
             obs[lanes] = self._reset_lanes(lanes, None)
         final_info: dict = {}
-        for k, mk in self._mask_pairs(info):
+        for k, mk in pairs:
             mask = info[mk]
             final_info[k], final_info[mk] = info[k], done if mask is every else mask & done
         top = self._info_now()  # every lane's info again: the reset lanes' is their reset info
