@@ -1,6 +1,7 @@
 """Compiled building blocks the process kernels share: the fused multiply-add, the small
-matrix-vector products of the sampled plants with numpy's rounding, and eight-value vectors
-(fused multiply-adds of whole columns) for the contouring servo's closed-loop recursion.
+matrix-vector products of the sampled plants with numpy's rounding, eight-value vectors
+(fused multiply-adds of whole columns) for the contouring servo's closed-loop recursion, and
+the powers of a row of values (the force laws at a period's sub-steps) in vectors.
 
 The plants' sampled linear parts are products of small matrices with short vectors, once per
 lane and control period. A library call for each costs more than the arithmetic, so the
@@ -18,7 +19,18 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic, models, register_model
 
-__all__ = ["add8", "add_scaled8", "fma", "get8", "load8", "matvec", "store8", "vec8", "zero8"]
+__all__ = [
+    "add8",
+    "add_scaled8",
+    "fma",
+    "get8",
+    "load8",
+    "matvec",
+    "powers",
+    "store8",
+    "vec8",
+    "zero8",
+]
 
 
 @intrinsic
@@ -229,3 +241,145 @@ def matvec(a, n, m, x, out):
             q = m - 1
             for r in range(n):
                 out[k, r] = fma(a[i, r * m + q], x[k, q], out[k, r])
+
+
+# ---- powers of a row of values ------------------------------------------------------------
+
+
+@intrinsic
+def float_bits(typingctx, x):
+    """The 64 bits of the float64 ``x``, as an int64 (its sign bit the int's)."""
+    if x != types.float64:
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.IntType(64))
+
+    return types.int64(types.float64), codegen
+
+
+@intrinsic
+def bits_float(typingctx, i):
+    """The float64 whose 64 bits are those of the int64 ``i`` (:func:`float_bits` undone)."""
+    if i != types.int64:
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.DoubleType())
+
+    return types.float64(types.int64), codegen
+
+
+@intrinsic
+def quotient(typingctx, a, b):
+    """``a / b`` for float64s, as the processor divides (no Python ``ZeroDivisionError``
+    check, whose branch keeps a loop out of the processor's vectors)."""
+    if not (a == types.float64 and b == types.float64):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.fdiv(*args)
+
+    return types.float64(types.float64, types.float64), codegen
+
+
+#: ln 2 in two parts: the first with 32 significant bits (so that ``n * _LN2_HI`` is exact
+#: for every exponent ``n`` of a float64), the second the rest (ln 2 - ``_LN2_HI``, rounded).
+_LN2_HI = 0.6931471806019545  # 0x1.62e42ffp-1
+_LN2_LO = -4.2009150726810846e-11
+_INV_LN2 = 1.4426950408889634
+#: 1.5 * 2**52: a float64 of magnitude below 2**51 added to it is rounded to an integer,
+#: which the low bits of the sum hold; an int64 of that size added to its bits is that float.
+_ROUND = 6755399441055744.0
+_ROUND_BITS = 0x4338000000000000
+#: The bits of sqrt(1/2): ``x`` is split as ``z 2**k`` with ``z`` in [sqrt(1/2), sqrt(2)).
+_SQRT_HALF_BITS = 0x3FE6A09E667F3BCD
+#: Normal positive finite float64s have bits in [_MIN_NORMAL_BITS, _INF_BITS).
+_MIN_NORMAL_BITS = 0x0010000000000000
+_INF_BITS = 0x7FF0000000000000
+#: Largest |p ln x| taken by the vector path: 2**n stays a normal number.
+_Y_MAX = 700.0
+
+
+@numba.njit(cache=True, inline="always")
+def _pow_vector(x, p):
+    """``x ** p`` as ``exp(p ln x)`` from multiplies, fused multiply-adds, one division and
+    bit operations only, so that a loop of them runs in the processor's vectors; NaN where
+    ``x`` is not a normal positive finite number or ``|p ln x|`` exceeds 700 (the caller
+    takes those from libm's ``pow``).
+
+    ``ln x = k ln 2 + ln z`` with ``x = z 2**k``, ``z`` in [sqrt(1/2), sqrt(2)), and
+    ``ln z = 2 atanh(s)``, ``s = (z - 1) / (z + 1)`` (``|s| <= 0.172``), by its series to
+    ``s**23`` (the next term is below 2**-60 of the sum); ``exp y = 2**n exp r`` with
+    ``n = round(y / ln 2)``, ``|r| <= ln(2) / 2``, by its Taylor series to ``r**13`` (the
+    next term below 2**-58 of the sum). Both series are summed by Estrin's scheme. The
+    relative error stays below ``4.5 (|p ln x| + 1) 2**-53``, most of it the rounding of
+    ``p ln x`` (``tests/core/test_kernels.py`` measures it against ``pow``)."""
+    b = float_bits(x)
+    t = b - _SQRT_HALF_BITS
+    k = t >> 52
+    z = bits_float(b - (k << 52))
+    kf = bits_float(k + _ROUND_BITS) - _ROUND  # k as a float64, exactly
+    f = z - 1.0
+    s = quotient(f, 2.0 + f)
+    # ln z = 2s + s w q(w), q(w) = sum 2 w**i / (2i + 3) for i <= 10, by Estrin's scheme
+    # (pairs, then powers of w**2): a short chain of dependent operations, which the
+    # processor overlaps from value to value, where Horner's is one long chain.
+    w = s * s
+    w2 = w * w
+    w4 = w2 * w2
+    q01 = fma(w, 2.0 / 5.0, 2.0 / 3.0)
+    q23 = fma(w, 2.0 / 9.0, 2.0 / 7.0)
+    q45 = fma(w, 2.0 / 13.0, 2.0 / 11.0)
+    q67 = fma(w, 2.0 / 17.0, 2.0 / 15.0)
+    q89 = fma(w, 2.0 / 21.0, 2.0 / 19.0)
+    q03 = fma(w2, q23, q01)
+    q47 = fma(w2, q67, q45)
+    q8x = fma(w2, 2.0 / 23.0, q89)
+    q = fma(w4 * w4, q8x, fma(w4, q47, q03))
+    ln_z = fma(s * w, q, 2.0 * s)
+    y = p * fma(kf, _LN2_HI, fma(kf, _LN2_LO, ln_z))
+    nr = fma(y, _INV_LN2, _ROUND)  # n + 1.5 * 2**52: n in its low bits
+    n = nr - _ROUND
+    r = fma(-n, _LN2_HI, y)
+    r = fma(-n, _LN2_LO, r)
+    # exp r = sum r**i / i! for i <= 13, by Estrin's scheme as above.
+    r2 = r * r
+    r4 = r2 * r2
+    e01 = r + 1.0
+    e23 = fma(r, 1.0 / 6.0, 0.5)
+    e45 = fma(r, 1.0 / 120.0, 1.0 / 24.0)
+    e67 = fma(r, 1.0 / 5040.0, 1.0 / 720.0)
+    e89 = fma(r, 1.0 / 362880.0, 1.0 / 40320.0)
+    eab = fma(r, 1.0 / 39916800.0, 1.0 / 3628800.0)
+    ecd = fma(r, 1.0 / 6227020800.0, 1.0 / 479001600.0)
+    e03 = fma(r2, e23, e01)
+    e47 = fma(r2, e67, e45)
+    e8b = fma(r2, eab, e89)
+    e = fma(r4 * r4, fma(r4, ecd, e8b), fma(r4, e47, e03))
+    scale = bits_float((float_bits(nr) - _ROUND_BITS + 1023) << 52)
+    ok = (b >= _MIN_NORMAL_BITS) & (b < _INF_BITS) & (abs(y) <= _Y_MAX)
+    return e * scale if ok else np.nan
+
+
+@numba.njit(cache=True, inline="always")
+def powers(src, so, dst, do, n, p):
+    """``dst[do + j] = max(src[so + j], 0.0) ** p`` for ``j < n`` (1-d float64 arrays; NaN
+    stays NaN), in the processor's vectors.
+
+    The force laws of the turning and milling plants raise the feed at every sub-step of a
+    period to a power; libm's ``pow``, one value at a time, was a third of those kernels'
+    arithmetic. Here the values go through :func:`_pow_vector`, and those it does not take
+    (zero, negative, subnormal, infinite or NaN values, results beyond about 1e+-304)
+    through ``pow`` after it, so that every special case is libm's. A value differs from
+    ``pow``'s by a few units in the last place (below 5e-15 for the plants' feeds and
+    exponents), and is the same wherever it falls in the row, so on any number of lanes or
+    threads. ``src`` and ``dst`` may be one array if the two ranges do not overlap.
+    """
+    x = src[so : so + n]  # views: indices from 0, which the compiler knows are not negative
+    y = dst[do : do + n]
+    for j in range(n):
+        y[j] = _pow_vector(x[j], p)
+    for j in range(n):
+        if y[j] != y[j]:
+            y[j] = max(x[j], 0.0) ** p

@@ -48,7 +48,7 @@ import numba
 import numpy as np
 
 from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
-from machining_envs.core.kernels import matvec
+from machining_envs.core.kernels import matvec, powers
 from machining_envs.core.lti import zoh, zoh_tf
 
 __all__ = [
@@ -650,14 +650,17 @@ def step_lanes(
         power = lane_f[k, 5] != 0.0
         p_end = work[k, 2 * m - 1]
         # buf[k] = [T_0, u_0, u_1 .. u_M]: the static torque at this sample's sub-steps
-        for j in range(m):
-            v = work[k, j]
-            if v <= 0.0:  # no reverse feed; pow(0, e) = 0 (NaN passes, caught by the env)
-                buf[k, 2 + j] = 0.0
-            elif fexp == 1.0:
-                buf[k, 2 + j] = v * ftpv
-            else:
-                buf[k, 2 + j] = (v * ftpv) ** fexp
+        if fexp == 1.0:
+            for j in range(m):
+                v = work[k, j]
+                # no reverse feed (NaN passes, caught by the env)
+                buf[k, 2 + j] = 0.0 if v <= 0.0 else v * ftpv
+        else:  # (f_t)**e, 0 for no or reverse feed; the feeds per tooth wait in the
+            # place of the lagged torques, which the lag's product fills below
+            wk = work[k]
+            for j in range(m):
+                wk[tq + j] = wk[j] * ftpv
+            powers(wk, tq, buf[k], 2, m, fexp)
         i = seg[k]
         lo = work[k, m]
         hi = lo

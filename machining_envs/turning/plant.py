@@ -31,7 +31,7 @@ import numba
 import numpy as np
 
 from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
-from machining_envs.core.kernels import fma, matvec
+from machining_envs.core.kernels import fma, matvec, powers
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
 
 __all__ = [
@@ -618,8 +618,7 @@ def step_lane(
     p_end = y[m - 1]
     b = buf[k]
     force = b[n_f : n_f + m]
-    for j in range(m):
-        force[j] = max(y[m + j], 0.0) ** pexp
+    powers(y, m, b, n_f, m, pexp)  # force[j] = max(y[m + j], 0) ** p
     e = edges[k]
     i = seg[k]
     lo, hi = (p_start, p_end) if p_start <= p_end else (p_end, p_start)
