@@ -628,9 +628,11 @@ def step_lanes(
     of ``LANE_SIGNALS``, ``out_seg[k]`` the workpiece segment and ``out_finish[k]`` the time
     the tool reached the workpiece's end in this sample (NaN if it did not). The
     arithmetic of a lane is that of one cut, whatever the other lanes do. ``work`` is
-    scratch space, ``(n, 3 M + 3)``: ``work[k, :2M + 3]`` gets ``big[0] @ z[k]`` (feed
+    scratch space, ``(n, 4 M + 3)``: ``work[k, :2M + 3]`` gets ``big[0] @ z[k]`` (feed
     velocity at the M sub-steps, position at the M sub-steps, next ``[Vf, dVf/dt, x]``),
-    ``work[k, 2M + 3:]`` the M lagged torques.
+    ``work[k, 2M + 3 : 3M + 3]`` the M lagged torques (before them, the feeds per tooth and
+    the depths' powers on their way to ``buf``), ``work[k, 3M + 3:]`` the depths along a
+    taper.
     """
     n_lanes = z.shape[0]
     tq = 2 * m + 3
@@ -685,11 +687,19 @@ def step_lanes(
                     lane_f[k, 14] = i
                 for j in range(m):
                     buf[k, 2 + j] *= scale
+            elif power:  # a taper: the depths' powers in vectors, through the scratch
+                wk = work[k]
+                for j in range(m):
+                    wk[tq + m + j] = (work[k, m + j] - edges[k, i]) * sl + d0[k, i]
+                depth_end = wk[tq + 2 * m - 1]
+                powers(wk, tq + m, wk, tq, m, dexp)
+                for j in range(m):
+                    buf[k, 2 + j] *= c * wk[tq + j]
             else:
                 depth_end = 0.0
                 for j in range(m):
                     depth_end = (work[k, m + j] - edges[k, i]) * sl + d0[k, i]
-                    buf[k, 2 + j] *= c * depth_end**dexp if power else c * depth_end
+                    buf[k, 2 + j] *= c * depth_end
         else:
             n_s = nseg[k]
             depth_end = 0.0
@@ -810,7 +820,7 @@ class MillingLanes:
         self.out_segment = np.zeros(self.n, dtype=np.int64)
         self.out_finish = np.full(self.n, np.nan)
         #: Scratch space of the kernel (see :func:`step_lanes`).
-        self.work = np.zeros((self.n, 3 * m + 3))
+        self.work = np.zeros((self.n, 4 * m + 3))
 
     def start(self, lane: int, params: MillingParams, spindle_rpm: float, profile) -> None:
         """Start a new cut in ``lane``: tool at rest at the workpiece's start, no torque.
