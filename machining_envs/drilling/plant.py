@@ -59,6 +59,7 @@ from machining_envs.core.checks import (
     check_range,
     replace_checked,
 )
+from machining_envs.core.kernels import powers
 from machining_envs.core.lti import zoh
 
 __all__ = [
@@ -999,8 +1000,13 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
     and load; the four stages of every RK4 sub-step of the spindle; the new state and the
     sensors), so that the slow operations of different lanes (``pow`` above all) overlap in
     the processor; each lane's arithmetic is that of one hole, whatever the number of
-    lanes. (One function: the arrays are not passed on per lane.)
+    lanes. The friction law's powers ``w**n`` of each RK4 stage are taken for the lanes
+    together, in the processor's vectors (:func:`~machining_envs.core.kernels.powers`).
+    (One function: the arrays are not passed on per lane.)
     """
+    nb = k1 - k0
+    speeds = np.empty(nb)  # each lane's spindle speed at the stage (>= 0), then its power
+    friction = np.empty(nb)
     for k in range(k0, k1):
         voltage = inputs[k - k0, 0]
         feed = inputs[k - k0, 1]
@@ -1079,6 +1085,10 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
     for j in range(m):
         r = _G_HALF + 6 * j
         for k in range(k0, k1):
+            w = tmp[k - k0, _T_W]
+            speeds[k - k0] = w if w > 0.0 else 0.0
+        powers(speeds, 0, friction, 0, nb, g[_G_N])
+        for k in range(k0, k1):
             u = tmp[k - k0, _T_U]
             x1 = state[k, _S_X1]
             x2 = state[k, _S_X2]
@@ -1089,37 +1099,43 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
             wa = w if w > 0.0 else 0.0
             f = (
                 g[_G_K2] * xa
-                - g[_G_K3] * wa ** g[_G_N]
+                - g[_G_K3] * friction[k - k0]
                 - tmp[k - k0, _T_LOAD] / (wa if wa > _W_FLOOR else _W_FLOOR)
             )
             tmp[k - k0, _T_F1] = f
             wb = w + g[_G_H2] * f
             tmp[k - k0, _T_WB] = wb if wb > 0.0 else 0.0
+            speeds[k - k0] = tmp[k - k0, _T_WB]
+        powers(speeds, 0, friction, 0, nb, g[_G_N])
         for k in range(k0, k1):
             wb = tmp[k - k0, _T_WB]
             f = (
                 g[_G_K2] * tmp[k - k0, _T_XB]
-                - g[_G_K3] * wb ** g[_G_N]
+                - g[_G_K3] * friction[k - k0]
                 - tmp[k - k0, _T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
             )
             tmp[k - k0, _T_F2] = f
             wb = tmp[k - k0, _T_W] + g[_G_H2] * f
             tmp[k - k0, _T_WB] = wb if wb > 0.0 else 0.0
+            speeds[k - k0] = tmp[k - k0, _T_WB]
+        powers(speeds, 0, friction, 0, nb, g[_G_N])
         for k in range(k0, k1):
             wb = tmp[k - k0, _T_WB]
             f = (
                 g[_G_K2] * tmp[k - k0, _T_XB]
-                - g[_G_K3] * wb ** g[_G_N]
+                - g[_G_K3] * friction[k - k0]
                 - tmp[k - k0, _T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
             )
             tmp[k - k0, _T_F3] = f
             wc = tmp[k - k0, _T_W] + g[_G_H] * f
             tmp[k - k0, _T_WB] = wc if wc > 0.0 else 0.0
+            speeds[k - k0] = tmp[k - k0, _T_WB]
+        powers(speeds, 0, friction, 0, nb, g[_G_N])
         for k in range(k0, k1):
             wc = tmp[k - k0, _T_WB]
             f4 = (
                 g[_G_K2] * tmp[k - k0, _T_XC]
-                - g[_G_K3] * wc ** g[_G_N]
+                - g[_G_K3] * friction[k - k0]
                 - tmp[k - k0, _T_LOAD] / (wc if wc > _W_FLOOR else _W_FLOOR)
             )
             w = tmp[k - k0, _T_W] + g[_G_H6] * (
