@@ -368,11 +368,11 @@ def powers(src, so, dst, do, n, p):
     stays NaN), in the processor's vectors.
 
     The force laws of the turning and milling plants raise the feed at every sub-step of a
-    period to a power; libm's ``pow``, one value at a time, was a third of those kernels'
-    arithmetic. Here the values go through :func:`_pow_vector`, and those it does not take
+    period to a power, and the drilling plant's spindle friction the speed at every RK4
+    stage; libm's ``pow``, one value at a time, was a fifth to a third of those kernels. Here the values go through :func:`_pow_vector`, and those it does not take
     (zero, negative, subnormal, infinite or NaN values, results beyond about 1e+-304)
     through ``pow`` after it, so that every special case is libm's. A value differs from
-    ``pow``'s by a few units in the last place (below 5e-15 for the plants' feeds and
+    ``pow``'s by a few units in the last place (below 4e-15 for the plants' feeds and
     exponents), and is the same wherever it falls in the row, so on any number of lanes or
     threads. ``src`` and ``dst`` may be one array if the two ranges do not overlap.
     """

@@ -998,15 +998,15 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
 
     The lanes go through each stage of the step together (the commands, fluctuations, hole
     and load; the four stages of every RK4 sub-step of the spindle; the new state and the
-    sensors), so that the slow operations of different lanes (``pow`` above all) overlap in
-    the processor; each lane's arithmetic is that of one hole, whatever the number of
+    sensors), so that the slow operations of different lanes (divisions, ``exp``) overlap
+    in the processor; each lane's arithmetic is that of one hole, whatever the number of
     lanes. The friction law's powers ``w**n`` of each RK4 stage are taken for the lanes
     together, in the processor's vectors (:func:`~machining_envs.core.kernels.powers`).
     (One function: the arrays are not passed on per lane.)
     """
     nb = k1 - k0
-    speeds = np.empty(nb)  # each lane's spindle speed at the stage (>= 0), then its power
-    friction = np.empty(nb)
+    speeds = np.empty(nb)  # each lane's spindle speed at the RK4 stage (>= 0) ...
+    friction = np.empty(nb)  # ... and its power n of the friction law
     for k in range(k0, k1):
         voltage = inputs[k - k0, 0]
         feed = inputs[k - k0, 1]
