@@ -1,0 +1,26 @@
+"""The step-breakdown script runs and splits every vector env's step (numbers not judged)."""
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import machining_envs
+
+SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "step_breakdown.py"
+
+
+def test_step_breakdown_script_splits_every_env():
+    out = subprocess.run(
+        [sys.executable, str(SCRIPT), "--lanes", "16", "--episode-steps", "200"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    for env_id in machining_envs.ENV_IDS:
+        line = next(row for row in out.splitlines() if row.startswith(env_id))
+        total, *parts = (float(x) for x in re.findall(r"(?<![\w(])-?\d+\.\d+(?!%)", line)[:5])
+        shares = [int(s) for s in re.findall(r"\(\s*(-?\d+)%\)", line)]
+        assert total > 0 and parts[0] > 0, line  # the compiled step takes some time
+        assert len(shares) == 4 and all(0 <= s <= 100 for s in shares), line
+        assert abs(sum(parts) - total) <= 0.03, line  # printed to two decimals
