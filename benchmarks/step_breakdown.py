@@ -28,6 +28,7 @@ import time
 
 import gymnasium as gym
 import numpy as np
+from throughput import steady_window, steps_per_second  # this folder's script
 
 import machining_envs
 
@@ -46,21 +47,6 @@ def _timed(obj, name: str, acc: dict, key: str) -> None:
     setattr(obj, name, wrapper)
 
 
-def mean_episode_steps(env_id: str, steps: int, seed: int) -> float:
-    """Mean episode length of the single env under random actions, over ``steps`` steps."""
-    env = gym.make(env_id)
-    env.reset(seed=seed)
-    env.action_space.seed(seed)
-    ends = 0
-    for _ in range(steps):
-        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-        if terminated or truncated:
-            ends += 1
-            env.reset()
-    env.close()
-    return steps / max(ends, 1)
-
-
 def breakdown(env_id: str, num_envs: int, episode_steps: float, seed: int) -> dict:
     """Seconds per lane-step of each part of a steady vector step, and resets per step."""
     venv = gym.make_vec(env_id, num_envs=num_envs)
@@ -68,7 +54,7 @@ def breakdown(env_id: str, num_envs: int, episode_steps: float, seed: int) -> di
     rng = np.random.default_rng(seed)
     actions = rng.uniform(space.low, space.high, size=(256, num_envs, *space.shape))
     actions = actions.astype(space.dtype)
-    n = min(max(200, int(episode_steps)), max(200, 2_500_000 // num_envs))
+    n = steady_window(episode_steps, num_envs)
     venv.reset(seed=seed)
     for i in range(n):
         venv.step(actions[i % 256])
@@ -116,7 +102,8 @@ def main(argv=None) -> None:
         + f" {'resets/step':>11s} {'µs/reset':>9s}"
     )
     for env_id in args.env:
-        episode = mean_episode_steps(env_id, args.episode_steps, seed=0)
+        resets = steps_per_second(env_id, args.episode_steps, seed=0)[2]
+        episode = args.episode_steps / max(resets, 1)  # as throughput.py's steady columns
         b = breakdown(env_id, args.lanes, episode, seed=0)
         cells = "".join(
             f" {b[p] * 1e6:7.2f} ({b[p] / b['total']:4.0%})" for p in parts

@@ -110,6 +110,12 @@ def vector_steps_per_second(
     return rate
 
 
+def steady_window(episode_steps: float, num_envs: int) -> int:
+    """Steps of a steady window (and of the untimed run before it): one mean episode of
+    the single env, at least 200 steps and at most 2.5 M env-steps."""
+    return min(max(200, int(episode_steps)), max(200, 2_500_000 // num_envs))
+
+
 def vector_steady_rates(
     env_id: str, num_envs: int, episode_steps: float, seed: int, rounds: int, single_steps: int,
     threads: list[int],
@@ -122,7 +128,7 @@ def vector_steady_rates(
     ``num_threads``), all on the same actions, their windows taken in turn in each round:
     ``{num_threads: (rates, singles)}``."""
     venvs = {t: gym.make_vec(env_id, num_envs=num_envs, num_threads=t) for t in threads}
-    n = min(max(200, int(episode_steps)), max(200, 2_500_000 // num_envs))
+    n = steady_window(episode_steps, num_envs)
     rng = np.random.default_rng(seed)
     space = venvs[threads[0]].single_action_space
     actions = rng.uniform(space.low, space.high, size=(256, num_envs, *space.shape))

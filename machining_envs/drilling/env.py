@@ -188,6 +188,7 @@ def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, normals):
     n = state.shape[0]
     inputs = np.empty((LANE_BLOCK, _N_IN))
     tmp = np.empty((LANE_BLOCK, _N_TMP))
+    rows = np.empty((2, LANE_BLOCK))
     for k0 in range(0, n, LANE_BLOCK):
         k1 = min(k0 + LANE_BLOCK, n)
         for k in range(k0, k1):
@@ -215,7 +216,7 @@ def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, normals):
             inputs[k - k0, 1] = feed
             for q in range(5):
                 inputs[k - k0, 2 + q] = normals[k, 5 * i + q]
-        advance(k0, k1, m, g, par, eng, state, inputs, out, tmp)
+        advance(k0, k1, m, g, par, eng, state, inputs, out, tmp, rows)
         _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs)
 
 

@@ -990,11 +990,12 @@ LANE_BLOCK = 16
 
 
 @numba.njit(cache=True)
-def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
+def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp, rows):
     """Advance lanes ``k0 .. k1 - 1`` by one sample; ``inputs[k - k0]`` = voltage (V), feed
     velocity (mm/s) and five standard normals (chip and cutting fluctuation innovations,
     torque, thrust and speed sensor noise) of lane ``k``; ``out[k]`` gets the signals of
-    :class:`DrillingStep`; ``tmp`` (at least ``k1 - k0`` rows of ``_N_TMP``) is scratch.
+    :class:`DrillingStep`; ``tmp`` (at least ``k1 - k0`` rows of ``_N_TMP``) and ``rows``
+    (2 rows of at least ``k1 - k0``) are scratch.
 
     The lanes go through each stage of the step together (the commands, fluctuations, hole
     and load; the four stages of every RK4 sub-step of the spindle; the new state and the
@@ -1005,8 +1006,8 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp):
     (One function: the arrays are not passed on per lane.)
     """
     nb = k1 - k0
-    speeds = np.empty(nb)  # each lane's spindle speed at the RK4 stage (>= 0) ...
-    friction = np.empty(nb)  # ... and its power n of the friction law
+    speeds = rows[0]  # each lane's spindle speed at the RK4 stage (>= 0) ...
+    friction = rows[1]  # ... and its power n of the friction law
     for k in range(k0, k1):
         voltage = inputs[k - k0, 0]
         feed = inputs[k - k0, 1]
@@ -1209,9 +1210,10 @@ def _step_lanes(m, g, par, eng, state, inputs, out):
     ``inputs[k]`` is lane ``k``'s)."""
     n = state.shape[0]
     tmp = np.empty((LANE_BLOCK, _N_TMP))
+    rows = np.empty((2, LANE_BLOCK))
     for k0 in range(0, n, LANE_BLOCK):
         k1 = min(k0 + LANE_BLOCK, n)
-        advance(k0, k1, m, g, par, eng, state, inputs[k0:k1], out, tmp)
+        advance(k0, k1, m, g, par, eng, state, inputs[k0:k1], out, tmp, rows)
 
 
 class DrillingLanes:
