@@ -12,6 +12,7 @@ import functools
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 __all__ = ["DepthProfile", "DEPTH_RANGE_MM"]
@@ -89,26 +90,53 @@ class DepthProfile:
         """Edges, start depths and slopes as arrays (for :meth:`__call__`)."""
         return tuple(np.array(v) for v in self._table)
 
+    @functools.cached_property
+    def _segments(self) -> np.ndarray:
+        """The segments as one array of rows of ``n + 1`` values: the edges, then the start
+        depths, end depths and slopes, each with an unused last value (the compiled loops'
+        table; :func:`_random_segments` makes it for a random profile)."""
+        edges, starts, slopes = self._table
+        out = np.zeros((4, len(edges)))
+        out[0] = edges
+        out[1, :-1] = starts
+        out[2, :-1] = self._ends
+        out[3, :-1] = slopes
+        out.flags.writeable = False
+        return out
+
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         if "_ends" not in state:  # pickled by an earlier version: make the tables
             self.__post_init__()
 
     @classmethod
-    def _built(cls, edges: list, starts: list, ends: list, name: str) -> DepthProfile:
+    def _built(
+        cls,
+        edges: list,
+        starts: list,
+        ends: list,
+        name: str,
+        slopes: list | None = None,
+        segments: np.ndarray | None = None,
+    ) -> DepthProfile:
         """A profile from segments this module built itself (lists of floats that
         ``__post_init__`` would accept): the same object, without checking it again. A
         vector env draws a workpiece at every lane's reset, and the checks were a fifth of
-        that reset's cost."""
+        that reset's cost. ``slopes``: the segments' slopes where the caller computed them
+        (as :meth:`_set_tables` does), and ``segments`` their array (:attr:`_segments`)."""
         new = object.__new__(cls)
-        for field, value in (
-            ("edges_mm", tuple(edges)),
-            ("start_depths_mm", tuple(starts)),
-            ("end_depths_mm", tuple(ends)),
-            ("name", name),
-        ):
-            object.__setattr__(new, field, value)
-        new._set_tables(edges, starts, ends)
+        d = new.__dict__  # a frozen dataclass's fields, set as its own __init__ would
+        d["edges_mm"] = tuple(edges)
+        d["start_depths_mm"] = tuple(starts)
+        d["end_depths_mm"] = tuple(ends)
+        d["name"] = name
+        if slopes is None:
+            new._set_tables(edges, starts, ends)
+        else:
+            d["_table"] = (edges, starts, slopes)
+            d["_ends"] = ends
+        if segments is not None:
+            d["_segments"] = segments
         return new
 
     # ---- constructors ---------------------------------------------------------------------
@@ -171,28 +199,19 @@ class DepthProfile:
         n = int(rng.integers(n_segments[0], n_segments[1] + 1))
         if n < 1:
             raise ValueError(f"n_segments must be a range of integers >= 1, got {n_segments!r}")
-        draws = rng.random((4, n)).tolist()  # lengths, start depths, taper?, end depths
-        edges = [0.0]
-        for r in draws[0]:
-            edges.append(edges[-1] + s_lo + (s_hi - s_lo) * r)
-        starts, ends = [], []
-        prev = None
-        for k in range(n):
-            a, b = (
-                (lo, hi)
-                if prev is None
-                else (max(lo, prev / max_jump_ratio), min(hi, prev * max_jump_ratio))
-            )
-            d0 = a + (b - a) * draws[1][k]
-            d1 = lo + (hi - lo) * draws[3][k] if draws[2][k] < taper_probability else d0
-            starts.append(d0)
-            ends.append(d1)
-            prev = d1
+        # lengths, start depths, taper?, end depths: one row of n draws each
+        table = _random_segments(
+            rng.random((4, n)), float(lo), float(hi), s_lo, s_hi, float(taper_probability),
+            float(max_jump_ratio),
+        )  # fmt: skip
+        edges, starts, ends, slopes = table.tolist()
+        del starts[n], ends[n], slopes[n]
+        table.flags.writeable = False
         # Built from checked ranges: every edge grows by at least s_lo > 0, every depth
         # lies in [lo, hi] within DEPTH_RANGE_MM.
         if cls is not DepthProfile:  # a subclass may check more: let it
             return cls(tuple(edges), tuple(starts), tuple(ends), name)
-        return cls._built(edges, starts, ends, str(name))
+        return cls._built(edges, starts, ends, str(name), slopes, table)
 
     # ---- evaluation -----------------------------------------------------------------------
     @property
@@ -219,6 +238,12 @@ class DepthProfile:
         """
         edges, starts, slopes = self._table
         return list(edges), list(starts), list(slopes)
+
+    def segment_array(self) -> np.ndarray:
+        """The segments as one read-only array for compiled loops and per-lane tables: rows
+        of ``n + 1`` values, the edges (``edges_mm``), then the start depths, end depths and
+        slopes of :meth:`segment_table`, each with an unused last value."""
+        return self._segments
 
     def __call__(self, x_mm) -> np.ndarray:
         """Depth (mm) at positions ``x_mm`` (array); zero outside ``[0, length_mm)``."""
@@ -248,28 +273,7 @@ class DepthProfile:
         """
         if not (c > 0 and q > 0 and v_max > 0):
             raise ValueError(f"c, q and v_max must be > 0, got {c!r}, {q!r}, {v_max!r}")
-        a_star = (1.0 / (v_max * c)) ** (1.0 / q)  # the depth at which the two limits meet
-        total = 0.0
-        edges, starts, _ = self._table
-        ends = self._ends
-        for i in range(len(starts)):
-            x0, x1 = edges[i], edges[i + 1]
-            a0, a1 = starts[i], ends[i]
-            if a0 == a1:
-                total += (x1 - x0) * max(1.0 / v_max, c * a0**q)
-                continue
-            slope = (a1 - a0) / (x1 - x0)
-            cuts = [x0, x1]
-            xs = x0 + (a_star - a0) / slope
-            if x0 < xs < x1:
-                cuts = [x0, xs, x1]
-            for u, w in zip(cuts[:-1], cuts[1:], strict=True):
-                if a0 + slope * (0.5 * (u + w) - x0) <= a_star:
-                    total += (w - u) / v_max
-                else:
-                    au, aw = a0 + slope * (u - x0), a0 + slope * (w - x0)
-                    total += c * (aw ** (q + 1.0) - au ** (q + 1.0)) / ((q + 1.0) * slope)
-        return float(total)
+        return _traverse_time(self._segments, float(c), float(q), float(v_max))
 
     def worn_traverse_time_s(
         self, c: float, q: float, v_max: float, wear_per_mm: float, wear_exponent: float
@@ -293,3 +297,58 @@ class DepthProfile:
         with np.errstate(divide="ignore"):
             slowness = np.where(a > 0, c * a**q * (1.0 + wear_per_mm * x) ** wear_exponent, 0.0)
         return float(trapezoid(np.maximum(slowness, 1.0 / v_max), x))
+
+
+@numba.njit(cache=True)
+def _random_segments(draws, lo, hi, s_lo, s_hi, taper_probability, max_jump_ratio):
+    """The segments :meth:`DepthProfile.random` draws, from its ``(4, n)`` uniform numbers
+    (lengths, start depths, whether a taper, end depths): rows of ``n + 1`` values, the
+    edges, then the start depths, end depths and slopes (each with one unused last value).
+    Every number is the one the same arithmetic gives in Python, in the same order."""
+    n = draws.shape[1]
+    out = np.zeros((4, n + 1))
+    edges, starts, ends, slopes = out[0], out[1], out[2], out[3]
+    for k in range(n):
+        edges[k + 1] = edges[k] + s_lo + (s_hi - s_lo) * draws[0, k]
+    prev = 0.0
+    for k in range(n):
+        a, b = lo, hi
+        if k > 0:  # no step multiplies or divides the depth by more than max_jump_ratio
+            a = max(lo, prev / max_jump_ratio)
+            b = min(hi, prev * max_jump_ratio)
+        d0 = a + (b - a) * draws[1, k]
+        d1 = lo + (hi - lo) * draws[3, k] if draws[2, k] < taper_probability else d0
+        starts[k] = d0
+        ends[k] = d1
+        slopes[k] = (d1 - d0) / (edges[k + 1] - edges[k])
+        prev = d1
+    return out
+
+
+@numba.njit(cache=True)
+def _traverse_time(segments, c, q, v_max):
+    """:meth:`DepthProfile.traverse_time_s` over the profile's ``segments``
+    (:attr:`DepthProfile._segments`), summed segment by segment in order."""
+    a_star = (1.0 / (v_max * c)) ** (1.0 / q)  # the depth at which the two limits meet
+    total = 0.0
+    for i in range(segments.shape[1] - 1):
+        x0 = segments[0, i]
+        x1 = segments[0, i + 1]
+        a0 = segments[1, i]
+        a1 = segments[2, i]
+        if a0 == a1:
+            total += (x1 - x0) * max(1.0 / v_max, c * a0**q)
+            continue
+        slope = (a1 - a0) / (x1 - x0)
+        xs = x0 + (a_star - a0) / slope
+        split = x0 < xs < x1  # two pieces, split where c a^q crosses 1 / v_max
+        for piece in range(2 if split else 1):
+            u = xs if piece == 1 else x0
+            w = xs if split and piece == 0 else x1
+            if a0 + slope * (0.5 * (u + w) - x0) <= a_star:
+                total += (w - u) / v_max
+            else:
+                au = a0 + slope * (u - x0)
+                aw = a0 + slope * (w - x0)
+                total += c * (aw ** (q + 1.0) - au ** (q + 1.0)) / ((q + 1.0) * slope)
+    return total

@@ -846,8 +846,8 @@ class MillingLanes:
         lag_rows(m, h, lag_s, self.lag[lane].reshape(m, m + 2))  # a view: filled in place
         self.z[lane] = 0.0
         self.buf[lane] = 0.0
-        edges, d0, slope = profile.segment_table()
-        ns = len(d0)
+        segments = profile.segment_array()
+        ns = segments.shape[1] - 1
         if ns > self._s_max:
             grow = ns - self._s_max
             self.edges = np.pad(self.edges, ((0, 0), (0, grow)), mode="edge")
@@ -856,13 +856,13 @@ class MillingLanes:
             self._s_max = ns
             self.version += 1  # the arrays were replaced: cached references are stale
         row = self.edges[lane]
-        row[: ns + 1] = edges
-        row[ns + 1 :] = edges[-1]
+        row[: ns + 1] = segments[0]
+        row[ns + 1 :] = segments[0, ns]
         row = self.d0[lane]
-        row[:ns] = d0
+        row[:ns] = segments[1, :ns]
         row[ns:] = 0.0
         row = self.slope[lane]
-        row[:ns] = slope
+        row[:ns] = segments[3, :ns]
         row[ns:] = 0.0
         self.nseg[lane] = ns
         self.seg[lane] = 0
@@ -881,7 +881,7 @@ class MillingLanes:
             dexp,
             1.0 if power else 0.0,
             params.sensor_gain,
-            edges[-1],
+            segments[0, ns],
             0.0,
             h,
             params.sample_time_s,

@@ -811,8 +811,8 @@ class TurningLanes:
         self._load_matrices(lane, float(spindle_rpm), math.isfinite(params.spindle_power_W))
         self.z[lane] = 0.0
         self.buf[lane] = 0.0
-        edges, d0, slope = (np.array(v) for v in profile.segment_table())
-        ns = d0.size
+        segments = profile.segment_array()
+        ns = segments.shape[1] - 1
         if ns > self._s_max:
             grow = ns - self._s_max
             self.edges = np.pad(self.edges, ((0, 0), (0, grow)), mode="edge")
@@ -820,12 +820,13 @@ class TurningLanes:
             self.slope = np.pad(self.slope, ((0, 0), (0, grow)))
             self._s_max = ns
             self.version += 1  # the arrays were replaced: cached references are stale
-        self.edges[lane, : ns + 1] = edges
-        self.edges[lane, ns + 1 :] = edges[-1]
+        length = float(segments[0, ns])
+        self.edges[lane, : ns + 1] = segments[0]
+        self.edges[lane, ns + 1 :] = length
         self.d0[lane] = 0.0
-        self.d0[lane, :ns] = d0
+        self.d0[lane, :ns] = segments[1, :ns]
         self.slope[lane] = 0.0
-        self.slope[lane, :ns] = slope
+        self.slope[lane, :ns] = segments[3, :ns]
         self.nseg[lane] = ns
         self.seg[lane] = 0
         margin = _velocity_bound(self._key, params.command_max) * params.sample_time_s
@@ -834,7 +835,7 @@ class TurningLanes:
             params.feed_exponent,
             params.sensor_gain,
             params.command_max,
-            float(edges[-1]),
+            length,
             0.0,
             margin,
             params.sample_time_s,

@@ -42,7 +42,43 @@ def test_random_profiles_are_those_the_public_constructor_makes():
         x = np.linspace(-1.0, p.length_mm + 1.0, 97)
         np.testing.assert_array_equal(p(x), q(x))
         assert p.traverse_time_s(0.3, 0.7, 5.0) == q.traverse_time_s(0.3, 0.7, 5.0)
+        np.testing.assert_array_equal(p.segment_array(), q.segment_array())
+        assert not p.segment_array().flags.writeable and not q.segment_array().flags.writeable
         assert pickle.loads(pickle.dumps(p)).segment_table() == q.segment_table()
+
+
+def _reference_random(rng, lo, hi, n_segments, s_lo, s_hi, taper_p, max_jump):
+    """``DepthProfile.random``'s draws and arithmetic written out plainly in Python."""
+    n = int(rng.integers(n_segments[0], n_segments[1] + 1))
+    lengths, starts_u, taper_u, ends_u = rng.random((4, n)).tolist()
+    edges, starts, ends = [0.0], [], []
+    for k in range(n):
+        edges.append(edges[-1] + s_lo + (s_hi - s_lo) * lengths[k])
+        a, b = (lo, hi) if k == 0 else (max(lo, ends[-1] / max_jump), min(hi, ends[-1] * max_jump))
+        starts.append(a + (b - a) * starts_u[k])
+        ends.append(lo + (hi - lo) * ends_u[k] if taper_u[k] < taper_p else starts[-1])
+    return tuple(edges), tuple(starts), tuple(ends)
+
+
+@pytest.mark.parametrize(
+    "ranges",
+    [
+        ((0.5, 3.0), (2, 5), (4.0, 12.0), 0.3, 2.5),
+        ((0.5, 3.5), (2, 6), (5.0, 12.0), 0.3, 2.5),
+        ((0.4, 3.5), (1, 8), (1.0, 30.0), 1.0, 1.1),
+    ],
+)
+def test_random_profiles_draw_the_numbers_of_their_description(ranges):
+    """The compiled arithmetic of ``random`` gives, to the last bit, the profile its plain
+    description gives from the same generator state (so the splits' fixed episodes stay
+    what they are)."""
+    (lo, hi), segments, (s_lo, s_hi), taper_p, jump = ranges
+    for seed in range(400):
+        p = DepthProfile.random(np.random.default_rng(seed), (lo, hi), segments, (s_lo, s_hi),
+                                taper_p, jump)  # fmt: skip
+        ref = _reference_random(np.random.default_rng(seed), lo, hi, segments, s_lo, s_hi,
+                                taper_p, jump)  # fmt: skip
+        assert (p.edges_mm, p.start_depths_mm, p.end_depths_mm) == ref
 
 
 def test_random_profile_refuses_bad_ranges():
