@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-__all__ = ["DepthProfile", "DEPTH_RANGE_MM"]
+__all__ = ["DepthProfile", "DEPTH_RANGE_MM", "load_segments"]
 
 #: Depths of cut any profile may hold, mm. Above 6 mm the 1822 N/mm^(1+p) force law of the
 #: paper's tool would pass the breakage force at every usable feed; zero is air.
@@ -352,3 +352,17 @@ def _traverse_time(segments, c, q, v_max):
                 aw = a0 + slope * (w - x0)
                 total += c * (aw ** (q + 1.0) - au ** (q + 1.0)) / ((q + 1.0) * slope)
     return total
+
+
+@numba.njit(cache=True)
+def load_segments(segments, lane, edges, d0, slope):
+    """Copy a profile's ``segments`` (:meth:`DepthProfile.segment_array`, ``n`` segments)
+    into row ``lane`` of the per-lane tables of a batch of cuts: ``edges[lane, : n + 1]``
+    (the rest of the row repeats the length), the start depths ``d0[lane, :n]`` and the
+    slopes ``slope[lane, :n]`` (the rest zero). The tables must hold ``n`` segments."""
+    n = segments.shape[1] - 1
+    for i in range(edges.shape[1]):
+        edges[lane, i] = segments[0, min(i, n)]
+    for i in range(d0.shape[1]):
+        d0[lane, i] = segments[1, i] if i < n else 0.0
+        slope[lane, i] = segments[3, i] if i < n else 0.0

@@ -50,6 +50,7 @@ import numpy as np
 from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
 from machining_envs.core.kernels import matvec, powers
 from machining_envs.core.lti import zoh, zoh_tf
+from machining_envs.core.workpieces import load_segments
 
 __all__ = [
     "MillingParams",
@@ -855,15 +856,7 @@ class MillingLanes:
             self.slope = np.pad(self.slope, ((0, 0), (0, grow)))
             self._s_max = ns
             self.version += 1  # the arrays were replaced: cached references are stale
-        row = self.edges[lane]
-        row[: ns + 1] = segments[0]
-        row[ns + 1 :] = segments[0, ns]
-        row = self.d0[lane]
-        row[:ns] = segments[1, :ns]
-        row[ns:] = 0.0
-        row = self.slope[lane]
-        row[:ns] = segments[3, :ns]
-        row[ns:] = 0.0
+        load_segments(segments, lane, self.edges, self.d0, self.slope)
         self.nseg[lane] = ns
         self.seg[lane] = 0
         power = params.force_model == "power_law"

@@ -33,6 +33,7 @@ import numpy as np
 from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
 from machining_envs.core.kernels import fma, matvec, powers
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
+from machining_envs.core.workpieces import load_segments
 
 __all__ = [
     "TurningParams",
@@ -821,12 +822,7 @@ class TurningLanes:
             self._s_max = ns
             self.version += 1  # the arrays were replaced: cached references are stale
         length = float(segments[0, ns])
-        self.edges[lane, : ns + 1] = segments[0]
-        self.edges[lane, ns + 1 :] = length
-        self.d0[lane] = 0.0
-        self.d0[lane, :ns] = segments[1, :ns]
-        self.slope[lane] = 0.0
-        self.slope[lane, :ns] = segments[3, :ns]
+        load_segments(segments, lane, self.edges, self.d0, self.slope)
         self.nseg[lane] = ns
         self.seg[lane] = 0
         margin = _velocity_bound(self._key, params.command_max) * params.sample_time_s
