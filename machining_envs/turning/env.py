@@ -159,6 +159,12 @@ _EB = ("diverged", "breakage", "finished", "terminated", "truncated", "over", "i
 _EF_COMMAND = _EF.index("command")
 _EF_REWARD = _EF.index("reward")
 _EF_FORCE_LIMIT = _EF.index("force_limit")
+#: The columns of ``ef`` a lane's start writes (in this order).
+_EF_START = [
+    _EF.index(c)
+    for c in ("force_limit", "vmax", "breakage_force", "prev_action", "fr_obs", "rpm_obs",
+              "command")
+]  # fmt: skip
 
 
 @numba.njit(cache=True, inline="always")
@@ -308,53 +314,51 @@ class _TurningCore:
             sc = dataclasses.replace(sc, spindle_rpm=self.spindle_rpm_override)
         self.scenarios[lane] = sc
         truth = sc.true_params(self.params)
-        check_below(
-            f"scenario {sc.name!r}: force_limit_N",
-            sc.force_limit_N,
-            "the tool's breakage_force_N",
-            truth.breakage_force_N,
-            "the tool would break before the limit binds",
-        )
+        limit = float(sc.force_limit_N)
+        if not limit < truth.breakage_force_N:  # the message is made only when it fails
+            check_below(
+                f"scenario {sc.name!r}: force_limit_N",
+                limit,
+                "the tool's breakage_force_N",
+                truth.breakage_force_N,
+                "the tool would break before the limit binds",
+            )
         self.lanes.start(lane, truth, sc.spindle_rpm, sc.profile)
-        self.force_limit[lane] = float(sc.force_limit_N)
-        self.bound[lane] = machining_time_bound(sc, truth)
-        self.vmax[lane] = truth.max_feed_velocity_mm_s
-        self.breakage_force[lane] = truth.breakage_force_N
+        bound = machining_time_bound(sc, truth)
+        fr_obs = min(limit / self.params.force_scale_N, 10.0)
+        rpm = float(sc.spindle_rpm)
+        vmax = truth.max_feed_velocity_mm_s
+        # force_limit, vmax, breakage_force, prev_action, fr_obs, rpm_obs, command (_EF_START)
+        self.ef[lane, _EF_START] = (limit, vmax, truth.breakage_force_N, -1.0, fr_obs,
+                                    rpm / 1000.0, 0.0)  # fmt: skip
+        self.bound[lane] = bound
         self.noise_counts[lane] = truth.sensor_gain * truth.noise_std_N
         self.meas[lane] = 0.0
-        self.fr_obs[lane] = min(self.force_limit[lane] / self.params.force_scale_N, 10.0)
-        self.rpm_obs[lane] = sc.spindle_rpm / 1000.0
-        self.prev_action[lane] = -1.0
         self.act_lanes = configure_lane(
             self.act_lanes, lane, sc.actuation, self.actuation, self._actuation_lanes
         )
         self.n_clipped[lane] = 0
         self.normal_i[lane] = _NORMAL_BLOCK  # a new episode draws a new block
-        self.spindle[lane] = float(sc.spindle_rpm)
-        self.spindle_set[lane] = float(sc.spindle_rpm)
+        self.spindle[lane] = rpm
+        self.spindle_set[lane] = rpm
         self.power[lane] = 0.0
         self.truths[lane] = truth
-        self.diameter[lane] = truth.workpiece_diameter_mm
-        if np.isfinite(truth.spindle_power_W):
+        diameter = float(truth.workpiece_diameter_mm)
+        self.diameter[lane] = diameter
+        if math.isfinite(truth.spindle_power_W):
             self.power_lanes.add(lane)
         else:
             self.power_lanes.discard(lane)
-        self.length[lane] = sc.profile.length_mm
+        length = sc.profile.length_mm
+        self.length[lane] = length
         self.names[lane] = sc.name
         # What the episode's infos repeat, as Python values: read once, not at every step.
-        self.episode_info[lane] = (
-            float(self.bound[lane]),
-            sc.profile.length_mm,
-            sc.name,
-            float(sc.spindle_rpm),
-            float(truth.workpiece_diameter_mm),
-        )
-        o = self.obs[lane]
-        o[:] = (0.0, self.fr_obs[lane], -1.0, self.rpm_obs[lane], 0.0, 0.0, 0.0)
+        self.episode_info[lane] = (float(bound), length, sc.name, rpm, diameter)
+        self.obs[lane] = (0.0, fr_obs, -1.0, rpm / 1000.0, 0.0, 0.0, 0.0)
         # The signals of a cut not yet begun, where lane_info and info_arrays read them until
         # the first step (which writes every one): the tool at rest at the workpiece's start.
+        # (The command, in ef, is 0 from above.)
         self.eb[lane] = False
-        self.command[lane] = 0.0
         out = self.lanes.out[lane]
         out[:] = 0.0
         out[6] = sc.profile.start_depths_mm[0]
