@@ -92,6 +92,10 @@ _INFO_F = (
 #: Each episode's constants held after the signals, in the rows of ``_MillingCore.info_f``
 #: (the core's arrays of these names are views of those rows).
 _INFO_LANE = ("torque_limit", "bound", "spindle", "length", "volume")
+#: The signals of ``_INFO_F`` before a cut's first step: zero, but the machining time (NaN)
+#: and the depth (the workpiece's first, set by each start).
+_START_SIGNALS = tuple(math.nan if name == "machining_time_s" else 0.0 for name in _INFO_F)
+assert _INFO_F.index("depth_mm") == 11
 
 
 @dataclass(frozen=True)
@@ -372,13 +376,14 @@ class _MillingCore:
         self.scenarios[lane] = sc
         self.truths[lane] = truth
         tr = sc.torque_limit_Nmm(nominal)
-        check_below(
-            f"scenario {sc.name!r}: the torque limit (torque_limit_Nmm x torque_limit_scale)",
-            tr,
-            "the tool's breakage_torque_Nmm",
-            truth.breakage_torque_Nmm,
-            "the tool would break before the limit binds",
-        )
+        if not tr < truth.breakage_torque_Nmm:  # the message is made only when it fails
+            check_below(
+                f"scenario {sc.name!r}: the torque limit (torque_limit_Nmm x torque_limit_scale)",
+                tr,
+                "the tool's breakage_torque_Nmm",
+                truth.breakage_torque_Nmm,
+                "the tool would break before the limit binds",
+            )
         area = CutArea(sc.profile)
         cum = area.cumulative
         if len(cum) > self.cumulative.shape[1]:
@@ -389,8 +394,14 @@ class _MillingCore:
         row[: len(cum)] = cum
         row[len(cum) :] = cum[-1]
         w = truth.axial_depth_mm
-        self.torque_limit[lane] = tr
-        self.bound[lane] = machining_time_bound(sc, truth, rpm)
+        depth0 = sc.profile.start_depths_mm[0]
+        # The info of a cut not yet begun (what lane_info and info_arrays report until the
+        # first step): every signal zero but the depth (and the machining time, NaN), then
+        # the episode's constants (_INFO_LANE), in one write of the lane's column.
+        self.info_f[:, lane] = (
+            *_START_SIGNALS[:11], depth0, *_START_SIGNALS[12:],
+            tr, machining_time_bound(sc, truth, rpm), rpm, sc.profile.length_mm, w * area.total,
+        )  # fmt: skip
         self.vmax[lane] = truth.max_feed_velocity_mm_s
         self.breakage_torque[lane] = truth.breakage_torque_Nmm
         self.noise_counts[lane] = truth.sensor_gain * truth.noise_std_Nmm
@@ -406,18 +417,10 @@ class _MillingCore:
         )
         self.n_clipped[lane] = 0
         self.normal_i[lane] = _NORMAL_BLOCK  # a new episode draws a new block
-        self.spindle[lane] = rpm
-        self.length[lane] = sc.profile.length_mm
-        self.volume[lane] = w * area.total
-        self.depth0[lane] = sc.profile.start_depths_mm[0]
+        self.depth0[lane] = depth0
         self.names[lane] = sc.name
         self.obs[lane] = (0.0, tr_obs, -1.0, rpm / 1000.0, 0.0, 0.0, 0.0)
-        # The info of a cut not yet begun (what lane_info and info_arrays report until the
-        # first step): every signal zero but the depth, no flag, no clipped action.
-        self.info_f[: len(_INFO_F), lane] = 0.0
-        self.info_f[11, lane] = self.depth0[lane]
-        self.info_f[13, lane] = np.nan
-        self.flags[lane] = False
+        self.flags[lane] = False  # no flag, no clipped action yet
         self.in_clipped[lane] = 0
         self.lanes.out_segment[lane] = 0
 
