@@ -108,6 +108,9 @@ class DepthProfile:
         self.__dict__.update(state)
         if "_ends" not in state:  # pickled by an earlier version: make the tables
             self.__post_init__()
+        segments = state.get("_segments")
+        if segments is not None:  # a pickled array comes back writeable
+            segments.flags.writeable = False
 
     @classmethod
     def _built(

@@ -95,7 +95,7 @@ _INFO_LANE = ("torque_limit", "bound", "spindle", "length", "volume")
 #: The signals of ``_INFO_F`` before a cut's first step: zero, but the machining time (NaN)
 #: and the depth (the workpiece's first, set by each start).
 _START_SIGNALS = tuple(math.nan if name == "machining_time_s" else 0.0 for name in _INFO_F)
-assert _INFO_F.index("depth_mm") == 11
+_DEPTH_ROW = _INFO_F.index("depth_mm")
 
 
 @dataclass(frozen=True)
@@ -399,7 +399,7 @@ class _MillingCore:
         # first step): every signal zero but the depth (and the machining time, NaN), then
         # the episode's constants (_INFO_LANE), in one write of the lane's column.
         self.info_f[:, lane] = (
-            *_START_SIGNALS[:11], depth0, *_START_SIGNALS[12:],
+            *_START_SIGNALS[:_DEPTH_ROW], depth0, *_START_SIGNALS[_DEPTH_ROW + 1 :],
             tr, machining_time_bound(sc, truth, rpm), rpm, sc.profile.length_mm, w * area.total,
         )  # fmt: skip
         self.vmax[lane] = truth.max_feed_velocity_mm_s

@@ -160,11 +160,11 @@ _EF_COMMAND = _EF.index("command")
 _EF_REWARD = _EF.index("reward")
 _EF_FORCE_LIMIT = _EF.index("force_limit")
 #: The columns of ``ef`` a lane's start writes (in this order).
-_EF_START = [
+_EF_START = np.array([
     _EF.index(c)
     for c in ("force_limit", "vmax", "breakage_force", "prev_action", "fr_obs", "rpm_obs",
               "command")
-]  # fmt: skip
+])  # fmt: skip
 
 
 @numba.njit(cache=True, inline="always")

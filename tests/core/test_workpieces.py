@@ -44,7 +44,10 @@ def test_random_profiles_are_those_the_public_constructor_makes():
         assert p.traverse_time_s(0.3, 0.7, 5.0) == q.traverse_time_s(0.3, 0.7, 5.0)
         np.testing.assert_array_equal(p.segment_array(), q.segment_array())
         assert not p.segment_array().flags.writeable and not q.segment_array().flags.writeable
-        assert pickle.loads(pickle.dumps(p)).segment_table() == q.segment_table()
+        back = pickle.loads(pickle.dumps(p))
+        assert back.segment_table() == q.segment_table()
+        np.testing.assert_array_equal(back.segment_array(), q.segment_array())
+        assert not back.segment_array().flags.writeable
 
 
 def _reference_random(rng, lo, hi, n_segments, s_lo, s_hi, taper_p, max_jump):
