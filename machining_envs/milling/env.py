@@ -88,6 +88,7 @@ _INFO_F = (
     "depth_mm",
     "removed_volume_mm3",
     "machining_time_s",
+    "cost",
 )
 #: Each episode's constants held after the signals, in the rows of ``_MillingCore.info_f``
 #: (the core's arrays of these names are views of those rows).
@@ -239,7 +240,8 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
         info_f[10, k] = pos
         info_f[11, k] = out[k, 7]
         info_f[12, k] = w_axial[k] * cut_area_at(pos, edges, d0, slope, cumulative, k, nseg[k])
-        info_f[13, k] = out_finish[k]
+        info_f[13, k] = out_finish[k]  # NaN unless the lane finished (flags[k, 2])
+        info_f[14, k] = 1.0 if torque > tr[k] else 0.0  # the cost: flags[k, 5]
         sc = tr[k]
         obs[k, 0] = _clamp(measured / sc, lo, hi)
         obs[k, 1] = tr_obs[k]
@@ -416,7 +418,9 @@ class _MillingCore:
             self.act_lanes, lane, sc.actuation, self.actuation, self._actuation_lanes
         )
         self.n_clipped[lane] = 0
-        self.normal_i[lane] = _NORMAL_BLOCK  # a new episode draws a new block
+        # A new episode draws a new block (a lane without noise never does: the compiled
+        # step does not count its normals).
+        self.normal_i[lane] = _NORMAL_BLOCK if self.noise_counts[lane] != 0.0 else 0
         self.depth0[lane] = depth0
         self.names[lane] = sc.name
         self.obs[lane] = (0.0, tr_obs, -1.0, rpm / 1000.0, 0.0, 0.0, 0.0)
@@ -434,7 +438,7 @@ class _MillingCore:
                 rngs[0].standard_normal(out=self.normals[0])
                 self.normal_i[0] = 0
             return
-        need = np.flatnonzero((self.normal_i >= _NORMAL_BLOCK) & (self.noise_counts != 0.0))
+        need = np.flatnonzero(self.normal_i >= _NORMAL_BLOCK)  # only lanes with noise
         for k in need.tolist():
             rngs[k].standard_normal(out=self.normals[k])
         self.normal_i[need] = 0
@@ -514,7 +518,7 @@ class _MillingCore:
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""
         (t, command, torque, measured, counts, peak, feed, mean_feed, feed_tooth, vf, pos,
-         depth, removed, finish,
+         depth, removed, finish, cost,
          limit, bound, rpm, length, volume) = self.info_f[:, k].tolist()  # fmt: skip
         diverged, breakage, finished = self.flags[k, :3].tolist()
         info = {
@@ -527,7 +531,7 @@ class _MillingCore:
             "finished": finished,
             "torque_Nmm": torque,
             "torque_limit_Nmm": limit,
-            "cost": 1.0 if self.flags[k, 5] else 0.0,
+            "cost": cost,
             "score_bound": bound,
             "measured": measured,
             "measured_counts": counts,
@@ -564,9 +568,9 @@ class _MillingCore:
             "diverged": f[:, 0],
             "finished": f[:, 2],
             "torque_Nmm": c[2],
-            "torque_limit_Nmm": c[14],
-            "cost": f[:, 5].astype(np.float64),
-            "score_bound": c[15],
+            "torque_limit_Nmm": c[15],
+            "cost": c[14],
+            "score_bound": c[16],
             "measured": c[3],
             "measured_counts": c[4],
             "peak_torque_Nmm": c[5],
@@ -577,12 +581,12 @@ class _MillingCore:
             "position_mm": c[10],
             "depth_mm": c[11],
             "segment": self.lanes.out_segment.copy(),
-            "spindle_rpm": c[16],
+            "spindle_rpm": c[17],
             "removed_volume_mm3": c[12],
-            "workpiece_length_mm": c[17],
-            "workpiece_volume_mm3": c[18],
+            "workpiece_length_mm": c[18],
+            "workpiece_volume_mm3": c[19],
             "scenario": self.names.copy(),
-            "machining_time_s": np.where(f[:, 2], c[13], np.nan),
+            "machining_time_s": c[13],  # NaN where the lane did not finish
             "_machining_time_s": self.flags[:, 2].copy(),
         }
 
