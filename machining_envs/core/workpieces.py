@@ -76,8 +76,8 @@ class DepthProfile:
 
     def _set_tables(self, edges: list, starts: list, ends: list) -> None:
         """Keep the segments, with their slopes, as lists of floats (for
-        :meth:`segment_table` and the loops over segments); :meth:`_arrays` makes arrays of
-        them when first asked."""
+        :meth:`segment_table` and the loops over segments); :attr:`_segments` makes an
+        array of them when first asked."""
         slopes = [
             (b - a) / (x1 - x0)
             for a, b, x0, x1 in zip(starts, ends, edges[:-1], edges[1:], strict=True)
@@ -86,15 +86,11 @@ class DepthProfile:
         object.__setattr__(self, "_ends", ends)
 
     @functools.cached_property
-    def _arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Edges, start depths and slopes as arrays (for :meth:`__call__`)."""
-        return tuple(np.array(v) for v in self._table)
-
-    @functools.cached_property
     def _segments(self) -> np.ndarray:
         """The segments as one array of rows of ``n + 1`` values: the edges, then the start
-        depths, end depths and slopes, each with an unused last value (the compiled loops'
-        table; :func:`_random_segments` makes it for a random profile)."""
+        depths, end depths and slopes, each with an unused last value (the table of
+        :meth:`__call__` and the compiled loops; :func:`_random_segments` makes it for a
+        random profile)."""
         edges, starts, slopes = self._table
         out = np.zeros((4, len(edges)))
         out[0] = edges
@@ -113,33 +109,23 @@ class DepthProfile:
             segments.flags.writeable = False
 
     @classmethod
-    def _built(
-        cls,
-        edges: list,
-        starts: list,
-        ends: list,
-        name: str,
-        slopes: list | None = None,
-        segments: np.ndarray | None = None,
-    ) -> DepthProfile:
-        """A profile from segments this module built itself (lists of floats that
-        ``__post_init__`` would accept): the same object, without checking it again. A
-        vector env draws a workpiece at every lane's reset, and the checks were a fifth of
-        that reset's cost. ``slopes``: the segments' slopes where the caller computed them
-        (as :meth:`_set_tables` does), and ``segments`` their array (:attr:`_segments`)."""
+    def _built(cls, segments: np.ndarray, name: str) -> DepthProfile:
+        """A profile from a read-only segments array this module computed itself (the
+        layout of :attr:`_segments`, of values ``__post_init__`` would accept): the same
+        object, without checking it again. A vector env draws a workpiece at every lane's
+        reset, and the checks were a fifth of that reset's cost."""
+        n = segments.shape[1] - 1
+        edges, starts, ends, slopes = segments.tolist()
+        del starts[n], ends[n], slopes[n]
         new = object.__new__(cls)
         d = new.__dict__  # a frozen dataclass's fields, set as its own __init__ would
         d["edges_mm"] = tuple(edges)
         d["start_depths_mm"] = tuple(starts)
         d["end_depths_mm"] = tuple(ends)
         d["name"] = name
-        if slopes is None:
-            new._set_tables(edges, starts, ends)
-        else:
-            d["_table"] = (edges, starts, slopes)
-            d["_ends"] = ends
-        if segments is not None:
-            d["_segments"] = segments
+        d["_table"] = (edges, starts, slopes)
+        d["_ends"] = ends
+        d["_segments"] = segments
         return new
 
     # ---- constructors ---------------------------------------------------------------------
@@ -207,14 +193,13 @@ class DepthProfile:
             rng.random((4, n)), float(lo), float(hi), s_lo, s_hi, float(taper_probability),
             float(max_jump_ratio),
         )  # fmt: skip
-        edges, starts, ends, slopes = table.tolist()
-        del starts[n], ends[n], slopes[n]
         table.flags.writeable = False
         # Built from checked ranges: every edge grows by at least s_lo > 0, every depth
         # lies in [lo, hi] within DEPTH_RANGE_MM.
         if cls is not DepthProfile:  # a subclass may check more: let it
-            return cls(tuple(edges), tuple(starts), tuple(ends), name)
-        return cls._built(edges, starts, ends, str(name), slopes, table)
+            edges, starts, ends = (tuple(row) for row in table[:3].tolist())
+            return cls(edges, starts[:n], ends[:n], name)
+        return cls._built(table, str(name))
 
     # ---- evaluation -----------------------------------------------------------------------
     @property
@@ -251,7 +236,8 @@ class DepthProfile:
     def __call__(self, x_mm) -> np.ndarray:
         """Depth (mm) at positions ``x_mm`` (array); zero outside ``[0, length_mm)``."""
         x = np.asarray(x_mm, dtype=np.float64)
-        e, d0, slope = self._arrays
+        segments = self._segments
+        e, d0, slope = segments[0], segments[1, :-1], segments[3, :-1]
         i = np.clip(np.searchsorted(e, x, side="right") - 1, 0, e.size - 2)
         d = d0[i] + slope[i] * (x - e[i])
         return np.where((x >= 0.0) & (x < e[-1]), d, 0.0)

@@ -241,7 +241,7 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
         info_f[11, k] = out[k, 7]
         info_f[12, k] = w_axial[k] * cut_area_at(pos, edges, d0, slope, cumulative, k, nseg[k])
         info_f[13, k] = out_finish[k]  # NaN unless the lane finished (flags[k, 2])
-        info_f[14, k] = 1.0 if torque > tr[k] else 0.0  # the cost: flags[k, 5]
+        info_f[14, k] = 1.0 if flags[k, 5] else 0.0  # the cost
         sc = tr[k]
         obs[k, 0] = _clamp(measured / sc, lo, hi)
         obs[k, 1] = tr_obs[k]
