@@ -65,6 +65,14 @@ class SB3VecEnv(VecEnv):
         # Gymnasium seeds a vector env with one int (lane i gets seed + i) or a list.
         seed = None if all(s is None for s in seeds) else list(seeds)
         options = self._options[0] if self._options and self._options[0] else None
+        if any(o != self._options[0] for o in self._options[1:]):
+            # The batched env resets every lane with one options dict (Gymnasium's vector
+            # API); SB3's DummyVecEnv would give each env its own: refuse, not drop them.
+            raise ValueError(
+                "SB3VecEnv resets every env with the same options; set_options got different "
+                f"options per env ({self._options[0]!r}, ...): pass one dict, or reset the "
+                "vector env once per set of options"
+            )
         obs, info = self.venv.reset(seed=seed, options=options)
         self._reset_seeds()
         self._reset_options()
@@ -78,6 +86,8 @@ class SB3VecEnv(VecEnv):
         obs, reward, terminated, truncated, info = self.venv.step(self._actions)
         done = np.logical_or(terminated, truncated)
         infos = self._split(info, done)
+        for d in infos:  # every step, as SB3's own VecEnvs give it
+            d["TimeLimit.truncated"] = False
         if done.any():
             # An env that ended reports its last step's info (SB3's convention), not the
             # info of the reset that followed it.

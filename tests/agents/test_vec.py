@@ -9,7 +9,7 @@ import pytest
 from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.env_util import make_vec_env
 
-import machining_envs  # noqa: F401
+import machining_envs
 from agents.rl.vec import SB3VecEnv
 
 
@@ -60,3 +60,46 @@ def test_refuses_next_step_autoreset():
     venv = gym.make_vec("CartPole-v1", num_envs=2, vectorization_mode="sync")
     with pytest.raises(ValueError, match="SAME_STEP"):
         SB3VecEnv(venv)
+
+
+def _same(a, b) -> bool:
+    a, b = np.asarray(a), np.asarray(b)
+    if a.dtype.kind == "f" and b.dtype.kind == "f":
+        return np.array_equal(a, b, equal_nan=True)
+    return np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("env_id", machining_envs.ENV_IDS)
+def test_native_vector_env_is_dummy_vec_env_to_sb3(env_id):
+    """The adapter over ``gym.make_vec(id)`` (the native batched env) gives SB3 what its
+    ``DummyVecEnv`` of single envs gives: observations, rewards, dones and every info key,
+    at every step and across resets (a fresh ``reset()`` after seeding included)."""
+    n = 3
+    native = SB3VecEnv(gym.make_vec(env_id, num_envs=n))
+    dummy = make_vec_env(env_id, n_envs=n)
+    native.seed(11)
+    dummy.seed(11)
+    np.testing.assert_array_equal(native.reset(), dummy.reset())
+    rng = np.random.default_rng(1)
+    for _ in range(150):
+        a = rng.uniform(-1.0, 1.0, size=(n, *native.action_space.shape)).astype(np.float32)
+        r1, r2 = native.step(a), dummy.step(a)
+        for j in range(3):
+            np.testing.assert_array_equal(r1[j], r2[j])
+        for i1, i2 in zip(r1[3], r2[3], strict=True):
+            assert set(i1) == set(i2) - {"episode"}
+            for key in i1:
+                assert _same(i1[key], i2[key]), key
+    np.testing.assert_array_equal(native.reset(), dummy.reset())
+
+
+def test_refuses_different_options_per_env():
+    """SB3's ``set_options`` may give each env its own options; the batched env resets every
+    lane with one dict, so different ones are refused, not dropped."""
+    venv = SB3VecEnv(gym.make_vec("machining_envs/Turning-v0", num_envs=2))
+    venv.set_options([{"scenario": "train"}, {"scenario": "validation"}])
+    with pytest.raises(ValueError, match="same options"):
+        venv.reset()
+    venv.set_options({"scenario": "paper_405"})  # one dict for every env
+    venv.reset()
+    assert list(venv.venv.unwrapped._core.names) == ["paper_405", "paper_405"]
