@@ -11,6 +11,7 @@ import gymnasium as gym
 import numba
 import numpy as np
 from gymnasium import spaces
+from gymnasium.vector import AutoresetMode
 
 from machining_envs.contouring._exact import py_hypot
 from machining_envs.contouring.metrics import CONTOURING_TASK
@@ -800,14 +801,15 @@ class ContouringVectorEnv(LaneVectorEnv):
     """``machining_envs/Contouring-v0`` as a native vector env: N XY tables, each on its own
     path with its own hidden inertias and loads, stepped by one compiled function.
 
-    ``gym.make_vec("machining_envs/Contouring-v0", num_envs=N, **kwargs)`` takes the
-    keyword arguments of :class:`ContouringEnv` (but not ``render_mode``), and
-    ``num_threads``: the threads that step the lanes (``machining_envs.core.vector``). Lane
-    ``i`` after ``reset(seed=s)`` runs exactly the episode ``ContouringEnv.reset(seed=s +
-    i)`` runs, with the same observations, rewards and ``info`` (here a dict of arrays; the
-    circle's keys and ``machining_time_s`` with their masks); every lane draws its own
-    scenario from its own generator. Finished lanes are reset in the same step
-    (``metadata["autoreset_mode"]``): see ``machining_envs.core.vector``.
+    ``gym.make_vec("machining_envs/Contouring-v0", num_envs=N, **kwargs)`` takes the keyword
+    arguments of :class:`ContouringEnv` (but not ``render_mode``), and ``num_threads``: the
+    threads that step the lanes (``machining_envs.core.vector``). Lane ``i`` after
+    ``reset(seed=s)`` runs exactly the episode ``ContouringEnv.reset(seed=s + i)`` runs,
+    with the same observations, rewards and ``info`` (here a dict of arrays; the circle's
+    keys and ``machining_time_s`` with their masks); every lane draws its own scenario from
+    its own generator. Finished lanes are reset in the same step by default
+    (``autoreset_mode``; also ``"NEXT_STEP"`` or ``"DISABLED"``): see
+    ``machining_envs.core.vector``.
     """
 
     env_name = "ContouringEnv"
@@ -824,6 +826,7 @@ class ContouringVectorEnv(LaneVectorEnv):
         in_position_mm: float = 0.005,
         divergence_mm: float = 50.0,
         num_threads: int = 1,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
         **overrides,
     ):
         check_num_threads(num_threads)
@@ -831,7 +834,9 @@ class ContouringVectorEnv(LaneVectorEnv):
             type(self).__name__, check_num_envs(num_envs), scenario, params, reward,
             max_episode_time_s, in_position_mm, divergence_mm, overrides,
         )  # fmt: skip
-        super().__init__(num_envs, core.observation_space, core.action_space, num_threads)
+        super().__init__(
+            num_envs, core.observation_space, core.action_space, num_threads, autoreset_mode
+        )
         core.blocks = self.lane_blocks
         self.default_scenario = scenario
         self.params = core.params

@@ -10,6 +10,7 @@ import gymnasium as gym
 import numba
 import numpy as np
 from gymnasium import spaces
+from gymnasium.vector import AutoresetMode
 
 from machining_envs.contouring._exact import np_mean, py_hypot
 from machining_envs.contouring.env import (
@@ -869,11 +870,12 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
     ``gym.make_vec("machining_envs/ContouringFeed-v0", num_envs=N, **kwargs)`` takes the
     keyword arguments of :class:`ContouringFeedEnv` (but not ``render_mode``), and
     ``num_threads``: the threads that step the lanes (``machining_envs.core.vector``). Lane
-    ``i`` after ``reset(seed=s)`` runs exactly the episode ``ContouringFeedEnv.reset(seed=s +
-    i)`` runs, with the same observations, rewards and ``info`` (here a dict of arrays; the
-    circle's keys and ``machining_time_s`` with their masks); every lane draws its own
-    scenario from its own generator. Finished lanes are reset in the same step
-    (``metadata["autoreset_mode"]``): see ``machining_envs.core.vector``.
+    ``i`` after ``reset(seed=s)`` runs exactly the episode ``ContouringFeedEnv.reset(seed=s
+    + i)`` runs, with the same observations, rewards and ``info`` (here a dict of arrays;
+    the circle's keys and ``machining_time_s`` with their masks); every lane draws its own
+    scenario from its own generator. Finished lanes are reset in the same step by default
+    (``autoreset_mode``; also ``"NEXT_STEP"`` or ``"DISABLED"``): see
+    ``machining_envs.core.vector``.
     """
 
     env_name = "ContouringFeedEnv"
@@ -895,6 +897,7 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
         divergence_mm: float = 50.0,
         actuation: Actuation | dict | None = None,
         num_threads: int = 1,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
         **overrides,
     ):
         check_num_threads(num_threads)
@@ -903,7 +906,9 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
             tolerance_mm, reward, decision_interval_s, override_max, max_episode_time_s,
             in_position_mm, divergence_mm, overrides, actuation,
         )  # fmt: skip
-        super().__init__(num_envs, core.observation_space, core.action_space, num_threads)
+        super().__init__(
+            num_envs, core.observation_space, core.action_space, num_threads, autoreset_mode
+        )
         core.blocks = self.lane_blocks
         self.default_scenario = scenario
         self.params = core.params

@@ -17,12 +17,26 @@ its batched physics:
 - ``_info_now()``: every lane's info as it stands, in the same form (new arrays).
 
 This base checks the actions (a non-finite action in any lane raises ``ValueError``
-naming the lane, and nothing is stepped), seeds lane ``i`` with ``seed + i`` exactly as
-``env.reset(seed=seed + i)`` seeds the single env, and resets finished lanes in the same
-step (``AutoresetMode.SAME_STEP``, declared in ``metadata["autoreset_mode"]``): the
-returned observation of such a lane is its new episode's first, its last observation and
-info are in ``info["final_obs"]`` and ``info["final_info"]``, exactly as Gymnasium's
-``SyncVectorEnv(..., autoreset_mode=AutoresetMode.SAME_STEP)`` reports them.
+naming the lane, and nothing is stepped) and seeds lane ``i`` with ``seed + i`` exactly as
+``env.reset(seed=seed + i)`` seeds the single env. What happens to a lane whose episode
+ends is the ``autoreset_mode`` every vector env takes (Gymnasium's
+:class:`~gymnasium.vector.AutoresetMode`, or its name as a string), declared in
+``metadata["autoreset_mode"]``; in each mode a lane runs the episodes of the single env
+with the same seed, as Gymnasium's ``SyncVectorEnv`` in that mode runs them:
+
+- ``SAME_STEP`` (the default; what :class:`agents.rl.vec.SB3VecEnv` needs): the lane is
+  reset in the step where it ends. The returned observation is its new episode's first;
+  its last observation and info are in ``info["final_obs"]`` and ``info["final_info"]``.
+- ``NEXT_STEP`` (Gymnasium's own default, which its vector observation wrappers such as
+  ``NormalizeObservation`` require): the step where a lane ends returns its last
+  observation; the next step resets it instead of stepping it (its action is ignored,
+  its reward is 0, it is neither terminated nor truncated, and its info is its reset
+  info).
+- ``DISABLED``: nothing is reset by itself. ``reset(options={"reset_mask": mask})`` resets
+  the lanes where the boolean array ``mask`` is true (``seed``, if given, seeds those
+  lanes only; the other lanes keep their observations, and the info's masks select the
+  reset lanes); stepping a lane that ended without resetting it raises
+  ``RuntimeError``, as the single env does.
 
 Every vector env takes ``num_threads`` (default 1): its kernel then steps blocks of lanes on
 that many threads at once (:mod:`machining_envs.core.blocks`; blocks of at least
@@ -49,9 +63,25 @@ from gymnasium.vector.utils import batch_space
 from machining_envs.core.blocks import LaneBlocks, one_blas_thread
 from machining_envs.core.env import real_actions
 
-__all__ = ["LaneVectorEnv", "check_num_envs"]
+__all__ = ["LaneVectorEnv", "check_num_envs", "check_autoreset_mode"]
 
 _NO_CONTEXT = contextlib.nullcontext()
+
+
+def check_autoreset_mode(mode) -> AutoresetMode:
+    """``mode`` as an :class:`~gymnasium.vector.AutoresetMode`: the enum itself, or its
+    name or value as a string (``"NEXT_STEP"``, ``"next_step"``, ``"NextStep"``, ...);
+    anything else is a ``ValueError`` listing the three."""
+    if isinstance(mode, AutoresetMode):
+        return mode
+    if isinstance(mode, str):
+        for m in AutoresetMode:
+            if mode in (m.name, m.name.lower(), m.value):
+                return m
+    raise ValueError(
+        "autoreset_mode must be a gymnasium.vector.AutoresetMode or one of "
+        f"{[m.name for m in AutoresetMode]}, got {mode!r}"
+    )
 
 
 def check_num_envs(num_envs) -> int:
@@ -79,8 +109,12 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         single_observation_space: gym.Space,
         single_action_space: gym.Space,
         num_threads: int = 1,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
     ) -> None:
         self.num_envs = check_num_envs(num_envs)
+        #: What happens to a lane whose episode ends (see the module docstring).
+        self.autoreset_mode = check_autoreset_mode(autoreset_mode)
+        self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
         #: The blocks of lanes the process's kernel steps at once, on ``num_threads``
         #: threads (the process's core runs its kernel through it).
         self.lane_blocks = LaneBlocks(self.num_envs, num_threads)
@@ -97,6 +131,12 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             seeding.np_random()[0] for _ in range(self.num_envs)
         ]
         self._started = False
+        #: Lanes whose episode ended at the last step and that have not been reset since
+        #: (``NEXT_STEP``: reset at the next step; ``DISABLED``: not steppable).
+        self._ended = np.zeros(self.num_envs, dtype=bool)
+        #: The observations of the last step or reset (``DISABLED``: a masked reset returns
+        #: them for the lanes it leaves alone).
+        self._last_obs: np.ndarray | None = None
 
     # ---- the VectorEnv interface ------------------------------------------------------------
     def reset(
@@ -104,9 +144,15 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
     ):
         """Start a new episode in every lane; ``seed`` (int: lane ``i`` gets ``seed + i``;
         or one seed per lane) and ``options`` (e.g. ``{"scenario": ...}``) as for the single
-        env."""
+        env. With ``autoreset_mode=DISABLED``, ``options["reset_mask"]`` (a boolean array,
+        one value per lane) resets only the lanes it marks (module docstring)."""
         if options is not None and not isinstance(options, dict):
             raise TypeError(f"options must be a dict or None, got {type(options).__name__}")
+        mask = None
+        if options is not None and "reset_mask" in options:
+            mask = self._reset_mask(options["reset_mask"])
+            options = {k: v for k, v in options.items() if k != "reset_mask"} or None
+        lanes = np.arange(self.num_envs) if mask is None else np.flatnonzero(mask)
         if seed is not None:
             if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
                 seeds = [int(seed) + i for i in range(self.num_envs)]
@@ -116,15 +162,45 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
                 raise ValueError(
                     f"seed must be None, an int or a list of {self.num_envs} seeds, got {seed!r}"
                 )
-            for i, s in enumerate(seeds):
-                if s is not None:
-                    self.lane_rngs[i] = seeding.np_random(s)[0]
+            for i in lanes.tolist():
+                if seeds[i] is not None:
+                    self.lane_rngs[i] = seeding.np_random(seeds[i])[0]
         with one_blas_thread() if self.resets_call_blas else _NO_CONTEXT:
-            obs = self._reset_lanes(np.arange(self.num_envs), options)
+            obs = self._reset_lanes(lanes, options)
         self._started = True
+        self._ended[lanes] = False
         info = self._info_now()
         self._with_masks(info)
+        if mask is not None:  # the other lanes keep their observations; info of these only
+            full = self._last_obs.copy()
+            full[lanes] = obs
+            obs = full
+            for key in [k for k in info if k[0] == "_"]:
+                info[key] = info[key] & mask
+        if self.autoreset_mode is AutoresetMode.DISABLED:
+            self._last_obs = obs.copy()
         return obs, info
+
+    def _reset_mask(self, mask) -> np.ndarray:
+        """Check ``options["reset_mask"]``: only in ``DISABLED`` mode, after a first full
+        reset, a boolean array of one value per lane with at least one true."""
+        if self.autoreset_mode is not AutoresetMode.DISABLED:
+            raise ValueError(
+                f"{self.env_name} (vector): options['reset_mask'] resets some lanes only with "
+                f"autoreset_mode=DISABLED; this env has {self.autoreset_mode.name}, which "
+                "resets lanes itself"
+            )
+        if not self._started:
+            raise RuntimeError(
+                f"{self.env_name} (vector): reset() every lane before resetting some of them"
+            )
+        m = np.asarray(mask)
+        if m.dtype != np.bool_ or m.shape != (self.num_envs,) or not m.any():
+            raise ValueError(
+                f"{self.env_name} (vector): options['reset_mask'] must be a boolean array of "
+                f"shape ({self.num_envs},) with at least one True, got {mask!r:.80}"
+            )
+        return m
 
     @abc.abstractmethod
     def _reset_lanes(self, lanes: np.ndarray, options: dict | None) -> np.ndarray:
@@ -159,6 +235,13 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
     def step(self, actions):
         if not self._started:
             raise RuntimeError(f"{self.env_name} (vector): call reset() before step()")
+        mode = self.autoreset_mode
+        if mode is AutoresetMode.DISABLED and self._ended.any():
+            raise RuntimeError(
+                f"{self.env_name} (vector): the episodes of lanes "
+                f"{np.flatnonzero(self._ended).tolist()} have ended; reset them "
+                "(reset(options={'reset_mask': mask})) before step()"
+            )
         shape = (self.num_envs, *self.single_action_space.shape)
         a = real_actions(actions, f"{self.env_name} (vector)")
         if a.shape != shape:
@@ -175,6 +258,8 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
                 f"{self.env_name} (vector): the action of lane {lane} is {a[lane].tolist()} "
                 "(not finite); no lane was stepped"
             )
+        if mode is not AutoresetMode.SAME_STEP:
+            return self._step_without_same_step_reset(a)
         obs, reward, terminated, truncated, info = self._step_lanes(a)
         every, pairs = self._with_masks(info)  # _step_lanes' dict is new at every step
         done = np.logical_or(terminated, truncated)
@@ -197,6 +282,29 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         top["final_obs"], top["_final_obs"] = final_obs, done.copy()
         top["final_info"], top["_final_info"] = final_info, done.copy()
         return obs, reward, terminated, truncated, top
+
+    def _step_without_same_step_reset(self, a: np.ndarray):
+        """``step`` in the ``NEXT_STEP`` and ``DISABLED`` modes (module docstring)."""
+        pending = np.flatnonzero(self._ended)  # NEXT_STEP: lanes to reset instead of step
+        # The kernel steps every lane: a pending lane takes one step past its episode's end,
+        # which its reset below undoes. Its generator is put back first, so that the reset
+        # draws what the single env's reset after the end draws.
+        states = [self.lane_rngs[i].bit_generator.state for i in pending.tolist()]
+        obs, reward, terminated, truncated, info = self._step_lanes(a)
+        if pending.size:
+            for i, state in zip(pending.tolist(), states, strict=True):
+                self.lane_rngs[i].bit_generator.state = state
+            with one_blas_thread() if self.resets_call_blas else _NO_CONTEXT:
+                obs[pending] = self._reset_lanes(pending, None)
+            reward[pending] = 0.0
+            terminated[pending] = False
+            truncated[pending] = False
+            info = self._info_now()  # the reset lanes report their reset info
+        self._with_masks(info)
+        self._ended = np.logical_or(terminated, truncated)
+        if self.autoreset_mode is AutoresetMode.DISABLED:
+            self._last_obs = obs.copy()
+        return obs, reward, terminated, truncated, info
 
     def close_extras(self, **kwargs) -> None:
         blocks = getattr(self, "lane_blocks", None)  # None: the constructor raised before it

@@ -9,6 +9,7 @@ import gymnasium as gym
 import numba
 import numpy as np
 from gymnasium import spaces
+from gymnasium.vector import AutoresetMode
 
 from machining_envs.core.blocks import LaneBlocks, check_num_threads
 from machining_envs.core.checks import check_below
@@ -746,12 +747,12 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
     ``gym.make_vec("machining_envs/MicroDrilling-v0", num_envs=N, **kwargs)`` takes the
     keyword arguments of :class:`MicroDrillingEnv` (but not ``render_mode``), ``control``
     included, and ``num_threads``: the threads that step the lanes
-    (``machining_envs.core.vector``). Lane ``i`` after ``reset(seed=s)`` runs exactly the episode
-    ``MicroDrillingEnv.reset(seed=s + i)`` runs, with the same observations, rewards and
-    ``info`` (here a dict of arrays; ``drilling_time_s`` and ``machining_time_s`` come with
-    masks); every lane draws its own scenario from its own generator. Finished lanes are
-    reset in the same step (``metadata["autoreset_mode"]``): see
-    ``machining_envs.core.vector``.
+    (``machining_envs.core.vector``). Lane ``i`` after ``reset(seed=s)`` runs exactly the
+    episode ``MicroDrillingEnv.reset(seed=s + i)`` runs, with the same observations, rewards
+    and ``info`` (here a dict of arrays; ``drilling_time_s`` and ``machining_time_s`` come
+    with masks); every lane draws its own scenario from its own generator. Finished lanes
+    are reset in the same step by default (``autoreset_mode``; also ``"NEXT_STEP"`` or
+    ``"DISABLED"``): see ``machining_envs.core.vector``.
     """
 
     env_name = "MicroDrillingEnv"
@@ -765,6 +766,7 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
         reward: DrillingReward | dict | None = None,
         max_episode_time_s: float = 150.0,
         num_threads: int = 1,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
         **overrides,
     ):
         check_num_threads(num_threads)
@@ -779,7 +781,11 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
             overrides,
         )
         super().__init__(
-            num_envs, self._core.observation_space, self._core.action_space, num_threads
+            num_envs,
+            self._core.observation_space,
+            self._core.action_space,
+            num_threads,
+            autoreset_mode,
         )
         self._core.blocks = self.lane_blocks
         self.default_scenario = scenario

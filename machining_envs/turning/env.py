@@ -10,6 +10,7 @@ import gymnasium as gym
 import numba
 import numpy as np
 from gymnasium import spaces
+from gymnasium.vector import AutoresetMode
 
 from machining_envs.core.actuation import (
     Actuation,
@@ -772,8 +773,9 @@ class TurningVectorEnv(LaneVectorEnv):
     threads that step the lanes (``machining_envs.core.vector``). Lane ``i`` after
     ``reset(seed=s)`` runs exactly the episode ``TurningEnv.reset(seed=s + i)`` runs, with
     the same observations, rewards and ``info`` (here a dict of arrays); every lane draws
-    its own scenario from its own generator. Finished lanes are reset in the same step
-    (``metadata["autoreset_mode"]``): see ``machining_envs.core.vector``.
+    its own scenario from its own generator. Finished lanes are reset in the same step by
+    default (``autoreset_mode``; also ``"NEXT_STEP"`` or ``"DISABLED"``): see
+    ``machining_envs.core.vector``.
     """
 
     env_name = "TurningEnv"
@@ -790,6 +792,7 @@ class TurningVectorEnv(LaneVectorEnv):
         max_episode_time_s: float = 200.0,
         actuation: Actuation | dict | None = None,
         num_threads: int = 1,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
         **overrides,
     ):
         check_num_threads(num_threads)
@@ -805,7 +808,11 @@ class TurningVectorEnv(LaneVectorEnv):
             actuation,
         )
         super().__init__(
-            num_envs, self._core.observation_space, self._core.action_space, num_threads
+            num_envs,
+            self._core.observation_space,
+            self._core.action_space,
+            num_threads,
+            autoreset_mode,
         )
         self._core.blocks = self.lane_blocks
         self.default_scenario = scenario
