@@ -148,7 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
         "train an SB3 policy (PPO, SAC, TD3) on an env",
         "Train a Stable-Baselines3 policy with the hyperparameters of "
         "agents/rl/configs/<algo>.yml (or --config); the run folder keeps the model, its "
-        "normalisation statistics, checkpoints and held-out evaluations.",
+        "normalisation statistics, checkpoints and its evaluations on the validation split.",
     )
     _training_arguments(t, "run folder (must be new unless --resume)")
     t.add_argument("--seed", type=int, default=0)

@@ -1,6 +1,6 @@
 """SB3 callbacks of the training runs, usable from ``machining-bench train`` and from rl-zoo3.
 
-:class:`ValidationCallback` is the held-out evaluation named in the shipped configs
+:class:`ValidationCallback` is the evaluation on ``validation`` named in the shipped configs
 (``callback:`` in ``agents/rl/configs/*.yml``, rl-zoo3's key). Every ``eval_freq`` env steps,
 and once more when training ends, it runs the policy through the evaluation harness on
 ``n_episodes`` episodes of the ``validation`` split (seeds 5000, 5001, ...) and scores them

@@ -7,13 +7,14 @@ them unmodified: one entry per env id with rl-zoo3's keys (``policy``, ``n_times
 and the algorithm's keywords. ``env_wrapper`` may name one of
 ``machining_envs.wrappers.IncrementalAction`` (with ``max_step`` and ``hide_action``) and
 ``agents.rl.residual.SetpointResidual`` (the policy moves a tuned classical agent's setting);
-``callback`` names ``agents.rl.callbacks.ValidationCallback`` (the held-out evaluation: its
-``eval_freq``, ``n_episodes``, ``scenarios``, ``checkpoint_freq``) and any other SB3
-callback by import path. rl-zoo3's value syntax is read too: ``!!float 1e6`` counts,
-``lin_<x>`` schedules, and ``"dict(...)"`` strings for ``policy_kwargs`` and ``normalize``
-(parsed as literals, never evaluated; ``nn.<Name>`` stands for ``torch.nn.<Name>``). The
-older keys of ours (``eval_freq``, ``eval_episodes``, ``eval_scenarios``,
-``checkpoint_freq``, ``action_increment``, ``hide_action``) are still read.
+``callback`` names ``agents.rl.callbacks.ValidationCallback`` (the evaluation on the
+``validation`` split: its ``eval_freq``, ``n_episodes``, ``scenarios``,
+``checkpoint_freq``) and any other SB3 callback by import path. rl-zoo3's value syntax is
+read too: ``!!float 1e6`` counts, ``lin_<x>`` schedules, and ``"dict(...)"`` strings for
+``policy_kwargs`` and ``normalize`` (parsed as literals, never evaluated; ``nn.<Name>``
+stands for ``torch.nn.<Name>``). The older keys of ours (``eval_freq``, ``eval_episodes``,
+``eval_scenarios``, ``checkpoint_freq``, ``action_increment``, ``hide_action``) are still
+read.
 """
 
 from __future__ import annotations

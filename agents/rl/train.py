@@ -289,7 +289,7 @@ def train(
         print(
             f"trained {cfg.algo} on {env_id} for {model.num_timesteps} steps in "
             f"{learn_s:.0f} s ({remaining / max(learn_s, 1e-9):.0f} env-steps/s of learn(), "
-            f"held-out evaluations included; {vec_kind} envs); run folder {out}"
+            f"validation evaluations included; {vec_kind} envs); run folder {out}"
         )
     return out
 

@@ -296,7 +296,7 @@ def test_primary_score_charges_episodes_that_do_not_count():
 
 
 def test_training_evaluates_with_the_envs_own_metrics(tmp_path):
-    """End milling reports torque, not force: the held-out evaluation uses its metrics."""
+    """End milling reports torque, not force: the validation evaluation uses its metrics."""
     text = TINY.replace("machining_envs/Turning-v0", "machining_envs/EndMilling-v0").replace(
         "paper_700", "paper_step"
     )
