@@ -41,9 +41,11 @@ class SB3VecEnv(VecEnv):
     venv : gymnasium.vector.VectorEnv
         Its ``metadata["autoreset_mode"]`` must be ``AutoresetMode.SAME_STEP``.
     info_keys : iterable of str, optional
-        The ``info`` entries copied into the per-env info dicts (all by default). Training
-        that needs none of them (``VecMonitor`` counts episodes itself) passes ``()``: the
-        terminal observation and ``TimeLimit.truncated`` are always given.
+        The ``info`` entries copied into the per-env info dicts (all by default, as SB3's
+        ``DummyVecEnv`` gives them). Training that needs none of them (``VecMonitor``
+        counts episodes itself) may pass ``()``: the terminal observation and
+        ``TimeLimit.truncated`` are always given. The copies are Python work per env and
+        key: at N = 1024 the full info costs several times the batched step itself.
     """
 
     def __init__(self, venv: gym.vector.VectorEnv, info_keys: Iterable[str] | None = None):
@@ -122,17 +124,27 @@ class SB3VecEnv(VecEnv):
     # ---- helpers ---------------------------------------------------------------------------
     def _split(self, info: dict, skip: np.ndarray) -> list[dict]:
         """Gymnasium's dict of arrays (with ``_key`` masks) -> one dict per env (empty for the
-        envs in ``skip``)."""
+        envs in ``skip``). A flat array's values come as Python numbers (bool, int, float,
+        str), as the single env gives them; other values as the array's elements."""
         out: list[dict] = [{} for _ in range(self.num_envs)]
         keys = info if self.info_keys is None else [k for k in self.info_keys if k in info]
+        keep = ~skip
+        every = bool(keep.all())
         for key in keys:
             if key.startswith("_") or key in ("final_obs", "final_info"):
                 continue
             values = info[key]
             mask = info.get("_" + key)
-            for i in range(self.num_envs):
-                if not skip[i] and (mask is None or mask[i]):
-                    out[i][key] = values[i]
+            held = keep if mask is None else keep & mask
+            flat = isinstance(values, np.ndarray) and values.ndim == 1 and values.dtype != object
+            if every and (mask is None or held.all()):  # every env: no index to look up
+                for d, v in zip(out, values.tolist() if flat else values, strict=True):
+                    d[key] = v
+            else:
+                lanes = np.flatnonzero(held).tolist()
+                picked = values[lanes].tolist() if flat else [values[i] for i in lanes]
+                for i, v in zip(lanes, picked, strict=True):
+                    out[i][key] = v
         return out
 
 
