@@ -72,8 +72,8 @@ class SB3VecEnv(VecEnv):
             # API); SB3's DummyVecEnv would give each env its own: refuse, not drop them.
             raise ValueError(
                 "SB3VecEnv resets every env with the same options; set_options got different "
-                f"options per env ({self._options[0]!r}, ...): pass one dict, or reset the "
-                "vector env once per set of options"
+                f"options per env ({self._options[0]!r}, ...): pass one dict (its "
+                "'scenario' may be a list of one scenario per env)"
             )
         obs, info = self.venv.reset(seed=seed, options=options)
         self._reset_seeds()

@@ -50,7 +50,7 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
-from machining_envs.core.vector import LaneVectorEnv, check_num_envs
+from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
 
 __all__ = [
     "ContouringEnv",
@@ -416,6 +416,9 @@ class _ContouringCore:
     (:func:`~machining_envs.contouring.plant.step_axes`), path (``Path.table``), set points
     and loads, advanced by one compiled function (:func:`_contour_step`), so that a lane
     and the single env agree to the last bit."""
+
+    #: What a scenario may be: an object of this class or one of these names.
+    scenario_types = (ContouringScenario, CONTOURING_SCENARIOS)
 
     def __init__(self, owner, n, scenario, params, reward, max_episode_time_s, in_position_mm,
                  divergence_mm, overrides):  # fmt: skip
@@ -831,26 +834,16 @@ class ContouringVectorEnv(LaneVectorEnv):
     ):
         check_num_threads(num_threads)
         self._core = core = _ContouringCore(
-            type(self).__name__, check_num_envs(num_envs), scenario, params, reward,
+            type(self).__name__, check_num_envs(num_envs), first_scenario(scenario), params, reward,
             max_episode_time_s, in_position_mm, divergence_mm, overrides,
         )  # fmt: skip
         super().__init__(
             num_envs, core.observation_space, core.action_space, num_threads, autoreset_mode
         )
         core.blocks = self.lane_blocks
-        self.default_scenario = scenario
+        self.default_scenario = self._lane_scenarios(scenario)
         self.params = core.params
         self.command_map = core.command_map
-
-    def _reset_lanes(self, lanes, options):
-        core = self._core
-        spec = scenario_option(options, self.default_scenario)
-        for i in lanes.tolist():
-            core.start(i, spec, self.lane_rngs[i])
-        return core.obs[lanes]  # their info is their reset info until they step (_info_now)
-
-    def _info_now(self):
-        return self._core.info_arrays()
 
     def _step_lanes(self, actions):
         core = self._core

@@ -68,7 +68,7 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
-from machining_envs.core.vector import LaneVectorEnv, check_num_envs
+from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
 
 __all__ = ["ContouringFeedEnv", "ContouringFeedVectorEnv", "FeedReward", "LOOKAHEAD_MM"]
 __all__ += ["DEFAULT_TOLERANCE_MM"]
@@ -362,6 +362,9 @@ class _FeedCore:
     ``ContouringFeedEnv`` (one lane) and ``ContouringFeedVectorEnv`` (N lanes): each lane's
     path (``Path.table``), loads and closed loops (``ServoLanes``), advanced by one compiled
     function (:func:`_feed_step`), so that a lane and the single env agree to the last bit."""
+
+    #: What a scenario may be: an object of this class or one of these names.
+    scenario_types = (ContouringScenario, CONTOURING_SCENARIOS)
 
     def __init__(self, owner, n, scenario, params, servo, tolerance_mm, reward,
                  decision_interval_s, override_max, max_episode_time_s, in_position_mm,
@@ -902,7 +905,7 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
     ):
         check_num_threads(num_threads)
         self._core = core = _FeedCore(
-            type(self).__name__, check_num_envs(num_envs), scenario, params, servo,
+            type(self).__name__, check_num_envs(num_envs), first_scenario(scenario), params, servo,
             tolerance_mm, reward, decision_interval_s, override_max, max_episode_time_s,
             in_position_mm, divergence_mm, overrides, actuation,
         )  # fmt: skip
@@ -910,22 +913,12 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
             num_envs, core.observation_space, core.action_space, num_threads, autoreset_mode
         )
         core.blocks = self.lane_blocks
-        self.default_scenario = scenario
+        self.default_scenario = self._lane_scenarios(scenario)
         self.params = core.params
         self.servo = core.servo
         self.tolerance_mm = core.tolerance_mm
         self.override_max = core.override_max
         self.command_map = core.command_map
-
-    def _reset_lanes(self, lanes, options):
-        core = self._core
-        spec = scenario_option(options, self.default_scenario)
-        for i in lanes.tolist():
-            core.start(i, spec, self.lane_rngs[i])
-        return core.obs[lanes]  # their info is their reset info until they step (_info_now)
-
-    def _info_now(self):
-        return self._core.info_arrays()
 
     def _step_lanes(self, actions):
         core = self._core

@@ -1,20 +1,30 @@
 """What every native vector env shares: N lanes of one process stepped as arrays.
 
-A process's vector env subclasses :class:`LaneVectorEnv` and implements three methods over
-its batched physics:
+A process's vector env subclasses :class:`LaneVectorEnv`. It holds its batched physics as
+``self._core``, the process's core that its single env shares, and its default scenario
+as ``self.default_scenario`` (from :meth:`LaneVectorEnv._lane_scenarios`). Through the
+core the base implements two of the three methods of a step:
 
 - ``_reset_lanes(lanes, options)``: start new episodes in the lanes ``lanes`` (an index
-  array), drawing each lane's scenario from its own generator ``self.lane_rngs[i]``, and
-  return their observations ``(len(lanes), *obs_shape)``. A lane holds its reset info
-  from the moment it starts: until its first step, ``_info_now()`` reports it for the lane
-  (the single env's reset info is the same lane's info);
-- ``_step_lanes(actions)``: advance every lane by one control period with the checked
-  actions ``(num_envs, *action_shape)``; return observations, rewards, terminations,
-  truncations and the step info as a new dict of arrays of length ``num_envs`` (a key
-  that only some lanes have comes with a boolean mask under ``"_" + key``; the base adds
-  the masks of the others to it). The arrays are new, not views of the lanes' state: they
-  become the ``final_info`` of the lanes that end, which are reset after them;
-- ``_info_now()``: every lane's info as it stands, in the same form (new arrays).
+  array), drawing each lane's scenario from its own generator ``self.lane_rngs[i]``
+  (``core.start(lane, spec, rng)``), and return their observations
+  ``(len(lanes), *obs_shape)`` (``core.obs``). A lane holds its reset info from the moment
+  it starts: until its first step, ``_info_now()`` reports it for the lane (the single
+  env's reset info is the same lane's info);
+- ``_info_now()``: every lane's info as it stands (``core.info_arrays()``), as new arrays
+  of length ``num_envs`` (a key that only some lanes have comes with a boolean mask under
+  ``"_" + key``; the base adds the masks of the others to it);
+
+and the subclass implements the third, ``_step_lanes(actions)``: advance every lane by one
+control period with the checked actions ``(num_envs, *action_shape)``; return
+observations, rewards, terminations, truncations and the step info in the same form. The
+arrays are new, not views of the lanes' state: they become the ``final_info`` of the lanes
+that end, which are reset after them.
+
+A scenario (the constructor's ``scenario`` or ``reset(options={"scenario": ...})``) is one
+for every lane, or a list of one per lane: lane ``i`` then runs the ``i``-th (a name is
+drawn from the lane's own generator), as a sweep over operating points needs. The
+constructor's is what a lane restarts with when its episode ends.
 
 This base checks the actions (a non-finite action in any lane raises ``ValueError``
 naming the lane, and nothing is stepped) and seeds lane ``i`` with ``seed + i`` exactly as
@@ -61,11 +71,17 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from machining_envs.core.blocks import LaneBlocks, one_blas_thread
-from machining_envs.core.env import real_actions
+from machining_envs.core.env import check_scenario_spec, real_actions, scenario_option
 
-__all__ = ["LaneVectorEnv", "check_num_envs", "check_autoreset_mode"]
+__all__ = ["LaneVectorEnv", "check_num_envs", "check_autoreset_mode", "first_scenario"]
 
 _NO_CONTEXT = contextlib.nullcontext()
+
+
+def first_scenario(spec):
+    """The first of a list or tuple of per-lane scenarios, else ``spec`` itself (what a
+    vector env's core checks when it is built; the base checks the whole list)."""
+    return spec[0] if isinstance(spec, (list, tuple)) and spec else spec
 
 
 def check_autoreset_mode(mode) -> AutoresetMode:
@@ -202,19 +218,43 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             )
         return m
 
-    @abc.abstractmethod
+    def _lane_scenarios(self, spec):
+        """``spec`` checked: one scenario (an object or a name of the process's,
+        ``core.scenario_types``) for every lane, returned as it is; or a list or tuple of
+        one per lane, each checked, returned as a list. ``ValueError`` names what is wrong."""
+        if not isinstance(spec, (list, tuple)):
+            check_scenario_spec(spec, *self._core.scenario_types)
+            return spec
+        if len(spec) != self.num_envs:
+            raise ValueError(
+                f"{self.env_name} (vector): a list of scenarios must hold one per lane "
+                f"({self.num_envs}), got {len(spec)}"
+            )
+        for i, one in enumerate(spec):
+            try:
+                check_scenario_spec(one, *self._core.scenario_types)
+            except ValueError as err:
+                raise ValueError(f"{self.env_name} (vector): scenario of lane {i}: {err}") from None
+        return list(spec)
+
     def _reset_lanes(self, lanes: np.ndarray, options: dict | None) -> np.ndarray:
         """Start new episodes in ``lanes``; their first observations (see the module
-        docstring)."""
+        docstring). Every scenario is checked before any lane starts."""
+        core = self._core
+        spec = self._lane_scenarios(scenario_option(options, self.default_scenario))
+        per_lane = isinstance(spec, list)
+        for i in lanes.tolist():
+            core.start(i, spec[i] if per_lane else spec, self.lane_rngs[i])
+        return core.obs[lanes]  # their info is their reset info until they step (_info_now)
 
     @abc.abstractmethod
     def _step_lanes(self, actions: np.ndarray) -> tuple:
         """Advance every lane by one control period (see the module docstring)."""
 
-    @abc.abstractmethod
     def _info_now(self) -> dict:
         """Every lane's info as it stands, as new arrays (a key only some lanes hold comes
         with its ``_key`` mask); a lane just reset reports its reset info."""
+        return self._core.info_arrays()
 
     def _with_masks(self, info: dict) -> tuple[np.ndarray, tuple]:
         """Add to ``info`` (a new dict) the mask of every lane for each key that has none:

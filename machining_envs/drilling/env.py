@@ -30,7 +30,7 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
-from machining_envs.core.vector import LaneVectorEnv, check_num_envs
+from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
 from machining_envs.drilling.metrics import DRILLING_TASK
 from machining_envs.drilling.plant import (
     _N_IN,
@@ -238,6 +238,9 @@ class _DrillingCore:
     next episode starts on the same generator. The numbers are held ``_NOISE_ROWS`` rows at
     a time.
     """
+
+    #: What a scenario may be: an object of this class or one of these names.
+    scenario_types = (DrillingScenario, DRILLING_SCENARIOS)
 
     def __init__(self, owner, n, scenario, control, params, reward, max_episode_time_s,
                  overrides):  # fmt: skip
@@ -773,7 +776,7 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
         self._core = _DrillingCore(
             type(self).__name__,
             check_num_envs(num_envs),
-            scenario,
+            first_scenario(scenario),
             control,
             params,
             reward,
@@ -788,21 +791,11 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
             autoreset_mode,
         )
         self._core.blocks = self.lane_blocks
-        self.default_scenario = scenario
+        self.default_scenario = self._lane_scenarios(scenario)
         self.params = self._core.params
         self.control = self._core.control
         self.command_map = self._core.command_map
         self.max_episode_time_s = self._core.max_episode_time_s
-
-    def _reset_lanes(self, lanes, options):
-        core = self._core
-        spec = scenario_option(options, self.default_scenario)
-        for i in lanes.tolist():
-            core.start(i, spec, self.lane_rngs[i])
-        return core.obs[lanes]  # their info is their reset info until they step (_info_now)
-
-    def _info_now(self):
-        return self._core.info_arrays()
 
     def _step_lanes(self, actions):
         core = self._core

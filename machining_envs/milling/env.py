@@ -37,7 +37,7 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
-from machining_envs.core.vector import LaneVectorEnv, check_num_envs
+from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
 from machining_envs.milling.metrics import MILLING_TASK
 from machining_envs.milling.plant import (
     SPINDLE_RPM_RANGE,
@@ -275,6 +275,9 @@ class _MillingCore:
     command, noise, reward, observation, episode end and info computed for all lanes by one
     compiled function, so that a lane of the vector env and the single env agree to the
     last bit."""
+
+    #: What a scenario may be: an object of this class or one of these names.
+    scenario_types = (MillingScenario, MILLING_SCENARIOS)
 
     def __init__(self, owner, n, scenario, params, reward, max_episode_time_s, action_map,
                  overrides, actuation=None):  # fmt: skip
@@ -859,7 +862,7 @@ class EndMillingVectorEnv(LaneVectorEnv):
         self._core = _MillingCore(
             type(self).__name__,
             check_num_envs(num_envs),
-            scenario,
+            first_scenario(scenario),
             params,
             reward,
             max_episode_time_s,
@@ -875,7 +878,7 @@ class EndMillingVectorEnv(LaneVectorEnv):
             autoreset_mode,
         )
         self._core.blocks = self.lane_blocks
-        self.default_scenario = scenario
+        self.default_scenario = self._lane_scenarios(scenario)
         self.params = self._core.params
         self.command_map = self._core.command_map
         self.max_episode_time_s = self._core.max_episode_time_s
@@ -887,16 +890,6 @@ class EndMillingVectorEnv(LaneVectorEnv):
     def command_to_action(self, command):
         """Action in [-1, 1] for a command U (counts)."""
         return self.command_map.command_to_action(command)
-
-    def _reset_lanes(self, lanes, options):
-        core = self._core
-        spec = scenario_option(options, self.default_scenario)
-        for i in lanes.tolist():
-            core.start(i, spec, self.lane_rngs[i])
-        return core.obs[lanes]  # their info is their reset info until they step (_info_now)
-
-    def _info_now(self):
-        return self._core.info_arrays()
 
     def _step_lanes(self, actions):
         core = self._core

@@ -37,7 +37,7 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
-from machining_envs.core.vector import LaneVectorEnv, check_num_envs
+from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
 from machining_envs.turning.metrics import TURNING_TASK
 from machining_envs.turning.plant import (
     SPINDLE_RPM_RANGE,
@@ -213,6 +213,9 @@ class _TurningCore:
     and ``TurningVectorEnv`` (N lanes): the plant (:class:`TurningLanes`) and the reward,
     observation and episode end computed for all lanes by one compiled function, so that a
     lane of the vector env and the single env agree to the last bit."""
+
+    #: What a scenario may be: an object of this class or one of these names.
+    scenario_types = (TurningScenario, TURNING_SCENARIOS)
 
     def __init__(self, owner, n, scenario, params, spindle_rpm, reward, max_episode_time_s,
                  overrides, actuation=None):  # fmt: skip
@@ -799,7 +802,7 @@ class TurningVectorEnv(LaneVectorEnv):
         self._core = _TurningCore(
             type(self).__name__,
             check_num_envs(num_envs),
-            scenario,
+            first_scenario(scenario),
             params,
             spindle_rpm,
             reward,
@@ -815,20 +818,10 @@ class TurningVectorEnv(LaneVectorEnv):
             autoreset_mode,
         )
         self._core.blocks = self.lane_blocks
-        self.default_scenario = scenario
+        self.default_scenario = self._lane_scenarios(scenario)
         self.params = self._core.params
         self.command_map = self._core.command_map
         self.max_episode_time_s = self._core.max_episode_time_s
-
-    def _reset_lanes(self, lanes, options):
-        core = self._core
-        spec = scenario_option(options, self.default_scenario)
-        for i in lanes.tolist():
-            core.start(i, spec, self.lane_rngs[i])
-        return core.obs[lanes]  # their info is their reset info until they step (_info_now)
-
-    def _info_now(self):
-        return self._core.info_arrays()
 
     def _step_lanes(self, actions):
         core = self._core

@@ -6,6 +6,8 @@ Parametrised over every id registered with a ``vector_entry_point``.
 
 from __future__ import annotations
 
+import pickle
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -344,3 +346,61 @@ def test_resets_that_call_blas_run_with_one_blas_thread(env_id, monkeypatch):
     assert len(seen) > 4, "the run should cross autoresets"
     expected = 1 if env_id in BLAS_RESETS else 2
     assert all(counts and all(n == expected for n in counts) for counts in seen), seen
+
+
+def _lane_specs(env_id: str, n: int) -> list:
+    """n different scenario names of the env (its own list, in order)."""
+    names = sorted(gym.make_vec(env_id, num_envs=1)._core.scenario_types[1])
+    return [names[i % len(names)] for i in range(n)]
+
+
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_a_list_of_scenarios_gives_each_lane_its_own(env_id):
+    """``scenario=[...]`` (constructor or reset option): lane i runs the single env on the
+    i-th scenario with seed s + i, and a lane that ends restarts on the constructor's."""
+    n, seed = 3, 4
+    kwargs = ENV_KWARGS.get(env_id, {})
+    if env_id == "machining_envs/EndMilling-v0":  # a time limit ends its long cuts
+        kwargs = {"max_episode_time_s": 20.0}
+    first = _lane_specs(env_id, n)
+    later = first[::-1]
+    venv = gym.make_vec(env_id, num_envs=n, scenario=first, **kwargs)
+    singles = [gym.make(env_id, scenario=first[i], **kwargs) for i in range(n)]
+    obs, info = venv.reset(seed=seed, options={"scenario": later})
+    for i, env in enumerate(singles):
+        o, inf = env.reset(seed=seed + i, options={"scenario": later[i]})
+        np.testing.assert_array_equal(obs[i], o)
+        for k, v in inf.items():
+            assert info["_" + k][i] and _same(info[k][i], v), (i, k)
+    rng = np.random.default_rng(5)
+    ends = 0
+    for step in range(600):
+        actions = _actions(rng, env_id, venv.single_action_space, n)
+        obs, reward, terminated, truncated, info = venv.step(actions)
+        for i, env in enumerate(singles):
+            o, r, te, tr, inf = env.step(actions[i])
+            assert (r, te, tr) == (reward[i], terminated[i], truncated[i]), (step, i)
+            if te or tr:
+                ends += 1
+                o, inf = env.reset()  # the single env's default: first[i]
+            np.testing.assert_array_equal(obs[i], o, err_msg=f"step {step}, lane {i}")
+            for k, v in inf.items():
+                assert info["_" + k][i] and _same(info[k][i], v), (step, i, k)
+    assert ends >= 1, "a lane should restart on its own scenario"
+
+
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_a_bad_list_of_scenarios_is_refused_naming_the_lane(env_id):
+    with pytest.raises(ValueError, match="one per lane \\(3\\), got 2"):
+        gym.make_vec(env_id, num_envs=3, scenario=["train", "train"])
+    with pytest.raises(ValueError, match="scenario of lane 1"):
+        gym.make_vec(env_id, num_envs=2, scenario=["train", "no such scenario"])
+    venv = gym.make_vec(env_id, num_envs=2)
+    venv.reset(seed=0)
+    twin = pickle.loads(pickle.dumps(venv))
+    with pytest.raises(ValueError, match="scenario of lane 1"):
+        venv.reset(options={"scenario": ["validation", 7]})
+    with pytest.raises(ValueError, match="one per lane"):
+        venv.reset(options={"scenario": ["validation"]})
+    a = np.zeros(venv.action_space.shape, venv.action_space.dtype)
+    np.testing.assert_array_equal(venv.step(a)[0], twin.step(a)[0])  # no lane was reset
