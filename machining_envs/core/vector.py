@@ -218,10 +218,12 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             )
         return m
 
-    def _lane_scenarios(self, spec):
+    def _lane_scenarios(self, spec, lanes: np.ndarray | None = None):
         """``spec`` checked: one scenario (an object or a name of the process's,
         ``core.scenario_types``) for every lane, returned as it is; or a list or tuple of
-        one per lane, each checked, returned as a list. ``ValueError`` names what is wrong."""
+        one per lane, returned as a list, whose entries for ``lanes`` (all by default) are
+        checked (a masked reset's list may hold anything, None say, for the lanes it leaves
+        alone). ``ValueError`` names what is wrong, and the lane."""
         if not isinstance(spec, (list, tuple)):
             check_scenario_spec(spec, *self._core.scenario_types)
             return spec
@@ -230,9 +232,9 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
                 f"{self.env_name} (vector): a list of scenarios must hold one per lane "
                 f"({self.num_envs}), got {len(spec)}"
             )
-        for i, one in enumerate(spec):
+        for i in range(self.num_envs) if lanes is None else lanes.tolist():
             try:
-                check_scenario_spec(one, *self._core.scenario_types)
+                check_scenario_spec(spec[i], *self._core.scenario_types)
             except ValueError as err:
                 raise ValueError(f"{self.env_name} (vector): scenario of lane {i}: {err}") from None
         return list(spec)
@@ -241,7 +243,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         """Start new episodes in ``lanes``; their first observations (see the module
         docstring). Every scenario is checked before any lane starts."""
         core = self._core
-        spec = self._lane_scenarios(scenario_option(options, self.default_scenario))
+        spec = self._lane_scenarios(scenario_option(options, self.default_scenario), lanes)
         per_lane = isinstance(spec, list)
         for i in lanes.tolist():
             core.start(i, spec[i] if per_lane else spec, self.lane_rngs[i])

@@ -127,3 +127,16 @@ def test_a_bad_autoreset_mode_or_mask_is_refused_naming_it():
     for bad in (np.array([1, 0]), np.array([True]), np.array([False, False]), "yes"):
         with pytest.raises(ValueError, match="reset_mask"):
             off.reset(options={"reset_mask": bad})
+
+
+def test_a_masked_reset_takes_the_scenarios_of_its_lanes_only():
+    """A list of scenarios in a masked reset: the marked lanes start on theirs, and the
+    entries of the others are not read (None is fine there)."""
+    venv = gym.make_vec("machining_envs/EndMilling-v0", num_envs=4, autoreset_mode="DISABLED")
+    venv.reset(seed=0, options={"scenario": ["train", "validation", "paper_step", "paper_taper"]})
+    mask = np.array([True, False, True, False])
+    _, info = venv.reset(options={"reset_mask": mask, "scenario": ["ood", None, "ood", None]})
+    assert list(info["scenario"]) == ["ood", "validation", "ood", "paper_taper"]
+    np.testing.assert_array_equal(info["_scenario"], mask)
+    with pytest.raises(ValueError, match="scenario of lane 0"):
+        venv.reset(options={"reset_mask": mask, "scenario": [None, "ood", "ood", "ood"]})
