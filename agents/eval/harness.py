@@ -16,6 +16,10 @@ from machining_envs.core.score import REGULATION_SCORE, Task
 
 __all__ = ["rollout", "rollout_batch", "evaluate", "Evaluation", "agent_name", "task_of"]
 
+#: Most lanes of one batch of :func:`evaluate` (an evaluation of more episodes runs in
+#: several batches): a batch runs until its longest episode ends, and a lane holds 8-16 kB.
+MAX_BATCH_LANES = 1024
+
 #: The task of an env that declares none (an env of another library): the regulation
 #: metrics and the machining-time score.
 DEFAULT_TASK = Task(regulation_metrics, REGULATION_SCORE)
@@ -67,14 +71,24 @@ def rollout(agent, env: gym.Env, scenario=None, seed: int | None = None) -> dict
 def rollout_batch(agent, venv, scenario, seeds: Sequence[int]) -> list[dict[str, np.ndarray]]:
     """One episode in each lane of a native vector env (``num_envs == len(seeds)``), the
     agent acting on the whole batch; returns one trajectory per lane, exactly as
-    :func:`rollout` returns it for the same seed.
+    :func:`rollout` returns it for the same seed and scenario.
 
-    Lane ``i`` is reset with seed ``seeds[i]``; a lane that finishes is reset by the vector
-    env and its later steps are ignored until every lane has finished.
+    Lane ``i`` is reset with seed ``seeds[i]`` on ``scenario`` (one for every lane; or a
+    list of one per lane; None, or a None entry: the env's default); a lane that finishes
+    is reset by the vector env and its later steps are ignored until every lane has
+    finished.
     """
     n = venv.num_envs
     if len(seeds) != n:
         raise ValueError(f"seeds must hold one seed per lane ({n}), got {len(seeds)}")
+    if isinstance(scenario, (list, tuple)):
+        if len(scenario) != n:
+            raise ValueError(f"scenario must hold one scenario per lane ({n}), got {len(scenario)}")
+        default = venv.unwrapped.default_scenario
+        scenario = [
+            (default[i] if isinstance(default, list) else default) if sc is None else sc
+            for i, sc in enumerate(scenario)
+        ]
     options = {"scenario": scenario} if scenario is not None else None
     obs, info = venv.reset(seed=[int(s) for s in seeds], options=options)
     infos, rewards = [info], [np.zeros(n)]
@@ -251,18 +265,21 @@ def evaluate(
     metrics_fn : callable, optional
         Trajectory -> metrics of one episode; by default the env's own (``task_of``).
     batched : bool, optional
-        Run the ``n_episodes`` of a scenario as the lanes of the env's native vector env
-        (``gym.make_vec``), the agent predicting for all of them at once; the rows are the
-        same as episode by episode. By default batched where the id has a native vector env
-        and more than one episode is asked for.
+        Run the episodes (``n_episodes`` of every scenario) as the lanes of the env's native
+        vector env (``gym.make_vec``, each lane on its own scenario), the agent predicting
+        for all of them at once, in batches of at most ``MAX_BATCH_LANES``; the rows are
+        the same as episode by episode. By default batched where the id has a native vector
+        env and more than one episode is asked for in all (a sweep over many scenarios of
+        one episode each included).
     progress : bool
         Show a progress bar (tqdm, on stderr) over the episodes.
     """
     if not isinstance(n_episodes, int) or n_episodes < 1:
         raise ValueError(f"n_episodes must be an integer >= 1, got {n_episodes!r}")
     has_vector = gym.spec(env_id).vector_entry_point is not None
+    scenarios = list(scenarios)
     if batched is None:
-        batched = has_vector and n_episodes > 1
+        batched = has_vector and n_episodes * len(scenarios) > 1
     elif batched and not has_vector:
         raise ValueError(f"batched=True: {env_id} has no native vector env")
     env = gym.make(env_id, **(env_kwargs or {}))
@@ -274,19 +291,31 @@ def evaluate(
             agent = agent(env)
         name = agent_name(agent)
         ev = Evaluation()
-        if batched:
-            venv = gym.make_vec(env_id, num_envs=n_episodes, **(env_kwargs or {}))
         bar = None
         if progress:
             from tqdm import tqdm
 
             bar = tqdm(total=len(scenarios) * n_episodes, desc=name, unit="episode")
-        for sc in scenarios:
-            seeds = [seed + i for i in range(n_episodes)]
-            if batched:
-                trajs = rollout_batch(agent, venv, sc, seeds)
+        seeds = [seed + i for i in range(n_episodes)]
+        if batched:  # every (scenario, episode) a lane, in batches
+            jobs = [(j, i) for j in range(len(scenarios)) for i in range(n_episodes)]
+            done: list[list] = [[None] * n_episodes for _ in scenarios]
+            for first in range(0, len(jobs), MAX_BATCH_LANES):
+                batch = jobs[first : first + MAX_BATCH_LANES]
+                if venv is None or venv.num_envs != len(batch):
+                    if venv is not None:
+                        venv.close()
+                    venv = gym.make_vec(env_id, num_envs=len(batch), **(env_kwargs or {}))
+                trajs = rollout_batch(
+                    agent, venv, [scenarios[j] for j, _ in batch], [seeds[i] for _, i in batch]
+                )
+                for (j, i), traj in zip(batch, trajs, strict=True):
+                    done[j][i] = traj
                 if bar is not None:
-                    bar.update(n_episodes)
+                    bar.update(len(batch))
+        for j, sc in enumerate(scenarios):
+            if batched:
+                trajs = done[j]
             else:
                 trajs = []
                 for s in seeds:

@@ -125,3 +125,43 @@ def test_batched_evaluation_gives_the_episode_by_episode_rows(
                 np.testing.assert_array_equal(v, b[k], err_msg=k)
             else:
                 assert v == b[k], k
+
+
+def _same_rows(a, b):
+    assert len(a.rows) == len(b.rows)
+    for ra, rb in zip(a.rows, b.rows, strict=True):
+        assert ra.keys() == rb.keys()
+        for k in ra:
+            assert ra[k] == rb[k] or (ra[k] != ra[k] and rb[k] != rb[k]), k
+
+
+def test_a_sweep_of_scenarios_runs_as_one_batch_with_the_same_rows():
+    """Scenarios of one episode each (a sweep over spindle speeds) run batched by default,
+    each lane on its own scenario, and give the episode-by-episode rows in the same order."""
+    from machining_envs.core.workpieces import DepthProfile
+    from machining_envs.turning.scenarios import TurningScenario
+
+    bar = DepthProfile.steps((1.0, 2.0), 8.0)
+    sweep = [TurningScenario(f"rpm {rpm:g}", bar, rpm) for rpm in (300.0, 450.0, 600.0)]
+    scenarios = [*sweep, "validation", None]  # None: the env's default
+    kw = dict(n_episodes=1, seed=5000)
+    batch = evaluate(FixedGainPI.from_env, TURNING, scenarios, **kw)
+    one = evaluate(FixedGainPI.from_env, TURNING, scenarios, batched=False, **kw)
+    assert [r["scenario"] for r in batch.rows][:3] == ["rpm 300", "rpm 450", "rpm 600"]
+    _same_rows(one, batch)
+
+
+def test_an_evaluation_larger_than_a_batch_runs_in_several(monkeypatch):
+    import agents.eval.harness as harness
+
+    made = []
+    real = gym.make_vec
+    monkeypatch.setattr(harness, "MAX_BATCH_LANES", 3)
+    monkeypatch.setattr(
+        harness.gym, "make_vec", lambda *a, **k: made.append(k["num_envs"]) or real(*a, **k)
+    )
+    kw = dict(n_episodes=4, seed=1000)
+    batch = evaluate(ConstantFeed.from_env, TURNING, ["ood", "paper_405"], batched=True, **kw)
+    assert made == [3, 2]  # batches of 3, 3 and 2 lanes: one env for the first two
+    one = evaluate(ConstantFeed.from_env, TURNING, ["ood", "paper_405"], batched=False, **kw)
+    _same_rows(one, batch)
