@@ -87,9 +87,7 @@ class SB3VecEnv(VecEnv):
     def step_wait(self):
         obs, reward, terminated, truncated, info = self.venv.step(self._actions)
         done = np.logical_or(terminated, truncated)
-        infos = self._split(info, done)
-        for d in infos:  # every step, as SB3's own VecEnvs give it
-            d["TimeLimit.truncated"] = False
+        infos = self._split(info, done, step=True)
         if done.any():
             # An env that ended reports its last step's info (SB3's convention), not the
             # info of the reset that followed it.
@@ -122,11 +120,14 @@ class SB3VecEnv(VecEnv):
         return [False for _ in self._get_indices(indices)]
 
     # ---- helpers ---------------------------------------------------------------------------
-    def _split(self, info: dict, skip: np.ndarray) -> list[dict]:
+    def _split(self, info: dict, skip: np.ndarray, step: bool = False) -> list[dict]:
         """Gymnasium's dict of arrays (with ``_key`` masks) -> one dict per env (empty for the
         envs in ``skip``). A flat array's values come as Python numbers (bool, int, float,
         str), as the single env gives them; other values as the array's elements."""
-        out: list[dict] = [{} for _ in range(self.num_envs)]
+        n = self.num_envs
+        # A step's dicts hold TimeLimit.truncated at every step, as SB3's own VecEnvs give it
+        # (step_wait sets it for the envs that end).
+        out = [{"TimeLimit.truncated": False} for _ in range(n)] if step else [{} for _ in range(n)]
         keys = info if self.info_keys is None else [k for k in self.info_keys if k in info]
         keep = ~skip
         every = bool(keep.all())

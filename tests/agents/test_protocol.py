@@ -9,6 +9,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+import machining_envs.core.vector as core_vector
 import machining_envs.turning.env as turning_env
 from agents.bench.tune import TuningBudget, load_tuned, paper_settings, tune_agent, tuned_factory
 from agents.rl import ConfigError, train
@@ -26,10 +27,12 @@ def scenarios_seen(monkeypatch):
 
     def spy(options, default):
         spec = real(options, default)
-        seen.append(spec if isinstance(spec, str) else getattr(spec, "name", spec))
+        for one in spec if isinstance(spec, list) else [spec]:  # a list: one per lane
+            seen.append(one if isinstance(one, str) else getattr(one, "name", one))
         return spec
 
-    monkeypatch.setattr(turning_env, "scenario_option", spy)
+    monkeypatch.setattr(turning_env, "scenario_option", spy)  # the single env's resets
+    monkeypatch.setattr(core_vector, "scenario_option", spy)  # the vector envs' lanes
     return seen
 
 
