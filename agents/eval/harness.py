@@ -137,7 +137,11 @@ def _lane_trajectories(infos: list[dict], rewards: list, length: np.ndarray) -> 
     lane ``i``'s rows are the infos of steps ``0 .. length[i] - 1`` and the ``final_info``
     of step ``length[i]``."""
     n = len(length)
-    finals = [info.get("final_info", {}) for info in infos]
+    # Only the steps where some lane ended hold a final_info: stack those alone (a batch of
+    # long episodes has tens of thousands of steps and a few hundred such).
+    fin_steps = [t for t, info in enumerate(infos) if "final_info" in info]
+    finals = [infos[t]["final_info"] for t in fin_steps]
+    fin_row = {t: r for r, t in enumerate(fin_steps)}
     keys = {k for k in set().union(*infos, *finals) if not k.startswith("_")}
     keys -= {"final_obs", "final_info"}
     columns = {}
@@ -153,12 +157,13 @@ def _lane_trajectories(infos: list[dict], rewards: list, length: np.ndarray) -> 
     trajs = []
     for i in range(n):
         last = int(length[i])
+        row = fin_row[last]  # the lane ended at step `last`: its final_info is there
         traj = {}
         for key, (top, top_ok, fin, fin_ok, dtype) in columns.items():
-            if not fin_ok[last, i]:
+            if not fin_ok[row, i]:
                 continue  # not in the lane's last row: rollout leaves such keys out
             col = np.where(top_ok[:last, i], top[:last, i], np.nan)
-            col = np.append(col, fin[last, i])
+            col = np.append(col, fin[row, i])
             if dtype.kind in "biu" and not np.isnan(col).any():
                 col = col.astype(dtype if dtype.kind == "b" else np.int64)
             traj[key] = col
