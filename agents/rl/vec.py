@@ -44,8 +44,9 @@ class SB3VecEnv(VecEnv):
         The ``info`` entries copied into the per-env info dicts (all by default, as SB3's
         ``DummyVecEnv`` gives them). Training that needs none of them (``VecMonitor``
         counts episodes itself) may pass ``()``: the terminal observation and
-        ``TimeLimit.truncated`` are always given. The copies are Python work per env and
-        key: at N = 1024 the full info costs several times the batched step itself.
+        ``TimeLimit.truncated`` are then given where an env ends, all SB3 reads. The
+        copies are Python work per env and key: at N = 1024 the full info costs several
+        times the batched step itself.
     """
 
     def __init__(self, venv: gym.vector.VectorEnv, info_keys: Iterable[str] | None = None):
@@ -125,9 +126,12 @@ class SB3VecEnv(VecEnv):
         envs in ``skip``). A flat array's values come as Python numbers (bool, int, float,
         str), as the single env gives them; other values as the array's elements."""
         n = self.num_envs
-        # A step's dicts hold TimeLimit.truncated at every step, as SB3's own VecEnvs give it
-        # (step_wait sets it for the envs that end).
-        out = [{"TimeLimit.truncated": False} for _ in range(n)] if step else [{} for _ in range(n)]
+        if step and self.info_keys is None:
+            # The full info holds TimeLimit.truncated at every step, as SB3's own VecEnvs
+            # give it (step_wait sets it for the envs that end; with info_keys, only there).
+            out = [{"TimeLimit.truncated": False} for _ in range(n)]
+        else:
+            out = [{} for _ in range(n)]
         keys = info if self.info_keys is None else [k for k in self.info_keys if k in info]
         keep = ~skip
         every = bool(keep.all())
