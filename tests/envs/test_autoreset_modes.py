@@ -12,15 +12,9 @@ import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode
 
-from tests.envs.test_vector import ENV_KWARGS, VECTOR_IDS, _actions, _same
+from tests.envs.test_vector import ENV_KWARGS, VECTOR_IDS, _actions, _assert_lane
 
 N_STEPS = 700
-
-
-def _assert_lane(obs, info, i, o, inf, where):
-    np.testing.assert_array_equal(obs[i], o, err_msg=str(where))
-    for k, v in inf.items():
-        assert info["_" + k][i] and _same(info[k][i], v), (where, k)
 
 
 def _pair(env_id, mode, n, seed, kwargs=None):

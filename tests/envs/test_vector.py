@@ -52,6 +52,33 @@ def _same(a, b) -> bool:
     return a == b
 
 
+def _assert_lane(obs, info, i, o, inf, where) -> None:
+    """Lane ``i`` of a vector env's ``obs`` and ``info`` is the single env's ``o``, ``inf``."""
+    np.testing.assert_array_equal(obs[i], o, err_msg=str(where))
+    for k, v in inf.items():
+        assert info["_" + k][i] and _same(info[k][i], v), (where, k)
+
+
+def _run_beside_singles(venv, singles, env_id: str, rng, steps: int) -> int:
+    """Step a same-step vector env and each lane's single env with the same random actions
+    for ``steps`` steps, comparing every lane with its single env (an ended lane's
+    ``final_obs`` and ``final_info`` with the single env's last step, then its new episode
+    with the single env's next); returns the number of episodes that ended."""
+    ends = 0
+    for step in range(steps):
+        actions = _actions(rng, env_id, venv.single_action_space, len(singles))
+        obs, reward, terminated, truncated, info = venv.step(actions)
+        for i, env in enumerate(singles):
+            o, r, te, tr, inf = env.step(actions[i])
+            assert (r, te, tr) == (reward[i], terminated[i], truncated[i]), (step, i)
+            if te or tr:
+                ends += 1
+                _assert_lane(info["final_obs"], info["final_info"], i, o, inf, (step, i))
+                o, inf = env.reset()
+            _assert_lane(obs, info, i, o, inf, (step, i))
+    return ends
+
+
 def test_turning_has_a_native_vector_env():
     assert "machining_envs/Turning-v0" in VECTOR_IDS
     venv = gym.make_vec("machining_envs/Turning-v0", num_envs=3)
@@ -71,28 +98,8 @@ def test_every_lane_is_the_single_env_across_autoresets(env_id):
     singles = [gym.make(env_id, **kwargs) for _ in range(n)]
     obs, info = venv.reset(seed=seed)
     for i, env in enumerate(singles):
-        o, inf = env.reset(seed=seed + i)
-        np.testing.assert_array_equal(obs[i], o)
-        for k, v in inf.items():
-            assert info["_" + k][i] and _same(info[k][i], v), k
-    rng = np.random.default_rng(0)
-    ends = 0
-    for step in range(N_STEPS):
-        actions = _actions(rng, env_id, venv.single_action_space, n)
-        obs, reward, terminated, truncated, info = venv.step(actions)
-        for i, env in enumerate(singles):
-            o, r, te, tr, inf = env.step(actions[i])
-            assert (r, te, tr) == (reward[i], terminated[i], truncated[i]), (step, i)
-            if te or tr:
-                ends += 1
-                np.testing.assert_array_equal(info["final_obs"][i], o)
-                final = info["final_info"]
-                for k, v in inf.items():
-                    assert final["_" + k][i] and _same(final[k][i], v), (step, i, k)
-                o, inf = env.reset()
-            np.testing.assert_array_equal(obs[i], o, err_msg=f"step {step}, lane {i}")
-            for k, v in inf.items():
-                assert info["_" + k][i] and _same(info[k][i], v), (step, i, k)
+        _assert_lane(obs, info, i, *env.reset(seed=seed + i), ("reset", i))
+    ends = _run_beside_singles(venv, singles, env_id, np.random.default_rng(0), N_STEPS)
     assert ends >= 10, "the comparison should cross several autoresets"
 
 
@@ -369,23 +376,9 @@ def test_a_list_of_scenarios_gives_each_lane_its_own(env_id):
     obs, info = venv.reset(seed=seed, options={"scenario": later})
     for i, env in enumerate(singles):
         o, inf = env.reset(seed=seed + i, options={"scenario": later[i]})
-        np.testing.assert_array_equal(obs[i], o)
-        for k, v in inf.items():
-            assert info["_" + k][i] and _same(info[k][i], v), (i, k)
-    rng = np.random.default_rng(5)
-    ends = 0
-    for step in range(600):
-        actions = _actions(rng, env_id, venv.single_action_space, n)
-        obs, reward, terminated, truncated, info = venv.step(actions)
-        for i, env in enumerate(singles):
-            o, r, te, tr, inf = env.step(actions[i])
-            assert (r, te, tr) == (reward[i], terminated[i], truncated[i]), (step, i)
-            if te or tr:
-                ends += 1
-                o, inf = env.reset()  # the single env's default: first[i]
-            np.testing.assert_array_equal(obs[i], o, err_msg=f"step {step}, lane {i}")
-            for k, v in inf.items():
-                assert info["_" + k][i] and _same(info[k][i], v), (step, i, k)
+        _assert_lane(obs, info, i, o, inf, ("reset", i))
+    # A single env's reset() without options restarts on its own scenario, first[i].
+    ends = _run_beside_singles(venv, singles, env_id, np.random.default_rng(5), 600)
     assert ends >= 1, "a lane should restart on its own scenario"
 
 
