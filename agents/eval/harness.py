@@ -81,14 +81,18 @@ def rollout_batch(agent, venv, scenario, seeds: Sequence[int]) -> list[dict[str,
     n = venv.num_envs
     if len(seeds) != n:
         raise ValueError(f"seeds must hold one seed per lane ({n}), got {len(seeds)}")
+    mode = venv.metadata.get("autoreset_mode")
+    if mode != gym.vector.AutoresetMode.SAME_STEP:  # a lane's last info is its final_info
+        raise ValueError(f"rollout_batch needs a same-step autoreset vector env, got {mode!r}")
     if isinstance(scenario, (list, tuple)):
         if len(scenario) != n:
             raise ValueError(f"scenario must hold one scenario per lane ({n}), got {len(scenario)}")
-        default = venv.unwrapped.default_scenario
-        scenario = [
-            (default[i] if isinstance(default, list) else default) if sc is None else sc
-            for i, sc in enumerate(scenario)
-        ]
+        if any(sc is None for sc in scenario):  # the env's default for those lanes
+            default = venv.unwrapped.default_scenario
+            scenario = [
+                (default[i] if isinstance(default, list) else default) if sc is None else sc
+                for i, sc in enumerate(scenario)
+            ]
     options = {"scenario": scenario} if scenario is not None else None
     obs, info = venv.reset(seed=[int(s) for s in seeds], options=options)
     infos, rewards = [info], [np.zeros(n)]

@@ -165,3 +165,12 @@ def test_an_evaluation_larger_than_a_batch_runs_in_several(monkeypatch):
     assert made == [3, 2]  # batches of 3, 3 and 2 lanes: one env for the first two
     one = evaluate(ConstantFeed.from_env, TURNING, ["ood", "paper_405"], batched=False, **kw)
     _same_rows(one, batch)
+
+
+def test_a_batch_needs_the_same_step_autoreset():
+    """A batch reads each lane's last step from ``final_info``: another mode is refused."""
+    from agents.eval.harness import rollout_batch
+
+    venv = gym.make_vec(TURNING, num_envs=2, autoreset_mode="NEXT_STEP")
+    with pytest.raises(ValueError, match="same-step"):
+        rollout_batch(ConstantFeed.from_env(gym.make(TURNING)), venv, "train", [0, 1])
