@@ -1,22 +1,13 @@
 """The step-breakdown script runs and splits every vector env's step (numbers not judged)."""
 
 import re
-import subprocess
-import sys
-from pathlib import Path
 
 import machining_envs
-
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "step_breakdown.py"
+from tests.benchmark_scripts import run_benchmark
 
 
 def test_step_breakdown_script_splits_every_env():
-    out = subprocess.run(
-        [sys.executable, str(SCRIPT), "--lanes", "16", "--episode-steps", "200"],
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout
+    out = run_benchmark("step_breakdown.py --lanes 16 --episode-steps 200")
     for env_id in machining_envs.ENV_IDS:
         line = next(row for row in out.splitlines() if row.startswith(env_id))
         total, *parts = (float(x) for x in re.findall(r"(?<![\w(])-?\d+\.\d+(?!%)", line)[:5])

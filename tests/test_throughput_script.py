@@ -1,22 +1,13 @@
 """The throughput script runs and prints a ratio for every registered env (numbers not judged)."""
 
-import subprocess
-import sys
-from pathlib import Path
-
 import machining_envs
-
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "throughput.py"
+from tests.benchmark_scripts import run_benchmark
 
 
 def test_throughput_script_reports_every_env():
-    out = subprocess.run(
-        [sys.executable, str(SCRIPT), "--steps", "200", "--rounds", "1", "--lanes", "1", "16"]
-        + ["--vector-steps", "2000", "--sync-steps", "200"],
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout
+    out = run_benchmark(
+        "throughput.py --steps 200 --rounds 1 --lanes 1 16 --vector-steps 2000 --sync-steps 200"
+    )
     for env_id in ("Pendulum-v1", *machining_envs.ENV_IDS):
         line = next(row for row in out.splitlines() if row.startswith(env_id))
         rate, ratio = (float(x) for x in line.split()[1:3])

@@ -8,9 +8,10 @@ core the base implements two of the three methods of a step:
 - ``_reset_lanes(lanes, options)``: start new episodes in the lanes ``lanes`` (an index
   array), drawing each lane's scenario from its own generator ``self.lane_rngs[i]``
   (``core.start(lane, spec, rng)``), and return their observations
-  ``(len(lanes), *obs_shape)`` (``core.obs``). A lane holds its reset info from the moment
-  it starts: until its first step, ``_info_now()`` reports it for the lane (the single
-  env's reset info is the same lane's info);
+  ``(len(lanes), *obs_shape)`` (from ``core.obs``, every lane's observation as it
+  stands). A lane holds its reset info from the moment it starts: until its first step,
+  ``_info_now()`` reports it for the lane (the single env's reset info is the same lane's
+  info);
 - ``_info_now()``: every lane's info as it stands (``core.info_arrays()``), as new arrays
   of length ``num_envs`` (a key that only some lanes have comes with a boolean mask under
   ``"_" + key``; the base adds the masks of the others to it);
@@ -150,9 +151,6 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         #: Lanes whose episode ended at the last step and that have not been reset since
         #: (``NEXT_STEP``: reset at the next step; ``DISABLED``: not steppable).
         self._ended = np.zeros(self.num_envs, dtype=bool)
-        #: The observations of the last step or reset (``DISABLED``: a masked reset returns
-        #: them for the lanes it leaves alone).
-        self._last_obs: np.ndarray | None = None
 
     # ---- the VectorEnv interface ------------------------------------------------------------
     def reset(
@@ -188,13 +186,9 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         info = self._info_now()
         self._with_masks(info)
         if mask is not None:  # the other lanes keep their observations; info of these only
-            full = self._last_obs.copy()
-            full[lanes] = obs
-            obs = full
+            obs = self._core.obs.copy()  # every lane's observation as it stands
             for key in [k for k in info if k[0] == "_"]:
                 info[key] = info[key] & mask
-        if self.autoreset_mode is AutoresetMode.DISABLED:
-            self._last_obs = obs.copy()
         return obs, info
 
     def _reset_mask(self, mask) -> np.ndarray:
@@ -344,8 +338,6 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             info = self._info_now()  # the reset lanes report their reset info
         self._with_masks(info)
         self._ended = np.logical_or(terminated, truncated)
-        if self.autoreset_mode is AutoresetMode.DISABLED:
-            self._last_obs = obs.copy()
         return obs, reward, terminated, truncated, info
 
     def close_extras(self, **kwargs) -> None:

@@ -1,0 +1,16 @@
+"""Run a script of ``benchmarks/`` as a user would, for the scripts' smoke tests."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def run_benchmark(command: str) -> str:
+    """What ``python benchmarks/<command>`` prints (``command``: the script's name and its
+    arguments, split at spaces); it must exit with 0."""
+    name, *args = command.split()
+    return subprocess.run(
+        [sys.executable, str(BENCHMARKS / name), *args], capture_output=True, text=True, check=True
+    ).stdout
