@@ -42,10 +42,13 @@ def agent_name(agent) -> str:
     return str(getattr(agent, "name", type(agent).__name__))
 
 
-def rollout(agent, env: gym.Env, scenario=None, seed: int | None = None) -> dict[str, np.ndarray]:
+def rollout(
+    agent, env: gym.Env, scenario=None, seed: int | None = None, keys=None
+) -> dict[str, np.ndarray]:
     """Run one episode and return its ``info`` trajectory (plus ``reward``) as arrays.
 
     Entry 0 is the reset's info (reward 0). ``machining_time_s`` is NaN until the cut ends.
+    ``keys`` (a set of info keys), where given, keeps only those keys of the info.
     """
     options = {"scenario": scenario} if scenario is not None else None
     obs, info = env.reset(seed=seed, options=options)
@@ -61,17 +64,21 @@ def rollout(agent, env: gym.Env, scenario=None, seed: int | None = None) -> dict
         rows.append(info)
         rewards.append(float(reward))
         done = terminated or truncated
-    keys = [k for k, v in rows[-1].items() if isinstance(v, (bool, int, float, np.number))]
-    traj = {k: np.array([r.get(k, math.nan) for r in rows]) for k in keys}
+    numbers = [k for k, v in rows[-1].items() if isinstance(v, (bool, int, float, np.number))]
+    if keys is not None:
+        numbers = [k for k in numbers if k in keys]
+    traj = {k: np.array([r.get(k, math.nan) for r in rows]) for k in numbers}
     traj["reward"] = np.array(rewards)
     traj["scenario"] = rows[0].get("scenario")
     return traj
 
 
-def rollout_batch(agent, venv, scenario, seeds: Sequence[int]) -> list[dict[str, np.ndarray]]:
+def rollout_batch(
+    agent, venv, scenario, seeds: Sequence[int], keys=None
+) -> list[dict[str, np.ndarray]]:
     """One episode in each lane of a native vector env (``num_envs == len(seeds)``), the
     agent acting on the whole batch; returns one trajectory per lane, exactly as
-    :func:`rollout` returns it for the same seed and scenario.
+    :func:`rollout` returns it for the same seed, scenario and ``keys``.
 
     Lane ``i`` is reset with seed ``seeds[i]`` on ``scenario`` (one for every lane; or a
     list of one per lane; None, or a None entry: the env's default); a lane that finishes
@@ -108,7 +115,7 @@ def rollout_batch(agent, venv, scenario, seeds: Sequence[int]) -> list[dict[str,
         length[ended & ~done] = len(infos) - 1
         done |= ended
         start = ended
-    return _lane_trajectories(infos, rewards, length)
+    return _lane_trajectories(infos, rewards, length, keys)
 
 
 def _stack(dicts: list[dict], key: str, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -136,10 +143,12 @@ def _stack(dicts: list[dict], key: str, n: int) -> tuple[np.ndarray, np.ndarray]
     return vals, ok
 
 
-def _lane_trajectories(infos: list[dict], rewards: list, length: np.ndarray) -> list[dict]:
+def _lane_trajectories(
+    infos: list[dict], rewards: list, length: np.ndarray, wanted=None
+) -> list[dict]:
     """Per-lane trajectories (as :func:`rollout` gives them) from a vector env's infos:
     lane ``i``'s rows are the infos of steps ``0 .. length[i] - 1`` and the ``final_info``
-    of step ``length[i]``."""
+    of step ``length[i]``; only the info keys in ``wanted``, where given."""
     n = len(length)
     # Only the steps where some lane ended hold a final_info: stack those alone (a batch of
     # long episodes has tens of thousands of steps and a few hundred such).
@@ -148,6 +157,8 @@ def _lane_trajectories(infos: list[dict], rewards: list, length: np.ndarray) -> 
     fin_row = {t: r for r, t in enumerate(fin_steps)}
     keys = {k for k in set().union(*infos, *finals) if not k.startswith("_")}
     keys -= {"final_obs", "final_info"}
+    if wanted is not None:  # stacking is most of a long batch's bookkeeping: only these
+        keys &= set(wanted)
     columns = {}
     for key in keys:
         sample = next(np.asarray(d[key]) for d in (*infos, *finals) if key in d)  # the key's dtype
@@ -273,6 +284,9 @@ def evaluate(
         same workpieces and noise.
     metrics_fn : callable, optional
         Trajectory -> metrics of one episode; by default the env's own (``task_of``).
+        Where it declares the info keys it reads (an ``info_keys`` attribute, see
+        ``machining_envs.core.metrics.reads_info``; the envs' own metrics do) and the
+        trajectories are not kept, the episodes record only those keys.
     batched : bool, optional
         Run the episodes (``n_episodes`` of every scenario) as the lanes of the env's native
         vector env (``gym.make_vec``, each lane on its own scenario), the agent predicting
@@ -296,6 +310,8 @@ def evaluate(
     try:
         if metrics_fn is None:
             metrics_fn = task_of(env).metrics
+        # The keys the metrics read, where they say (None: every key); all when kept.
+        keys = None if keep_trajectories else getattr(metrics_fn, "info_keys", None)
         if not hasattr(agent, "predict") and callable(agent):
             agent = agent(env)
         name = agent_name(agent)
@@ -316,7 +332,11 @@ def evaluate(
                         venv.close()
                     venv = gym.make_vec(env_id, num_envs=len(batch), **(env_kwargs or {}))
                 trajs = rollout_batch(
-                    agent, venv, [scenarios[j] for j, _ in batch], [seeds[i] for _, i in batch]
+                    agent,
+                    venv,
+                    [scenarios[j] for j, _ in batch],
+                    [seeds[i] for _, i in batch],
+                    keys,
                 )
                 for (j, i), traj in zip(batch, trajs, strict=True):
                     done[j][i] = traj
@@ -328,7 +348,7 @@ def evaluate(
             else:
                 trajs = []
                 for s in seeds:
-                    trajs.append(rollout(agent, env, sc, s))
+                    trajs.append(rollout(agent, env, sc, s, keys))
                     if bar is not None:
                         bar.update(1)
             for i, traj in enumerate(trajs):

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from machining_envs.core.metrics import episode_flag, finish_time, score_bound
+from machining_envs.core.metrics import episode_flag, finish_time, reads_info, score_bound
 from machining_envs.core.score import PrimaryScore, Task
 
 __all__ = [
@@ -61,6 +61,12 @@ def circle_radius_errors(traj: dict, steady_fraction: float = STEADY_FRACTION):
     return r - 0.5 * (hi + lo), 0.5 * (hi - lo)
 
 
+@reads_info(
+    "t_s", "contour_error_mm", "peak_contour_error_mm", "tracking_error_mm",
+    "circle_radius_mm", "circle_cx_mm", "circle_cy_mm", "path_s_mm", "path_length_mm",
+    "x_mm", "y_mm", "finished", "machining_time_s", "torque_sq_Nm2", "command_x_mm_s",
+    "command_y_mm_s", "cost", "score_bound", "time_limit_s", "diverged",
+)  # fmt: skip
 def contouring_metrics(traj: dict) -> dict[str, float]:
     """Metrics of one contouring episode.
 

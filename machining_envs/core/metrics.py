@@ -2,13 +2,21 @@
 
 Every function takes a trajectory: a dict of equal-length arrays keyed by ``info`` names,
 the reset's info first, one entry per step after it (see ``agents.eval.rollout``).
+
+A metrics function may declare the ``info`` keys it reads with :func:`reads_info`; the
+harness then records only those keys of the episodes it scores without keeping their
+trajectories (``agents.eval.evaluate``), which saves most of the recording of an info
+with many keys.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 __all__ = [
+    "reads_info",
     "regulation_metrics",
     "segment_bounds",
     "oscillation_amplitude",
@@ -23,6 +31,19 @@ __all__ = [
 SETTLE_BAND = 0.05
 #: Window of the moving mean removed before measuring oscillation, s.
 OSC_WINDOW_S = 1.0
+
+
+def reads_info(*keys: str) -> Callable[[Callable], Callable]:
+    """Mark a metrics function as reading only the ``info`` keys ``keys`` of a trajectory
+    (read, or tested with ``in``), as its ``info_keys`` attribute (a frozenset): a
+    trajectory without the other keys gives the same metrics. The trajectory's ``reward``
+    and ``scenario`` entries are always there and need no declaring."""
+
+    def mark(fn: Callable) -> Callable:
+        fn.info_keys = frozenset(keys)
+        return fn
+
+    return mark
 
 
 def episode_flag(traj: dict, key: str) -> bool:
@@ -75,6 +96,10 @@ def score_bound(traj: dict) -> float:
     return float(b[-1]) if b.size else float("nan")
 
 
+@reads_info(
+    "t_s", "force_N", "force_limit_N", "cost", "depth_mm", "segment", "score_bound",
+    "finished", "machining_time_s", "breakage", "diverged",
+)  # fmt: skip
 def regulation_metrics(
     traj: dict, signal: str = "force_N", limit: str = "force_limit_N"
 ) -> dict[str, float]:
@@ -99,6 +124,9 @@ def regulation_metrics(
     - ``score_bound``: the episode's floor of the machining time (``info["score_bound"]``);
     - ``machining_time_s``: when the workpiece was finished (the episode's length if not);
     - ``finished``, ``breakage``, ``diverged`` (1.0 / 0.0); ``n_steps``.
+
+    Its declared keys (:func:`reads_info`) are those of the default ``signal`` and
+    ``limit``; a caller with others declares its own.
     """
     t = np.asarray(traj["t_s"], dtype=np.float64)
     y = np.asarray(traj[signal], dtype=np.float64)

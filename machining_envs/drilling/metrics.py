@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from machining_envs.core.metrics import episode_flag, finish_time, score_bound
+from machining_envs.core.metrics import episode_flag, finish_time, reads_info, score_bound
 from machining_envs.core.score import PrimaryScore, Task
 
 __all__ = ["DRILLING_SCORE", "DRILLING_TASK", "drilling_metrics", "drilling_mask"]
@@ -26,6 +26,11 @@ def drilling_mask(traj: dict) -> np.ndarray:
     return cutting & engaged
 
 
+@reads_info(
+    "t_s", "cutting", "engagement", "torque_Nmm", "thrust_N", "torque_limit_Nmm", "cost",
+    "spindle_hz", "peak_torque_Nmm", "breakage_torque_Nmm", "finished", "drilling_time_s",
+    "position_mm", "depth_mm", "score_bound", "breakage", "diverged",
+)  # fmt: skip
 def drilling_metrics(traj: dict) -> dict[str, float]:
     """Metrics of one micro-drilling episode.
 

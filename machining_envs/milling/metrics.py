@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from machining_envs.core.metrics import regulation_metrics
+from machining_envs.core.metrics import reads_info, regulation_metrics
 from machining_envs.core.score import REGULATION_SCORE, Task
 
 __all__ = ["MILLING_TASK", "milling_metrics", "machining_time_eq20_min"]
@@ -37,6 +37,11 @@ def machining_time_eq20_min(traj: dict) -> float:
     return float(np.sum(li[moved] / (f[moved] * n[moved])))
 
 
+@reads_info(
+    *(regulation_metrics.info_keys - {"force_N", "force_limit_N"}),
+    "torque_Nmm", "torque_limit_Nmm", "position_mm", "mean_feed_mm_per_rev", "spindle_rpm",
+    "workpiece_length_mm", "removed_volume_mm3",
+)  # fmt: skip
 def milling_metrics(traj: dict) -> dict[str, float]:
     """Regulation metrics of the torque (see ``regulation_metrics``) plus:
 

@@ -1,6 +1,7 @@
 """The evaluation harness (``agents.eval``): tables and files, the same workpieces for every agent."""
 
 import csv
+from collections.abc import Mapping
 
 import gymnasium as gym
 import numpy as np
@@ -174,3 +175,67 @@ def test_a_batch_needs_the_same_step_autoreset():
     venv = gym.make_vec(TURNING, num_envs=2, autoreset_mode="NEXT_STEP")
     with pytest.raises(ValueError, match="same-step"):
         rollout_batch(ConstantFeed.from_env(gym.make(TURNING)), venv, "train", [0, 1])
+
+
+class _Recording(Mapping):
+    """A trajectory that notes every key read from it or tested with ``in``."""
+
+    def __init__(self, traj: dict):
+        self.traj, self.read = traj, set()
+
+    def __getitem__(self, key):
+        self.read.add(key)
+        return self.traj[key]
+
+    def __contains__(self, key):
+        self.read.add(key)
+        return key in self.traj
+
+    def __iter__(self):
+        raise AssertionError("a metrics function that declares its keys lists them all")
+
+    def __len__(self):
+        return len(self.traj)
+
+
+KEYS_CASES = [BATCHED_CASES[i] for i in (2, 3, 8, 9, 11, 12)]
+
+
+@pytest.mark.parametrize(
+    "env_id, env_kwargs, factory, scenarios, n",
+    KEYS_CASES,
+    ids=[f"{c[2].__qualname__.split('.')[0]}-{c[0].split('/')[1]}" for c in KEYS_CASES],
+)
+def test_metrics_read_only_the_info_keys_they_declare(env_id, env_kwargs, factory, scenarios, n):
+    """The envs' metrics declare the info keys they read (``reads_info``): on whole
+    trajectories they read no other, and an evaluation that records only those keys (the
+    default where trajectories are not kept), batched or not, gives the rows of one that
+    records every key."""
+    from agents.eval import task_of
+
+    metrics = task_of(gym.make(env_id, **env_kwargs)).metrics
+    declared = metrics.info_keys | {"reward", "scenario"}
+    kw = dict(n_episodes=n, seed=2000, env_kwargs=env_kwargs)
+    full = evaluate(factory, env_id, scenarios, keep_trajectories=True, **kw)
+    read = set()
+    for traj in full.trajectories:
+        rec = _Recording(traj)
+        metrics(rec)
+        read |= rec.read
+    assert read <= declared, sorted(read - declared)
+    _same_rows(full, evaluate(factory, env_id, scenarios, **kw))
+    _same_rows(full, evaluate(factory, env_id, scenarios, batched=False, **kw))
+
+
+def test_only_the_declared_keys_are_recorded():
+    """What the harness keeps of an episode it scores: the metrics' keys, with the reward
+    and the scenario; a metrics function that declares none gets every numeric key."""
+    from agents.eval.harness import rollout
+
+    env = gym.make(TURNING)
+    agent = ConstantFeed.from_env(env)
+    some = rollout(agent, env, "validation", 3, keys={"t_s", "force_N", "no_such_key"})
+    assert set(some) == {"t_s", "force_N", "reward", "scenario"}
+    every = rollout(agent, env, "validation", 3)
+    assert {"t_s", "force_N", "depth_mm", "segment", "cost"} <= set(every)
+    np.testing.assert_array_equal(some["force_N"], every["force_N"])
