@@ -9,7 +9,8 @@ as OpenBLAS's kernels do in the small products that discretise the plants. Where
 rows are not bit-equal for that reason, every float signal must still agree to 1e-9 of its
 own scale (the largest magnitude of its stored rows, per column; a last-bit change in a
 coefficient moves a signal in proportion to its size, not to each value, which may pass
-through zero), float32 signals (observations, actions) to one float32 step at that scale
+through zero; for a component of a larger quantity, that quantity's size: ``SCALE_OF``),
+float32 signals (observations, actions) to one float32 step at that scale
 (a last-bit change may move a float32 rounding by one step), and the digests, which cannot
 see a last-bit change from a real one, are then not compared. The H-infinity designs a case
 uses are replayed from the file (``record.py`` says why); a fresh synthesis is checked
@@ -48,14 +49,37 @@ def test_golden_data_stays_small():
     assert total < 5 * 2**20, f"golden data takes {total / 2**20:.2f} MiB (budget 5 MiB)"
 
 
-def assert_close_to_scale(key: str, actual: np.ndarray, desired: np.ndarray) -> None:
+#: Signals that are a component of a larger quantity the case also records: the scale of
+#: their rounding is that quantity's, not their own. A contouring motor torque sits at
+#: +-1e-10 N m while its axis cruises (the difference of the controller's terms, each of
+#: the size of the torques that accelerate it), so a last-bit change in a position moves
+#: it by some 1e-10 N m, well past 1e-9 of the cruising rows; the torques the motors give
+#: in the run (the root of ``torque_sq_Nm2``, both axes over a decision) are their scale.
+SCALE_OF = {
+    "info/torque_x_Nm": "info/torque_sq_Nm2",
+    "info/torque_y_Nm": "info/torque_sq_Nm2",
+}
+
+
+def case_scale(key: str, golden: dict) -> float:
+    """The least scale of ``key``'s rounding in a recorded case: 0, or from ``SCALE_OF``."""
+    whole = SCALE_OF.get(key)
+    if whole is None or "rows/" + whole not in golden:
+        return 0.0
+    return float(np.sqrt(np.nanmax(np.abs(golden["rows/" + whole]))))
+
+
+def assert_close_to_scale(
+    key: str, actual: np.ndarray, desired: np.ndarray, least_scale: float = 0.0
+) -> None:
     """``actual`` equals ``desired`` where it is not finite, and elsewhere within 1e-9 of
-    each column's scale (float32: one float32 step at that scale), plus 1e-12."""
+    each column's scale (float32: one float32 step at that scale), plus 1e-12; a column's
+    scale is the largest magnitude of its recorded values, or ``least_scale`` if larger."""
     a, b = np.asarray(actual), np.asarray(desired)
     assert a.shape == b.shape, f"{key}: shape {a.shape}, recorded {b.shape}"
     finite = np.isfinite(b)
     np.testing.assert_array_equal(a[~finite], b[~finite], err_msg=key)
-    scale = np.max(np.where(finite, np.abs(b), 0.0), axis=0)
+    scale = np.maximum(np.max(np.where(finite, np.abs(b), 0.0), axis=0), least_scale)
     if b.dtype == np.float32:
         tol = np.spacing(scale.astype(np.float32)).astype(np.float64)
     else:
@@ -79,6 +103,10 @@ def test_assert_close_to_scale_fails_beyond_its_tolerance():
     assert_close_to_scale("x", b + np.array([1e-12, 2e-9]), b)  # 1e-12 is 0.1 of column 0's tol
     with pytest.raises(AssertionError, match="differ beyond"):
         assert_close_to_scale("x", b + np.array([0.0, 4e-9]), b)
+    # a component of a larger quantity: 1e-9 of that quantity's scale (here 5), not its own
+    assert_close_to_scale("x", b + np.array([4e-9, 4e-9]), b, least_scale=5.0)
+    with pytest.raises(AssertionError, match="differ beyond"):
+        assert_close_to_scale("x", b + np.array([6e-9, 0.0]), b, least_scale=5.0)
     with pytest.raises(AssertionError):
         assert_close_to_scale("x", np.where(np.isnan(b), 0.0, b), b)
     f = b.astype(np.float32)
@@ -103,7 +131,8 @@ def test_replay_matches_recording(case):
     for key, values in data.items():
         # Where a stored row differs, this names the signal, the rows and the size of the change.
         if values.dtype.kind == "f":
-            assert_close_to_scale(key, values[rows], golden["rows/" + key])
+            least = case_scale(key, golden)
+            assert_close_to_scale(key, values[rows], golden["rows/" + key], least)
         else:
             np.testing.assert_array_equal(values[rows], golden["rows/" + key], err_msg=key)
     if not exact:  # another CPU's SIMD kernels: last-bit differences, checked above
