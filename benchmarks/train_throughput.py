@@ -4,7 +4,7 @@ DummyVecEnv (and SubprocVecEnv), env-steps per second, in one process.
 The runs use one PPO configuration (``MlpPolicy``, ``n_steps`` 256 per env, batch 256, 4
 epochs) and the same seed; on the native env and on DummyVecEnv they see the very same
 episodes (lane i is env i with seed + i), so the difference is the cost of stepping the
-envs. Held-out evaluations are not part of these runs.
+envs. The validation evaluations of a training run are not part of these runs.
 
     python benchmarks/train_throughput.py [--env machining_envs/Turning-v0] [--n-envs 16]
         [--steps 32768]

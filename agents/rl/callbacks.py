@@ -75,7 +75,7 @@ def _positive_int(name: str, value) -> int:
 
 
 class ValidationCallback(BaseCallback):
-    """Held-out evaluation on ``validation`` episodes while training (see the module doc).
+    """Evaluation on ``validation`` episodes while training (see the module doc).
 
     Parameters
     ----------
