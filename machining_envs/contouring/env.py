@@ -13,7 +13,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 
-from machining_envs.contouring._exact import py_hypot
+from machining_envs.contouring._exact import py_hypot, py_square
 from machining_envs.contouring.metrics import CONTOURING_TASK
 from machining_envs.contouring.paths import (
     SEGMENT_COLUMNS,
@@ -333,7 +333,7 @@ def _contour_step(act, clipped, lf, li, cf, tabs, nseg, rb, loads, obs, out, fla
         rew = (
             -cf[_CW] * eps / cf[_CW + 1]
             - cf[_CW + 2] * etrack / cf[_CW + 3]
-            - cf[_CW + 4] * (math.pow(tx / t0, two) + math.pow(ty / t0, two))
+            - cf[_CW + 4] * (py_square(tx / t0, two) + py_square(ty / t0, two))
         )
         if diverged:
             rew -= cf[_CW + 6]
