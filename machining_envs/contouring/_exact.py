@@ -130,12 +130,16 @@ def py_hypot(a, b):
     mx = a if a > b else b
     if mx == 0.0:
         return mx
-    _, e = math.frexp(mx)
-    if e < -1023:  # subnormal: rescale (as CPython does) and try again
-        return 2.2250738585072014e-308 * py_hypot(
-            a / 2.2250738585072014e-308, b / 2.2250738585072014e-308
-        )
-    scale = math.ldexp(1.0, -e)
+    biased = _bits(mx) >> 52  # mx > 0: its exponent field
+    if 0 < biased < 2045:  # normal: frexp's exponent e is biased - 1022, and 2**-e normal
+        scale = _double((2045 - biased) << 52)  # 2**-e, without frexp's and ldexp's calls
+    else:
+        _, e = math.frexp(mx)
+        if e < -1023:  # subnormal: rescale (as CPython does) and try again
+            return 2.2250738585072014e-308 * py_hypot(
+                a / 2.2250738585072014e-308, b / 2.2250738585072014e-308
+            )
+        scale = math.ldexp(1.0, -e)
     csum = 1.0
     frac1 = 0.0
     frac2 = 0.0

@@ -51,7 +51,7 @@ def test_py_hypot_is_pythons_math_hypot():
     """CPython's hypot differs from libm's (numpy's, numba's) in the last bit now and then;
     the kernels that reproduce Python code use this one."""
     differs = 0
-    for scale in (1e-6, 1.0, 1e3, 1e200):
+    for scale in (1e-300, 1e-6, 1.0, 1e3, 1e200):
         x = RNG.normal(size=20000) * scale
         y = RNG.normal(size=20000) * scale * RNG.uniform(0, 3, 20000)
         py = [math.hypot(a, b) for a, b in zip(x.tolist(), y.tolist(), strict=True)]
@@ -59,6 +59,9 @@ def test_py_hypot_is_pythons_math_hypot():
             assert _exact.py_hypot(a, b) == h
         differs += int(np.sum(np.hypot(x, y) != py))
     assert differs > 0  # so the distinction is needed
+    big = RNG.uniform(4.5e307, 1.2e308, 2000)  # 2**1022 and over: through frexp
+    for a, b in zip(big.tolist(), (big * RNG.uniform(0, 1, 2000)).tolist(), strict=True):
+        assert _exact.py_hypot(a, b) == math.hypot(a, b) == _exact.py_hypot(b, -a)
     assert _exact.py_hypot(0.0, 0.0) == 0.0 and _exact.py_hypot(-3.0, 4.0) == 5.0
     assert _exact.py_hypot(math.inf, math.nan) == math.inf
 
