@@ -16,7 +16,7 @@ operations here are those whose rounding differs from a plain loop:
 CPython's ``x ** 2`` is libm's ``pow``, which differs from ``x * x`` for about one value
 in a thousand; compiled code gets it from ``math.pow(x, two)`` with ``two`` read at run
 time (a constant exponent is rewritten into ``x * x`` by the compiler), and
-:func:`py_square` calls it only where ``x * x`` could differ.
+``machining_envs.core.kernels.py_square`` calls it only where ``x * x`` could differ.
 
 The tests in ``tests/contouring/test_exact.py`` compare every function here with the
 operation it reproduces on random data.
@@ -32,10 +32,11 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from machining_envs.core.kernels import bits_float, float_bits
+
 __all__ = [
     "fma",
     "py_hypot",
-    "py_square",
     "np_sum",
     "np_mean",
     "gemv_row",
@@ -66,56 +67,6 @@ def _exact_mul(x, y):
     return hi, fma(x, y, -hi)
 
 
-@intrinsic
-def _bits(typingctx, x):
-    """The 64 bits of the double ``x``, as an integer."""
-    sig = types.int64(types.float64)
-
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], ir.IntType(64))
-
-    return sig, codegen
-
-
-@intrinsic
-def _double(typingctx, i):
-    """The double whose 64 bits are the integer ``i``."""
-    sig = types.float64(types.int64)
-
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], ir.DoubleType())
-
-    return sig, codegen
-
-
-#: glibc's ``pow`` (2.28 on) is within 0.54 units in the last place of the exact power
-#: (its source's worst case); 0.45 leaves a margin. A C library whose ``pow`` errs by more
-#: could differ from ``py_square`` in the last bit, rarely (the golden data, recorded on
-#: glibc, are compared to 1e-9 elsewhere); a lane still equals the single env.
-_POW_ULP = 0.45
-
-
-@numba.njit(cache=True, inline="always")
-def py_square(x, two):
-    """CPython's ``x ** 2`` (libm's ``pow(x, two)``, ``two`` = 2.0 read at run time).
-
-    ``x * x`` is the double nearest ``x**2``; where ``x**2`` lies within 0.45 of a unit
-    in the last place of it (``fma`` gives the exact remainder), any other double is more
-    than 0.55 units away, so ``pow``, within 0.54 units, returns it too. It calls
-    ``pow`` only near a midpoint between two doubles (about one value in ten) or where
-    ``x * x`` is below 2**-970 or overflows: a few nanoseconds for most values instead
-    of some tens (``tests/contouring/test_exact.py`` compares it with CPython).
-    """
-    p = x * x
-    biased = (_bits(p) >> 52) & 0x7FF  # p >= 0: its exponent field; a unit in its last
-    if 52 < biased < 0x7FF:  # place is 2**(biased - 1075), a normal double here
-        if abs(fma(x, x, -p)) < _POW_ULP * _double((biased - 52) << 52):
-            return p
-    elif x == 0.0:
-        return 0.0  # pow(+-0, 2) is +0
-    return math.pow(x, two)
-
-
 @numba.njit(cache=True)
 def py_hypot(a, b):
     """CPython's ``math.hypot(a, b)``: the Euclidean norm rounded from an exact sum of
@@ -130,9 +81,9 @@ def py_hypot(a, b):
     mx = a if a > b else b
     if mx == 0.0:
         return mx
-    biased = _bits(mx) >> 52  # mx > 0: its exponent field
+    biased = float_bits(mx) >> 52  # mx > 0: its exponent field
     if 0 < biased < 2045:  # normal: frexp's exponent e is biased - 1022, and 2**-e normal
-        scale = _double((2045 - biased) << 52)  # 2**-e, without frexp's and ldexp's calls
+        scale = bits_float((2045 - biased) << 52)  # 2**-e, without frexp's and ldexp's calls
     else:
         _, e = math.frexp(mx)
         if e < -1023:  # subnormal: rescale (as CPython does) and try again

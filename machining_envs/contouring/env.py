@@ -13,7 +13,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 
-from machining_envs.contouring._exact import py_hypot, py_square
+from machining_envs.contouring._exact import py_hypot
 from machining_envs.contouring.metrics import CONTOURING_TASK
 from machining_envs.contouring.paths import (
     SEGMENT_COLUMNS,
@@ -50,6 +50,7 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
+from machining_envs.core.kernels import py_square
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
 
 __all__ = [

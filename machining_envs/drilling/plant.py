@@ -59,7 +59,7 @@ from machining_envs.core.checks import (
     check_range,
     replace_checked,
 )
-from machining_envs.core.kernels import powers
+from machining_envs.core.kernels import powers, py_square
 from machining_envs.core.lti import zoh
 
 __all__ = [
@@ -1041,7 +1041,7 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp, rows):
             load = (wear + ratio) * _pymax(0.0, 1.0 + par[k, _P_SIG_0] * xi_cut)
             k4 = par[k, _P_KT] * v_cut * eng_t * load
             kh = par[k, _P_KH] * v_cut * eng_h * load
-            kh2 = par[k, _P_KH2] * math.pow(v_cut * eng_h, g[_G_SQUARE])
+            kh2 = par[k, _P_KH2] * py_square(v_cut * eng_h, g[_G_SQUARE])
         else:
             v_cut = 0.0
             ratio = 0.0

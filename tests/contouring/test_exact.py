@@ -4,7 +4,6 @@ geometry over ``Path.table()``, to rounding for the lifted block product of the 
 
 import math
 
-import numba
 import numpy as np
 import pytest
 
@@ -64,41 +63,6 @@ def test_py_hypot_is_pythons_math_hypot():
         assert _exact.py_hypot(a, b) == math.hypot(a, b) == _exact.py_hypot(b, -a)
     assert _exact.py_hypot(0.0, 0.0) == 0.0 and _exact.py_hypot(-3.0, 4.0) == 5.0
     assert _exact.py_hypot(math.inf, math.nan) == math.inf
-
-
-def test_py_square_is_pythons_power_of_two():
-    """CPython's ``x ** 2`` (libm's pow) differs from ``x * x`` in the last bit for about one
-    value in a thousand; ``py_square`` gives its numbers, taking ``pow`` only near a
-    midpoint, and every value with that: midpoints, the ends of the range, zeros, inf, NaN."""
-    values = [RNG.normal(size=200_000) * s for s in (1e-3, 1.0, 1e3)]
-    values.append(RNG.uniform(-1, 1, 200_000) * 10.0 ** RNG.uniform(-170, 150, 200_000))
-    x = np.concatenate(values)
-    # x * x exactly halfway between two doubles cannot be; these are as near it as can be
-    # (mantissa 1 + 2**-26 +- a little: x**2 = 1 + 2**-25 + 2**-52 + ...)
-    near = 1.0 + 2.0**-26 + np.arange(-200, 200) * 2.0**-52
-    edges = [0.0, -0.0, 5e-324, 1e-170, 1e-160, 2.0**-486, 1.3e154, -1.4e154, math.inf, -math.inf]
-    x = np.concatenate([x, near, -near * 3.0, edges])
-    out = np.empty_like(x)
-    _square_all(x, 2.0, out)
-    np.testing.assert_array_equal(out, [_python_square(v) for v in x.tolist()])
-    with np.errstate(over="ignore"):
-        assert int(np.sum(out != x * x)) > 100  # so the distinction is needed
-    nan = np.array([math.nan])
-    _square_all(nan, 2.0, nan)
-    assert math.isnan(nan[0])
-
-
-def _python_square(v: float) -> float:
-    try:
-        return v**2
-    except OverflowError:  # where libm's pow gives inf, CPython raises
-        return math.inf
-
-
-@numba.njit
-def _square_all(x, two, out):
-    for i in range(x.size):
-        out[i] = _exact.py_square(x[i], two)
 
 
 def _paths():
