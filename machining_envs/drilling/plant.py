@@ -908,7 +908,7 @@ def _shared_constants(p: DrillingParams) -> np.ndarray:
         math.sqrt(1.0 - ou_0**2),
         fa,
         p.chip_length_diameters,
-        2.0,  # x ** 2 of Python calls pow(); the exponent is data so that the kernel does too
+        2.0,  # Python's x ** 2 is pow(): data, so that the kernel's py_square gives it too
         ts / m,  # the RK4 step, and the factors of its stages
         0.5 * (ts / m),
         (ts / m) / 6.0,
