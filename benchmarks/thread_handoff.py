@@ -1,6 +1,6 @@
 """What running a kernel on blocks of lanes costs on several threads against one: the
-handoff of ``machining_envs.core.blocks.LaneBlocks`` (a worker thread of a pool wakes for
-its block, and the calling thread waits for it), measured on this machine.
+handoff of ``machining_envs.core.blocks.LaneBlocks`` (its workers wait for their blocks in
+compiled code, and the calling thread waits for them), measured on this machine.
 
 A compiled kernel (no GIL) does ``work`` multiply-adds per lane over 1024 lanes; one
 ``LaneBlocks.run`` on one thread and on ``--threads`` threads, each the best of several

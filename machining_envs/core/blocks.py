@@ -26,7 +26,17 @@ other cores busy: a two-thread ContouringFeed-v0 ran no faster than one. So the 
 of such a process runs its resets in :func:`one_blas_thread`, with BLAS on one thread: the
 numbers are the same, the cores stay free.
 
-This module imports numpy, threadpoolctl and the standard library only.
+A compiled kernel (numba) with no other trailing argument than one integer runs on
+**workers that wait in compiled code**: each worker thread polls a flag of its own, without
+the GIL, and calls the kernel on its block itself when the flag moves, so handing it a
+block costs about a microsecond. A pool's thread sleeps between blocks, and waking it took
+90-100 µs on a virtual machine (``benchmarks/thread_handoff.py``), as long as a whole
+kernel of a thousand lanes. A worker polls for a few milliseconds after each block (long
+enough for the next step of an env stepped in a loop to find it awake), then sleeps until
+the next block; while an env is stepped without pause, its workers keep their cores busy.
+Anything else (a Python kernel, other trailing arguments) runs on the pool.
+
+This module imports numpy, numba, threadpoolctl and the standard library only.
 """
 
 from __future__ import annotations
@@ -34,9 +44,16 @@ from __future__ import annotations
 import os
 import sys
 import threading
+import time
+import weakref
 from concurrent.futures import ThreadPoolExecutor
 
+import numba
 import numpy as np
+from numba import types
+from numba.core import cgutils
+from numba.core.registry import CPUDispatcher
+from numba.extending import intrinsic
 
 __all__ = [
     "MAX_THREADS",
@@ -83,6 +100,165 @@ def block_edges(n: int, num_threads: int) -> list[tuple[int, int]]:
     return [(lo, hi) for lo, hi in zip(cuts[:-1], cuts[1:], strict=True) if hi > lo]
 
 
+# ---- workers that wait in compiled code --------------------------------------------------
+
+
+def _item_pointer(context, builder, aryty, ary_value, index):
+    ary = context.make_array(aryty)(context, builder, ary_value)
+    return cgutils.get_item_pointer(context, builder, aryty, ary, [index])
+
+
+@intrinsic
+def _load(typingctx, ctl, i):
+    """``ctl[i]`` of an int64 array, read atomically (sequentially consistent)."""
+    if not (isinstance(ctl, types.Array) and ctl.dtype == types.int64):
+        return None
+
+    def codegen(context, builder, signature, args):
+        ptr = _item_pointer(context, builder, signature.args[0], args[0], args[1])
+        return builder.load_atomic(ptr, "seq_cst", 8)
+
+    return types.int64(ctl, types.intp), codegen
+
+
+@intrinsic
+def _store(typingctx, ctl, i, value):
+    """``ctl[i] = value`` of an int64 array, written atomically (sequentially consistent)."""
+    if not (isinstance(ctl, types.Array) and ctl.dtype == types.int64):
+        return None
+
+    def codegen(context, builder, signature, args):
+        ptr = _item_pointer(context, builder, signature.args[0], args[0], args[1])
+        value = context.cast(builder, args[2], signature.args[2], types.int64)
+        builder.store_atomic(value, ptr, "seq_cst", 8)
+        return context.get_dummy_value()
+
+    return types.void(ctl, types.intp, types.int64), codegen
+
+
+#: Slots of a worker's row of flags: the number of the block it is asked for (-1: stop),
+#: the last it finished, whether it is polling (1) or asleep (0), the kernel's integer.
+_GO, _DONE, _AWAKE, _TAIL = 0, 1, 2, 3
+#: Polls of an idle worker before it sleeps (a few milliseconds).
+_POLLS = 2_000_000
+
+
+@numba.njit(nogil=True, cache=True)
+def _poll(ctl, i, value, polls):
+    """Poll ``ctl[i]`` until it equals ``value`` (True) or ``polls`` reads have not (False)."""
+    for _ in range(polls):
+        if _load(ctl, i) == value:
+            return True
+    return False
+
+
+@numba.njit(cache=True)
+def _set(ctl, i, value):
+    """``ctl[i] = value``, atomically, from Python."""
+    _store(ctl, i, value)
+
+
+@numba.njit(cache=True)
+def _get(ctl, i):
+    """``ctl[i]``, atomically, from Python."""
+    return _load(ctl, i)
+
+
+@numba.njit(inline="always")
+def _call(kernel, args, ctl):
+    kernel(*args)
+
+
+@numba.njit(inline="always")
+def _call_with_tail(kernel, args, ctl):
+    kernel(*args, _load(ctl, _TAIL))
+
+
+@numba.njit(nogil=True)
+def _serve(call, kernel, ctl, args, polls):
+    """``call(kernel, args, ctl)`` (:func:`_call`: ``kernel(*args)``; :func:`_call_with_tail`:
+    with ``ctl[_TAIL]`` after them) each time ``ctl[_GO]`` moves, then ``ctl[_DONE]`` set to
+    it. Returns ``ctl[_GO]`` when it is negative (stop), or the last block done once
+    ``polls`` polls found nothing and it has marked itself asleep (the caller then sleeps
+    until woken)."""
+    seen = _load(ctl, _DONE)
+    idle = 0
+    while True:
+        go = _load(ctl, _GO)
+        if go < 0:
+            return go
+        if go != seen:
+            call(kernel, args, ctl)
+            seen = go
+            _store(ctl, _DONE, go)
+            idle = 0
+        elif idle < polls:
+            idle += 1
+        else:
+            _store(ctl, _AWAKE, 0)
+            if _load(ctl, _GO) == seen:  # read after the mark: a block asked for since is seen
+                return seen
+            _store(ctl, _AWAKE, 1)
+
+
+class _Worker:
+    """A thread that serves one block of lanes from compiled code (module docstring)."""
+
+    def __init__(self, kernel, args: tuple, with_tail: bool) -> None:
+        self.ctl = np.zeros(8, dtype=np.int64)  # a cache line of its own
+        self.ctl[_AWAKE] = 1
+        self.wake = threading.Event()
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(
+            target=self._loop, args=(kernel, args, with_tail), daemon=True,
+            name="machining-envs-lanes",
+        )  # fmt: skip
+        self.thread.start()
+
+    def _loop(self, kernel, args: tuple, with_tail: bool) -> None:
+        ctl = self.ctl
+        call = _call_with_tail if with_tail else _call
+        while True:
+            try:
+                if _serve(call, kernel, ctl, args, _POLLS) < 0:
+                    return
+            except BaseException as exc:  # the kernel's (or its compiler's): the caller's
+                self.error = exc
+                _set(ctl, _AWAKE, 0)
+                _set(ctl, _DONE, _get(ctl, _GO))
+            self.wake.wait()
+            self.wake.clear()
+            if _get(ctl, _GO) < 0:
+                return
+            _set(ctl, _AWAKE, 1)
+
+    def ask(self, number: int, tail: int) -> None:
+        """Ask for block ``number`` (after the last one finished), with the integer ``tail``."""
+        _set(self.ctl, _TAIL, tail)
+        _set(self.ctl, _GO, number)
+        if _get(self.ctl, _AWAKE) == 0:  # asleep, or about to be: wake it
+            self.wake.set()
+
+    def wait(self, number: int) -> None:
+        """Wait until block ``number`` is done."""
+        while not _poll(self.ctl, _DONE, number, _POLLS):
+            if not self.thread.is_alive():
+                raise RuntimeError("a worker thread of the lane blocks has stopped")
+            time.sleep(0)
+
+    def stop(self) -> None:
+        _set(self.ctl, _GO, -1)
+        self.wake.set()
+        self.thread.join()
+
+
+def _stop_all(workers: list, pid: int) -> None:
+    """Stop ``workers``, threads of process ``pid`` (a forked copy has none of them)."""
+    if os.getpid() == pid:
+        for worker in workers:
+            worker.stop()
+
+
 class LaneBlocks:
     """The blocks of ``n`` lanes for ``num_threads`` threads, and the threads that step them
     (see the module docstring)."""
@@ -99,15 +275,28 @@ class LaneBlocks:
         # The last argument tuple seen (by identity) and its blocks' arguments.
         self._source: tuple | None = None
         self._blocks: list[tuple] = []
+        # The compiled workers, what they serve ((kernel, blocks, with tail), by identity),
+        # the process they belong to and the number of the last block asked for.
+        self._workers: list[_Worker] = []
+        self._served: tuple | None = None
+        self._workers_pid = 0
+        self._number = 0
+        self._finalizer: weakref.finalize | None = None
 
     def __getstate__(self) -> dict:
         # Threads and views do not pickle: made anew when next needed.
         state = dict(self.__dict__)
-        state.update(_pool=None, _pool_pid=0, _source=None, _blocks=[])
+        state.update(_pool=None, _pool_pid=0, _source=None, _blocks=[], _workers=[],
+                     _served=None, _workers_pid=0, _number=0, _finalizer=None)  # fmt: skip
         return state
 
     def _block_args(self, args: tuple, axes: tuple) -> list[tuple]:
-        if args is not self._source:
+        source = self._source
+        if args is not source and not (
+            source is not None
+            and len(args) == len(source)
+            and all(a is b for a, b in zip(args, source, strict=True))
+        ):  # new arguments (the same objects in a new tuple keep their blocks)
             if len(args) != len(axes):
                 raise ValueError(f"{len(args)} kernel arguments but {len(axes)} axis codes")
             for i, (x, axis) in enumerate(zip(args, axes, strict=True)):
@@ -147,6 +336,11 @@ class LaneBlocks:
             kernel(*args, *tail)
             return
         blocks = self._block_args(args, axes)
+        if isinstance(kernel, CPUDispatcher) and (
+            not tail or (len(tail) == 1 and isinstance(tail[0], (int, np.integer)))
+        ):
+            self._run_compiled(kernel, blocks, tail)
+            return
         pool = self._pool
         if pool is None or self._pool_pid != os.getpid():  # none yet, or a forked copy's
             pool = self._pool = ThreadPoolExecutor(
@@ -162,11 +356,53 @@ class LaneBlocks:
         for f in futures:
             f.result()
 
+    def _run_compiled(self, kernel, blocks: list[tuple], tail: tuple) -> None:
+        """:meth:`run` of a compiled kernel on the compiled workers (module docstring)."""
+        with_tail = bool(tail)
+        served = (kernel, blocks, with_tail)
+        old = self._served
+        if (
+            old is None
+            or self._workers_pid != os.getpid()
+            or old[0] is not kernel
+            or old[1] is not blocks
+            or old[2] != with_tail
+        ):
+            self._stop_workers()
+            self._workers = [_Worker(kernel, b, with_tail) for b in blocks[1:]]
+            self._served, self._workers_pid = served, os.getpid()
+            # Stopped with the blocks, if never closed: they hold the lanes' arrays.
+            self._finalizer = weakref.finalize(self, _stop_all, self._workers, os.getpid())
+        self._number += 1
+        number = self._number
+        value = int(tail[0]) if tail else 0
+        for worker in self._workers:
+            worker.ask(number, value)
+        try:
+            kernel(*blocks[0], *tail)
+        finally:
+            for worker in self._workers:  # every block done before anything else touches
+                worker.wait(number)  # the lanes
+            errors = [w.error for w in self._workers if w.error is not None]
+            for worker in self._workers:  # raised once (the calling thread's first)
+                worker.error = None
+        if errors:
+            raise errors[0]
+
+    def _stop_workers(self) -> None:
+        finalizer = getattr(self, "_finalizer", None)
+        if finalizer is not None:
+            finalizer.detach()
+            self._finalizer = None
+        _stop_all(self._workers, self._workers_pid)
+        self._workers, self._served = [], None
+
     def close(self) -> None:
         """Stop the worker threads (made again if :meth:`run` needs them)."""
         if self._pool is not None and self._pool_pid == os.getpid():
             self._pool.shutdown(wait=True)
         self._pool = None
+        self._stop_workers()
 
 
 _BLAS_LOCK = threading.Lock()

@@ -1,8 +1,10 @@
 """Blocks of lanes stepped on threads (``machining_envs.core.blocks``)."""
 
+import gc
 import pickle
 import threading
 
+import numba
 import numpy as np
 import pytest
 
@@ -180,3 +182,47 @@ def test_one_blas_thread_holds_until_the_outermost_use_leaves():
     worker.start()
     worker.join()
     assert seen and all(n == 1 for n in seen)
+
+
+@numba.njit(nogil=True)
+def _mark(lanes, flags, code):
+    for i in range(lanes.shape[0]):
+        flags[i] = True
+    if lanes[0] != 0 and code == 7:
+        raise ValueError("a worker's block failed")
+
+
+def test_a_compiled_kernel_runs_on_workers_that_raise_its_errors():
+    """A compiled kernel with an integer after its arrays runs on workers that wait in
+    compiled code; an error in a worker's block is raised once every block has finished,
+    and the workers serve the next run."""
+    n = 512
+    lanes, done = np.arange(n), np.zeros(n, dtype=np.bool_)
+    blocks = LaneBlocks(n, 4)
+    blocks.run(_mark, (lanes, done), (0, 0), 1)
+    assert done.all() and len(blocks._workers) == 3
+    done[:] = False
+    with pytest.raises(ValueError, match="worker's block failed"):
+        blocks.run(_mark, (lanes, done), (0, 0), 7)
+    assert done.all()
+    done[:] = False
+    blocks.run(_mark, (lanes, done), (0, 0), 1)
+    assert done.all()
+    threads = [w.thread for w in blocks._workers]
+    blocks.close()
+    assert blocks._workers == [] and not any(t.is_alive() for t in threads)
+    blocks.run(_mark, (lanes, done), (0, 0), 1)  # made again when needed
+    assert len(blocks._workers) == 3
+    blocks.close()
+
+
+def test_workers_stop_with_their_blocks():
+    """Workers hold the lanes' arrays: blocks never closed stop theirs when collected."""
+    blocks = LaneBlocks(512, 2)
+    blocks.run(_mark, (np.arange(512), np.zeros(512, dtype=np.bool_)), (0, 0), 1)
+    threads = [w.thread for w in blocks._workers]
+    del blocks
+    gc.collect()
+    for t in threads:
+        t.join(timeout=10)
+    assert threads and not any(t.is_alive() for t in threads)
