@@ -5,13 +5,13 @@ their compiled kernels (numba) must give the same numbers to the last bit, so th
 recorded episodes stay valid and a lane of a vector env equals the single env. The
 operations here are those whose rounding differs from a plain loop:
 
-- :func:`fma`: one fused multiply-add (one rounding), as the BLAS kernels use;
 - :func:`py_hypot`: CPython's ``math.hypot`` (an exactly rounded sum of squares; libm's
   ``hypot``, which numpy and numba use, differs in the last bit for about 1 pair in 200);
 - :func:`np_sum` / :func:`np_mean`: numpy's pairwise summation of a contiguous float64
   array (``np.sum``, ``np.mean``);
 - :func:`gemv_row`: one element of OpenBLAS's ``dgemv`` (``A @ x`` of a C-ordered float64
-  matrix, x86-64 Haswell kernels, one thread): four interleaved FMA chains per row.
+  matrix, x86-64 Haswell kernels, one thread): four interleaved FMA chains per row
+  (``machining_envs.core.kernels.fma``: one rounding, as the BLAS kernels use).
 
 CPython's ``x ** 2`` is libm's ``pow``, which differs from ``x * x`` for about one value
 in a thousand; compiled code gets it from ``math.pow(x, two)`` with ``two`` read at run
@@ -27,15 +27,10 @@ from __future__ import annotations
 import math
 
 import numba
-from llvmlite import ir
-from numba import types
-from numba.core import cgutils
-from numba.extending import intrinsic
 
-from machining_envs.core.kernels import bits_float, float_bits
+from machining_envs.core.kernels import bits_float, float_bits, fma
 
 __all__ = [
-    "fma",
     "py_hypot",
     "np_sum",
     "np_mean",
@@ -43,21 +38,6 @@ __all__ = [
     "py_mod",
     "vecmat_rows",
 ]
-
-
-@intrinsic
-def fma(typingctx, a, b, c):
-    """``a * b + c`` rounded once (the hardware's fused multiply-add)."""
-    sig = types.float64(types.float64, types.float64, types.float64)
-
-    def codegen(context, builder, signature, args):
-        d = ir.DoubleType()
-        fn = cgutils.get_or_insert_function(
-            builder.module, ir.FunctionType(d, [d, d, d]), "llvm.fma.f64"
-        )
-        return builder.call(fn, args)
-
-    return sig, codegen
 
 
 @numba.njit(cache=True, inline="always")

@@ -164,6 +164,15 @@ def _get(ctl, i):
     return _load(ctl, i)
 
 
+@numba.njit(cache=True)
+def _ask(ctl, number, tail):
+    """Ask for block ``number`` with the integer ``tail``; whether the worker is asleep (or
+    about to be), and must be woken. One compiled call from Python."""
+    _store(ctl, _TAIL, tail)
+    _store(ctl, _GO, number)
+    return _load(ctl, _AWAKE) == 0
+
+
 @numba.njit(inline="always")
 def _call(kernel, args, ctl):
     kernel(*args)
@@ -234,9 +243,7 @@ class _Worker:
 
     def ask(self, number: int, tail: int) -> None:
         """Ask for block ``number`` (after the last one finished), with the integer ``tail``."""
-        _set(self.ctl, _TAIL, tail)
-        _set(self.ctl, _GO, number)
-        if _get(self.ctl, _AWAKE) == 0:  # asleep, or about to be: wake it
+        if _ask(self.ctl, number, tail):
             self.wake.set()
 
     def wait(self, number: int) -> None:
@@ -359,7 +366,6 @@ class LaneBlocks:
     def _run_compiled(self, kernel, blocks: list[tuple], tail: tuple) -> None:
         """:meth:`run` of a compiled kernel on the compiled workers (module docstring)."""
         with_tail = bool(tail)
-        served = (kernel, blocks, with_tail)
         old = self._served
         if (
             old is None
@@ -370,7 +376,7 @@ class LaneBlocks:
         ):
             self._stop_workers()
             self._workers = [_Worker(kernel, b, with_tail) for b in blocks[1:]]
-            self._served, self._workers_pid = served, os.getpid()
+            self._served, self._workers_pid = (kernel, blocks, with_tail), os.getpid()
             # Stopped with the blocks, if never closed: they hold the lanes' arrays.
             self._finalizer = weakref.finalize(self, _stop_all, self._workers, os.getpid())
         self._number += 1
@@ -383,11 +389,12 @@ class LaneBlocks:
         finally:
             for worker in self._workers:  # every block done before anything else touches
                 worker.wait(number)  # the lanes
-            errors = [w.error for w in self._workers if w.error is not None]
-            for worker in self._workers:  # raised once (the calling thread's first)
-                worker.error = None
-        if errors:
-            raise errors[0]
+            error = next((w.error for w in self._workers if w.error is not None), None)
+            if error is not None:
+                for worker in self._workers:  # raised once (the calling thread's first)
+                    worker.error = None
+        if error is not None:
+            raise error
 
     def _stop_workers(self) -> None:
         finalizer = getattr(self, "_finalizer", None)
