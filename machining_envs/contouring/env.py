@@ -51,6 +51,7 @@ from machining_envs.core.env import (
     scenario_option,
 )
 from machining_envs.core.kernels import py_square
+from machining_envs.core.packed import PackedArgs, b1_2, f4_2, f8_1, f8_2, f8_3, i8_1, i8_2
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
 
 __all__ = [
@@ -371,6 +372,15 @@ def _contour_step(act, clipped, lf, li, cf, tabs, nseg, rb, loads, obs, out, fla
         _contour_obs(lane, k, x, y, vx, vy, lf, cf, rb, obs)
 
 
+@numba.njit(cache=True, nogil=True)
+def _contour_step_packed(t):
+    """:func:`_contour_step` with its arguments in one table (``core.packed``): the single
+    env's call, which would otherwise pay for unboxing each array."""
+    _contour_step(f8_2(t, 0), i8_1(t, 1), f8_2(t, 2), i8_2(t, 3), f8_1(t, 4), f8_3(t, 5),
+                  i8_1(t, 6), f8_3(t, 7), f8_3(t, 8), f4_2(t, 9), f8_2(t, 10),
+                  b1_2(t, 11))  # fmt: skip
+
+
 #: Where :func:`_contour_step`'s arguments (``_ContouringCore._args``) hold the lanes: axis
 #: 0 or none (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (0, 0, 0, 0, None, 0, 0, 0, 0, 0, 0, 0)
@@ -466,6 +476,7 @@ class _ContouringCore:
         self.circle = np.zeros((n, 3))
         #: The blocks of lanes the kernel steps at once (one thread unless a vector env
         #: asks for more).
+        self._packed = PackedArgs()
         self.blocks = LaneBlocks(n)
         self._bind()
 
@@ -539,7 +550,7 @@ class _ContouringCore:
         """Advance every lane by one servo period with the (checked, clipped) actions in
         ``act``; whether each was clipped is in ``clipped``."""
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
-            _contour_step(*self._args)
+            _contour_step_packed(self._packed(self._args))
         else:
             self.blocks.run(_contour_step, self._args, _STEP_AXES)
 

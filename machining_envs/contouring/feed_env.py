@@ -68,6 +68,7 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
+from machining_envs.core.packed import PackedArgs, b1_2, f4_2, f8_1, f8_2, f8_3, i8_1, i8_2
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
 
 __all__ = ["ContouringFeedEnv", "ContouringFeedVectorEnv", "FeedReward", "LOOKAHEAD_MM"]
@@ -345,6 +346,15 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, state, consts, obs, flag
                   o[11], tol, look, lo, hi, obs)  # fmt: skip
 
 
+@numba.njit(cache=True, nogil=True)
+def _feed_step_packed(t):
+    """:func:`_feed_step` with its arguments in one table (``core.packed``): the single
+    env's call, which would otherwise pay for unboxing each array."""
+    _feed_step(f8_2(t, 0), i8_2(t, 1), f8_3(t, 2), f8_2(t, 3), f8_2(t, 4), f8_3(t, 5), f8_2(t, 6),
+               f8_2(t, 7), f8_1(t, 8), f4_2(t, 9), b1_2(t, 10), f8_2(t, 11), f8_1(t, 12),
+               i8_1(t, 13))  # fmt: skip
+
+
 #: Where :func:`_feed_step`'s arguments (``_FeedCore._args``) hold the lanes: axis 0, none
 #: (shared) or scratch space, for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (0, 0, 0, 0, 0, 0, 0, 0, None, 0, 0, 0, SCRATCH, SCRATCH)
@@ -445,6 +455,7 @@ class _FeedCore:
         self._scratch = (self._float_scratch(n_seg), np.zeros(n_seg, dtype=np.int64))
         #: The blocks of lanes the kernel steps at once (one thread unless a vector env
         #: asks for more).
+        self._packed = PackedArgs()
         self.blocks = LaneBlocks(n)
         self._bind()
 
@@ -574,7 +585,7 @@ class _FeedCore:
             asked = self._c[5] + self._c[6] * self.in_action
             self.applied[:] = self.act_lanes.apply(asked)
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
-            _feed_step(*self._args)
+            _feed_step_packed(self._packed(self._args))
         else:
             self.blocks.run(_feed_step, self._args, _STEP_AXES)
 

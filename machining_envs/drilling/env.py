@@ -30,6 +30,7 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
+from machining_envs.core.packed import PackedArgs, as_int, b1_2, f4_2, f8_1, f8_2, f8_3, i8_2
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
 from machining_envs.drilling.metrics import DRILLING_TASK
 from machining_envs.drilling.plant import (
@@ -221,6 +222,14 @@ def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, normals):
         _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs)
 
 
+@numba.njit(cache=True, nogil=True)
+def _step_packed(t):
+    """:func:`_step` with its arguments in one table (``core.packed``): the single
+    env's call, which would otherwise pay for unboxing each array."""
+    _step(as_int(t, 0), f8_1(t, 1), f8_2(t, 2), f8_3(t, 3), f8_2(t, 4), f8_2(t, 5), f8_1(t, 6),
+          f8_2(t, 7), b1_2(t, 8), i8_2(t, 9), f4_2(t, 10), f8_2(t, 11))  # fmt: skip
+
+
 #: Where :func:`_step`'s arguments (``_DrillingCore._args``) hold the lanes: axis 0 or none
 #: (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (None, None, 0, 0, 0, 0, None, 0, 0, 0, 0, 0)
@@ -301,6 +310,7 @@ class _DrillingCore:
         )  # fmt: skip
         #: The blocks of lanes the kernel steps at once (one thread unless a vector env
         #: asks for more).
+        self._packed = PackedArgs()
         self.blocks = LaneBlocks(n)
 
     def draw_normals(self, lane: int, rng: np.random.Generator) -> None:
@@ -385,7 +395,7 @@ class _DrillingCore:
         box, ``flags[:, _F_IN_CLIPPED]`` saying whether it was clipped already); the lanes'
         normals must hold a row for this step (:meth:`draw_normals`)."""
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
-            _step(*self._args)
+            _step_packed(self._packed(self._args))
         else:
             self.blocks.run(_step, self._args, _STEP_AXES)
 

@@ -37,6 +37,17 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
+from machining_envs.core.packed import (
+    PackedArgs,
+    as_float,
+    as_int,
+    b1_1,
+    b1_2,
+    f4_2,
+    f8_1,
+    f8_2,
+    i8_1,
+)
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
 from machining_envs.milling.metrics import MILLING_TASK
 from machining_envs.milling.plant import (
@@ -252,6 +263,19 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
             obs[k, 3 + i] = _clamp(meas[k, i] / sc, lo, hi)
 
 
+@numba.njit(cache=True, nogil=True)
+def _step_packed(t, stage):
+    """:func:`_step` with its arguments in one table (``core.packed``): the single
+    env's call, which would otherwise pay for unboxing each array."""
+    _step(f8_1(t, 0), i8_1(t, 1), f8_1(t, 2), f8_2(t, 3), i8_1(t, 4), f8_1(t, 5), f8_1(t, 6),
+          f8_1(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), f8_2(t, 12), f8_2(t, 13),
+          f8_2(t, 14), f8_2(t, 15), i8_1(t, 16), i8_1(t, 17), b1_1(t, 18), as_int(t, 19),
+          f8_2(t, 20), i8_1(t, 21), f8_1(t, 22), f8_2(t, 23), as_float(t, 24), f8_1(t, 25),
+          f8_1(t, 26), f8_1(t, 27), f8_1(t, 28), f8_1(t, 29), f8_2(t, 30), as_float(t, 31),
+          f8_1(t, 32), f8_2(t, 33), f8_1(t, 34), f8_1(t, 35), f8_1(t, 36), f4_2(t, 37),
+          f8_1(t, 38), b1_2(t, 39), i8_1(t, 40), f8_2(t, 41), stage)  # fmt: skip
+
+
 #: Where :func:`_step`'s arguments (``_MillingCore._kernel_args``) hold the lanes: axis 0, axis
 #: 1 (``info_f``) or none (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (
@@ -347,6 +371,7 @@ class _MillingCore:
         self._args_version = -1
         #: The blocks of lanes the kernel steps at once (one thread unless a vector env
         #: asks for more).
+        self._packed = PackedArgs()
         self.blocks = LaneBlocks(n)
 
     def _bind_views(self) -> None:
@@ -515,7 +540,7 @@ class _MillingCore:
     def _run(self, args: tuple, stage: int) -> None:
         """:func:`_step` of ``stage`` over every lane (on the blocks of lanes, if several)."""
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
-            _step(*args, stage)
+            _step_packed(self._packed(args), stage)
         else:
             self.blocks.run(_step, args, _STEP_AXES, stage)
 

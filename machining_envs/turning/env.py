@@ -37,6 +37,18 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
+from machining_envs.core.packed import (
+    PackedArgs,
+    as_float,
+    as_int,
+    b1_1,
+    b1_2,
+    f4_2,
+    f8_1,
+    f8_2,
+    i8_1,
+    i8_2,
+)
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
 from machining_envs.turning.metrics import TURNING_TASK
 from machining_envs.turning.plant import (
@@ -201,6 +213,16 @@ def _step(ef, eb, big, li, filt, z, buf, work, edges, d0, slope, lane_f, finishe
                   fr_obs, rpm_obs, obs, reward, flags)  # fmt: skip
 
 
+@numba.njit(cache=True, nogil=True)
+def _step_packed(t):
+    """:func:`_step` with its arguments in one table (``core.packed``): the single env's
+    call, which would otherwise pay for unboxing each array."""
+    _step(f8_2(t, 0), b1_2(t, 1), f8_2(t, 2), i8_2(t, 3), f8_2(t, 4), f8_2(t, 5), f8_2(t, 6),
+          f8_2(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12), as_int(t, 13),
+          as_int(t, 14), f8_2(t, 15), f8_1(t, 16), as_float(t, 17), as_float(t, 18), f8_2(t, 19),
+          as_float(t, 20), f8_1(t, 21), f4_2(t, 22), i8_1(t, 23))  # fmt: skip
+
+
 #: Where :func:`_step`'s arguments (``_TurningCore._kernel_args``) hold the lanes: axis 0
 #: or none (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (
@@ -281,6 +303,7 @@ class _TurningCore:
         self.names = np.full(n, "", dtype=object)
         self._args: tuple | None = None
         self._args_version = -1
+        self._packed = PackedArgs()
         #: The blocks of lanes the kernel steps at once (one thread unless a vector env
         #: asks for more).
         self.blocks = LaneBlocks(n)
@@ -435,7 +458,7 @@ class _TurningCore:
         if self.act_lanes is not None:
             self.in_command[:] = self.act_lanes.apply(self.in_command)
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
-            _step(*self._kernel_args())
+            _step_packed(self._packed(self._kernel_args()))
         else:
             self.blocks.run(_step, self._kernel_args(), _STEP_AXES)
         if self.power_lanes:

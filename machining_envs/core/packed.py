@@ -1,0 +1,214 @@
+"""A compiled kernel's many arguments in one: the single env's step, called from Python.
+
+A call from Python into a numba kernel checks the type of every argument and unboxes every
+array: about 80 ns an array on top of the call. A lane kernel takes 11-39 arrays (the
+lanes' state, tables, outputs), so a single env, which calls it once a step for one lane,
+paid 1-3 µs of each 7-12 µs step just for that. :func:`pack` writes an argument tuple's
+arrays (address, shape) and numbers into one int64 table, once, and each process has a
+compiled **trampoline** taking that table alone, which reads the arguments back with the
+readers below and calls the kernel: one array to unbox instead of dozens. The kernel gets
+C-contiguous arrays of the same types as when called directly, so it runs the same machine
+code and gives the same numbers, to the last bit.
+
+Each argument takes :data:`SLOT` entries of the table: a code for its kind (dtype and
+dimensions, or a float or an int), then its data address (a number's own bits) and its
+shape. Each reader checks the code of the slot it reads and raises ``TypeError`` where it
+is another kind, so a trampoline that reads an argument as what it is not fails instead of
+reading memory wrongly.
+
+The table holds addresses, not arrays: it is valid only while the tuple it was packed from
+keeps its arrays alive. :class:`PackedArgs` keeps the tuple beside its table, packs again
+when it is given another tuple, and packs nothing into a pickle or a copy (their arrays are
+elsewhere).
+
+This module imports numpy, numba and ``core.kernels`` only.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numba.core import types
+from numba.extending import intrinsic
+
+from machining_envs.core.kernels import bits_float
+
+__all__ = [
+    "SLOT",
+    "PackedArgs",
+    "as_float",
+    "as_int",
+    "b1_1",
+    "b1_2",
+    "f4_2",
+    "f8_1",
+    "f8_2",
+    "f8_3",
+    "i8_1",
+    "i8_2",
+    "pack",
+]
+
+#: Table entries per argument: its kind's code, its address (or a number's bits), three
+#: extents.
+SLOT = 5
+
+_FLOAT = 1
+_INT = 2
+#: Codes of the array kinds: 8 * kind + dimensions.
+_KINDS = {np.dtype(np.float64): 1, np.dtype(np.float32): 2, np.dtype(np.int64): 3,
+          np.dtype(np.bool_): 4}  # fmt: skip
+
+
+def _code(kind: int, ndim: int) -> int:
+    return 8 * kind + ndim
+
+
+def pack(args: tuple) -> np.ndarray:
+    """The int64 table of ``args`` (arrays of float64, float32, int64 or bool with one to
+    three dimensions, C-contiguous; Python floats and ints), :data:`SLOT` entries each."""
+    table = np.zeros(SLOT * len(args), dtype=np.int64)
+    for i, a in enumerate(args):
+        o = SLOT * i
+        if isinstance(a, np.ndarray):
+            kind = _KINDS.get(a.dtype)
+            if kind is None or not 1 <= a.ndim <= 3 or not a.flags.c_contiguous:
+                raise TypeError(
+                    f"pack: argument {i} is a {a.ndim}-d {a.dtype} array"
+                    f"{'' if a.flags.c_contiguous else ' (not C-contiguous)'}; expected a "
+                    "C-contiguous float64, float32, int64 or bool array of 1-3 dimensions"
+                )
+            table[o] = _code(kind, a.ndim)
+            table[o + 1] = a.ctypes.data
+            table[o + 2 : o + 2 + a.ndim] = a.shape
+        elif isinstance(a, float):
+            table[o] = _FLOAT
+            table[o + 1] = np.float64(a).view(np.int64)
+        elif isinstance(a, int) and not isinstance(a, bool):
+            table[o] = _INT
+            table[o + 1] = a
+        else:
+            raise TypeError(f"pack: argument {i} is a {type(a).__name__}; expected an array, "
+                            "a float or an int")  # fmt: skip
+    return table
+
+
+class PackedArgs:
+    """The table of the last argument tuple given, packed again when the tuple is another
+    object (the tuple is kept, so its arrays outlive the table)."""
+
+    __slots__ = ("_args", "_table")
+
+    def __init__(self) -> None:
+        self._args: tuple | None = None
+        self._table: np.ndarray | None = None
+
+    def __call__(self, args: tuple) -> np.ndarray:
+        if args is not self._args:
+            self._table = pack(args)
+            self._args = args
+        return self._table
+
+    def __getstate__(self) -> dict:
+        return {}  # addresses mean nothing elsewhere: the copy packs its own tuple
+
+    def __setstate__(self, state: dict) -> None:
+        self._args = None
+        self._table = None
+
+
+def _pointer_to(nbtype):
+    """An intrinsic making a ``CPointer(nbtype)`` of an int64 address."""
+
+    @intrinsic
+    def pointer(typingctx, address):
+        if address != types.int64:
+            return None
+        sig = types.CPointer(nbtype)(types.int64)
+
+        def codegen(context, builder, signature, args):
+            return builder.inttoptr(args[0], context.get_value_type(signature.return_type))
+
+        return sig, codegen
+
+    return pointer
+
+
+_f8 = _pointer_to(types.float64)
+_f4 = _pointer_to(types.float32)
+_i8 = _pointer_to(types.int64)
+_b1 = _pointer_to(types.boolean)
+
+
+@numba.njit(cache=True, inline="always")
+def _at(t, i, code):
+    """The offset of argument ``i``'s slot, after checking its code."""
+    o = 5 * i
+    if t[o] != code:
+        raise TypeError("packed argument read as another kind")
+    return o
+
+
+@numba.njit(cache=True, inline="always")
+def f8_1(t, i):
+    o = _at(t, i, 9)
+    return numba.carray(_f8(t[o + 1]), (t[o + 2],))
+
+
+@numba.njit(cache=True, inline="always")
+def f8_2(t, i):
+    o = _at(t, i, 10)
+    return numba.carray(_f8(t[o + 1]), (t[o + 2], t[o + 3]))
+
+
+@numba.njit(cache=True, inline="always")
+def f8_3(t, i):
+    o = _at(t, i, 11)
+    return numba.carray(_f8(t[o + 1]), (t[o + 2], t[o + 3], t[o + 4]))
+
+
+@numba.njit(cache=True, inline="always")
+def f4_2(t, i):
+    o = _at(t, i, 18)
+    return numba.carray(_f4(t[o + 1]), (t[o + 2], t[o + 3]))
+
+
+@numba.njit(cache=True, inline="always")
+def i8_1(t, i):
+    o = _at(t, i, 25)
+    return numba.carray(_i8(t[o + 1]), (t[o + 2],))
+
+
+@numba.njit(cache=True, inline="always")
+def i8_2(t, i):
+    o = _at(t, i, 26)
+    return numba.carray(_i8(t[o + 1]), (t[o + 2], t[o + 3]))
+
+
+@numba.njit(cache=True, inline="always")
+def b1_1(t, i):
+    o = _at(t, i, 33)
+    return numba.carray(_b1(t[o + 1]), (t[o + 2],))
+
+
+@numba.njit(cache=True, inline="always")
+def b1_2(t, i):
+    o = _at(t, i, 34)
+    return numba.carray(_b1(t[o + 1]), (t[o + 2], t[o + 3]))
+
+
+@numba.njit(cache=True, inline="always")
+def as_float(t, i):
+    """Argument ``i`` as a float (an int argument converted, as a direct call would)."""
+    o = 5 * i
+    if t[o] == 2:
+        return float(t[o + 1])
+    if t[o] != 1:
+        raise TypeError("packed argument read as another kind")
+    return bits_float(t[o + 1])
+
+
+@numba.njit(cache=True, inline="always")
+def as_int(t, i):
+    o = _at(t, i, 2)
+    return t[o + 1]

@@ -1,0 +1,179 @@
+"""A kernel's arguments packed into one table (``machining_envs.core.packed``), and each
+process's trampoline giving its kernel's numbers to the last bit."""
+
+import copy
+import pickle
+
+import gymnasium as gym
+import numba
+import numpy as np
+import pytest
+
+import machining_envs  # noqa: F401  (registers the ids)
+from machining_envs.contouring import env as contouring_env
+from machining_envs.contouring import feed_env
+from machining_envs.core.packed import (
+    SLOT,
+    PackedArgs,
+    as_float,
+    as_int,
+    b1_1,
+    b1_2,
+    f4_2,
+    f8_1,
+    f8_2,
+    f8_3,
+    i8_1,
+    i8_2,
+    pack,
+)
+from machining_envs.drilling import env as drilling_env
+from machining_envs.milling import env as milling_env
+from machining_envs.turning import env as turning_env
+
+
+@numba.njit
+def _read_back(t):
+    """Every reader on a table of the ten kinds, writing through the arrays it makes."""
+    a, b, c, d = f8_1(t, 0), f8_2(t, 1), f8_3(t, 2), f4_2(t, 3)
+    e, f, g, h = i8_1(t, 4), i8_2(t, 5), b1_1(t, 6), b1_2(t, 7)
+    x, n, m = as_float(t, 8), as_int(t, 9), as_float(t, 10)
+    a[-1] = x
+    b[1, 2] = x + n
+    c[1, 2, 3] = m
+    d[0, 1] = 2.5
+    e[0] = n
+    f[1, 0] = 7
+    g[1] = True
+    h[0, 1] = True
+    return a.sum() + b.sum() + c.sum() + d.sum() + e.sum() + f.sum() + g.sum() + h.sum()
+
+
+def _kinds():
+    return (
+        np.arange(3.0),
+        np.arange(6.0).reshape(2, 3),
+        np.zeros((2, 3, 4)),
+        np.zeros((2, 2), dtype=np.float32),
+        np.arange(4),
+        np.zeros((3, 2), dtype=np.int64),
+        np.zeros(2, dtype=bool),
+        np.zeros((2, 2), dtype=bool),
+        0.1,
+        -3,
+        5,  # an int read as a float, as a direct call would take it
+    )
+
+
+def test_the_readers_give_the_arrays_and_numbers_packed():
+    args = _kinds()
+    plain = [a.copy() if isinstance(a, np.ndarray) else a for a in args]
+    total = _read_back(pack(args))
+    # the arrays read back are the packed arrays themselves (writes reach them) ...
+    plain[0][-1] = 0.1
+    plain[1][1, 2] = 0.1 - 3
+    plain[2][1, 2, 3] = 5.0
+    plain[3][0, 1] = 2.5
+    plain[4][0] = -3
+    plain[5][1, 0] = 7
+    plain[6][1] = True
+    plain[7][0, 1] = True
+    for got, want in zip(args[:8], plain[:8], strict=True):
+        assert got.dtype == want.dtype and np.array_equal(got, want)
+    # ... and the float's bits survive the table
+    assert total == sum(float(p.sum()) for p in plain[:8])
+    assert pack((0.1,))[1] == np.float64(0.1).view(np.int64)
+    assert len(pack(args)) == SLOT * len(args)
+
+
+@numba.njit
+def _read_f8_2(t):
+    return f8_2(t, 0).sum()
+
+
+@numba.njit
+def _read_int(t):
+    return as_int(t, 0)
+
+
+def test_a_reader_refuses_an_argument_of_another_kind():
+    for wrong in (np.zeros(3), np.zeros((2, 2), dtype=np.float32), np.zeros((2, 2), bool), 1.0):
+        with pytest.raises(TypeError, match="another kind"):
+            _read_f8_2(pack((wrong,)))
+    with pytest.raises(TypeError, match="another kind"):
+        _read_int(pack((1.5,)))
+    assert _read_f8_2(pack((np.ones((2, 2)),))) == 4.0
+
+
+def test_pack_refuses_what_a_reader_cannot_read_naming_the_argument():
+    bad = [
+        (np.zeros((4, 4))[:, ::2], "argument 1 is a 2-d float64 array \\(not C-contiguous\\)"),
+        (np.zeros(3, dtype=np.int32), "argument 1 is a 1-d int32 array"),
+        (np.zeros((1, 1, 1, 1)), "argument 1 is a 4-d float64"),
+        (np.zeros(()), "argument 1 is a 0-d"),
+        ("x", "argument 1 is a str"),
+        (True, "argument 1 is a bool"),
+        (None, "argument 1 is a NoneType"),
+    ]
+    for arg, message in bad:
+        with pytest.raises(TypeError, match=message):
+            pack((np.zeros(2), arg))
+
+
+def test_packed_args_pack_again_for_another_tuple_only():
+    packed = PackedArgs()
+    a = (np.zeros(3), 1.0)
+    t1 = packed(a)
+    assert packed(a) is t1
+    b = (np.zeros(3), 1.0)
+    t2 = packed(b)
+    assert t2 is not t1 and t2[1] == b[0].ctypes.data
+    # a pickle or a copy holds no addresses: it packs the tuple it is given
+    for other in (pickle.loads(pickle.dumps(packed)), copy.copy(packed), copy.deepcopy(packed)):
+        c = (np.zeros(3), 1.0)
+        assert other(c)[1] == c[0].ctypes.data
+
+
+#: id -> (kernel, trampoline, trailing arguments) of each process.
+KERNELS = {
+    "Turning-v0": (turning_env._step, turning_env._step_packed, ()),
+    "EndMilling-v0": (milling_env._step, milling_env._step_packed, (3,)),
+    "MicroDrilling-v0": (drilling_env._step, drilling_env._step_packed, ()),
+    "Contouring-v0": (contouring_env._contour_step, contouring_env._contour_step_packed, ()),
+    "ContouringFeed-v0": (feed_env._feed_step, feed_env._feed_step_packed, ()),
+}
+
+
+def _arguments(core) -> tuple:
+    return core._kernel_args() if hasattr(core, "_kernel_args") else core._args
+
+
+@pytest.mark.parametrize("env_id", sorted(KERNELS))
+def test_each_trampoline_steps_as_its_kernel_to_the_last_bit(env_id):
+    kernel, trampoline, tail = KERNELS[env_id]
+    env = gym.make(f"machining_envs/{env_id}")
+    env.reset(seed=3, options={"scenario": "validation"})
+    space = env.action_space
+    space.seed(3)
+    for _ in range(5):
+        env.step(space.sample())
+    core = env.unwrapped._core
+    state = _arguments(core)
+    # the lanes' arrays as the env holds them now, twice: one copy stepped by the kernel
+    # called directly, the other by the trampoline, for a few steps
+    direct = tuple(a.copy() if isinstance(a, np.ndarray) else a for a in state)
+    packed = tuple(a.copy() if isinstance(a, np.ndarray) else a for a in state)
+    table = pack(packed)
+    for _ in range(3):
+        kernel(*direct, *tail)
+        trampoline(table, *tail)
+    moved = 0
+    for i, (a, b, s) in enumerate(zip(direct, packed, state, strict=True)):
+        if isinstance(a, np.ndarray):
+            assert a.dtype == b.dtype and a.shape == b.shape, i
+            np.testing.assert_array_equal(a, b, err_msg=f"argument {i}", strict=True)
+            # bit for bit, NaN included
+            assert a.tobytes() == b.tobytes(), i
+            moved += not np.array_equal(a, s, equal_nan=True)
+    assert moved >= 2  # the steps changed the state the two compare
+    env.close()
