@@ -552,7 +552,7 @@ class _ContouringCore:
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
             _contour_step_packed(self._packed(self._args))
         else:
-            self.blocks.run(_contour_step, self._args, _STEP_AXES)
+            self.blocks.run(_contour_step, self._args, _STEP_AXES, packed=_contour_step_packed)
 
     def lane_info(self, k: int) -> dict:
         """The info of lane ``k`` after its reset or its last step."""

@@ -587,7 +587,7 @@ class _FeedCore:
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
             _feed_step_packed(self._packed(self._args))
         else:
-            self.blocks.run(_feed_step, self._args, _STEP_AXES)
+            self.blocks.run(_feed_step, self._args, _STEP_AXES, packed=_feed_step_packed)
 
     def _bind(self) -> None:
         """Gather the kernel's arguments once (again whenever an array is replaced, as

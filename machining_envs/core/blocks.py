@@ -36,7 +36,8 @@ enough for the next step of an env stepped in a loop to find it awake), then sle
 the next block; while an env is stepped without pause, its workers keep their cores busy.
 Anything else (a Python kernel, other trailing arguments) runs on the pool.
 
-This module imports numpy, numba, threadpoolctl and the standard library only.
+This module imports numpy, numba, threadpoolctl, ``core.packed`` and the standard library
+only.
 """
 
 from __future__ import annotations
@@ -54,6 +55,8 @@ from numba import types
 from numba.core import cgutils
 from numba.core.registry import CPUDispatcher
 from numba.extending import intrinsic
+
+from machining_envs.core.packed import pack
 
 __all__ = [
     "MAX_THREADS",
@@ -282,6 +285,10 @@ class LaneBlocks:
         # The last argument tuple seen (by identity) and its blocks' arguments.
         self._source: tuple | None = None
         self._blocks: list[tuple] = []
+        # The blocks' arguments packed into tables (core.packed), for the blocks they were
+        # packed from (by identity); None where a block's arrays cannot be packed.
+        self._tables: list[tuple] | None = None
+        self._tables_of: list[tuple] | None = None
         # The compiled workers, what they serve ((kernel, blocks, with tail), by identity),
         # the process they belong to and the number of the last block asked for.
         self._workers: list[_Worker] = []
@@ -293,8 +300,9 @@ class LaneBlocks:
     def __getstate__(self) -> dict:
         # Threads and views do not pickle: made anew when next needed.
         state = dict(self.__dict__)
-        state.update(_pool=None, _pool_pid=0, _source=None, _blocks=[], _workers=[],
-                     _served=None, _workers_pid=0, _number=0, _finalizer=None)  # fmt: skip
+        state.update(_pool=None, _pool_pid=0, _source=None, _blocks=[], _tables=None,
+                     _tables_of=None, _workers=[], _served=None, _workers_pid=0, _number=0,
+                     _finalizer=None)  # fmt: skip
         return state
 
     def _block_args(self, args: tuple, axes: tuple) -> list[tuple]:
@@ -334,15 +342,35 @@ class LaneBlocks:
             self._source, self._blocks = args, blocks
         return self._blocks
 
-    def run(self, kernel, args: tuple, axes: tuple, *tail) -> None:
+    def _block_tables(self, blocks: list[tuple]) -> list[tuple] | None:
+        """Each block's arguments packed into one table (``core.packed``), as a one-argument
+        tuple; None where some array of a block is not C-contiguous (a view across the
+        lanes' axis 1)."""
+        if self._tables_of is not blocks:
+            try:
+                self._tables = [(pack(b),) for b in blocks]
+            except TypeError:
+                self._tables = None
+            self._tables_of = blocks  # the blocks keep the tables' arrays alive
+        return self._tables
+
+    def run(self, kernel, args: tuple, axes: tuple, *tail, packed=None) -> None:
         """``kernel(*args, *tail)`` over all lanes: on the blocks' views of ``args`` (one
         axis code per argument in ``axes``), at the same time on the threads, when there is
         more than one block; the kernel returns nothing. A kernel's error is raised once every
-        block has finished."""
+        block has finished.
+
+        ``packed``, the kernel's trampoline (``core.packed``), runs instead on each block's
+        table where every block's arrays are C-contiguous: the same numbers, and for some
+        kernels faster code (the trampoline's arrays have strides the compiler can see)."""
         if self.one:
             kernel(*args, *tail)
             return
         blocks = self._block_args(args, axes)
+        if packed is not None:
+            tables = self._block_tables(blocks)
+            if tables is not None:
+                kernel, blocks = packed, tables
         if isinstance(kernel, CPUDispatcher) and (
             not tail or (len(tail) == 1 and isinstance(tail[0], (int, np.integer)))
         ):

@@ -397,7 +397,7 @@ class _DrillingCore:
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
             _step_packed(self._packed(self._args))
         else:
-            self.blocks.run(_step, self._args, _STEP_AXES)
+            self.blocks.run(_step, self._args, _STEP_AXES, packed=_step_packed)
 
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""

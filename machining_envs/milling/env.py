@@ -542,7 +542,7 @@ class _MillingCore:
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
             _step_packed(self._packed(args), stage)
         else:
-            self.blocks.run(_step, args, _STEP_AXES, stage)
+            self.blocks.run(_step, args, _STEP_AXES, stage, packed=_step_packed)
 
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""

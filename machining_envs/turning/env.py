@@ -460,7 +460,7 @@ class _TurningCore:
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
             _step_packed(self._packed(self._kernel_args()))
         else:
-            self.blocks.run(_step, self._kernel_args(), _STEP_AXES)
+            self.blocks.run(_step, self._kernel_args(), _STEP_AXES, packed=_step_packed)
         if self.power_lanes:
             self._spindle_drives()
 

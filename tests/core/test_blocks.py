@@ -18,6 +18,7 @@ from machining_envs.core.blocks import (
     check_num_threads,
     one_blas_thread,
 )
+from machining_envs.core.packed import f8_1, f8_2
 
 
 @pytest.mark.parametrize("n", [1, 5, 127, 128, 255, 256, 300, 1000, 1024, 8192, 10_001])
@@ -226,3 +227,48 @@ def test_workers_stop_with_their_blocks():
     for t in threads:
         t.join(timeout=10)
     assert threads and not any(t.is_alive() for t in threads)
+
+
+@numba.njit(nogil=True)
+def _scale(rows, cols, out, factor):
+    """rows: lanes on axis 0; cols: lanes on axis 1; out: lanes on axis 0."""
+    for i in range(rows.shape[0]):
+        out[i] = rows[i, 0] * factor + cols[0, i]
+
+
+@numba.njit(nogil=True)
+def _scale_packed(t, factor):
+    _scale(f8_2(t, 0), f8_2(t, 1), f8_1(t, 2), factor)
+
+
+def test_a_trampoline_runs_on_each_blocks_table_where_the_blocks_pack():
+    """With ``packed``, every block runs the trampoline on its own table (its views'
+    addresses); where a block's view is not C-contiguous (lanes on axis 1), the kernel runs
+    on the views as without it. The numbers are the same either way."""
+    n = 512
+    rows = np.arange(2.0 * n).reshape(n, 2)
+    cols = np.arange(3.0 * n).reshape(3, n)
+    want = rows[:, 0] * 3 + cols[0]
+    # packable: lanes on axis 0 only (a constant row shared by the blocks)
+    shared = np.full((1, n), 5.0)
+    out = np.zeros(n)
+    blocks = LaneBlocks(n, 2)
+    blocks.run(_scale, (rows, shared, out), (0, None, 0), 3, packed=_scale_packed)
+    np.testing.assert_array_equal(out, rows[:, 0] * 3 + 5.0)
+    tables = blocks._tables
+    assert tables is not None and len(tables) == 2
+    assert blocks._served[0] is _scale_packed  # the workers run the trampoline
+    lo, hi = blocks.edges[1]
+    assert tables[1][0][1] == rows[lo:hi].ctypes.data  # the second block's own rows
+    blocks.run(_scale, (rows, shared, out), (0, None, 0), 3, packed=_scale_packed)
+    assert blocks._tables is tables  # packed once for the same arguments
+    blocks.close()
+    # not packable: a view across axis 1 -> the kernel on the views
+    out[:] = 0.0
+    blocks = LaneBlocks(n, 2)
+    blocks.run(_scale, (rows, cols, out), (0, 1, 0), 3, packed=_scale_packed)
+    np.testing.assert_array_equal(out, want)
+    assert blocks._tables is None and blocks._served[0] is _scale
+    state = pickle.loads(pickle.dumps(blocks))
+    assert state._tables is None and state._tables_of is None
+    blocks.close()
