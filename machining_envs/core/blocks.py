@@ -429,7 +429,8 @@ class LaneBlocks:
         if finalizer is not None:
             finalizer.detach()
             self._finalizer = None
-        _stop_all(self._workers, self._workers_pid)
+        if self._workers:  # (none, say, when an env left open is collected at exit, after
+            _stop_all(self._workers, self._workers_pid)  # the module's names are gone)
         self._workers, self._served = [], None
 
     def close(self) -> None:
