@@ -216,7 +216,8 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, state, consts, obs, flag
     else the action's; then the reward weights ``w``, the lookahead distances and the
     observation's bounds (offsets ``_C_*``). ``flags[k]`` = ``[diverged, finished,
     terminated, truncated]``; ``sc``, ``order`` = float and integer scratch
-    (``_FeedCore._scratch``). Few arguments: each costs the call about 0.05 µs."""
+    (``_FeedCore._scratch``). The env calls it through :func:`_feed_step_packed` (one
+    table for every argument)."""
     actions, applied, s, override, prev_action, reward = (
         lf[:, 0], lf[:, 1], lf[:, 2], lf[:, 3], lf[:, 4], lf[:, 5]
     )  # fmt: skip

@@ -7,8 +7,10 @@ paid 1-3 µs of each 7-12 µs step just for that. :func:`pack` writes an argumen
 arrays (address, shape) and numbers into one int64 table, once, and each process has a
 compiled **trampoline** taking that table alone, which reads the arguments back with the
 readers below and calls the kernel: one array to unbox instead of dozens. The kernel gets
-C-contiguous arrays of the same types as when called directly, so it runs the same machine
-code and gives the same numbers, to the last bit.
+C-contiguous arrays of the same types as when called directly, and does the same arithmetic
+in the same order (no fast-math): the same numbers, to the last bit. The compiler sees more
+of them, though (their strides follow from their shapes where it inlines the kernel), and
+vectorises some loops better: Turning-v0's kernel runs 1.5x faster through its trampoline.
 
 Each argument takes :data:`SLOT` entries of the table: a code for its kind (dtype and
 dimensions, or a float or an int), then its data address (a number's own bits) and its

@@ -193,8 +193,8 @@ def _step(ef, eb, big, li, filt, z, buf, work, edges, d0, slope, lane_f, finishe
     """One step of every lane: the actions' bookkeeping, the plant, the env's outputs.
 
     ``ef`` and ``eb`` hold the env's per-lane floats and flags (``_TurningCore``'s ``_EF``
-    and ``_EB`` columns), ``li`` the plant's integers (``TurningLanes.li``): few arguments,
-    as each costs the call time."""
+    and ``_EB`` columns), ``li`` the plant's integers (``TurningLanes.li``). The env calls it
+    through :func:`_step_packed` (one table for every argument)."""
     (actions, commands, noise, fr, vmax, brk, prev_action, fr_obs, rpm_obs, reward,
      last_command) = _env_floats(ef)  # fmt: skip
     flags, clipped, last_clipped = eb[:, :6], eb[:, 6], eb[:, 7]
