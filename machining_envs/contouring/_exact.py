@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 
 import numba
+import numpy as np
 
 from machining_envs.core.kernels import bits_float, float_bits, fma
 
@@ -288,8 +289,81 @@ def gemv(a, x, out):
 def vecmat_rows(z, mt, out):
     """``out[i] = z[i] @ mt.T`` for every row ``i``, each row exactly as numpy computes the
     1-D product ``z[i] @ m`` alone (``mt`` is ``m.T`` made C-ordered: numpy's ``z @ m`` of
-    a 1-D ``z`` is OpenBLAS's ``dgemv`` on ``m.T``, :func:`gemv_row`)."""
+    a 1-D ``z`` is OpenBLAS's ``dgemv`` on ``m.T``, :func:`gemv_row`).
+
+    A batch of rows takes every row through the same operations, :func:`gemv_row`'s for
+    output ``r``, in the same order: so the loops run over the rows innermost (``z``
+    transposed), where the compiler puts several rows in one vector instruction, and each
+    row's numbers stay those of ``gemv_row``."""
+    n = z.shape[0]
     n_rows = mt.shape[0]
-    for i in range(z.shape[0]):
-        for r in range(n_rows):
-            out[i, r] = gemv_row(mt, z[i], r, n_rows)
+    if n < 4:
+        for i in range(n):
+            for r in range(n_rows):
+                out[i, r] = gemv_row(mt, z[i], r, n_rows)
+        return
+    n_cols = mt.shape[1]
+    m3 = n_cols & 3
+    nb = n_cols - m3
+    full = n_rows - (n_rows & 3)
+    zt = np.empty((n_cols, n))
+    for i in range(n):
+        for c in range(n_cols):
+            zt[c, i] = z[i, c]
+    acc = np.zeros((4, n))
+    v = np.zeros(n)
+    for r in range(n_rows):
+        a = mt[r]
+        acc[:] = 0.0
+        if nb > 0:
+            if r < full:  # four FMA chains, summed (c0 + c2) + (c1 + c3)
+                for c in range(0, nb, 4):
+                    a0, a1, a2, a3 = a[c], a[c + 1], a[c + 2], a[c + 3]
+                    x0, x1, x2, x3 = zt[c], zt[c + 1], zt[c + 2], zt[c + 3]
+                    for i in range(n):
+                        acc[0, i] = fma(a0, x0[i], acc[0, i])
+                        acc[1, i] = fma(a1, x1[i], acc[1, i])
+                        acc[2, i] = fma(a2, x2[i], acc[2, i])
+                        acc[3, i] = fma(a3, x3[i], acc[3, i])
+                for i in range(n):
+                    v[i] = (acc[0, i] + acc[2, i]) + (acc[1, i] + acc[3, i])
+            elif (n_rows & 2) and r < full + 2:  # two chains of multiplies and adds
+                for c in range(0, nb, 2):
+                    a0, a1 = a[c], a[c + 1]
+                    x0, x1 = zt[c], zt[c + 1]
+                    for i in range(n):
+                        acc[0, i] = acc[0, i] + a0 * x0[i]
+                        acc[1, i] = acc[1, i] + a1 * x1[i]
+                for i in range(n):
+                    v[i] = acc[0, i] + acc[1, i]
+            else:  # four chains of multiplies and adds, summed pairwise
+                for c in range(0, nb, 4):
+                    a0, a1, a2, a3 = a[c], a[c + 1], a[c + 2], a[c + 3]
+                    x0, x1, x2, x3 = zt[c], zt[c + 1], zt[c + 2], zt[c + 3]
+                    for i in range(n):
+                        acc[0, i] = acc[0, i] + a0 * x0[i]
+                        acc[1, i] = acc[1, i] + a1 * x1[i]
+                        acc[2, i] = acc[2, i] + a2 * x2[i]
+                        acc[3, i] = acc[3, i] + a3 * x3[i]
+                for i in range(n):
+                    v[i] = (acc[0, i] + acc[2, i]) + (acc[1, i] + acc[3, i])
+        else:
+            v[:] = 0.0
+        if m3 == 0:
+            for i in range(n):
+                out[i, r] = 0.0 + v[i]
+        elif m3 == 1:
+            b0 = a[nb]
+            xb0 = zt[nb]
+            for i in range(n):
+                out[i, r] = fma(b0, xb0[i], 0.0 + v[i])
+        elif m3 == 2:
+            b0, b1 = a[nb], a[nb + 1]
+            xb0, xb1 = zt[nb], zt[nb + 1]
+            for i in range(n):
+                out[i, r] = (0.0 + v[i]) + fma(b0, xb0[i], b1 * xb1[i])
+        else:
+            b0, b1, b2 = a[nb], a[nb + 1], a[nb + 2]
+            xb0, xb1, xb2 = zt[nb], zt[nb + 1], zt[nb + 2]
+            for i in range(n):
+                out[i, r] = (0.0 + v[i]) + fma(b2, xb2[i], fma(b0, xb0[i], b1 * xb1[i]))

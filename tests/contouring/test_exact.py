@@ -38,6 +38,30 @@ def test_gemv_row_is_numpys_matrix_vector_product(shape):
         np.testing.assert_array_equal(out, a @ x)
 
 
+@pytest.mark.parametrize("shape", [(6, 8), (7, 9), (13, 15), (10, 10), (5, 3), (4, 4), (42, 44)])
+@pytest.mark.parametrize("n", [1, 3, 4, 9, 100])
+def test_vecmat_rows_gives_each_rows_product_alone(shape, n):
+    """Each row of a batch as :func:`gemv_row` gives that row's product alone (numpy's 1-D
+    product on the CPU the kernels follow: every residue of the outputs and inputs modulo
+    four, batches below and above the lane-vectorised path's smallest), to the last bit,
+    signed zeros and NaN included."""
+    for _ in range(10):
+        mt = RNG.normal(size=shape)
+        z = RNG.normal(size=(n, shape[1])) * 10.0 ** RNG.uniform(-3, 3, (n, shape[1]))
+        z[0, 0] = -0.0
+        if n > 2:
+            z[1] = 0.0
+            z[2, -1] = np.nan
+        out = np.empty((n, shape[0]))
+        _exact.vecmat_rows(z, mt, out)
+        want = np.array(
+            [[_exact.gemv_row(mt, z[i], r, shape[0]) for r in range(shape[0])] for i in range(n)]
+        )
+        assert out.tobytes() == want.tobytes()
+        if n > 2:
+            assert np.isnan(out[2]).any() and (np.signbit(out[1]) == np.signbit(want[1])).all()
+
+
 @pytest.mark.parametrize("n", [1, 5, 8, 50, 128, 129, 300, 1000, 5000])
 def test_np_sum_and_mean_are_numpys_pairwise_sums(n):
     for _ in range(20):
