@@ -61,6 +61,13 @@ def _make_vec(cfg: TrainConfig, seed: int, vec: str | None = None):
     ``vec`` is one of ``VEC_KINDS``; by default ``native`` where the id has a native vector
     env, else ``dummy``. All three give every env ``seed + i`` at the first reset, so they
     run the same episodes.
+
+    On the native vector env, SB3's per-env info dicts carry only what SB3 reads (the
+    terminal observation and ``TimeLimit.truncated`` where an env ends, the episode's
+    return and length from ``VecMonitor``) unless the configuration names callbacks of its
+    own, which may read the env's info as ``DummyVecEnv`` gives it: then every key. Copying
+    the env's info into 16 dicts a step was a sixth of PPO's whole ``learn()`` on
+    Turning-v0 (``benchmarks/train_throughput.py``). The policy learnt is the same.
     """
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecMonitor, VecNormalize
@@ -74,8 +81,12 @@ def _make_vec(cfg: TrainConfig, seed: int, vec: str | None = None):
     if vec == "native":
         from agents.rl.vec import SB3VecEnv, VecIncrementalAction
 
+        info_keys = None if cfg.callbacks else ()
         venv = VecMonitor(
-            SB3VecEnv(gym.make_vec(cfg.env_id, num_envs=cfg.n_envs, **dict(cfg.env_kwargs)))
+            SB3VecEnv(
+                gym.make_vec(cfg.env_id, num_envs=cfg.n_envs, **dict(cfg.env_kwargs)),
+                info_keys=info_keys,
+            )
         )
         increment = None
         if wrapper_kwargs is not None:

@@ -406,3 +406,49 @@ def test_bad_vec_kind_is_refused_before_training(tiny, tmp_path):
     with pytest.raises(ConfigError, match="no native vector env"):
         train(plain, "ppo", tmp_path / "r2", config_path=config, vec="native")
     assert not (tmp_path / "r").exists() and not (tmp_path / "r2").exists()
+
+
+def _infos_until_an_env_ends(venv) -> tuple[list[dict], list[dict]]:
+    """(the infos of a step where no env ended, those of the first step where one did)."""
+    venv.reset()
+    rng = np.random.default_rng(0)
+    quiet = None
+    for _ in range(2000):
+        actions = rng.uniform(-1, 1, size=(venv.num_envs, *venv.action_space.shape))
+        venv.step_async(actions.astype(np.float32))
+        _, _, dones, infos = venv.step_wait()
+        if dones.any():
+            return quiet, infos
+        quiet = infos
+    raise AssertionError("no episode ended")
+
+
+def test_native_training_copies_the_env_info_only_for_callbacks_that_may_read_it(tmp_path):
+    """Training on the native vector env gives SB3 only what it reads (terminal observation,
+    TimeLimit.truncated, VecMonitor's episode) unless the configuration names a callback of
+    its own, which then gets every info key, as from DummyVecEnv."""
+    from agents.rl.train import _make_vec
+
+    path = tmp_path / "tiny.yml"
+    path.write_text(TINY)
+    cfg = load_config(TURNING, "ppo", path)
+    assert not cfg.callbacks
+    venv, _ = _make_vec(cfg, seed=1, vec="native")
+    quiet, ended = _infos_until_an_env_ends(venv)
+    assert all(d == {} for d in quiet)
+    i = next(i for i, d in enumerate(ended) if d)
+    assert set(ended[i]) == {"terminal_observation", "TimeLimit.truncated", "episode"}
+    venv.close()
+    named = tmp_path / "named.yml"
+    named.write_text(
+        TINY
+        + "  callback:\n    - stable_baselines3.common.callbacks.StopTrainingOnMaxEpisodes:\n        max_episodes: 1000\n"
+    )
+    cfg = load_config(TURNING, "ppo", named)
+    assert cfg.callbacks
+    venv, _ = _make_vec(cfg, seed=1, vec="native")
+    quiet, ended = _infos_until_an_env_ends(venv)
+    assert {"force_N", "cost", "breakage", "TimeLimit.truncated"} <= set(quiet[0])
+    i = next(i for i, d in enumerate(ended) if "terminal_observation" in d)
+    assert {"force_N", "cost", "terminal_observation", "episode"} <= set(ended[i])
+    venv.close()
