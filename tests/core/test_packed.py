@@ -177,3 +177,36 @@ def test_each_trampoline_steps_as_its_kernel_to_the_last_bit(env_id):
             moved += not np.array_equal(a, s, equal_nan=True)
     assert moved >= 2  # the steps changed the state the two compare
     env.close()
+
+
+@pytest.mark.parametrize("env_id", sorted(KERNELS))
+def test_a_copied_env_packs_its_own_arrays(env_id):
+    """A deep copy or a pickle of a stepped env steps as the original does, through a table
+    of its own arrays (a table copied with its addresses would step the original's)."""
+    env = gym.make(f"machining_envs/{env_id}")
+    env.reset(seed=2)
+    space = env.action_space
+    space.seed(1)
+    for _ in range(3):
+        env.step(space.sample())
+    base = env.unwrapped
+    copies = [copy.deepcopy(base), pickle.loads(pickle.dumps(base))]
+    actions = [space.sample() for _ in range(20)]
+    runs = []
+    for e in (base, *copies):
+        steps = []
+        for a in actions:
+            obs, reward, terminated, truncated, _ = e.step(a)
+            steps.append((obs.tobytes(), reward))
+            if terminated or truncated:
+                break
+        runs.append(steps)
+    assert runs[1] == runs[0] and runs[2] == runs[0]
+
+    def addresses(e) -> set:
+        t = e._core._packed._table
+        return {int(t[SLOT * i + 1]) for i in range(len(t) // SLOT) if t[SLOT * i] > 2}
+
+    mine = addresses(base)
+    assert mine and all(addresses(c).isdisjoint(mine) for c in copies)
+    env.close()
