@@ -374,8 +374,8 @@ def _contour_step(act, clipped, lf, li, cf, tabs, nseg, rb, loads, obs, out, fla
 
 @numba.njit(cache=True, nogil=True)
 def _contour_step_packed(t):
-    """:func:`_contour_step` with its arguments in one table (``core.packed``): the single
-    env's call, which would otherwise pay for unboxing each array."""
+    """:func:`_contour_step` with its arguments in one table (``core.packed``): what every
+    step calls (one array to unbox, not one per argument)."""
     _contour_step(f8_2(t, 0), i8_1(t, 1), f8_2(t, 2), i8_2(t, 3), f8_1(t, 4), f8_3(t, 5),
                   i8_1(t, 6), f8_3(t, 7), f8_3(t, 8), f4_2(t, 9), f8_2(t, 10),
                   b1_2(t, 11))  # fmt: skip
@@ -474,9 +474,9 @@ class _ContouringCore:
         self.circles: list[dict] = [{}] * n
         self.has_circle = np.zeros(n, dtype=bool)
         self.circle = np.zeros((n, 3))
+        self._packed = PackedArgs()  # the kernel's arguments in one table (core.packed)
         #: The blocks of lanes the kernel steps at once (one thread unless a vector env
         #: asks for more).
-        self._packed = PackedArgs()
         self.blocks = LaneBlocks(n)
         self._bind()
 

@@ -349,8 +349,8 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, state, consts, obs, flag
 
 @numba.njit(cache=True, nogil=True)
 def _feed_step_packed(t):
-    """:func:`_feed_step` with its arguments in one table (``core.packed``): the single
-    env's call, which would otherwise pay for unboxing each array."""
+    """:func:`_feed_step` with its arguments in one table (``core.packed``): what every
+    step calls (one array to unbox, not one per argument)."""
     _feed_step(f8_2(t, 0), i8_2(t, 1), f8_3(t, 2), f8_2(t, 3), f8_2(t, 4), f8_3(t, 5), f8_2(t, 6),
                f8_2(t, 7), f8_1(t, 8), f4_2(t, 9), b1_2(t, 10), f8_2(t, 11), f8_1(t, 12),
                i8_1(t, 13))  # fmt: skip
@@ -454,9 +454,9 @@ class _FeedCore:
         self.circle = np.zeros((n, 3))
         n_seg = self.tabs.shape[1]
         self._scratch = (self._float_scratch(n_seg), np.zeros(n_seg, dtype=np.int64))
+        self._packed = PackedArgs()  # the kernel's arguments in one table (core.packed)
         #: The blocks of lanes the kernel steps at once (one thread unless a vector env
         #: asks for more).
-        self._packed = PackedArgs()
         self.blocks = LaneBlocks(n)
         self._bind()
 

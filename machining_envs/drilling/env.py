@@ -224,8 +224,8 @@ def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, normals):
 
 @numba.njit(cache=True, nogil=True)
 def _step_packed(t):
-    """:func:`_step` with its arguments in one table (``core.packed``): the single
-    env's call, which would otherwise pay for unboxing each array."""
+    """:func:`_step` with its arguments in one table (``core.packed``): what every
+    step calls (one array to unbox, not one per argument)."""
     _step(as_int(t, 0), f8_1(t, 1), f8_2(t, 2), f8_3(t, 3), f8_2(t, 4), f8_2(t, 5), f8_1(t, 6),
           f8_2(t, 7), b1_2(t, 8), i8_2(t, 9), f4_2(t, 10), f8_2(t, 11))  # fmt: skip
 
@@ -308,9 +308,9 @@ class _DrillingCore:
             lanes.m, lanes.shared, lanes.par, lanes.eng, lanes.state, lanes.out,
             self.consts, self.ev, self.flags, self.counts, self.obs, self.normals,
         )  # fmt: skip
+        self._packed = PackedArgs()  # the kernel's arguments in one table (core.packed)
         #: The blocks of lanes the kernel steps at once (one thread unless a vector env
         #: asks for more).
-        self._packed = PackedArgs()
         self.blocks = LaneBlocks(n)
 
     def draw_normals(self, lane: int, rng: np.random.Generator) -> None:

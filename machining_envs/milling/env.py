@@ -265,8 +265,8 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
 
 @numba.njit(cache=True, nogil=True)
 def _step_packed(t, stage):
-    """:func:`_step` with its arguments in one table (``core.packed``): the single
-    env's call, which would otherwise pay for unboxing each array."""
+    """:func:`_step` with its arguments in one table (``core.packed``): what every
+    step calls (one array to unbox, not one per argument)."""
     _step(f8_1(t, 0), i8_1(t, 1), f8_1(t, 2), f8_2(t, 3), i8_1(t, 4), f8_1(t, 5), f8_1(t, 6),
           f8_1(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), f8_2(t, 12), f8_2(t, 13),
           f8_2(t, 14), f8_2(t, 15), i8_1(t, 16), i8_1(t, 17), b1_1(t, 18), as_int(t, 19),
@@ -369,9 +369,9 @@ class _MillingCore:
         self.noise = np.zeros(n)
         self._args: tuple | None = None
         self._args_version = -1
+        self._packed = PackedArgs()  # the kernel's arguments in one table (core.packed)
         #: The blocks of lanes the kernel steps at once (one thread unless a vector env
         #: asks for more).
-        self._packed = PackedArgs()
         self.blocks = LaneBlocks(n)
 
     def _bind_views(self) -> None:

@@ -215,8 +215,8 @@ def _step(ef, eb, big, li, filt, z, buf, work, edges, d0, slope, lane_f, finishe
 
 @numba.njit(cache=True, nogil=True)
 def _step_packed(t):
-    """:func:`_step` with its arguments in one table (``core.packed``): the single env's
-    call, which would otherwise pay for unboxing each array."""
+    """:func:`_step` with its arguments in one table (``core.packed``): what every
+    step calls (one array to unbox, not one per argument)."""
     _step(f8_2(t, 0), b1_2(t, 1), f8_2(t, 2), i8_2(t, 3), f8_2(t, 4), f8_2(t, 5), f8_2(t, 6),
           f8_2(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12), as_int(t, 13),
           as_int(t, 14), f8_2(t, 15), f8_1(t, 16), as_float(t, 17), as_float(t, 18), f8_2(t, 19),
@@ -303,7 +303,7 @@ class _TurningCore:
         self.names = np.full(n, "", dtype=object)
         self._args: tuple | None = None
         self._args_version = -1
-        self._packed = PackedArgs()
+        self._packed = PackedArgs()  # the kernel's arguments in one table (core.packed)
         #: The blocks of lanes the kernel steps at once (one thread unless a vector env
         #: asks for more).
         self.blocks = LaneBlocks(n)
