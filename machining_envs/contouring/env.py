@@ -34,7 +34,7 @@ from machining_envs.contouring.scenarios import (
     check_feed,
     contouring_scenario,
 )
-from machining_envs.core.blocks import LaneBlocks, check_num_threads
+from machining_envs.core.blocks import LaneBlocks, check_num_threads, serve_one_table
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
 from machining_envs.core.env import (
     ActionMap,
@@ -381,6 +381,13 @@ def _contour_step_packed(t):
                   b1_2(t, 11))  # fmt: skip
 
 
+@numba.njit(cache=True, nogil=True)
+def _serve_contour_step(ctl, table, polls):
+    """The lane blocks' worker loop for :func:`_contour_step_packed` (``core.blocks``), compiled with
+    this module and cached, not at the first step on several threads."""
+    return serve_one_table(_contour_step_packed, ctl, table, polls)
+
+
 #: Where :func:`_contour_step`'s arguments (``_ContouringCore._args``) hold the lanes: axis
 #: 0 or none (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (0, 0, 0, 0, None, 0, 0, 0, 0, 0, 0, 0)
@@ -552,7 +559,13 @@ class _ContouringCore:
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
             _contour_step_packed(self._packed(self._args))
         else:
-            self.blocks.run(_contour_step, self._args, _STEP_AXES, packed=_contour_step_packed)
+            self.blocks.run(
+                _contour_step,
+                self._args,
+                _STEP_AXES,
+                packed=_contour_step_packed,
+                serve=_serve_contour_step,
+            )
 
     def lane_info(self, k: int) -> dict:
         """The info of lane ``k`` after its reset or its last step."""

@@ -53,7 +53,7 @@ from machining_envs.core.actuation import (
     configure_lane,
     resolve_actuation,
 )
-from machining_envs.core.blocks import SCRATCH, LaneBlocks, check_num_threads
+from machining_envs.core.blocks import SCRATCH, LaneBlocks, check_num_threads, serve_one_table
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
@@ -356,6 +356,13 @@ def _feed_step_packed(t):
                i8_1(t, 13))  # fmt: skip
 
 
+@numba.njit(cache=True, nogil=True)
+def _serve_feed_step(ctl, table, polls):
+    """The lane blocks' worker loop for :func:`_feed_step_packed` (``core.blocks``), compiled with
+    this module and cached, not at the first step on several threads."""
+    return serve_one_table(_feed_step_packed, ctl, table, polls)
+
+
 #: Where :func:`_feed_step`'s arguments (``_FeedCore._args``) hold the lanes: axis 0, none
 #: (shared) or scratch space, for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (0, 0, 0, 0, 0, 0, 0, 0, None, 0, 0, 0, SCRATCH, SCRATCH)
@@ -588,7 +595,9 @@ class _FeedCore:
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
             _feed_step_packed(self._packed(self._args))
         else:
-            self.blocks.run(_feed_step, self._args, _STEP_AXES, packed=_feed_step_packed)
+            self.blocks.run(
+                _feed_step, self._args, _STEP_AXES, packed=_feed_step_packed, serve=_serve_feed_step
+            )
 
     def _bind(self) -> None:
         """Gather the kernel's arguments once (again whenever an array is replaced, as

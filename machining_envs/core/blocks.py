@@ -65,6 +65,7 @@ __all__ = [
     "LaneBlocks",
     "check_num_threads",
     "one_blas_thread",
+    "serve_one_table",
 ]
 
 #: Fewest lanes a thread steps: below this, handing a block to a thread (tens of µs)
@@ -188,6 +189,28 @@ def _call_with_tail(kernel, args, ctl):
 
 @numba.njit(nogil=True)
 def _serve(call, kernel, ctl, args, polls):
+    """:func:`serve_loop`, compiled for each kernel it is given (not cacheable: a function
+    passed as an argument), on first use in a process."""
+    return serve_loop(call, kernel, ctl, args, polls)
+
+
+@numba.njit(inline="always")
+def serve_one_table(kernel, ctl, table, polls):
+    """:func:`serve_loop` of a trampoline (``core.packed``) on its block's table.
+
+    A process module defines its workers' loop with it, compiled with the module and cached
+    on disk, so that the first step on several threads need not compile it::
+
+        @numba.njit(cache=True, nogil=True)
+        def _serve_step(ctl, table, polls):
+            return serve_one_table(_step_packed, ctl, table, polls)
+
+    and gives it to :meth:`LaneBlocks.run` as ``serve``."""
+    return serve_loop(_call, kernel, ctl, (table,), polls)
+
+
+@numba.njit(inline="always")
+def serve_loop(call, kernel, ctl, args, polls):
     """``call(kernel, args, ctl)`` (:func:`_call`: ``kernel(*args)``; :func:`_call_with_tail`:
     with ``ctl[_TAIL]`` after them) each time ``ctl[_GO]`` moves, then ``ctl[_DONE]`` set to
     it. Returns ``ctl[_GO]`` when it is negative (stop), or the last block done once
@@ -216,23 +239,27 @@ def _serve(call, kernel, ctl, args, polls):
 class _Worker:
     """A thread that serves one block of lanes from compiled code (module docstring)."""
 
-    def __init__(self, kernel, args: tuple, with_tail: bool) -> None:
+    def __init__(self, kernel, args: tuple, with_tail: bool, serve=None) -> None:
         self.ctl = np.zeros(8, dtype=np.int64)  # a cache line of its own
         self.ctl[_AWAKE] = 1
         self.wake = threading.Event()
         self.error: BaseException | None = None
         self.thread = threading.Thread(
-            target=self._loop, args=(kernel, args, with_tail), daemon=True,
+            target=self._loop, args=(kernel, args, with_tail, serve), daemon=True,
             name="machining-envs-lanes",
         )  # fmt: skip
         self.thread.start()
 
-    def _loop(self, kernel, args: tuple, with_tail: bool) -> None:
+    def _loop(self, kernel, args: tuple, with_tail: bool, serve) -> None:
         ctl = self.ctl
         call = _call_with_tail if with_tail else _call
         while True:
             try:
-                if _serve(call, kernel, ctl, args, _POLLS) < 0:
+                if serve is not None:  # a process's own loop for its trampoline, cached
+                    status = serve(ctl, args[0], _POLLS)
+                else:
+                    status = _serve(call, kernel, ctl, args, _POLLS)
+                if status < 0:
                     return
             except BaseException as exc:  # the kernel's (or its compiler's): the caller's
                 self.error = exc
@@ -289,8 +316,8 @@ class LaneBlocks:
         # packed from (by identity); None where a block's arrays cannot be packed.
         self._tables: list[tuple] | None = None
         self._tables_of: list[tuple] | None = None
-        # The compiled workers, what they serve ((kernel, blocks, with tail), by identity),
-        # the process they belong to and the number of the last block asked for.
+        # The compiled workers, what they serve ((kernel, blocks, with tail, loop), by
+        # identity), the process they belong to and the number of the last block asked for.
         self._workers: list[_Worker] = []
         self._served: tuple | None = None
         self._workers_pid = 0
@@ -354,7 +381,7 @@ class LaneBlocks:
             self._tables_of = blocks  # the blocks keep the tables' arrays alive
         return self._tables
 
-    def run(self, kernel, args: tuple, axes: tuple, *tail, packed=None) -> None:
+    def run(self, kernel, args: tuple, axes: tuple, *tail, packed=None, serve=None) -> None:
         """``kernel(*args, *tail)`` over all lanes: on the blocks' views of ``args`` (one
         axis code per argument in ``axes``), at the same time on the threads, when there is
         more than one block; the kernel returns nothing. A kernel's error is raised once every
@@ -362,19 +389,24 @@ class LaneBlocks:
 
         ``packed``, the kernel's trampoline (``core.packed``), runs instead on each block's
         table where every block's arrays are C-contiguous: the same numbers, and for some
-        kernels faster code (the trampoline's arrays have strides the compiler can see)."""
+        kernels faster code (the trampoline's arrays have strides the compiler can see).
+        ``serve``, the trampoline's worker loop (:func:`serve_one_table`, cached with its
+        module; for a trampoline without trailing arguments), spares the workers compiling
+        :func:`_serve` for it."""
         if self.one:
             kernel(*args, *tail)
             return
         blocks = self._block_args(args, axes)
+        loop = None
         if packed is not None:
             tables = self._block_tables(blocks)
             if tables is not None:
                 kernel, blocks = packed, tables
+                loop = serve if not tail else None
         if isinstance(kernel, CPUDispatcher) and (
             not tail or (len(tail) == 1 and isinstance(tail[0], (int, np.integer)))
         ):
-            self._run_compiled(kernel, blocks, tail)
+            self._run_compiled(kernel, blocks, tail, loop)
             return
         pool = self._pool
         if pool is None or self._pool_pid != os.getpid():  # none yet, or a forked copy's
@@ -391,8 +423,9 @@ class LaneBlocks:
         for f in futures:
             f.result()
 
-    def _run_compiled(self, kernel, blocks: list[tuple], tail: tuple) -> None:
-        """:meth:`run` of a compiled kernel on the compiled workers (module docstring)."""
+    def _run_compiled(self, kernel, blocks: list[tuple], tail: tuple, serve=None) -> None:
+        """:meth:`run` of a compiled kernel on the compiled workers (module docstring), with
+        the workers' loop ``serve`` where given."""
         with_tail = bool(tail)
         old = self._served
         if (
@@ -401,10 +434,12 @@ class LaneBlocks:
             or old[0] is not kernel
             or old[1] is not blocks
             or old[2] != with_tail
+            or old[3] is not serve
         ):
             self._stop_workers()
-            self._workers = [_Worker(kernel, b, with_tail) for b in blocks[1:]]
-            self._served, self._workers_pid = (kernel, blocks, with_tail), os.getpid()
+            self._workers = [_Worker(kernel, b, with_tail, serve) for b in blocks[1:]]
+            self._served = (kernel, blocks, with_tail, serve)
+            self._workers_pid = os.getpid()
             # Stopped with the blocks, if never closed: they hold the lanes' arrays.
             self._finalizer = weakref.finalize(self, _stop_all, self._workers, os.getpid())
         self._number += 1

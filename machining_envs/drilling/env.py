@@ -11,7 +11,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 
-from machining_envs.core.blocks import LaneBlocks, check_num_threads
+from machining_envs.core.blocks import LaneBlocks, check_num_threads, serve_one_table
 from machining_envs.core.checks import check_below
 from machining_envs.core.env import (
     ActionMap,
@@ -230,6 +230,13 @@ def _step_packed(t):
           f8_2(t, 7), b1_2(t, 8), i8_2(t, 9), f4_2(t, 10), f8_2(t, 11))  # fmt: skip
 
 
+@numba.njit(cache=True, nogil=True)
+def _serve_step(ctl, table, polls):
+    """The lane blocks' worker loop for :func:`_step_packed` (``core.blocks``), compiled with
+    this module and cached, not at the first step on several threads."""
+    return serve_one_table(_step_packed, ctl, table, polls)
+
+
 #: Where :func:`_step`'s arguments (``_DrillingCore._args``) hold the lanes: axis 0 or none
 #: (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (None, None, 0, 0, 0, 0, None, 0, 0, 0, 0, 0)
@@ -397,7 +404,7 @@ class _DrillingCore:
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
             _step_packed(self._packed(self._args))
         else:
-            self.blocks.run(_step, self._args, _STEP_AXES, packed=_step_packed)
+            self.blocks.run(_step, self._args, _STEP_AXES, packed=_step_packed, serve=_serve_step)
 
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""

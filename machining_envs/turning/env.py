@@ -18,7 +18,7 @@ from machining_envs.core.actuation import (
     configure_lane,
     resolve_actuation,
 )
-from machining_envs.core.blocks import LaneBlocks, check_num_threads
+from machining_envs.core.blocks import LaneBlocks, check_num_threads, serve_one_table
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_below, check_range
 from machining_envs.core.env import (
     ActionMap,
@@ -221,6 +221,13 @@ def _step_packed(t):
           f8_2(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12), as_int(t, 13),
           as_int(t, 14), f8_2(t, 15), f8_1(t, 16), as_float(t, 17), as_float(t, 18), f8_2(t, 19),
           as_float(t, 20), f8_1(t, 21), f4_2(t, 22), i8_1(t, 23))  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def _serve_step(ctl, table, polls):
+    """The lane blocks' worker loop for :func:`_step_packed` (``core.blocks``), compiled with
+    this module and cached, not at the first step on several threads."""
+    return serve_one_table(_step_packed, ctl, table, polls)
 
 
 #: Where :func:`_step`'s arguments (``_TurningCore._kernel_args``) hold the lanes: axis 0
@@ -460,7 +467,9 @@ class _TurningCore:
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
             _step_packed(self._packed(self._kernel_args()))
         else:
-            self.blocks.run(_step, self._kernel_args(), _STEP_AXES, packed=_step_packed)
+            self.blocks.run(
+                _step, self._kernel_args(), _STEP_AXES, packed=_step_packed, serve=_serve_step
+            )
         if self.power_lanes:
             self._spindle_drives()
 

@@ -17,8 +17,9 @@ from machining_envs.core.blocks import (
     block_edges,
     check_num_threads,
     one_blas_thread,
+    serve_one_table,
 )
-from machining_envs.core.packed import f8_1, f8_2
+from machining_envs.core.packed import b1_1, f8_1, f8_2, i8_1
 
 
 @pytest.mark.parametrize("n", [1, 5, 127, 128, 255, 256, 300, 1000, 1024, 8192, 10_001])
@@ -271,4 +272,32 @@ def test_a_trampoline_runs_on_each_blocks_table_where_the_blocks_pack():
     assert blocks._tables is None and blocks._served[0] is _scale
     state = pickle.loads(pickle.dumps(blocks))
     assert state._tables is None and state._tables_of is None
+    blocks.close()
+
+
+@numba.njit(nogil=True)
+def _mark_packed(t):
+    lanes, flags = i8_1(t, 0), b1_1(t, 1)
+    _mark(lanes, flags, 7 if lanes[0] == 448 else 1)
+
+
+@numba.njit(nogil=True)
+def _serve_mark(ctl, table, polls):
+    return serve_one_table(_mark_packed, ctl, table, polls)
+
+
+def test_workers_run_a_trampolines_own_loop_and_raise_its_errors():
+    """Given ``serve`` (a module's loop for its trampoline, :func:`serve_one_table`), the
+    workers run it on their blocks' tables; a kernel's error in a worker is still raised
+    once every block has finished. With a trailing argument, the generic loop serves."""
+    n = 512
+    lanes, done = np.arange(n), np.zeros(n, dtype=np.bool_)
+    blocks = LaneBlocks(n, 2)
+    blocks.run(_mark, (lanes, done), (0, 0), packed=_mark_packed, serve=_serve_mark)
+    assert done.all() and blocks._served[0] is _mark_packed and blocks._served[3] is _serve_mark
+    done[:] = False
+    shifted = lanes + 192  # the second block now starts at lane 448: its kernel raises
+    with pytest.raises(ValueError, match="worker's block failed"):
+        blocks.run(_mark, (shifted, done), (0, 0), packed=_mark_packed, serve=_serve_mark)
+    assert done.all()
     blocks.close()

@@ -210,3 +210,30 @@ def test_a_copied_env_packs_its_own_arrays(env_id):
     mine = addresses(base)
     assert mine and all(addresses(c).isdisjoint(mine) for c in copies)
     env.close()
+
+
+#: id -> the workers' loop its vector env on several threads runs (None: the generic one,
+#: compiled on first use, as where the blocks' views do not pack).
+SERVES = {
+    "Turning-v0": turning_env._serve_step,
+    "EndMilling-v0": None,  # its info arrays hold the lanes on axis 1: the kernel on views
+    "MicroDrilling-v0": drilling_env._serve_step,
+    "Contouring-v0": contouring_env._serve_contour_step,
+    "ContouringFeed-v0": feed_env._serve_feed_step,
+}
+
+
+@pytest.mark.parametrize("env_id", sorted(KERNELS))
+def test_a_vector_env_on_threads_runs_its_trampoline_where_it_can(env_id):
+    kernel, trampoline, _ = KERNELS[env_id]
+    venv = gym.make_vec(f"machining_envs/{env_id}", num_envs=256, num_threads=2)
+    venv.reset(seed=0)
+    space = venv.single_action_space
+    space.seed(0)
+    for _ in range(2):
+        venv.step(np.stack([space.sample() for _ in range(256)]))
+    served = venv.unwrapped._core.blocks._served
+    serve = SERVES[env_id]
+    assert served[0] is (kernel if serve is None else trampoline)
+    assert served[3] is serve
+    venv.close()
