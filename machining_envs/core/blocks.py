@@ -66,6 +66,7 @@ __all__ = [
     "check_num_threads",
     "one_blas_thread",
     "serve_one_table",
+    "serve_one_table_with_tail",
 ]
 
 #: Fewest lanes a thread steps: below this, handing a block to a thread (tens of µs)
@@ -207,6 +208,13 @@ def serve_one_table(kernel, ctl, table, polls):
 
     and gives it to :meth:`LaneBlocks.run` as ``serve``."""
     return serve_loop(_call, kernel, ctl, (table,), polls)
+
+
+@numba.njit(inline="always")
+def serve_one_table_with_tail(kernel, ctl, table, polls):
+    """:func:`serve_one_table` of a trampoline that takes an integer after its table
+    (``ctl[_TAIL]``, as :meth:`LaneBlocks.run` passes it)."""
+    return serve_loop(_call_with_tail, kernel, ctl, (table,), polls)
 
 
 @numba.njit(inline="always")
@@ -371,8 +379,8 @@ class LaneBlocks:
 
     def _block_tables(self, blocks: list[tuple]) -> list[tuple] | None:
         """Each block's arguments packed into one table (``core.packed``), as a one-argument
-        tuple; None where some array of a block is not C-contiguous (a view across the
-        lanes' axis 1)."""
+        tuple; None where some array of a block does not pack (``core.packed.pack``: a
+        view across the lanes' axis 1 packs only if it is 2-d float64)."""
         if self._tables_of is not blocks:
             try:
                 self._tables = [(pack(b),) for b in blocks]
@@ -390,9 +398,10 @@ class LaneBlocks:
         ``packed``, the kernel's trampoline (``core.packed``), runs instead on each block's
         table where every block's arrays are C-contiguous: the same numbers, and for some
         kernels faster code (the trampoline's arrays have strides the compiler can see).
-        ``serve``, the trampoline's worker loop (:func:`serve_one_table`, cached with its
-        module; for a trampoline without trailing arguments), spares the workers compiling
-        :func:`_serve` for it."""
+        ``serve``, the trampoline's worker loop (:func:`serve_one_table`, or
+        :func:`serve_one_table_with_tail` for a trampoline taking an integer after its
+        table; cached with its module), spares the workers compiling :func:`_serve` for
+        it."""
         if self.one:
             kernel(*args, *tail)
             return
@@ -402,7 +411,7 @@ class LaneBlocks:
             tables = self._block_tables(blocks)
             if tables is not None:
                 kernel, blocks = packed, tables
-                loop = serve if not tail else None
+                loop = serve
         if isinstance(kernel, CPUDispatcher) and (
             not tail or (len(tail) == 1 and isinstance(tail[0], (int, np.integer)))
         ):

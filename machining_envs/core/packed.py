@@ -7,14 +7,16 @@ paid 1-3 µs of each 7-12 µs step just for that. :func:`pack` writes an argumen
 arrays (address, shape) and numbers into one int64 table, once, and each process has a
 compiled **trampoline** taking that table alone, which reads the arguments back with the
 readers below and calls the kernel: one array to unbox instead of dozens. The kernel gets
-C-contiguous arrays of the same types as when called directly, and does the same arithmetic
-in the same order (no fast-math): the same numbers, to the last bit. The compiler sees more
+C-contiguous arrays of the same types as when called directly (or, read by
+:func:`f8_2_rows`, arrays of layout ``A``), and does the same arithmetic in the same order
+(no fast-math): the same numbers, to the last bit. The compiler sees more
 of them, though (their strides follow from their shapes where it inlines the kernel), and
 vectorises some loops better: Turning-v0's kernel runs 1.5x faster through its trampoline.
 
 Each argument takes :data:`SLOT` entries of the table: a code for its kind (dtype and
 dimensions, or a float or an int), then its data address (a number's own bits) and its
-shape. Each reader checks the code of the slot it reads and raises ``TypeError`` where it
+shape (and, for a 2-d float64 view of some columns of a wider array, read by
+:func:`f8_2_rows`, its row stride). Each reader checks the code of the slot it reads and raises ``TypeError`` where it
 is another kind, so a trampoline that reads an argument as what it is not fails instead of
 reading memory wrongly.
 
@@ -45,6 +47,7 @@ __all__ = [
     "f4_2",
     "f8_1",
     "f8_2",
+    "f8_2_rows",
     "f8_3",
     "i8_1",
     "i8_2",
@@ -66,19 +69,34 @@ def _code(kind: int, ndim: int) -> int:
     return 8 * kind + ndim
 
 
+#: Code of a 2-d float64 array whose rows are contiguous but further apart than a row
+#: (a view of some columns of a wider array), its row stride in the slot's last entry.
+_ROWS_APART = 14
+
+
+def _rows_apart(a: np.ndarray) -> bool:
+    s0, s1 = a.strides
+    return a.dtype == np.float64 and s1 == 8 and s0 % 8 == 0 and s0 >= 8 * a.shape[1]
+
+
 def pack(args: tuple) -> np.ndarray:
     """The int64 table of ``args`` (arrays of float64, float32, int64 or bool with one to
-    three dimensions, C-contiguous; Python floats and ints), :data:`SLOT` entries each."""
+    three dimensions, C-contiguous, or 2-d float64 with contiguous rows further apart;
+    Python floats and ints), :data:`SLOT` entries each."""
     table = np.zeros(SLOT * len(args), dtype=np.int64)
     for i, a in enumerate(args):
         o = SLOT * i
         if isinstance(a, np.ndarray):
             kind = _KINDS.get(a.dtype)
+            if a.ndim == 2 and not a.flags.c_contiguous and a.size and _rows_apart(a):
+                table[o : o + 5] = (_ROWS_APART, a.ctypes.data, *a.shape, a.strides[0] // 8)
+                continue
             if kind is None or not 1 <= a.ndim <= 3 or not a.flags.c_contiguous:
                 raise TypeError(
                     f"pack: argument {i} is a {a.ndim}-d {a.dtype} array"
                     f"{'' if a.flags.c_contiguous else ' (not C-contiguous)'}; expected a "
-                    "C-contiguous float64, float32, int64 or bool array of 1-3 dimensions"
+                    "C-contiguous float64, float32, int64 or bool array of 1-3 dimensions, "
+                    "or a 2-d float64 array of contiguous rows"
                 )
             table[o] = _code(kind, a.ndim)
             table[o + 1] = a.ctypes.data
@@ -161,6 +179,23 @@ def f8_1(t, i):
 def f8_2(t, i):
     o = _at(t, i, 10)
     return numba.carray(_f8(t[o + 1]), (t[o + 2], t[o + 3]))
+
+
+@numba.njit(cache=True, inline="always")
+def f8_2_rows(t, i):
+    """A 2-d float64 argument whose rows may lie further apart than a row (a view of some
+    columns of a wider array; a C-contiguous one too): an array of layout ``A``."""
+    o = 5 * i
+    if t[o] == 10:  # C-contiguous: its rows one row apart
+        stride = t[o + 3]
+    elif t[o] == 14:
+        stride = t[o + 4]
+    else:
+        raise TypeError("packed argument read as another kind")
+    rows, cols = t[o + 2], t[o + 3]
+    span = (rows - 1) * stride + cols if rows > 0 else 0
+    base = numba.carray(_f8(t[o + 1]), (span,))
+    return np.lib.stride_tricks.as_strided(base, shape=(rows, cols), strides=(8 * stride, 8))
 
 
 @numba.njit(cache=True, inline="always")

@@ -17,7 +17,7 @@ from machining_envs.core.actuation import (
     configure_lane,
     resolve_actuation,
 )
-from machining_envs.core.blocks import LaneBlocks, check_num_threads
+from machining_envs.core.blocks import LaneBlocks, check_num_threads, serve_one_table_with_tail
 from machining_envs.core.checks import check_below
 from machining_envs.core.env import (
     ACTION_MAPS,
@@ -46,6 +46,7 @@ from machining_envs.core.packed import (
     f4_2,
     f8_1,
     f8_2,
+    f8_2_rows,
     i8_1,
 )
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
@@ -266,14 +267,22 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
 @numba.njit(cache=True, nogil=True)
 def _step_packed(t, stage):
     """:func:`_step` with its arguments in one table (``core.packed``): what every
-    step calls (one array to unbox, not one per argument)."""
+    step calls (one array to unbox, not one per argument). ``info_f`` holds the lanes on
+    axis 1, so a block's is a view of some of its columns (``f8_2_rows``)."""
     _step(f8_1(t, 0), i8_1(t, 1), f8_1(t, 2), f8_2(t, 3), i8_1(t, 4), f8_1(t, 5), f8_1(t, 6),
           f8_1(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), f8_2(t, 12), f8_2(t, 13),
           f8_2(t, 14), f8_2(t, 15), i8_1(t, 16), i8_1(t, 17), b1_1(t, 18), as_int(t, 19),
           f8_2(t, 20), i8_1(t, 21), f8_1(t, 22), f8_2(t, 23), as_float(t, 24), f8_1(t, 25),
           f8_1(t, 26), f8_1(t, 27), f8_1(t, 28), f8_1(t, 29), f8_2(t, 30), as_float(t, 31),
           f8_1(t, 32), f8_2(t, 33), f8_1(t, 34), f8_1(t, 35), f8_1(t, 36), f4_2(t, 37),
-          f8_1(t, 38), b1_2(t, 39), i8_1(t, 40), f8_2(t, 41), stage)  # fmt: skip
+          f8_1(t, 38), b1_2(t, 39), i8_1(t, 40), f8_2_rows(t, 41), stage)  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def _serve_step(ctl, table, polls):
+    """The lane blocks' worker loop for :func:`_step_packed` (``core.blocks``),
+    compiled with this module and cached, not at the first step on several threads."""
+    return serve_one_table_with_tail(_step_packed, ctl, table, polls)
 
 
 #: Where :func:`_step`'s arguments (``_MillingCore._kernel_args``) hold the lanes: axis 0, axis
@@ -542,7 +551,7 @@ class _MillingCore:
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
             _step_packed(self._packed(args), stage)
         else:
-            self.blocks.run(_step, args, _STEP_AXES, stage, packed=_step_packed)
+            self.blocks.run(_step, args, _STEP_AXES, stage, packed=_step_packed, serve=_serve_step)
 
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""

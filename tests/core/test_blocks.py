@@ -244,11 +244,12 @@ def _scale_packed(t, factor):
 
 def test_a_trampoline_runs_on_each_blocks_table_where_the_blocks_pack():
     """With ``packed``, every block runs the trampoline on its own table (its views'
-    addresses); where a block's view is not C-contiguous (lanes on axis 1), the kernel runs
-    on the views as without it. The numbers are the same either way."""
+    addresses); where a block's view does not pack (here an integer array with the lanes on
+    axis 1: only a float64 one packs, by its row stride), the kernel runs on the views as
+    without it. The numbers are the same either way."""
     n = 512
     rows = np.arange(2.0 * n).reshape(n, 2)
-    cols = np.arange(3.0 * n).reshape(3, n)
+    cols = np.arange(3 * n).reshape(3, n)
     want = rows[:, 0] * 3 + cols[0]
     # packable: lanes on axis 0 only (a constant row shared by the blocks)
     shared = np.full((1, n), 5.0)
@@ -264,7 +265,7 @@ def test_a_trampoline_runs_on_each_blocks_table_where_the_blocks_pack():
     blocks.run(_scale, (rows, shared, out), (0, None, 0), 3, packed=_scale_packed)
     assert blocks._tables is tables  # packed once for the same arguments
     blocks.close()
-    # not packable: a view across axis 1 -> the kernel on the views
+    # not packable: an integer view across axis 1 -> the kernel on the views
     out[:] = 0.0
     blocks = LaneBlocks(n, 2)
     blocks.run(_scale, (rows, cols, out), (0, 1, 0), 3, packed=_scale_packed)

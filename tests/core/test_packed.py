@@ -22,6 +22,7 @@ from machining_envs.core.packed import (
     f4_2,
     f8_1,
     f8_2,
+    f8_2_rows,
     f8_3,
     i8_1,
     i8_2,
@@ -84,6 +85,34 @@ def test_the_readers_give_the_arrays_and_numbers_packed():
     assert total == sum(float(p.sum()) for p in plain[:8])
     assert pack((0.1,))[1] == np.float64(0.1).view(np.int64)
     assert len(pack(args)) == SLOT * len(args)
+
+
+@numba.njit
+def _rows_of(t):
+    a = f8_2_rows(t, 0)
+    a[1, 0] = -1.0  # writes reach the array packed
+    return a.sum(), a.shape[0], a.shape[1]
+
+
+def test_a_view_of_some_columns_packs_with_its_row_stride():
+    """A 2-d float64 view of some columns of a wider array (a block of lanes on axis 1)
+    packs with its row stride and reads back as that view; a C-contiguous array reads
+    back the same way; other strides are refused, and the plain reader refuses the view."""
+    wide = np.arange(40.0).reshape(4, 10)
+    view = wide[:, 3:7]
+    total, rows, cols = _rows_of(pack((view,)))
+    assert (rows, cols) == (4, 4) and wide[1, 3] == -1.0
+    assert total == view.sum() and wide[1, 2] == 12.0 and wide[1, 7] == 17.0
+    whole = np.arange(6.0).reshape(2, 3)
+    assert _rows_of(pack((whole,)))[1:] == (2, 3) and whole[1, 0] == -1.0
+    with pytest.raises(TypeError, match="another kind"):
+        _read_f8_2(pack((view,)))
+    with pytest.raises(TypeError, match="another kind"):
+        _rows_of(pack((np.zeros(3),)))
+    with pytest.raises(TypeError, match="not C-contiguous"):
+        pack((wide[:, ::2],))  # not contiguous within a row
+    with pytest.raises(TypeError, match="not C-contiguous"):
+        pack((np.zeros((4, 10), dtype=np.float32)[:, 3:7],))  # float64 only
 
 
 @numba.njit
@@ -212,11 +241,10 @@ def test_a_copied_env_packs_its_own_arrays(env_id):
     env.close()
 
 
-#: id -> the workers' loop its vector env on several threads runs (None: the generic one,
-#: compiled on first use, as where the blocks' views do not pack).
+#: id -> the workers' loop its vector env on several threads runs (cached with its module).
 SERVES = {
     "Turning-v0": turning_env._serve_step,
-    "EndMilling-v0": None,  # its info arrays hold the lanes on axis 1: the kernel on views
+    "EndMilling-v0": milling_env._serve_step,
     "MicroDrilling-v0": drilling_env._serve_step,
     "Contouring-v0": contouring_env._serve_contour_step,
     "ContouringFeed-v0": feed_env._serve_feed_step,
@@ -225,7 +253,7 @@ SERVES = {
 
 @pytest.mark.parametrize("env_id", sorted(KERNELS))
 def test_a_vector_env_on_threads_runs_its_trampoline_where_it_can(env_id):
-    kernel, trampoline, _ = KERNELS[env_id]
+    _, trampoline, _ = KERNELS[env_id]
     venv = gym.make_vec(f"machining_envs/{env_id}", num_envs=256, num_threads=2)
     venv.reset(seed=0)
     space = venv.single_action_space
@@ -233,7 +261,5 @@ def test_a_vector_env_on_threads_runs_its_trampoline_where_it_can(env_id):
     for _ in range(2):
         venv.step(np.stack([space.sample() for _ in range(256)]))
     served = venv.unwrapped._core.blocks._served
-    serve = SERVES[env_id]
-    assert served[0] is (kernel if serve is None else trampoline)
-    assert served[3] is serve
+    assert served[0] is trampoline and served[3] is SERVES[env_id]
     venv.close()
