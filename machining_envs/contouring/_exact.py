@@ -306,12 +306,9 @@ def vecmat_rows(z, mt, out):
     m3 = n_cols & 3
     nb = n_cols - m3
     full = n_rows - (n_rows & 3)
-    zt = np.empty((n_cols, n))
-    for i in range(n):
-        for c in range(n_cols):
-            zt[c, i] = z[i, c]
-    acc = np.zeros((4, n))
-    v = np.zeros(n)
+    zt = np.ascontiguousarray(z.T)
+    acc = np.zeros((4, n))  # the chains; acc[0] then holds their sum (gemv_row's v)
+    v = acc[0]
     for r in range(n_rows):
         a = mt[r]
         acc[:] = 0.0
@@ -326,7 +323,7 @@ def vecmat_rows(z, mt, out):
                         acc[2, i] = fma(a2, x2[i], acc[2, i])
                         acc[3, i] = fma(a3, x3[i], acc[3, i])
                 for i in range(n):
-                    v[i] = (acc[0, i] + acc[2, i]) + (acc[1, i] + acc[3, i])
+                    v[i] = (v[i] + acc[2, i]) + (acc[1, i] + acc[3, i])
             elif (n_rows & 2) and r < full + 2:  # two chains of multiplies and adds
                 for c in range(0, nb, 2):
                     a0, a1 = a[c], a[c + 1]
@@ -335,7 +332,7 @@ def vecmat_rows(z, mt, out):
                         acc[0, i] = acc[0, i] + a0 * x0[i]
                         acc[1, i] = acc[1, i] + a1 * x1[i]
                 for i in range(n):
-                    v[i] = acc[0, i] + acc[1, i]
+                    v[i] = v[i] + acc[1, i]
             else:  # four chains of multiplies and adds, summed pairwise
                 for c in range(0, nb, 4):
                     a0, a1, a2, a3 = a[c], a[c + 1], a[c + 2], a[c + 3]
@@ -346,9 +343,7 @@ def vecmat_rows(z, mt, out):
                         acc[2, i] = acc[2, i] + a2 * x2[i]
                         acc[3, i] = acc[3, i] + a3 * x3[i]
                 for i in range(n):
-                    v[i] = (acc[0, i] + acc[2, i]) + (acc[1, i] + acc[3, i])
-        else:
-            v[:] = 0.0
+                    v[i] = (v[i] + acc[2, i]) + (acc[1, i] + acc[3, i])
         if m3 == 0:
             for i in range(n):
                 out[i, r] = 0.0 + v[i]

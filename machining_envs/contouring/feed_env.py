@@ -358,8 +358,8 @@ def _feed_step_packed(t):
 
 @numba.njit(cache=True, nogil=True)
 def _serve_feed_step(ctl, table, polls):
-    """The lane blocks' worker loop for :func:`_feed_step_packed` (``core.blocks``), compiled with
-    this module and cached, not at the first step on several threads."""
+    """The lane blocks' worker loop for :func:`_feed_step_packed` (``core.blocks``),
+    compiled with this module and cached, not at the first step on several threads."""
     return serve_one_table(_feed_step_packed, ctl, table, polls)
 
 

@@ -396,8 +396,10 @@ class LaneBlocks:
         block has finished.
 
         ``packed``, the kernel's trampoline (``core.packed``), runs instead on each block's
-        table where every block's arrays are C-contiguous: the same numbers, and for some
-        kernels faster code (the trampoline's arrays have strides the compiler can see).
+        table where there are several blocks and every block's arrays pack: the same
+        numbers, and for some kernels faster code (the trampoline's arrays have strides the
+        compiler can see). On one block the kernel runs as it is: a caller stepping one
+        block calls its trampoline itself, sparing this call.
         ``serve``, the trampoline's worker loop (:func:`serve_one_table`, or
         :func:`serve_one_table_with_tail` for a trampoline taking an integer after its
         table; cached with its module), spares the workers compiling :func:`_serve` for

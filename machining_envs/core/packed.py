@@ -16,9 +16,9 @@ vectorises some loops better: Turning-v0's kernel runs 1.5x faster through its t
 Each argument takes :data:`SLOT` entries of the table: a code for its kind (dtype and
 dimensions, or a float or an int), then its data address (a number's own bits) and its
 shape (and, for a 2-d float64 view of some columns of a wider array, read by
-:func:`f8_2_rows`, its row stride). Each reader checks the code of the slot it reads and raises ``TypeError`` where it
-is another kind, so a trampoline that reads an argument as what it is not fails instead of
-reading memory wrongly.
+:func:`f8_2_rows`, its row stride). Each reader checks the code of the slot it reads and
+raises ``TypeError`` where it is another kind, so a trampoline that reads an argument as
+what it is not fails instead of reading memory wrongly.
 
 The table holds addresses, not arrays: it is valid only while the tuple it was packed from
 keeps its arrays alive. :class:`PackedArgs` keeps the tuple beside its table, packs again

@@ -440,10 +440,8 @@ def test_native_training_copies_the_env_info_only_for_callbacks_that_may_read_it
     assert set(ended[i]) == {"terminal_observation", "TimeLimit.truncated", "episode"}
     venv.close()
     named = tmp_path / "named.yml"
-    named.write_text(
-        TINY
-        + "  callback:\n    - stable_baselines3.common.callbacks.StopTrainingOnMaxEpisodes:\n        max_episodes: 1000\n"
-    )
+    callback = "stable_baselines3.common.callbacks.StopTrainingOnMaxEpisodes"
+    named.write_text(TINY + f"  callback:\n    - {callback}:\n        max_episodes: 1000\n")
     cfg = load_config(TURNING, "ppo", named)
     assert cfg.callbacks
     venv, _ = _make_vec(cfg, seed=1, vec="native")
