@@ -158,7 +158,7 @@ def _bound(o, i, x, lo, hi):
 
 def _scratch_size(nb: int, n_seg: int) -> int:
     """Values of ``_feed_step``'s float scratch (see :func:`_carve`)."""
-    return (nb + 1) + 6 * nb + 4 * nb + (8 * nb + 2) + SCRATCH_SIZE + n_seg
+    return (nb + 1) + 6 * nb + 4 * nb + (8 * nb + 2) + SCRATCH_SIZE + n_seg + 3 * nb
 
 
 @numba.njit(cache=True, inline="always")
@@ -167,7 +167,7 @@ def _carve(sc, nb, n_seg):
     pass instead of sixteen): the set point's path positions (nb + 1), reference and table
     x, y, contour errors, a spare run (nb each), references and loads (nb, 2), positions
     (nb, 2), velocities (nb + 1, 2), commands and torques (nb, 2), ``run_block``'s scratch,
-    the distances' lower bounds per segment."""
+    the distances' lower bounds per segment, ``path_points``' scratch (3 nb)."""
     o = nb + 1
     st = sc[:o]
     rx = sc[o : o + nb]
@@ -187,8 +187,10 @@ def _carve(sc, nb, n_seg):
     o += 8 * nb + 2
     zb = sc[o : o + SCRATCH_SIZE]
     lower = sc[o + SCRATCH_SIZE : o + SCRATCH_SIZE + n_seg]
-    assert lower.size == n_seg  # the buffer has room for every view
-    return st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, zb, lower
+    o += SCRATCH_SIZE + n_seg
+    pts = sc[o : o + 3 * nb]
+    assert pts.size == 3 * nb  # the buffer has room for every view
+    return st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, zb, lower, pts
 
 
 #: Columns of ``_FeedCore.lf`` (per-lane floats) and ``_FeedCore.li`` (per-lane integers).
@@ -232,7 +234,7 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, state, consts, obs, flag
     n = int(c[0])
     ts = c[1]
     tol = c[2]
-    st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, zb, lower = _carve(
+    st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, zb, lower, pts = _carve(
         sc, n, order.size
     )
     for k in range(actions.shape[0]):
@@ -248,7 +250,7 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, state, consts, obs, flag
         s0 = s[k]
         for j in range(n + 1):
             st[j] = min(s0 + vts * float(j), length)
-        path_points(tab, length, st, n, rx, ry)
+        path_points(tab, length, st, n, rx, ry, pts)
         nl = n_load[k]
         for j in range(n):
             ref[j, 0] = rx[j] - x0

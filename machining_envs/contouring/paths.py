@@ -30,6 +30,7 @@ import numba
 import numpy as np
 
 from machining_envs.contouring._exact import np_mean, py_hypot
+from machining_envs.core.kernels import sincos_row
 
 __all__ = ["Line", "Arc", "Involute", "Path", "PAPER_CORNER_FEED_MM_S", "PAPER_FEED_MM_S"]
 __all__ += ["SEGMENT_COLUMNS", "path_point", "path_points", "path_heading", "path_distance"]
@@ -843,10 +844,54 @@ def path_point(tab, length, s):
 
 
 @numba.njit(cache=True)
-def path_points(tab, length, s, n, out_x, out_y):
-    """``Path.points(s[:n])`` into ``out_x[:n]``, ``out_y[:n]``."""
+def path_points(tab, length, s, n, out_x, out_y, scratch):
+    """``Path.points(s[:n])`` into ``out_x[:n]``, ``out_y[:n]`` (``scratch``: ``3 n``
+    floats), faster than :func:`path_point` point by point.
+
+    The segments' formulas are :func:`path_point`'s in the same order, with the sines
+    and cosines of the arcs' and involutes' angles from
+    :func:`~machining_envs.core.kernels.sincos_row`, all the angles of the row at once in
+    the processor's vectors, instead of libm's one at a time. A point on a line is
+    :func:`path_point`'s to the last bit; on a curve a sine or cosine may differ from
+    libm's by one unit in the last place (about 1e-16 of the radius); each point is the
+    same wherever it falls in the row.
+    """
+    ang = scratch[:n]
+    th = scratch[n : 2 * n]
+    seg = scratch[2 * n : 3 * n]
     for j in range(n):
-        out_x[j], out_y[j] = path_point(tab, length, s[j])
+        sj = min(max(s[j], 0.0), length)
+        k = path_segment_index(tab, length, sj)
+        row = tab[k]
+        loc = sj - row[1]
+        seg[j] = k
+        kind = row[0]
+        if kind == _LINE:
+            th[j] = loc
+            ang[j] = 1.0  # unused: any angle in the vector path's range
+        elif kind == _ARC:
+            th[j] = 0.0
+            ang[j] = row[9] + row[10] * loc / row[8]
+        else:
+            t = math.sqrt(row[12] + 2.0 * loc / row[8])
+            th[j] = t
+            ang[j] = t + row[9]
+    sincos_row(ang, n, out_y, out_x)  # the sines into out_y, the cosines into out_x
+    for j in range(n):
+        row = tab[int(seg[j])]
+        kind = row[0]
+        if kind == _LINE:
+            out_x[j] = row[6] + row[8] * th[j]
+            out_y[j] = row[7] + row[9] * th[j]
+        elif kind == _ARC:
+            out_x[j] = row[6] + row[8] * out_x[j]
+            out_y[j] = row[7] + row[8] * out_y[j]
+        else:
+            c = out_x[j]
+            sn = out_y[j]
+            t = th[j]
+            out_x[j] = row[6] + row[8] * (c + t * sn)
+            out_y[j] = row[7] + row[8] * (sn - t * c)
 
 
 @numba.njit(cache=True)

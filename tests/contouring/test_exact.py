@@ -17,6 +17,7 @@ from machining_envs.contouring.paths import (
     path_distances,
     path_heading,
     path_point,
+    path_points,
     path_segment_index,
 )
 from machining_envs.contouring.plant import ContouringParams
@@ -115,6 +116,18 @@ def test_compiled_geometry_is_the_path_methods(path):
     py = y + RNG.normal(0, 0.05, y.size) * RNG.choice([0.01, 1.0, 100.0], y.size)
     for a, b in zip(px.tolist(), py.tolist(), strict=True):
         assert path_distance(tab, a, b) == path.distance(a, b)
+    # Many points at once (the feed env's set points): path_point's formulas with the
+    # vector sines and cosines, each within one unit in the last place of libm's: a
+    # coordinate ``c + R cos`` within R 2**-52 plus its own rounding (twice for the
+    # involute's ``R (cos + theta sin)``); a line's points to the last bit.
+    xs, ys, scratch = np.empty(s.size), np.empty(s.size), np.empty(3 * s.size)
+    path_points(tab, length, s, s.size, xs, ys, scratch)
+    scale = max(abs(r[8]) * (1.0 + (abs(r[11]) if r[0] == 2.0 else 0.0)) for r in tab)
+    bound = 2.0 * scale * 2.0**-52 + 2.0 * np.spacing(np.maximum(np.abs(x), np.abs(y)))
+    assert np.all(np.abs(xs - x) <= bound) and np.all(np.abs(ys - y) <= bound)
+    on_lines = np.array([tab[path_segment_index(tab, length, v), 0] == 0.0 for v in s])
+    assert xs[on_lines].tobytes() == x[on_lines].tobytes()
+    assert ys[on_lines].tobytes() == y[on_lines].tobytes()
     for lo in range(0, px.size - 50, 37):  # blocks of 50 points, as the feed env asks
         n = 50
         out, scratch = np.empty(n), np.empty(n)

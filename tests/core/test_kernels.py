@@ -1,5 +1,5 @@
-"""The shared compiled products and powers (``machining_envs.core.kernels``) against numpy's
-products and libm's ``pow``."""
+"""The shared compiled products, powers, sines and cosines (``machining_envs.core.kernels``)
+against numpy's products and libm's ``pow``, ``sin`` and ``cos``."""
 
 import math
 
@@ -16,6 +16,8 @@ from machining_envs.core.kernels import (
     matvec,
     powers,
     py_square,
+    sincos,
+    sincos_row,
     store8,
 )
 
@@ -207,3 +209,74 @@ def _python_square(v: float) -> float:
 def _square_all(x, two, out):
     for i in range(x.size):
         out[i] = py_square(x[i], two)
+
+
+@numba.njit
+def _sincos_each(x, s_out, c_out):
+    for j in range(x.size):
+        s_out[j], c_out[j] = sincos(x[j])
+
+
+@numba.njit
+def _sincos_row(x, n, s_out, c_out):
+    sincos_row(x, n, s_out, c_out)
+
+
+def _ulps(got, expected):
+    """Distance in units in the last place of the expected values."""
+    return np.abs(got - expected) / np.spacing(np.abs(expected))
+
+
+@pytest.mark.parametrize("span", [1.0, 8.0, 1e3, 2.0**20])
+def test_sines_and_cosines_are_libms_to_one_unit_in_the_last_place(span):
+    """Over angles up to ``span`` (the contouring paths' arcs and involutes turn a few
+    times at most; 2**20 is the vector path's limit), and over the angles nearest the
+    multiples of pi / 2 (the hardest to reduce: a sine or cosine near zero), each value is
+    libm's or one unit in the last place from it; most are libm's."""
+    rng = np.random.default_rng(int(span))
+    x = rng.uniform(-span, span, 200_000)
+    k = rng.integers(-int(span / 1.5) - 1, int(span / 1.5) + 2, 20_000)
+    x[:20_000] = np.nextafter(k * (math.pi / 2.0), rng.choice([-np.inf, np.inf], k.size))
+    x[20_000:20_100] = k[:100] * (math.pi / 2.0)
+    x = x[(np.abs(x) <= 2.0**20) & (np.abs(x) >= 2.0**-27)]
+    s, c = np.empty_like(x), np.empty_like(x)
+    _sincos_row(x, x.size, s, c)
+    es = np.array([math.sin(v) for v in x.tolist()])
+    ec = np.array([math.cos(v) for v in x.tolist()])
+    assert _ulps(s, es).max() <= 1.0 and _ulps(c, ec).max() <= 1.0
+    assert np.mean(s == es) > 0.9 and np.mean(c == ec) > 0.9
+
+
+def test_sines_and_cosines_outside_the_vector_range_are_libms():
+    """Zero keeps its sign, and tiny, huge, infinite and NaN angles are libm's exactly."""
+    x = np.array([0.0, -0.0, 1e-9, -2.0**-28, 5e-324, 2.0**20 + 1.0, -1e7, 1e300, np.inf,
+                  -np.inf, np.nan])  # fmt: skip
+    for fn in (_sincos_each, lambda a, s, c: _sincos_row(a, a.size, s, c)):
+        s, c = np.empty_like(x), np.empty_like(x)
+        with np.errstate(invalid="ignore"):
+            fn(x, s, c)
+        with np.errstate(invalid="ignore"):
+            es = np.sin(x)
+            ec = np.cos(x)
+        es[:-3] = [math.sin(v) for v in x[:-3].tolist()]
+        ec[:-3] = [math.cos(v) for v in x[:-3].tolist()]
+        assert s.tobytes() == es.tobytes() and c.tobytes() == ec.tobytes()
+
+
+def test_a_sine_is_the_same_in_a_row_of_any_length():
+    """An angle's sine and cosine do not depend on where it falls in the row (the vector
+    loop or its scalar tail, a libm neighbour or none): ``sincos_row`` gives ``sincos``'s
+    numbers and writes the first ``n`` values only."""
+    rng = np.random.default_rng(5)
+    x = rng.uniform(-40.0, 40.0, 61)
+    x[[7, 30]] = (0.0, np.inf)  # libm's, amid the others
+    s1, c1 = np.empty_like(x), np.empty_like(x)
+    with np.errstate(invalid="ignore"):
+        _sincos_each(x, s1, c1)
+    for lo, n in ((0, 61), (3, 50), (1, 7), (10, 1), (29, 5)):
+        s, c = np.full(64, 7.0), np.full(64, 7.0)
+        with np.errstate(invalid="ignore"):
+            _sincos_row(x[lo:], n, s, c)
+        assert s[:n].tobytes() == s1[lo : lo + n].tobytes()
+        assert c[:n].tobytes() == c1[lo : lo + n].tobytes()
+        assert np.all(s[n:] == 7.0) and np.all(c[n:] == 7.0)
