@@ -14,6 +14,12 @@ evenly spaced steps (always the last one) and a SHA-256 digest of every signal o
 steps, so that a replay is checked bit for bit on every step while the files stay small
 (the full trajectories take about 30 MB).
 
+Each file also stores the fingerprint of the machine it was recorded on
+(:func:`machine_fingerprint`: the processor's features numpy dispatches on, the versions
+of numpy, OpenBLAS and its kernel, numba, llvmlite and the C library). On a machine with the
+same fingerprint the replay must give the same numbers to the last bit, digests included;
+elsewhere ``test_golden.py`` compares the stored rows to a tolerance.
+
 Only the public API is used here (env ids, ``from agents import ...``), so the cases stay
 valid whatever the modules behind them are called, with one exception: the H-infinity
 designs. Their synthesis at the optimal gamma leaves a near-degenerate controller whose
@@ -33,6 +39,7 @@ import functools
 import hashlib
 import json
 import math
+import platform
 import sys
 from pathlib import Path
 
@@ -251,6 +258,43 @@ def _run_episode(env_id: str, kwargs: dict, factory, scenario: str, seed: int) -
     return out
 
 
+def machine_fingerprint() -> str:
+    """What decides the last bits of a replay besides the code, as one JSON string: the
+    processor's architecture and the features numpy picks its SIMD kernels by (its
+    transcendental functions differ in the last bit between AVX2 and AVX-512), numpy's
+    version, numpy's BLAS (its version and kernel: the plants' discretisation), numba's and
+    llvmlite's versions (the kernels' code), the C library (libm: the kernels' ``pow``,
+    ``sin``, ``hypot``...) and Python's version. Two machines with the same fingerprint
+    replay a case alike: the compiled kernels keep IEEE arithmetic (no fast-math), so the
+    processor's model beyond these features does not change their numbers."""
+    import llvmlite
+    import numba
+    from threadpoolctl import threadpool_info
+
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as features
+    except ImportError:  # numpy's layout changed: the versions below still tell apart
+        features = {}
+    blas = [
+        {k: str(i.get(k, "")) for k in ("internal_api", "version", "architecture")}
+        for i in threadpool_info()
+        if i.get("user_api") == "blas" and "numpy" in str(i.get("filepath", ""))
+    ]
+    return json.dumps(
+        {
+            "machine": platform.machine(),
+            "cpu": sorted(k for k, on in features.items() if on),
+            "numpy": np.__version__,
+            "blas": blas,
+            "numba": numba.__version__,
+            "llvmlite": llvmlite.__version__,
+            "libc": list(platform.libc_ver()),
+            "python": platform.python_version(),  # math.hypot, float formatting
+        },
+        sort_keys=True,
+    )
+
+
 def digest(a: np.ndarray) -> str:
     """SHA-256 of an array's dtype, shape and bytes."""
     a = np.ascontiguousarray(a)
@@ -270,7 +314,7 @@ def pack(data: dict) -> dict:
     designs = data.pop("designs", [])
     n = len(data["reward"])
     rows = kept_rows(n)
-    out = {"n_rows": np.array(n), "rows": rows}
+    out = {"n_rows": np.array(n), "rows": rows, "machine": np.array(machine_fingerprint())}
     for k, v in data.items():
         out["rows/" + k] = v[rows]
         out["sha256/" + k] = np.array(digest(v))
@@ -281,16 +325,30 @@ def pack(data: dict) -> dict:
 
 def main(argv=None) -> int:
     """Record every case, or with arguments only the cases whose name starts with one of
-    them (``python -m tests.golden.record Turning-v0``), keeping the other files."""
-    prefixes = tuple(sys.argv[1:] if argv is None else argv)
+    them (``python -m tests.golden.record Turning-v0``), keeping the other files.
+
+    With ``--keep-designs`` a case that has a file is recorded on the H-infinity designs
+    that file stores, not on a fresh synthesis: the data of this machine for the same
+    controllers (a fresh synthesis differs between BLAS kernels far beyond the replay's
+    tolerance; ``record.py``'s docstring)."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    keep = "--keep-designs" in args
+    prefixes = tuple(a for a in args if a != "--keep-designs")
+    kept: dict = {}
     for old in HERE.glob("*.npz"):
         if not prefixes or old.stem.startswith(prefixes):
+            if keep:
+                with np.load(old) as f:
+                    kept[old.stem] = unpack_designs({k: f[k] for k in f.files})
             old.unlink()
     total = 0
     for stem, env_id, kwargs, factory, sc, seed in cases():
         if prefixes and not stem.startswith(prefixes):
             continue
-        data = run_case(env_id, kwargs, factory, sc, seed)
+        designs = kept.get(stem) or None
+        data = run_case(env_id, kwargs, factory, sc, seed, designs=designs)
+        if designs:
+            data["designs"] = designs
         path = HERE / f"{stem}.npz"
         np.savez_compressed(path, **pack(data))
         total += path.stat().st_size

@@ -1,12 +1,13 @@
 """Replay every golden case (``tests/golden/record.py``) and compare it with its recording.
 
-The comparison is bit for bit on the kind of CPU the data was recorded on: same signals,
-same number of steps, the stored rows equal to the last bit and the SHA-256 digest of every
-signal over all steps equal. A change that only moves code or reorganises it must keep that.
+The comparison is bit for bit on a machine like the one the data was recorded on (the same
+``record.machine_fingerprint``, which each file stores): same signals, same number of steps,
+the stored rows equal to the last bit and the SHA-256 digest of every signal over all steps
+equal. A change that only moves code or reorganises it must keep that.
 numpy picks its SIMD kernels for the transcendental functions (exp, sin, power, ...) by the
 CPU it runs on, and its AVX-512 kernels differ from the AVX2 ones in the last bit or two,
-as OpenBLAS's kernels do in the small products that discretise the plants. Where the stored
-rows are not bit-equal for that reason, every float signal must still agree to 1e-9 of its
+as OpenBLAS's kernels do in the small products that discretise the plants. On another
+machine, every float signal must still agree to 1e-9 of its
 own scale (the largest magnitude of its stored rows, per column; a last-bit change in a
 coefficient moves a signal in proportion to its size, not to each value, which may pass
 through zero; for a component of a larger quantity, that quantity's size: ``SCALE_OF``),
@@ -29,7 +30,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.golden.record import HERE, cases, digest, kept_rows, run_case, unpack_designs
+from tests.golden.record import (
+    HERE,
+    cases,
+    digest,
+    kept_rows,
+    machine_fingerprint,
+    run_case,
+    unpack_designs,
+)
 from tests.helpers import servo_step_response
 
 CASES = cases()
@@ -115,32 +124,72 @@ def test_assert_close_to_scale_fails_beyond_its_tolerance():
         assert_close_to_scale("x", f * np.float32(1.001), f)
 
 
+def compare_to_recording(data: dict, golden: dict, same_machine: bool) -> None:
+    """Check a replay's signals ``data`` against a golden file's contents ``golden``: on the
+    same machine every signal bit for bit (its stored rows, NaN included, and its digest
+    over every step), elsewhere its stored rows to :func:`assert_close_to_scale`'s
+    tolerance (integer signals exactly)."""
+    recorded = sorted(k.removeprefix("sha256/") for k in golden if k.startswith("sha256/"))
+    assert sorted(data) == recorded, "the recorded signals changed"
+    assert len(data["reward"]) == int(golden["n_rows"]), "the episode length changed"
+    rows = kept_rows(len(data["reward"]))
+    np.testing.assert_array_equal(rows, golden["rows"])
+    for key, values in data.items():
+        stored = golden["rows/" + key]
+        if same_machine:
+            assert values[rows].dtype == stored.dtype, key
+            assert values[rows].tobytes() == stored.tobytes(), (
+                f"{key}: a stored row differs on the machine it was recorded on"
+            )
+            assert digest(values) == str(golden["sha256/" + key]), (
+                f"{key}: equal on the stored rows but not bit for bit on every step"
+            )
+        elif values.dtype.kind == "f":
+            # Where a stored row differs, this names the signal, the rows and the change.
+            assert_close_to_scale(key, values[rows], stored, case_scale(key, golden))
+        else:
+            np.testing.assert_array_equal(values[rows], stored, err_msg=key)
+
+
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
 def test_replay_matches_recording(case):
     stem, env_id, kwargs, factory, scenario, seed = case
     with np.load(HERE / f"{stem}.npz") as f:
         golden = {k: f[k] for k in f.files}
     data = run_case(env_id, kwargs, factory, scenario, seed, designs=unpack_designs(golden))
+    same_machine = str(golden.get("machine", "")) == machine_fingerprint()
+    compare_to_recording(data, golden, same_machine)
 
-    recorded = sorted(k.removeprefix("sha256/") for k in golden if k.startswith("sha256/"))
-    assert sorted(data) == recorded, "the recorded signals changed"
-    assert len(data["reward"]) == int(golden["n_rows"]), "the episode length changed"
-    rows = kept_rows(len(data["reward"]))
-    np.testing.assert_array_equal(rows, golden["rows"])
-    exact = all(np.array_equal(v[rows], golden["rows/" + k]) for k, v in data.items())
-    for key, values in data.items():
-        # Where a stored row differs, this names the signal, the rows and the size of the change.
-        if values.dtype.kind == "f":
-            least = case_scale(key, golden)
-            assert_close_to_scale(key, values[rows], golden["rows/" + key], least)
-        else:
-            np.testing.assert_array_equal(values[rows], golden["rows/" + key], err_msg=key)
-    if not exact:  # another CPU's SIMD kernels: last-bit differences, checked above
-        return
-    for key, values in data.items():
-        assert digest(values) == str(golden["sha256/" + key]), (
-            f"{key}: equal on the stored rows but not bit for bit on every step"
-        )
+
+def test_the_comparison_is_bit_for_bit_on_the_recording_machine_only():
+    """On the recording machine a last-bit change anywhere fails, on a stored row or on a
+    step between them (the digest), and NaN equals NaN; elsewhere a last-bit change passes
+    and a larger one fails."""
+    from tests.golden.record import pack
+
+    rng = np.random.default_rng(3)
+    n = 300
+    data = {
+        "reward": rng.normal(size=n),
+        "obs": rng.normal(size=(n, 3)).astype(np.float32),
+        "terminated": np.zeros(n, dtype=np.int8),
+        "info/machining_time_s": np.where(np.arange(n) == n - 1, 12.5, np.nan),
+    }
+    golden = pack(data)
+    rows = set(kept_rows(n).tolist())
+    between = next(i for i in range(1, n) if i not in rows)
+    compare_to_recording(data, golden, same_machine=True)
+    compare_to_recording(data, golden, same_machine=False)
+    for row in (between, max(rows)):
+        bumped = {k: v.copy() for k, v in data.items()}
+        bumped["reward"][row] = np.nextafter(bumped["reward"][row], np.inf)
+        with pytest.raises(AssertionError, match="reward"):
+            compare_to_recording(bumped, golden, same_machine=True)
+        compare_to_recording(bumped, golden, same_machine=False)
+    bumped = {k: v.copy() for k, v in data.items()}
+    bumped["reward"][max(rows)] += 1e-6
+    with pytest.raises(AssertionError, match="reward"):
+        compare_to_recording(bumped, golden, same_machine=False)
 
 
 def _recorded_designs() -> list:
