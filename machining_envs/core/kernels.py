@@ -439,18 +439,19 @@ _SINCOS_MIN = 7.450580596923828e-09
 def _sincos_vector(x):
     """``(sin x, cos x)`` from multiplies, fused multiply-adds and bit operations only, so
     that a loop of them runs in the processor's vectors; ``(NaN, NaN)`` where ``|x|`` is
-    not within [2**-27, 2**20] (the caller takes those from libm).
+    not within [2**-27, 2**20] or lies within ``|n| 2**-30`` of a multiple ``n pi / 2``
+    (the caller takes those from libm).
 
     ``x = n pi / 2 + r`` with ``n = round(2 x / pi)``, ``|r| <= pi / 4``: ``x - n pi_hi``
     is exact (both are multiples of a unit in the last place of ``pi_hi`` or ``x``, and
     the difference is below 1), and the next two parts of ``pi / 2`` leave ``r`` rounded
-    plus the tail it lost (NaN too where ``r`` is below ``|n| 2**-30``, a sine or cosine
-    near zero whose bits the subtraction cancelled). ``sin r`` and ``cos r`` are their Taylor series to ``r**19``
-    and ``r**18`` (the next terms are below 2**-60 of the sums), summed by Estrin's
-    scheme; the cosine adds ``1 - r**2 / 2`` with its rounding error carried. ``n mod 4``
-    then picks and signs the pair. Within 0.91 units in the last place of the exact
-    values in 20 000 angles of [-50, 50] checked with 200-bit arithmetic, and never more
-    than one unit from libm's (``tests/core/test_kernels.py`` measures it).
+    plus the tail it lost (exact unless ``r`` is that near zero, a sine or cosine whose
+    bits the subtraction cancelled). ``sin r`` and ``cos r`` are their Taylor series to
+    ``r**19`` and ``r**18`` (the next terms are below 2**-60 of the sums), summed by
+    Estrin's scheme; the cosine adds ``1 - r**2 / 2`` with its rounding error carried.
+    ``n mod 4`` then picks and signs the pair. Within 0.91 units in the last place of the
+    exact values in 20 000 angles of [-50, 50] checked with 200-bit arithmetic, and never
+    more than one unit from libm's (``tests/core/test_kernels.py`` measures it).
     """
     nr = fma(x, _TWO_OVER_PI, _ROUND)  # n + 1.5 * 2**52: n (mod 4 too) in its low bits
     n = nr - _ROUND
@@ -493,9 +494,9 @@ def _sincos_vector(x):
 @numba.njit(cache=True, inline="always")
 def sincos(x):
     """``(sin x, cos x)`` of one angle: :func:`_sincos_vector`'s numbers, libm's where it
-    takes none (tiny, huge, infinite or NaN angles). A loop of these over angles that all lie
-    in its range runs in the processor's vectors; :func:`sincos_row` keeps the branch
-    out of that loop."""
+    takes none (tiny, huge, infinite or NaN angles, and those nearest a multiple of
+    pi / 2). :func:`sincos_row` computes a row of them with the branch kept out of the
+    loop that runs in the processor's vectors."""
     s, c = _sincos_vector(x)
     if s != s:
         return math.sin(x), math.cos(x)
