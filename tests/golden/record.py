@@ -16,7 +16,7 @@ steps, so that a replay is checked bit for bit on every step while the files sta
 
 Each file also stores the fingerprint of the machine it was recorded on
 (:func:`machine_fingerprint`: the processor's features numpy dispatches on, the versions
-of numpy, OpenBLAS and its kernel, numba, llvmlite and the C library). On a machine with the
+of numpy, OpenBLAS and its kernel, numba, llvmlite, the C library and Python). On a machine with the
 same fingerprint the replay must give the same numbers to the last bit, digests included;
 elsewhere ``test_golden.py`` compares the stored rows to a tolerance.
 
