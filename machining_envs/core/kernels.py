@@ -32,7 +32,6 @@ __all__ = [
     "matvec",
     "powers",
     "py_square",
-    "sincos",
     "sincos_row",
     "store8",
     "vec8",
@@ -492,23 +491,12 @@ def _sincos_vector(x):
 
 
 @numba.njit(cache=True, inline="always")
-def sincos(x):
-    """``(sin x, cos x)`` of one angle: :func:`_sincos_vector`'s numbers, libm's where it
-    takes none (tiny, huge, infinite or NaN angles, and those nearest a multiple of
-    pi / 2). :func:`sincos_row` computes a row of them with the branch kept out of the
-    loop that runs in the processor's vectors."""
-    s, c = _sincos_vector(x)
-    if s != s:
-        return math.sin(x), math.cos(x)
-    return s, c
-
-
-@numba.njit(cache=True, inline="always")
 def sincos_row(x, n, s_out, c_out):
-    """``s_out[j], c_out[j] = sincos(x[j])`` for ``j < n`` (1-d float64 arrays, not
-    overlapping): the vector path over the whole row, then libm where it took none. Each
-    value is :func:`sincos`'s, wherever it falls in the row. About 2 ns an angle where libm
-    takes some 12 (a 2-core Xeon with AVX-512, numba's 256-bit vectors)."""
+    """``s_out[j], c_out[j] = sin(x[j]), cos(x[j])`` for ``j < n`` (1-d float64 arrays, not
+    overlapping): :func:`_sincos_vector` over the whole row, then libm where it took none
+    (tiny, huge, infinite or NaN angles, and those nearest a multiple of pi / 2). Each value
+    is the same wherever it falls in the row. About 2 ns an angle where libm takes some 12
+    (a 2-core Xeon with AVX-512, numba's 256-bit vectors)."""
     xs = x[:n]  # views: indices from 0, which the compiler knows are not negative
     ss = s_out[:n]
     cs = c_out[:n]

@@ -60,7 +60,7 @@ SLOT = 5
 
 _FLOAT = 1
 _INT = 2
-#: Codes of the array kinds: 8 * kind + dimensions.
+#: The array kinds by dtype; an array's code is 8 * kind + dimensions.
 _KINDS = {np.dtype(np.float64): 1, np.dtype(np.float32): 2, np.dtype(np.int64): 3,
           np.dtype(np.bool_): 4}  # fmt: skip
 
@@ -69,6 +69,11 @@ def _code(kind: int, ndim: int) -> int:
     return 8 * kind + ndim
 
 
+# The codes the readers check (module globals: constants to the compiled code).
+_F8_1, _F8_2, _F8_3 = (_code(1, d) for d in (1, 2, 3))
+_F4_2 = _code(2, 2)
+_I8_1, _I8_2 = _code(3, 1), _code(3, 2)
+_B1_1, _B1_2 = _code(4, 1), _code(4, 2)
 #: Code of a 2-d float64 array whose rows are contiguous but further apart than a row
 #: (a view of some columns of a wider array), its row stride in the slot's last entry.
 _ROWS_APART = 14
@@ -163,7 +168,7 @@ _b1 = _pointer_to(types.boolean)
 @numba.njit(cache=True, inline="always")
 def _at(t, i, code):
     """The offset of argument ``i``'s slot, after checking its code."""
-    o = 5 * i
+    o = SLOT * i
     if t[o] != code:
         raise TypeError("packed argument read as another kind")
     return o
@@ -171,13 +176,13 @@ def _at(t, i, code):
 
 @numba.njit(cache=True, inline="always")
 def f8_1(t, i):
-    o = _at(t, i, 9)
+    o = _at(t, i, _F8_1)
     return numba.carray(_f8(t[o + 1]), (t[o + 2],))
 
 
 @numba.njit(cache=True, inline="always")
 def f8_2(t, i):
-    o = _at(t, i, 10)
+    o = _at(t, i, _F8_2)
     return numba.carray(_f8(t[o + 1]), (t[o + 2], t[o + 3]))
 
 
@@ -185,10 +190,10 @@ def f8_2(t, i):
 def f8_2_rows(t, i):
     """A 2-d float64 argument whose rows may lie further apart than a row (a view of some
     columns of a wider array; a C-contiguous one too): an array of layout ``A``."""
-    o = 5 * i
-    if t[o] == 10:  # C-contiguous: its rows one row apart
+    o = SLOT * i
+    if t[o] == _F8_2:  # C-contiguous: its rows one row apart
         stride = t[o + 3]
-    elif t[o] == 14:
+    elif t[o] == _ROWS_APART:
         stride = t[o + 4]
     else:
         raise TypeError("packed argument read as another kind")
@@ -200,52 +205,52 @@ def f8_2_rows(t, i):
 
 @numba.njit(cache=True, inline="always")
 def f8_3(t, i):
-    o = _at(t, i, 11)
+    o = _at(t, i, _F8_3)
     return numba.carray(_f8(t[o + 1]), (t[o + 2], t[o + 3], t[o + 4]))
 
 
 @numba.njit(cache=True, inline="always")
 def f4_2(t, i):
-    o = _at(t, i, 18)
+    o = _at(t, i, _F4_2)
     return numba.carray(_f4(t[o + 1]), (t[o + 2], t[o + 3]))
 
 
 @numba.njit(cache=True, inline="always")
 def i8_1(t, i):
-    o = _at(t, i, 25)
+    o = _at(t, i, _I8_1)
     return numba.carray(_i8(t[o + 1]), (t[o + 2],))
 
 
 @numba.njit(cache=True, inline="always")
 def i8_2(t, i):
-    o = _at(t, i, 26)
+    o = _at(t, i, _I8_2)
     return numba.carray(_i8(t[o + 1]), (t[o + 2], t[o + 3]))
 
 
 @numba.njit(cache=True, inline="always")
 def b1_1(t, i):
-    o = _at(t, i, 33)
+    o = _at(t, i, _B1_1)
     return numba.carray(_b1(t[o + 1]), (t[o + 2],))
 
 
 @numba.njit(cache=True, inline="always")
 def b1_2(t, i):
-    o = _at(t, i, 34)
+    o = _at(t, i, _B1_2)
     return numba.carray(_b1(t[o + 1]), (t[o + 2], t[o + 3]))
 
 
 @numba.njit(cache=True, inline="always")
 def as_float(t, i):
     """Argument ``i`` as a float (an int argument converted, as a direct call would)."""
-    o = 5 * i
-    if t[o] == 2:
+    o = SLOT * i
+    if t[o] == _INT:
         return float(t[o + 1])
-    if t[o] != 1:
+    if t[o] != _FLOAT:
         raise TypeError("packed argument read as another kind")
     return bits_float(t[o + 1])
 
 
 @numba.njit(cache=True, inline="always")
 def as_int(t, i):
-    o = _at(t, i, 2)
+    o = _at(t, i, _INT)
     return t[o + 1]

@@ -16,7 +16,6 @@ from machining_envs.core.kernels import (
     matvec,
     powers,
     py_square,
-    sincos,
     sincos_row,
     store8,
 )
@@ -213,8 +212,9 @@ def _square_all(x, two, out):
 
 @numba.njit
 def _sincos_each(x, s_out, c_out):
+    """Each angle alone: a row of one."""
     for j in range(x.size):
-        s_out[j], c_out[j] = sincos(x[j])
+        sincos_row(x[j : j + 1], 1, s_out[j : j + 1], c_out[j : j + 1])
 
 
 @numba.njit
