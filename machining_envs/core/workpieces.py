@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-__all__ = ["DepthProfile", "DEPTH_RANGE_MM", "load_segments"]
+__all__ = ["DepthProfile", "DEPTH_RANGE_MM", "load_segments", "traverse_time"]
 
 #: Depths of cut any profile may hold, mm. Above 6 mm the 1822 N/mm^(1+p) force law of the
 #: paper's tool would pass the breakage force at every usable feed; zero is air.
@@ -262,7 +262,7 @@ class DepthProfile:
         """
         if not (c > 0 and q > 0 and v_max > 0):
             raise ValueError(f"c, q and v_max must be > 0, got {c!r}, {q!r}, {v_max!r}")
-        return _traverse_time(self._segments, float(c), float(q), float(v_max))
+        return traverse_time(self._segments, float(c), float(q), float(v_max))
 
     def worn_traverse_time_s(
         self, c: float, q: float, v_max: float, wear_per_mm: float, wear_exponent: float
@@ -315,7 +315,7 @@ def _random_segments(draws, lo, hi, s_lo, s_hi, taper_probability, max_jump_rati
 
 
 @numba.njit(cache=True)
-def _traverse_time(segments, c, q, v_max):
+def traverse_time(segments, c, q, v_max):
     """:meth:`DepthProfile.traverse_time_s` over the profile's ``segments``
     (:attr:`DepthProfile._segments`), summed segment by segment in order."""
     a_star = (1.0 / (v_max * c)) ** (1.0 / q)  # the depth at which the two limits meet

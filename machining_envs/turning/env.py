@@ -46,10 +46,12 @@ from machining_envs.core.packed import (
     f4_2,
     f8_1,
     f8_2,
+    f8_3,
     i8_1,
     i8_2,
 )
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
+from machining_envs.core.workpieces import traverse_time
 from machining_envs.turning.metrics import TURNING_TASK
 from machining_envs.turning.plant import (
     SPINDLE_RPM_RANGE,
@@ -58,11 +60,13 @@ from machining_envs.turning.plant import (
     cutting_power_W,
     lane_ints,
     spindle_drive,
+    start_lane,
     step_lane,
 )
 from machining_envs.turning.scenarios import (
     TURNING_SCENARIOS,
     TurningScenario,
+    bound_coefficient,
     machining_time_bound,
     turning_scenario,
 )
@@ -172,6 +176,11 @@ _EB = ("diverged", "breakage", "finished", "terminated", "truncated", "over", "i
 _EF_COMMAND = _EF.index("command")
 _EF_REWARD = _EF.index("reward")
 _EF_FORCE_LIMIT = _EF.index("force_limit")
+_EF_VMAX = _EF.index("vmax")
+_EF_BREAKAGE = _EF.index("breakage_force")
+_EF_PREV_ACTION = _EF.index("prev_action")
+_EF_FR_OBS = _EF.index("fr_obs")
+_EF_RPM_OBS = _EF.index("rpm_obs")
 #: The columns of ``ef`` a lane's start writes (in this order).
 _EF_START = np.array([
     _EF.index(c)
@@ -189,12 +198,16 @@ def _env_floats(ef):
 
 @numba.njit(cache=True, nogil=True)
 def _step(ef, eb, big, li, filt, z, buf, work, edges, d0, slope, lane_f, finished, m, n_f,
-          out, out_finish, gain, fs, meas, max_t, w, obs, n_clipped):  # fmt: skip
-    """One step of every lane: the actions' bookkeeping, the plant, the env's outputs.
+          out, out_finish, gain, fs, meas, max_t, w, obs, n_clipped, normals, normal_i,
+          noise_counts):  # fmt: skip
+    """One step of every lane: the actions' bookkeeping, the sensor noise, the plant, the
+    env's outputs.
 
     ``ef`` and ``eb`` hold the env's per-lane floats and flags (``_TurningCore``'s ``_EF``
-    and ``_EB`` columns), ``li`` the plant's integers (``TurningLanes.li``). The env calls it
-    through :func:`_step_packed` (one table for every argument)."""
+    and ``_EB`` columns), ``li`` the plant's integers (``TurningLanes.li``). A lane with
+    noise (``noise_counts[k]`` counts per unit normal) takes the next normal of its block
+    ``normals[k]`` (``_TurningCore.draw_noise`` keeps one there), a lane without draws none.
+    The env calls it through :func:`_step_packed` (one table for every argument)."""
     (actions, commands, noise, fr, vmax, brk, prev_action, fr_obs, rpm_obs, reward,
      last_command) = _env_floats(ef)  # fmt: skip
     flags, clipped, last_clipped = eb[:, :6], eb[:, 6], eb[:, 7]
@@ -205,6 +218,13 @@ def _step(ef, eb, big, li, filt, z, buf, work, edges, d0, slope, lane_f, finishe
         last_command[k] = commands[k]
         last_clipped[k] = clipped[k]
         n_clipped[k] += clipped[k]
+        nc = noise_counts[k]
+        if nc != 0.0:
+            i = normal_i[k]
+            noise[k] = nc * normals[k, i]
+            normal_i[k] = i + 1
+        else:
+            noise[k] = 0.0
         step_lane(
             k, big, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f,
             finished, m, n_f, commands[k], noise[k], out, out_seg, out_finish,
@@ -220,7 +240,8 @@ def _step_packed(t):
     _step(f8_2(t, 0), b1_2(t, 1), f8_2(t, 2), i8_2(t, 3), f8_2(t, 4), f8_2(t, 5), f8_2(t, 6),
           f8_2(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12), as_int(t, 13),
           as_int(t, 14), f8_2(t, 15), f8_1(t, 16), as_float(t, 17), as_float(t, 18), f8_2(t, 19),
-          as_float(t, 20), f8_1(t, 21), f4_2(t, 22), i8_1(t, 23))  # fmt: skip
+          as_float(t, 20), f8_1(t, 21), f4_2(t, 22), i8_1(t, 23), f8_2(t, 24), i8_1(t, 25),
+          f8_1(t, 26))  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
@@ -230,10 +251,84 @@ def _serve_step(ctl, table, polls):
     return serve_one_table(_step_packed, ctl, table, polls)
 
 
+@numba.njit(cache=True)
+def _start(k, full_history, consts, segments, x, ef, eb, big, li, z, buf, edges, d0, slope,
+           lane_f, finished, out, out_finish, fs, meas, obs, n_clipped, bound, noise_counts,
+           normal_i, spindle, spindle_set, power, diameter, length, spindle_rpm, phis, gams,
+           base, sa, sb, ts):  # fmt: skip
+    """The arrays of lane ``k`` at the start of an episode (``_TurningCore.start``): the
+    plant's (:func:`~machining_envs.turning.plant.start_lane`, whose return it returns),
+    then the env's, the tool at rest at the workpiece's start.
+
+    ``x`` = ``[rpm, force limit, Vmax, breakage force, noise (counts), diameter, score
+    bound, spindle power]`` of the cut (the bound NaN: computed here, for a sharp tool, as
+    :func:`~machining_envs.turning.scenarios.machining_time_bound` does), ``consts`` the
+    plant's lane constants (``TurningLanes.lane_constants``).
+    """
+    rpm, limit, vmax, brk, noise, diam, b = x[0], x[1], x[2], x[3], x[4], x[5], x[6]
+    ok = start_lane(k, rpm, full_history, consts, segments, phis, gams, base, sa, sb, ts, big,
+                    li, z, buf, edges, d0, slope, lane_f, finished, spindle_rpm)  # fmt: skip
+    if b != b:  # machining_time_bound with no wear: traverse_time_s's closed form (left
+        # NaN, for machining_time_bound to refuse, where that refuses its numbers)
+        p = consts[1]
+        c = bound_coefficient(consts[0], p, limit, x[7], diam, rpm)
+        if c > 0.0 and p > 0.0 and vmax > 0.0:
+            b = traverse_time(segments, c, 1.0 / p, vmax)
+    fr_obs = min(limit / fs, 10.0)
+    rpm_obs = rpm / 1000.0
+    e = ef[k]  # the columns of _EF_START: limit, Vmax, breakage, prev action, fr, rpm, command
+    e[_EF_FORCE_LIMIT] = limit
+    e[_EF_VMAX] = vmax
+    e[_EF_BREAKAGE] = brk
+    e[_EF_PREV_ACTION] = -1.0
+    e[_EF_FR_OBS] = fr_obs
+    e[_EF_RPM_OBS] = rpm_obs
+    e[_EF_COMMAND] = 0.0
+    bound[k] = b
+    noise_counts[k] = noise
+    meas[k, :] = 0.0
+    n_clipped[k] = 0
+    normal_i[k] = _NORMAL_BLOCK  # a new episode draws a new block
+    spindle[k] = rpm
+    spindle_set[k] = rpm
+    power[k, :] = 0.0
+    diameter[k] = diam
+    ns = segments.shape[1] - 1
+    length[k] = segments[0, ns]
+    o = obs[k]
+    o[:] = 0.0
+    o[1] = fr_obs
+    o[2] = -1.0
+    o[3] = rpm_obs
+    # The signals of a cut not yet begun, where lane_info and info_arrays read them until the
+    # first step (which writes every one): the tool at rest at the workpiece's start.
+    eb[k, :] = False
+    out[k, :] = 0.0
+    out[k, 6] = segments[1, 0]  # the depth at the start
+    li[k, 3] = 0  # the segment
+    out_finish[k] = np.nan
+    return ok
+
+
+@numba.njit(cache=True)
+def _start_packed(t, s, k, full_history, consts, segments, x):
+    """:func:`_start` with the step's table ``t`` (:func:`_step_packed`'s) and the table
+    ``s`` of the other arrays it writes (``_TurningCore._start_args``)."""
+    return _start(
+        k, full_history, consts, segments, x, f8_2(t, 0), b1_2(t, 1), f8_2(t, 2), i8_2(t, 3),
+        f8_2(t, 5), f8_2(t, 6), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12),
+        f8_2(t, 15), f8_1(t, 16), as_float(t, 18), f8_2(t, 19), f4_2(t, 22), i8_1(t, 23),
+        f8_1(s, 0), f8_1(s, 1), i8_1(s, 2), f8_1(s, 3), f8_1(s, 4), f8_2(s, 5), f8_1(s, 6),
+        f8_1(s, 7), f8_1(s, 8), f8_3(s, 9), f8_2(s, 10), f8_2(s, 11), f8_2(s, 12),
+        f8_2(s, 13), as_float(s, 14),
+    )  # fmt: skip
+
+
 #: Where :func:`_step`'s arguments (``_TurningCore._kernel_args``) hold the lanes: axis 0
 #: or none (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (
-    0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, None, None, 0, 0, None, None, 0, None, None, 0, 0,
+    0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, None, None, 0, 0, None, None, 0, None, None, 0, 0, 0,
+    0, 0,
 )  # fmt: skip
 
 
@@ -294,7 +389,6 @@ class _TurningCore:
         self.obs = np.zeros((n, 4 + _HISTORY), dtype=np.float32)
         self.normals = np.zeros((n, _NORMAL_BLOCK))
         self.normal_i = np.full(n, _NORMAL_BLOCK)
-        self._lane_index = np.arange(n)
         self.spindle = np.zeros(n)
         self.spindle_set = np.zeros(n)
         #: Drive power delivered and cutting power at the last sample, W.
@@ -311,6 +405,9 @@ class _TurningCore:
         self._args: tuple | None = None
         self._args_version = -1
         self._packed = PackedArgs()  # the kernel's arguments in one table (core.packed)
+        self._s_args: tuple | None = None
+        self._s_args_version = -1
+        self._packed_start = PackedArgs()  # _start_args in one table
         #: The blocks of lanes the kernel steps at once (one thread unless a vector env
         #: asks for more).
         self.blocks = LaneBlocks(n)
@@ -325,12 +422,13 @@ class _TurningCore:
 
     def __getstate__(self) -> dict:
         # A pickled view is a copy: the views are made anew from ef and eb on loading.
-        views = {*_EF, "flags", "in_clipped", "clipped", "_args"}
+        views = {*_EF, "flags", "in_clipped", "clipped", "_args", "_s_args"}
         return {k: v for k, v in self.__dict__.items() if k not in views}
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         self._args = None
+        self._s_args = None
         self._bind_views()
 
     def _actuation_lanes(self) -> ActuationLanes:
@@ -357,72 +455,66 @@ class _TurningCore:
                 truth.breakage_force_N,
                 "the tool would break before the limit binds",
             )
-        self.lanes.start(lane, truth, sc.spindle_rpm, sc.profile)
-        bound = machining_time_bound(sc, truth)
-        fr_obs = min(limit / self.params.force_scale_N, 10.0)
+        # (true_params changes no field of the linear blocks, so the lane fits the batch.)
+        lanes = self.lanes
+        profile = sc.profile
+        segments = profile.segment_array()
+        lanes.fit_segments(segments.shape[1] - 1)
         rpm = float(sc.spindle_rpm)
-        vmax = truth.max_feed_velocity_mm_s
-        # force_limit, vmax, breakage_force, prev_action, fr_obs, rpm_obs, command (_EF_START)
-        self.ef[lane, _EF_START] = (limit, vmax, truth.breakage_force_N, -1.0, fr_obs,
-                                    rpm / 1000.0, 0.0)  # fmt: skip
-        self.bound[lane] = bound
-        self.noise_counts[lane] = truth.sensor_gain * truth.noise_std_N
-        self.meas[lane] = 0.0
+        power_W = float(truth.spindle_power_W)
+        full = math.isfinite(power_W)
+        diameter = float(truth.workpiece_diameter_mm)
+        # The score bound: computed by the kernel for a sharp tool, here with wear.
+        bound = math.nan if truth.wear_per_100mm == 0.0 else machining_time_bound(sc, truth)
+        x = np.array((rpm, limit, truth.max_feed_velocity_mm_s, truth.breakage_force_N,
+                      truth.sensor_gain * truth.noise_std_N, diameter, bound, power_W))  # fmt: skip
+        if not _start_packed(
+            self._packed(self._kernel_args()), self._packed_start(self._start_args()), lane,
+            full, lanes.lane_constants(truth), segments, x,
+        ):  # fmt: skip
+            lanes._load_matrices(lane, rpm, full)
+        if not self.bound[lane] == self.bound[lane]:  # refused by the kernel: let it say why
+            self.bound[lane] = machining_time_bound(sc, truth)
+        lanes.lane_params[lane] = truth
+        lanes.profiles[lane] = profile
         self.act_lanes = configure_lane(
             self.act_lanes, lane, sc.actuation, self.actuation, self._actuation_lanes
         )
-        self.n_clipped[lane] = 0
-        self.normal_i[lane] = _NORMAL_BLOCK  # a new episode draws a new block
-        self.spindle[lane] = rpm
-        self.spindle_set[lane] = rpm
-        self.power[lane] = 0.0
         self.truths[lane] = truth
-        diameter = float(truth.workpiece_diameter_mm)
-        self.diameter[lane] = diameter
-        if math.isfinite(truth.spindle_power_W):
+        if full:
             self.power_lanes.add(lane)
         else:
             self.power_lanes.discard(lane)
-        length = sc.profile.length_mm
-        self.length[lane] = length
         self.names[lane] = sc.name
         # What the episode's infos repeat, as Python values: read once, not at every step.
-        self.episode_info[lane] = (float(bound), length, sc.name, rpm, diameter)
-        self.obs[lane] = (0.0, fr_obs, -1.0, rpm / 1000.0, 0.0, 0.0, 0.0)
-        # The signals of a cut not yet begun, where lane_info and info_arrays read them until
-        # the first step (which writes every one): the tool at rest at the workpiece's start.
-        # (The command, in ef, is 0 from above.)
-        self.eb[lane] = False
-        out = self.lanes.out[lane]
-        out[:] = 0.0
-        out[6] = sc.profile.start_depths_mm[0]
-        self.lanes.out_segment[lane] = 0
-        self.lanes.out_finish[lane] = np.nan
+        self.episode_info[lane] = (float(self.bound[lane]), float(self.length[lane]), sc.name,
+                                   rpm, diameter)  # fmt: skip
+
+    def _start_args(self) -> tuple:
+        """The arrays :func:`_start` writes besides the step's, and the linear blocks' tables
+        (:func:`_start_packed`'s second table)."""
+        lanes = self.lanes
+        if self._s_args is None or self._s_args_version != lanes.version:
+            self._s_args = (self.bound, self.noise_counts, self.normal_i, self.spindle,
+                            self.spindle_set, self.power, self.diameter, self.length,
+                            lanes.spindle_rpm, *lanes.speed_free)  # fmt: skip
+            self._s_args_version = lanes.version
+        return self._s_args
 
     def draw_noise(self, rngs) -> None:
-        """Sensor noise of this step into ``in_noise``: lane ``k`` takes the next standard
-        normal of its generator ``rngs[k]`` (drawn in blocks, the same numbers in the same
-        order as one at a time), times its noise level; lanes without noise draw nothing."""
+        """Keep a standard normal ready for this step in every lane with sensor noise: a
+        lane whose block ``normals[k]`` is used up draws the next block from its generator
+        ``rngs[k]`` (the same numbers in the same order as one at a time); the kernel takes
+        them (:func:`_step`). Lanes without noise draw nothing."""
         if self.n == 1:  # the single env: the same, without array bookkeeping
-            nc = float(self.noise_counts[0])
-            if nc:
-                i = int(self.normal_i[0])
-                if i >= _NORMAL_BLOCK:
-                    self.normals[0] = rngs[0].standard_normal(_NORMAL_BLOCK)
-                    i = 0
-                self.in_noise[0] = nc * self.normals[0, i]
-                self.normal_i[0] = i + 1
-            else:
-                self.in_noise[0] = 0.0
+            if self.normal_i[0] >= _NORMAL_BLOCK and self.noise_counts[0] != 0.0:
+                rngs[0].standard_normal(out=self.normals[0])
+                self.normal_i[0] = 0
             return
-        noisy = self.noise_counts != 0.0
-        need = np.flatnonzero(noisy & (self.normal_i >= _NORMAL_BLOCK))
-        for k in need:
-            self.normals[k] = rngs[k].standard_normal(_NORMAL_BLOCK)
-            self.normal_i[k] = 0
-        z = self.normals[self._lane_index, np.minimum(self.normal_i, _NORMAL_BLOCK - 1)]
-        self.in_noise[:] = np.where(noisy, self.noise_counts * z, 0.0)
-        self.normal_i += noisy
+        need = np.flatnonzero((self.normal_i >= _NORMAL_BLOCK) & (self.noise_counts != 0.0))
+        for k in need.tolist():
+            rngs[k].standard_normal(out=self.normals[k])
+        self.normal_i[need] = 0
 
     def _kernel_args(self) -> tuple:
         """The arguments of :func:`_step`, in order (rebuilt when the plant's arrays are)."""
@@ -453,6 +545,9 @@ class _TurningCore:
                 self._w,
                 self.obs,
                 self.n_clipped,
+                self.normals,
+                self.normal_i,
+                self.noise_counts,
             )
             self._args_version = lanes.version
         return self._args
@@ -460,8 +555,8 @@ class _TurningCore:
     def step(self) -> None:
         """Advance every lane with the inputs in ``in_action`` (clipped to the box),
         ``in_clipped`` (whether it was clipped), ``in_command`` (the command it maps to) and
-        ``in_noise`` (sensor noise, counts); with CNC actuation on, the commands pass
-        through it first (``machining_envs.core.actuation``)."""
+        the sensor noise's normals (:meth:`draw_noise`); with CNC actuation on, the
+        commands pass through it first (``machining_envs.core.actuation``)."""
         if self.act_lanes is not None:
             self.in_command[:] = self.act_lanes.apply(self.in_command)
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out

@@ -394,23 +394,61 @@ def _matrices(params: _LinearKey, spindle_rpm: float) -> _Matrices:
 def _fill_matrices(params: _LinearKey, spindle_rpm: float, packed, lag) -> int:
     """``_Matrices.packed`` and ``delay_group`` at ``spindle_rpm`` into ``packed`` and ``lag``
     (a lane's rows: a lane starting at a new speed needs no other copy); returns ``lags``."""
-    m = params.substeps
-    ts = params.sample_time_s
-    h = ts / m
+    lags = _lane_matrices(*_speed_free_tables(params), float(spindle_rpm), packed, lag)
+    if lags < 0:  # Phi(rho) is zoh's job (never in the plant's ranges): as below, by zoh
+        lags = _fill_matrices_zoh(params, spindle_rpm, packed, lag)
+    return lags
+
+
+@functools.lru_cache(maxsize=16)
+def _speed_free_tables(params: _LinearKey) -> tuple:
+    """What :func:`_lane_matrices` reads besides the speed: ``(phis, gams, base, A, B,
+    Ts)`` (the servo's transitions over ``i h``, the step matrix's rows on the current
+    pair, the continuous servo, the sample time), read-only."""
     phis, gams = _speed_free(params)[:2]
-    base = _speed_free_rows(params)[0]
+    return (phis, gams, _speed_free_rows(params)[0], *_servo_system(params),
+            float(params.sample_time_s))  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _lane_matrices(phis, gams, base, sa, sb, ts, spindle_rpm, packed, lag):
+    """:func:`_fill_matrices` from its tables (:func:`_speed_free_tables`): the packed step
+    matrix and the delay groups at ``spindle_rpm``, and ``lags``; -1 (nothing written)
+    where ``Phi(rho)`` lies outside :func:`_exp_row`'s reach.
+
+    Every delayed instant ``t_j - T`` sits the same fraction ``rho`` of a sub-step past a
+    sub-step point, so one exponential over ``rho`` and the powers over ``i h`` give all of
+    them exactly."""
+    m = lag.size
+    h = ts / m
     period = 60.0 / spindle_rpm
     lags = int(math.ceil(period / ts + 1e-12)) + 1
-    # Every delayed instant t_j - T sits the same fraction rho of a sub-step past a sub-step
-    # point, so one exponential over rho and the powers over i*h give all of them exactly.
     rho = (-period) % h
     if rho > h - 1e-12 * h:
         rho = 0.0
     i_row = np.zeros(4)  # the I-rows of Phi(rho) and Gamma(rho), side by side
     i_row[2] = 1.0
-    servo = _servo_system(params)
-    if rho > 0 and not _exp_row(*servo, rho, 2, i_row):
-        phi_r, gam_r = zoh(*servo, rho)
+    if rho > 0 and not _exp_row(sa, sb, rho, 2, i_row):
+        return -1
+    _delayed_rows(phis, gams, base, i_row[:3], i_row[3], period, ts, rho, packed, lag)
+    return lags
+
+
+def _fill_matrices_zoh(params: _LinearKey, spindle_rpm: float, packed, lag) -> int:
+    """:func:`_lane_matrices` with ``Phi(rho)`` and ``Gamma(rho)`` from ``zoh``."""
+    m = params.substeps
+    ts = params.sample_time_s
+    h = ts / m
+    phis, gams, base, sa, sb, _ = _speed_free_tables(params)
+    period = 60.0 / spindle_rpm
+    lags = int(math.ceil(period / ts + 1e-12)) + 1
+    rho = (-period) % h
+    if rho > h - 1e-12 * h:
+        rho = 0.0
+    i_row = np.zeros(4)  # the I-rows of Phi(rho) and Gamma(rho), side by side
+    i_row[2] = 1.0
+    if rho > 0:
+        phi_r, gam_r = zoh(sa, sb, rho)
         i_row[:3], i_row[3] = phi_r[2], gam_r[2, 0]
     _delayed_rows(phis, gams, base, i_row[:3], i_row[3], period, ts, rho, packed, lag)
     return lags
@@ -727,6 +765,42 @@ LANE_SIGNALS = (
 )
 
 
+@numba.njit(cache=True)
+def start_lane(k, rpm, full_history, consts, segments, phis, gams, base, sa, sb, ts, big, li, z,
+               buf, edges, d0, slope, lane_f, finished, spindle_rpm):  # fmt: skip
+    """Lane ``k``'s arrays (:class:`TurningLanes`) at the start of a cut at ``rpm`` on the
+    workpiece ``segments`` (``DepthProfile.segment_array``; the tables must hold its
+    segments), the machine at rest at its start: the step matrix at that speed
+    (:func:`_lane_matrices`, padded to the slowest speed's memory with ``full_history``),
+    the lane's ``consts`` (:meth:`TurningLanes.lane_constants`) and clock. Returns False
+    where the step matrix is left for ``zoh`` (:meth:`TurningLanes._load_matrices`)."""
+    m = li.shape[1] - 4
+    lags = _lane_matrices(
+        phis, gams, base, sa, sb, ts, rpm, big[k].reshape((2 * m + 3, 8)), li[k, 4:]
+    )
+    li[k, 0] = z.shape[1] if full_history else 4 * (lags + 1)
+    z[k, :] = 0.0
+    buf[k, :] = 0.0
+    ns = segments.shape[1] - 1
+    load_segments(segments, k, edges, d0, slope)
+    li[k, 1] = ns
+    li[k, 2] = 0
+    kf, p, ke, cmax, margin, wear = consts
+    row = lane_f[k]
+    row[0] = kf
+    row[1] = p
+    row[2] = ke
+    row[3] = cmax
+    row[4] = segments[0, ns]
+    row[5] = 0.0
+    row[6] = margin
+    row[7] = ts
+    row[8] = wear
+    finished[k] = False
+    spindle_rpm[k] = rpm
+    return lags >= 0
+
+
 class TurningLanes:
     """N independent cuts stepped together: the physics of every turning env.
 
@@ -809,38 +883,41 @@ class TurningLanes:
                 "a lane's servo, filter, sample time and sub-steps must be those of the "
                 f"batch ({self._key}), got {_LinearKey.of(params)}"
             )
-        self._load_matrices(lane, float(spindle_rpm), math.isfinite(params.spindle_power_W))
-        self.z[lane] = 0.0
-        self.buf[lane] = 0.0
         segments = profile.segment_array()
-        ns = segments.shape[1] - 1
-        if ns > self._s_max:
-            grow = ns - self._s_max
+        self.fit_segments(segments.shape[1] - 1)
+        rpm = float(spindle_rpm)
+        full = math.isfinite(params.spindle_power_W)
+        if not start_lane(
+            lane, rpm, full, self.lane_constants(params), segments, *self.speed_free, self.big,
+            self.li, self.z, self.buf, self.edges, self.d0, self.slope, self.lane_f,
+            self.finished, self.spindle_rpm,
+        ):  # fmt: skip
+            self._load_matrices(lane, rpm, full)
+        self.lane_params[lane] = params
+        self.profiles[lane] = profile
+
+    @property
+    def speed_free(self) -> tuple:
+        """What :func:`start_lane` reads of the linear blocks (:func:`_speed_free_tables`)."""
+        return _speed_free_tables(self._key)
+
+    def lane_constants(self, params: TurningParams) -> tuple:
+        """``lane_f``'s constants of a cut with the true ``params`` (:func:`start_lane`):
+        ``(Kf, p, Ke, U_max, margin, wear per mm)``."""
+        margin = _velocity_bound(self._key, params.command_max) * params.sample_time_s
+        return (params.force_coefficient, params.feed_exponent, params.sensor_gain,
+                params.command_max, margin, params.wear_per_100mm / 100.0)  # fmt: skip
+
+    def fit_segments(self, n_segments: int) -> None:
+        """Widen the per-lane workpiece tables to hold ``n_segments`` segments (a new
+        ``version``: references to the old tables are stale)."""
+        if n_segments > self._s_max:
+            grow = n_segments - self._s_max
             self.edges = np.pad(self.edges, ((0, 0), (0, grow)), mode="edge")
             self.d0 = np.pad(self.d0, ((0, 0), (0, grow)))
             self.slope = np.pad(self.slope, ((0, 0), (0, grow)))
-            self._s_max = ns
-            self.version += 1  # the arrays were replaced: cached references are stale
-        length = float(segments[0, ns])
-        load_segments(segments, lane, self.edges, self.d0, self.slope)
-        self.nseg[lane] = ns
-        self.seg[lane] = 0
-        margin = _velocity_bound(self._key, params.command_max) * params.sample_time_s
-        self.lane_f[lane] = (
-            params.force_coefficient,
-            params.feed_exponent,
-            params.sensor_gain,
-            params.command_max,
-            length,
-            0.0,
-            margin,
-            params.sample_time_s,
-            params.wear_per_100mm / 100.0,
-        )
-        self.finished[lane] = False
-        self.spindle_rpm[lane] = float(spindle_rpm)
-        self.lane_params[lane] = params
-        self.profiles[lane] = profile
+            self._s_max = n_segments
+            self.version += 1
 
     def _load_matrices(self, lane: int, spindle_rpm: float, full_history: bool) -> None:
         """The step matrix of ``lane`` at ``spindle_rpm``. With ``full_history`` it is padded

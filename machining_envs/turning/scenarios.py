@@ -20,6 +20,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
@@ -247,15 +248,26 @@ def machining_time_bound(scenario: TurningScenario, truth: TurningParams) -> flo
     episode may pass the limit on under 2 % of its steps and still count, so an agent could
     in principle beat the floor by about that much.
     """
-    kf, p = truth.force_coefficient, truth.feed_exponent
-    limit = scenario.force_limit_N
-    if math.isfinite(truth.spindle_power_W):
-        # With a power-limited spindle the force that keeps the set speed is at most
-        # P_max / v_c: above it the spindle slows and the force rises further.
-        v_c = math.pi * truth.workpiece_diameter_mm * 1e-3 * scenario.spindle_rpm / 60.0
-        limit = min(limit, truth.spindle_power_W / v_c)
-    c = 60.0 / scenario.spindle_rpm * (kf / limit) ** (1.0 / p)
+    p = truth.feed_exponent
+    c = bound_coefficient(
+        float(truth.force_coefficient), float(p), float(scenario.force_limit_N),
+        float(truth.spindle_power_W), float(truth.workpiece_diameter_mm),
+        float(scenario.spindle_rpm),
+    )  # fmt: skip
     # Kf (1 + w x) in f*(x): with wear the integrand gains (1 + w x)^(1/p).
     return scenario.profile.worn_traverse_time_s(
         c, 1.0 / p, truth.max_feed_velocity_mm_s, truth.wear_per_100mm / 100.0, 1.0 / p
     )
+
+
+@numba.njit(cache=True)
+def bound_coefficient(kf, p, limit, spindle_power_W, diameter_mm, spindle_rpm):
+    """``c`` of :func:`machining_time_bound`'s integrand ``c a(x)^(1/p)`` (s/mm): the
+    inverse of the feed velocity at the limit on a depth of 1 mm, ``60 / n (Kf / L)^(1/p)``.
+    With a power-limited spindle (finite ``spindle_power_W``) the force that keeps the set
+    speed is at most ``P_max / v_c``: above it the spindle slows and the force rises
+    further, so ``L`` is at most that."""
+    if math.isfinite(spindle_power_W):
+        v_c = math.pi * diameter_mm * 1e-3 * spindle_rpm / 60.0
+        limit = min(limit, spindle_power_W / v_c)
+    return 60.0 / spindle_rpm * (kf / limit) ** (1.0 / p)

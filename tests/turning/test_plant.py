@@ -201,3 +201,27 @@ def test_exponential_row_of_a_delayed_instant_is_the_exact_discretisation():
         assert _exp_row(a, b, rho, 2, out)
         np.testing.assert_allclose(out, [*phi[2], gam[2, 0]], rtol=0, atol=1e-15)
     assert not _exp_row(a, b, 10 * h, 2, out)  # norm about 5.6: zoh's job
+
+
+def test_step_matrix_by_zoh_where_the_series_declines_it_agrees():
+    """Where the compiled series declines ``Phi(rho)`` (never at the plant's speeds), the
+    lane's step matrix comes from scipy's ``zoh`` instead: at speeds where both can run,
+    the two give the same delay groups and rows within 4 eps of each row's size."""
+    from machining_envs.turning.plant import (
+        _fill_matrices_zoh,
+        _lane_matrices,
+        _LinearKey,
+        _speed_free_tables,
+    )
+
+    key = _LinearKey.of(TurningParams())
+    m = key.substeps
+    for rpm in (50.0, 245.0, 333.3, 405.0, 700.0, 1234.5, 3000.0):
+        series, zohs = np.empty((2 * m + 3, 8)), np.empty((2 * m + 3, 8))
+        lag_s, lag_z = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
+        lags = _lane_matrices(*_speed_free_tables(key), rpm, series, lag_s)
+        assert lags > 0
+        assert _fill_matrices_zoh(key, rpm, zohs, lag_z) == lags
+        np.testing.assert_array_equal(lag_s, lag_z)
+        scale = np.abs(series).max(axis=1, keepdims=True)
+        assert np.all(np.abs(series - zohs) <= 4 * np.finfo(float).eps * scale)

@@ -60,3 +60,19 @@ def test_split_draws_are_numpys_scalar_draws_in_order():
             assert sc.noise_scale == rng.uniform(0.5, 2.0)
             assert sc.force_limit_N == (rng.uniform(700.0, 1300.0) if ood else 1000.0)
             assert sc.wear_per_100mm == (rng.uniform(0.3, 1.0) if split == "wear" else 0.0)
+
+
+def test_the_envs_score_bound_is_machining_time_bound():
+    """A lane's score bound, computed by the compiled start for a sharp tool, is
+    ``machining_time_bound`` of its scenario and true parameters to the last bit: on every
+    split that draws its cuts, with and without the spindle's power limit."""
+    from machining_envs.turning.scenarios import machining_time_bound
+
+    venv = gym.make_vec("machining_envs/Turning-v0", num_envs=8)
+    for split in ("train", "ood", "shopfloor", "wear", "paper_405", "taper_405"):
+        venv.reset(seed=3, options={"scenario": split})
+        core = venv.unwrapped._core
+        for k in range(8):
+            sc = core.scenarios[k]
+            assert core.bound[k] == machining_time_bound(sc, sc.true_params(core.params))
+    venv.close()
