@@ -50,17 +50,20 @@ from machining_envs.core.packed import (
     i8_1,
 )
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
+from machining_envs.core.workpieces import traverse_time
 from machining_envs.milling.metrics import MILLING_TASK
 from machining_envs.milling.plant import (
+    LANE_CONSTANTS,
     SPINDLE_RPM_RANGE,
     MillingLanes,
     MillingParams,
+    start_lane,
     step_lanes,
 )
 from machining_envs.milling.scenarios import (
     MILLING_SCENARIOS,
-    CutArea,
     MillingScenario,
+    bound_coefficient,
     cut_area_at,
     machining_time_bound,
     milling_scenario,
@@ -106,10 +109,13 @@ _INFO_F = (
 #: Each episode's constants held after the signals, in the rows of ``_MillingCore.info_f``
 #: (the core's arrays of these names are views of those rows).
 _INFO_LANE = ("torque_limit", "bound", "spindle", "length", "volume")
-#: The signals of ``_INFO_F`` before a cut's first step: zero, but the machining time (NaN)
-#: and the depth (the workpiece's first, set by each start).
-_START_SIGNALS = tuple(math.nan if name == "machining_time_s" else 0.0 for name in _INFO_F)
 _DEPTH_ROW = _INFO_F.index("depth_mm")
+_TIME_ROW = _INFO_F.index("machining_time_s")
+#: Columns of ``MillingLanes.lane_f`` a lane's start reads.
+_RPM, _FEXP, _C1, _DEXP = (
+    LANE_CONSTANTS.index(c)
+    for c in ("spindle_rpm", "feed_exponent", "torque_gain", "depth_exponent")
+)
 
 
 @dataclass(frozen=True)
@@ -285,6 +291,87 @@ def _serve_step(ctl, table, polls):
     return serve_one_table_with_tail(_step_packed, ctl, table, polls)
 
 
+@numba.njit(cache=True)
+def _start(k, row, x, segments, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished,
+           out_seg, normal_i, noise_counts, breakage, vmax, n_teeth, w_axial, cumulative,
+           meas, prev_action, tr_obs, rpm_obs, obs, flags, in_clipped, n_clipped, info_f):  # fmt: skip
+    """The arrays of lane ``k`` at the start of an episode (``_MillingCore.start``): the
+    plant's (:func:`~machining_envs.milling.plant.start_lane`, from its constants ``row``),
+    then the env's, the tool at rest at the workpiece's start.
+
+    ``x`` = ``[torque limit, Vmax, breakage torque, noise (counts), teeth, axial depth,
+    limit's observation, score bound, process lag]`` of the cut (the bound NaN: computed
+    here, for a sharp tool, as
+    :func:`~machining_envs.milling.scenarios.machining_time_bound` does). ``info_f[:, k]``
+    gets the info of a cut not yet begun (what the info reports until the first step):
+    every signal zero but the depth and the machining time (NaN), then the episode's
+    constants (``_INFO_LANE``).
+    """
+    tr, vm, brk, noise, teeth, w, t_obs, b, lag_s = (x[0], x[1], x[2], x[3], x[4], x[5], x[6],
+                                                      x[7], x[8])  # fmt: skip
+    start_lane(k, row, lag_s, segments, lag, z, buf, edges, d0, slope, nseg, seg, lane_f,
+               finished)  # fmt: skip
+    rpm = row[_RPM]
+    ns = segments.shape[1] - 1
+    if b != b:  # machining_time_bound with no wear: traverse_time_s's closed form (left
+        # NaN, for machining_time_bound to refuse, where that refuses its numbers)
+        e = row[_FEXP]
+        c = bound_coefficient(row[_C1], e, tr, teeth, rpm)
+        q = row[_DEXP] / e
+        if c > 0.0 and q > 0.0 and vm > 0.0:
+            b = traverse_time(segments, c, q, vm)
+    # The area under the profile up to each edge (CutArea's cumulative sums).
+    area = 0.0
+    cumulative[k, 0] = 0.0
+    for i in range(ns):
+        wi = segments[0, i + 1] - segments[0, i]
+        area = area + wi * (segments[1, i] + 0.5 * segments[3, i] * wi)
+        cumulative[k, i + 1] = area
+    for i in range(ns + 1, cumulative.shape[1]):
+        cumulative[k, i] = area
+    for i in range(info_f.shape[0]):
+        info_f[i, k] = 0.0
+    info_f[_DEPTH_ROW, k] = segments[1, 0]
+    info_f[_TIME_ROW, k] = np.nan
+    nf = len(_INFO_F)
+    info_f[nf, k] = tr
+    info_f[nf + 1, k] = b
+    info_f[nf + 2, k] = rpm
+    info_f[nf + 3, k] = segments[0, ns]
+    info_f[nf + 4, k] = w * area
+    vmax[k] = vm
+    breakage[k] = brk
+    noise_counts[k] = noise
+    n_teeth[k] = teeth
+    w_axial[k] = w
+    meas[k, :] = 0.0
+    tr_obs[k] = t_obs
+    rpm_obs[k] = rpm / 1000.0
+    prev_action[k] = -1.0
+    n_clipped[k] = 0
+    # A new episode draws a new block (a lane without noise never does: the compiled step
+    # does not count its normals).
+    normal_i[k] = _NORMAL_BLOCK if noise != 0.0 else 0
+    o = obs[k]
+    o[:] = 0.0
+    o[1] = t_obs
+    o[2] = -1.0
+    o[3] = rpm / 1000.0
+    flags[k, :] = False  # no flag, no clipped action yet
+    in_clipped[k] = 0
+    out_seg[k] = 0
+
+
+@numba.njit(cache=True)
+def _start_packed(t, k, row, x, segments):
+    """:func:`_start` with the step's table ``t`` (:func:`_step_packed`'s)."""
+    _start(k, row, x, segments, f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), f8_2(t, 12), f8_2(t, 13),
+           f8_2(t, 14), f8_2(t, 15), i8_1(t, 16), i8_1(t, 17), b1_1(t, 18), i8_1(t, 21),
+           i8_1(t, 4), f8_1(t, 5), f8_1(t, 26), f8_1(t, 27), f8_1(t, 28), f8_1(t, 29),
+           f8_2(t, 30), f8_2(t, 33), f8_1(t, 34), f8_1(t, 35), f8_1(t, 36), f4_2(t, 37),
+           b1_2(t, 39), i8_1(t, 1), i8_1(t, 40), f8_2_rows(t, 41))  # fmt: skip
+
+
 #: Where :func:`_step`'s arguments (``_MillingCore._kernel_args``) hold the lanes: axis 0, axis
 #: 1 (``info_f``) or none (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (
@@ -370,7 +457,6 @@ class _MillingCore:
         self.bound[:] = np.nan
         self.normals = np.zeros((n, _NORMAL_BLOCK))
         self.normal_i = np.full(n, _NORMAL_BLOCK, dtype=np.int64)
-        self.depth0 = np.zeros(n)
         self.names = np.full(n, "", dtype=object)
         self.in_action = np.zeros(n)
         self.in_clipped = np.zeros(n, dtype=np.int64)
@@ -412,9 +498,9 @@ class _MillingCore:
         nominal = self.params
         rpm = sc.spindle_rpm(nominal)
         truth = sc.true_params(nominal)
-        self.lanes.start(lane, truth, rpm, sc.profile)
-        self.scenarios[lane] = sc
-        self.truths[lane] = truth
+        profile = sc.profile
+        if profile.max_depth_mm > truth.tool_diameter_mm:  # (MillingLanes.start's check)
+            self.lanes.start(lane, truth, rpm, profile)  # raises
         tr = sc.torque_limit_Nmm(nominal)
         if not tr < truth.breakage_torque_Nmm:  # the message is made only when it fails
             check_below(
@@ -424,47 +510,32 @@ class _MillingCore:
                 truth.breakage_torque_Nmm,
                 "the tool would break before the limit binds",
             )
-        area = CutArea(sc.profile)
-        cum = area.cumulative
-        if len(cum) > self.cumulative.shape[1]:
-            grow = len(cum) - self.cumulative.shape[1]
+        # (true_params changes no field of the servo, so the lane fits the batch.)
+        segments = profile.segment_array()
+        ns = segments.shape[1] - 1
+        self.lanes.fit_segments(ns)
+        if ns + 1 > self.cumulative.shape[1]:
+            grow = ns + 1 - self.cumulative.shape[1]
             self.cumulative = np.pad(self.cumulative, ((0, 0), (0, grow)), mode="edge")
             self._args = None
-        row = self.cumulative[lane]
-        row[: len(cum)] = cum
-        row[len(cum) :] = cum[-1]
-        w = truth.axial_depth_mm
-        depth0 = sc.profile.start_depths_mm[0]
-        # The info of a cut not yet begun (what lane_info and info_arrays report until the
-        # first step): every signal zero but the depth (and the machining time, NaN), then
-        # the episode's constants (_INFO_LANE), in one write of the lane's column.
-        self.info_f[:, lane] = (
-            *_START_SIGNALS[:_DEPTH_ROW], depth0, *_START_SIGNALS[_DEPTH_ROW + 1 :],
-            tr, machining_time_bound(sc, truth, rpm), rpm, sc.profile.length_mm, w * area.total,
-        )  # fmt: skip
-        self.vmax[lane] = truth.max_feed_velocity_mm_s
-        self.breakage_torque[lane] = truth.breakage_torque_Nmm
-        self.noise_counts[lane] = truth.sensor_gain * truth.noise_std_Nmm
-        self.n_teeth[lane] = truth.n_teeth
-        self.w_axial[lane] = w
-        self.meas[lane] = 0.0
-        tr_obs = min(tr / nominal.torque_limit_Nmm, 10.0)
-        self.tr_obs[lane] = tr_obs
-        self.rpm_obs[lane] = rpm / 1000.0
-        self.prev_action[lane] = -1.0
+        # The score bound: computed by the kernel for a sharp tool, here with wear.
+        bound = math.nan if truth.wear_per_100mm == 0.0 else machining_time_bound(sc, truth, rpm)
+        row = self.lanes.lane_constants(truth, rpm)
+        x = np.array((tr, truth.max_feed_velocity_mm_s, truth.breakage_torque_Nmm,
+                      truth.sensor_gain * truth.noise_std_Nmm, truth.n_teeth,
+                      truth.axial_depth_mm, min(tr / nominal.torque_limit_Nmm, 10.0), bound,
+                      truth.process_lag_s(rpm)))  # fmt: skip
+        _start_packed(self._packed(self._kernel_args()), lane, row, x, segments)
+        if not self.bound[lane] == self.bound[lane]:  # refused by the kernel: let it say why
+            self.bound[lane] = machining_time_bound(sc, truth, rpm)
+        self.lanes.lane_params[lane] = truth
+        self.lanes.profiles[lane] = profile
+        self.scenarios[lane] = sc
+        self.truths[lane] = truth
         self.act_lanes = configure_lane(
             self.act_lanes, lane, sc.actuation, self.actuation, self._actuation_lanes
         )
-        self.n_clipped[lane] = 0
-        # A new episode draws a new block (a lane without noise never does: the compiled
-        # step does not count its normals).
-        self.normal_i[lane] = _NORMAL_BLOCK if self.noise_counts[lane] != 0.0 else 0
-        self.depth0[lane] = depth0
         self.names[lane] = sc.name
-        self.obs[lane] = (0.0, tr_obs, -1.0, rpm / 1000.0, 0.0, 0.0, 0.0)
-        self.flags[lane] = False  # no flag, no clipped action yet
-        self.in_clipped[lane] = 0
-        self.lanes.out_segment[lane] = 0
 
     def draw_noise(self, rngs) -> None:
         """Give every lane with sensor noise a standard normal for this step: a lane whose

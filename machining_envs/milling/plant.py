@@ -575,6 +575,8 @@ LANE_CONSTANTS = (
 )
 _T = LANE_CONSTANTS.index("t_s")
 _WEAR = LANE_CONSTANTS.index("wear_per_mm")
+_H = LANE_CONSTANTS.index("substep_s")
+_LENGTH = LANE_CONSTANTS.index("length_mm")
 
 #: Fields of ``MillingLanes.out`` (one row per lane after each step).
 LANE_SIGNALS = (
@@ -758,6 +760,28 @@ def step_lanes(
         lane_f[k, 8] = t + lane_f[k, 10]
 
 
+@numba.njit(cache=True)
+def start_lane(k, row, lag_s, segments, lag, z, buf, edges, d0, slope, nseg, seg, lane_f,
+               finished):  # fmt: skip
+    """Lane ``k``'s arrays (:class:`MillingLanes`) at the start of a cut on the workpiece
+    ``segments`` (``DepthProfile.segment_array``; the tables must hold its segments), the
+    tool at rest at its start: its constants ``row`` (:meth:`MillingLanes.lane_constants`;
+    only its first ``len(LANE_CONSTANTS)`` values are read) and the lag matrix of the
+    process lag ``lag_s`` (:func:`lag_rows`)."""
+    m = buf.shape[1] - 2
+    lag_rows(m, row[_H], lag_s, lag[k].reshape((m, m + 2)))  # a view: filled in place
+    z[k, :] = 0.0
+    buf[k, :] = 0.0
+    ns = segments.shape[1] - 1
+    load_segments(segments, k, edges, d0, slope)
+    nseg[k] = ns
+    seg[k] = 0
+    for i in range(lane_f.shape[1]):
+        lane_f[k, i] = row[i]
+    lane_f[k, _LENGTH] = segments[0, ns]
+    finished[k] = False
+
+
 class MillingLanes:
     """N independent cuts stepped together: the physics of every end-milling env.
 
@@ -841,52 +865,42 @@ class MillingLanes:
                 f"must be those of the batch ({self._key}), got {_ServoKey.of(params)}"
             )
         rpm = float(spindle_rpm)
-        m = self.m
-        h = params.sample_time_s / params.substeps
-        lag_s = params.process_lag_s(rpm)
-        lag_rows(m, h, lag_s, self.lag[lane].reshape(m, m + 2))  # a view: filled in place
-        self.z[lane] = 0.0
-        self.buf[lane] = 0.0
         segments = profile.segment_array()
-        ns = segments.shape[1] - 1
-        if ns > self._s_max:
-            grow = ns - self._s_max
+        self.fit_segments(segments.shape[1] - 1)
+        start_lane(lane, self.lane_constants(params, rpm), params.process_lag_s(rpm), segments,
+                   self.lag, self.z, self.buf, self.edges, self.d0, self.slope, self.nseg,
+                   self.seg, self.lane_f, self.finished)  # fmt: skip
+        self.lane_params[lane] = params
+        self.profiles[lane] = profile
+
+    def fit_segments(self, n_segments: int) -> None:
+        """Widen the per-lane workpiece tables to hold ``n_segments`` segments (a new
+        ``version``: references to the old tables are stale)."""
+        if n_segments > self._s_max:
+            grow = n_segments - self._s_max
             self.edges = np.pad(self.edges, ((0, 0), (0, grow)), mode="edge")
             self.d0 = np.pad(self.d0, ((0, 0), (0, grow)))
             self.slope = np.pad(self.slope, ((0, 0), (0, grow)))
-            self._s_max = ns
-            self.version += 1  # the arrays were replaced: cached references are stale
-        load_segments(segments, lane, self.edges, self.d0, self.slope)
-        self.nseg[lane] = ns
-        self.seg[lane] = 0
-        power = params.force_model == "power_law"
-        if power:
+            self._s_max = n_segments
+            self.version += 1
+
+    @staticmethod
+    def lane_constants(params: MillingParams, spindle_rpm: float) -> np.ndarray:
+        """A lane's row of ``lane_f`` (``LANE_CONSTANTS``) at the start of a cut with the
+        true ``params`` at ``spindle_rpm``, the workpiece's length 0 (:func:`start_lane`
+        writes it)."""
+        rpm = spindle_rpm
+        if params.force_model == "power_law":
             c = KGF * params.torque_coefficient_kgfmm * params.tool_diameter_mm
-            dexp = params.depth_exponent
+            dexp, power = params.depth_exponent, 1.0
         else:
             c = params.torque_gain(1.0).item()
-            dexp = 1.0
-        self.lane_f[lane] = (
-            params.command_max,
-            60.0 / (rpm * params.n_teeth),
-            params.torque_feed_exponent,
-            c,
-            dexp,
-            1.0 if power else 0.0,
-            params.sensor_gain,
-            segments[0, ns],
-            0.0,
-            h,
-            params.sample_time_s,
-            rpm,
-            rpm / 60.0,
-            0.0,
-            -1.0,
-            params.wear_per_100mm / 100.0,
-        )
-        self.finished[lane] = False
-        self.lane_params[lane] = params
-        self.profiles[lane] = profile
+            dexp, power = 1.0, 0.0
+        return np.array((
+            params.command_max, 60.0 / (rpm * params.n_teeth), params.torque_feed_exponent, c,
+            dexp, power, params.sensor_gain, 0.0, 0.0, params.sample_time_s / params.substeps,
+            params.sample_time_s, rpm, rpm / 60.0, 0.0, -1.0, params.wear_per_100mm / 100.0,
+        ))  # fmt: skip
 
     def step(self, commands: np.ndarray, noise_counts: np.ndarray) -> None:
         """Hold ``commands[k]`` (counts; clipped to [0, U_max]) in every lane for one sample,

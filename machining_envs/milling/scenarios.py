@@ -315,9 +315,19 @@ def machining_time_bound(
     """
     e = truth.torque_feed_exponent
     l_exp = truth.depth_exponent if truth.force_model == "power_law" else 1.0
-    c1 = float(truth.torque_gain(1.0))
-    c = 60.0 / (truth.n_teeth * spindle_rpm) * (c1 / scenario.torque_limit_Nmm(truth)) ** (1.0 / e)
+    c = bound_coefficient(
+        float(truth.torque_gain(1.0)), float(e), float(scenario.torque_limit_Nmm(truth)),
+        float(truth.n_teeth), float(spindle_rpm),
+    )  # fmt: skip
     # With wear, c (1 + w x) in f_t*: the integrand gains (1 + w x)^(1/e).
     return scenario.profile.worn_traverse_time_s(
         c, l_exp / e, truth.max_feed_velocity_mm_s, truth.wear_per_100mm / 100.0, 1.0 / e
     )
+
+
+@numba.njit(cache=True)
+def bound_coefficient(c1, e, limit, n_teeth, spindle_rpm):
+    """``c`` of :func:`machining_time_bound`'s integrand ``c d(x)^(l / e)`` (s/mm): the
+    inverse of the feed velocity at the limit ``L`` on a depth of 1 mm,
+    ``60 / (N n) (c_1 / L)^(1/e)`` (``c_1`` the torque law's gain at 1 mm)."""
+    return 60.0 / (n_teeth * spindle_rpm) * (c1 / limit) ** (1.0 / e)

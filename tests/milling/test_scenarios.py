@@ -82,3 +82,23 @@ def test_split_draws_are_numpys_scalar_draws_in_order():
             assert sc.feed_exponent_scale == rng.uniform(1 - spread, 1 + spread)
             assert sc.noise_scale == rng.uniform(0.5, 2.0)
             assert sc.wear_per_100mm == (rng.uniform(*wear) if wear else 0.0)
+
+
+def test_the_envs_score_bound_and_volume_are_the_scenarios():
+    """A lane's score bound and workpiece volume, computed by the compiled start, are
+    ``machining_time_bound`` and the axial depth times ``CutArea``'s total of its scenario
+    and true parameters to the last bit, on the splits that draw their cuts and the paper's
+    workpieces, with either force model."""
+    from machining_envs.milling.scenarios import CutArea, machining_time_bound
+
+    for overrides in ({}, {"force_model": "average_force"}):
+        venv = gym.make_vec("machining_envs/EndMilling-v0", num_envs=6, **overrides)
+        for split in ("train", "ood", "wear", "paper_step", "paper_taper"):
+            venv.reset(seed=5, options={"scenario": split})
+            core = venv.unwrapped._core
+            for k in range(6):
+                sc, truth = core.scenarios[k], core.truths[k]
+                rpm = sc.spindle_rpm(core.params)
+                assert core.bound[k] == machining_time_bound(sc, truth, rpm)
+                assert core.volume[k] == truth.axial_depth_mm * CutArea(sc.profile).total
+        venv.close()
