@@ -19,7 +19,7 @@ from machining_envs.contouring.plant import ContouringParams
 from machining_envs.core.actuation import Actuation
 from machining_envs.core.checks import check_below, check_range, drawn_instance
 from machining_envs.core.env import resolve_scenario
-from machining_envs.core.splits import split_rng
+from machining_envs.core.splits import split_stream
 
 __all__ = [
     "ContouringScenario",
@@ -196,7 +196,7 @@ def _random(
         )  # fmt: skip
 
     def make(env_rng: np.random.Generator) -> ContouringScenario:
-        rng = split_rng(env_rng, name)
+        rng = split_stream(env_rng, name)
         path = Path.random_smooth(
             rng,
             n_segments=segments,

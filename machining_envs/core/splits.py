@@ -22,6 +22,7 @@ that neither can touch ``test`` or ``ood``.
 
 from __future__ import annotations
 
+import math
 import zlib
 from collections.abc import Iterable
 
@@ -35,6 +36,8 @@ __all__ = [
     "SPLIT_SEED_BASE",
     "MAX_SPLIT_EPISODES",
     "split_rng",
+    "split_stream",
+    "SplitStream",
     "uniform_draws",
     "split_seeds",
     "check_not_held_out",
@@ -100,6 +103,165 @@ def _split_generator(x: int, key: int) -> np.random.Generator:
     words = np.empty(8, dtype=np.uint32)
     _seed_state(x & 0xFFFFFFFF, x >> 32, key, words)
     return np.random.Generator(np.random.PCG64(_SeedWords(words.view(np.uint64))))
+
+
+def split_stream(rng: np.random.Generator, split: str) -> SplitStream:
+    """The numbers of :func:`split_rng`'s generator, drawn by compiled code: what the
+    scenario factories draw a ``split`` scenario with (every lane of a vector env draws
+    one at each reset, and making a numpy ``Generator`` was a good part of that)."""
+    key = _SPLIT_KEYS.get(split) if isinstance(split, str) else None
+    if key is None:
+        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    x = draw_below_2_63(rng)
+    state = np.empty(6, dtype=np.uint64)
+    _seed_stream(x & 0xFFFFFFFF, x >> 32, key, state)
+    return SplitStream(state)
+
+
+class SplitStream:
+    """A PCG64 stream that draws the numbers numpy's ``Generator(PCG64(...))`` draws from
+    the same state, for the few methods scenario factories call, with numpy's arithmetic:
+    :meth:`random` (``next_double``), :meth:`uniform` (``low + (high - low) u``) and
+    :meth:`integers` (Lemire's bounded draw on 32-bit outputs, the second half of each
+    64-bit output kept for the next, as numpy's PCG64 does). Made by :func:`split_stream`;
+    ``tests/core/test_splits.py`` checks it against numpy's generator from many states.
+
+    ``state``: the 128-bit state and increment (high words first), whether a 32-bit half is
+    kept, and that half, as six uint64 values.
+    """
+
+    __slots__ = ("_state",)
+
+    def __init__(self, state: np.ndarray) -> None:
+        self._state = state
+
+    def random(self, size=None):
+        """Uniform numbers in [0, 1): a float, or an array of shape ``size``."""
+        if size is None:
+            return _next_double(self._state)
+        out = np.empty(size)
+        _fill_doubles(self._state, out.reshape(-1))
+        return out
+
+    def uniform(self, low: float = 0.0, high: float = 1.0, size=None):
+        """Uniform numbers in [low, high): a float, or an array of shape ``size``."""
+        low, high = float(low), float(high)
+        span = high - low
+        if not math.isfinite(span):
+            raise OverflowError("high - low range exceeds valid bounds")
+        if size is None:
+            return low + span * _next_double(self._state)
+        out = np.empty(size)
+        _fill_doubles(self._state, out.reshape(-1))
+        return low + span * out
+
+    def integers(self, low: int, high: int) -> np.int64:
+        """One integer in [low, high) (``int64``)."""
+        low, high = int(low), int(high)
+        if not -(2**63) <= low < high <= 2**63 or high - low > 2**32:
+            raise ValueError(f"integers: need low < high within 2**32 of each other, got "
+                             f"{low}, {high}")  # fmt: skip
+        return np.int64(low + _bounded(self._state, high - low - 1))
+
+
+_U0, _U1, _U11, _U32, _U58, _U63, _U64 = (np.uint64(v) for v in (0, 1, 11, 32, 58, 63, 64))
+_LOW32 = np.uint64(0xFFFFFFFF)
+#: PCG64's multiplier (PCG_DEFAULT_MULTIPLIER_128), high and low words.
+_MUL_HI = np.uint64(2549297995355413924)
+_MUL_LO = np.uint64(4865540595714422341)
+
+
+@numba.njit(cache=True, inline="always")
+def _mul_high(a, b):
+    """The high 64 bits of the 128-bit product of two uint64 values."""
+    a0, a1, b0, b1 = a & _LOW32, a >> _U32, b & _LOW32, b >> _U32
+    p01, p10 = a0 * b1, a1 * b0
+    mid = ((a0 * b0) >> _U32) + (p01 & _LOW32) + (p10 & _LOW32)
+    return a1 * b1 + (p01 >> _U32) + (p10 >> _U32) + (mid >> _U32)
+
+
+@numba.njit(cache=True, inline="always")
+def _advance(s):
+    """The LCG step ``state = state * multiplier + increment`` (mod 2**128)."""
+    lo = s[1] * _MUL_LO
+    hi = s[0] * _MUL_LO + s[1] * _MUL_HI + _mul_high(s[1], _MUL_LO)
+    s[1] = lo + s[3]
+    s[0] = hi + s[2] + (_U1 if s[1] < lo else _U0)
+
+
+@numba.njit(cache=True, inline="always")
+def _next64(s):
+    """The next 64-bit output: the state advanced, then its XSL-RR output."""
+    _advance(s)
+    v = s[0] ^ s[1]
+    r = s[0] >> _U58
+    return (v >> r) | (v << ((_U64 - r) & _U63))
+
+
+@numba.njit(cache=True)
+def _seed_stream(lo, hi, key, s):
+    """``s`` seeded as ``PCG64(SeedSequence([lo + 2**32 hi, key]))``: the seed sequence's
+    four 64-bit words (:func:`_seed_state`) as the initial state and the increment's
+    sequence, as PCG64's seeding uses them."""
+    w = np.empty(8, dtype=np.uint32)
+    _seed_state(lo, hi, key, w)
+    words = np.empty(4, dtype=np.uint64)
+    for i in range(4):
+        words[i] = np.uint64(w[2 * i]) | (np.uint64(w[2 * i + 1]) << _U32)
+    s[0] = _U0
+    s[1] = _U0
+    s[2] = (words[2] << _U1) | (words[3] >> _U63)
+    s[3] = (words[3] << _U1) | _U1
+    _advance(s)
+    lo_sum = s[1] + words[1]
+    s[0] = s[0] + words[0] + (_U1 if lo_sum < s[1] else _U0)
+    s[1] = lo_sum
+    _advance(s)
+    s[4] = _U0
+    s[5] = _U0
+
+
+@numba.njit(cache=True)
+def _next_double(s):
+    return np.float64(_next64(s) >> _U11) * (1.0 / 9007199254740992.0)
+
+
+@numba.njit(cache=True)
+def _fill_doubles(s, out):
+    for i in range(out.size):
+        out[i] = np.float64(_next64(s) >> _U11) * (1.0 / 9007199254740992.0)
+
+
+@numba.njit(cache=True, inline="always")
+def _next32(s):
+    """The next 32-bit output: the kept high half of the last 64-bit one, else the low half
+    of a new one (whose high half is kept)."""
+    if s[4] != _U0:
+        s[4] = _U0
+        return s[5]
+    v = _next64(s)
+    s[4] = _U1
+    s[5] = v >> _U32
+    return v & _LOW32
+
+
+@numba.njit(cache=True)
+def _bounded(s, rng):
+    """An integer in ``[0, rng]`` (``rng < 2**32``) by Lemire's method on 32-bit outputs."""
+    r = np.uint64(rng)
+    if r == _U0:
+        return 0
+    if r == _LOW32:
+        return np.int64(_next32(s))
+    excl = r + _U1
+    m = _next32(s) * excl
+    left = m & _LOW32
+    if left < excl:
+        threshold = (_LOW32 - r) % excl
+        while left < threshold:
+            m = _next32(s) * excl
+            left = m & _LOW32
+    return np.int64(m >> _U32)
 
 
 def uniform_draws(rng: np.random.Generator, lows: list, spans: list) -> list[float]:

@@ -21,7 +21,7 @@ import numpy as np
 
 from machining_envs.core.checks import check_range, drawn_instance
 from machining_envs.core.env import resolve_scenario
-from machining_envs.core.splits import split_rng
+from machining_envs.core.splits import split_stream
 from machining_envs.drilling.plant import DIAMETER_RANGE_MM, DrillingParams
 
 __all__ = [
@@ -151,7 +151,7 @@ def _random(
         )  # fmt: skip
 
     def make(env_rng: np.random.Generator) -> DrillingScenario:
-        rng = split_rng(env_rng, name)
+        rng = split_stream(env_rng, name)
         u = rng.random(6).tolist()
         d = 0.5 + 0.3 * u[0]
         ar = aspect[0] + (aspect[1] - aspect[0]) * u[1]

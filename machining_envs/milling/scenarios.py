@@ -23,7 +23,7 @@ import numpy as np
 from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
 from machining_envs.core.checks import check_range, drawn_instance
 from machining_envs.core.env import resolve_scenario
-from machining_envs.core.splits import split_rng, uniform_draws
+from machining_envs.core.splits import split_stream, uniform_draws
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams, bisect_right
 
@@ -237,7 +237,7 @@ def _random(
         MillingScenario(name, prof, sp, tr, ks, ks, noise, w_end, actuation=actuation)
 
     def make(env_rng: np.random.Generator) -> MillingScenario:
-        rng = split_rng(env_rng, name)
+        rng = split_stream(env_rng, name)
         prof = DepthProfile.random(rng, depth, segments, (5.0, 12.0), 0.3, name=f"{name} profile")
         u = uniform_draws(rng, lows, spans)
         return drawn_instance(

@@ -26,7 +26,7 @@ import numpy as np
 from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
 from machining_envs.core.checks import drawn_instance
 from machining_envs.core.env import resolve_scenario
-from machining_envs.core.splits import split_rng, uniform_draws
+from machining_envs.core.splits import split_stream, uniform_draws
 from machining_envs.core.workpieces import DepthProfile
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams, _check
 
@@ -172,7 +172,7 @@ def _random(
                         **shop)  # fmt: skip
 
     def make(env_rng: np.random.Generator) -> TurningScenario:
-        rng = split_rng(env_rng, name)
+        rng = split_stream(env_rng, name)
         spindle = float(np.exp(log_rpm + log_span * rng.random()))
         prof = DepthProfile.random(rng, depth, segments, (4.0, 12.0), 0.3, name=f"{name} profile")
         u = uniform_draws(rng, lows, spans)

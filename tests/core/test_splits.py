@@ -57,3 +57,35 @@ def test_the_draw_below_2_63_is_numpys_integers(bits):
         for _ in range(3):
             assert draw_below_2_63(a) == int(b.integers(2**63)), seed
         assert np.array_equal(a.random(4), b.random(4)), seed  # and on from the same state
+
+
+def test_split_stream_draws_the_numbers_of_split_rng():
+    """The compiled stream a scenario factory draws from gives the numbers numpy's generator
+    of :func:`split_rng` gives, call for call, from many lane states and in every split:
+    single and shaped ``random``, ``uniform`` with and without a size, and ``integers``
+    over small and large ranges, interleaved (so the 32-bit half ``integers`` keeps is
+    tested too)."""
+    from machining_envs.core.splits import split_stream
+
+    for seed in range(400):
+        for split in SPLITS:
+            a, b = np.random.default_rng(seed), np.random.default_rng(seed)
+            g, s = split_rng(a, split), split_stream(b, split)
+            assert a.bit_generator.state == b.bit_generator.state  # one draw each
+            got, want = [], []
+            for draw in (
+                lambda r: r.random(),
+                lambda r: int(r.integers(2, 6)),
+                lambda r: r.random((4, 3)).tolist(),
+                lambda r: r.uniform(-3.0, 7.5),
+                lambda r: r.uniform(0.5, 2.0, 3).tolist(),
+                lambda r: int(r.integers(0, 2**32)),
+                lambda r: int(r.integers(-5, 1_000_003)),
+                lambda r: int(r.integers(7, 8)),
+                lambda r: r.random(5).tolist(),
+            ):
+                want.append(draw(g))
+                got.append(draw(s))
+            assert got == want
+    with pytest.raises(ValueError, match="split must be one of"):
+        split_stream(np.random.default_rng(0), "nope")
