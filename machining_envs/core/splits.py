@@ -36,9 +36,12 @@ __all__ = [
     "SPLIT_SEED_BASE",
     "MAX_SPLIT_EPISODES",
     "split_rng",
+    "split_state",
     "split_stream",
     "SplitStream",
-    "uniform_draws",
+    "stream_bounded",
+    "stream_double",
+    "stream_fill",
     "split_seeds",
     "check_not_held_out",
 ]
@@ -109,13 +112,20 @@ def split_stream(rng: np.random.Generator, split: str) -> SplitStream:
     """The numbers of :func:`split_rng`'s generator, drawn by compiled code: what the
     scenario factories draw a ``split`` scenario with (every lane of a vector env draws
     one at each reset, and making a numpy ``Generator`` was a good part of that)."""
+    return SplitStream(split_state(rng, split))
+
+
+def split_state(rng: np.random.Generator, split: str) -> np.ndarray:
+    """The state of :func:`split_stream`'s stream (see :class:`SplitStream`), for compiled
+    code that draws from it with :func:`stream_double`, :func:`stream_fill` and
+    :func:`stream_bounded`."""
     key = _SPLIT_KEYS.get(split) if isinstance(split, str) else None
     if key is None:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
     x = draw_below_2_63(rng)
     state = np.empty(6, dtype=np.uint64)
     _seed_stream(x & 0xFFFFFFFF, x >> 32, key, state)
-    return SplitStream(state)
+    return state
 
 
 class SplitStream:
@@ -138,9 +148,9 @@ class SplitStream:
     def random(self, size=None):
         """Uniform numbers in [0, 1): a float, or an array of shape ``size``."""
         if size is None:
-            return _next_double(self._state)
+            return stream_double(self._state)
         out = np.empty(size)
-        _fill_doubles(self._state, out.reshape(-1))
+        stream_fill(self._state, out.reshape(-1))
         return out
 
     def uniform(self, low: float = 0.0, high: float = 1.0, size=None):
@@ -150,9 +160,9 @@ class SplitStream:
         if not math.isfinite(span):
             raise OverflowError("high - low range exceeds valid bounds")
         if size is None:
-            return low + span * _next_double(self._state)
+            return low + span * stream_double(self._state)
         out = np.empty(size)
-        _fill_doubles(self._state, out.reshape(-1))
+        stream_fill(self._state, out.reshape(-1))
         return low + span * out
 
     def integers(self, low: int, high: int) -> np.int64:
@@ -161,7 +171,7 @@ class SplitStream:
         if not -(2**63) <= low < high <= 2**63 or high - low > 2**32:
             raise ValueError(f"integers: need low < high within 2**32 of each other, got "
                              f"{low}, {high}")  # fmt: skip
-        return np.int64(low + _bounded(self._state, high - low - 1))
+        return np.int64(low + stream_bounded(self._state, high - low - 1))
 
 
 _U0, _U1, _U11, _U32, _U58, _U63, _U64 = (np.uint64(v) for v in (0, 1, 11, 32, 58, 63, 64))
@@ -222,12 +232,14 @@ def _seed_stream(lo, hi, key, s):
 
 
 @numba.njit(cache=True)
-def _next_double(s):
+def stream_double(s):
+    """The next uniform number in [0, 1) of the stream ``s`` (``Generator.random()``)."""
     return np.float64(_next64(s) >> _U11) * (1.0 / 9007199254740992.0)
 
 
 @numba.njit(cache=True)
-def _fill_doubles(s, out):
+def stream_fill(s, out):
+    """``out`` (one dimension) filled with the stream's next uniform numbers in order."""
     for i in range(out.size):
         out[i] = np.float64(_next64(s) >> _U11) * (1.0 / 9007199254740992.0)
 
@@ -246,8 +258,9 @@ def _next32(s):
 
 
 @numba.njit(cache=True)
-def _bounded(s, rng):
-    """An integer in ``[0, rng]`` (``rng < 2**32``) by Lemire's method on 32-bit outputs."""
+def stream_bounded(s, rng):
+    """An integer in ``[0, rng]`` (``rng < 2**32``) by Lemire's method on 32-bit outputs:
+    ``Generator.integers(low, low + rng + 1) - low``."""
     r = np.uint64(rng)
     if r == _U0:
         return 0
@@ -262,15 +275,6 @@ def _bounded(s, rng):
             m = _next32(s) * excl
             left = m & _LOW32
     return np.int64(m >> _U32)
-
-
-def uniform_draws(rng: np.random.Generator, lows: list, spans: list) -> list[float]:
-    """One uniform number in ``[low, low + span)`` for each pair, as Python floats: the
-    numbers ``rng.uniform(low, low + span)`` gives one call at a time, in order (numpy
-    computes each as ``low + (high - low) u`` from the generator's next double), drawn with
-    one call (a scenario's reset draws several; each call costs some microseconds)."""
-    u = rng.random(len(lows)).tolist()
-    return [lo + span * r for lo, span, r in zip(lows, spans, u, strict=True)]
 
 
 class _SeedWords(ISeedSequence):

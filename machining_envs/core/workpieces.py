@@ -15,7 +15,9 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-__all__ = ["DepthProfile", "DEPTH_RANGE_MM", "load_segments", "traverse_time"]
+from machining_envs.core.splits import stream_bounded, stream_fill
+
+__all__ = ["DepthProfile", "DEPTH_RANGE_MM", "drawn_profile", "load_segments", "traverse_time"]
 
 #: Depths of cut any profile may hold, mm. Above 6 mm the 1822 N/mm^(1+p) force law of the
 #: paper's tool would pass the breakage force at every usable feed; zero is air.
@@ -286,6 +288,42 @@ class DepthProfile:
         with np.errstate(divide="ignore"):
             slowness = np.where(a > 0, c * a**q * (1.0 + wear_per_mm * x) ** wear_exponent, 0.0)
         return float(trapezoid(np.maximum(slowness, 1.0 / v_max), x))
+
+
+def drawn_profile(state, before: int, depth_range_mm, n_segments, segment_mm,
+                  taper_probability: float, max_jump_ratio: float, after: int, name: str):  # fmt: skip
+    """A random workpiece drawn from a split's compiled stream (``state``:
+    :func:`~machining_envs.core.splits.split_state`) between ``before`` and ``after``
+    uniform numbers, in one compiled call: ``(the uniforms before, the profile, the
+    uniforms after)``, the numbers that ``rng.random(before)``,
+    :meth:`DepthProfile.random` ``(rng, ...)`` and ``rng.random(after)`` give from the
+    split's generator. For scenario factories, which check their ranges once: these are
+    not checked again."""
+    lo, hi = depth_range_mm
+    s_lo, s_hi = segment_mm
+    b, table, a = _draw_cut(
+        state, before, float(lo), float(hi), int(n_segments[0]), int(n_segments[1]),
+        float(s_lo), float(s_hi), float(taper_probability), float(max_jump_ratio), after,
+    )  # fmt: skip
+    table.flags.writeable = False
+    return b, DepthProfile._built(table, name), a
+
+
+@numba.njit(cache=True)
+def _draw_cut(state, before, lo, hi, n_lo, n_hi, s_lo, s_hi, taper_probability, max_jump_ratio,
+              after):  # fmt: skip
+    """:func:`drawn_profile`'s numbers: ``before`` uniforms, the number of segments
+    (``integers(n_lo, n_hi + 1)``), a ``(4, n)`` block of uniforms (:meth:`DepthProfile.
+    random`'s), its segments (:func:`_random_segments`), ``after`` uniforms."""
+    b = np.empty(before)
+    stream_fill(state, b)
+    n = n_lo + stream_bounded(state, n_hi - n_lo)
+    draws = np.empty((4, n))
+    stream_fill(state, draws.reshape(-1))
+    table = _random_segments(draws, lo, hi, s_lo, s_hi, taper_probability, max_jump_ratio)
+    a = np.empty(after)
+    stream_fill(state, a)
+    return b, table, a
 
 
 @numba.njit(cache=True)

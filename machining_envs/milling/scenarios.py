@@ -23,8 +23,8 @@ import numpy as np
 from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
 from machining_envs.core.checks import check_range, drawn_instance
 from machining_envs.core.env import resolve_scenario
-from machining_envs.core.splits import split_stream, uniform_draws
-from machining_envs.core.workpieces import DepthProfile
+from machining_envs.core.splits import split_state
+from machining_envs.core.workpieces import DepthProfile, drawn_profile
 from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams, bisect_right
 
 __all__ = [
@@ -218,9 +218,9 @@ def _random(
     wear: tuple[float, float] | None = None,
     actuation: Actuation | None = None,
 ):
-    # After the workpiece, uniform in [low, high) each (uniform_draws: one call, the numbers
-    # of one scalar draw each, in order): the log spindle and limit scales, Ks, m, the noise
-    # scale and (with wear) the wear rate.
+    # After the workpiece, uniform in [low, high) each, low + (high - low) u (what
+    # rng.uniform(low, high) gives) in order: the log spindle and limit scales, Ks, m, the
+    # noise scale and (with wear) the wear rate.
     lows = [float(np.log(spindle[0])), float(np.log(ref[0])), 1.0 - truth, 1.0 - truth, 0.5]
     highs = [float(np.log(spindle[1])), float(np.log(ref[1])), 1.0 + truth, 1.0 + truth, 2.0]
     if wear is not None:
@@ -229,6 +229,10 @@ def _random(
     spans = [hi - lo for lo, hi in zip(lows, highs, strict=True)]
     # Every drawn field lies between these two scenarios' (checked here, once): make()
     # builds its scenarios without checking them again.
+    profile_name = f"{name} profile"
+    DepthProfile.random(
+        np.random.default_rng(0), depth, segments, (5.0, 12.0), 0.3, 2.5
+    )  # checks them
     prof = DepthProfile.steps((depth[0],), 1.0)
     for end in (0, 1):
         w_end = wear[end] if wear is not None else 0.0
@@ -237,9 +241,11 @@ def _random(
         MillingScenario(name, prof, sp, tr, ks, ks, noise, w_end, actuation=actuation)
 
     def make(env_rng: np.random.Generator) -> MillingScenario:
-        rng = split_stream(env_rng, name)
-        prof = DepthProfile.random(rng, depth, segments, (5.0, 12.0), 0.3, name=f"{name} profile")
-        u = uniform_draws(rng, lows, spans)
+        # The numbers of DepthProfile.random(rng, ...) and one rng.uniform per range, from
+        # the split's stream in one compiled call.
+        _, prof, v = drawn_profile(split_state(env_rng, name), 0, depth, segments, (5.0, 12.0),
+                                   0.3, 2.5, len(lows), profile_name)  # fmt: skip
+        u = [lo + span * x for lo, span, x in zip(lows, spans, v.tolist(), strict=True)]
         return drawn_instance(
             MillingScenario,
             {

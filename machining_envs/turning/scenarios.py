@@ -26,8 +26,8 @@ import numpy as np
 from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
 from machining_envs.core.checks import drawn_instance
 from machining_envs.core.env import resolve_scenario
-from machining_envs.core.splits import split_stream, uniform_draws
-from machining_envs.core.workpieces import DepthProfile
+from machining_envs.core.splits import split_state
+from machining_envs.core.workpieces import DepthProfile, drawn_profile
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams, _check
 
 __all__ = [
@@ -144,9 +144,9 @@ def _random(
     wear: tuple[float, float] | None = None,
     shopfloor: bool = False,
 ):
-    # The spindle speed log-uniform, then the workpiece, then uniform in [low, high) each
-    # (uniform_draws: one call, the numbers of one scalar draw each, in order): Kf, p, the
-    # noise scale, the force limit (where it varies) and the wear rate (with wear).
+    # The spindle speed log-uniform, then the workpiece, then uniform in [low, high) each,
+    # low + (high - low) u (what rng.uniform(low, high) gives) in order: Kf, p, the noise
+    # scale, the force limit (where it varies) and the wear rate (with wear).
     log_rpm = float(np.log(rpm[0]))
     log_span = float(np.log(rpm[1])) - log_rpm
     lows = [0.8, 0.8, 0.5]
@@ -165,6 +165,10 @@ def _random(
     )
     # Every drawn field lies between these two scenarios' (checked here, once): make()
     # builds its scenarios without checking them again.
+    profile_name = f"{name} profile"
+    DepthProfile.random(
+        np.random.default_rng(0), depth, segments, (4.0, 12.0), 0.3, 2.5
+    )  # checks them
     prof = DepthProfile.steps((depth[0],), 1.0)
     for end in (0, 1):
         w_end = wear[end] if wear is not None else 0.0
@@ -172,10 +176,12 @@ def _random(
                         **shop)  # fmt: skip
 
     def make(env_rng: np.random.Generator) -> TurningScenario:
-        rng = split_stream(env_rng, name)
-        spindle = float(np.exp(log_rpm + log_span * rng.random()))
-        prof = DepthProfile.random(rng, depth, segments, (4.0, 12.0), 0.3, name=f"{name} profile")
-        u = uniform_draws(rng, lows, spans)
+        # The numbers of rng.random(), DepthProfile.random(rng, ...) and one rng.uniform
+        # per range, from the split's stream in one compiled call.
+        r, prof, v = drawn_profile(split_state(env_rng, name), 1, depth, segments, (4.0, 12.0),
+                                   0.3, 2.5, len(lows), profile_name)  # fmt: skip
+        spindle = float(np.exp(log_rpm + log_span * float(r[0])))
+        u = [lo + span * x for lo, span, x in zip(lows, spans, v.tolist(), strict=True)]
         return drawn_instance(
             TurningScenario,
             {

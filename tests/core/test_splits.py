@@ -89,3 +89,26 @@ def test_split_stream_draws_the_numbers_of_split_rng():
             assert got == want
     with pytest.raises(ValueError, match="split must be one of"):
         split_stream(np.random.default_rng(0), "nope")
+
+
+def test_drawn_profile_is_depth_profile_random_between_uniforms():
+    """The compiled draw the scenario factories use (uniforms, a random workpiece,
+    uniforms, from a split's stream) gives what ``random``, ``DepthProfile.random`` and
+    ``random`` give from :func:`split_rng`'s generator: the same numbers and the same
+    profile, over many states and both factories' shapes."""
+    from machining_envs.core.splits import split_state
+    from machining_envs.core.workpieces import DepthProfile, drawn_profile
+
+    for seed in range(300):
+        for before, after, segments, seg_mm in ((1, 5, (2, 5), (4.0, 12.0)),
+                                                (0, 6, (2, 6), (5.0, 12.0))):  # fmt: skip
+            a, b = np.random.default_rng(seed), np.random.default_rng(seed)
+            g = split_rng(a, "train")
+            want_b = g.random(before)
+            want = DepthProfile.random(g, (0.5, 3.0), segments, seg_mm, 0.3, 2.5, name="p")
+            want_a = g.random(after)
+            got_b, got, got_a = drawn_profile(split_state(b, "train"), before, (0.5, 3.0),
+                                              segments, seg_mm, 0.3, 2.5, after, "p")  # fmt: skip
+            assert got == want
+            np.testing.assert_array_equal(got.segment_array(), want.segment_array())
+            assert got_b.tolist() == want_b.tolist() and got_a.tolist() == want_a.tolist()
