@@ -19,7 +19,7 @@ of:
   array of the same shape (the first block the array itself).
 
 Resets run on the calling thread, and some of them (the exact discretisations of the
-turning and contouring plants, through scipy) call OpenBLAS, whose threads spin for about
+contouring plants, through scipy) call OpenBLAS, whose threads spin for about
 0.1 ms after every call, even a 4x4 product. A single env resets now and then, but a vector
 env of many lanes resets some at almost every step, and its BLAS threads then kept the
 other cores busy: a two-thread ContouringFeed-v0 ran no faster than one. So the vector env

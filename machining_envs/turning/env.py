@@ -909,8 +909,10 @@ class TurningVectorEnv(LaneVectorEnv):
     """
 
     env_name = "TurningEnv"
-    # Every reset discretises the lane's plant at its own parameters (scipy, BLAS).
-    resets_call_blas = True
+    # A reset discretises the lane's plant at its speed in compiled code, with no BLAS call
+    # (scipy's zoh, which calls BLAS, only where the series declines: never in the plant's
+    # ranges), so it does not need BLAS limited to one thread.
+    resets_call_blas = False
 
     def __init__(
         self,
