@@ -37,6 +37,7 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
+from machining_envs.core.kernels import block_noise
 from machining_envs.core.packed import (
     PackedArgs,
     as_float,
@@ -185,13 +186,7 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
             cmd = cmap[5] + cmap[6] * a
         commands[k] = cmd
         info_f[1, k] = cmd
-        nc = noise_counts[k]
-        if nc != 0.0:
-            i = normal_i[k]
-            noise[k] = nc * normals[k, i]
-            normal_i[k] = i + 1
-        else:
-            noise[k] = 0.0
+        noise[k] = block_noise(k, noise_counts[k], normals, normal_i)
         prev_action[k] = a
         n_clipped[k] += clipped[k]
     if not stage & 2:

@@ -37,6 +37,7 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
+from machining_envs.core.kernels import block_noise
 from machining_envs.core.packed import (
     PackedArgs,
     as_float,
@@ -218,13 +219,7 @@ def _step(ef, eb, big, li, filt, z, buf, work, edges, d0, slope, lane_f, finishe
         last_command[k] = commands[k]
         last_clipped[k] = clipped[k]
         n_clipped[k] += clipped[k]
-        nc = noise_counts[k]
-        if nc != 0.0:
-            i = normal_i[k]
-            noise[k] = nc * normals[k, i]
-            normal_i[k] = i + 1
-        else:
-            noise[k] = 0.0
+        noise[k] = block_noise(k, noise_counts[k], normals, normal_i)
         step_lane(
             k, big, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f,
             finished, m, n_f, commands[k], noise[k], out, out_seg, out_finish,

@@ -419,13 +419,7 @@ def _lane_matrices(phis, gams, base, sa, sb, ts, spindle_rpm, packed, lag):
     Every delayed instant ``t_j - T`` sits the same fraction ``rho`` of a sub-step past a
     sub-step point, so one exponential over ``rho`` and the powers over ``i h`` give all of
     them exactly."""
-    m = lag.size
-    h = ts / m
-    period = 60.0 / spindle_rpm
-    lags = int(math.ceil(period / ts + 1e-12)) + 1
-    rho = (-period) % h
-    if rho > h - 1e-12 * h:
-        rho = 0.0
+    period, lags, rho = _delays(spindle_rpm, ts, lag.size)
     i_row = np.zeros(4)  # the I-rows of Phi(rho) and Gamma(rho), side by side
     i_row[2] = 1.0
     if rho > 0 and not _exp_row(sa, sb, rho, 2, i_row):
@@ -434,17 +428,24 @@ def _lane_matrices(phis, gams, base, sa, sb, ts, spindle_rpm, packed, lag):
     return lags
 
 
-def _fill_matrices_zoh(params: _LinearKey, spindle_rpm: float, packed, lag) -> int:
-    """:func:`_lane_matrices` with ``Phi(rho)`` and ``Gamma(rho)`` from ``zoh``."""
-    m = params.substeps
-    ts = params.sample_time_s
+@numba.njit(cache=True)
+def _delays(spindle_rpm, ts, m):
+    """``(T, lags, rho)`` at ``spindle_rpm``: the revolution time ``T``, the samples of
+    command history the step matrix reaches back (``lags``) and the fraction of a sub-step
+    ``h = Ts / m`` by which every delayed instant ``t_j - T`` lies past a sub-step point."""
     h = ts / m
-    phis, gams, base, sa, sb, _ = _speed_free_tables(params)
     period = 60.0 / spindle_rpm
     lags = int(math.ceil(period / ts + 1e-12)) + 1
     rho = (-period) % h
     if rho > h - 1e-12 * h:
         rho = 0.0
+    return period, lags, rho
+
+
+def _fill_matrices_zoh(params: _LinearKey, spindle_rpm: float, packed, lag) -> int:
+    """:func:`_lane_matrices` with ``Phi(rho)`` and ``Gamma(rho)`` from ``zoh``."""
+    phis, gams, base, sa, sb, ts = _speed_free_tables(params)
+    period, lags, rho = _delays(float(spindle_rpm), ts, params.substeps)
     i_row = np.zeros(4)  # the I-rows of Phi(rho) and Gamma(rho), side by side
     i_row[2] = 1.0
     if rho > 0:
