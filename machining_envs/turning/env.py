@@ -182,12 +182,6 @@ _EF_BREAKAGE = _EF.index("breakage_force")
 _EF_PREV_ACTION = _EF.index("prev_action")
 _EF_FR_OBS = _EF.index("fr_obs")
 _EF_RPM_OBS = _EF.index("rpm_obs")
-#: The columns of ``ef`` a lane's start writes (in this order).
-_EF_START = np.array([
-    _EF.index(c)
-    for c in ("force_limit", "vmax", "breakage_force", "prev_action", "fr_obs", "rpm_obs",
-              "command")
-])  # fmt: skip
 
 
 @numba.njit(cache=True, inline="always")
@@ -271,7 +265,7 @@ def _start(k, full_history, consts, segments, x, ef, eb, big, li, z, buf, edges,
             b = traverse_time(segments, c, 1.0 / p, vmax)
     fr_obs = min(limit / fs, 10.0)
     rpm_obs = rpm / 1000.0
-    e = ef[k]  # the columns of _EF_START: limit, Vmax, breakage, prev action, fr, rpm, command
+    e = ef[k]
     e[_EF_FORCE_LIMIT] = limit
     e[_EF_VMAX] = vmax
     e[_EF_BREAKAGE] = brk
