@@ -39,17 +39,15 @@ from machining_envs.drilling.plant import (
     _P_BREAK,
     _P_D,
     _P_TARGET,
-    _S_OMEGA,
-    _S_POS,
     _S_T,
-    _S_VOLT,
-    _S_X1,
     LANE_BLOCK,
     DrillingLanes,
     DrillingParams,
     _pymax,
     _pymin,
     advance,
+    restart_lane,
+    start_lane,
 )
 from machining_envs.drilling.scenarios import (
     DRILLING_SCENARIOS,
@@ -237,6 +235,66 @@ def _serve_step(ctl, table, polls):
     return serve_one_table(_step_packed, ctl, table, polls)
 
 
+@numba.njit(cache=True)
+def _start(k, row, eng_depth, eng_torque, eng_thrust, x, par, eng, state, out, consts, ev, flags,
+           counts, obs, bound):  # fmt: skip
+    """The arrays of lane ``k`` at the start of a hole (``_DrillingCore.start``): the
+    plant's (:func:`~machining_envs.drilling.plant.start_lane` with the ``par`` row ``row``
+    and the engagement tables, :func:`~machining_envs.drilling.plant.restart_lane`), then
+    the env's: the score bound, the first observation, and the signals of a hole not yet
+    begun, where ``lane_info`` and ``info_arrays`` read them until the first step (which
+    writes every one before it reads it): the drill at rest at its start position, the
+    spindle at its initial speed, the valve and the voltage as the plant starts, the command
+    of the initial action. ``x`` = ``[voltage, valve x1, spindle speed (rad/s), start
+    position, torque limit, feed of the bound, initial action, its command]``.
+    """
+    volt, x1, omega, position, tr, v, a0, c0 = x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7]
+    start_lane(k, row, eng_depth, eng_torque, eng_thrust, par, eng)
+    restart_lane(k, volt, x1, omega, position, state)
+    hz = omega / (2.0 * math.pi)
+    target = row[_P_TARGET]
+    bound[k] = (target - position) / v
+    e = ev[k]
+    e[:] = 0.0
+    e[_E_ACTION] = a0
+    e[_E_TR] = tr
+    e[_E_SPEED_MEAS] = hz
+    e[_E_COMMAND] = c0
+    e[_E_VOLTAGE] = volt
+    flags[k, :] = False
+    counts[k, _C_N_CLIPPED] = 0
+    counts[k, _C_SEGMENT] = 0
+    lo, hi = _TORQUE_OBS
+    ts, hs, ss, ls = consts[6], consts[7], consts[8], consts[9]  # the observation's scales
+    # (the observation as Python's min and max make it)
+    o = obs[k]
+    o[0] = _pymin(_pymax(0.0 / ts, lo), hi)
+    o[1] = _pymin(tr / ts, 10.0)
+    o[2] = _pymin(_pymax(0.0 / hs, lo), hi)
+    o[3] = _pymin(_pymax(hz / ss, 0.0), 3.0)
+    o[4] = a0
+    o[5] = _pymin(_pymax(position / ls, -1.0), 2.0)
+    o[6] = _pymin(0.0 / ls, 2.0)
+    o[7] = _pymin(target / ls, 2.0)
+    o[8] = row[_P_D]
+    for i in range(_HISTORY):
+        o[9 + i] = _pymin(_pymax(0.0 / ts, lo), hi)
+    q = out[k]
+    q[:] = 0.0
+    q[5] = hz
+    q[6] = hz
+    q[7] = x1
+    q[11] = position
+    q[17] = np.nan
+
+
+@numba.njit(cache=True)
+def _start_packed(t, k, row, eng_depth, eng_torque, eng_thrust, x, bound):
+    """:func:`_start` with the step's table ``t`` (:func:`_step_packed`'s)."""
+    _start(k, row, eng_depth, eng_torque, eng_thrust, x, f8_2(t, 2), f8_3(t, 3), f8_2(t, 4),
+           f8_2(t, 5), f8_1(t, 6), f8_2(t, 7), b1_2(t, 8), i8_2(t, 9), f4_2(t, 10), bound)  # fmt: skip
+
+
 #: Where :func:`_step`'s arguments (``_DrillingCore._args``) hold the lanes: axis 0 or none
 #: (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (None, None, 0, 0, 0, 0, None, 0, 0, 0, 0, 0)
@@ -342,12 +400,23 @@ class _DrillingCore:
         p = self.params
         d = sc.diameter_mm
         truth = sc.true_params(p)
-        lanes = self.lanes
-        lanes.start(lane, truth, d, sc.target_depth_mm)
+        tr = sc.limit_Nmm(p)
+        # (true_params changes no field the lanes share, and a scenario's hole lies within
+        # the lanes' range of depths: DrillingLanes.start's checks hold.)
+        c = truth.coefficients(d)
+        target = sc.target_depth_mm
+        u = p.nominal_voltage
+        # The floor of the drilling time: the whole travel at the programmed feed (voltage
+        # control) or at the stage's top speed (feed control).
+        v = p.feed_velocity_mm_s if self.control == "voltage" else p.feed_speed_max_mm_s
+        x = np.array((u, truth.valve_static_gain_per_V * u, truth.free_speed_rad_s(u), 0.0, tr,
+                      v, self._a0, self._c0))  # fmt: skip
+        _start_packed(self._packed(self._args), lane,
+                      self.lanes.lane_row(truth, c, d, target), c.engage_depth_mm,
+                      c.engage_torque, c.engage_thrust, x, self.bound)  # fmt: skip
         self.block_rng[lane] = rng
         self.draw_normals(lane, rng)
-        tr = sc.limit_Nmm(p)
-        breakage = truth.breakage_torque_Nmm(d)
+        breakage = float(self.lanes.par[lane, _P_BREAK])
         if not tr < breakage:  # the message is made only when it fails
             check_below(
                 f"scenario {sc.name!r}: the torque limit (torque_limit_Nmm x torque_limit_scale)",
@@ -356,48 +425,6 @@ class _DrillingCore:
                 breakage,
                 "the drill would break before the limit binds",
             )
-        s = lanes.state[lane]
-        hz = float(s[_S_OMEGA]) / (2.0 * math.pi)
-        position = float(s[_S_POS])
-        # The floor of the drilling time: the whole travel at the programmed feed (voltage
-        # control) or at the stage's top speed (feed control).
-        v = p.feed_velocity_mm_s if self.control == "voltage" else p.feed_speed_max_mm_s
-        self.bound[lane] = (sc.target_depth_mm - position) / v
-        e = self.ev[lane]
-        e[:] = 0.0
-        e[_E_ACTION] = self._a0
-        e[_E_TR] = tr
-        e[_E_SPEED_MEAS] = hz
-        self.flags[lane] = False
-        c = self.counts[lane]
-        c[_C_N_CLIPPED] = 0
-        c[_C_SEGMENT] = 0
-        lo, hi = _TORQUE_OBS
-        ls = MicroDrillingEnv.LENGTH_SCALE_MM
-        self.obs[lane] = (
-            min(max(0.0 / p.torque_scale_Nmm, lo), hi),
-            min(tr / p.torque_scale_Nmm, 10.0),
-            min(max(0.0 / p.thrust_scale_N, lo), hi),
-            min(max(hz / MicroDrillingEnv.SPEED_SCALE_HZ, 0.0), 3.0),
-            self._a0,
-            min(max(position / ls, -1.0), 2.0),
-            min(0.0 / ls, 2.0),
-            min(sc.target_depth_mm / ls, 2.0),
-            d,
-            *(min(max(0.0 / p.torque_scale_Nmm, lo), hi) for _ in range(_HISTORY)),
-        )
-        # The signals of a hole not yet begun, where lane_info and info_arrays read them
-        # until the first step (which writes every one before it reads it): the drill at
-        # rest at its start position, the spindle at its initial speed, the valve and the
-        # voltage as the plant starts, the command of the initial action.
-        e[_E_COMMAND] = self._c0
-        e[_E_VOLTAGE] = s[_S_VOLT]
-        o = lanes.out[lane]
-        o[:] = 0.0
-        o[5] = o[6] = hz
-        o[7] = s[_S_X1]
-        o[11] = position
-        o[17] = np.nan
 
     def step(self) -> None:
         """Advance every lane with its action ``ev[:, _E_ACTION]`` (finite; clipped to the

@@ -1216,6 +1216,30 @@ def _step_lanes(m, g, par, eng, state, inputs, out):
         advance(k0, k1, m, g, par, eng, state, inputs[k0:k1], out, tmp, rows)
 
 
+@numba.njit(cache=True)
+def start_lane(k, row, eng_depth, eng_torque, eng_thrust, par, eng):
+    """Lane ``k``'s parameters and drill (:class:`DrillingLanes`): its ``par`` row
+    (:meth:`DrillingLanes.lane_row`) and its engagement tables."""
+    for i in range(par.shape[1]):
+        par[k, i] = row[i]
+    eng[k, 0, :] = eng_depth
+    eng[k, 1, :] = eng_torque
+    eng[k, 2, :] = eng_thrust
+
+
+@numba.njit(cache=True)
+def restart_lane(k, voltage, x1, omega, position_mm, state):
+    """Lane ``k``'s state at the start of a hole (:meth:`DrillingLanes.restart`): the valve
+    settled at ``x1`` for ``voltage``, the spindle at ``omega``, the drill point at
+    ``position_mm``, every other state zero."""
+    s = state[k]
+    s[:] = 0.0
+    s[_S_VOLT] = voltage
+    s[_S_X1] = x1
+    s[_S_OMEGA] = omega
+    s[_S_POS] = position_mm
+
+
 class DrillingLanes:
     """N independent holes drilled together: the physics of every drilling env.
 
@@ -1284,7 +1308,17 @@ class DrillingLanes:
                 f"({', '.join(f'{f}={batch[f]!r}' for f in diff)}), got {diff}"
             )
         c = p.coefficients(diameter_mm) if coefficients is None else coefficients
-        self.par[lane] = (
+        start_lane(lane, self.lane_row(p, c, diameter_mm, target_depth_mm), c.engage_depth_mm,
+                   c.engage_torque, c.engage_thrust, self.par, self.eng)  # fmt: skip
+        self.restart(lane, p, start_position_mm)
+
+    @staticmethod
+    def lane_row(params: DrillingParams, coefficients: CuttingCoefficients,
+                 diameter_mm: float, target_depth_mm: float) -> np.ndarray:  # fmt: skip
+        """A lane's row of ``par`` (``_P_*``): its parameters and its drill's cutting
+        constants (``coefficients``, of ``params`` at ``diameter_mm``)."""
+        p, c = params, coefficients
+        return np.array((
             p.chip_friction,
             p.chip_fluctuation,
             p.cutting_fluctuation,
@@ -1299,12 +1333,7 @@ class DrillingLanes:
             p.speed_noise_hz,
             p.breakage_torque_Nmm(diameter_mm),
             p.wear_per_mm,
-        )
-        e = self.eng[lane]
-        e[0] = c.engage_depth_mm
-        e[1] = c.engage_torque
-        e[2] = c.engage_thrust
-        self.restart(lane, p, start_position_mm)
+        ))  # fmt: skip
 
     def restart(
         self,
@@ -1318,12 +1347,8 @@ class DrillingLanes:
         nominal; or at ``speed_hz``), the valve settled, the drill point at ``position_mm``,
         no hole, no chips, fluctuations and sensor filters at zero."""
         u = params.nominal_voltage if voltage is None else float(voltage)
-        s = self.state[lane]
-        s[:] = 0.0
-        s[_S_VOLT] = u
-        s[_S_X1] = params.valve_static_gain_per_V * u
-        s[_S_OMEGA] = params.free_speed_rad_s(u) if speed_hz is None else _TWO_PI * speed_hz
-        s[_S_POS] = position_mm
+        omega = params.free_speed_rad_s(u) if speed_hz is None else _TWO_PI * speed_hz
+        restart_lane(lane, u, params.valve_static_gain_per_V * u, omega, position_mm, self.state)
 
     def step(self, inputs: np.ndarray) -> None:
         """Advance every lane by one sample; ``inputs[k]`` = voltage (V), feed velocity
