@@ -81,10 +81,16 @@ def split_rng(rng: np.random.Generator, split: str) -> np.random.Generator:
     (:func:`_seed_state`), and numpy's PCG64 is seeded from the words it gives.
     ``tests/core/test_splits.py`` checks the two agree.
     """
+    key = _split_key(split)  # before the draw: a bad name leaves rng as it was
+    return _split_generator(draw_below_2_63(rng), key)
+
+
+def _split_key(split: str) -> int:
+    """The key ``split`` mixes into its generators' seeds (``ValueError`` for no split)."""
     key = _SPLIT_KEYS.get(split) if isinstance(split, str) else None
     if key is None:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
-    return _split_generator(draw_below_2_63(rng), key)
+    return key
 
 
 def draw_below_2_63(rng: np.random.Generator) -> int:
@@ -119,9 +125,7 @@ def split_state(rng: np.random.Generator, split: str) -> np.ndarray:
     """The state of :func:`split_stream`'s stream (see :class:`SplitStream`), for compiled
     code that draws from it with :func:`stream_double`, :func:`stream_fill` and
     :func:`stream_bounded`."""
-    key = _SPLIT_KEYS.get(split) if isinstance(split, str) else None
-    if key is None:
-        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    key = _split_key(split)
     x = draw_below_2_63(rng)
     state = np.empty(6, dtype=np.uint64)
     _seed_stream(x & 0xFFFFFFFF, x >> 32, key, state)

@@ -58,6 +58,7 @@ from machining_envs.milling.plant import (
     SPINDLE_RPM_RANGE,
     MillingLanes,
     MillingParams,
+    check_depth,
     start_lane,
     step_lanes,
 )
@@ -494,8 +495,7 @@ class _MillingCore:
         rpm = sc.spindle_rpm(nominal)
         truth = sc.true_params(nominal)
         profile = sc.profile
-        if profile.max_depth_mm > truth.tool_diameter_mm:  # (MillingLanes.start's check)
-            self.lanes.start(lane, truth, rpm, profile)  # raises
+        check_depth(profile, truth)
         tr = sc.torque_limit_Nmm(nominal)
         if not tr < truth.breakage_torque_Nmm:  # the message is made only when it fails
             check_below(

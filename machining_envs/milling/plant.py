@@ -760,6 +760,16 @@ def step_lanes(
         lane_f[k, 8] = t + lane_f[k, 10]
 
 
+def check_depth(profile, params: MillingParams) -> None:
+    """``ValueError`` for a workpiece (``DepthProfile``) deeper radially than the tool of
+    ``params`` is wide."""
+    if profile.max_depth_mm > params.tool_diameter_mm:
+        raise ValueError(
+            f"radial depth of the workpiece must be at most the tool diameter "
+            f"{params.tool_diameter_mm:g} mm, got {profile.max_depth_mm:g} mm"
+        )
+
+
 @numba.njit(cache=True)
 def start_lane(k, row, lag_s, segments, lag, z, buf, edges, d0, slope, nseg, seg, lane_f,
                finished):  # fmt: skip
@@ -854,11 +864,7 @@ class MillingLanes:
         than the tool is wide, or servo parameters other than the batch's.
         """
         check_range("spindle_rpm", spindle_rpm, *SPINDLE_RPM_RANGE)
-        if profile.max_depth_mm > params.tool_diameter_mm:
-            raise ValueError(
-                f"radial depth of the workpiece must be at most the tool diameter "
-                f"{params.tool_diameter_mm:g} mm, got {profile.max_depth_mm:g} mm"
-            )
+        check_depth(profile, params)
         if params is not self.params and _ServoKey.of(params) != self._key:
             raise ValueError(
                 "a lane's servo gain, natural frequency, damping, sample time and sub-steps "
