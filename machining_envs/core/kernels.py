@@ -26,7 +26,6 @@ from numba.extending import intrinsic, models, register_model
 __all__ = [
     "add8",
     "add_scaled8",
-    "block_noise",
     "fma",
     "get8",
     "load8",
@@ -164,19 +163,6 @@ def add8(typingctx, a, b):
         return builder.fadd(args[0], args[1])
 
     return vec8(vec8, vec8), codegen
-
-
-@numba.njit(cache=True, inline="always")
-def block_noise(k, scale, normals, normal_i):
-    """Lane ``k``'s sensor noise for one step: ``scale`` times the next standard normal of
-    its block ``normals[k]``, whose index ``normal_i[k]`` then moves on; 0 where ``scale``
-    is 0 (a lane without noise takes none). The envs keep each block filled from the lane's
-    own generator, between steps."""
-    if scale != 0.0:
-        i = normal_i[k]
-        normal_i[k] = i + 1
-        return scale * normals[k, i]
-    return 0.0
 
 
 @numba.njit(cache=True)

@@ -30,6 +30,7 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
+from machining_envs.core.normals import LaneGenerators, standard_normal
 from machining_envs.core.packed import PackedArgs, as_int, b1_2, f4_2, f8_1, f8_2, f8_3, i8_2
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
 from machining_envs.drilling.metrics import DRILLING_TASK
@@ -59,10 +60,6 @@ __all__ = ["MicroDrillingEnv", "MicroDrillingVectorEnv", "DrillingReward", "CONT
 
 _HISTORY = 3
 _TORQUE_OBS = (-1.0, 10.0)
-#: Rows of five standard normals drawn from the generator at a time (a block), and rows
-#: held in memory at a time.
-_NOISE_BLOCK = 256
-_NOISE_ROWS = 256
 #: What the action commands: the valve voltage (the paper's loop) or the feed velocity.
 CONTROL_MODES = ("voltage", "feed")
 #: The signals render() draws: name -> the info key each is read from.
@@ -111,7 +108,7 @@ class DrillingReward:
 (_F_IN_CLIPPED, _F_CLIPPED, _F_DIVERGED, _F_BREAKAGE, _F_FINISHED, _F_TERMINATED,
  _F_TRUNCATED, _F_OVER, _N_FLAGS) = range(9)  # fmt: skip
 #: Columns of ``_DrillingCore.counts``.
-_C_N_CLIPPED, _C_SEGMENT, _C_NOISE = 0, 1, 2
+_C_N_CLIPPED, _C_SEGMENT = 0, 1
 #: Entries of ``_DrillingCore.consts``.
 (_K_MID, _K_HALF, _K_FEED_MODE, _K_V0, _K_U0, _K_MAX_T, _K_TORQUE_SCALE, _K_THRUST_SCALE,
  _K_SPEED_SCALE, _K_LENGTH_SCALE, _K_W) = range(11)  # fmt: skip
@@ -177,12 +174,13 @@ def _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs):
 
 
 @numba.njit(cache=True, nogil=True)
-def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, normals):
+def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, rng_table):
     """One step of every lane: the action's command, the plant, the env's outputs.
 
     Lane ``k`` applies ``ev[k, _E_ACTION]``, clipped to the box here (and counted as clipped,
-    as it is when ``flags[k, _F_IN_CLIPPED]`` says it was clipped before), and takes the
-    next five of its standard normals. The plant advances ``LANE_BLOCK`` lanes at a time.
+    as it is when ``flags[k, _F_IN_CLIPPED]`` says it was clipped before), and draws five
+    standard normals from its generator (row ``rng_table[k]``, ``core.normals``). The plant
+    advances ``LANE_BLOCK`` lanes at a time.
     """
     feed_mode = c[_K_FEED_MODE] != 0.0
     n = state.shape[0]
@@ -210,12 +208,10 @@ def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, normals):
                 voltage, feed = command, c[_K_V0]
             ev[k, _E_COMMAND] = command
             ev[k, _E_VOLTAGE] = voltage
-            i = counts[k, _C_NOISE]
-            counts[k, _C_NOISE] = i + 1
             inputs[k - k0, 0] = voltage
             inputs[k - k0, 1] = feed
             for q in range(5):
-                inputs[k - k0, 2 + q] = normals[k, 5 * i + q]
+                inputs[k - k0, 2 + q] = standard_normal(rng_table, k)
         advance(k0, k1, m, g, par, eng, state, inputs, out, tmp, rows)
         _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs)
 
@@ -225,7 +221,7 @@ def _step_packed(t):
     """:func:`_step` with its arguments in one table (``core.packed``): what every
     step calls (one array to unbox, not one per argument)."""
     _step(as_int(t, 0), f8_1(t, 1), f8_2(t, 2), f8_3(t, 3), f8_2(t, 4), f8_2(t, 5), f8_1(t, 6),
-          f8_2(t, 7), b1_2(t, 8), i8_2(t, 9), f4_2(t, 10), f8_2(t, 11))  # fmt: skip
+          f8_2(t, 7), b1_2(t, 8), i8_2(t, 9), f4_2(t, 10), i8_2(t, 11))  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
@@ -306,11 +302,9 @@ class _DrillingCore:
     the reward, observation and episode end computed for all lanes by one compiled function,
     so that a lane of the vector env and the single env agree to the last bit.
 
-    Noise: lane ``k`` draws the standard normals of its plant from the generator of its
-    episode in blocks of ``_NOISE_BLOCK`` rows of five, the first at the reset after the
-    scenario; the rest of a block an episode did not use is drawn (and dropped) when the
-    next episode starts on the same generator. The numbers are held ``_NOISE_ROWS`` rows at
-    a time.
+    Noise: lane ``k`` draws the five standard normals of its plant's step from the
+    generator its episode started with (``core.normals``), after the scenario, as the step
+    needs them.
     """
 
     #: What a scenario may be: an object of this class or one of these names.
@@ -360,40 +354,26 @@ class _DrillingCore:
         self.names = np.full(n, "", dtype=object)
         self.ev = np.zeros((n, _N_EV))
         self.flags = np.zeros((n, _N_FLAGS), dtype=np.bool_)
-        self.counts = np.zeros((n, 3), dtype=np.int64)
+        self.counts = np.zeros((n, 2), dtype=np.int64)
         self.bound = np.full(n, np.nan)
         self.obs = np.zeros((n, 9 + _HISTORY), dtype=np.float32)
-        self.normals = np.zeros((n, 5 * _NOISE_ROWS))
-        self.counts[:, _C_NOISE] = _NOISE_ROWS
-        #: Normals of the current block not drawn yet, per lane, and its generator.
-        self.owed = [0] * n
-        self.block_rng: list = [None] * n
+        #: The generators the lanes draw their noise from (their episodes').
+        self.rngs = LaneGenerators(n)
         lanes = self.lanes
         self._args = (
             lanes.m, lanes.shared, lanes.par, lanes.eng, lanes.state, lanes.out,
-            self.consts, self.ev, self.flags, self.counts, self.obs, self.normals,
+            self.consts, self.ev, self.flags, self.counts, self.obs, self.rngs.table,
         )  # fmt: skip
         self._packed = PackedArgs()  # the kernel's arguments in one table (core.packed)
         #: The blocks of lanes the kernel steps at once (one thread unless a vector env
         #: asks for more).
         self.blocks = LaneBlocks(n)
 
-    def draw_normals(self, lane: int, rng: np.random.Generator) -> None:
-        """The next ``_NOISE_ROWS`` rows of ``lane``'s normals (a new block if one is due)."""
-        if self.owed[lane] == 0:
-            self.owed[lane] = 5 * _NOISE_BLOCK
-        rng.standard_normal(out=self.normals[lane])
-        self.owed[lane] -= 5 * _NOISE_ROWS
-        self.counts[lane, _C_NOISE] = 0
-
     def start(self, lane: int, spec, rng: np.random.Generator) -> None:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
         first observation goes to ``obs[lane]``, its reset info is its :meth:`lane_info`
         (and its column of :meth:`info_arrays`) until the first step."""
         check_scenario_spec(spec, DrillingScenario, DRILLING_SCENARIOS)
-        if self.owed[lane] and self.block_rng[lane] is rng:
-            rng.standard_normal(self.owed[lane])  # the rest of the last episode's block
-        self.owed[lane] = 0
         sc = drilling_scenario(spec, rng)
         self.scenarios[lane] = sc
         self.names[lane] = sc.name
@@ -414,8 +394,7 @@ class _DrillingCore:
         _start_packed(self._packed(self._args), lane,
                       self.lanes.lane_row(truth, c, d, target), c.engage_depth_mm,
                       c.engage_torque, c.engage_thrust, x, self.bound)  # fmt: skip
-        self.block_rng[lane] = rng
-        self.draw_normals(lane, rng)
+        self.rngs.bind(lane, rng)  # the hole's noise comes from it too
         breakage = float(self.lanes.par[lane, _P_BREAK])
         if not tr < breakage:  # the message is made only when it fails
             check_below(
@@ -428,8 +407,7 @@ class _DrillingCore:
 
     def step(self) -> None:
         """Advance every lane with its action ``ev[:, _E_ACTION]`` (finite; clipped to the
-        box, ``flags[:, _F_IN_CLIPPED]`` saying whether it was clipped already); the lanes'
-        normals must hold a row for this step (:meth:`draw_normals`)."""
+        box, ``flags[:, _F_IN_CLIPPED]`` saying whether it was clipped already)."""
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
             _step_packed(self._packed(self._args))
         else:
@@ -441,7 +419,7 @@ class _DrillingCore:
          position, depth, packed, chip, cutting, engagement, finish) = self.lanes.out[k].tolist()  # fmt: skip
         e = self.ev[k].tolist()
         clipped, diverged, breakage, finished = self.flags[k, _F_CLIPPED:_F_TERMINATED].tolist()
-        n_clipped, segment, _ = self.counts[k].tolist()
+        n_clipped, segment = self.counts[k].tolist()
         p = self.lanes.par[k]
         sc = self.scenarios[k]
         info = {
@@ -643,7 +621,10 @@ class MicroDrillingEnv(gym.Env):
 
     ## Version History
     * v0: first version. The physics now runs as a batched kernel shared with the vector
-      env (same numbers to the last bit, the same noise draws from ``np_random``).
+      env (same numbers to the last bit, the same noise draws from ``np_random``, five
+      normals a step, drawn by the kernel as the step needs them: the episodes of an
+      unseeded reset after the first differ from those of the versions that drew them in
+      blocks of 256 steps).
       The task is a process limit, not a reference: scenarios carry ``torque_limit_Nmm``
       and ``torque_limit_scale`` (was ``torque_ref_Nmm``), observation 1 is the limit,
       ``info`` gives ``torque_limit_Nmm``, ``cost`` and ``score_bound``; the reward tracks
@@ -746,8 +727,6 @@ class MicroDrillingEnv(gym.Env):
         a, clipped = check_action(action, "MicroDrillingEnv")
         core.ev[0, _E_ACTION] = a
         core.flags[0, _F_IN_CLIPPED] = clipped
-        if core.counts[0, _C_NOISE] == _NOISE_ROWS:
-            core.draw_normals(0, core.block_rng[0])
         core.step()
         info = core.lane_info(0)
         record_step(self, self._log, info)
@@ -846,8 +825,6 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
     def _step_lanes(self, actions):
         core = self._core
         core.ev[:, _E_ACTION] = actions[:, 0]  # clipped to the box by the kernel
-        for k in np.flatnonzero(core.counts[:, _C_NOISE] == _NOISE_ROWS).tolist():
-            core.draw_normals(k, core.block_rng[k])
         core.step()
         f = core.flags
         return (

@@ -37,7 +37,7 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
-from machining_envs.core.kernels import block_noise
+from machining_envs.core.normals import LaneGenerators, lane_noise
 from machining_envs.core.packed import (
     PackedArgs,
     as_float,
@@ -49,6 +49,7 @@ from machining_envs.core.packed import (
     f8_2,
     f8_2_rows,
     i8_1,
+    i8_2,
 )
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
 from machining_envs.core.workpieces import traverse_time
@@ -74,8 +75,6 @@ from machining_envs.milling.scenarios import (
 __all__ = ["EndMillingEnv", "EndMillingVectorEnv", "MillingReward"]
 
 _HISTORY = 3
-#: Standard normals drawn at a time for the sensor noise of a lane.
-_NORMAL_BLOCK = 256
 #: Decades spanned by the command on the default logarithmic action map: the feeds that
 #: hold the torque on the test set span about two (the feed exponent m ~ 0.4 turns a 2x
 #: change of depth, Ks or reference into a ~5x change of feed), and one more keeps slow
@@ -159,7 +158,7 @@ def _clamp(x, lo, hi):
 
 
 @numba.njit(cache=True, nogil=True)
-def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noise, big, lag,
+def _step(actions, clipped, cmap, rng_table, noise_counts, commands, noise, big, lag,
           z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, out, out_seg, out_finish, work,
           ke, tr, brk, vmax, n_teeth, w_axial, cumulative, max_t, w, meas, prev_action,
           tr_obs, rpm_obs, obs, reward, flags, n_clipped, info_f, stage):  # fmt: skip
@@ -171,7 +170,8 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
     ``cmap`` = ``[log, command_min, span, c, g, mid, half]`` of the action map
     (:class:`machining_envs.core.env.ActionMap`): the command is
     ``command_min + span expm1(c (a + 1)) / g`` on the log map, ``mid + half a`` on the
-    linear one. A lane with noise takes the next normal of its block ``normals[k]``.
+    linear one. A lane with noise draws a normal from its generator (row ``rng_table[k]``,
+    ``core.normals``).
     ``tr`` holds the torque limits; ``w`` = ``[tracking, overtorque, target, progress,
     breakage]``; ``flags[k]`` = ``[diverged, breakage, finished, terminated, truncated,
     over the limit]``;
@@ -187,7 +187,7 @@ def _step(actions, clipped, cmap, normals, normal_i, noise_counts, commands, noi
             cmd = cmap[5] + cmap[6] * a
         commands[k] = cmd
         info_f[1, k] = cmd
-        noise[k] = block_noise(k, noise_counts[k], normals, normal_i)
+        noise[k] = lane_noise(rng_table, k, noise_counts[k])
         prev_action[k] = a
         n_clipped[k] += clipped[k]
     if not stage & 2:
@@ -271,13 +271,13 @@ def _step_packed(t, stage):
     """:func:`_step` with its arguments in one table (``core.packed``): what every
     step calls (one array to unbox, not one per argument). ``info_f`` holds the lanes on
     axis 1, so a block's is a view of some of its columns (``f8_2_rows``)."""
-    _step(f8_1(t, 0), i8_1(t, 1), f8_1(t, 2), f8_2(t, 3), i8_1(t, 4), f8_1(t, 5), f8_1(t, 6),
-          f8_1(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), f8_2(t, 12), f8_2(t, 13),
-          f8_2(t, 14), f8_2(t, 15), i8_1(t, 16), i8_1(t, 17), b1_1(t, 18), as_int(t, 19),
-          f8_2(t, 20), i8_1(t, 21), f8_1(t, 22), f8_2(t, 23), as_float(t, 24), f8_1(t, 25),
-          f8_1(t, 26), f8_1(t, 27), f8_1(t, 28), f8_1(t, 29), f8_2(t, 30), as_float(t, 31),
-          f8_1(t, 32), f8_2(t, 33), f8_1(t, 34), f8_1(t, 35), f8_1(t, 36), f4_2(t, 37),
-          f8_1(t, 38), b1_2(t, 39), i8_1(t, 40), f8_2_rows(t, 41), stage)  # fmt: skip
+    _step(f8_1(t, 0), i8_1(t, 1), f8_1(t, 2), i8_2(t, 3), f8_1(t, 4), f8_1(t, 5),
+          f8_1(t, 6), f8_2(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), f8_2(t, 12),
+          f8_2(t, 13), f8_2(t, 14), i8_1(t, 15), i8_1(t, 16), b1_1(t, 17), as_int(t, 18),
+          f8_2(t, 19), i8_1(t, 20), f8_1(t, 21), f8_2(t, 22), as_float(t, 23), f8_1(t, 24),
+          f8_1(t, 25), f8_1(t, 26), f8_1(t, 27), f8_1(t, 28), f8_2(t, 29), as_float(t, 30),
+          f8_1(t, 31), f8_2(t, 32), f8_1(t, 33), f8_1(t, 34), f8_1(t, 35), f4_2(t, 36),
+          f8_1(t, 37), b1_2(t, 38), i8_1(t, 39), f8_2_rows(t, 40), stage)  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
@@ -289,7 +289,7 @@ def _serve_step(ctl, table, polls):
 
 @numba.njit(cache=True)
 def _start(k, row, x, segments, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished,
-           out_seg, normal_i, noise_counts, breakage, vmax, n_teeth, w_axial, cumulative,
+           out_seg, noise_counts, breakage, vmax, n_teeth, w_axial, cumulative,
            meas, prev_action, tr_obs, rpm_obs, obs, flags, in_clipped, n_clipped, info_f):  # fmt: skip
     """The arrays of lane ``k`` at the start of an episode (``_MillingCore.start``): the
     plant's (:func:`~machining_envs.milling.plant.start_lane`, from its constants ``row``),
@@ -345,9 +345,6 @@ def _start(k, row, x, segments, lag, z, buf, lane_f, edges, d0, slope, nseg, seg
     rpm_obs[k] = rpm / 1000.0
     prev_action[k] = -1.0
     n_clipped[k] = 0
-    # A new episode draws a new block (a lane without noise never does: the compiled step
-    # does not count its normals).
-    normal_i[k] = _NORMAL_BLOCK if noise != 0.0 else 0
     o = obs[k]
     o[:] = 0.0
     o[1] = t_obs
@@ -361,17 +358,17 @@ def _start(k, row, x, segments, lag, z, buf, lane_f, edges, d0, slope, nseg, seg
 @numba.njit(cache=True)
 def _start_packed(t, k, row, x, segments):
     """:func:`_start` with the step's table ``t`` (:func:`_step_packed`'s)."""
-    _start(k, row, x, segments, f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), f8_2(t, 12), f8_2(t, 13),
-           f8_2(t, 14), f8_2(t, 15), i8_1(t, 16), i8_1(t, 17), b1_1(t, 18), i8_1(t, 21),
-           i8_1(t, 4), f8_1(t, 5), f8_1(t, 26), f8_1(t, 27), f8_1(t, 28), f8_1(t, 29),
-           f8_2(t, 30), f8_2(t, 33), f8_1(t, 34), f8_1(t, 35), f8_1(t, 36), f4_2(t, 37),
-           b1_2(t, 39), i8_1(t, 1), i8_1(t, 40), f8_2_rows(t, 41))  # fmt: skip
+    _start(k, row, x, segments, f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), f8_2(t, 12),
+           f8_2(t, 13), f8_2(t, 14), i8_1(t, 15), i8_1(t, 16), b1_1(t, 17), i8_1(t, 20),
+           f8_1(t, 4), f8_1(t, 25), f8_1(t, 26), f8_1(t, 27), f8_1(t, 28),
+           f8_2(t, 29), f8_2(t, 32), f8_1(t, 33), f8_1(t, 34), f8_1(t, 35), f4_2(t, 36),
+           b1_2(t, 38), i8_1(t, 1), i8_1(t, 39), f8_2_rows(t, 40))  # fmt: skip
 
 
 #: Where :func:`_step`'s arguments (``_MillingCore._kernel_args``) hold the lanes: axis 0, axis
 #: 1 (``info_f``) or none (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (
-    0, 0, None, 0, 0, 0, 0, 0, None, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, None, 0, 0, 0, 0, None,
+    0, 0, None, 0, 0, 0, 0, None, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, None, 0, 0, 0, 0, None,
     0, 0, 0, 0, 0, 0, None, None, 0, 0, 0, 0, 0, 0, 0, 0, 1,
 )  # fmt: skip
 
@@ -451,8 +448,8 @@ class _MillingCore:
         self._bind_views()
         self.torque_limit[:] = 1.0
         self.bound[:] = np.nan
-        self.normals = np.zeros((n, _NORMAL_BLOCK))
-        self.normal_i = np.full(n, _NORMAL_BLOCK, dtype=np.int64)
+        #: The generators the lanes draw their sensor noise from (their episodes').
+        self.rngs = LaneGenerators(n)
         self.names = np.full(n, "", dtype=object)
         self.in_action = np.zeros(n)
         self.in_clipped = np.zeros(n, dtype=np.int64)
@@ -491,6 +488,7 @@ class _MillingCore:
         first observation goes to ``obs[lane]``, its reset info is its :meth:`lane_info` (and
         its column of :meth:`info_arrays`) until the first step."""
         sc = milling_scenario(spec, rng)
+        self.rngs.bind(lane, rng)  # the episode's sensor noise comes from it too
         nominal = self.params
         rpm = sc.spindle_rpm(nominal)
         truth = sc.true_params(nominal)
@@ -532,21 +530,6 @@ class _MillingCore:
         )
         self.names[lane] = sc.name
 
-    def draw_noise(self, rngs) -> None:
-        """Give every lane with sensor noise a standard normal for this step: a lane whose
-        block ``normals[k]`` is used up draws the next block from its generator ``rngs[k]``
-        (the same numbers in the same order as one at a time); lanes without noise draw
-        nothing."""
-        if self.n == 1:  # the single env: the same, without array bookkeeping
-            if self.normal_i[0] >= _NORMAL_BLOCK and self.noise_counts[0] != 0.0:
-                rngs[0].standard_normal(out=self.normals[0])
-                self.normal_i[0] = 0
-            return
-        need = np.flatnonzero(self.normal_i >= _NORMAL_BLOCK)  # only lanes with noise
-        for k in need.tolist():
-            rngs[k].standard_normal(out=self.normals[k])
-        self.normal_i[need] = 0
-
     def _kernel_args(self) -> tuple:
         """The arguments of :func:`_step`, in order (rebuilt when the lane arrays are)."""
         lanes = self.lanes
@@ -555,8 +538,7 @@ class _MillingCore:
                 self.in_action,
                 self.in_clipped,
                 self._cmap,
-                self.normals,
-                self.normal_i,
+                self.rngs.table,
                 self.noise_counts,
                 self.commands,
                 self.noise,
@@ -600,9 +582,10 @@ class _MillingCore:
 
     def step(self) -> None:
         """Advance every lane with the actions in ``in_action`` (inside the box) and
-        ``in_clipped`` (1 where the action was clipped to the box), after
-        :meth:`draw_noise`; with CNC actuation on, the commands pass through it first
-        (``machining_envs.core.actuation``) and ``info["command"]`` is what the drives got."""
+        ``in_clipped`` (1 where the action was clipped to the box), each lane's sensor noise
+        drawn from the generator its episode started with; with CNC actuation on, the
+        commands pass through it first (``machining_envs.core.actuation``) and
+        ``info["command"]`` is what the drives got."""
         args = self._kernel_args()
         if self.act_lanes is None:
             self._run(args, 3)
@@ -801,10 +784,10 @@ class EndMillingEnv(gym.Env):
 
     ## Version History
     * v0: first version. The physics now runs as a batched kernel shared with the vector
-      env (same numbers to the last bit); the sensor noise is drawn in blocks of 256 from
-      ``np_random`` (the same normals in the same order within an episode; after an
-      episode the unused rest of a block is skipped, so later episodes of an unseeded
-      reset differ from the first implementation's).
+      env (same numbers to the last bit); the sensor noise is drawn by the kernel from
+      ``np_random``, one normal a step (the normals of the first implementation, in the
+      same order within an episode; the episodes of an unseeded reset after the first
+      differ from those of the versions that drew the noise in blocks).
       The task is a process limit, not a reference: ``MillingParams.torque_limit_Nmm`` and
       the scenarios' ``torque_limit_scale`` (were ``torque_ref_*``), observation 1 is the
       limit, ``info`` gives ``torque_limit_Nmm``, ``cost`` and ``score_bound``; the reward
@@ -881,7 +864,6 @@ class EndMillingEnv(gym.Env):
         info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         self.plant = core.lanes
-        self._rngs = (self.np_random,)
         self._log = EpisodeLog(_LOG_FIELDS)
         self._log.record(info)
         return core.obs[0].copy(), info
@@ -895,7 +877,6 @@ class EndMillingEnv(gym.Env):
         a, clipped = check_action(action, "EndMillingEnv")
         core.in_action[0] = a
         core.in_clipped[0] = clipped
-        core.draw_noise(self._rngs)
         core.step()
         info = core.lane_info(0)
         record_step(self, self._log, info)
@@ -996,7 +977,6 @@ class EndMillingVectorEnv(LaneVectorEnv):
         a = actions[:, 0]
         core.in_clipped[:] = (a < -1.0) | (a > 1.0)
         np.minimum(np.maximum(a, -1.0), 1.0, out=core.in_action)  # np.clip, without its wrapper
-        core.draw_noise(self.lane_rngs)
         core.step()
         f = core.flags
         return (

@@ -37,7 +37,7 @@ from machining_envs.core.env import (
     resolve_reward,
     scenario_option,
 )
-from machining_envs.core.kernels import block_noise
+from machining_envs.core.normals import LaneGenerators, lane_noise
 from machining_envs.core.packed import (
     PackedArgs,
     as_float,
@@ -75,8 +75,6 @@ from machining_envs.turning.scenarios import (
 __all__ = ["TurningEnv", "TurningVectorEnv", "TurningReward"]
 
 _HISTORY = 3
-#: Standard normals drawn at a time for the sensor noise of a lane.
-_NORMAL_BLOCK = 64
 _FORCE_OBS = (-1.0, 10.0)
 #: The signals render() draws: name -> the info key each is read from.
 _LOG_FIELDS = {
@@ -193,15 +191,15 @@ def _env_floats(ef):
 
 @numba.njit(cache=True, nogil=True)
 def _step(ef, eb, big, li, filt, z, buf, work, edges, d0, slope, lane_f, finished, m, n_f,
-          out, out_finish, gain, fs, meas, max_t, w, obs, n_clipped, normals, normal_i,
+          out, out_finish, gain, fs, meas, max_t, w, obs, n_clipped, rng_table,
           noise_counts):  # fmt: skip
     """One step of every lane: the actions' bookkeeping, the sensor noise, the plant, the
     env's outputs.
 
     ``ef`` and ``eb`` hold the env's per-lane floats and flags (``_TurningCore``'s ``_EF``
     and ``_EB`` columns), ``li`` the plant's integers (``TurningLanes.li``). A lane with
-    noise (``noise_counts[k]`` counts per unit normal) takes the next normal of its block
-    ``normals[k]`` (``_TurningCore.draw_noise`` keeps one there), a lane without draws none.
+    noise (``noise_counts[k]`` counts per unit normal) draws a normal from its generator
+    (row ``rng_table[k]``, ``core.normals``), a lane without draws none.
     The env calls it through :func:`_step_packed` (one table for every argument)."""
     (actions, commands, noise, fr, vmax, brk, prev_action, fr_obs, rpm_obs, reward,
      last_command) = _env_floats(ef)  # fmt: skip
@@ -213,7 +211,7 @@ def _step(ef, eb, big, li, filt, z, buf, work, edges, d0, slope, lane_f, finishe
         last_command[k] = commands[k]
         last_clipped[k] = clipped[k]
         n_clipped[k] += clipped[k]
-        noise[k] = block_noise(k, noise_counts[k], normals, normal_i)
+        noise[k] = lane_noise(rng_table, k, noise_counts[k])
         step_lane(
             k, big, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f,
             finished, m, n_f, commands[k], noise[k], out, out_seg, out_finish,
@@ -229,8 +227,8 @@ def _step_packed(t):
     _step(f8_2(t, 0), b1_2(t, 1), f8_2(t, 2), i8_2(t, 3), f8_2(t, 4), f8_2(t, 5), f8_2(t, 6),
           f8_2(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12), as_int(t, 13),
           as_int(t, 14), f8_2(t, 15), f8_1(t, 16), as_float(t, 17), as_float(t, 18), f8_2(t, 19),
-          as_float(t, 20), f8_1(t, 21), f4_2(t, 22), i8_1(t, 23), f8_2(t, 24), i8_1(t, 25),
-          f8_1(t, 26))  # fmt: skip
+          as_float(t, 20), f8_1(t, 21), f4_2(t, 22), i8_1(t, 23), i8_2(t, 24),
+          f8_1(t, 25))  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
@@ -243,7 +241,7 @@ def _serve_step(ctl, table, polls):
 @numba.njit(cache=True)
 def _start(k, full_history, consts, segments, x, ef, eb, big, li, z, buf, edges, d0, slope,
            lane_f, finished, out, out_finish, fs, meas, obs, n_clipped, bound, noise_counts,
-           normal_i, spindle, spindle_set, power, diameter, length, spindle_rpm, phis, gams,
+           spindle, spindle_set, power, diameter, length, spindle_rpm, phis, gams,
            base, sa, sb, ts):  # fmt: skip
     """The arrays of lane ``k`` at the start of an episode (``_TurningCore.start``): the
     plant's (:func:`~machining_envs.turning.plant.start_lane`, whose return it returns),
@@ -277,7 +275,6 @@ def _start(k, full_history, consts, segments, x, ef, eb, big, li, z, buf, edges,
     noise_counts[k] = noise
     meas[k, :] = 0.0
     n_clipped[k] = 0
-    normal_i[k] = _NORMAL_BLOCK  # a new episode draws a new block
     spindle[k] = rpm
     spindle_set[k] = rpm
     power[k, :] = 0.0
@@ -307,9 +304,9 @@ def _start_packed(t, s, k, full_history, consts, segments, x):
         k, full_history, consts, segments, x, f8_2(t, 0), b1_2(t, 1), f8_2(t, 2), i8_2(t, 3),
         f8_2(t, 5), f8_2(t, 6), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12),
         f8_2(t, 15), f8_1(t, 16), as_float(t, 18), f8_2(t, 19), f4_2(t, 22), i8_1(t, 23),
-        f8_1(s, 0), f8_1(s, 1), i8_1(s, 2), f8_1(s, 3), f8_1(s, 4), f8_2(s, 5), f8_1(s, 6),
-        f8_1(s, 7), f8_1(s, 8), f8_3(s, 9), f8_2(s, 10), f8_2(s, 11), f8_2(s, 12),
-        f8_2(s, 13), as_float(s, 14),
+        f8_1(s, 0), f8_1(s, 1), f8_1(s, 2), f8_1(s, 3), f8_2(s, 4), f8_1(s, 5), f8_1(s, 6),
+        f8_1(s, 7), f8_3(s, 8), f8_2(s, 9), f8_2(s, 10), f8_2(s, 11), f8_2(s, 12),
+        as_float(s, 13),
     )  # fmt: skip
 
 
@@ -317,7 +314,7 @@ def _start_packed(t, s, k, full_history, consts, segments, x):
 #: or none (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (
     0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, None, None, 0, 0, None, None, 0, None, None, 0, 0, 0,
-    0, 0,
+    0,
 )  # fmt: skip
 
 
@@ -376,8 +373,8 @@ class _TurningCore:
         self.meas = np.zeros((n, _HISTORY + 1))  # newest first, N
         self.n_clipped = np.zeros(n, dtype=np.int64)
         self.obs = np.zeros((n, 4 + _HISTORY), dtype=np.float32)
-        self.normals = np.zeros((n, _NORMAL_BLOCK))
-        self.normal_i = np.full(n, _NORMAL_BLOCK)
+        #: The generators the lanes draw their sensor noise from (their episodes').
+        self.rngs = LaneGenerators(n)
         self.spindle = np.zeros(n)
         self.spindle_set = np.zeros(n)
         #: Drive power delivered and cutting power at the last sample, W.
@@ -431,6 +428,7 @@ class _TurningCore:
         first observation goes to ``obs[lane]``, its reset info is its :meth:`lane_info`
         (and its column of :meth:`info_arrays`) until the first step."""
         sc = turning_scenario(spec, rng)
+        self.rngs.bind(lane, rng)  # the episode's sensor noise comes from it too
         if self.spindle_rpm_override is not None:
             sc = dataclasses.replace(sc, spindle_rpm=self.spindle_rpm_override)
         self.scenarios[lane] = sc
@@ -484,26 +482,11 @@ class _TurningCore:
         (:func:`_start_packed`'s second table)."""
         lanes = self.lanes
         if self._s_args is None or self._s_args_version != lanes.version:
-            self._s_args = (self.bound, self.noise_counts, self.normal_i, self.spindle,
+            self._s_args = (self.bound, self.noise_counts, self.spindle,
                             self.spindle_set, self.power, self.diameter, self.length,
                             lanes.spindle_rpm, *lanes.speed_free)  # fmt: skip
             self._s_args_version = lanes.version
         return self._s_args
-
-    def draw_noise(self, rngs) -> None:
-        """Keep a standard normal ready for this step in every lane with sensor noise: a
-        lane whose block ``normals[k]`` is used up draws the next block from its generator
-        ``rngs[k]`` (the same numbers in the same order as one at a time); the kernel takes
-        them (:func:`_step`). Lanes without noise draw nothing."""
-        if self.n == 1:  # the single env: the same, without array bookkeeping
-            if self.normal_i[0] >= _NORMAL_BLOCK and self.noise_counts[0] != 0.0:
-                rngs[0].standard_normal(out=self.normals[0])
-                self.normal_i[0] = 0
-            return
-        need = np.flatnonzero((self.normal_i >= _NORMAL_BLOCK) & (self.noise_counts != 0.0))
-        for k in need.tolist():
-            rngs[k].standard_normal(out=self.normals[k])
-        self.normal_i[need] = 0
 
     def _kernel_args(self) -> tuple:
         """The arguments of :func:`_step`, in order (rebuilt when the plant's arrays are)."""
@@ -534,8 +517,7 @@ class _TurningCore:
                 self._w,
                 self.obs,
                 self.n_clipped,
-                self.normals,
-                self.normal_i,
+                self.rngs.table,
                 self.noise_counts,
             )
             self._args_version = lanes.version
@@ -543,9 +525,9 @@ class _TurningCore:
 
     def step(self) -> None:
         """Advance every lane with the inputs in ``in_action`` (clipped to the box),
-        ``in_clipped`` (whether it was clipped), ``in_command`` (the command it maps to) and
-        the sensor noise's normals (:meth:`draw_noise`); with CNC actuation on, the
-        commands pass through it first (``machining_envs.core.actuation``)."""
+        ``in_clipped`` (whether it was clipped) and ``in_command`` (the command it maps to),
+        each lane's sensor noise drawn from the generator its episode started with; with CNC
+        actuation on, the commands pass through it first (``machining_envs.core.actuation``)."""
         if self.act_lanes is not None:
             self.in_command[:] = self.act_lanes.apply(self.in_command)
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
@@ -756,10 +738,10 @@ class TurningEnv(gym.Env):
 
     ## Version History
     * v0: first version. The physics now runs as a batched kernel shared with the vector
-      env (same numbers to the last bit); the sensor noise is drawn in blocks of 64 from
-      ``np_random`` (the same normals in the same order within an episode; after an
-      episode the unused rest of a block is skipped, so later episodes of an unseeded
-      reset differ from the first implementation's).
+      env (same numbers to the last bit); the sensor noise is drawn by the kernel from
+      ``np_random``, one normal a step (the normals of the first implementation, in the
+      same order within an episode; the episodes of an unseeded reset after the first
+      differ from those of the versions that drew the noise in blocks).
       The task is a process limit, not a reference: scenarios carry ``force_limit_N``
       (was ``force_ref_N``), observation 1 is the limit, ``info`` gives ``force_limit_N``,
       ``cost`` and ``score_bound``; the reward tracks ``target`` x limit and penalises
@@ -836,7 +818,6 @@ class TurningEnv(gym.Env):
         info = core.lane_info(0)
         self.scenario = core.scenarios[0]
         self.plant = core.lanes
-        self._rngs = (self.np_random,)
         self._log = EpisodeLog(_LOG_FIELDS)
         self._log.record(info)
         return core.obs[0].copy(), info
@@ -852,7 +833,6 @@ class TurningEnv(gym.Env):
         ef[0] = a  # in_action, in_command (_EF)
         ef[1] = self.command_map.action_to_command(a)
         core.in_clipped[0] = clipped
-        core.draw_noise(self._rngs)
         core.step()
         info = core.lane_info(0)
         record_step(self, self._log, info)
@@ -947,7 +927,6 @@ class TurningVectorEnv(LaneVectorEnv):
         clipped = (a < -1.0) | (a > 1.0)
         a = np.minimum(np.maximum(a, -1.0), 1.0)  # np.clip, without its wrapper
         u = self.command_map.action_to_command(a)
-        core.draw_noise(self.lane_rngs)
         core.in_action[:] = a
         core.in_clipped[:] = clipped
         core.in_command[:] = u

@@ -180,23 +180,25 @@ def test_engagement_lookup_is_numpys_interp():
             assert all(np.isnan(_engagement(lanes.eng, 0, full, float("nan"))))
 
 
-def test_noise_is_drawn_in_blocks_of_256_rows_and_a_new_episode_starts_a_new_block():
-    """The normals of an episode come from ``np_random`` in blocks of 256 rows of five
-    (the first at the reset, after the scenario); the next reset skips what an episode left
-    of its block, so an unseeded reset continues the generator where blocks end."""
-    env = gym.make(DRILLING, scenario="paper_0.8")  # a named hole: the reset draws nothing
+def test_noise_is_drawn_from_np_random_five_normals_a_step():
+    """The plant's normals come from ``np_random``, five a step, as the steps need them
+    (after the scenario, ``core.normals``): after 300 steps of a named hole (whose reset
+    draws nothing) the generator stands where 1500 normals from the seed leave it, and an
+    unseeded reset goes on from there."""
+    env = gym.make(DRILLING, scenario="paper_0.8")
     env.reset(seed=3)
-    for _ in range(300):  # a second block is drawn at step 257
-        env.step(np.array([0.0], dtype=np.float32))
-    env.reset()
+    for _ in range(300):
+        _, _, terminated, truncated, _ = env.step(np.array([0.0], dtype=np.float32))
+        assert not (terminated or truncated)
     want = np.random.default_rng(3)
-    want.standard_normal(2 * 256 * 5)  # the two blocks of the first episode
+    want.standard_normal(300 * 5)
     mine = env.unwrapped.np_random
-    # The next episode's first numbers are the generator's next ones.
-    np.testing.assert_array_equal(
-        env.unwrapped._core.normals[0], want.standard_normal(env.unwrapped._core.normals.shape[1])
-    )
-    assert mine is env.unwrapped._core.block_rng[0]
+    assert mine.bit_generator.state == want.bit_generator.state
+    env.reset()
+    assert env.unwrapped._core.rngs.generators[0] is mine
+    env.step(np.array([0.0], dtype=np.float32))
+    want.standard_normal(5)
+    assert mine.bit_generator.state == want.bit_generator.state
 
 
 def test_vector_env_takes_the_single_envs_keywords():

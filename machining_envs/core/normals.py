@@ -1,0 +1,157 @@
+"""Standard normals of a numpy ``Generator``, drawn by compiled code from its own bit
+generator: the sensor noise of the plants, one number where a step needs it.
+
+The kernels of the turning, milling and drilling envs take their noise from each lane's
+generator (the episode's ``np_random``). Drawing it from Python, a block of normals at a
+time, cost a library call for each lane whose block ran out and kept a block per lane in
+memory. Here compiled code draws each normal when the step needs it, with the algorithm of
+``Generator.standard_normal`` (numpy's 256-level ziggurat, the tables numba carries for its
+own ``Generator`` support), on the generator's own state: through the bit generator's
+public C interface (``BitGenerator.ctypes``: the address of its state and of its
+``next_uint64`` and ``next_double`` functions), so that the numbers are the ones
+``rng.standard_normal()`` gives, in the same order, and the generator stands where it would
+after them (``tests/core/test_normals.py`` checks both, for PCG64 and other bit
+generators).
+
+A table row holds addresses, not the generator: whoever fills it keeps the generator alive
+(:class:`LaneGenerators`). numpy's own calls take the generator's lock; these do not, so a
+generator bound here must not be drawn from by another thread while a step runs (the envs'
+generators are their own).
+
+This module imports numpy and numba only; it knows nothing of gymnasium.
+"""
+
+from __future__ import annotations
+
+import ctypes
+
+import numba
+import numpy as np
+from llvmlite import ir
+from numba.core import types
+from numba.extending import intrinsic
+
+# numpy's ziggurat tables for the normal distribution (``ziggurat_constants.h``), as numba
+# carries them to reproduce ``Generator.standard_normal``.
+from numba.np.random._constants import (
+    fi_double,
+    ki_double,
+    wi_double,
+    ziggurat_nor_inv_r,
+    ziggurat_nor_r,
+)
+
+__all__ = ["ROW", "LaneGenerators", "generator_row", "lane_noise", "standard_normal"]
+
+#: Entries of a generator's row: its state's address, then those of its ``next_uint64``
+#: and ``next_double`` functions.
+ROW = 3
+
+
+def generator_row(rng: np.random.Generator) -> tuple[int, int, int]:
+    """The row of ``rng`` (see :data:`ROW`); ``TypeError`` for anything but a numpy
+    ``Generator``."""
+    if not isinstance(rng, np.random.Generator):
+        raise TypeError(f"a lane's generator must be a numpy Generator, got {type(rng).__name__}")
+    c = rng.bit_generator.ctypes
+
+    def address(fn) -> int:
+        return ctypes.cast(fn, ctypes.c_void_p).value
+
+    return c.state_address, address(c.next_uint64), address(c.next_double)
+
+
+class LaneGenerators:
+    """The generators lanes draw their noise from, and their rows (``table``, int64 of
+    shape ``(n, ROW)``) for the kernels; keeps each generator alive while its row is in the
+    table. A pickle or a copy holds the generators and the table, whose rows it writes anew
+    (the addresses are this process's; the array stays the one the kernels' argument
+    tuples hold)."""
+
+    __slots__ = ("generators", "table")
+
+    def __init__(self, n: int) -> None:
+        self.generators: list[np.random.Generator | None] = [None] * n
+        self.table = np.zeros((n, ROW), dtype=np.int64)
+
+    def bind(self, lane: int, rng: np.random.Generator) -> None:
+        """Lane ``lane`` draws from ``rng`` from now on (nothing is done if it already
+        does)."""
+        if self.generators[lane] is not rng:
+            self.table[lane] = generator_row(rng)
+            self.generators[lane] = rng
+
+    def __getstate__(self) -> dict:
+        return {"generators": self.generators, "table": self.table}
+
+    def __setstate__(self, state: dict) -> None:
+        self.generators = state["generators"]
+        self.table = state["table"]
+        for k, rng in enumerate(self.generators):
+            self.table[k] = 0 if rng is None else generator_row(rng)
+
+
+def _caller(result):
+    """An intrinsic calling the C function at an int64 address on the state at another:
+    ``result fn(void *state)``, as numpy's bit generators export them."""
+
+    @intrinsic
+    def call(typingctx, fn, state):
+        if fn != types.int64 or state != types.int64:
+            return None
+        sig = result(types.int64, types.int64)
+
+        def codegen(context, builder, signature, args):
+            ll_result = context.get_value_type(result)
+            ll_void_ptr = context.get_value_type(types.voidptr)
+            fnty = ir.FunctionType(ll_result, (ll_void_ptr,))
+            f = builder.inttoptr(args[0], fnty.as_pointer())
+            return builder.call(f, (builder.inttoptr(args[1], ll_void_ptr),))
+
+        return sig, codegen
+
+    return call
+
+
+_next_uint64 = _caller(types.uint64)
+_next_double = _caller(types.float64)
+
+
+@numba.njit(cache=True)
+def standard_normal(table, k):
+    """The next standard normal of lane ``k``'s generator (row ``table[k]``): the number
+    its ``standard_normal()`` would give, by numpy's ziggurat."""
+    state = table[k, 0]
+    fn_u64 = table[k, 1]
+    fn_dbl = table[k, 2]
+    while True:
+        r = _next_uint64(fn_u64, state)
+        idx = r & np.uint64(0xFF)
+        r >>= np.uint64(8)
+        rabs = (r >> np.uint64(1)) & np.uint64(0x000FFFFFFFFFFFFF)
+        x = float(rabs) * wi_double[idx]
+        if r & np.uint64(1):
+            x = -x
+        if rabs < ki_double[idx]:
+            return x  # the rectangles: nearly every draw
+        if idx == 0:  # the tail beyond r
+            while True:
+                xx = -ziggurat_nor_inv_r * np.log1p(-_next_double(fn_dbl, state))
+                yy = -np.log1p(-_next_double(fn_dbl, state))
+                if yy + yy > xx * xx:
+                    if (rabs >> np.uint64(8)) & np.uint64(1):
+                        return -(ziggurat_nor_r + xx)
+                    return ziggurat_nor_r + xx
+        elif (fi_double[idx - 1] - fi_double[idx]) * _next_double(fn_dbl, state) + fi_double[
+            idx
+        ] < np.exp(-0.5 * x * x):
+            return x
+
+
+@numba.njit(cache=True, inline="always")
+def lane_noise(table, k, scale):
+    """Lane ``k``'s sensor noise for one step: ``scale`` times the next standard normal of
+    its generator; 0, and nothing drawn, where ``scale`` is 0 (a lane without noise)."""
+    if scale != 0.0:
+        return scale * standard_normal(table, k)
+    return 0.0
