@@ -252,21 +252,34 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         with its ``_key`` mask); a lane just reset reports its reset info."""
         return self._core.info_arrays()
 
-    def _with_masks(self, info: dict) -> tuple[np.ndarray, tuple]:
+    def _with_masks(self, info: dict) -> tuple:
         """Add to ``info`` (a new dict) the mask of every lane for each key that has none:
-        one array, shared by those keys. Returns it, and ``(key, "_" + key)`` for every key
-        but the masks; both worked out once per set of keys."""
+        one array, shared by those keys. Returns ``(masks added, keys but the masks,
+        (key, mask) of the keys that came with a mask of their own)``, worked out once per
+        set of keys (what :meth:`_final_info` reads)."""
         keys = tuple(info)
         known = self._mask_keys.get(keys)
         if known is None:
             masks = tuple("_" + k for k in keys if k[0] != "_" and "_" + k not in info)
-            pairs = tuple((k, "_" + k) for k in keys if k[0] != "_")
+            plain = tuple(k for k in keys if k[0] != "_")
+            own = tuple((k, "_" + k) for k in plain if "_" + k in info)
             if len(self._mask_keys) >= 64:  # a few sets of keys occur; never let it grow
                 self._mask_keys.clear()
-            known = self._mask_keys[keys] = (masks, pairs)
-        every = self._every.copy()  # a copy of a template: np.ones costs several times more
-        info.update(dict.fromkeys(known[0], every))
-        return every, known[1]
+            known = self._mask_keys[keys] = (masks, plain, own)
+        info.update(dict.fromkeys(known[0], self._every.copy()))  # (np.ones costs more)
+        return known
+
+    @staticmethod
+    def _final_info(info: dict, known: tuple, done: np.ndarray) -> dict:
+        """The step's ``info`` (with its masks, :meth:`_with_masks`) as the final info of
+        the lanes ``done``: every key's array, each mask and-ed with ``done`` (the masks
+        that mark every lane are ``done`` itself, one array)."""
+        masks, plain, own = known
+        final = {k: info[k] for k in plain}
+        final.update(dict.fromkeys(masks, done))
+        for k, mk in own:
+            final[mk] = info[mk] & done
+        return final
 
     def step(self, actions):
         if not self._started:
@@ -297,7 +310,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         if mode is not AutoresetMode.SAME_STEP:
             return self._step_without_same_step_reset(a)
         obs, reward, terminated, truncated, info = self._step_lanes(a)
-        every, pairs = self._with_masks(info)  # _step_lanes' dict is new at every step
+        known = self._with_masks(info)  # _step_lanes' dict is new at every step
         done = np.logical_or(terminated, truncated)
         if not done.any():
             return obs, reward, terminated, truncated, info
@@ -309,10 +322,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         obs = obs.copy()
         with one_blas_thread() if self.resets_call_blas else _NO_CONTEXT:
             obs[lanes] = self._reset_lanes(lanes, None)
-        final_info: dict = {}
-        for k, mk in pairs:
-            mask = info[mk]
-            final_info[k], final_info[mk] = info[k], done if mask is every else mask & done
+        final_info = self._final_info(info, known, done)
         top = self._info_now()  # every lane's info again: the reset lanes' is their reset info
         self._with_masks(top)
         top["final_obs"], top["_final_obs"] = final_obs, done.copy()

@@ -162,7 +162,8 @@ def _step(actions, clipped, cmap, rng_table, noise_counts, commands, noise, big,
           z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, out, out_seg, out_finish, work,
           ke, tr, brk, vmax, n_teeth, w_axial, cumulative, max_t, w, meas, prev_action,
           tr_obs, rpm_obs, obs, reward, flags, n_clipped, info_f, stage):  # fmt: skip
-    """One step of every lane: the actions' commands and the sensor noise (``stage`` 1),
+    """One step of every lane: the actions (clipped to the box, ``clipped[k]`` set to 1
+    where they were) and their commands, the sensor noise (``stage`` 1),
     then the plant (:func:`step_lanes`) and each lane's reward, observation, episode flags
     and info (``stage`` 2); ``stage`` 3 does both. Between the two, the CNC's actuation may
     change ``commands`` (``machining_envs.core.actuation``).
@@ -181,6 +182,12 @@ def _step(actions, clipped, cmap, rng_table, noise_counts, commands, noise, big,
     log_map = cmap[0] != 0.0
     for k in range(n if stage & 1 else 0):  # stage 1: the commands
         a = actions[k]
+        if a > 1.0:  # clipped to the box (np.clip's numbers; finite, checked before)
+            a = actions[k] = 1.0
+            clipped[k] = 1
+        elif a < -1.0:
+            a = actions[k] = -1.0
+            clipped[k] = 1
         if log_map:
             cmd = cmap[1] + cmap[2] * math.expm1(cmap[3] * (a + 1.0)) / cmap[4]
         else:
@@ -581,11 +588,11 @@ class _MillingCore:
         return self._args
 
     def step(self) -> None:
-        """Advance every lane with the actions in ``in_action`` (inside the box) and
-        ``in_clipped`` (1 where the action was clipped to the box), each lane's sensor noise
-        drawn from the generator its episode started with; with CNC actuation on, the
-        commands pass through it first (``machining_envs.core.actuation``) and
-        ``info["command"]`` is what the drives got."""
+        """Advance every lane with the actions in ``in_action`` (finite; clipped to the box
+        here, and marked 1 in ``in_clipped``, which may mark them clipped before), each
+        lane's sensor noise drawn from the generator its episode started with; with CNC
+        actuation on, the commands pass through it first (``machining_envs.core.actuation``)
+        and ``info["command"]`` is what the drives got."""
         args = self._kernel_args()
         if self.act_lanes is None:
             self._run(args, 3)
@@ -974,9 +981,8 @@ class EndMillingVectorEnv(LaneVectorEnv):
 
     def _step_lanes(self, actions):
         core = self._core
-        a = actions[:, 0]
-        core.in_clipped[:] = (a < -1.0) | (a > 1.0)
-        np.minimum(np.maximum(a, -1.0), 1.0, out=core.in_action)  # np.clip, without its wrapper
+        core.in_action[:] = actions[:, 0]  # clipped to the box by the kernel, which marks
+        core.in_clipped.fill(0)  # the clipped ones here
         core.step()
         f = core.flags
         return (
