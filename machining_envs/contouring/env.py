@@ -39,6 +39,7 @@ from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
+    LaneNames,
     adopt_core,
     check_scenario_spec,
     episode_ended,
@@ -475,7 +476,7 @@ class _ContouringCore:
         self.clipped = np.zeros(n, dtype=np.int64)
         self.scenarios: list[ContouringScenario | None] = [None] * n
         self.plants: list[ContouringPlant | None] = [None] * n
-        self.names = np.full(n, "", dtype=object)
+        self.names = LaneNames(n)
         self.feeds = np.zeros(n)
         self.ref_end = np.zeros(n)
         self.circles: list[dict] = [{}] * n
@@ -632,7 +633,7 @@ class _ContouringCore:
         info["segment"] = self.li[:, _ISEG].copy()
         info["feed_mm_s"] = self.feeds.copy()
         info["reference_end_s"] = self.ref_end.copy()
-        info["scenario"] = self.names.copy()
+        info["scenario"] = self.names.array()
         if self.has_circle.any():
             for i, key in enumerate(_CIRCLE_KEYS):
                 info[key] = self.circle[:, i].copy()

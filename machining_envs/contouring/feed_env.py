@@ -57,6 +57,7 @@ from machining_envs.core.blocks import SCRATCH, LaneBlocks, check_num_threads, s
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
+    LaneNames,
     adopt_core,
     check_reward_weights,
     check_scenario_spec,
@@ -456,7 +457,7 @@ class _FeedCore:
         self.out = np.zeros((n, len(_OUT)))
         self.scenarios: list[ContouringScenario | None] = [None] * n
         self.paths: list = [None] * n
-        self.names = np.full(n, "", dtype=object)
+        self.names = LaneNames(n)
         self.servos = np.full(n, servo, dtype=object)
         self.episode_info: list[dict] = [{}] * n
         self.has_circle = np.zeros(n, dtype=bool)
@@ -679,7 +680,7 @@ class _FeedCore:
         info["programmed_time_s"] = pf[:, 6].copy()
         info["time_limit_s"] = pf[:, 7].copy()
         info["servo"] = self.servos.copy()
-        info["scenario"] = self.names.copy()
+        info["scenario"] = self.names.array()
         if self.has_circle.any():
             for i, key in enumerate(("circle_cx_mm", "circle_cy_mm", "circle_radius_mm")):
                 info[key] = self.circle[:, i].copy()

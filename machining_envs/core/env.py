@@ -24,6 +24,7 @@ __all__ = [
     "scenario_option",
     "check_reward_weights",
     "EpisodeLog",
+    "LaneNames",
     "record_step",
 ]
 
@@ -320,6 +321,44 @@ def check_reward_weights(reward) -> None:
             isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0
         ):
             raise ValueError(f"reward weight {f.name} must be a finite number >= 0, got {v!r}")
+
+
+class LaneNames:
+    """The scenario name of every lane, for the info's ``"scenario"`` array.
+
+    Copying an object array costs a reference count per lane (about 8 µs at N = 1024,
+    half of a milling step's info), and a vector step hands the names out once or twice
+    while they change only at a reset. So :meth:`array` hands out the array itself, made
+    read-only, and the next name set writes into a copy: what a step's info holds never
+    changes after it."""
+
+    __slots__ = ("_names", "_shared")
+
+    def __init__(self, n: int) -> None:
+        self._names = np.full(n, "", dtype=object)
+        self._shared = False
+
+    def __setitem__(self, lane: int, name: str) -> None:
+        if self._shared:
+            self._names = self._names.copy()  # writable
+            self._shared = False
+        self._names[lane] = name
+
+    def __getitem__(self, lane: int) -> str:
+        return self._names[lane]
+
+    def __len__(self) -> int:
+        return len(self._names)
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def array(self) -> np.ndarray:
+        """Every lane's name, as a read-only object array that no later reset changes."""
+        if not self._shared:
+            self._names.flags.writeable = False
+            self._shared = True
+        return self._names
 
 
 class EpisodeLog:

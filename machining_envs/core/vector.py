@@ -254,15 +254,15 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
 
     def _with_masks(self, info: dict) -> tuple:
         """Add to ``info`` (a new dict) the mask of every lane for each key that has none:
-        one array, shared by those keys. Returns ``(masks added, keys but the masks,
-        (key, mask) of the keys that came with a mask of their own)``, worked out once per
-        set of keys (what :meth:`_final_info` reads)."""
+        one array, shared by those keys. Returns ``(masks added, keys but the masks, masks
+        the keys came with)``, worked out once per set of keys (what :meth:`_final_info`
+        reads)."""
         keys = tuple(info)
         known = self._mask_keys.get(keys)
         if known is None:
             masks = tuple("_" + k for k in keys if k[0] != "_" and "_" + k not in info)
             plain = tuple(k for k in keys if k[0] != "_")
-            own = tuple((k, "_" + k) for k in plain if "_" + k in info)
+            own = tuple("_" + k for k in plain if "_" + k in info)
             if len(self._mask_keys) >= 64:  # a few sets of keys occur; never let it grow
                 self._mask_keys.clear()
             known = self._mask_keys[keys] = (masks, plain, own)
@@ -277,7 +277,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         masks, plain, own = known
         final = {k: info[k] for k in plain}
         final.update(dict.fromkeys(masks, done))
-        for k, mk in own:
+        for mk in own:
             final[mk] = info[mk] & done
         return final
 

@@ -16,6 +16,7 @@ from machining_envs.core.checks import check_below
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
+    LaneNames,
     adopt_core,
     check_action,
     check_episode_time,
@@ -351,7 +352,7 @@ class _DrillingCore:
         self.n = n
         self.lanes = DrillingLanes(p, n)
         self.scenarios: list[DrillingScenario | None] = [None] * n
-        self.names = np.full(n, "", dtype=object)
+        self.names = LaneNames(n)
         self.ev = np.zeros((n, _N_EV))
         self.flags = np.zeros((n, _N_FLAGS), dtype=np.bool_)
         self.counts = np.zeros((n, 2), dtype=np.int64)
@@ -505,7 +506,7 @@ class _DrillingCore:
             "chip_ratio": o[:, 14],
             "diameter_mm": lane[:, 2],
             "segment": c[:, _C_SEGMENT],
-            "scenario": self.names.copy(),
+            "scenario": self.names.array(),
             "drilling_time_s": finish,
             "_drilling_time_s": done.copy(),
             "machining_time_s": finish.copy(),

@@ -23,6 +23,7 @@ from machining_envs.core.env import (
     ACTION_MAPS,
     ActionMap,
     EpisodeLog,
+    LaneNames,
     adopt_core,
     check_action,
     check_episode_time,
@@ -457,7 +458,7 @@ class _MillingCore:
         self.bound[:] = np.nan
         #: The generators the lanes draw their sensor noise from (their episodes').
         self.rngs = LaneGenerators(n)
-        self.names = np.full(n, "", dtype=object)
+        self.names = LaneNames(n)
         self.in_action = np.zeros(n)
         self.in_clipped = np.zeros(n, dtype=np.int64)
         self.commands = np.zeros(n)
@@ -679,7 +680,7 @@ class _MillingCore:
             "removed_volume_mm3": c[12],
             "workpiece_length_mm": c[18],
             "workpiece_volume_mm3": c[19],
-            "scenario": self.names.copy(),
+            "scenario": self.names.array(),
             "machining_time_s": c[13],  # NaN where the lane did not finish
             "_machining_time_s": self.flags[:, 2].copy(),
         }

@@ -23,6 +23,7 @@ from machining_envs.core.checks import PY_NUMBER_TYPES, check_below, check_range
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
+    LaneNames,
     adopt_core,
     check_action,
     check_episode_time,
@@ -387,7 +388,7 @@ class _TurningCore:
         #: Lanes whose spindle is power-limited (their speed may change within the cut).
         self.power_lanes: set[int] = set()
         self.length = np.zeros(n)
-        self.names = np.full(n, "", dtype=object)
+        self.names = LaneNames(n)
         self._args: tuple | None = None
         self._args_version = -1
         self._packed = PackedArgs()  # the kernel's arguments in one table (core.packed)
@@ -638,7 +639,7 @@ class _TurningCore:
             "spindle_power_W": power[0],
             "cutting_power_W": power[1],
             "workpiece_length_mm": self.length.copy(),
-            "scenario": self.names.copy(),
+            "scenario": self.names.array(),
             "machining_time_s": np.where(f[:, 2], self.lanes.out_finish, np.nan),
             "_machining_time_s": f[:, 2].copy(),
         }

@@ -102,4 +102,4 @@ def test_refuses_different_options_per_env():
         venv.reset()
     venv.set_options({"scenario": "paper_405"})  # one dict for every env
     venv.reset()
-    assert list(venv.venv.unwrapped._core.names) == ["paper_405", "paper_405"]
+    assert list(venv.venv.unwrapped._core.names.array()) == ["paper_405", "paper_405"]

@@ -6,6 +6,8 @@ Parametrised over every id registered with a ``vector_entry_point``.
 
 from __future__ import annotations
 
+import copy
+
 import pickle
 
 import gymnasium as gym
@@ -380,6 +382,42 @@ def test_a_list_of_scenarios_gives_each_lane_its_own(env_id):
     # A single env's reset() without options restarts on its own scenario, first[i].
     ends = _run_beside_singles(venv, singles, env_id, np.random.default_rng(5), 600)
     assert ends >= 1, "a lane should restart on its own scenario"
+
+
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_what_a_step_returned_never_changes_later(env_id):
+    """The info (and observation) of a reset or a step are the env's no longer: later steps
+    and resets, which give lanes new scenarios (and with them new names), leave them as
+    they were returned (the scenario names are handed out without a copy, read-only)."""
+    n = 4
+    kwargs = ENV_KWARGS.get(env_id, {})
+    if env_id == "machining_envs/EndMilling-v0":  # a time limit ends its long cuts
+        kwargs = {"max_episode_time_s": 20.0}
+    first = _lane_specs(env_id, n)
+    venv = gym.make_vec(env_id, num_envs=n, scenario=first, **kwargs)
+    returned = [venv.reset(seed=1, options={"scenario": first[::-1]})]
+    rng = np.random.default_rng(0)
+    ends = 0
+    for _ in range(400):
+        obs, _, terminated, truncated, info = venv.step(
+            _actions(rng, env_id, venv.single_action_space, n)
+        )
+        returned.append((obs, info))
+        ends += int(np.count_nonzero(terminated | truncated))
+    snapshot = copy.deepcopy(returned)
+    venv.reset(seed=2, options={"scenario": first[::-1]})
+    venv.step(_actions(rng, env_id, venv.single_action_space, n))
+    assert ends >= 2, "the run should cross resets"
+    names = {tuple(info["scenario"]) for _, info in returned}
+    assert len(names) >= 2, "the lanes' scenario names should change at the resets"
+    for (obs, info), (obs0, info0) in zip(returned, snapshot, strict=True):
+        np.testing.assert_array_equal(obs, obs0)
+        for key, value in info0.items():
+            if isinstance(value, np.ndarray) and value.dtype != object:
+                np.testing.assert_array_equal(info[key], value, err_msg=key)
+        assert list(info["scenario"]) == list(info0["scenario"])
+    with pytest.raises(ValueError, match="read-only"):
+        returned[-1][1]["scenario"][0] = "mine"
 
 
 @pytest.mark.parametrize("env_id", VECTOR_IDS)
