@@ -7,7 +7,6 @@ Parametrised over every id registered with a ``vector_entry_point``.
 from __future__ import annotations
 
 import copy
-
 import pickle
 
 import gymnasium as gym
