@@ -7,8 +7,8 @@ time, cost a library call for each lane whose block ran out and kept a block per
 memory. Here compiled code draws each normal when the step needs it, with the algorithm of
 ``Generator.standard_normal`` (numpy's 256-level ziggurat, the tables numba carries for its
 own ``Generator`` support), on the generator's own state: through the bit generator's
-public C interface (``BitGenerator.ctypes``: the address of its state and of its
-``next_uint64`` and ``next_double`` functions), so that the numbers are the ones
+public C interface (its ``bitgen_t``: the address of its state and of its ``next_uint64``
+and ``next_double`` functions), so that the numbers are the ones
 ``rng.standard_normal()`` gives, in the same order, and the generator stands where it would
 after them (``tests/core/test_normals.py`` checks both, for PCG64 and other bit
 generators).
@@ -48,17 +48,26 @@ __all__ = ["ROW", "LaneGenerators", "generator_row", "lane_noise", "standard_nor
 ROW = 3
 
 
+#: numpy's ``bitgen_t`` (``numpy/random/bitgen.h``, its C API for random numbers): the
+#: state's address, then ``next_uint64``, ``next_uint32``, ``next_double``, ``next_raw``.
+_BITGEN_WORDS = 5
+#: ``PyCapsule_GetPointer`` with its own prototype (not set on ``ctypes.pythonapi``'s,
+#: which others share).
+_capsule_pointer = ctypes.PYFUNCTYPE(ctypes.c_void_p, ctypes.py_object, ctypes.c_char_p)(
+    ("PyCapsule_GetPointer", ctypes.pythonapi)
+)
+
+
 def generator_row(rng: np.random.Generator) -> tuple[int, int, int]:
-    """The row of ``rng`` (see :data:`ROW`); ``TypeError`` for anything but a numpy
-    ``Generator``."""
+    """The row of ``rng`` (see :data:`ROW`), read from its bit generator's ``bitgen_t``
+    (the ``capsule`` numpy gives C code; ``BitGenerator.ctypes`` would give the same
+    addresses, at some 60 µs and 1.6 kB a generator); ``TypeError`` for anything but a
+    numpy ``Generator``."""
     if not isinstance(rng, np.random.Generator):
         raise TypeError(f"a lane's generator must be a numpy Generator, got {type(rng).__name__}")
-    c = rng.bit_generator.ctypes
-
-    def address(fn) -> int:
-        return ctypes.cast(fn, ctypes.c_void_p).value
-
-    return c.state_address, address(c.next_uint64), address(c.next_double)
+    address = _capsule_pointer(rng.bit_generator.capsule, b"BitGenerator")
+    words = (ctypes.c_uint64 * _BITGEN_WORDS).from_address(address)
+    return words[0], words[1], words[3]
 
 
 class LaneGenerators:

@@ -4,6 +4,7 @@ are ``standard_normal()``'s, in order, and leave the generator where numpy's wou
 from __future__ import annotations
 
 import copy
+import ctypes
 import pickle
 
 import numba
@@ -69,6 +70,10 @@ def test_binding_writes_the_row_and_keeps_the_generator():
     lanes.bind(2, rng)
     assert lanes.generators[2] is rng
     assert tuple(lanes.table[2]) == generator_row(rng) and not lanes.table[:2].any()
+    # the addresses numpy's ctypes interface gives for the same bit generator
+    c = rng.bit_generator.ctypes
+    fn = [ctypes.cast(f, ctypes.c_void_p).value for f in (c.next_uint64, c.next_double)]
+    assert generator_row(rng) == (c.state_address, *fn)
     with pytest.raises(TypeError, match="numpy Generator"):
         lanes.bind(0, np.random.RandomState(0))
 
