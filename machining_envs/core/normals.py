@@ -85,10 +85,19 @@ class LaneGenerators:
 
     def bind(self, lane: int, rng: np.random.Generator) -> None:
         """Lane ``lane`` draws from ``rng`` from now on (nothing is done if it already
-        does)."""
-        if self.generators[lane] is not rng:
-            self.table[lane] = generator_row(rng)
-            self.generators[lane] = rng
+        does). ``ValueError`` if another lane draws from it: lanes on several threads would
+        draw from one state at once."""
+        if self.generators[lane] is rng:
+            return
+        row = generator_row(rng)
+        shared = np.flatnonzero(self.table[:, 0] == row[0])
+        if shared.size:
+            raise ValueError(
+                f"lane {lane}'s generator is already lane {int(shared[0])}'s: every lane "
+                "needs a generator of its own"
+            )
+        self.table[lane] = row
+        self.generators[lane] = rng
 
     def __getstate__(self) -> dict:
         return {"generators": self.generators, "table": self.table}

@@ -76,6 +76,11 @@ def test_binding_writes_the_row_and_keeps_the_generator():
     assert generator_row(rng) == (c.state_address, *fn)
     with pytest.raises(TypeError, match="numpy Generator"):
         lanes.bind(0, np.random.RandomState(0))
+    with pytest.raises(ValueError, match="lane 0's generator is already lane 2's"):
+        lanes.bind(0, rng)
+    lanes.bind(2, rng)  # the same lane again: nothing to do
+    lanes.bind(2, np.random.default_rng(1))
+    lanes.bind(0, rng)  # free again
 
 
 @pytest.mark.parametrize("clone", [copy.deepcopy, lambda x: pickle.loads(pickle.dumps(x))])
