@@ -347,12 +347,6 @@ class LaneNames:
     def __getitem__(self, lane: int) -> str:
         return self._names[lane]
 
-    def __len__(self) -> int:
-        return len(self._names)
-
-    def __iter__(self):
-        return iter(self._names)
-
     def array(self) -> np.ndarray:
         """Every lane's name, as a read-only object array that no later reset changes."""
         if not self._shared:

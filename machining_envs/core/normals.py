@@ -4,11 +4,11 @@ generator: the sensor noise of the plants, one number where a step needs it.
 The kernels of the turning, milling and drilling envs take their noise from each lane's
 generator (the episode's ``np_random``). Drawing it from Python, a block of normals at a
 time, cost a library call for each lane whose block ran out and kept a block per lane in
-memory. Here compiled code draws each normal when the step needs it, with the algorithm of
-``Generator.standard_normal`` (numpy's 256-level ziggurat, the tables numba carries for its
-own ``Generator`` support), on the generator's own state: through the bit generator's
-public C interface (its ``bitgen_t``: the address of its state and of its ``next_uint64``
-and ``next_double`` functions), so that the numbers are the ones
+memory. Here compiled code draws each normal when the step needs it, with
+``Generator.standard_normal``'s algorithm (numpy's 256-level ziggurat, as numba compiles
+it for its own ``Generator`` support), on the generator's own state: through the bit
+generator's public C interface (its ``bitgen_t``: the address of its state and of its
+``next_uint64`` and ``next_double`` functions), so that the numbers are the ones
 ``rng.standard_normal()`` gives, in the same order, and the generator stands where it would
 after them (``tests/core/test_normals.py`` checks both, for PCG64 and other bit
 generators).
@@ -27,19 +27,12 @@ import ctypes
 
 import numba
 import numpy as np
-from llvmlite import ir
-from numba.core import types
+from numba.core import cgutils, types
 from numba.extending import intrinsic
 
-# numpy's ziggurat tables for the normal distribution (``ziggurat_constants.h``), as numba
-# carries them to reproduce ``Generator.standard_normal``.
-from numba.np.random._constants import (
-    fi_double,
-    ki_double,
-    wi_double,
-    ziggurat_nor_inv_r,
-    ziggurat_nor_r,
-)
+# numba's own Generator.standard_normal (numpy's ziggurat, on a bit generator's C
+# functions), which its support for numpy Generators compiles.
+from numba.np.random.distributions import random_standard_normal
 
 __all__ = ["ROW", "LaneGenerators", "generator_row", "lane_noise", "standard_normal"]
 
@@ -109,61 +102,31 @@ class LaneGenerators:
             self.table[k] = 0 if rng is None else generator_row(rng)
 
 
-def _caller(result):
-    """An intrinsic calling the C function at an int64 address on the state at another:
-    ``result fn(void *state)``, as numpy's bit generators export them."""
-
-    @intrinsic
-    def call(typingctx, fn, state):
-        if fn != types.int64 or state != types.int64:
-            return None
-        sig = result(types.int64, types.int64)
-
-        def codegen(context, builder, signature, args):
-            ll_result = context.get_value_type(result)
-            ll_void_ptr = context.get_value_type(types.voidptr)
-            fnty = ir.FunctionType(ll_result, (ll_void_ptr,))
-            f = builder.inttoptr(args[0], fnty.as_pointer())
-            return builder.call(f, (builder.inttoptr(args[1], ll_void_ptr),))
-
-        return sig, codegen
-
-    return call
+#: numba's type of a numpy bit generator in compiled code: its state and C functions.
+_BIT_GENERATOR = types.NumPyRandomBitGeneratorType("bit_generator")
 
 
-_next_uint64 = _caller(types.uint64)
-_next_double = _caller(types.float64)
+@intrinsic
+def _bit_generator(typingctx, state, next_uint64, next_double):
+    """numba's bit generator value for the addresses of a row (see :data:`ROW`): what
+    its ``Generator`` support makes of a numpy generator passed in from Python, without
+    the Python object (none of its members that hold it are read)."""
+    if not (state == next_uint64 == next_double == types.int64):
+        return None
+
+    def codegen(context, builder, signature, args):
+        bits = cgutils.create_struct_proxy(_BIT_GENERATOR)(context, builder)
+        bits.state, bits.fnptr_next_uint64, bits.fnptr_next_double = args
+        return bits._getvalue()
+
+    return _BIT_GENERATOR(types.int64, types.int64, types.int64), codegen
 
 
 @numba.njit(cache=True)
 def standard_normal(table, k):
     """The next standard normal of lane ``k``'s generator (row ``table[k]``): the number
     its ``standard_normal()`` would give, by numpy's ziggurat."""
-    state = table[k, 0]
-    fn_u64 = table[k, 1]
-    fn_dbl = table[k, 2]
-    while True:
-        r = _next_uint64(fn_u64, state)
-        idx = r & np.uint64(0xFF)
-        r >>= np.uint64(8)
-        rabs = (r >> np.uint64(1)) & np.uint64(0x000FFFFFFFFFFFFF)
-        x = float(rabs) * wi_double[idx]
-        if r & np.uint64(1):
-            x = -x
-        if rabs < ki_double[idx]:
-            return x  # the rectangles: nearly every draw
-        if idx == 0:  # the tail beyond r
-            while True:
-                xx = -ziggurat_nor_inv_r * np.log1p(-_next_double(fn_dbl, state))
-                yy = -np.log1p(-_next_double(fn_dbl, state))
-                if yy + yy > xx * xx:
-                    if (rabs >> np.uint64(8)) & np.uint64(1):
-                        return -(ziggurat_nor_r + xx)
-                    return ziggurat_nor_r + xx
-        elif (fi_double[idx - 1] - fi_double[idx]) * _next_double(fn_dbl, state) + fi_double[
-            idx
-        ] < np.exp(-0.5 * x * x):
-            return x
+    return random_standard_normal(_bit_generator(table[k, 0], table[k, 1], table[k, 2]))
 
 
 @numba.njit(cache=True, inline="always")

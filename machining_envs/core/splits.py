@@ -245,7 +245,7 @@ def stream_double(s):
 def stream_fill(s, out):
     """``out`` (one dimension) filled with the stream's next uniform numbers in order."""
     for i in range(out.size):
-        out[i] = np.float64(_next64(s) >> _U11) * (1.0 / 9007199254740992.0)
+        out[i] = stream_double(s)
 
 
 @numba.njit(cache=True, inline="always")

@@ -177,16 +177,7 @@ class DepthProfile:
         ratio before any controller can react, and 2.5 keeps a cut held at the 1 kN reference
         below the 3 kN breakage force (the paper's own steps are 2x and 1.5x).
         """
-        lo, hi = depth_range_mm
-        if not (0 < lo <= hi <= DEPTH_RANGE_MM[1]):
-            raise ValueError(
-                f"depth_range_mm must satisfy 0 < lo <= hi <= {DEPTH_RANGE_MM[1]}, got {depth_range_mm!r}"
-            )
-        if not max_jump_ratio > 1.0:
-            raise ValueError(f"max_jump_ratio must be > 1, got {max_jump_ratio!r}")
-        s_lo, s_hi = (float(v) for v in segment_mm)
-        if not (0.0 < s_lo <= s_hi < math.inf):
-            raise ValueError(f"segment_mm must satisfy 0 < lo <= hi < inf, got {segment_mm!r}")
+        lo, hi, s_lo, s_hi = cls._check_ranges(depth_range_mm, segment_mm, max_jump_ratio)
         n = int(rng.integers(n_segments[0], n_segments[1] + 1))
         if n < 1:
             raise ValueError(f"n_segments must be a range of integers >= 1, got {n_segments!r}")
@@ -202,6 +193,30 @@ class DepthProfile:
             edges, starts, ends = (tuple(row) for row in table[:3].tolist())
             return cls(edges, starts[:n], ends[:n], name)
         return cls._built(table, str(name))
+
+    @staticmethod
+    def _check_ranges(depth_range_mm, segment_mm, max_jump_ratio) -> tuple:
+        """:meth:`random`'s checks of its ranges before it draws; ``(lo, hi, s_lo, s_hi)``."""
+        lo, hi = depth_range_mm
+        if not (0 < lo <= hi <= DEPTH_RANGE_MM[1]):
+            raise ValueError(
+                f"depth_range_mm must satisfy 0 < lo <= hi <= {DEPTH_RANGE_MM[1]}, got {depth_range_mm!r}"
+            )
+        if not max_jump_ratio > 1.0:
+            raise ValueError(f"max_jump_ratio must be > 1, got {max_jump_ratio!r}")
+        s_lo, s_hi = (float(v) for v in segment_mm)
+        if not (0.0 < s_lo <= s_hi < math.inf):
+            raise ValueError(f"segment_mm must satisfy 0 < lo <= hi < inf, got {segment_mm!r}")
+        return lo, hi, s_lo, s_hi
+
+    @classmethod
+    def check_random_ranges(cls, depth_range_mm, n_segments, segment_mm,
+                            max_jump_ratio: float = 2.5) -> None:  # fmt: skip
+        """``ValueError`` unless :meth:`random` accepts these ranges for every draw: what a
+        scenario factory checks once before it draws through :func:`drawn_profile`."""
+        cls._check_ranges(depth_range_mm, segment_mm, max_jump_ratio)
+        if not 1 <= n_segments[0] <= n_segments[1]:
+            raise ValueError(f"n_segments must be a range of integers >= 1, got {n_segments!r}")
 
     # ---- evaluation -----------------------------------------------------------------------
     @property

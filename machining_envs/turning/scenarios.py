@@ -166,9 +166,7 @@ def _random(
     # Every drawn field lies between these two scenarios' (checked here, once): make()
     # builds its scenarios without checking them again.
     profile_name = f"{name} profile"
-    DepthProfile.random(
-        np.random.default_rng(0), depth, segments, (4.0, 12.0), 0.3, 2.5
-    )  # checks them
+    DepthProfile.check_random_ranges(depth, segments, (4.0, 12.0), 2.5)
     prof = DepthProfile.steps((depth[0],), 1.0)
     for end in (0, 1):
         w_end = wear[end] if wear is not None else 0.0

@@ -94,3 +94,17 @@ def test_random_profile_refuses_bad_ranges():
         DepthProfile.random(rng, segment_mm=(1.0, np.inf))
     with pytest.raises(ValueError, match="n_segments must be a range of integers >= 1"):
         DepthProfile.random(rng, n_segments=(0, 0))
+
+
+def test_the_ranges_a_factory_checks_once_are_those_random_checks():
+    DepthProfile.check_random_ranges((0.5, 3.0), (2, 5), (4.0, 12.0))
+    for bad, match in [
+        (((0.0, 3.0), (2, 5), (4.0, 12.0)), "depth_range_mm"),
+        (((0.5, 3.0), (0, 5), (4.0, 12.0)), "n_segments"),
+        (((0.5, 3.0), (3, 2), (4.0, 12.0)), "n_segments"),
+        (((0.5, 3.0), (2, 5), (0.0, 12.0)), "segment_mm"),
+    ]:
+        with pytest.raises(ValueError, match=match):
+            DepthProfile.check_random_ranges(*bad)
+    with pytest.raises(ValueError, match="max_jump_ratio"):
+        DepthProfile.check_random_ranges((0.5, 3.0), (2, 5), (4.0, 12.0), 1.0)
