@@ -25,6 +25,7 @@ __all__ = [
     "check_reward_weights",
     "EpisodeLog",
     "LaneNames",
+    "LaneObjects",
     "record_step",
 ]
 
@@ -353,6 +354,40 @@ class LaneNames:
             self._names.flags.writeable = False
             self._shared = True
         return self._names
+
+
+class LaneObjects:
+    """An object per lane (a scenario, its true parameters), each either set or left to be
+    built when it is first read: a vector env that starts many lanes at once keeps their
+    drawn numbers and makes the objects of the lanes someone asks for only.
+
+    ``lanes[k]`` returns lane ``k``'s object, building it with ``build(*args)`` if
+    :meth:`defer` left it so; ``lanes[k] = obj`` sets it. ``build`` must be a module-level
+    function or a method of a picklable object, so that the env pickles."""
+
+    __slots__ = ("_items", "_deferred")
+
+    def __init__(self, n: int) -> None:
+        self._items: list = [None] * n
+        self._deferred: dict[int, tuple] = {}
+
+    def __getitem__(self, lane: int):
+        recipe = self._deferred.pop(lane, None)
+        if recipe is not None:
+            self._items[lane] = recipe[0](*recipe[1:])
+        return self._items[lane]
+
+    def __setitem__(self, lane: int, obj) -> None:
+        self._deferred.pop(lane, None)
+        self._items[lane] = obj
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def defer(self, lane: int, build, *args) -> None:
+        """Lane ``lane``'s object is ``build(*args)``, made when it is first read."""
+        self._items[lane] = None
+        self._deferred[lane] = (build, *args)
 
 
 class EpisodeLog:

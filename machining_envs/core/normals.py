@@ -33,8 +33,9 @@ from numba.extending import intrinsic
 # numba's own Generator.standard_normal (numpy's ziggurat, on a bit generator's C
 # functions), which its support for numpy Generators compiles.
 from numba.np.random.distributions import random_standard_normal
+from numba.np.random.generator_core import next_uint64
 
-__all__ = ["ROW", "LaneGenerators", "generator_row", "lane_noise", "standard_normal"]
+__all__ = ["ROW", "LaneGenerators", "generator_row", "lane_noise", "next_word", "standard_normal"]
 
 #: Entries of a generator's row: its state's address, then those of its ``next_uint64``
 #: and ``next_double`` functions.
@@ -127,6 +128,13 @@ def standard_normal(table, k):
     """The next standard normal of lane ``k``'s generator (row ``table[k]``): the number
     its ``standard_normal()`` would give, by numpy's ziggurat."""
     return random_standard_normal(_bit_generator(table[k, 0], table[k, 1], table[k, 2]))
+
+
+@numba.njit(cache=True)
+def next_word(table, k):
+    """The next 64-bit word of lane ``k``'s generator: the ``next_uint64`` of its bit
+    generator, which ``Generator.integers`` reads for 64-bit ranges."""
+    return next_uint64(_bit_generator(table[k, 0], table[k, 1], table[k, 2]))
 
 
 @numba.njit(cache=True, inline="always")

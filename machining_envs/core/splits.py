@@ -30,6 +30,8 @@ import numba
 import numpy as np
 from numpy.random.bit_generator import ISeedSequence
 
+from machining_envs.core.normals import next_word
+
 __all__ = [
     "SPLITS",
     "HELD_OUT",
@@ -37,6 +39,7 @@ __all__ = [
     "MAX_SPLIT_EPISODES",
     "split_rng",
     "split_state",
+    "lane_split_state",
     "split_stream",
     "SplitStream",
     "stream_bounded",
@@ -130,6 +133,16 @@ def split_state(rng: np.random.Generator, split: str) -> np.ndarray:
     state = np.empty(6, dtype=np.uint64)
     _seed_stream(x & 0xFFFFFFFF, x >> 32, key, state)
     return state
+
+
+@numba.njit(cache=True)
+def lane_split_state(table, k, key, state):
+    """:func:`split_state` in compiled code, for lane ``k`` of a generator table
+    (:class:`~machining_envs.core.normals.LaneGenerators`) and a split's ``key``
+    (``_split_key``): ``state`` seeded from the lane generator's next draw below 2**63
+    (its next 64-bit word shifted right by one, :func:`draw_below_2_63`'s number)."""
+    x = next_word(table, k) >> _U1
+    _seed_stream(np.int64(x & _LOW32), np.int64(x >> _U32), key, state)
 
 
 class SplitStream:

@@ -238,9 +238,12 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         docstring). Every scenario is checked before any lane starts."""
         core = self._core
         spec = self._lane_scenarios(scenario_option(options, self.default_scenario), lanes)
-        per_lane = isinstance(spec, list)
-        for i in lanes.tolist():
-            core.start(i, spec[i] if per_lane else spec, self.lane_rngs[i])
+        start_lanes = getattr(core, "start_lanes", None)  # a core that starts many at once
+        if start_lanes is not None and not isinstance(spec, list):
+            start_lanes(lanes, spec, self.lane_rngs)
+        else:
+            for i in lanes.tolist():
+                core.start(i, spec[i] if isinstance(spec, list) else spec, self.lane_rngs[i])
         return core.obs[lanes]  # their info is their reset info until they step (_info_now)
 
     @abc.abstractmethod

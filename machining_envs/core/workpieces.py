@@ -15,9 +15,16 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from machining_envs.core.splits import stream_bounded, stream_fill
+from machining_envs.core.splits import _split_key, lane_split_state, stream_bounded, stream_fill
 
-__all__ = ["DepthProfile", "DEPTH_RANGE_MM", "drawn_profile", "load_segments", "traverse_time"]
+__all__ = [
+    "DepthProfile",
+    "DEPTH_RANGE_MM",
+    "drawn_profile",
+    "drawn_lane_cuts",
+    "load_segments",
+    "traverse_time",
+]
 
 #: Depths of cut any profile may hold, mm. Above 6 mm the 1822 N/mm^(1+p) force law of the
 #: paper's tool would pass the breakage force at every usable feed; zero is air.
@@ -322,6 +329,48 @@ def drawn_profile(state, before: int, depth_range_mm, n_segments, segment_mm,
     )  # fmt: skip
     table.flags.writeable = False
     return b, DepthProfile._built(table, name), a
+
+
+def drawn_lane_cuts(table, lanes: np.ndarray, split: str, before: int, depth_range_mm,
+                    n_segments, segment_mm, taper_probability: float, max_jump_ratio: float,
+                    after: int):  # fmt: skip
+    """:func:`drawn_profile`'s numbers for many lanes in one compiled call, each from the
+    ``split``'s stream of its own generator (row ``lanes[i]`` of ``table``, a
+    :class:`~machining_envs.core.normals.LaneGenerators` table): what ``drawn_profile(
+    split_state(rng_i, split), ...)`` gives lane by lane, every generator left where that
+    leaves it. Returns ``(before, segments, counts, after)``: the uniforms before, of
+    shape ``(L, before)``; every lane's segments (:meth:`DepthProfile.segment_array`'s
+    rows), lane ``i``'s in ``segments[i, :, : counts[i] + 1]``; the uniforms after,
+    ``(L, after)``."""
+    lo, hi = depth_range_mm
+    s_lo, s_hi = segment_mm
+    return _draw_lane_cuts(
+        table, lanes, _split_key(split), before, float(lo), float(hi), int(n_segments[0]),
+        int(n_segments[1]), float(s_lo), float(s_hi), float(taper_probability),
+        float(max_jump_ratio), after,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _draw_lane_cuts(table, lanes, key, before, lo, hi, n_lo, n_hi, s_lo, s_hi,
+                    taper_probability, max_jump_ratio, after):  # fmt: skip
+    """:func:`drawn_lane_cuts`' numbers."""
+    n_lanes = lanes.size
+    b = np.empty((n_lanes, before))
+    a = np.empty((n_lanes, after))
+    segments = np.zeros((n_lanes, 4, n_hi + 1))
+    counts = np.empty(n_lanes, dtype=np.int64)
+    state = np.empty(6, dtype=np.uint64)
+    for i in range(n_lanes):
+        lane_split_state(table, lanes[i], key, state)
+        bi, cut, ai = _draw_cut(state, before, lo, hi, n_lo, n_hi, s_lo, s_hi,
+                                taper_probability, max_jump_ratio, after)  # fmt: skip
+        b[i] = bi
+        a[i] = ai
+        n = cut.shape[1] - 1
+        segments[i, :, : n + 1] = cut
+        counts[i] = n
+    return b, segments, counts, a
 
 
 @numba.njit(cache=True)

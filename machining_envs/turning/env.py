@@ -24,6 +24,7 @@ from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
     LaneNames,
+    LaneObjects,
     adopt_core,
     check_action,
     check_episode_time,
@@ -68,6 +69,7 @@ from machining_envs.turning.plant import (
 from machining_envs.turning.scenarios import (
     TURNING_SCENARIOS,
     TurningScenario,
+    _SplitFactory,
     bound_coefficient,
     machining_time_bound,
     turning_scenario,
@@ -298,6 +300,24 @@ def _start(k, full_history, consts, segments, x, ef, eb, big, li, z, buf, edges,
 
 
 @numba.njit(cache=True)
+def _start_lanes_packed(t, s, lanes, full_history, consts, segments, counts, x):
+    """:func:`_start_packed` for every lane ``lanes[i]``, on its row of ``consts`` and
+    ``x`` and its segments ``segments[i, :, : counts[i] + 1]``; whether each lane's step
+    matrix was made (:func:`_start_packed`'s return)."""
+    ok = np.empty(lanes.size, dtype=np.bool_)
+    for i in range(lanes.size):
+        c = consts[i]
+        ok[i] = _start_packed(t, s, lanes[i], full_history, (c[0], c[1], c[2], c[3], c[4], c[5]),
+                              segments[i, :, : counts[i] + 1], x[i])  # fmt: skip
+    return ok
+
+
+def _true_params(scenarios, lane: int, nominal: TurningParams) -> TurningParams:
+    """The true parameters of lane ``lane``'s scenario (a deferred ``truths`` entry)."""
+    return scenarios[lane].true_params(nominal)
+
+
+@numba.njit(cache=True)
 def _start_packed(t, s, k, full_history, consts, segments, x):
     """:func:`_start` with the step's table ``t`` (:func:`_step_packed`'s) and the table
     ``s`` of the other arrays it writes (``_TurningCore._start_args``)."""
@@ -359,7 +379,9 @@ class _TurningCore:
         # when a scenario first brings its own.
         self.act_lanes = None if self.actuation is None else self._actuation_lanes()
         self.lanes = TurningLanes(self.params, n)
-        self.scenarios: list[TurningScenario | None] = [None] * n
+        #: Every lane's scenario and true parameters (built when read, for lanes started
+        #: together by :meth:`start_lanes`).
+        self.scenarios = LaneObjects(n)
         # The per-lane floats and flags the kernel reads and writes, each set in one array
         # (one argument of the kernel) and named here by views of its columns.
         self.ef = np.zeros((n, len(_EF)))
@@ -380,7 +402,8 @@ class _TurningCore:
         self.spindle_set = np.zeros(n)
         #: Drive power delivered and cutting power at the last sample, W.
         self.power = np.zeros((n, 2))
-        self.truths: list[TurningParams | None] = [None] * n
+        self.truths = LaneObjects(n)
+        self._batch_ok: dict[str, bool] = {}  # _batches' checks, by factory
         #: Per lane: (score bound, workpiece length, scenario name, set spindle speed,
         #: diameter) of its episode.
         self.episode_info: list[tuple] = [(math.nan, 0.0, "", 0.0, 0.0)] * n
@@ -463,8 +486,6 @@ class _TurningCore:
             lanes._load_matrices(lane, rpm, full)
         if not self.bound[lane] == self.bound[lane]:  # refused by the kernel: let it say why
             self.bound[lane] = machining_time_bound(sc, truth)
-        lanes.lane_params[lane] = truth
-        lanes.profiles[lane] = profile
         self.act_lanes = configure_lane(
             self.act_lanes, lane, sc.actuation, self.actuation, self._actuation_lanes
         )
@@ -477,6 +498,93 @@ class _TurningCore:
         # What the episode's infos repeat, as Python values: read once, not at every step.
         self.episode_info[lane] = (float(self.bound[lane]), float(self.length[lane]), sc.name,
                                    rpm, diameter)  # fmt: skip
+
+    def start_lanes(self, lanes: np.ndarray, spec, rngs) -> None:
+        """:meth:`start` for each lane ``k`` of ``lanes`` on the scenario ``spec``, drawn
+        with ``rngs[k]``: the same episodes, the same numbers. A split's scenarios (a name
+        such as ``"train"``) are drawn and started for all lanes in two compiled calls, and
+        a lane's scenario and true parameters are built only when read (``scenarios[k]``,
+        ``truths[k]``)."""
+        factory = TURNING_SCENARIOS.get(spec) if isinstance(spec, str) else None
+        if not self._batches(factory):
+            for k in lanes.tolist():
+                self.start(k, spec, rngs[k])
+            return
+        for k in lanes.tolist():
+            self.rngs.bind(k, rngs[k])  # the scenario is drawn with it, and the noise
+        rpm, segments, counts, v = factory.draw_lanes(self.rngs.table, lanes)
+        p = self.params
+        u = np.asarray(factory.lows) + np.asarray(factory.spans) * v  # (L, ranges)
+        n = lanes.size
+        # TurningScenario.true_params's numbers, field by field, for every lane at once.
+        power = factory.shop["spindle_power_W"]
+        power = power if math.isfinite(power) else p.spindle_power_W
+        full = math.isfinite(power)
+        limit = u[:, 3] if factory.limit_varies else np.full(n, float(factory.limit_N[0]))
+        consts = np.empty((n, 6))
+        consts[:, 0] = p.force_coefficient * u[:, 0]
+        consts[:, 1] = p.feed_exponent * u[:, 1]
+        consts[:, 2:] = self.lanes.lane_constants(p)[2:]
+        consts[:, 5] = 0.0  # a sharp tool (no wear: the factory draws none)
+        x = np.empty((n, 8))
+        x[:, 0] = rpm
+        x[:, 1] = limit
+        x[:, 2] = p.max_feed_velocity_mm_s
+        x[:, 3] = p.breakage_force_N
+        x[:, 4] = p.sensor_gain * (p.noise_std_N * u[:, 2])
+        x[:, 5] = p.workpiece_diameter_mm
+        x[:, 6] = math.nan
+        x[:, 7] = power
+        self.lanes.fit_segments(int(counts.max()))
+        ok = _start_lanes_packed(
+            self._packed(self._kernel_args()), self._packed_start(self._start_args()), lanes,
+            full, consts, segments, counts, x,
+        )  # fmt: skip
+        name = factory.name
+        diameter = float(p.workpiece_diameter_mm)
+        actuation = factory.shop["actuation"]
+        v_rows = v.tolist()
+        for i, k in enumerate(lanes.tolist()):
+            lane_rpm = float(rpm[i])
+            if not ok[i]:
+                self.lanes._load_matrices(k, lane_rpm, full)
+            self.scenarios.defer(k, factory.build_drawn, lane_rpm,
+                                 segments[i, :, : counts[i] + 1], v_rows[i])  # fmt: skip
+            self.truths.defer(k, _true_params, self.scenarios, k, p)
+            if not self.bound[k] == self.bound[k]:  # refused by the kernel: let it say why
+                self.bound[k] = machining_time_bound(self.scenarios[k], self.truths[k])
+            self.act_lanes = configure_lane(
+                self.act_lanes, k, actuation, self.actuation, self._actuation_lanes
+            )
+            if full:
+                self.power_lanes.add(k)
+            else:
+                self.power_lanes.discard(k)
+            self.names[k] = name
+            self.episode_info[k] = (float(self.bound[k]), float(self.length[k]), name,
+                                    lane_rpm, diameter)  # fmt: skip
+
+    def _batches(self, factory) -> bool:
+        """Whether :meth:`start_lanes` may start ``factory``'s scenarios in one batch: a
+        split's, without wear (whose score bound is integrated in Python) or a spindle
+        speed set by the env, whose every true parameter set passes the checks
+        ``start`` makes (those of the ranges' two ends, checked once)."""
+        if not isinstance(factory, _SplitFactory) or factory.wear is not None:
+            return False
+        if self.spindle_rpm_override is not None:
+            return False
+        ok = self._batch_ok.get(factory.name)
+        if ok is None:
+            try:
+                for sc in factory.extremes:
+                    truth = sc.true_params(self.params)
+                    ok = float(sc.force_limit_N) < truth.breakage_force_N
+                    if not ok:
+                        break
+            except ValueError:
+                ok = False
+            self._batch_ok[factory.name] = ok
+        return ok
 
     def _start_args(self) -> tuple:
         """The arrays :func:`_start` writes besides the step's, and the linear blocks' tables

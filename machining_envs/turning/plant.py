@@ -855,8 +855,6 @@ class TurningLanes:
         self.lane_f = np.zeros((self.n, 9))
         self.finished = np.zeros(self.n, dtype=np.bool_)
         self.spindle_rpm = np.zeros(self.n)
-        self.lane_params: list[TurningParams] = [params] * self.n
-        self.profiles: list = [None] * self.n
         #: Signals of the last step, one row per lane (columns: ``LANE_SIGNALS``).
         self.out = np.zeros((self.n, len(LANE_SIGNALS)))
         #: Time at which each lane finished its workpiece in the last step (NaN if not).
@@ -894,8 +892,6 @@ class TurningLanes:
             self.finished, self.spindle_rpm,
         ):  # fmt: skip
             self._load_matrices(lane, rpm, full)
-        self.lane_params[lane] = params
-        self.profiles[lane] = profile
 
     @property
     def speed_free(self) -> tuple:

@@ -27,7 +27,7 @@ from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
 from machining_envs.core.checks import drawn_instance
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.splits import split_state
-from machining_envs.core.workpieces import DepthProfile, drawn_profile
+from machining_envs.core.workpieces import DepthProfile, drawn_lane_cuts, drawn_profile
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams, _check
 
 __all__ = [
@@ -135,67 +135,112 @@ def _step_range(rng: np.random.Generator) -> TurningScenario:
     return TurningScenario("step_range", prof, float(np.exp(rng.uniform(np.log(245), np.log(700)))))
 
 
-def _random(
-    name: str,
-    rpm: tuple[float, float],
-    depth: tuple[float, float],
-    segments: tuple[int, int],
-    limit_N: tuple[float, float] = (1000.0, 1000.0),
-    wear: tuple[float, float] | None = None,
-    shopfloor: bool = False,
-):
-    # The spindle speed log-uniform, then the workpiece, then uniform in [low, high) each,
-    # low + (high - low) u (what rng.uniform(low, high) gives) in order: Kf, p, the noise
-    # scale, the force limit (where it varies) and the wear rate (with wear).
-    log_rpm = float(np.log(rpm[0]))
-    log_span = float(np.log(rpm[1])) - log_rpm
-    lows = [0.8, 0.8, 0.5]
-    highs = [1.2, 1.2, 2.0]
-    if limit_N[1] > limit_N[0]:
-        lows.append(float(limit_N[0]))
-        highs.append(float(limit_N[1]))
-    if wear is not None:  # drawn last: the same cuts as without wear
-        lows.append(float(wear[0]))
-        highs.append(float(wear[1]))
-    spans = [hi - lo for lo, hi in zip(lows, highs, strict=True)]
-    shop = (
-        {"spindle_power_W": SHOPFLOOR_SPINDLE_POWER_W, "actuation": SHOPFLOOR_ACTUATION}
-        if shopfloor
-        else {"spindle_power_W": math.inf, "actuation": None}
-    )
-    # Every drawn field lies between these two scenarios' (checked here, once): make()
-    # builds its scenarios without checking them again.
-    profile_name = f"{name} profile"
-    DepthProfile.check_random_ranges(depth, segments, (4.0, 12.0), 2.5)
-    prof = DepthProfile.steps((depth[0],), 1.0)
-    for end in (0, 1):
-        w_end = wear[end] if wear is not None else 0.0
-        TurningScenario(name, prof, rpm[end], limit_N[end], *(highs if end else lows)[:3], w_end,
-                        **shop)  # fmt: skip
+class _SplitFactory:
+    """The factory of a split's scenarios: ``factory(rng)`` draws one from the env's
+    generator. The spindle speed log-uniform, then the workpiece, then uniform in
+    ``[low, high)`` each, ``low + (high - low) u`` (what ``rng.uniform(low, high)`` gives)
+    in order: Kf, p, the noise scale, the force limit (where it varies) and the wear rate
+    (with wear). A vector env draws the numbers of many lanes at once
+    (:meth:`draw_lanes`) and builds a lane's scenario from them only when it is asked for
+    (:meth:`build`): the same object ``factory(rng)`` gives."""
 
-    def make(env_rng: np.random.Generator) -> TurningScenario:
+    def __init__(
+        self,
+        name: str,
+        rpm: tuple[float, float],
+        depth: tuple[float, float],
+        segments: tuple[int, int],
+        limit_N: tuple[float, float] = (1000.0, 1000.0),
+        wear: tuple[float, float] | None = None,
+        shopfloor: bool = False,
+    ) -> None:
+        self.name = name
+        self.log_rpm = float(np.log(rpm[0]))
+        self.log_span = float(np.log(rpm[1])) - self.log_rpm
+        lows = [0.8, 0.8, 0.5]
+        highs = [1.2, 1.2, 2.0]
+        self.limit_varies = limit_N[1] > limit_N[0]
+        if self.limit_varies:
+            lows.append(float(limit_N[0]))
+            highs.append(float(limit_N[1]))
+        self.wear = wear
+        if wear is not None:  # drawn last: the same cuts as without wear
+            lows.append(float(wear[0]))
+            highs.append(float(wear[1]))
+        self.lows = lows
+        self.spans = [hi - lo for lo, hi in zip(lows, highs, strict=True)]
+        self.limit_N = limit_N
+        self.shop = (
+            {"spindle_power_W": SHOPFLOOR_SPINDLE_POWER_W, "actuation": SHOPFLOOR_ACTUATION}
+            if shopfloor
+            else {"spindle_power_W": math.inf, "actuation": None}
+        )
+        self.depth, self.segments = depth, segments
+        # Every drawn field lies between these two scenarios' (checked here, once): the
+        # factory builds its scenarios without checking them again.
+        self.profile_name = f"{name} profile"
+        DepthProfile.check_random_ranges(depth, segments, (4.0, 12.0), 2.5)
+        prof = DepthProfile.steps((depth[0],), 1.0)
+        self.extremes = tuple(
+            TurningScenario(name, prof, rpm[end], limit_N[end], *(highs if end else lows)[:3],
+                            wear[end] if wear is not None else 0.0, **self.shop)  # fmt: skip
+            for end in (0, 1)
+        )
+
+    def __call__(self, env_rng: np.random.Generator) -> TurningScenario:
         # The numbers of rng.random(), DepthProfile.random(rng, ...) and one rng.uniform
         # per range, from the split's stream in one compiled call.
-        r, prof, v = drawn_profile(split_state(env_rng, name), 1, depth, segments, (4.0, 12.0),
-                                   0.3, 2.5, len(lows), profile_name)  # fmt: skip
-        spindle = float(np.exp(log_rpm + log_span * float(r[0])))
-        u = [lo + span * x for lo, span, x in zip(lows, spans, v.tolist(), strict=True)]
+        r, prof, v = drawn_profile(
+            split_state(env_rng, self.name), 1, *self._cut_ranges, len(self.lows),
+            self.profile_name,
+        )  # fmt: skip
+        return self.build(float(r[0]), prof, v.tolist())
+
+    @property
+    def _cut_ranges(self) -> tuple:
+        return self.depth, self.segments, (4.0, 12.0), 0.3, 2.5
+
+    def draw_lanes(self, table, lanes: np.ndarray) -> tuple:
+        """The numbers of :meth:`__call__` for every lane in ``lanes``, each drawn with its
+        generator in ``table`` (``LaneGenerators.table``), in one compiled call:
+        ``(spindle rpm, segments, segment counts, uniforms)`` of shapes ``(L,)``, ``(L, 4,
+        S + 1)``, ``(L,)`` and ``(L, len(lows))`` (see
+        :func:`~machining_envs.core.workpieces.drawn_lane_cuts`); :meth:`build` turns a
+        lane's into its scenario."""
+        r, segments, counts, v = drawn_lane_cuts(
+            table, lanes, self.name, 1, *self._cut_ranges, len(self.lows)
+        )
+        return np.exp(self.log_rpm + self.log_span * r[:, 0]), segments, counts, v
+
+    def build(self, r: float, profile: DepthProfile, v: list[float]) -> TurningScenario:
+        """The scenario of the uniform ``r`` (the speed's), the drawn ``profile`` and the
+        uniforms ``v`` (the ranges')."""
+        spindle = float(np.exp(self.log_rpm + self.log_span * r))
+        return self._scenario(spindle, profile, v)
+
+    def build_drawn(self, spindle: float, segments: np.ndarray, v: list[float]):
+        """The scenario of a lane's numbers from :meth:`draw_lanes` (its speed, its
+        segments as ``segment_array`` holds them, its uniforms)."""
+        table = np.array(segments)
+        table.flags.writeable = False
+        return self._scenario(spindle, DepthProfile._built(table, self.profile_name), v)
+
+    def _scenario(self, spindle: float, profile: DepthProfile, v: list[float]):
+        u = [lo + span * x for lo, span, x in zip(self.lows, self.spans, v, strict=True)]
         return drawn_instance(
             TurningScenario,
             {
-                "name": name,
-                "profile": prof,
+                "name": self.name,
+                "profile": profile,
                 "spindle_rpm": spindle,
-                "force_limit_N": u[3] if limit_N[1] > limit_N[0] else limit_N[0],
+                "force_limit_N": u[3] if self.limit_varies else self.limit_N[0],
                 "force_coefficient_scale": u[0],
                 "feed_exponent_scale": u[1],
                 "noise_scale": u[2],
-                "wear_per_100mm": u[-1] if wear is not None else 0.0,
-                **shop,
+                "wear_per_100mm": u[-1] if self.wear is not None else 0.0,
+                **self.shop,
             },
         )
-
-    return make
 
 
 #: The ranges of the training distribution (spindle rpm, depth mm, segments), which
@@ -213,18 +258,18 @@ TURNING_SCENARIOS: dict[str, Callable[[np.random.Generator], TurningScenario]] =
     "paper_700": _paper(700),
     "taper_405": _taper,
     "step_range": _step_range,
-    **{split: _random(split, *_TRAINING_RANGES) for split in ("train", "validation", "test")},
-    "ood": _random("ood", (200.0, 800.0), (0.5, 3.5), (2, 6), (700.0, 1300.0)),
+    **{split: _SplitFactory(split, *_TRAINING_RANGES) for split in ("train", "validation", "test")},
+    "ood": _SplitFactory("ood", (200.0, 800.0), (0.5, 3.5), (2, 6), (700.0, 1300.0)),
     # The training ranges with a tool that dulls along the cut: the force coefficient grows
     # by 30-100 % per 100 mm (up to +60 % at the end of the longest, 60 mm, workpiece). The
     # rate is chosen, not identified: large enough that a controller tuned on a sharp tool
     # meets a clearly duller one within one workpiece.
-    "wear": _random("wear", *_TRAINING_RANGES, wear=(0.3, 1.0)),
+    "wear": _SplitFactory("wear", *_TRAINING_RANGES, wear=(0.3, 1.0)),
     # The training ranges on a real machine: the CNC's override in 1 % steps, rate- and
     # acceleration-limited, two periods of interpolator delay (SHOPFLOOR_ACTUATION), and the
     # paper's 2.2 kW spindle, which slows when a cut asks for more (at 700 rpm on the 100 mm
     # bar that is any force above 600 N, below the 1 kN limit).
-    "shopfloor": _random("shopfloor", *_TRAINING_RANGES, shopfloor=True),
+    "shopfloor": _SplitFactory("shopfloor", *_TRAINING_RANGES, shopfloor=True),
 }
 
 
