@@ -348,6 +348,13 @@ class LaneNames:
     def __getitem__(self, lane: int) -> str:
         return self._names[lane]
 
+    def set_many(self, lanes: np.ndarray, name: str) -> None:
+        """Every lane of ``lanes`` (an index array) is named ``name``."""
+        if self._shared:
+            self._names = self._names.copy()
+            self._shared = False
+        self._names[lanes] = name
+
     def array(self) -> np.ndarray:
         """Every lane's name, as a read-only object array that no later reset changes."""
         if not self._shared:
@@ -388,6 +395,14 @@ class LaneObjects:
         """Lane ``lane``'s object is ``build(*args)``, made when it is first read."""
         self._items[lane] = None
         self._deferred[lane] = (build, *args)
+
+    def defer_many(self, lanes: list[int], recipes) -> None:
+        """:meth:`defer` for each of ``lanes`` with its recipe ``(build, *args)`` (an
+        iterable, in the order of ``lanes``)."""
+        items = self._items
+        for lane in lanes:
+            items[lane] = None
+        self._deferred.update(zip(lanes, recipes, strict=True))
 
 
 class EpisodeLog:

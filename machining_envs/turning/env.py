@@ -540,29 +540,35 @@ class _TurningCore:
             self._packed(self._kernel_args()), self._packed_start(self._start_args()), lanes,
             full, consts, segments, counts, x,
         )  # fmt: skip
-        name = factory.name
-        diameter = float(p.workpiece_diameter_mm)
-        actuation = factory.shop["actuation"]
-        v_rows = v.tolist()
-        for i, k in enumerate(lanes.tolist()):
-            lane_rpm = float(rpm[i])
-            if not ok[i]:
-                self.lanes._load_matrices(k, lane_rpm, full)
-            self.scenarios.defer(k, factory.build_drawn, lane_rpm,
-                                 segments[i, :, : counts[i] + 1], v_rows[i])  # fmt: skip
-            self.truths.defer(k, _true_params, self.scenarios, k, p)
+        ks = lanes.tolist()
+        for i in np.flatnonzero(~ok).tolist():  # left for zoh (never in the plant's ranges)
+            self.lanes._load_matrices(ks[i], float(rpm[i]), full)
+        rpms = rpm.tolist()
+        build, name = factory.build_drawn, factory.name
+        self.scenarios.defer_many(
+            ks, ((build, r, segments, i, c, v) for i, (r, c, v) in
+                 enumerate(zip(rpms, counts.tolist(), v.tolist(), strict=True)))
+        )  # fmt: skip
+        self.truths.defer_many(ks, ((_true_params, self.scenarios, k, p) for k in ks))
+        for k in ks:
             if not self.bound[k] == self.bound[k]:  # refused by the kernel: let it say why
                 self.bound[k] = machining_time_bound(self.scenarios[k], self.truths[k])
-            self.act_lanes = configure_lane(
-                self.act_lanes, k, actuation, self.actuation, self._actuation_lanes
-            )
-            if full:
-                self.power_lanes.add(k)
-            else:
-                self.power_lanes.discard(k)
-            self.names[k] = name
-            self.episode_info[k] = (float(self.bound[k]), float(self.length[k]), name,
-                                    lane_rpm, diameter)  # fmt: skip
+        actuation = factory.shop["actuation"]
+        if actuation is not None or self.act_lanes is not None:
+            for k in ks:
+                self.act_lanes = configure_lane(
+                    self.act_lanes, k, actuation, self.actuation, self._actuation_lanes
+                )
+        if full:
+            self.power_lanes.update(ks)
+        else:
+            self.power_lanes.difference_update(ks)
+        self.names.set_many(lanes, name)
+        diameter = float(p.workpiece_diameter_mm)
+        info = self.episode_info
+        for k, b, length, r in zip(ks, self.bound[lanes].tolist(), self.length[lanes].tolist(),
+                                   rpms, strict=True):  # fmt: skip
+            info[k] = (b, length, name, r, diameter)
 
     def _batches(self, factory) -> bool:
         """Whether :meth:`start_lanes` may start ``factory``'s scenarios in one batch: a

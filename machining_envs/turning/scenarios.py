@@ -218,10 +218,11 @@ class _SplitFactory:
         spindle = float(np.exp(self.log_rpm + self.log_span * r))
         return self._scenario(spindle, profile, v)
 
-    def build_drawn(self, spindle: float, segments: np.ndarray, v: list[float]):
-        """The scenario of a lane's numbers from :meth:`draw_lanes` (its speed, its
-        segments as ``segment_array`` holds them, its uniforms)."""
-        table = np.array(segments)
+    def build_drawn(self, spindle: float, segments: np.ndarray, i: int, count: int,
+                    v: list[float]):  # fmt: skip
+        """The scenario of lane ``i``'s numbers from :meth:`draw_lanes`: its speed, the
+        segments (of all lanes), its segment count, its uniforms."""
+        table = segments[i, :, : count + 1].copy()
         table.flags.writeable = False
         return self._scenario(spindle, DepthProfile._built(table, self.profile_name), v)
 

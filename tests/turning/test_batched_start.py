@@ -61,6 +61,7 @@ def test_lanes_started_together_start_as_one_by_one(spec):
 def test_a_batch_builds_the_lanes_objects_only_when_read():
     one, many, lanes = _cores("train")
     assert all(k in many.scenarios._deferred for k in lanes.tolist())
+    assert all(k in many.truths._deferred for k in lanes.tolist())
     assert many.scenarios[4] == one.scenarios[4]
     assert 4 not in many.scenarios._deferred and 7 in many.scenarios._deferred
     # A pickle or copy carries what is still to be built.
