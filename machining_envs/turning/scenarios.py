@@ -182,8 +182,15 @@ class _SplitFactory:
         DepthProfile.check_random_ranges(depth, segments, (4.0, 12.0), 2.5)
         prof = DepthProfile.steps((depth[0],), 1.0)
         self.extremes = tuple(
-            TurningScenario(name, prof, rpm[end], limit_N[end], *(highs if end else lows)[:3],
-                            wear[end] if wear is not None else 0.0, **self.shop)  # fmt: skip
+            TurningScenario(
+                name,
+                prof,
+                rpm[end],
+                limit_N[end],
+                *(highs if end else lows)[:3],
+                wear[end] if wear is not None else 0.0,
+                **self.shop,
+            )
             for end in (0, 1)
         )
 
