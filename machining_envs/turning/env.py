@@ -403,7 +403,7 @@ class _TurningCore:
         #: Drive power delivered and cutting power at the last sample, W.
         self.power = np.zeros((n, 2))
         self.truths = LaneObjects(n)
-        self._batch_ok: dict[str, bool] = {}  # _batches' checks, by factory
+        self._batch_ok: dict = {}  # _batches' checks, by factory
         #: Per lane: (score bound, workpiece length, scenario name, set spindle speed,
         #: diameter) of its episode.
         self.episode_info: list[tuple] = [(math.nan, 0.0, "", 0.0, 0.0)] * n
@@ -579,7 +579,7 @@ class _TurningCore:
             return False
         if self.spindle_rpm_override is not None:
             return False
-        ok = self._batch_ok.get(factory.name)
+        ok = self._batch_ok.get(factory)
         if ok is None:
             try:
                 for sc in factory.extremes:
@@ -589,7 +589,7 @@ class _TurningCore:
                         break
             except ValueError:
                 ok = False
-            self._batch_ok[factory.name] = ok
+            self._batch_ok[factory] = ok
         return ok
 
     def _start_args(self) -> tuple:
