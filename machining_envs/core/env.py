@@ -340,20 +340,21 @@ class LaneNames:
         self._shared = False
 
     def __setitem__(self, lane: int, name: str) -> None:
-        if self._shared:
-            self._names = self._names.copy()  # writable
-            self._shared = False
-        self._names[lane] = name
+        self._writable()[lane] = name
 
     def __getitem__(self, lane: int) -> str:
         return self._names[lane]
 
     def set_many(self, lanes: np.ndarray, name: str) -> None:
         """Every lane of ``lanes`` (an index array) is named ``name``."""
+        self._writable()[lanes] = name
+
+    def _writable(self) -> np.ndarray:
+        """The names array to write: a copy of it once it has been handed out."""
         if self._shared:
-            self._names = self._names.copy()
+            self._names = self._names.copy()  # writable
             self._shared = False
-        self._names[lanes] = name
+        return self._names
 
     def array(self) -> np.ndarray:
         """Every lane's name, as a read-only object array that no later reset changes."""
@@ -369,7 +370,7 @@ class LaneObjects:
     drawn numbers and makes the objects of the lanes someone asks for only.
 
     ``lanes[k]`` returns lane ``k``'s object, building it with ``build(*args)`` if
-    :meth:`defer` left it so; ``lanes[k] = obj`` sets it. ``build`` must be a module-level
+    :meth:`defer_many` left it so; ``lanes[k] = obj`` sets it. ``build`` must be a module-level
     function or a method of a picklable object, so that the env pickles."""
 
     __slots__ = ("_items", "_deferred")
@@ -391,14 +392,10 @@ class LaneObjects:
     def __len__(self) -> int:
         return len(self._items)
 
-    def defer(self, lane: int, build, *args) -> None:
-        """Lane ``lane``'s object is ``build(*args)``, made when it is first read."""
-        self._items[lane] = None
-        self._deferred[lane] = (build, *args)
-
     def defer_many(self, lanes: list[int], recipes) -> None:
-        """:meth:`defer` for each of ``lanes`` with its recipe ``(build, *args)`` (an
-        iterable, in the order of ``lanes``)."""
+        """Each lane of ``lanes`` gets its recipe ``(build, *args)`` (``recipes``, an
+        iterable in the order of ``lanes``): its object is ``build(*args)``, made when it is
+        first read."""
         items = self._items
         for lane in lanes:
             items[lane] = None

@@ -321,12 +321,9 @@ def drawn_profile(state, before: int, depth_range_mm, n_segments, segment_mm,
     :meth:`DepthProfile.random` ``(rng, ...)`` and ``rng.random(after)`` give from the
     split's generator. For scenario factories, which check their ranges once: these are
     not checked again."""
-    lo, hi = depth_range_mm
-    s_lo, s_hi = segment_mm
-    b, table, a = _draw_cut(
-        state, before, float(lo), float(hi), int(n_segments[0]), int(n_segments[1]),
-        float(s_lo), float(s_hi), float(taper_probability), float(max_jump_ratio), after,
-    )  # fmt: skip
+    ranges = _cut_ranges(depth_range_mm, n_segments, segment_mm, taper_probability,
+                         max_jump_ratio)  # fmt: skip
+    b, table, a = _draw_cut(state, before, *ranges, after)
     table.flags.writeable = False
     return b, DepthProfile._built(table, name), a
 
@@ -342,13 +339,17 @@ def drawn_lane_cuts(table, lanes: np.ndarray, split: str, before: int, depth_ran
     shape ``(L, before)``; every lane's segments (:meth:`DepthProfile.segment_array`'s
     rows), lane ``i``'s in ``segments[i, :, : counts[i] + 1]``; the uniforms after,
     ``(L, after)``."""
+    ranges = _cut_ranges(depth_range_mm, n_segments, segment_mm, taper_probability,
+                         max_jump_ratio)  # fmt: skip
+    return _draw_lane_cuts(table, lanes, _split_key(split), before, *ranges, after)
+
+
+def _cut_ranges(depth_range_mm, n_segments, segment_mm, taper_probability, max_jump_ratio):
+    """The workpiece's ranges as :func:`_draw_cut` takes them (floats and ints, in order)."""
     lo, hi = depth_range_mm
     s_lo, s_hi = segment_mm
-    return _draw_lane_cuts(
-        table, lanes, _split_key(split), before, float(lo), float(hi), int(n_segments[0]),
-        int(n_segments[1]), float(s_lo), float(s_hi), float(taper_probability),
-        float(max_jump_ratio), after,
-    )  # fmt: skip
+    return (float(lo), float(hi), int(n_segments[0]), int(n_segments[1]), float(s_lo),
+            float(s_hi), float(taper_probability), float(max_jump_ratio))  # fmt: skip
 
 
 @numba.njit(cache=True)

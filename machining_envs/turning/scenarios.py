@@ -142,7 +142,7 @@ class _SplitFactory:
     in order: Kf, p, the noise scale, the force limit (where it varies) and the wear rate
     (with wear). A vector env draws the numbers of many lanes at once
     (:meth:`draw_lanes`) and builds a lane's scenario from them only when it is asked for
-    (:meth:`build`): the same object ``factory(rng)`` gives."""
+    (:meth:`build_drawn`): the same object ``factory(rng)`` gives."""
 
     def __init__(
         self,
@@ -201,7 +201,8 @@ class _SplitFactory:
             split_state(env_rng, self.name), 1, *self._cut_ranges, len(self.lows),
             self.profile_name,
         )  # fmt: skip
-        return self.build(float(r[0]), prof, v.tolist())
+        spindle = float(np.exp(self.log_rpm + self.log_span * float(r[0])))
+        return self._scenario(spindle, prof, v.tolist())
 
     @property
     def _cut_ranges(self) -> tuple:
@@ -212,18 +213,12 @@ class _SplitFactory:
         generator in ``table`` (``LaneGenerators.table``), in one compiled call:
         ``(spindle rpm, segments, segment counts, uniforms)`` of shapes ``(L,)``, ``(L, 4,
         S + 1)``, ``(L,)`` and ``(L, len(lows))`` (see
-        :func:`~machining_envs.core.workpieces.drawn_lane_cuts`); :meth:`build` turns a
+        :func:`~machining_envs.core.workpieces.drawn_lane_cuts`); :meth:`build_drawn` turns a
         lane's into its scenario."""
         r, segments, counts, v = drawn_lane_cuts(
             table, lanes, self.name, 1, *self._cut_ranges, len(self.lows)
         )
         return np.exp(self.log_rpm + self.log_span * r[:, 0]), segments, counts, v
-
-    def build(self, r: float, profile: DepthProfile, v: list[float]) -> TurningScenario:
-        """The scenario of the uniform ``r`` (the speed's), the drawn ``profile`` and the
-        uniforms ``v`` (the ranges')."""
-        spindle = float(np.exp(self.log_rpm + self.log_span * r))
-        return self._scenario(spindle, profile, v)
 
     def build_drawn(self, spindle: float, segments: np.ndarray, i: int, count: int,
                     v: list[float]):  # fmt: skip

@@ -92,9 +92,9 @@ def test_lane_objects_build_once_and_setting_wins():
         return [x]
 
     objs = LaneObjects(3)
-    objs.defer(1, build, 5)
+    objs.defer_many([1], [(build, 5)])
     assert objs[0] is None and calls == []
     assert objs[1] == [5] and objs[1] is objs[1] and calls == [5]
-    objs.defer(2, build, 6)
+    objs.defer_many([2], [(build, 6)])
     objs[2] = "set"
     assert objs[2] == "set" and calls == [5] and len(objs) == 3
