@@ -330,8 +330,9 @@ class LaneNames:
     Copying an object array costs a reference count per lane (about 8 µs at N = 1024,
     half of a milling step's info), and a vector step hands the names out once or twice
     while they change only at a reset. So :meth:`array` hands out the array itself, made
-    read-only, and the next name set writes into a copy: what a step's info holds never
-    changes after it."""
+    read-only, and the next reset that changes a name writes into a copy: what a step's
+    info holds never changes after it (and lanes that reset on the scenario they ran copy
+    nothing)."""
 
     __slots__ = ("_names", "_shared")
 
@@ -340,14 +341,17 @@ class LaneNames:
         self._shared = False
 
     def __setitem__(self, lane: int, name: str) -> None:
-        self._writable()[lane] = name
+        if self._names[lane] != name:  # a lane that keeps its name needs no copy
+            self._writable()[lane] = name
 
     def __getitem__(self, lane: int) -> str:
         return self._names[lane]
 
     def set_many(self, lanes: np.ndarray, name: str) -> None:
         """Every lane of ``lanes`` (an index array) is named ``name``."""
-        self._writable()[lanes] = name
+        names = self._names
+        if any(names[k] != name for k in lanes.tolist()):  # else nothing to copy or write
+            self._writable()[lanes] = name
 
     def _writable(self) -> np.ndarray:
         """The names array to write: a copy of it once it has been handed out."""

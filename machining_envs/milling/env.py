@@ -24,6 +24,7 @@ from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
     LaneNames,
+    LaneObjects,
     adopt_core,
     check_action,
     check_episode_time,
@@ -56,6 +57,7 @@ from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scen
 from machining_envs.core.workpieces import traverse_time
 from machining_envs.milling.metrics import MILLING_TASK
 from machining_envs.milling.plant import (
+    KGF,
     LANE_CONSTANTS,
     SPINDLE_RPM_RANGE,
     MillingLanes,
@@ -67,6 +69,7 @@ from machining_envs.milling.plant import (
 from machining_envs.milling.scenarios import (
     MILLING_SCENARIOS,
     MillingScenario,
+    _SplitFactory,
     bound_coefficient,
     cut_area_at,
     machining_time_bound,
@@ -113,10 +116,18 @@ _INFO_F = (
 _INFO_LANE = ("torque_limit", "bound", "spindle", "length", "volume")
 _DEPTH_ROW = _INFO_F.index("depth_mm")
 _TIME_ROW = _INFO_F.index("machining_time_s")
-#: Columns of ``MillingLanes.lane_f`` a lane's start reads.
-_RPM, _FEXP, _C1, _DEXP = (
+#: Columns of ``MillingLanes.lane_f`` a lane's start reads or writes.
+_RPM, _FEXP, _C1, _DEXP, _FT_PER_VF, _REV_PER_S, _WEAR = (
     LANE_CONSTANTS.index(c)
-    for c in ("spindle_rpm", "feed_exponent", "torque_gain", "depth_exponent")
+    for c in (
+        "spindle_rpm",
+        "feed_exponent",
+        "torque_gain",
+        "depth_exponent",
+        "ft_per_vf",
+        "rev_per_s",
+        "wear_per_mm",
+    )
 )
 
 
@@ -373,6 +384,81 @@ def _start_packed(t, k, row, x, segments):
            b1_2(t, 38), i8_1(t, 1), i8_1(t, 39), f8_2_rows(t, 40))  # fmt: skip
 
 
+#: What :func:`_start_drawn_lanes` reads of the nominal parameters and a split's ranges
+#: (:func:`_batch_numbers`), in this order after the nominal lane constants.
+_BATCH_NUMBERS = (
+    "spindle_rpm", "torque_limit_Nmm", "power_law", "feed_exponent", "torque_coefficient_kgfmm",
+    "tool_diameter_mm", "tangential_coefficient_N_mm2", "n_teeth", "axial_depth_mm",
+    "max_feed_velocity_mm_s", "breakage_torque_Nmm", "sensor_gain", "noise_std_Nmm",
+    "process_lag_rev", "rpm_low", "rpm_high", "ks_low", "ks_span", "m_low", "m_span",
+    "noise_low", "noise_span",
+)  # fmt: skip
+
+
+def _batch_numbers(params: MillingParams, factory: _SplitFactory) -> np.ndarray:
+    """The numbers :func:`_start_drawn_lanes` reads: ``params``'s lane constants
+    (:meth:`MillingLanes.lane_constants` at the nominal speed), then ``_BATCH_NUMBERS``."""
+    p = params
+    lows, spans = factory.lows, factory.spans
+    numbers = (
+        p.spindle_rpm, p.torque_limit_Nmm, p.force_model == "power_law", p.feed_exponent,
+        p.torque_coefficient_kgfmm, p.tool_diameter_mm, p.tangential_coefficient_N_mm2,
+        p.n_teeth, p.axial_depth_mm, p.max_feed_velocity_mm_s, p.breakage_torque_Nmm,
+        p.sensor_gain, p.noise_std_Nmm, p.process_lag_rev, *SPINDLE_RPM_RANGE, lows[2],
+        spans[2], lows[3], spans[3], lows[4], spans[4],
+    )  # fmt: skip
+    row = MillingLanes.lane_constants(p, p.spindle_rpm)
+    return np.concatenate((row, np.array(numbers, dtype=np.float64)))
+
+
+@numba.njit(cache=True)
+def _start_drawn_lanes(t, lanes, nominal, v, scales, segments, counts):
+    """:func:`_start_packed` for every lane ``lanes[i]`` of a split's batch: from its
+    uniforms ``v[i]`` (:meth:`_SplitFactory.draw_lanes`), its spindle and limit scales
+    ``scales[i]`` and its segments ``segments[i, :, : counts[i] + 1]``, the numbers
+    ``MillingScenario`` (``spindle_rpm``, ``torque_limit_Nmm``, ``true_params``) and
+    ``_MillingCore.start`` work out, in their order of operations (the same bits), from
+    ``nominal`` (:func:`_batch_numbers`). Returns the first ``i`` whose speed falls
+    outside ``SPINDLE_RPM_RANGE`` (none is started from it on), or -1."""
+    nc = len(LANE_CONSTANTS)
+    (n_rpm, n_limit, power_law, fexp, ks, diam, kt, teeth, axial, vmax, brk, ke, noise_std,
+     lag_rev, rpm_lo, rpm_hi, ks_lo, ks_span, m_lo, m_span, nz_lo, nz_span) = nominal[nc:]  # fmt: skip
+    row = np.empty(nc)
+    x = np.empty(9)
+    for i in range(lanes.size):
+        rpm = n_rpm * scales[i, 0]
+        if not (rpm_lo <= rpm <= rpm_hi):
+            return i
+        limit = n_limit * scales[i, 1]
+        ks_scale = ks_lo + ks_span * v[i, 2]
+        row[:] = nominal[:nc]  # the columns the truth keeps
+        row[_FT_PER_VF] = 60.0 / (rpm * teeth)
+        if power_law != 0.0:
+            row[_FEXP] = fexp * (m_lo + m_span * v[i, 3])
+            row[_C1] = KGF * (ks * ks_scale) * diam
+        else:  # the average-force model's torque_gain(1.0)
+            row[_C1] = teeth * (kt * ks_scale) * axial * 1.0 / (2.0 * math.pi)
+        row[_RPM] = rpm
+        row[_REV_PER_S] = rpm / 60.0
+        row[_WEAR] = 0.0  # a sharp tool (the batch takes no wear)
+        x[0] = limit
+        x[1] = vmax
+        x[2] = brk
+        x[3] = ke * (noise_std * (nz_lo + nz_span * v[i, 4]))
+        x[4] = teeth
+        x[5] = axial
+        x[6] = min(limit / n_limit, 10.0)
+        x[7] = np.nan  # the score bound: worked out by _start
+        x[8] = 60.0 * lag_rev / rpm
+        _start_packed(t, lanes[i], row, x, segments[i, :, : counts[i] + 1])
+    return -1
+
+
+def _true_params(scenarios, lane: int, nominal: MillingParams) -> MillingParams:
+    """The true parameters of lane ``lane``'s scenario (a deferred ``truths`` entry)."""
+    return scenarios[lane].true_params(nominal)
+
+
 #: Where :func:`_step`'s arguments (``_MillingCore._kernel_args``) hold the lanes: axis 0, axis
 #: 1 (``info_f``) or none (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (
@@ -435,8 +521,13 @@ class _MillingCore:
         self.act_lanes = None if self.actuation is None else self._actuation_lanes()
         self._ke = float(self.params.sensor_gain)
         self.lanes = MillingLanes(self.params, n)
-        self.scenarios: list[MillingScenario | None] = [None] * n
-        self.truths: list[MillingParams | None] = [None] * n
+        #: Each lane's scenario and true parameters (built when read after a batched start).
+        self.scenarios = LaneObjects(n)
+        self.truths = LaneObjects(n)
+        #: Whether a split factory's scenarios may start in one batch (:meth:`_batches`),
+        #: and the numbers its batches read (:func:`_batch_numbers`).
+        self._batch_ok: dict = {}
+        self._batch_numbers: dict = {}
         self.vmax = np.ones(n)
         self.breakage_torque = np.ones(n)
         self.noise_counts = np.zeros(n)
@@ -513,12 +604,7 @@ class _MillingCore:
             )
         # (true_params changes no field of the servo, so the lane fits the batch.)
         segments = profile.segment_array()
-        ns = segments.shape[1] - 1
-        self.lanes.fit_segments(ns)
-        if ns + 1 > self.cumulative.shape[1]:
-            grow = ns + 1 - self.cumulative.shape[1]
-            self.cumulative = np.pad(self.cumulative, ((0, 0), (0, grow)), mode="edge")
-            self._args = None
+        self._fit(segments.shape[1] - 1)
         # The score bound: computed by the kernel for a sharp tool, here with wear.
         bound = math.nan if truth.wear_per_100mm == 0.0 else machining_time_bound(sc, truth, rpm)
         row = self.lanes.lane_constants(truth, rpm)
@@ -529,14 +615,91 @@ class _MillingCore:
         _start_packed(self._packed(self._kernel_args()), lane, row, x, segments)
         if not self.bound[lane] == self.bound[lane]:  # refused by the kernel: let it say why
             self.bound[lane] = machining_time_bound(sc, truth, rpm)
-        self.lanes.lane_params[lane] = truth
-        self.lanes.profiles[lane] = profile
         self.scenarios[lane] = sc
         self.truths[lane] = truth
         self.act_lanes = configure_lane(
             self.act_lanes, lane, sc.actuation, self.actuation, self._actuation_lanes
         )
         self.names[lane] = sc.name
+
+    def _fit(self, n_segments: int) -> None:
+        """Widen the lanes' workpiece tables (the plant's and the cumulative areas) to hold
+        ``n_segments`` segments."""
+        self.lanes.fit_segments(n_segments)
+        if n_segments + 1 > self.cumulative.shape[1]:
+            grow = n_segments + 1 - self.cumulative.shape[1]
+            self.cumulative = np.pad(self.cumulative, ((0, 0), (0, grow)), mode="edge")
+            self._args = None
+
+    def start_lanes(self, lanes: np.ndarray, spec, rngs) -> None:
+        """:meth:`start` for each lane ``k`` of ``lanes`` on the scenario ``spec``, drawn
+        with ``rngs[k]``: the same episodes, the same numbers. A split's scenarios (a name
+        such as ``"train"``) are drawn and started for all lanes in two compiled calls, and
+        a lane's scenario and true parameters are built only when read (``scenarios[k]``,
+        ``truths[k]``)."""
+        factory = MILLING_SCENARIOS.get(spec) if isinstance(spec, str) else None
+        if not self._batches(factory):
+            for k in lanes.tolist():
+                self.start(k, spec, rngs[k])
+            return
+        for k in lanes.tolist():
+            self.rngs.bind(k, rngs[k])  # the scenario is drawn with it, and the noise
+        segments, counts, v = factory.draw_lanes(self.rngs.table, lanes)
+        p = self.params
+        # The spindle and limit scales (numpy's exp, as the factory's), then every number
+        # start() works out from them and the other uniforms, in one compiled call.
+        scales = np.exp(factory.log_lows + factory.log_spans * v[:, :2])
+        self._fit(int(counts.max()))
+        nominal = self._batch_numbers.get(factory)
+        if nominal is None:
+            nominal = self._batch_numbers[factory] = _batch_numbers(self.params, factory)
+        bad = _start_drawn_lanes(self._packed(self._kernel_args()), lanes, nominal, v, scales,
+                                 segments, counts)  # fmt: skip
+        if bad >= 0:  # a range's end rounded past SPINDLE_RPM_RANGE: the lane's check says so
+            factory.build_drawn(segments, bad, int(counts[bad]), v[bad].tolist()).spindle_rpm(p)
+        ks = lanes.tolist()
+        build = factory.build_drawn
+        self.scenarios.defer_many(
+            ks, ((build, segments, i, c, vi) for i, (c, vi) in
+                 enumerate(zip(counts.tolist(), v.tolist(), strict=True)))
+        )  # fmt: skip
+        self.truths.defer_many(ks, ((_true_params, self.scenarios, k, p) for k in ks))
+        for k in ks:
+            if not self.bound[k] == self.bound[k]:  # refused by the kernel: let it say why
+                self.bound[k] = machining_time_bound(
+                    self.scenarios[k], self.truths[k], float(self.spindle[k])
+                )
+        if factory.actuation is not None or self.act_lanes is not None:
+            for k in ks:
+                self.act_lanes = configure_lane(
+                    self.act_lanes, k, factory.actuation, self.actuation, self._actuation_lanes
+                )
+        self.names.set_many(lanes, factory.name)
+
+    def _batches(self, factory) -> bool:
+        """Whether :meth:`start_lanes` may start ``factory``'s scenarios in one batch: a
+        split's, without wear (whose score bound is integrated in Python), whose every
+        scenario passes the checks :meth:`start` makes (those of the ranges' two ends,
+        checked once: spindle speed, true parameters, radial depth, torque limit below the
+        breakage torque)."""
+        if not isinstance(factory, _SplitFactory) or factory.wear is not None:
+            return False
+        ok = self._batch_ok.get(factory)
+        if ok is None:
+            nominal = self.params
+            try:
+                for sc in factory.extremes:
+                    sc.spindle_rpm(nominal)
+                    truth = sc.true_params(nominal)
+                    ok = factory.depth[1] <= truth.tool_diameter_mm and (
+                        sc.torque_limit_Nmm(nominal) < truth.breakage_torque_Nmm
+                    )
+                    if not ok:
+                        break
+            except ValueError:
+                ok = False
+            self._batch_ok[factory] = ok
+        return ok
 
     def _kernel_args(self) -> tuple:
         """The arguments of :func:`_step`, in order (rebuilt when the lane arrays are)."""

@@ -849,8 +849,6 @@ class MillingLanes:
         self.nseg = np.ones(self.n, dtype=np.int64)
         self.seg = np.zeros(self.n, dtype=np.int64)
         self.finished = np.zeros(self.n, dtype=np.bool_)
-        self.lane_params: list[MillingParams] = [params] * self.n
-        self.profiles: list = [None] * self.n
         self.out = np.zeros((self.n, len(LANE_SIGNALS)))
         self.out_segment = np.zeros(self.n, dtype=np.int64)
         self.out_finish = np.full(self.n, np.nan)
@@ -876,8 +874,6 @@ class MillingLanes:
         start_lane(lane, self.lane_constants(params, rpm), params.process_lag_s(rpm), segments,
                    self.lag, self.z, self.buf, self.edges, self.d0, self.slope, self.nseg,
                    self.seg, self.lane_f, self.finished)  # fmt: skip
-        self.lane_params[lane] = params
-        self.profiles[lane] = profile
 
     def fit_segments(self, n_segments: int) -> None:
         """Widen the per-lane workpiece tables to hold ``n_segments`` segments (a new

@@ -24,7 +24,7 @@ from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
 from machining_envs.core.checks import check_range, drawn_instance
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.splits import split_state
-from machining_envs.core.workpieces import DepthProfile, drawn_profile
+from machining_envs.core.workpieces import DepthProfile, drawn_lane_cuts, drawn_profile
 from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams, bisect_right
 
 __all__ = [
@@ -208,58 +208,105 @@ def _fixed(name: str, profile: Callable[[], DepthProfile]):
     return make
 
 
-def _random(
-    name: str,
-    depth: tuple[float, float],
-    segments: tuple[int, int],
-    spindle: tuple[float, float],
-    ref: tuple[float, float],
-    truth: float,
-    wear: tuple[float, float] | None = None,
-    actuation: Actuation | None = None,
-):
-    # After the workpiece, uniform in [low, high) each, low + (high - low) u (what
-    # rng.uniform(low, high) gives) in order: the log spindle and limit scales, Ks, m, the
-    # noise scale and (with wear) the wear rate.
-    lows = [float(np.log(spindle[0])), float(np.log(ref[0])), 1.0 - truth, 1.0 - truth, 0.5]
-    highs = [float(np.log(spindle[1])), float(np.log(ref[1])), 1.0 + truth, 1.0 + truth, 2.0]
-    if wear is not None:
-        lows.append(float(wear[0]))
-        highs.append(float(wear[1]))
-    spans = [hi - lo for lo, hi in zip(lows, highs, strict=True)]
-    # Every drawn field lies between these two scenarios' (checked here, once): make()
-    # builds its scenarios without checking them again.
-    profile_name = f"{name} profile"
-    DepthProfile.check_random_ranges(depth, segments, (5.0, 12.0), 2.5)
-    prof = DepthProfile.steps((depth[0],), 1.0)
-    for end in (0, 1):
-        w_end = wear[end] if wear is not None else 0.0
-        ranges = (spindle[end], ref[end], 1.0 + (2 * end - 1) * truth, 2.0 if end else 0.5)
-        sp, tr, ks, noise = ranges
-        MillingScenario(name, prof, sp, tr, ks, ks, noise, w_end, actuation=actuation)
+class _SplitFactory:
+    """The factory of a split's scenarios: ``factory(rng)`` draws one from the env's
+    generator. The workpiece, then uniform in ``[low, high)`` each, ``low + (high - low) u``
+    (what ``rng.uniform(low, high)`` gives) in order: the log spindle and limit scales, Ks,
+    m, the noise scale and (with wear) the wear rate. A vector env draws the numbers of
+    many lanes at once (:meth:`draw_lanes`) and builds a lane's scenario from them only when
+    it is asked for (:meth:`build_drawn`): the same object ``factory(rng)`` gives."""
 
-    def make(env_rng: np.random.Generator) -> MillingScenario:
+    def __init__(
+        self,
+        name: str,
+        depth: tuple[float, float],
+        segments: tuple[int, int],
+        spindle: tuple[float, float],
+        ref: tuple[float, float],
+        truth: float,
+        wear: tuple[float, float] | None = None,
+        actuation: Actuation | None = None,
+    ) -> None:
+        self.name = name
+        lows = [float(np.log(spindle[0])), float(np.log(ref[0])), 1.0 - truth, 1.0 - truth, 0.5]
+        highs = [float(np.log(spindle[1])), float(np.log(ref[1])), 1.0 + truth, 1.0 + truth, 2.0]
+        self.wear = wear
+        if wear is not None:
+            lows.append(float(wear[0]))
+            highs.append(float(wear[1]))
+        self.lows = lows
+        self.spans = [hi - lo for lo, hi in zip(lows, highs, strict=True)]
+        #: The log spindle and limit scales' ranges, as arrays (``draw_lanes``'s users).
+        self.log_lows, self.log_spans = np.array(lows[:2]), np.array(self.spans[:2])
+        self.actuation = actuation
+        self.depth, self.segments = depth, segments
+        # Every drawn field lies between these two scenarios' (checked here, once): the
+        # factory builds its scenarios without checking them again.
+        self.profile_name = f"{name} profile"
+        DepthProfile.check_random_ranges(depth, segments, (5.0, 12.0), 2.5)
+        prof = DepthProfile.steps((depth[0],), 1.0)
+        self.extremes = tuple(
+            MillingScenario(
+                name,
+                prof,
+                spindle[end],
+                ref[end],
+                1.0 + (2 * end - 1) * truth,
+                1.0 + (2 * end - 1) * truth,
+                2.0 if end else 0.5,
+                wear[end] if wear is not None else 0.0,
+                actuation=actuation,
+            )
+            for end in (0, 1)
+        )
+
+    def __call__(self, env_rng: np.random.Generator) -> MillingScenario:
         # The numbers of DepthProfile.random(rng, ...) and one rng.uniform per range, from
         # the split's stream in one compiled call.
-        _, prof, v = drawn_profile(split_state(env_rng, name), 0, depth, segments, (5.0, 12.0),
-                                   0.3, 2.5, len(lows), profile_name)  # fmt: skip
-        u = [lo + span * x for lo, span, x in zip(lows, spans, v.tolist(), strict=True)]
+        _, prof, v = drawn_profile(
+            split_state(env_rng, self.name), 0, *self._cut_ranges, len(self.lows),
+            self.profile_name,
+        )  # fmt: skip
+        return self._scenario(prof, v.tolist())
+
+    @property
+    def _cut_ranges(self) -> tuple:
+        return self.depth, self.segments, (5.0, 12.0), 0.3, 2.5
+
+    def draw_lanes(self, table, lanes: np.ndarray) -> tuple:
+        """The numbers of :meth:`__call__` for every lane in ``lanes``, each drawn with its
+        generator in ``table`` (``LaneGenerators.table``), in one compiled call:
+        ``(segments, segment counts, uniforms)`` of shapes ``(L, 4, S + 1)``, ``(L,)`` and
+        ``(L, len(lows))`` (see :func:`~machining_envs.core.workpieces.drawn_lane_cuts`);
+        :meth:`build_drawn` turns a lane's into its scenario."""
+        _, segments, counts, v = drawn_lane_cuts(
+            table, lanes, self.name, 0, *self._cut_ranges, len(self.lows)
+        )
+        return segments, counts, v
+
+    def build_drawn(self, segments: np.ndarray, i: int, count: int, v: list[float]):
+        """The scenario of lane ``i``'s numbers from :meth:`draw_lanes`: the segments (of
+        all lanes), its segment count, its uniforms."""
+        table = segments[i, :, : count + 1].copy()
+        table.flags.writeable = False
+        return self._scenario(DepthProfile._built(table, self.profile_name), v)
+
+    def _scenario(self, profile: DepthProfile, v: list[float]) -> MillingScenario:
+        u = [lo + span * x for lo, span, x in zip(self.lows, self.spans, v, strict=True)]
         return drawn_instance(
             MillingScenario,
             {
-                "name": name,
-                "profile": prof,
+                "name": self.name,
+                "profile": profile,
                 "spindle_scale": float(np.exp(u[0])),
                 "torque_limit_scale": float(np.exp(u[1])),
                 "torque_coefficient_scale": u[2],
                 "feed_exponent_scale": u[3],
                 "noise_scale": u[4],
-                "wear_per_100mm": u[5] if wear is not None else 0.0,
-                "actuation": actuation,
+                "wear_per_100mm": u[5] if self.wear is not None else 0.0,
+                "actuation": self.actuation,
             },
         )
-
-    return make
 
 
 #: The ranges of the training distribution (depth mm, segments, spindle and limit scales,
@@ -289,10 +336,10 @@ _TRAINING_RANGES = ((0.5, 3.0), (2, 5), (0.8, 1.25), (0.8, 1.25), 0.2)
 MILLING_SCENARIOS: dict[str, Callable[[np.random.Generator], MillingScenario]] = {
     "paper_step": _fixed("paper_step", paper_step_profile),
     "paper_taper": _fixed("paper_taper", paper_taper_profile),
-    **{split: _random(split, *_TRAINING_RANGES) for split in ("train", "validation", "test")},
-    "ood": _random("ood", (0.4, 3.5), (2, 6), (0.7, 1.4), (0.7, 1.4), 0.25),
-    "wear": _random("wear", *_TRAINING_RANGES, wear=(0.5, 1.5)),
-    "shopfloor": _random("shopfloor", *_TRAINING_RANGES, actuation=SHOPFLOOR_ACTUATION),
+    **{split: _SplitFactory(split, *_TRAINING_RANGES) for split in ("train", "validation", "test")},
+    "ood": _SplitFactory("ood", (0.4, 3.5), (2, 6), (0.7, 1.4), (0.7, 1.4), 0.25),
+    "wear": _SplitFactory("wear", *_TRAINING_RANGES, wear=(0.5, 1.5)),
+    "shopfloor": _SplitFactory("shopfloor", *_TRAINING_RANGES, actuation=SHOPFLOOR_ACTUATION),
 }
 
 

@@ -1,0 +1,99 @@
+"""Many lanes started at once (``_MillingCore.start_lanes``): the same episodes as lane by
+lane, for every scenario name and both torque laws, with each lane's scenario and truth
+built when read."""
+
+import copy
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from machining_envs.milling.plant import MillingParams
+from machining_envs.milling.scenarios import MILLING_SCENARIOS
+from tests.helpers import MILLING
+
+N = 12
+PARAMS = {"power_law": MillingParams(), "average_force": MillingParams.ahn_choi_al6061()}
+
+
+def _cores(spec, **kwargs):
+    """Two vector envs' cores after one reset(seed=5): lanes started one by one (the
+    per-lane path) and all at once."""
+    one, many = (gym.make_vec(MILLING, num_envs=N, **kwargs).unwrapped for _ in range(2))
+    for venv in (one, many):
+        venv.reset(seed=5, options={"scenario": spec})
+    lanes = np.array([0, 3, 4, 7, 11])
+    for k in lanes.tolist():
+        one._core.start(k, spec, one.lane_rngs[k])
+    many._core.start_lanes(lanes, spec, many.lane_rngs)
+    return one._core, many._core, lanes
+
+
+def _arrays(obj) -> dict:
+    return {k: v for k, v in vars(obj).items() if isinstance(v, np.ndarray)}
+
+
+@pytest.mark.parametrize("law", sorted(PARAMS))
+@pytest.mark.parametrize("spec", sorted(MILLING_SCENARIOS))
+def test_lanes_started_together_start_as_one_by_one(spec, law):
+    """Every array of the env and the plant, every lane's scenario, truth and name, and the
+    generators' states: the same, bit for bit; and the lanes step alike after."""
+    one, many, lanes = _cores(spec, params=PARAMS[law])
+    batched = {"train", "validation", "test", "ood", "shopfloor"}  # wear: bound in Python
+    assert many._batch_ok.get(MILLING_SCENARIOS[spec], False) == (spec in batched)
+    for _ in range(2):
+        for a, b in ((one, many), (one.lanes, many.lanes)):
+            arrays_a, arrays_b = _arrays(a), _arrays(b)
+            assert arrays_a.keys() == arrays_b.keys()
+            for name, arr in arrays_a.items():
+                np.testing.assert_array_equal(arr, arrays_b[name], err_msg=name, strict=True)
+        for core in (one, many):
+            core.in_action[:] = 0.3
+            core.step()
+    for k in range(N):
+        assert one.scenarios[k] == many.scenarios[k], k
+        assert one.truths[k] == many.truths[k], k
+        assert one.names[k] == many.names[k]
+        assert one.rngs.generators[k].random() == many.rngs.generators[k].random()
+    acts = [c.act_lanes for c in (one, many)]
+    assert (acts[0] is None) == (acts[1] is None)
+    if acts[0] is not None:
+        for name, arr in _arrays(acts[0]).items():
+            np.testing.assert_array_equal(arr, _arrays(acts[1])[name], err_msg=name)
+
+
+def test_a_batch_builds_the_lanes_objects_only_when_read():
+    one, many, lanes = _cores("train")
+    assert all(k in many.scenarios._deferred for k in lanes.tolist())
+    assert all(k in many.truths._deferred for k in lanes.tolist())
+    assert many.scenarios[4] == one.scenarios[4]
+    assert 4 not in many.scenarios._deferred and 7 in many.scenarios._deferred
+    # A pickle or copy carries what is still to be built.
+    for clone in (pickle.loads(pickle.dumps(many)), copy.deepcopy(many)):
+        assert clone.scenarios[7] == one.scenarios[7]
+        assert clone.truths[11] == one.truths[11]
+
+
+def test_a_scenario_the_batch_would_let_through_unchecked_goes_lane_by_lane():
+    """Nominal parameters for which a split's ends would break the tool (the torque limit
+    at or above ``breakage_torque_Nmm``): the batch is not taken and the lane's own check
+    names the problem, as a single env's reset does."""
+    venv = gym.make_vec(MILLING, num_envs=2, breakage_torque_Nmm=4600.0)
+    with pytest.raises(ValueError, match="breakage_torque_Nmm"):
+        venv.reset(seed=0, options={"scenario": "ood"})
+        for _ in range(50):  # ood draws limits up to 1.4 x 3600 N·mm
+            venv.reset(options={"scenario": "ood"})
+    venv.reset(seed=0)  # train's limits reach 1.25 x 3600 = 4500 N·mm, below it: batched
+    checked = {f.name: ok for f, ok in venv.unwrapped._core._batch_ok.items()}
+    assert checked == {"train": True, "ood": False}
+
+
+def test_a_spindle_range_the_nominal_speed_pushes_out_goes_lane_by_lane():
+    """A nominal speed whose split range reaches past ``SPINDLE_RPM_RANGE``: the lane's
+    own check refuses it."""
+    venv = gym.make_vec(MILLING, num_envs=2, spindle_rpm=5500.0)  # train: up to 6875 rpm
+    with pytest.raises(ValueError, match="spindle_rpm range"):
+        for seed in range(50):
+            venv.reset(seed=seed)
+    assert not venv.unwrapped._core._batch_ok[MILLING_SCENARIOS["train"]]
