@@ -60,7 +60,6 @@ from machining_envs.turning.plant import (
     SPINDLE_RPM_RANGE,
     TurningLanes,
     TurningParams,
-    cutting_power_W,
     lane_ints,
     spindle_drive,
     start_lane,
@@ -183,6 +182,61 @@ _EF_BREAKAGE = _EF.index("breakage_force")
 _EF_PREV_ACTION = _EF.index("prev_action")
 _EF_FR_OBS = _EF.index("fr_obs")
 _EF_RPM_OBS = _EF.index("rpm_obs")
+
+
+#: The float keys of a vector step's info, one row each of the table
+#: :func:`_info_rows` fills (``_TurningCore.info_arrays``).
+_INFO_F = ("t_s", "command", "force_N", "force_limit_N", "cost", "score_bound", "measured",
+           "measured_counts", "peak_force_N", "feed_mm_per_rev", "feed_velocity_mm_s",
+           "position_mm", "depth_mm", "spindle_rpm", "spindle_power_W", "cutting_power_W",
+           "workpiece_length_mm", "machining_time_s")  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _info_rows(lane_f, ef, eb, out, out_finish, meas, bound, spindle, diameter, length, rows):
+    """Every lane's float info into ``rows`` (one row per key of ``_INFO_F``, one column per
+    lane), as :meth:`_TurningCore.lane_info` reports it: the feed, feed velocity and
+    position 0 after a divergence, the machining time NaN until the lane finishes, both
+    powers ``cutting_power_W``'s (its arithmetic, in its order: an ideal spindle; the
+    caller puts in the power-limited lanes' own)."""
+    n = out.shape[0]
+    # A row at a time: rows lie 8 n bytes apart, and writing all of a lane's at once
+    # stalls on stores that alias in the cache (n = 1024: 8 kB apart) a few times over.
+    for k in range(n):
+        rows[0, k] = lane_f[k, 5]
+    for k in range(n):
+        rows[1, k] = ef[k, _EF_COMMAND]
+    for k in range(n):
+        rows[2, k] = out[k, 0]
+    for k in range(n):
+        rows[3, k] = ef[k, _EF_FORCE_LIMIT]
+    for k in range(n):
+        rows[4, k] = 1.0 if eb[k, 5] else 0.0
+    for k in range(n):
+        rows[5, k] = bound[k]
+    for k in range(n):
+        rows[6, k] = meas[k, 0]
+    for k in range(n):
+        rows[7, k] = out[k, 2]
+    for k in range(n):
+        rows[8, k] = out[k, 1]
+    for r, c in ((9, 3), (10, 4), (11, 5)):
+        for k in range(n):
+            rows[r, k] = 0.0 if eb[k, 0] else out[k, c]
+    for k in range(n):
+        rows[12, k] = out[k, 6]
+    for k in range(n):
+        rows[13, k] = spindle[k]
+    for k in range(n):
+        f = out[k, 0]
+        f = f if (f >= 0.0 or f != f) else 0.0  # numpy's maximum(f, 0.0)
+        rows[14, k] = f * (spindle[k] * (math.pi / 30.0)) * (diameter[k] * 0.0005)
+    for k in range(n):
+        rows[15, k] = rows[14, k]
+    for k in range(n):
+        rows[16, k] = length[k]
+    for k in range(n):
+        rows[17, k] = out_finish[k] if eb[k, 2] else np.nan
 
 
 @numba.njit(cache=True, inline="always")
@@ -672,14 +726,6 @@ class _TurningCore:
                 self.rpm_obs[k] = new / 1000.0
                 self.obs[k, 3] = self.rpm_obs[k]
 
-    def _power_arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        """Drive and cutting power of every lane, W, as arrays (``lane_info``'s arithmetic)."""
-        cut = cutting_power_W(self.lanes.out[:, 0], self.spindle, self.diameter)
-        drive = cut.copy()
-        for k in self.power_lanes:
-            drive[k], cut[k] = self.power[k]
-        return drive, cut
-
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""
         lanes = self.lanes
@@ -691,7 +737,7 @@ class _TurningCore:
             p_drive, p_cut = self.power[k].tolist()
             rpm = float(self.spindle[k])
         else:  # an ideal spindle delivers what the cut asks: cutting_power_W's arithmetic,
-            # in its order, on Python floats (the same numbers as _power_arrays)
+            # in its order, on Python floats (the same numbers as _info_rows)
             p_drive = p_cut = max(force, 0.0) * (rpm * (math.pi / 30.0)) * (diameter * 0.0005)
         info = {
             "t_s": float(lanes.lane_f[k, 5]),
@@ -724,40 +770,30 @@ class _TurningCore:
         return info
 
     def info_arrays(self) -> dict:
-        """The step info of every lane, as arrays (``machining_time_s`` with its mask)."""
-        o = self.lanes.out
-        f = self.flags
-        ok = ~f[:, 0]
-        power = self._power_arrays()
-        info = {
-            "t_s": self.lanes.lane_f[:, 5].copy(),
-            "command": self.command.copy(),
-            "action_clipped": self.clipped.copy(),
+        """The step info of every lane, as arrays (``machining_time_s`` with its mask): views
+        of one table of the float keys (:func:`_info_rows`) and one copy of the flags."""
+        c = np.empty((len(_INFO_F), self.n))
+        _info_rows(self.lanes.lane_f, self.ef, self.eb, self.lanes.out, self.lanes.out_finish,
+                   self.meas, self.bound, self.spindle, self.diameter, self.length, c)  # fmt: skip
+        for k in self.power_lanes:  # drive and cutting power from the spindle's drive
+            c[14, k], c[15, k] = self.power[k]
+        f = self.eb.copy()
+        info = dict(zip(_INFO_F, c, strict=True))
+        return {
+            "t_s": info["t_s"],
+            "command": info["command"],
+            "action_clipped": f[:, 7],
             "n_action_clipped": self.n_clipped.copy(),
-            "breakage": f[:, 1].copy(),
-            "diverged": f[:, 0].copy(),
-            "finished": f[:, 2].copy(),
-            "force_N": o[:, 0].copy(),
-            "force_limit_N": self.force_limit.copy(),
-            "cost": f[:, 5].astype(np.float64),
-            "score_bound": self.bound.copy(),
-            "measured": self.meas[:, 0].copy(),
-            "measured_counts": o[:, 2].copy(),
-            "peak_force_N": o[:, 1].copy(),
-            "feed_mm_per_rev": np.where(ok, o[:, 3], 0.0),
-            "feed_velocity_mm_s": np.where(ok, o[:, 4], 0.0),
-            "position_mm": np.where(ok, o[:, 5], 0.0),
-            "depth_mm": o[:, 6].copy(),
+            "breakage": f[:, 1],
+            "diverged": f[:, 0],
+            "finished": f[:, 2],
+            **{k: info[k] for k in _INFO_F[2:13]},
             "segment": self.lanes.out_segment.copy(),
-            "spindle_rpm": self.spindle.copy(),
-            "spindle_power_W": power[0],
-            "cutting_power_W": power[1],
-            "workpiece_length_mm": self.length.copy(),
+            **{k: info[k] for k in _INFO_F[13:17]},
             "scenario": self.names.array(),
-            "machining_time_s": np.where(f[:, 2], self.lanes.out_finish, np.nan),
-            "_machining_time_s": f[:, 2].copy(),
+            "machining_time_s": info["machining_time_s"],
+            "_machining_time_s": self.eb[:, 2].copy(),
         }
-        return info
 
 
 class TurningEnv(gym.Env):
