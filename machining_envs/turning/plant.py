@@ -261,7 +261,8 @@ class _Matrices:
     # instant (0 where it lies in the current sample, merged with the other terms)
     filt_step: np.ndarray  # (n_f, n_f + M + 1): next filter state from [state, F_1..F_M, F_0]
     packed: np.ndarray  # (2M + 3, 8): the current pair's group, then each feed row's delayed
-    # group where that is not the current one (zeros elsewhere)
+    # group where that is not the current one (zeros elsewhere); stored column after column,
+    # as each lane holds it (``TurningLanes.big``)
 
     @property
     def big(self) -> np.ndarray:
@@ -385,7 +386,7 @@ def _speed_free_rows(params: _LinearKey) -> tuple[np.ndarray, np.ndarray]:
 @functools.lru_cache(maxsize=256)
 def _matrices(params: _LinearKey, spindle_rpm: float) -> _Matrices:
     m = params.substeps
-    packed = np.empty((2 * m + 3, 8))
+    packed = np.empty((8, 2 * m + 3)).T  # column after column, as the lanes hold it
     lag = np.empty(m, dtype=np.int64)
     lags = _fill_matrices(params, spindle_rpm, packed, lag)
     return _Matrices(lags, lag, _speed_free_rows(params)[1], packed)
@@ -497,7 +498,8 @@ def _delayed_rows(phis, gams, base, phi_r2, gam_r2, period, ts, rho, packed, lag
     position at its delayed instant ``t_j - T`` (``period``), which lies ``lag[j]`` samples
     back, ``i h + rho`` past that sample's start: the I-row of ``Phi(rho) Phi(i h)`` and the
     I-entry of ``Phi(rho) Gamma(i h) + Gamma(rho)`` (``phi_r2``, ``gam_r2``: the I-row of
-    ``Phi(rho)`` and the I-entry of ``Gamma(rho)``). Each sum in a fixed order."""
+    ``Phi(rho)`` and the I-entry of ``Gamma(rho)``). Each sum in a fixed order. ``packed``
+    is ``(2M + 3, 8)``, and may be a view of a matrix stored column after column."""
     m = lag.size
     h = ts / m
     packed[:, :4] = base
@@ -590,15 +592,21 @@ def lane_ints(li):
 @numba.njit(cache=True)
 def _sampled_rows(a, lag, zk, m, y):
     """``y = A @ zk`` for the lane's step matrix ``A`` (``(2M + 3, 4 (L + 1))``), held as
-    its non-zero groups of four columns only: ``a`` row after row, eight values a row.
+    its non-zero groups of four columns only: ``a`` column after column, eight columns of
+    ``2M + 3`` values (``a.reshape(8, 2M + 3)``).
 
     Every row reads the current pair ``(x_k, u_k)`` (columns 0-3 of ``A``, the first four
-    of its row in ``a``); a feed row also reads the pair of its delayed instant (group
-    ``lag[j]`` of ``A``, the last four of its row in ``a``; none where ``lag[j]`` is 0, the
+    columns of ``a``); a feed row also reads the pair of its delayed instant (group
+    ``lag[j]`` of ``A``, the last four columns of ``a``; none where ``lag[j]`` is 0, the
     group then merged in the first). The others are zero, and
     :func:`~machining_envs.core.kernels.matvec`'s sums gain nothing from a zero group (a
     fused ``0 x + s`` is ``s`` for finite ``x``), so the rows here, summed in its order over
     the non-zero groups only, are its numbers for ``A @ zk`` (numpy's) to the last bit.
+
+    The rows in whole groups of four go in runs that read the same pairs (the positions,
+    the feed rows of one delay group after another, the next state): each run is one loop
+    of the same operations for every row, which runs in the processor's vectors, a row per
+    value.
     """
     n_rows = 2 * m + 3
     nb = n_rows & ~3  # rows summed in fused groups of four; the feed rows are among them
@@ -606,33 +614,87 @@ def _sampled_rows(a, lag, zk, m, y):
     z1 = zk[1]
     z2 = zk[2]
     z3 = zk[3]
-    for r in range(nb):
-        b = 8 * r
-        s0 = fma(a[b], z0, 0.0)
-        s1 = fma(a[b + 1], z1, 0.0)
-        s2 = fma(a[b + 2], z2, 0.0)
-        s3 = fma(a[b + 3], z3, 0.0)
-        if m <= r < 2 * m and lag[r - m] > 0:
-            q = 4 * lag[r - m]
-            s0 = fma(a[b + 4], zk[q], s0)
-            s1 = fma(a[b + 5], zk[q + 1], s1)
-            s2 = fma(a[b + 6], zk[q + 2], s2)
-            s3 = fma(a[b + 7], zk[q + 3], s3)
-        y[r] = 0.0 + ((s0 + s2) + (s1 + s3))
+    n = np.uint64(n_rows)  # unsigned indices: the compiler knows they are not negative
+    lo = 0
+    while lo < nb:
+        g = 0  # the run's delay group
+        hi = nb
+        if lo < m:
+            hi = m
+        elif lo < 2 * m:
+            g = lag[lo - m]
+            hi = lo + 1
+            while hi < 2 * m and lag[hi - m] == g:
+                hi += 1
+            if g == 0 and hi == 2 * m:
+                hi = nb
+        if g > 0:
+            q = 4 * g
+            d0 = zk[q]
+            d1 = zk[q + 1]
+            d2 = zk[q + 2]
+            d3 = zk[q + 3]
+            for i in range(lo, hi):
+                r = np.uint64(i)
+                s0 = fma(a[r + np.uint64(4) * n], d0, fma(a[r], z0, 0.0))
+                s1 = fma(a[r + np.uint64(5) * n], d1, fma(a[r + n], z1, 0.0))
+                s2 = fma(a[r + np.uint64(6) * n], d2, fma(a[r + np.uint64(2) * n], z2, 0.0))
+                s3 = fma(a[r + np.uint64(7) * n], d3, fma(a[r + np.uint64(3) * n], z3, 0.0))
+                y[r] = 0.0 + ((s0 + s2) + (s1 + s3))
+        else:
+            for i in range(lo, hi):
+                r = np.uint64(i)
+                s0 = fma(a[r], z0, 0.0)
+                s1 = fma(a[r + n], z1, 0.0)
+                s2 = fma(a[r + np.uint64(2) * n], z2, 0.0)
+                s3 = fma(a[r + np.uint64(3) * n], z3, 0.0)
+                y[r] = 0.0 + ((s0 + s2) + (s1 + s3))
+        lo = hi
     r = nb
     if (n_rows - nb) & 2:  # two rows of two sums of rounded products
         for r in range(nb, nb + 2):
-            b = 8 * r
-            s0 = 0.0 + a[b] * z0
-            s1 = 0.0 + a[b + 1] * z1
-            y[r] = 0.0 + ((s0 + a[b + 2] * z2) + (s1 + a[b + 3] * z3))
+            s0 = 0.0 + a[r] * z0
+            s1 = 0.0 + a[n_rows + r] * z1
+            y[r] = 0.0 + ((s0 + a[2 * n_rows + r] * z2) + (s1 + a[3 * n_rows + r] * z3))
         r = nb + 2
     if (n_rows - nb) & 1:  # one row of four sums of rounded products
-        b = 8 * r
         y[r] = 0.0 + (
-            ((0.0 + a[b] * z0) + (0.0 + a[b + 2] * z2))
-            + ((0.0 + a[b + 1] * z1) + (0.0 + a[b + 3] * z3))
+            ((0.0 + a[r] * z0) + (0.0 + a[2 * n_rows + r] * z2))
+            + ((0.0 + a[n_rows + r] * z1) + (0.0 + a[3 * n_rows + r] * z3))
         )
+
+
+@numba.njit(cache=True)
+def _filter_pair(f, x, w, out):
+    """``out[:2] = F @ x[:w]`` for the filter's step matrix ``F`` of two rows (a
+    second-order filter; ``w`` values a row, row after row in ``f``), summed as
+    :func:`~machining_envs.core.kernels.matvec` sums two rows (two interleaved sums of
+    rounded products over the columns in whole groups of four, added, and a last column
+    fused on), so to the last bit numpy's product, the two rows in one loop (four
+    independent sums, where one row after the other leaves two). False, writing nothing,
+    for a ``w`` that ``matvec`` sums otherwise."""
+    tail = w & 3
+    if tail > 1 or w < 5 or w >= 2048:
+        return False
+    s0 = 0.0
+    s1 = 0.0
+    t0 = 0.0
+    t1 = 0.0
+    for q in range(0, w - tail, 2):
+        x0 = x[q]
+        x1 = x[q + 1]
+        s0 = s0 + f[q] * x0
+        s1 = s1 + f[q + 1] * x1
+        t0 = t0 + f[w + q] * x0
+        t1 = t1 + f[w + q + 1] * x1
+    o0 = 0.0 + (s0 + s1)
+    o1 = 0.0 + (t0 + t1)
+    if tail:
+        o0 = fma(f[w - 1], x[w - 1], o0)
+        o1 = fma(f[2 * w - 1], x[w - 1], o1)
+    out[0] = o0
+    out[1] = o1
+    return True
 
 
 @numba.njit(cache=True)
@@ -689,14 +751,15 @@ def step_lane(
     if wear != 0.0:  # Kf (1 + w x): the tool dulls along the cut (wear_per_100mm)
         for j in range(m):
             force[j] *= 1.0 + wear * y[j]
-    fo = work[k : k + 1, n_rows:]
-    matvec(filt[k : k + 1], n_f, b.shape[0], buf[k : k + 1], fo)
-    b[:n_f] = fo[0]
+    fo = work[k, n_rows:]
+    if not (n_f == 2 and _filter_pair(filt[k], b, b.shape[0], fo)):
+        matvec(filt[k : k + 1], n_f, b.shape[0], buf[k : k + 1], work[k : k + 1, n_rows:])
+    b[:n_f] = fo
     f_end = force[m - 1]
     out = out_f[k]
     out[0] = f_end
     out[1] = force.max()
-    out[2] = gain * fo[0, 0] + noise
+    out[2] = gain * fo[0] + noise
     out[3] = y[2 * m - 1]
     b[b.shape[0] - 1] = f_end
     for q in range(c - 1, 3, -1):
@@ -777,7 +840,7 @@ def start_lane(k, rpm, full_history, consts, segments, phis, gams, base, sa, sb,
     where the step matrix is left for ``zoh`` (:meth:`TurningLanes._load_matrices`)."""
     m = li.shape[1] - 4
     lags = _lane_matrices(
-        phis, gams, base, sa, sb, ts, rpm, big[k].reshape((2 * m + 3, 8)), li[k, 4:]
+        phis, gams, base, sa, sb, ts, rpm, big[k].reshape((8, 2 * m + 3)).T, li[k, 4:]
     )
     li[k, 0] = z.shape[1] if full_history else 4 * (lags + 1)
     z[k, :] = 0.0
@@ -830,8 +893,9 @@ class TurningLanes:
         c_max = 4 * (lags_max + 1)
         filt = _speed_free_rows(self._key)[1]
         self.m, self.n_f = m, filt.shape[0]
-        #: The lanes' step matrices, each as its non-zero groups of columns: eight values
-        #: a row (``_sampled_rows``).
+        #: The lanes' step matrices, each as its non-zero groups of columns
+        #: (``_Matrices.packed``) column after column: eight columns of ``2M + 3`` values,
+        #: ``big[k].reshape(8, 2M + 3)`` (``_sampled_rows``).
         self.big = np.zeros((self.n, (2 * m + 3) * 8))
         #: The lanes' integers in one array (one argument of the kernel), read through the
         #: views below: the step matrix's columns, the workpiece's segments, the segment the
@@ -921,7 +985,7 @@ class TurningLanes:
         with zero columns to the memory of the slowest speed, so that the lane keeps every
         sample instant it could ever need and its speed may change between samples."""
         m = self.m
-        lags = _fill_matrices(self._key, spindle_rpm, self.big[lane].reshape(2 * m + 3, 8),
+        lags = _fill_matrices(self._key, spindle_rpm, self.big[lane].reshape(8, 2 * m + 3).T,
                               self.lag[lane])  # fmt: skip
         self.cols[lane] = self.z.shape[1] if full_history else 4 * (lags + 1)
 
