@@ -225,3 +225,30 @@ def test_step_matrix_by_zoh_where_the_series_declines_it_agrees():
         np.testing.assert_array_equal(lag_s, lag_z)
         scale = np.abs(series).max(axis=1, keepdims=True)
         assert np.all(np.abs(series - zohs) <= 4 * np.finfo(float).eps * scale)
+
+
+@pytest.mark.parametrize("width", [5, 6, 9, 13, 53, 54, 101])
+def test_the_filters_two_rows_are_matvecs(width):
+    """The second-order filter's step (``_filter_pair``, both rows in one loop) gives
+    ``core.kernels.matvec``'s numbers to the last bit, with inf and NaN too; widths matvec
+    sums otherwise are left to it."""
+    from machining_envs.core.kernels import matvec
+    from machining_envs.turning.plant import _filter_pair
+
+    rng = np.random.default_rng(width)
+    for trial in range(40):
+        f = rng.normal(size=2 * width) * 10.0 ** rng.integers(-3, 4, size=2 * width)
+        x = rng.normal(size=width) * 10.0 ** rng.integers(-3, 4, size=width)
+        if trial == 1:
+            x[rng.integers(width)] = np.inf
+        if trial == 2:
+            f[rng.integers(2 * width)] = np.nan
+        out = np.full(2, 7.0)
+        expected = np.full((1, 2), 7.0)
+        matvec(f.reshape(1, -1), 2, width, x.reshape(1, -1), expected)
+        taken = _filter_pair(f, x, width, out)
+        assert taken == (width & 3 < 2)
+        if taken:
+            assert out.tobytes() == expected[0].tobytes(), (width, trial)
+        else:
+            assert out.tolist() == [7.0, 7.0]
