@@ -9,12 +9,19 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from machining_envs.core.actuation import SHOPFLOOR_ACTUATION
 from machining_envs.milling.plant import MillingParams
 from machining_envs.milling.scenarios import MILLING_SCENARIOS
 from tests.helpers import MILLING
 
 N = 12
 PARAMS = {"power_law": MillingParams(), "average_force": MillingParams.ahn_choi_al6061()}
+#: Env options a batch must respect: a nominal tool that wears (the splits' truths are
+#: sharp all the same) and the CNC's actuation set for every lane.
+OPTIONS = {
+    "worn_nominal": {"params": MillingParams(wear_per_100mm=1.0)},
+    "actuation": {"actuation": SHOPFLOOR_ACTUATION},
+}
 
 
 def _cores(spec, **kwargs):
@@ -42,6 +49,21 @@ def test_lanes_started_together_start_as_one_by_one(spec, law):
     one, many, lanes = _cores(spec, params=PARAMS[law])
     batched = {"train", "validation", "test", "ood", "shopfloor"}  # wear: bound in Python
     assert many._batch_ok.get(MILLING_SCENARIOS[spec], False) == (spec in batched)
+    _assert_same(one, many)
+
+
+@pytest.mark.parametrize("option", sorted(OPTIONS))
+def test_env_options_start_together_as_one_by_one(option):
+    """The env's own options (``OPTIONS``) reach the lanes started together as they reach
+    those started one by one."""
+    one, many, _ = _cores("train", **OPTIONS[option])
+    assert many._batch_ok[MILLING_SCENARIOS["train"]]
+    _assert_same(one, many)
+
+
+def _assert_same(one, many):
+    """Two cores alike: their arrays and their plants' (now and after a step), every lane's
+    objects and name, the generators' states and the CNC's actuation."""
     for _ in range(2):
         for a, b in ((one, many), (one.lanes, many.lanes)):
             arrays_a, arrays_b = _arrays(a), _arrays(b)
