@@ -668,7 +668,14 @@ class _MillingCore:
         bad = _start_drawn_lanes(self._packed(self._kernel_args()), lanes, nominal, v, scales,
                                  segments, counts)  # fmt: skip
         if bad >= 0:  # a range's end rounded past SPINDLE_RPM_RANGE: the lane's check says so
-            factory.build_drawn(segments, bad, int(counts[bad]), v[bad].tolist()).spindle_rpm(p)
+            sc = factory.build_drawn(segments, bad, int(counts[bad]), v[bad].tolist())
+            sc.spindle_rpm(p)
+            lo, hi = SPINDLE_RPM_RANGE
+            raise ValueError(
+                f"lane {int(lanes[bad])}: spindle_scale {sc.spindle_scale} gives "
+                f"{p.spindle_rpm * sc.spindle_scale:g} rpm, outside the spindle_rpm range "
+                f"[{lo}, {hi}]"
+            )
         ks = lanes.tolist()
         build = factory.build_drawn
         self.scenarios.defer_many(
