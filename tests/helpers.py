@@ -251,3 +251,43 @@ def assert_drawn_scenarios_pass_their_checks(factories: dict, seeds: int = 150) 
             for field in dataclasses.fields(sc):
                 value = getattr(sc, field.name)
                 assert not isinstance(value, np.generic), (name, field.name, type(value))
+
+
+def started_together_and_one_by_one(env_id: str, spec, n: int = 12, **kwargs):
+    """Two vector envs' cores after one ``reset(seed=5)``: lanes 0, 3, 4, 7 and 11 started
+    again one by one (the per-lane path, ``core.start``) in the first and all at once
+    (``core.start_lanes``) in the second; ``(one, many, lanes)``."""
+    one, many = (gym.make_vec(env_id, num_envs=n, **kwargs).unwrapped for _ in range(2))
+    for venv in (one, many):
+        venv.reset(seed=5, options={"scenario": spec})
+    lanes = np.array([0, 3, 4, 7, 11])
+    for k in lanes.tolist():
+        one._core.start(k, spec, one.lane_rngs[k])
+    many._core.start_lanes(lanes, spec, many.lane_rngs)
+    return one._core, many._core, lanes
+
+
+def _arrays(obj) -> dict:
+    return {k: v for k, v in vars(obj).items() if isinstance(v, np.ndarray)}
+
+
+def assert_cores_alike(one, many) -> None:
+    """Two cores (``started_together_and_one_by_one``) alike to the last bit: every array
+    of theirs and of their plants, every lane's scenario, true parameters and name, the
+    lanes' generators' states and the CNC's actuation."""
+    for a, b in ((one, many), (one.lanes, many.lanes)):
+        arrays_a, arrays_b = _arrays(a), _arrays(b)
+        assert arrays_a.keys() == arrays_b.keys()
+        for name, arr in arrays_a.items():
+            np.testing.assert_array_equal(arr, arrays_b[name], err_msg=name, strict=True)
+    for k in range(len(one.scenarios)):
+        assert one.scenarios[k] == many.scenarios[k], k
+        assert one.truths[k] == many.truths[k], k
+        assert one.names[k] == many.names[k]
+        state = one.rngs.generators[k].bit_generator.state
+        assert state == many.rngs.generators[k].bit_generator.state, k
+    acts = [c.act_lanes for c in (one, many)]
+    assert (acts[0] is None) == (acts[1] is None)
+    if acts[0] is not None:
+        for name, arr in _arrays(acts[0]).items():
+            np.testing.assert_array_equal(arr, _arrays(acts[1])[name], err_msg=name)

@@ -406,6 +406,47 @@ class LaneObjects:
         self._deferred.update(zip(lanes, recipes, strict=True))
 
 
+def split_batch(core, lanes: np.ndarray, spec, rngs, factories: dict):
+    """The first half of a core's ``start_lanes``: the split factory of ``spec`` (a name in
+    ``factories``) whose scenarios ``core`` starts ``lanes`` on together
+    (``core._batches(factory)`` says whether it may), each lane ``k`` now drawing from
+    ``rngs[k]``; or None, after starting each lane by ``core.start``, with all its checks
+    (another name, a scenario object, a split the batch does not take)."""
+    factory = factories.get(spec) if isinstance(spec, str) else None
+    if not core._batches(factory):
+        for k in lanes.tolist():
+            core.start(k, spec, rngs[k])
+        return None
+    for k in lanes.tolist():
+        core.rngs.bind(k, rngs[k])  # the scenario is drawn with it, and the noise
+    return factory
+
+
+def settle_batch(core, lanes: np.ndarray, recipes, actuation, name: str) -> list[int]:
+    """The bookkeeping of ``lanes`` started together by a core's ``start_lanes``: each
+    lane's scenario built when first read from its recipe (``recipes``: ``(build, *args)``
+    in the order of ``lanes``) and its true parameters from that scenario
+    (:class:`LaneObjects`), the CNC's ``actuation`` of the split (None: the env's option)
+    in each lane, the split's ``name``. Returns ``lanes`` as a list."""
+    from machining_envs.core.actuation import configure_lane
+
+    ks = lanes.tolist()
+    core.scenarios.defer_many(ks, recipes)
+    core.truths.defer_many(ks, ((lane_truth, core.scenarios, k, core.params) for k in ks))
+    if actuation is not None or core.act_lanes is not None:
+        for k in ks:
+            core.act_lanes = configure_lane(
+                core.act_lanes, k, actuation, core.actuation, core._actuation_lanes
+            )
+    core.names.set_many(lanes, name)
+    return ks
+
+
+def lane_truth(scenarios: LaneObjects, lane: int, nominal):
+    """The true parameters of lane ``lane``'s scenario (a deferred ``truths`` entry)."""
+    return scenarios[lane].true_params(nominal)
+
+
 class EpisodeLog:
     """The signals an env keeps for ``render()``: a list per name, each fed by one ``info`` key.
 

@@ -38,6 +38,8 @@ from machining_envs.core.env import (
     resolve_params,
     resolve_reward,
     scenario_option,
+    settle_batch,
+    split_batch,
 )
 from machining_envs.core.normals import LaneGenerators, lane_noise
 from machining_envs.core.packed import (
@@ -461,11 +463,6 @@ def _info_table(n: int) -> np.ndarray:
     return np.zeros((len(_INFO_F) + len(_INFO_LANE), n + 8))[:, :n]
 
 
-def _true_params(scenarios, lane: int, nominal: MillingParams) -> MillingParams:
-    """The true parameters of lane ``lane``'s scenario (a deferred ``truths`` entry)."""
-    return scenarios[lane].true_params(nominal)
-
-
 #: Where :func:`_step`'s arguments (``_MillingCore._kernel_args``) hold the lanes: axis 0, axis
 #: 1 (``info_f``) or none (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (
@@ -649,13 +646,9 @@ class _MillingCore:
         such as ``"train"``) are drawn and started for all lanes in two compiled calls, and
         a lane's scenario and true parameters are built only when read (``scenarios[k]``,
         ``truths[k]``)."""
-        factory = MILLING_SCENARIOS.get(spec) if isinstance(spec, str) else None
-        if not self._batches(factory):
-            for k in lanes.tolist():
-                self.start(k, spec, rngs[k])
+        factory = split_batch(self, lanes, spec, rngs, MILLING_SCENARIOS)
+        if factory is None:
             return
-        for k in lanes.tolist():
-            self.rngs.bind(k, rngs[k])  # the scenario is drawn with it, and the noise
         segments, counts, v = factory.draw_lanes(self.rngs.table, lanes)
         p = self.params
         # The spindle and limit scales (numpy's exp, as the factory's), then every number
@@ -676,24 +669,15 @@ class _MillingCore:
                 f"{p.spindle_rpm * sc.spindle_scale:g} rpm, outside the spindle_rpm range "
                 f"[{lo}, {hi}]"
             )
-        ks = lanes.tolist()
         build = factory.build_drawn
-        self.scenarios.defer_many(
-            ks, ((build, segments, i, c, vi) for i, (c, vi) in
-                 enumerate(zip(counts.tolist(), v.tolist(), strict=True)))
-        )  # fmt: skip
-        self.truths.defer_many(ks, ((_true_params, self.scenarios, k, p) for k in ks))
+        recipes = ((build, segments, i, c, vi) for i, (c, vi) in
+                   enumerate(zip(counts.tolist(), v.tolist(), strict=True)))  # fmt: skip
+        ks = settle_batch(self, lanes, recipes, factory.actuation, factory.name)
         for k in ks:
             if not self.bound[k] == self.bound[k]:  # refused by the kernel: let it say why
                 self.bound[k] = machining_time_bound(
                     self.scenarios[k], self.truths[k], float(self.spindle[k])
                 )
-        if factory.actuation is not None or self.act_lanes is not None:
-            for k in ks:
-                self.act_lanes = configure_lane(
-                    self.act_lanes, k, factory.actuation, self.actuation, self._actuation_lanes
-                )
-        self.names.set_many(lanes, factory.name)
 
     def _batches(self, factory) -> bool:
         """Whether :meth:`start_lanes` may start ``factory``'s scenarios in one batch: a

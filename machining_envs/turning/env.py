@@ -38,6 +38,8 @@ from machining_envs.core.env import (
     resolve_params,
     resolve_reward,
     scenario_option,
+    settle_batch,
+    split_batch,
 )
 from machining_envs.core.normals import LaneGenerators, lane_noise
 from machining_envs.core.packed import (
@@ -366,11 +368,6 @@ def _start_lanes_packed(t, s, lanes, full_history, consts, segments, counts, x):
     return ok
 
 
-def _true_params(scenarios, lane: int, nominal: TurningParams) -> TurningParams:
-    """The true parameters of lane ``lane``'s scenario (a deferred ``truths`` entry)."""
-    return scenarios[lane].true_params(nominal)
-
-
 @numba.njit(cache=True)
 def _start_packed(t, s, k, full_history, consts, segments, x):
     """:func:`_start` with the step's table ``t`` (:func:`_step_packed`'s) and the table
@@ -559,13 +556,9 @@ class _TurningCore:
         such as ``"train"``) are drawn and started for all lanes in two compiled calls, and
         a lane's scenario and true parameters are built only when read (``scenarios[k]``,
         ``truths[k]``)."""
-        factory = TURNING_SCENARIOS.get(spec) if isinstance(spec, str) else None
-        if not self._batches(factory):
-            for k in lanes.tolist():
-                self.start(k, spec, rngs[k])
+        factory = split_batch(self, lanes, spec, rngs, TURNING_SCENARIOS)
+        if factory is None:
             return
-        for k in lanes.tolist():
-            self.rngs.bind(k, rngs[k])  # the scenario is drawn with it, and the noise
         rpm, segments, counts, v = factory.draw_lanes(self.rngs.table, lanes)
         p = self.params
         u = np.asarray(factory.lows) + np.asarray(factory.spans) * v  # (L, ranges)
@@ -599,25 +592,16 @@ class _TurningCore:
             self.lanes._load_matrices(ks[i], float(rpm[i]), full)
         rpms = rpm.tolist()
         build, name = factory.build_drawn, factory.name
-        self.scenarios.defer_many(
-            ks, ((build, r, segments, i, c, v) for i, (r, c, v) in
-                 enumerate(zip(rpms, counts.tolist(), v.tolist(), strict=True)))
-        )  # fmt: skip
-        self.truths.defer_many(ks, ((_true_params, self.scenarios, k, p) for k in ks))
+        recipes = ((build, r, segments, i, c, v) for i, (r, c, v) in
+                   enumerate(zip(rpms, counts.tolist(), v.tolist(), strict=True)))  # fmt: skip
+        settle_batch(self, lanes, recipes, factory.shop["actuation"], name)
         for k in ks:
             if not self.bound[k] == self.bound[k]:  # refused by the kernel: let it say why
                 self.bound[k] = machining_time_bound(self.scenarios[k], self.truths[k])
-        actuation = factory.shop["actuation"]
-        if actuation is not None or self.act_lanes is not None:
-            for k in ks:
-                self.act_lanes = configure_lane(
-                    self.act_lanes, k, actuation, self.actuation, self._actuation_lanes
-                )
         if full:
             self.power_lanes.update(ks)
         else:
             self.power_lanes.difference_update(ks)
-        self.names.set_many(lanes, name)
         diameter = float(p.workpiece_diameter_mm)
         info = self.episode_info
         for k, b, length, r in zip(ks, self.bound[lanes].tolist(), self.length[lanes].tolist(),

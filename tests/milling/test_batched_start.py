@@ -2,17 +2,13 @@
 lane, for every scenario name and both torque laws, with each lane's scenario and truth
 built when read."""
 
-import copy
-import pickle
-
 import gymnasium as gym
-import numpy as np
 import pytest
 
 from machining_envs.core.actuation import SHOPFLOOR_ACTUATION
 from machining_envs.milling.plant import MillingParams
 from machining_envs.milling.scenarios import MILLING_SCENARIOS
-from tests.helpers import MILLING
+from tests.helpers import MILLING, assert_cores_alike, started_together_and_one_by_one
 
 N = 12
 PARAMS = {"power_law": MillingParams(), "average_force": MillingParams.ahn_choi_al6061()}
@@ -25,20 +21,7 @@ OPTIONS = {
 
 
 def _cores(spec, **kwargs):
-    """Two vector envs' cores after one reset(seed=5): lanes started one by one (the
-    per-lane path) and all at once."""
-    one, many = (gym.make_vec(MILLING, num_envs=N, **kwargs).unwrapped for _ in range(2))
-    for venv in (one, many):
-        venv.reset(seed=5, options={"scenario": spec})
-    lanes = np.array([0, 3, 4, 7, 11])
-    for k in lanes.tolist():
-        one._core.start(k, spec, one.lane_rngs[k])
-    many._core.start_lanes(lanes, spec, many.lane_rngs)
-    return one._core, many._core, lanes
-
-
-def _arrays(obj) -> dict:
-    return {k: v for k, v in vars(obj).items() if isinstance(v, np.ndarray)}
+    return started_together_and_one_by_one(MILLING, spec, N, **kwargs)
 
 
 @pytest.mark.parametrize("law", sorted(PARAMS))
@@ -62,39 +45,12 @@ def test_env_options_start_together_as_one_by_one(option):
 
 
 def _assert_same(one, many):
-    """Two cores alike: their arrays and their plants' (now and after a step), every lane's
-    objects and name, the generators' states and the CNC's actuation."""
-    for _ in range(2):
-        for a, b in ((one, many), (one.lanes, many.lanes)):
-            arrays_a, arrays_b = _arrays(a), _arrays(b)
-            assert arrays_a.keys() == arrays_b.keys()
-            for name, arr in arrays_a.items():
-                np.testing.assert_array_equal(arr, arrays_b[name], err_msg=name, strict=True)
-        for core in (one, many):
-            core.in_action[:] = 0.3
-            core.step()
-    for k in range(N):
-        assert one.scenarios[k] == many.scenarios[k], k
-        assert one.truths[k] == many.truths[k], k
-        assert one.names[k] == many.names[k]
-        assert one.rngs.generators[k].random() == many.rngs.generators[k].random()
-    acts = [c.act_lanes for c in (one, many)]
-    assert (acts[0] is None) == (acts[1] is None)
-    if acts[0] is not None:
-        for name, arr in _arrays(acts[0]).items():
-            np.testing.assert_array_equal(arr, _arrays(acts[1])[name], err_msg=name)
-
-
-def test_a_batch_builds_the_lanes_objects_only_when_read():
-    one, many, lanes = _cores("train")
-    assert all(k in many.scenarios._deferred for k in lanes.tolist())
-    assert all(k in many.truths._deferred for k in lanes.tolist())
-    assert many.scenarios[4] == one.scenarios[4]
-    assert 4 not in many.scenarios._deferred and 7 in many.scenarios._deferred
-    # A pickle or copy carries what is still to be built.
-    for clone in (pickle.loads(pickle.dumps(many)), copy.deepcopy(many)):
-        assert clone.scenarios[7] == one.scenarios[7]
-        assert clone.truths[11] == one.truths[11]
+    """Two cores alike (``assert_cores_alike``), now and after a step of both."""
+    assert_cores_alike(one, many)
+    for core in (one, many):
+        core.in_action[:] = 0.3
+        core.step()
+    assert_cores_alike(one, many)
 
 
 def test_a_scenario_the_batch_would_let_through_unchecked_goes_lane_by_lane():

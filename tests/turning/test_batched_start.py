@@ -1,35 +1,18 @@
 """Many lanes started at once (``_TurningCore.start_lanes``): the same episodes as lane by
 lane, for every scenario name, with each lane's scenario and truth built when read."""
 
-import copy
-import pickle
-
 import gymnasium as gym
-import numpy as np
 import pytest
 
 from machining_envs.core.env import LaneObjects
 from machining_envs.turning.scenarios import TURNING_SCENARIOS
-from tests.helpers import TURNING
+from tests.helpers import TURNING, assert_cores_alike, started_together_and_one_by_one
 
 N = 12
 
 
 def _cores(spec, **kwargs):
-    """Two vector envs' cores after one reset(seed=5): lanes started one by one (the
-    per-lane path) and all at once."""
-    one, many = (gym.make_vec(TURNING, num_envs=N, **kwargs).unwrapped for _ in range(2))
-    for venv in (one, many):
-        venv.reset(seed=5, options={"scenario": spec})
-    lanes = np.array([0, 3, 4, 7, 11])
-    for k in lanes.tolist():
-        one._core.start(k, spec, one.lane_rngs[k])
-    many._core.start_lanes(lanes, spec, many.lane_rngs)
-    return one._core, many._core, lanes
-
-
-def _arrays(obj) -> dict:
-    return {k: v for k, v in vars(obj).items() if isinstance(v, np.ndarray)}
+    return started_together_and_one_by_one(TURNING, spec, N, **kwargs)
 
 
 @pytest.mark.parametrize("spec", sorted(TURNING_SCENARIOS))
@@ -39,35 +22,10 @@ def test_lanes_started_together_start_as_one_by_one(spec):
     one, many, lanes = _cores(spec)
     batched = {"train", "validation", "test", "ood", "shopfloor"}  # wear: bound in Python
     assert many._batch_ok.get(TURNING_SCENARIOS[spec], False) == (spec in batched)
-    for a, b in ((one, many), (one.lanes, many.lanes)):
-        arrays_a, arrays_b = _arrays(a), _arrays(b)
-        assert arrays_a.keys() == arrays_b.keys()
-        for name, arr in arrays_a.items():
-            np.testing.assert_array_equal(arr, arrays_b[name], err_msg=name, strict=True)
+    assert_cores_alike(one, many)
     assert one.power_lanes == many.power_lanes
     for k in range(N):
-        assert one.scenarios[k] == many.scenarios[k], k
-        assert one.truths[k] == many.truths[k], k
         assert one.episode_info[k] == many.episode_info[k], k
-        assert one.names[k] == many.names[k]
-        assert one.rngs.generators[k].random() == many.rngs.generators[k].random()
-    acts = [c.act_lanes for c in (one, many)]
-    assert (acts[0] is None) == (acts[1] is None)
-    if acts[0] is not None:
-        for name, arr in _arrays(acts[0]).items():
-            np.testing.assert_array_equal(arr, _arrays(acts[1])[name], err_msg=name)
-
-
-def test_a_batch_builds_the_lanes_objects_only_when_read():
-    one, many, lanes = _cores("train")
-    assert all(k in many.scenarios._deferred for k in lanes.tolist())
-    assert all(k in many.truths._deferred for k in lanes.tolist())
-    assert many.scenarios[4] == one.scenarios[4]
-    assert 4 not in many.scenarios._deferred and 7 in many.scenarios._deferred
-    # A pickle or copy carries what is still to be built.
-    for clone in (pickle.loads(pickle.dumps(many)), copy.deepcopy(many)):
-        assert clone.scenarios[7] == one.scenarios[7]
-        assert clone.truths[11] == one.truths[11]
 
 
 def test_a_scenario_the_batch_would_let_through_unchecked_goes_lane_by_lane():
