@@ -592,7 +592,7 @@ class _TurningCore:
             self.lanes._load_matrices(ks[i], float(rpm[i]), full)
         rpms = rpm.tolist()
         build, name = factory.build_drawn, factory.name
-        recipes = ((build, r, segments, i, c, v) for i, (r, c, v) in
+        recipes = ((build, r, segments, i, c, vi) for i, (r, c, vi) in
                    enumerate(zip(rpms, counts.tolist(), v.tolist(), strict=True)))  # fmt: skip
         settle_batch(self, lanes, recipes, factory.shop["actuation"], name)
         for k in ks:
