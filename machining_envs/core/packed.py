@@ -40,6 +40,7 @@ from machining_envs.core.kernels import bits_float
 __all__ = [
     "SLOT",
     "PackedArgs",
+    "spaced_rows",
     "as_float",
     "as_int",
     "b1_1",
@@ -82,6 +83,15 @@ _ROWS_APART = 14
 def _rows_apart(a: np.ndarray) -> bool:
     s0, s1 = a.strides
     return a.dtype == np.float64 and s1 == 8 and s0 % 8 == 0 and s0 >= 8 * a.shape[1]
+
+
+def spaced_rows(n_rows: int, n: int) -> np.ndarray:
+    """An uninitialised float64 table of ``n_rows`` rows of ``n`` values (one per lane)
+    whose rows lie 64 bytes more than ``n`` values apart: a view of a wider array, which
+    :func:`pack` hands to a kernel as rows apart (:func:`f8_2_rows`). For a kernel that
+    writes a lane's column at once: with rows a multiple of 4 kB apart (``n = 1024``:
+    8 kB) its stores alias one another in the cache and stall, several times over."""
+    return np.empty((n_rows, n + 8))[:, :n]
 
 
 def pack(args: tuple) -> np.ndarray:

@@ -22,6 +22,7 @@ __all__ = [
     "DEPTH_RANGE_MM",
     "drawn_profile",
     "drawn_lane_cuts",
+    "drawn_lane_profile",
     "load_segments",
     "traverse_time",
 ]
@@ -324,8 +325,19 @@ def drawn_profile(state, before: int, depth_range_mm, n_segments, segment_mm,
     ranges = _cut_ranges(depth_range_mm, n_segments, segment_mm, taper_probability,
                          max_jump_ratio)  # fmt: skip
     b, table, a = _draw_cut(state, before, *ranges, after)
+    return b, _drawn(table, name), a
+
+
+def drawn_lane_profile(segments: np.ndarray, i: int, count: int, name: str) -> DepthProfile:
+    """Lane ``i``'s workpiece from :func:`drawn_lane_cuts`' ``segments`` (``count`` of its
+    own), named ``name``: the profile :func:`drawn_profile` makes of the same numbers."""
+    return _drawn(segments[i, :, : count + 1].copy(), name)
+
+
+def _drawn(table: np.ndarray, name: str) -> DepthProfile:
+    """The profile of a drawn segment table (read-only from now on; not checked again)."""
     table.flags.writeable = False
-    return b, DepthProfile._built(table, name), a
+    return DepthProfile._built(table, name)
 
 
 def drawn_lane_cuts(table, lanes: np.ndarray, split: str, before: int, depth_range_mm,

@@ -24,7 +24,12 @@ from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
 from machining_envs.core.checks import check_range, drawn_instance
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.splits import split_state
-from machining_envs.core.workpieces import DepthProfile, drawn_lane_cuts, drawn_profile
+from machining_envs.core.workpieces import (
+    DepthProfile,
+    drawn_lane_cuts,
+    drawn_lane_profile,
+    drawn_profile,
+)
 from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams, bisect_right
 
 __all__ = [
@@ -287,9 +292,7 @@ class _SplitFactory:
     def build_drawn(self, segments: np.ndarray, i: int, count: int, v: list[float]):
         """The scenario of lane ``i``'s numbers from :meth:`draw_lanes`: the segments (of
         all lanes), its segment count, its uniforms."""
-        table = segments[i, :, : count + 1].copy()
-        table.flags.writeable = False
-        return self._scenario(DepthProfile._built(table, self.profile_name), v)
+        return self._scenario(drawn_lane_profile(segments, i, count, self.profile_name), v)
 
     def _scenario(self, profile: DepthProfile, v: list[float]) -> MillingScenario:
         u = [lo + span * x for lo, span, x in zip(self.lows, self.spans, v, strict=True)]

@@ -54,6 +54,7 @@ from machining_envs.core.packed import (
     f8_3,
     i8_1,
     i8_2,
+    spaced_rows,
 )
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
 from machining_envs.core.workpieces import traverse_time
@@ -197,47 +198,31 @@ _INFO_F = ("t_s", "command", "force_N", "force_limit_N", "cost", "score_bound", 
 @numba.njit(cache=True)
 def _info_rows(lane_f, ef, eb, out, out_finish, meas, bound, spindle, diameter, length, rows):
     """Every lane's float info into ``rows`` (one row per key of ``_INFO_F``, one column per
-    lane), as :meth:`_TurningCore.lane_info` reports it: the feed, feed velocity and
-    position 0 after a divergence, the machining time NaN until the lane finishes, both
-    powers ``cutting_power_W``'s (its arithmetic, in its order: an ideal spindle; the
-    caller puts in the power-limited lanes' own)."""
-    n = out.shape[0]
-    # A row at a time: rows lie 8 n bytes apart, and writing all of a lane's at once
-    # stalls on stores that alias in the cache (n = 1024: 8 kB apart) a few times over.
-    for k in range(n):
+    lane; rows spaced apart, ``core.packed.spaced_rows``), as
+    :meth:`_TurningCore.lane_info` reports it: the feed, feed velocity and position 0 after
+    a divergence, the machining time NaN until the lane finishes, both powers
+    ``cutting_power_W``'s (its arithmetic, in its order: an ideal spindle; the caller puts
+    in the power-limited lanes' own)."""
+    for k in range(out.shape[0]):
+        o = out[k]
+        ok = not eb[k, 0]
         rows[0, k] = lane_f[k, 5]
-    for k in range(n):
         rows[1, k] = ef[k, _EF_COMMAND]
-    for k in range(n):
-        rows[2, k] = out[k, 0]
-    for k in range(n):
+        rows[2, k] = o[0]
         rows[3, k] = ef[k, _EF_FORCE_LIMIT]
-    for k in range(n):
         rows[4, k] = 1.0 if eb[k, 5] else 0.0
-    for k in range(n):
         rows[5, k] = bound[k]
-    for k in range(n):
         rows[6, k] = meas[k, 0]
-    for k in range(n):
-        rows[7, k] = out[k, 2]
-    for k in range(n):
-        rows[8, k] = out[k, 1]
-    for r, c in ((9, 3), (10, 4), (11, 5)):
-        for k in range(n):
-            rows[r, k] = 0.0 if eb[k, 0] else out[k, c]
-    for k in range(n):
-        rows[12, k] = out[k, 6]
-    for k in range(n):
+        rows[7, k] = o[2]
+        rows[8, k] = o[1]
+        rows[9, k] = o[3] if ok else 0.0
+        rows[10, k] = o[4] if ok else 0.0
+        rows[11, k] = o[5] if ok else 0.0
+        rows[12, k] = o[6]
         rows[13, k] = spindle[k]
-    for k in range(n):
-        f = out[k, 0]
-        f = f if (f >= 0.0 or f != f) else 0.0  # numpy's maximum(f, 0.0)
-        rows[14, k] = f * (spindle[k] * (math.pi / 30.0)) * (diameter[k] * 0.0005)
-    for k in range(n):
-        rows[15, k] = rows[14, k]
-    for k in range(n):
+        f = o[0] if (o[0] >= 0.0 or o[0] != o[0]) else 0.0  # numpy's maximum(f, 0.0)
+        rows[14, k] = rows[15, k] = f * (spindle[k] * (math.pi / 30.0)) * (diameter[k] * 0.0005)
         rows[16, k] = length[k]
-    for k in range(n):
         rows[17, k] = out_finish[k] if eb[k, 2] else np.nan
 
 
@@ -756,7 +741,7 @@ class _TurningCore:
     def info_arrays(self) -> dict:
         """The step info of every lane, as arrays (``machining_time_s`` with its mask): views
         of one table of the float keys (:func:`_info_rows`) and one copy of the flags."""
-        c = np.empty((len(_INFO_F), self.n))
+        c = spaced_rows(len(_INFO_F), self.n)
         _info_rows(self.lanes.lane_f, self.ef, self.eb, self.lanes.out, self.lanes.out_finish,
                    self.meas, self.bound, self.spindle, self.diameter, self.length, c)  # fmt: skip
         for k in self.power_lanes:  # drive and cutting power from the spindle's drive

@@ -27,7 +27,12 @@ from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
 from machining_envs.core.checks import drawn_instance
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.splits import split_state
-from machining_envs.core.workpieces import DepthProfile, drawn_lane_cuts, drawn_profile
+from machining_envs.core.workpieces import (
+    DepthProfile,
+    drawn_lane_cuts,
+    drawn_lane_profile,
+    drawn_profile,
+)
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams, _check
 
 __all__ = [
@@ -224,9 +229,7 @@ class _SplitFactory:
                     v: list[float]):  # fmt: skip
         """The scenario of lane ``i``'s numbers from :meth:`draw_lanes`: its speed, the
         segments (of all lanes), its segment count, its uniforms."""
-        table = segments[i, :, : count + 1].copy()
-        table.flags.writeable = False
-        return self._scenario(spindle, DepthProfile._built(table, self.profile_name), v)
+        return self._scenario(spindle, drawn_lane_profile(segments, i, count, self.profile_name), v)
 
     def _scenario(self, spindle: float, profile: DepthProfile, v: list[float]):
         u = [lo + span * x for lo, span, x in zip(self.lows, self.spans, v, strict=True)]
