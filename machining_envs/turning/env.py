@@ -67,6 +67,7 @@ from machining_envs.turning.plant import (
     spindle_drive,
     start_lane,
     step_lane,
+    step_scratch,
 )
 from machining_envs.turning.scenarios import (
     TURNING_SCENARIOS,
@@ -234,7 +235,7 @@ def _env_floats(ef):
 
 
 @numba.njit(cache=True, nogil=True)
-def _step(ef, eb, big, li, filt, z, buf, work, edges, d0, slope, lane_f, finished, m, n_f,
+def _step(ef, eb, feed, li, filt, z, buf, base, edges, d0, slope, lane_f, finished, m, n_f,
           out, out_finish, gain, fs, meas, max_t, w, obs, n_clipped, rng_table,
           noise_counts):  # fmt: skip
     """One step of every lane: the actions' bookkeeping, the sensor noise, the plant, the
@@ -250,6 +251,7 @@ def _step(ef, eb, big, li, filt, z, buf, work, edges, d0, slope, lane_f, finishe
     flags, clipped, last_clipped = eb[:, :6], eb[:, 6], eb[:, 7]
     cols, nseg, seg, out_seg, lag = lane_ints(li)
     t = lane_f[:, 5]
+    work = step_scratch(m, n_f)
     for k in range(z.shape[0]):
         prev_action[k] = actions[k]
         last_command[k] = commands[k]
@@ -257,7 +259,7 @@ def _step(ef, eb, big, li, filt, z, buf, work, edges, d0, slope, lane_f, finishe
         n_clipped[k] += clipped[k]
         noise[k] = lane_noise(rng_table, k, noise_counts[k])
         step_lane(
-            k, big, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f,
+            k, feed, base, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f,
             finished, m, n_f, commands[k], noise[k], out, out_seg, out_finish,
         )  # fmt: skip
         _env_lane(k, out, out_finish, t, gain, fs, meas, fr, vmax, brk, max_t, w, prev_action,
@@ -269,7 +271,7 @@ def _step_packed(t):
     """:func:`_step` with its arguments in one table (``core.packed``): what every
     step calls (one array to unbox, not one per argument)."""
     _step(f8_2(t, 0), b1_2(t, 1), f8_2(t, 2), i8_2(t, 3), f8_2(t, 4), f8_2(t, 5), f8_2(t, 6),
-          f8_2(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12), as_int(t, 13),
+          f8_1(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12), as_int(t, 13),
           as_int(t, 14), f8_2(t, 15), f8_1(t, 16), as_float(t, 17), as_float(t, 18), f8_2(t, 19),
           as_float(t, 20), f8_1(t, 21), f4_2(t, 22), i8_1(t, 23), i8_2(t, 24),
           f8_1(t, 25))  # fmt: skip
@@ -283,7 +285,7 @@ def _serve_step(ctl, table, polls):
 
 
 @numba.njit(cache=True)
-def _start(k, full_history, consts, segments, x, ef, eb, big, li, z, buf, edges, d0, slope,
+def _start(k, full_history, consts, segments, x, ef, eb, feed, li, z, buf, edges, d0, slope,
            lane_f, finished, out, out_finish, fs, meas, obs, n_clipped, bound, noise_counts,
            spindle, spindle_set, power, diameter, length, spindle_rpm, phis, gams,
            base, sa, sb, ts):  # fmt: skip
@@ -297,7 +299,7 @@ def _start(k, full_history, consts, segments, x, ef, eb, big, li, z, buf, edges,
     plant's lane constants (``TurningLanes.lane_constants``).
     """
     rpm, limit, vmax, brk, noise, diam, b = x[0], x[1], x[2], x[3], x[4], x[5], x[6]
-    ok = start_lane(k, rpm, full_history, consts, segments, phis, gams, base, sa, sb, ts, big,
+    ok = start_lane(k, rpm, full_history, consts, segments, phis, gams, base, sa, sb, ts, feed,
                     li, z, buf, edges, d0, slope, lane_f, finished, spindle_rpm)  # fmt: skip
     if b != b:  # machining_time_bound with no wear: traverse_time_s's closed form (left
         # NaN, for machining_time_bound to refuse, where that refuses its numbers)
@@ -370,7 +372,7 @@ def _start_packed(t, s, k, full_history, consts, segments, x):
 #: Where :func:`_step`'s arguments (``_TurningCore._kernel_args``) hold the lanes: axis 0
 #: or none (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (
-    0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, None, None, 0, 0, None, None, 0, None, None, 0, 0, 0,
+    0, 0, 0, 0, None, 0, 0, None, 0, 0, 0, 0, 0, None, None, 0, 0, None, None, 0, None, None, 0, 0, 0,
     0,
 )  # fmt: skip
 
@@ -633,12 +635,12 @@ class _TurningCore:
             self._args = (
                 self.ef,
                 self.eb,
-                lanes.big,
+                lanes.feed,
                 lanes.li,
                 lanes.filt,
                 lanes.z,
                 lanes.buf,
-                lanes.work,
+                lanes.base,
                 lanes.edges,
                 lanes.d0,
                 lanes.slope,

@@ -261,8 +261,8 @@ class _Matrices:
     # instant (0 where it lies in the current sample, merged with the other terms)
     filt_step: np.ndarray  # (n_f, n_f + M + 1): next filter state from [state, F_1..F_M, F_0]
     packed: np.ndarray  # (2M + 3, 8): the current pair's group, then each feed row's delayed
-    # group where that is not the current one (zeros elsewhere); stored column after column,
-    # as each lane holds it (``TurningLanes.big``)
+    # group where that is not the current one (zeros elsewhere); the lanes hold it in two
+    # parts (``TurningLanes.base`` and ``feed``)
 
     @property
     def big(self) -> np.ndarray:
@@ -386,18 +386,25 @@ def _speed_free_rows(params: _LinearKey) -> tuple[np.ndarray, np.ndarray]:
 @functools.lru_cache(maxsize=256)
 def _matrices(params: _LinearKey, spindle_rpm: float) -> _Matrices:
     m = params.substeps
-    packed = np.empty((8, 2 * m + 3)).T  # column after column, as the lanes hold it
+    feed = np.empty((4, m)).T  # column after column, as the lanes hold it
     lag = np.empty(m, dtype=np.int64)
-    lags = _fill_matrices(params, spindle_rpm, packed, lag)
-    return _Matrices(lags, lag, _speed_free_rows(params)[1], packed)
+    lags = _fill_matrices(params, spindle_rpm, feed, lag)
+    base, filt = _speed_free_rows(params)
+    packed = np.zeros((2 * m + 3, 8))
+    packed[:, :4] = base
+    now = lag == 0
+    packed[m : 2 * m][now, :4] = feed[now]
+    packed[m : 2 * m][~now, 4:] = feed[~now]
+    return _Matrices(lags, lag, filt, packed)
 
 
-def _fill_matrices(params: _LinearKey, spindle_rpm: float, packed, lag) -> int:
-    """``_Matrices.packed`` and ``delay_group`` at ``spindle_rpm`` into ``packed`` and ``lag``
-    (a lane's rows: a lane starting at a new speed needs no other copy); returns ``lags``."""
-    lags = _lane_matrices(*_speed_free_tables(params), float(spindle_rpm), packed, lag)
+def _fill_matrices(params: _LinearKey, spindle_rpm: float, feed, lag) -> int:
+    """A lane's own coefficients of the step matrix's feed rows at ``spindle_rpm`` into
+    ``feed`` (``(M, 4)``; :func:`_delayed_rows`) and their delay groups into ``lag``; returns
+    ``lags``."""
+    lags = _lane_matrices(*_speed_free_tables(params), float(spindle_rpm), feed, lag)
     if lags < 0:  # Phi(rho) is zoh's job (never in the plant's ranges): as below, by zoh
-        lags = _fill_matrices_zoh(params, spindle_rpm, packed, lag)
+        lags = _fill_matrices_zoh(params, spindle_rpm, feed, lag)
     return lags
 
 
@@ -412,9 +419,9 @@ def _speed_free_tables(params: _LinearKey) -> tuple:
 
 
 @numba.njit(cache=True)
-def _lane_matrices(phis, gams, base, sa, sb, ts, spindle_rpm, packed, lag):
-    """:func:`_fill_matrices` from its tables (:func:`_speed_free_tables`): the packed step
-    matrix and the delay groups at ``spindle_rpm``, and ``lags``; -1 (nothing written)
+def _lane_matrices(phis, gams, base, sa, sb, ts, spindle_rpm, feed, lag):
+    """:func:`_fill_matrices` from its tables (:func:`_speed_free_tables`): the lane's feed
+    rows and their delay groups at ``spindle_rpm``, and ``lags``; -1 (nothing written)
     where ``Phi(rho)`` lies outside :func:`_exp_row`'s reach.
 
     Every delayed instant ``t_j - T`` sits the same fraction ``rho`` of a sub-step past a
@@ -425,7 +432,7 @@ def _lane_matrices(phis, gams, base, sa, sb, ts, spindle_rpm, packed, lag):
     i_row[2] = 1.0
     if rho > 0 and not _exp_row(sa, sb, rho, 2, i_row):
         return -1
-    _delayed_rows(phis, gams, base, i_row[:3], i_row[3], period, ts, rho, packed, lag)
+    _delayed_rows(phis, gams, base, i_row[:3], i_row[3], period, ts, rho, feed, lag)
     return lags
 
 
@@ -443,7 +450,7 @@ def _delays(spindle_rpm, ts, m):
     return period, lags, rho
 
 
-def _fill_matrices_zoh(params: _LinearKey, spindle_rpm: float, packed, lag) -> int:
+def _fill_matrices_zoh(params: _LinearKey, spindle_rpm: float, feed, lag) -> int:
     """:func:`_lane_matrices` with ``Phi(rho)`` and ``Gamma(rho)`` from ``zoh``."""
     phis, gams, base, sa, sb, ts = _speed_free_tables(params)
     period, lags, rho = _delays(float(spindle_rpm), ts, params.substeps)
@@ -452,7 +459,7 @@ def _fill_matrices_zoh(params: _LinearKey, spindle_rpm: float, packed, lag) -> i
     if rho > 0:
         phi_r, gam_r = zoh(sa, sb, rho)
         i_row[:3], i_row[3] = phi_r[2], gam_r[2, 0]
-    _delayed_rows(phis, gams, base, i_row[:3], i_row[3], period, ts, rho, packed, lag)
+    _delayed_rows(phis, gams, base, i_row[:3], i_row[3], period, ts, rho, feed, lag)
     return lags
 
 
@@ -492,18 +499,20 @@ def _exp_row(a, b, dt, row, out):
 
 
 @numba.njit(cache=True)
-def _delayed_rows(phis, gams, base, phi_r2, gam_r2, period, ts, rho, packed, lag):
-    """The packed step matrix (``_Matrices.packed``) and each feed row's delayed group
-    ``lag``: the rows on the current pair (``base``), less, in each feed row ``m + j``, the
-    position at its delayed instant ``t_j - T`` (``period``), which lies ``lag[j]`` samples
-    back, ``i h + rho`` past that sample's start: the I-row of ``Phi(rho) Phi(i h)`` and the
-    I-entry of ``Phi(rho) Gamma(i h) + Gamma(rho)`` (``phi_r2``, ``gam_r2``: the I-row of
-    ``Phi(rho)`` and the I-entry of ``Gamma(rho)``). Each sum in a fixed order. ``packed``
-    is ``(2M + 3, 8)``, and may be a view of a matrix stored column after column."""
+def _delayed_rows(phis, gams, base, phi_r2, gam_r2, period, ts, rho, feed, lag):
+    """A lane's own part of the step matrix (``_Matrices.packed``): each feed row's delayed
+    group ``lag`` and its coefficients ``feed`` (``(M, 4)``, and may be a view of an array
+    stored column after column). Feed row ``m + j`` is the row on the current pair
+    (``base``), less the position at its delayed instant ``t_j - T`` (``period``), which
+    lies ``lag[j]`` samples back, ``i h + rho`` past that sample's start: the I-row of
+    ``Phi(rho) Phi(i h)`` and the I-entry of ``Phi(rho) Gamma(i h) + Gamma(rho)``
+    (``phi_r2``, ``gam_r2``: the I-row of ``Phi(rho)`` and the I-entry of ``Gamma(rho)``).
+    Where that instant lies in the current sample (``lag[j]`` 0) ``feed[j]`` is the whole
+    row on the current pair (``base`` less it), else the delayed group's four numbers
+    (``0 - it``), the row's current group being ``base``'s, which all lanes share. Each sum
+    in a fixed order."""
     m = lag.size
     h = ts / m
-    packed[:, :4] = base
-    packed[:, 4:] = 0.0
     for j in range(m):
         back = float(j + 1) * h - period  # t_j - T relative to t_k
         lj = int(math.ceil(-back / ts - 1e-9)) if back < 0 else 0
@@ -511,13 +520,14 @@ def _delayed_rows(phis, gams, base, phi_r2, gam_r2, period, ts, rho, packed, lag
         if not 0 <= i <= m:
             raise ValueError("a delayed instant fell outside its sample")
         lag[j] = lj
-        row = packed[m + j]
-        off = 0 if lj == 0 else 4  # block 0 overlaps the current pair's terms
+        row = feed[j]
+        for c in range(4):  # group 0 overlaps the current pair's terms
+            row[c] = base[m + j, c] if lj == 0 else 0.0
         for c in range(3):
             d = phi_r2[0] * phis[i, 0, c] + phi_r2[1] * phis[i, 1, c] + phi_r2[2] * phis[i, 2, c]
-            row[off + c] -= d
+            row[c] -= d
         d = gams[i, 0] * phi_r2[0] + gams[i, 1] * phi_r2[1] + gams[i, 2] * phi_r2[2] + gam_r2
-        row[off + 3] -= d
+        row[3] -= d
 
 
 def sampled_model(params: TurningParams, spindle_rpm: float) -> tuple[np.ndarray, int]:
@@ -570,17 +580,25 @@ def _depth_at(x, edges, d0, slope, nseg):
 
 @numba.njit(cache=True)
 def _step_lanes(
-    big, li, filt, z, buf, work, edges, d0, slope, lane_f, finished, m, n_f, commands, noise,
+    feed, base, li, filt, z, buf, edges, d0, slope, lane_f, finished, m, n_f, commands, noise,
     out_f, out_finish,
 ):  # fmt: skip
     """Advance every lane by one sample (:func:`step_lane` on each; ``li`` holds the
     lanes' integers, ``TurningLanes.li``)."""
     cols, nseg, seg, out_seg, lag = lane_ints(li)
+    work = step_scratch(m, n_f)
     for k in range(z.shape[0]):
         step_lane(
-            k, big, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f,
+            k, feed, base, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f,
             finished, m, n_f, commands[k], noise[k], out_f, out_seg, out_finish,
         )  # fmt: skip
+
+
+@numba.njit(cache=True, inline="always")
+def step_scratch(m, n_f):
+    """The scratch of :func:`step_lane`, one for every lane a call steps: the step matrix's
+    rows, then the filter's next state."""
+    return np.empty((1, 2 * m + 3 + n_f))
 
 
 @numba.njit(cache=True, inline="always")
@@ -589,24 +607,40 @@ def lane_ints(li):
     return li[:, 0], li[:, 1], li[:, 2], li[:, 3], li[:, 4:]
 
 
-@numba.njit(cache=True)
-def _sampled_rows(a, lag, zk, m, y):
-    """``y = A @ zk`` for the lane's step matrix ``A`` (``(2M + 3, 4 (L + 1))``), held as
-    its non-zero groups of four columns only: ``a`` column after column, eight columns of
-    ``2M + 3`` values (``a.reshape(8, 2M + 3)``).
+@numba.njit(cache=True, inline="always")
+def _current_rows(base, n, z0, z1, z2, z3, lo, hi, y):
+    """Rows ``lo .. hi - 1`` of ``y = A @ zk`` that read the current pair only (``base``'s
+    four columns of ``n`` values), each summed as a fused group of four."""
+    for i in range(lo, hi):
+        r = np.uint64(i)
+        s0 = fma(base[r], z0, 0.0)
+        s1 = fma(base[r + n], z1, 0.0)
+        s2 = fma(base[r + np.uint64(2) * n], z2, 0.0)
+        s3 = fma(base[r + np.uint64(3) * n], z3, 0.0)
+        y[r] = 0.0 + ((s0 + s2) + (s1 + s3))
 
-    Every row reads the current pair ``(x_k, u_k)`` (columns 0-3 of ``A``, the first four
-    columns of ``a``); a feed row also reads the pair of its delayed instant (group
-    ``lag[j]`` of ``A``, the last four columns of ``a``; none where ``lag[j]`` is 0, the
-    group then merged in the first). The others are zero, and
+
+@numba.njit(cache=True)
+def _sampled_rows(base, feed, lag, zk, m, y):
+    """``y = A @ zk`` for a lane's step matrix ``A`` (``(2M + 3, 4 (L + 1))``), held as its
+    non-zero groups of four columns only, in two parts (:func:`_delayed_rows`): ``base``,
+    the rows on the current pair ``(x_k, u_k)`` (columns 0-3 of ``A``) that every lane
+    shares, and ``feed``, the lane's own numbers of its feed rows ``M .. 2M - 1``; both
+    column after column (``base.reshape(4, 2M + 3)``, ``feed.reshape(4, M)``).
+
+    A position or next-state row reads the current pair only, with ``base``'s numbers. A
+    feed row whose delayed instant lies in another sample (group ``lag[j]`` of ``A``) reads
+    the current pair with ``base``'s numbers and that group with ``feed``'s; one whose
+    delayed instant lies in the current sample (``lag[j]`` 0) reads the current pair with
+    ``feed``'s. The other groups are zero, and
     :func:`~machining_envs.core.kernels.matvec`'s sums gain nothing from a zero group (a
     fused ``0 x + s`` is ``s`` for finite ``x``), so the rows here, summed in its order over
     the non-zero groups only, are its numbers for ``A @ zk`` (numpy's) to the last bit.
 
-    The rows in whole groups of four go in runs that read the same pairs (the positions,
-    the feed rows of one delay group after another, the next state): each run is one loop
-    of the same operations for every row, which runs in the processor's vectors, a row per
-    value.
+    The rows in whole groups of four (every position and feed row) go in runs that read
+    the same numbers (the positions, the feed rows of one delay group after another, the
+    next state): each run is one loop of the same operations for every row, which runs in
+    the processor's vectors, a row per value.
     """
     n_rows = 2 * m + 3
     nb = n_rows & ~3  # rows summed in fused groups of four; the feed rows are among them
@@ -615,42 +649,35 @@ def _sampled_rows(a, lag, zk, m, y):
     z2 = zk[2]
     z3 = zk[3]
     n = np.uint64(n_rows)  # unsigned indices: the compiler knows they are not negative
+    nm = np.uint64(m)
+    _current_rows(base, n, z0, z1, z2, z3, 0, m, y)
     lo = 0
-    while lo < nb:
-        g = 0  # the run's delay group
-        hi = nb
-        if lo < m:
-            hi = m
-        elif lo < 2 * m:
-            g = lag[lo - m]
-            hi = lo + 1
-            while hi < 2 * m and lag[hi - m] == g:
-                hi += 1
-            if g == 0 and hi == 2 * m:
-                hi = nb
+    while lo < m:  # the feed rows, in runs of one delay group
+        g = lag[lo]
+        hi = lo + 1
+        while hi < m and lag[hi] == g:
+            hi += 1
         if g > 0:
             q = 4 * g
             d0 = zk[q]
             d1 = zk[q + 1]
             d2 = zk[q + 2]
             d3 = zk[q + 3]
-            for i in range(lo, hi):
-                r = np.uint64(i)
-                s0 = fma(a[r + np.uint64(4) * n], d0, fma(a[r], z0, 0.0))
-                s1 = fma(a[r + np.uint64(5) * n], d1, fma(a[r + n], z1, 0.0))
-                s2 = fma(a[r + np.uint64(6) * n], d2, fma(a[r + np.uint64(2) * n], z2, 0.0))
-                s3 = fma(a[r + np.uint64(7) * n], d3, fma(a[r + np.uint64(3) * n], z3, 0.0))
+            for j in range(lo, hi):
+                u = np.uint64(j)
+                r = u + nm
+                s0 = fma(feed[u], d0, fma(base[r], z0, 0.0))
+                s1 = fma(feed[u + nm], d1, fma(base[r + n], z1, 0.0))
+                s2 = fma(feed[u + np.uint64(2) * nm], d2, fma(base[r + np.uint64(2) * n], z2, 0.0))
+                s3 = fma(feed[u + np.uint64(3) * nm], d3, fma(base[r + np.uint64(3) * n], z3, 0.0))
                 y[r] = 0.0 + ((s0 + s2) + (s1 + s3))
         else:
-            for i in range(lo, hi):
-                r = np.uint64(i)
-                s0 = fma(a[r], z0, 0.0)
-                s1 = fma(a[r + n], z1, 0.0)
-                s2 = fma(a[r + np.uint64(2) * n], z2, 0.0)
-                s3 = fma(a[r + np.uint64(3) * n], z3, 0.0)
-                y[r] = 0.0 + ((s0 + s2) + (s1 + s3))
+            yf = y[m:]
+            _current_rows(feed, nm, z0, z1, z2, z3, lo, hi, yf)
         lo = hi
+    _current_rows(base, n, z0, z1, z2, z3, 2 * m, nb, y)
     r = nb
+    a = base
     if (n_rows - nb) & 2:  # two rows of two sums of rounded products
         for r in range(nb, nb + 2):
             s0 = 0.0 + a[r] * z0
@@ -699,10 +726,11 @@ def _filter_pair(f, x, w, out):
 
 @numba.njit(cache=True)
 def step_lane(
-    k, big, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f, finished, m,
-    n_f, command, noise, out_f, out_seg, out_finish,
+    k, feed, base, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f, finished,
+    m, n_f, command, noise, out_f, out_seg, out_finish,
 ):  # fmt: skip
-    """Advance lane ``k`` by one sample (see :class:`TurningLanes` for the layout).
+    """Advance lane ``k`` by one sample (see :class:`TurningLanes` for the layout; ``work``
+    is :func:`step_scratch`'s, which the lanes may share).
 
     ``lane_f[k]`` holds ``[Kf, p, Ke, U_max, length, t, margin, Ts, wear per mm]``;
     ``out_f[k]`` gets
@@ -714,8 +742,8 @@ def step_lane(
     c = cols[k]
     zk = z[k, :c]
     zk[3] = min(max(command, 0.0), cmax)
-    y = work[k, :n_rows]
-    _sampled_rows(big[k], lag[k], zk, m, y)
+    y = work[0, :n_rows]
+    _sampled_rows(base, feed[k], lag[k], zk, m, y)
     p_start = zk[2]
     p_end = y[m - 1]
     b = buf[k]
@@ -751,9 +779,9 @@ def step_lane(
     if wear != 0.0:  # Kf (1 + w x): the tool dulls along the cut (wear_per_100mm)
         for j in range(m):
             force[j] *= 1.0 + wear * y[j]
-    fo = work[k, n_rows:]
-    if not (n_f == 2 and _filter_pair(filt[k], b, b.shape[0], fo)):
-        matvec(filt[k : k + 1], n_f, b.shape[0], buf[k : k + 1], work[k : k + 1, n_rows:])
+    fo = work[0, n_rows:]
+    if not (n_f == 2 and _filter_pair(filt[0], b, b.shape[0], fo)):
+        matvec(filt, n_f, b.shape[0], buf[k : k + 1], work[:, n_rows:])
     b[:n_f] = fo
     f_end = force[m - 1]
     out = out_f[k]
@@ -830,8 +858,8 @@ LANE_SIGNALS = (
 
 
 @numba.njit(cache=True)
-def start_lane(k, rpm, full_history, consts, segments, phis, gams, base, sa, sb, ts, big, li, z,
-               buf, edges, d0, slope, lane_f, finished, spindle_rpm):  # fmt: skip
+def start_lane(k, rpm, full_history, consts, segments, phis, gams, base, sa, sb, ts, feed, li,
+               z, buf, edges, d0, slope, lane_f, finished, spindle_rpm):  # fmt: skip
     """Lane ``k``'s arrays (:class:`TurningLanes`) at the start of a cut at ``rpm`` on the
     workpiece ``segments`` (``DepthProfile.segment_array``; the tables must hold its
     segments), the machine at rest at its start: the step matrix at that speed
@@ -839,9 +867,7 @@ def start_lane(k, rpm, full_history, consts, segments, phis, gams, base, sa, sb,
     the lane's ``consts`` (:meth:`TurningLanes.lane_constants`) and clock. Returns False
     where the step matrix is left for ``zoh`` (:meth:`TurningLanes._load_matrices`)."""
     m = li.shape[1] - 4
-    lags = _lane_matrices(
-        phis, gams, base, sa, sb, ts, rpm, big[k].reshape((8, 2 * m + 3)).T, li[k, 4:]
-    )
+    lags = _lane_matrices(phis, gams, base, sa, sb, ts, rpm, feed[k].reshape((4, m)).T, li[k, 4:])
     li[k, 0] = z.shape[1] if full_history else 4 * (lags + 1)
     z[k, :] = 0.0
     buf[k, :] = 0.0
@@ -894,9 +920,12 @@ class TurningLanes:
         filt = _speed_free_rows(self._key)[1]
         self.m, self.n_f = m, filt.shape[0]
         #: The lanes' step matrices, each as its non-zero groups of columns
-        #: (``_Matrices.packed``) column after column: eight columns of ``2M + 3`` values,
-        #: ``big[k].reshape(8, 2M + 3)`` (``_sampled_rows``).
-        self.big = np.zeros((self.n, (2 * m + 3) * 8))
+        #: (``_Matrices.packed``) in two parts (``_sampled_rows``): the rows on the current
+        #: pair, which every lane shares (``base``, column after column: four columns of
+        #: ``2M + 3`` values), and each lane's own numbers of its feed rows (``feed[k]``,
+        #: four columns of ``M`` values, ``_delayed_rows``).
+        self.base = np.ascontiguousarray(_speed_free_rows(self._key)[0].T).ravel()
+        self.feed = np.zeros((self.n, 4 * m))
         #: The lanes' integers in one array (one argument of the kernel), read through the
         #: views below: the step matrix's columns, the workpiece's segments, the segment the
         #: tool is in and was in after the last step, and the delay groups of the feed rows.
@@ -904,11 +933,10 @@ class TurningLanes:
         self._bind_views()
         self.cols[:] = 4
         self.nseg[:] = 1
-        self.filt = np.tile(filt.ravel(), (self.n, 1))
+        #: The sensor filter's step matrix, which every lane shares (one row).
+        self.filt = filt.reshape(1, -1).copy()
         self.z = np.zeros((self.n, c_max))
         self.buf = np.zeros((self.n, filt.shape[1]))
-        #: Scratch of the kernel: the step matrix's rows, then the filter's next state.
-        self.work = np.zeros((self.n, 2 * m + 3 + self.n_f))
         self._s_max = 1
         #: Counts replacements of the lane arrays (by a profile with more segments).
         self.version = 0
@@ -951,7 +979,7 @@ class TurningLanes:
         rpm = float(spindle_rpm)
         full = math.isfinite(params.spindle_power_W)
         if not start_lane(
-            lane, rpm, full, self.lane_constants(params), segments, *self.speed_free, self.big,
+            lane, rpm, full, self.lane_constants(params), segments, *self.speed_free, self.feed,
             self.li, self.z, self.buf, self.edges, self.d0, self.slope, self.lane_f,
             self.finished, self.spindle_rpm,
         ):  # fmt: skip
@@ -985,7 +1013,7 @@ class TurningLanes:
         with zero columns to the memory of the slowest speed, so that the lane keeps every
         sample instant it could ever need and its speed may change between samples."""
         m = self.m
-        lags = _fill_matrices(self._key, spindle_rpm, self.big[lane].reshape(8, 2 * m + 3).T,
+        lags = _fill_matrices(self._key, spindle_rpm, self.feed[lane].reshape(4, m).T,
                               self.lag[lane])  # fmt: skip
         self.cols[lane] = self.z.shape[1] if full_history else 4 * (lags + 1)
 
@@ -1004,12 +1032,12 @@ class TurningLanes:
         with ``noise_counts[k]`` added to lane ``k``'s measurement; results in ``out``,
         ``out_segment`` and ``out_finish``."""
         _step_lanes(
-            self.big,
+            self.feed,
+            self.base,
             self.li,
             self.filt,
             self.z,
             self.buf,
-            self.work,
             self.edges,
             self.d0,
             self.slope,

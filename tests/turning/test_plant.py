@@ -217,7 +217,7 @@ def test_step_matrix_by_zoh_where_the_series_declines_it_agrees():
     key = _LinearKey.of(TurningParams())
     m = key.substeps
     for rpm in (50.0, 245.0, 333.3, 405.0, 700.0, 1234.5, 3000.0):
-        series, zohs = np.empty((2 * m + 3, 8)), np.empty((2 * m + 3, 8))
+        series, zohs = np.empty((m, 4)), np.empty((m, 4))  # a lane's feed rows
         lag_s, lag_z = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
         lags = _lane_matrices(*_speed_free_tables(key), rpm, series, lag_s)
         assert lags > 0
