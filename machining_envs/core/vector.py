@@ -319,10 +319,10 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             return obs, reward, terminated, truncated, info
         lanes = np.flatnonzero(done)
         final_obs = np.empty(self.num_envs, dtype=object)  # all None
-        for i in lanes.tolist():
-            final_obs[i] = obs[i].copy()
-        # The step's info arrays are the final info; _reset_lanes does not write to them.
-        obs = obs.copy()
+        for i, row in zip(lanes.tolist(), obs[lanes]):  # rows of a copy: no copy each
+            final_obs[i] = row
+        # The step's info arrays are the final info; _reset_lanes does not write to them,
+        # nor to obs, the step's own new array (_step_lanes), which takes the first ones.
         with one_blas_thread() if self.resets_call_blas else _NO_CONTEXT:
             obs[lanes] = self._reset_lanes(lanes, None)
         final_info = self._final_info(info, known, done)

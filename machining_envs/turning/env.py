@@ -342,16 +342,61 @@ def _start(k, full_history, consts, segments, x, ef, eb, feed, li, z, buf, edges
     return ok
 
 
+#: The numbers :func:`_start_drawn_lanes` reads of a split and the nominal parameters
+#: (``_batch_numbers``), in its order.
+_BATCH = ("force_coefficient", "feed_exponent", "sensor_gain", "command_max", "margin",
+          "spindle_power_W", "max_feed_velocity_mm_s", "breakage_force_N", "noise_std_N",
+          "workpiece_diameter_mm", "kf_low", "kf_span", "p_low", "p_span", "noise_low",
+          "noise_span", "limit_varies", "limit_low", "limit_span")  # fmt: skip
+
+
+def _batch_numbers(core, factory) -> np.ndarray:
+    """What :func:`_start_drawn_lanes` reads (``_BATCH``) for lanes of ``factory``'s split
+    on ``core``'s nominal parameters: the numbers ``TurningScenario.true_params`` and
+    ``TurningLanes.lane_constants`` take."""
+    p = core.params
+    power = factory.shop["spindle_power_W"]
+    power = power if math.isfinite(power) else p.spindle_power_W
+    ke, cmax, margin = core.lanes.lane_constants(p)[2:5]
+    lows, spans = factory.lows, factory.spans
+    varies = factory.limit_varies
+    limit = (lows[3], spans[3]) if varies else (float(factory.limit_N[0]), 0.0)
+    return np.array([
+        p.force_coefficient, p.feed_exponent, ke, cmax, margin, power,
+        p.max_feed_velocity_mm_s, p.breakage_force_N, p.noise_std_N, p.workpiece_diameter_mm,
+        lows[0], spans[0], lows[1], spans[1], lows[2], spans[2], float(varies), *limit,
+    ], dtype=np.float64)  # fmt: skip
+
+
 @numba.njit(cache=True)
-def _start_lanes_packed(t, s, lanes, full_history, consts, segments, counts, x):
-    """:func:`_start_packed` for every lane ``lanes[i]``, on its row of ``consts`` and
-    ``x`` and its segments ``segments[i, :, : counts[i] + 1]``; whether each lane's step
-    matrix was made (:func:`_start_packed`'s return)."""
+def _start_drawn_lanes(t, s, lanes, nums, rpm, v, segments, counts):
+    """:func:`_start_packed` for every lane ``lanes[i]`` of a split's batch: its speed
+    ``rpm[i]``, segments ``segments[i, :, : counts[i] + 1]`` and uniforms ``v[i]`` (the
+    split factory's ``draw_lanes``), on the split's and nominal numbers ``nums``
+    (``_batch_numbers``): the true parameters ``TurningScenario.true_params`` makes of
+    them (a sharp tool), in its order of operations. Whether each lane's step matrix was
+    made (:func:`_start_packed`'s return)."""
+    (kf, pexp, ke, cmax, margin, power, vmax, brk, noise_std, diam, kf_lo, kf_span, p_lo,
+     p_span, n_lo, n_span, varies, l_lo, l_span) = (
+        nums[0], nums[1], nums[2], nums[3], nums[4], nums[5], nums[6], nums[7], nums[8],
+        nums[9], nums[10], nums[11], nums[12], nums[13], nums[14], nums[15], nums[16],
+        nums[17], nums[18])  # fmt: skip
+    full = math.isfinite(power)
     ok = np.empty(lanes.size, dtype=np.bool_)
+    x = np.empty(8)
     for i in range(lanes.size):
-        c = consts[i]
-        ok[i] = _start_packed(t, s, lanes[i], full_history, (c[0], c[1], c[2], c[3], c[4], c[5]),
-                              segments[i, :, : counts[i] + 1], x[i])  # fmt: skip
+        vi = v[i]
+        consts = (kf * (kf_lo + kf_span * vi[0]), pexp * (p_lo + p_span * vi[1]), ke, cmax,
+                  margin, 0.0)  # fmt: skip
+        x[0] = rpm[i]
+        x[1] = l_lo + l_span * vi[3] if varies != 0.0 else l_lo
+        x[2] = vmax
+        x[3] = brk
+        x[4] = ke * (noise_std * (n_lo + n_span * vi[2]))  # the sensor's gain Ke
+        x[5] = diam
+        x[6] = np.nan
+        x[7] = power
+        ok[i] = _start_packed(t, s, lanes[i], full, consts, segments[i, :, : counts[i] + 1], x)
     return ok
 
 
@@ -442,6 +487,7 @@ class _TurningCore:
         self.power = np.zeros((n, 2))
         self.truths = LaneObjects(n)
         self._batch_ok: dict = {}  # _batches' checks, by factory
+        self._batch_nums: dict = {}  # _batch_numbers, by factory
         #: Per lane: (score bound, workpiece length, scenario name, set spindle speed,
         #: diameter) of its episode.
         self.episode_info: list[tuple] = [(math.nan, 0.0, "", 0.0, 0.0)] * n
@@ -547,32 +593,14 @@ class _TurningCore:
         if factory is None:
             return
         rpm, segments, counts, v = factory.draw_lanes(self.rngs.table, lanes)
-        p = self.params
-        u = np.asarray(factory.lows) + np.asarray(factory.spans) * v  # (L, ranges)
-        n = lanes.size
-        # TurningScenario.true_params's numbers, field by field, for every lane at once.
-        power = factory.shop["spindle_power_W"]
-        power = power if math.isfinite(power) else p.spindle_power_W
-        full = math.isfinite(power)
-        limit = u[:, 3] if factory.limit_varies else np.full(n, float(factory.limit_N[0]))
-        consts = np.empty((n, 6))
-        consts[:, 0] = p.force_coefficient * u[:, 0]
-        consts[:, 1] = p.feed_exponent * u[:, 1]
-        consts[:, 2:] = self.lanes.lane_constants(p)[2:]
-        consts[:, 5] = 0.0  # a sharp tool (no wear: the factory draws none)
-        x = np.empty((n, 8))
-        x[:, 0] = rpm
-        x[:, 1] = limit
-        x[:, 2] = p.max_feed_velocity_mm_s
-        x[:, 3] = p.breakage_force_N
-        x[:, 4] = p.sensor_gain * (p.noise_std_N * u[:, 2])
-        x[:, 5] = p.workpiece_diameter_mm
-        x[:, 6] = math.nan
-        x[:, 7] = power
+        nums = self._batch_nums.get(factory)
+        if nums is None:
+            nums = self._batch_nums[factory] = _batch_numbers(self, factory)
+        full = math.isfinite(nums[5])
         self.lanes.fit_segments(int(counts.max()))
-        ok = _start_lanes_packed(
+        ok = _start_drawn_lanes(
             self._packed(self._kernel_args()), self._packed_start(self._start_args()), lanes,
-            full, consts, segments, counts, x,
+            nums, rpm, v, segments, counts,
         )  # fmt: skip
         ks = lanes.tolist()
         for i in np.flatnonzero(~ok).tolist():  # left for zoh (never in the plant's ranges)
@@ -582,17 +610,19 @@ class _TurningCore:
         recipes = ((build, r, segments, i, c, vi) for i, (r, c, vi) in
                    enumerate(zip(rpms, counts.tolist(), v.tolist(), strict=True)))  # fmt: skip
         settle_batch(self, lanes, recipes, factory.shop["actuation"], name)
-        for k in ks:
-            if not self.bound[k] == self.bound[k]:  # refused by the kernel: let it say why
-                self.bound[k] = machining_time_bound(self.scenarios[k], self.truths[k])
+        bounds = self.bound[lanes]
+        for i in np.flatnonzero(bounds != bounds).tolist():  # refused by the kernel: let it
+            k = ks[i]  # say why
+            self.bound[k] = machining_time_bound(self.scenarios[k], self.truths[k])
+            bounds[i] = self.bound[k]
         if full:
             self.power_lanes.update(ks)
         else:
             self.power_lanes.difference_update(ks)
-        diameter = float(p.workpiece_diameter_mm)
+        diameter = float(nums[9])
         info = self.episode_info
-        for k, b, length, r in zip(ks, self.bound[lanes].tolist(), self.length[lanes].tolist(),
-                                   rpms, strict=True):  # fmt: skip
+        for k, b, length, r in zip(ks, bounds.tolist(), self.length[lanes].tolist(), rpms,
+                                   strict=True):  # fmt: skip
             info[k] = (b, length, name, r, diameter)
 
     def _batches(self, factory) -> bool:
