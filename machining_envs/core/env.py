@@ -373,37 +373,54 @@ class LaneObjects:
     built when it is first read: a vector env that starts many lanes at once keeps their
     drawn numbers and makes the objects of the lanes someone asks for only.
 
-    ``lanes[k]`` returns lane ``k``'s object, building it with ``build(*args)`` if
-    :meth:`defer_many` left it so; ``lanes[k] = obj`` sets it. ``build`` must be a module-level
-    function or a method of a picklable object, so that the env pickles."""
+    ``lanes[k]`` returns lane ``k``'s object, building it if :meth:`defer` left it so;
+    ``lanes[k] = obj`` sets it. A batch of lanes shares one recipe, and each lane holds only
+    the recipe's number and its place in the batch (two integers in arrays, no Python object
+    per lane). ``build`` must be a module-level function or a method of a picklable object,
+    so that the env pickles."""
 
-    __slots__ = ("_items", "_deferred")
+    __slots__ = ("_items", "_batch", "_place", "_recipes", "_next", "_prune_at")
 
     def __init__(self, n: int) -> None:
         self._items: list = [None] * n
-        self._deferred: dict[int, tuple] = {}
+        #: The recipe each lane's object is left to (its key in ``_recipes``), or -1.
+        self._batch = np.full(n, -1, dtype=np.int64)
+        #: Each lane's place in the batch its object is left to.
+        self._place = np.zeros(n, dtype=np.int64)
+        self._recipes: dict[int, tuple] = {}
+        self._next = 0
+        self._prune_at = 64
 
     def __getitem__(self, lane: int):
-        recipe = self._deferred.pop(lane, None)
-        if recipe is not None:
-            self._items[lane] = recipe[0](*recipe[1:])
+        b = self._batch[lane]
+        if b >= 0:  # built before the lane forgets its recipe: an error leaves it to build
+            recipe = self._recipes[int(b)]
+            self._items[lane] = recipe[0](*recipe[1:], int(self._place[lane]))
+            self._batch[lane] = -1
         return self._items[lane]
 
     def __setitem__(self, lane: int, obj) -> None:
-        self._deferred.pop(lane, None)
+        self._batch[lane] = -1
         self._items[lane] = obj
 
     def __len__(self) -> int:
         return len(self._items)
 
-    def defer_many(self, lanes: list[int], recipes) -> None:
-        """Each lane of ``lanes`` gets its recipe ``(build, *args)`` (``recipes``, an
-        iterable in the order of ``lanes``): its object is ``build(*args)``, made when it is
-        first read."""
+    def defer(self, lanes: np.ndarray, build, *args) -> None:
+        """Lane ``lanes[i]`` (an index array, each lane once) gets the object
+        ``build(*args, i)``, made when it is first read."""
+        key = self._next
+        self._next += 1
+        self._recipes[key] = (build, *args)
+        self._batch[lanes] = key
+        self._place[lanes] = np.arange(lanes.size)
         items = self._items
-        for lane in lanes:
+        for lane in lanes.tolist():
             items[lane] = None
-        self._deferred.update(zip(lanes, recipes, strict=True))
+        if len(self._recipes) > self._prune_at:  # forget the recipes no lane is left to
+            live = set(np.unique(self._batch).tolist())
+            self._recipes = {k: r for k, r in self._recipes.items() if k in live}
+            self._prune_at = 2 * len(self._recipes) + 64
 
 
 def split_batch(core, lanes: np.ndarray, spec, rngs, factories: dict):
@@ -422,17 +439,17 @@ def split_batch(core, lanes: np.ndarray, spec, rngs, factories: dict):
     return factory
 
 
-def settle_batch(core, lanes: np.ndarray, recipes, actuation, name: str) -> list[int]:
-    """The bookkeeping of ``lanes`` started together by a core's ``start_lanes``: each
-    lane's scenario built when first read from its recipe (``recipes``: ``(build, *args)``
-    in the order of ``lanes``) and its true parameters from that scenario
-    (:class:`LaneObjects`), the CNC's ``actuation`` of the split (None: the env's option)
-    in each lane, the split's ``name``. Returns ``lanes`` as a list."""
+def settle_batch(core, lanes: np.ndarray, build, args: tuple, actuation, name: str) -> list[int]:
+    """The bookkeeping of ``lanes`` started together by a core's ``start_lanes``: lane
+    ``lanes[i]``'s scenario built when first read as ``build(*args, i)`` and its true
+    parameters from that scenario (:class:`LaneObjects`), the CNC's ``actuation`` of the
+    split (None: the env's option) in each lane, the split's ``name``. Returns ``lanes`` as
+    a list."""
     from machining_envs.core.actuation import configure_lane
 
     ks = lanes.tolist()
-    core.scenarios.defer_many(ks, recipes)
-    core.truths.defer_many(ks, ((lane_truth, core.scenarios, k, core.params) for k in ks))
+    core.scenarios.defer(lanes, build, *args)
+    core.truths.defer(lanes, lane_truth, core.scenarios, lanes.copy(), core.params)
     if actuation is not None or core.act_lanes is not None:
         for k in ks:
             core.act_lanes = configure_lane(
@@ -442,9 +459,9 @@ def settle_batch(core, lanes: np.ndarray, recipes, actuation, name: str) -> list
     return ks
 
 
-def lane_truth(scenarios: LaneObjects, lane: int, nominal):
-    """The true parameters of lane ``lane``'s scenario (a deferred ``truths`` entry)."""
-    return scenarios[lane].true_params(nominal)
+def lane_truth(scenarios: LaneObjects, lanes: np.ndarray, nominal, i: int):
+    """The true parameters of lane ``lanes[i]``'s scenario (a deferred ``truths`` entry)."""
+    return scenarios[int(lanes[i])].true_params(nominal)
 
 
 class EpisodeLog:

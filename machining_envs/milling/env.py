@@ -670,10 +670,8 @@ class _MillingCore:
                 f"{p.spindle_rpm * sc.spindle_scale:g} rpm, outside the spindle_rpm range "
                 f"[{lo}, {hi}]"
             )
-        build = factory.build_drawn
-        recipes = ((build, segments, i, c, vi) for i, (c, vi) in
-                   enumerate(zip(counts.tolist(), v.tolist(), strict=True)))  # fmt: skip
-        ks = settle_batch(self, lanes, recipes, factory.actuation, factory.name)
+        ks = settle_batch(self, lanes, factory.build_lane, (segments, counts, v),
+                          factory.actuation, factory.name)  # fmt: skip
         for k in ks:
             if not self.bound[k] == self.bound[k]:  # refused by the kernel: let it say why
                 self.bound[k] = machining_time_bound(

@@ -294,6 +294,11 @@ class _SplitFactory:
         all lanes), its segment count, its uniforms."""
         return self._scenario(drawn_lane_profile(segments, i, count, self.profile_name), v)
 
+    def build_lane(self, segments: np.ndarray, counts: np.ndarray, v: np.ndarray, i: int):
+        """:meth:`build_drawn` of lane ``i`` of all the lanes' numbers from
+        :meth:`draw_lanes`."""
+        return self.build_drawn(segments, i, int(counts[i]), v[i].tolist())
+
     def _scenario(self, profile: DepthProfile, v: list[float]) -> MillingScenario:
         u = [lo + span * x for lo, span, x in zip(self.lows, self.spans, v, strict=True)]
         return drawn_instance(

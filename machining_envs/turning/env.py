@@ -489,8 +489,9 @@ class _TurningCore:
         self._batch_ok: dict = {}  # _batches' checks, by factory
         self._batch_nums: dict = {}  # _batch_numbers, by factory
         #: Per lane: (score bound, workpiece length, scenario name, set spindle speed,
-        #: diameter) of its episode.
-        self.episode_info: list[tuple] = [(math.nan, 0.0, "", 0.0, 0.0)] * n
+        #: diameter) of its episode, as Python values; None for a lane started with others
+        #: until lane_info reads it from the arrays.
+        self.episode_info: list[tuple | None] = [(math.nan, 0.0, "", 0.0, 0.0)] * n
         self.diameter = np.ones(n)
         #: Lanes whose spindle is power-limited (their speed may change within the cut).
         self.power_lanes: set[int] = set()
@@ -605,25 +606,19 @@ class _TurningCore:
         ks = lanes.tolist()
         for i in np.flatnonzero(~ok).tolist():  # left for zoh (never in the plant's ranges)
             self.lanes._load_matrices(ks[i], float(rpm[i]), full)
-        rpms = rpm.tolist()
-        build, name = factory.build_drawn, factory.name
-        recipes = ((build, r, segments, i, c, vi) for i, (r, c, vi) in
-                   enumerate(zip(rpms, counts.tolist(), v.tolist(), strict=True)))  # fmt: skip
-        settle_batch(self, lanes, recipes, factory.shop["actuation"], name)
+        settle_batch(self, lanes, factory.build_lane, (rpm, segments, counts, v),
+                     factory.shop["actuation"], factory.name)  # fmt: skip
         bounds = self.bound[lanes]
         for i in np.flatnonzero(bounds != bounds).tolist():  # refused by the kernel: let it
             k = ks[i]  # say why
             self.bound[k] = machining_time_bound(self.scenarios[k], self.truths[k])
-            bounds[i] = self.bound[k]
         if full:
             self.power_lanes.update(ks)
         else:
             self.power_lanes.difference_update(ks)
-        diameter = float(nums[9])
         info = self.episode_info
-        for k, b, length, r in zip(ks, bounds.tolist(), self.length[lanes].tolist(), rpms,
-                                   strict=True):  # fmt: skip
-            info[k] = (b, length, name, r, diameter)
+        for k in ks:
+            info[k] = None  # lane_info reads it from the arrays
 
     def _batches(self, factory) -> bool:
         """Whether :meth:`start_lanes` may start ``factory``'s scenarios in one batch: a
@@ -733,7 +728,13 @@ class _TurningCore:
         force, peak, counts, feed, vel, pos, depth = lanes.out[k].tolist()
         diverged, breakage, finished, _, _, over, _, clipped = self.eb[k].tolist()
         ef = self.ef[k].tolist()
-        bound, length, name, rpm, diameter = self.episode_info[k]
+        episode = self.episode_info[k]
+        if episode is None:  # a lane started with others (start_lanes)
+            episode = self.episode_info[k] = (
+                float(self.bound[k]), float(self.length[k]), self.names[k],
+                float(self.spindle_set[k]), float(self.diameter[k]),
+            )  # fmt: skip
+        bound, length, name, rpm, diameter = episode
         if k in self.power_lanes:  # drive and cutting power from the spindle's drive
             p_drive, p_cut = self.power[k].tolist()
             rpm = float(self.spindle[k])

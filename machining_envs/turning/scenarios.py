@@ -231,6 +231,12 @@ class _SplitFactory:
         segments (of all lanes), its segment count, its uniforms."""
         return self._scenario(spindle, drawn_lane_profile(segments, i, count, self.profile_name), v)
 
+    def build_lane(self, spindle: np.ndarray, segments: np.ndarray, counts: np.ndarray,
+                   v: np.ndarray, i: int):  # fmt: skip
+        """:meth:`build_drawn` of lane ``i`` of all the lanes' numbers from
+        :meth:`draw_lanes`."""
+        return self.build_drawn(float(spindle[i]), segments, i, int(counts[i]), v[i].tolist())
+
     def _scenario(self, spindle: float, profile: DepthProfile, v: list[float]):
         u = [lo + span * x for lo, span, x in zip(self.lows, self.spans, v, strict=True)]
         return drawn_instance(

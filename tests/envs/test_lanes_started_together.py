@@ -15,10 +15,9 @@ from tests.helpers import MILLING, TURNING, started_together_and_one_by_one
 @pytest.mark.parametrize("env_id", [TURNING, MILLING])
 def test_a_batch_builds_the_lanes_objects_only_when_read(env_id):
     one, many, lanes = started_together_and_one_by_one(env_id, "train")
-    assert all(k in many.scenarios._deferred for k in lanes.tolist())
-    assert all(k in many.truths._deferred for k in lanes.tolist())
+    assert (many.scenarios._batch[lanes] >= 0).all() and (many.truths._batch[lanes] >= 0).all()
     assert many.scenarios[4] == one.scenarios[4]
-    assert 4 not in many.scenarios._deferred and 7 in many.scenarios._deferred
+    assert many.scenarios._batch[4] == -1 and many.scenarios._batch[7] >= 0
     for clone in (pickle.loads(pickle.dumps(many)), copy.deepcopy(many)):
         assert clone.scenarios[7] == one.scenarios[7]
         assert clone.truths[11] == one.truths[11]
