@@ -319,7 +319,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             return obs, reward, terminated, truncated, info
         lanes = np.flatnonzero(done)
         final_obs = np.empty(self.num_envs, dtype=object)  # all None
-        for i, row in zip(lanes.tolist(), obs[lanes]):  # rows of a copy: no copy each
+        for i, row in zip(lanes.tolist(), obs[lanes], strict=True):  # rows of one copy
             final_obs[i] = row
         # The step's info arrays are the final info; _reset_lanes does not write to them,
         # nor to obs, the step's own new array (_step_lanes), which takes the first ones.
