@@ -349,8 +349,7 @@ class LaneNames:
 
     def set_many(self, lanes: np.ndarray, name: str) -> None:
         """Every lane of ``lanes`` (an index array) is named ``name``."""
-        names = self._names
-        if any(names[k] != name for k in lanes.tolist()):  # else nothing to copy or write
+        if (self._names[lanes] != name).any():  # else nothing to copy or write
             self._writable()[lanes] = name
 
     def _writable(self) -> np.ndarray:
