@@ -361,11 +361,13 @@ def _batch_numbers(core, factory) -> np.ndarray:
     lows, spans = factory.lows, factory.spans
     varies = factory.limit_varies
     limit = (lows[3], spans[3]) if varies else (float(factory.limit_N[0]), 0.0)
-    return np.array([
+    nums = np.array([
         p.force_coefficient, p.feed_exponent, ke, cmax, margin, power,
         p.max_feed_velocity_mm_s, p.breakage_force_N, p.noise_std_N, p.workpiece_diameter_mm,
         lows[0], spans[0], lows[1], spans[1], lows[2], spans[2], float(varies), *limit,
     ], dtype=np.float64)  # fmt: skip
+    assert nums.size == len(_BATCH)
+    return nums
 
 
 @numba.njit(cache=True)
