@@ -724,23 +724,6 @@ def _filter_pair(f, x, w, out):
     return True
 
 
-@numba.njit(cache=True, inline="always")
-def _peak(force, m):
-    """``force[:m].max()`` (numpy's: the first NaN if there is one), in one loop of
-    selects that runs in the processor's vectors."""
-    pk = force[0]
-    bad = pk != pk
-    for j in range(1, m):
-        f = force[j]
-        pk = f if f > pk else pk
-        bad |= f != f
-    if bad:
-        for j in range(m):
-            if force[j] != force[j]:
-                return force[j]
-    return pk
-
-
 @numba.njit(cache=True)
 def step_lane(
     k, feed, base, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f, finished,
@@ -803,7 +786,7 @@ def step_lane(
     f_end = force[m - 1]
     out = out_f[k]
     out[0] = f_end
-    out[1] = _peak(force, m)
+    out[1] = force.max()
     out[2] = gain * fo[0] + noise
     out[3] = y[2 * m - 1]
     b[b.shape[0] - 1] = f_end

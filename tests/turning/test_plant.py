@@ -252,27 +252,3 @@ def test_the_filters_two_rows_are_matvecs(width):
             assert out.tobytes() == expected[0].tobytes(), (width, trial)
         else:
             assert out.tolist() == [7.0, 7.0]
-
-
-def test_the_peak_force_is_the_arrays_max():
-    """``_peak`` (one loop of selects, in vectors) gives ``force[:m].max()``: the largest
-    value, or the first NaN where there is one, to the last bit."""
-    import numba
-
-    from machining_envs.turning.plant import _peak
-
-    @numba.njit
-    def numba_max(x, m):
-        return x[:m].max()
-
-    rng = np.random.default_rng(7)
-    for trial in range(300):
-        m = int(rng.integers(1, 60))
-        x = rng.uniform(0.0, 5e3, m + 3) * (rng.uniform(size=m + 3) < 0.8)
-        if trial % 3 == 1:  # NaNs of different payloads: the first is kept
-            x[rng.integers(m)] = np.frombuffer(np.uint64(0x7FF8000000000001).tobytes())[0]
-            x[rng.integers(m)] = np.nan
-        got = _peak(x, m)
-        assert np.float64(got).tobytes() == np.float64(numba_max(x, m)).tobytes(), trial
-        if not np.isnan(x[:m]).any():
-            assert got == np.max(x[:m])
