@@ -662,7 +662,7 @@ class _MillingCore:
         bad = _start_drawn_lanes(self._packed(self._kernel_args()), lanes, nominal, v, scales,
                                  segments, counts)  # fmt: skip
         if bad >= 0:  # a range's end rounded past SPINDLE_RPM_RANGE: the lane's check says so
-            sc = factory.build_drawn(segments, bad, int(counts[bad]), v[bad].tolist())
+            sc = factory.build_lane(segments, counts, v, bad)
             sc.spindle_rpm(p)
             lo, hi = SPINDLE_RPM_RANGE
             raise ValueError(

@@ -219,7 +219,7 @@ class _SplitFactory:
     (what ``rng.uniform(low, high)`` gives) in order: the log spindle and limit scales, Ks,
     m, the noise scale and (with wear) the wear rate. A vector env draws the numbers of
     many lanes at once (:meth:`draw_lanes`) and builds a lane's scenario from them only when
-    it is asked for (:meth:`build_drawn`): the same object ``factory(rng)`` gives."""
+    it is asked for (:meth:`build_lane`): the same object ``factory(rng)`` gives."""
 
     def __init__(
         self,
@@ -283,21 +283,17 @@ class _SplitFactory:
         generator in ``table`` (``LaneGenerators.table``), in one compiled call:
         ``(segments, segment counts, uniforms)`` of shapes ``(L, 4, S + 1)``, ``(L,)`` and
         ``(L, len(lows))`` (see :func:`~machining_envs.core.workpieces.drawn_lane_cuts`);
-        :meth:`build_drawn` turns a lane's into its scenario."""
+        :meth:`build_lane` turns a lane's into its scenario."""
         _, segments, counts, v = drawn_lane_cuts(
             table, lanes, self.name, 0, *self._cut_ranges, len(self.lows)
         )
         return segments, counts, v
 
-    def build_drawn(self, segments: np.ndarray, i: int, count: int, v: list[float]):
-        """The scenario of lane ``i``'s numbers from :meth:`draw_lanes`: the segments (of
-        all lanes), its segment count, its uniforms."""
-        return self._scenario(drawn_lane_profile(segments, i, count, self.profile_name), v)
-
     def build_lane(self, segments: np.ndarray, counts: np.ndarray, v: np.ndarray, i: int):
-        """:meth:`build_drawn` of lane ``i`` of all the lanes' numbers from
-        :meth:`draw_lanes`."""
-        return self.build_drawn(segments, i, int(counts[i]), v[i].tolist())
+        """The scenario of lane ``i`` of the lanes' numbers from :meth:`draw_lanes` (their
+        segments, segment counts and uniforms)."""
+        profile = drawn_lane_profile(segments, i, int(counts[i]), self.profile_name)
+        return self._scenario(profile, v[i].tolist())
 
     def _scenario(self, profile: DepthProfile, v: list[float]) -> MillingScenario:
         u = [lo + span * x for lo, span, x in zip(self.lows, self.spans, v, strict=True)]

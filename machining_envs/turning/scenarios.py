@@ -147,7 +147,7 @@ class _SplitFactory:
     in order: Kf, p, the noise scale, the force limit (where it varies) and the wear rate
     (with wear). A vector env draws the numbers of many lanes at once
     (:meth:`draw_lanes`) and builds a lane's scenario from them only when it is asked for
-    (:meth:`build_drawn`): the same object ``factory(rng)`` gives."""
+    (:meth:`build_lane`): the same object ``factory(rng)`` gives."""
 
     def __init__(
         self,
@@ -218,24 +218,19 @@ class _SplitFactory:
         generator in ``table`` (``LaneGenerators.table``), in one compiled call:
         ``(spindle rpm, segments, segment counts, uniforms)`` of shapes ``(L,)``, ``(L, 4,
         S + 1)``, ``(L,)`` and ``(L, len(lows))`` (see
-        :func:`~machining_envs.core.workpieces.drawn_lane_cuts`); :meth:`build_drawn` turns a
+        :func:`~machining_envs.core.workpieces.drawn_lane_cuts`); :meth:`build_lane` turns a
         lane's into its scenario."""
         r, segments, counts, v = drawn_lane_cuts(
             table, lanes, self.name, 1, *self._cut_ranges, len(self.lows)
         )
         return np.exp(self.log_rpm + self.log_span * r[:, 0]), segments, counts, v
 
-    def build_drawn(self, spindle: float, segments: np.ndarray, i: int, count: int,
-                    v: list[float]):  # fmt: skip
-        """The scenario of lane ``i``'s numbers from :meth:`draw_lanes`: its speed, the
-        segments (of all lanes), its segment count, its uniforms."""
-        return self._scenario(spindle, drawn_lane_profile(segments, i, count, self.profile_name), v)
-
     def build_lane(self, spindle: np.ndarray, segments: np.ndarray, counts: np.ndarray,
                    v: np.ndarray, i: int):  # fmt: skip
-        """:meth:`build_drawn` of lane ``i`` of all the lanes' numbers from
-        :meth:`draw_lanes`."""
-        return self.build_drawn(float(spindle[i]), segments, i, int(counts[i]), v[i].tolist())
+        """The scenario of lane ``i`` of the lanes' numbers from :meth:`draw_lanes` (their
+        speeds, segments, segment counts and uniforms)."""
+        profile = drawn_lane_profile(segments, i, int(counts[i]), self.profile_name)
+        return self._scenario(float(spindle[i]), profile, v[i].tolist())
 
     def _scenario(self, spindle: float, profile: DepthProfile, v: list[float]):
         u = [lo + span * x for lo, span, x in zip(self.lows, self.spans, v, strict=True)]
