@@ -67,7 +67,6 @@ from machining_envs.turning.plant import (
     spindle_drive,
     start_lane,
     step_lane,
-    step_scratch,
 )
 from machining_envs.turning.scenarios import (
     TURNING_SCENARIOS,
@@ -237,21 +236,21 @@ def _env_floats(ef):
 @numba.njit(cache=True, nogil=True)
 def _step(ef, eb, feed, li, filt, z, buf, base, edges, d0, slope, lane_f, finished, m, n_f,
           out, out_finish, gain, fs, meas, max_t, w, obs, n_clipped, rng_table,
-          noise_counts):  # fmt: skip
+          noise_counts, work):  # fmt: skip
     """One step of every lane: the actions' bookkeeping, the sensor noise, the plant, the
     env's outputs.
 
     ``ef`` and ``eb`` hold the env's per-lane floats and flags (``_TurningCore``'s ``_EF``
     and ``_EB`` columns), ``li`` the plant's integers (``TurningLanes.li``). A lane with
     noise (``noise_counts[k]`` counts per unit normal) draws a normal from its generator
-    (row ``rng_table[k]``, ``core.normals``), a lane without draws none.
+    (row ``rng_table[k]``, ``core.normals``), a lane without draws none. ``work`` is the
+    plant's scratch (``TurningLanes.work``): nothing is allocated here.
     The env calls it through :func:`_step_packed` (one table for every argument)."""
     (actions, commands, noise, fr, vmax, brk, prev_action, fr_obs, rpm_obs, reward,
      last_command) = _env_floats(ef)  # fmt: skip
     flags, clipped, last_clipped = eb[:, :6], eb[:, 6], eb[:, 7]
     cols, nseg, seg, out_seg, lag = lane_ints(li)
     t = lane_f[:, 5]
-    work = step_scratch(m, n_f)
     for k in range(z.shape[0]):
         prev_action[k] = actions[k]
         last_command[k] = commands[k]
@@ -274,7 +273,7 @@ def _step_packed(t):
           f8_1(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12), as_int(t, 13),
           as_int(t, 14), f8_2(t, 15), f8_1(t, 16), as_float(t, 17), as_float(t, 18), f8_2(t, 19),
           as_float(t, 20), f8_1(t, 21), f4_2(t, 22), i8_1(t, 23), i8_2(t, 24),
-          f8_1(t, 25))  # fmt: skip
+          f8_1(t, 25), f8_2(t, 26))  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
@@ -420,7 +419,7 @@ def _start_packed(t, s, k, full_history, consts, segments, x):
 #: or none (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (
     0, 0, 0, 0, None, 0, 0, None, 0, 0, 0, 0, 0, None, None, 0, 0, None, None, 0, None, None, 0, 0, 0,
-    0,
+    0, 0,
 )  # fmt: skip
 
 
@@ -686,6 +685,7 @@ class _TurningCore:
                 self.n_clipped,
                 self.rngs.table,
                 self.noise_counts,
+                lanes.work,
             )
             self._args_version = lanes.version
         return self._args

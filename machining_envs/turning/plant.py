@@ -580,25 +580,17 @@ def _depth_at(x, edges, d0, slope, nseg):
 
 @numba.njit(cache=True)
 def _step_lanes(
-    feed, base, li, filt, z, buf, edges, d0, slope, lane_f, finished, m, n_f, commands, noise,
-    out_f, out_finish,
+    feed, base, li, filt, z, buf, work, edges, d0, slope, lane_f, finished, m, n_f, commands,
+    noise, out_f, out_finish,
 ):  # fmt: skip
     """Advance every lane by one sample (:func:`step_lane` on each; ``li`` holds the
     lanes' integers, ``TurningLanes.li``)."""
     cols, nseg, seg, out_seg, lag = lane_ints(li)
-    work = step_scratch(m, n_f)
     for k in range(z.shape[0]):
         step_lane(
             k, feed, base, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f,
             finished, m, n_f, commands[k], noise[k], out_f, out_seg, out_finish,
         )  # fmt: skip
-
-
-@numba.njit(cache=True, inline="always")
-def step_scratch(m, n_f):
-    """The scratch of :func:`step_lane`, one for every lane a call steps: the step matrix's
-    rows, then the filter's next state."""
-    return np.empty((1, 2 * m + 3 + n_f))
 
 
 @numba.njit(cache=True, inline="always")
@@ -729,8 +721,7 @@ def step_lane(
     k, feed, base, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f, finished,
     m, n_f, command, noise, out_f, out_seg, out_finish,
 ):  # fmt: skip
-    """Advance lane ``k`` by one sample (see :class:`TurningLanes` for the layout; ``work``
-    is :func:`step_scratch`'s, which the lanes may share).
+    """Advance lane ``k`` by one sample (see :class:`TurningLanes` for the layout).
 
     ``lane_f[k]`` holds ``[Kf, p, Ke, U_max, length, t, margin, Ts, wear per mm]``;
     ``out_f[k]`` gets
@@ -742,7 +733,7 @@ def step_lane(
     c = cols[k]
     zk = z[k, :c]
     zk[3] = min(max(command, 0.0), cmax)
-    y = work[0, :n_rows]
+    y = work[k, :n_rows]
     _sampled_rows(base, feed[k], lag[k], zk, m, y)
     p_start = zk[2]
     p_end = y[m - 1]
@@ -779,9 +770,9 @@ def step_lane(
     if wear != 0.0:  # Kf (1 + w x): the tool dulls along the cut (wear_per_100mm)
         for j in range(m):
             force[j] *= 1.0 + wear * y[j]
-    fo = work[0, n_rows:]
+    fo = work[k, n_rows:]
     if not (n_f == 2 and _filter_pair(filt[0], b, b.shape[0], fo)):
-        matvec(filt, n_f, b.shape[0], buf[k : k + 1], work[:, n_rows:])
+        matvec(filt, n_f, b.shape[0], buf[k : k + 1], work[k : k + 1, n_rows:])
     b[:n_f] = fo
     f_end = force[m - 1]
     out = out_f[k]
@@ -937,6 +928,8 @@ class TurningLanes:
         self.filt = filt.reshape(1, -1).copy()
         self.z = np.zeros((self.n, c_max))
         self.buf = np.zeros((self.n, filt.shape[1]))
+        #: Scratch of the kernel: the step matrix's rows, then the filter's next state.
+        self.work = np.zeros((self.n, 2 * m + 3 + self.n_f))
         self._s_max = 1
         #: Counts replacements of the lane arrays (by a profile with more segments).
         self.version = 0
@@ -1038,6 +1031,7 @@ class TurningLanes:
             self.filt,
             self.z,
             self.buf,
+            self.work,
             self.edges,
             self.d0,
             self.slope,
