@@ -343,16 +343,18 @@ def _start(k, full_history, consts, segments, x, ef, eb, feed, li, z, buf, edges
 
 #: The numbers :func:`_start_drawn_lanes` reads of a split and the nominal parameters
 #: (``_batch_numbers``), in its order.
-_BATCH = ("force_coefficient", "feed_exponent", "sensor_gain", "command_max", "margin",
-          "spindle_power_W", "max_feed_velocity_mm_s", "breakage_force_N", "noise_std_N",
-          "workpiece_diameter_mm", "kf_low", "kf_span", "p_low", "p_span", "noise_low",
-          "noise_span", "limit_varies", "limit_low", "limit_span")  # fmt: skip
+_BATCH_NUMBERS = (
+    "force_coefficient", "feed_exponent", "sensor_gain", "command_max", "margin",
+    "spindle_power_W", "max_feed_velocity_mm_s", "breakage_force_N", "noise_std_N",
+    "workpiece_diameter_mm", "kf_low", "kf_span", "p_low", "p_span", "noise_low", "noise_span",
+    "limit_varies", "limit_low", "limit_span",
+)  # fmt: skip
 
 
 def _batch_numbers(core, factory) -> np.ndarray:
-    """What :func:`_start_drawn_lanes` reads (``_BATCH``) for lanes of ``factory``'s split
-    on ``core``'s nominal parameters: the numbers ``TurningScenario.true_params`` and
-    ``TurningLanes.lane_constants`` take."""
+    """What :func:`_start_drawn_lanes` reads (``_BATCH_NUMBERS``) for lanes of
+    ``factory``'s split on ``core``'s nominal parameters: the numbers
+    ``TurningScenario.true_params`` and ``TurningLanes.lane_constants`` take."""
     p = core.params
     power = factory.shop["spindle_power_W"]
     power = power if math.isfinite(power) else p.spindle_power_W
@@ -365,7 +367,7 @@ def _batch_numbers(core, factory) -> np.ndarray:
         p.max_feed_velocity_mm_s, p.breakage_force_N, p.noise_std_N, p.workpiece_diameter_mm,
         lows[0], spans[0], lows[1], spans[1], lows[2], spans[2], float(varies), *limit,
     ], dtype=np.float64)  # fmt: skip
-    assert nums.size == len(_BATCH)
+    assert nums.size == len(_BATCH_NUMBERS)
     return nums
 
 
@@ -488,7 +490,7 @@ class _TurningCore:
         self.power = np.zeros((n, 2))
         self.truths = LaneObjects(n)
         self._batch_ok: dict = {}  # _batches' checks, by factory
-        self._batch_nums: dict = {}  # _batch_numbers, by factory
+        self._batch_numbers: dict = {}  # _batch_numbers, by factory
         #: Per lane: (score bound, workpiece length, scenario name, set spindle speed,
         #: diameter) of its episode, as Python values; None for a lane started with others
         #: until lane_info reads it from the arrays.
@@ -595,9 +597,9 @@ class _TurningCore:
         if factory is None:
             return
         rpm, segments, counts, v = factory.draw_lanes(self.rngs.table, lanes)
-        nums = self._batch_nums.get(factory)
+        nums = self._batch_numbers.get(factory)
         if nums is None:
-            nums = self._batch_nums[factory] = _batch_numbers(self, factory)
+            nums = self._batch_numbers[factory] = _batch_numbers(self, factory)
         full = math.isfinite(nums[5])
         self.lanes.fit_segments(int(counts.max()))
         ok = _start_drawn_lanes(
