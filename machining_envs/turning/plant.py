@@ -567,15 +567,29 @@ class TurningStep:
 # ---- the batched physics: N cuts stepped as arrays, one kernel for one lane or many --------
 
 
-@numba.njit(cache=True)
-def _depth_at(x, edges, d0, slope, nseg):
-    """Depth (mm) at ``x`` of a profile given by its arrays; zero outside ``[0, length)``
-    (``DepthProfile.__call__`` for one position)."""
-    if not (x >= 0.0 and x < edges[nseg]):
-        return 0.0
-    i = np.searchsorted(edges[: nseg + 1], x, side="right") - 1
-    i = min(max(i, 0), nseg - 1)
-    return d0[i] + slope[i] * (x - edges[i])
+@numba.njit(cache=True, inline="always")
+def _profile_depths(y, edges, d0, slope, nseg, i, force, m, kf):
+    """``force[j] *= depth(y[j]) * Kf`` for the sub-steps ``j < m`` of a sample whose
+    positions may cross the profile's edges, and the last depth. A depth is
+    ``DepthProfile.__call__``'s at the position (zero outside ``[0, length)``, NaN read as
+    outside), its segment found by walking from segment ``i`` (the positions of a sample
+    lie close together: a step or two), not searched afresh. The edges are sorted, so the
+    walk ends on the segment ``np.searchsorted`` finds (the last whose edge is at or below
+    the position, or the first) and every depth is its number to the last bit."""
+    top = edges[nseg]
+    depth = 0.0
+    for j in range(m):
+        x = y[j]
+        if not (x >= 0.0 and x < top):
+            depth = 0.0
+        else:
+            while i + 1 < nseg and edges[i + 1] <= x:
+                i += 1
+            while i > 0 and edges[i] > x:
+                i -= 1
+            depth = d0[i] + slope[i] * (x - edges[i])
+        force[j] = force[j] * depth * kf
+    return depth
 
 
 @numba.njit(cache=True)
@@ -759,10 +773,7 @@ def step_lane(
                 force[j] = force[j] * depth * kf
             depth_end = (y[m - 1] - e[i]) * sl + d0[k, i]
     else:
-        depth = 0.0
-        for j in range(m):
-            depth = _depth_at(y[j], e, d0[k], slope[k], nseg[k])
-            force[j] = force[j] * depth * kf
+        depth = _profile_depths(y, e, d0[k], slope[k], nseg[k], i, force, m, kf)
         depth_end = depth
         i = np.searchsorted(e[: nseg[k] + 1], p_end, side="right") - 1
         i = min(max(i, 0), nseg[k] - 1)

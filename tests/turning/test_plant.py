@@ -252,3 +252,40 @@ def test_the_filters_two_rows_are_matvecs(width):
             assert out.tobytes() == expected[0].tobytes(), (width, trial)
         else:
             assert out.tolist() == [7.0, 7.0]
+
+
+@pytest.mark.parametrize(
+    "profile",
+    [
+        DepthProfile.steps((1.0, 2.0, 3.0), 3.0),
+        DepthProfile.taper(),
+        DepthProfile.random(np.random.default_rng(4), taper_probability=0.5),
+    ],
+    ids=["steps", "taper", "random"],
+)
+def test_depths_across_edges_are_the_profiles(profile):
+    """A sample whose sub-steps cross the profile's edges takes each depth by walking from
+    the lane's segment; every depth is the profile's own (``DepthProfile.__call__``) to the
+    last bit, from any starting segment, outside the cut (zero) and at a NaN position."""
+    from machining_envs.turning.plant import _profile_depths
+
+    seg = profile.segment_array()
+    edges, d0, slope = seg[0], seg[1, :-1].copy(), seg[3, :-1].copy()
+    n = edges.size - 1
+    rng = np.random.default_rng(0)
+    length = profile.length_mm
+    rows = [
+        np.linspace(-0.5, length + 0.5, 50),  # every edge, from before the cut to past it
+        np.linspace(length + 0.5, -0.5, 50),  # backwards
+        rng.uniform(-1.0, length + 1.0, 50),  # anywhere, in no order
+        np.resize(np.concatenate([edges, edges[::-1]]), 50),  # on the edges themselves
+        np.where(np.arange(50) % 7 == 3, np.nan, np.linspace(0.0, length, 50)),
+    ]
+    kf = 1.37
+    for x in rows:
+        want = np.asarray(profile(x))
+        for start in range(n):
+            force = np.ones(50)
+            last = _profile_depths(x, edges, d0, slope, n, start, force, 50, kf)
+            np.testing.assert_array_equal(force, 1.0 * want * kf)
+            assert last == want[-1]
