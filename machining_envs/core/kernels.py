@@ -165,7 +165,39 @@ def add8(typingctx, a, b):
     return vec8(vec8, vec8), codegen
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
+def row_max(a, n):
+    """``a[:n].max()`` (``n >= 1``) as numba's ``max`` gives it, the first NaN if any, in a
+    plain loop: a kernel compiled without reference counting (``_nrt=False``) cannot call
+    ``max``, whose iterator needs it."""
+    top = a[0]
+    if top != top:
+        return top
+    for j in range(1, n):
+        v = a[j]
+        if v != v:
+            return v
+        if v > top:
+            top = v
+    return top
+
+
+@numba.njit(cache=True, inline="always")
+def row_min(a, n):
+    """``a[:n].min()`` (``n >= 1``), as :func:`row_max` gives the max."""
+    low = a[0]
+    if low != low:
+        return low
+    for j in range(1, n):
+        v = a[j]
+        if v != v:
+            return v
+        if v < low:
+            low = v
+    return low
+
+
+@numba.njit(cache=True, _nrt=True)
 def matvec(a, n, m, x, out):
     """``out[k, :n] = A_k @ x[k, :m]`` for every row ``k`` of ``x``, with numpy's rounding.
 
@@ -182,7 +214,8 @@ def matvec(a, n, m, x, out):
     call, and are the numbers numpy gives to the last bit (``tests/core/test_kernels.py``
     checks them on random matrices). Shapes outside that scheme (two or three columns past
     the groups of four, a single row, 2048 columns or more) go to ``np.dot``, as numpy's
-    own product would.
+    own product would; that allocates, so it is compiled with the runtime (``_nrt=True``)
+    even where a kernel compiled without it (``_nrt=False``) calls it.
     """
     shared = a.shape[0] == 1
     tail = m & 3

@@ -31,7 +31,7 @@ import numba
 import numpy as np
 
 from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
-from machining_envs.core.kernels import fma, matvec, powers
+from machining_envs.core.kernels import fma, matvec, powers, row_max, row_min
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
 from machining_envs.core.workpieces import load_segments
 
@@ -759,7 +759,7 @@ def step_lane(
     lo, hi = (p_start, p_end) if p_start <= p_end else (p_end, p_start)
     one_segment = e[i] <= lo - margin and hi + margin < e[i + 1]
     if not one_segment and e[i] <= lo and hi < e[i + 1]:
-        one_segment = e[i] <= y[:m].min() and y[:m].max() < e[i + 1]
+        one_segment = e[i] <= row_min(y, m) and row_max(y, m) < e[i + 1]
     if one_segment:
         sl = slope[k, i]
         if sl == 0.0:
@@ -784,11 +784,12 @@ def step_lane(
     fo = work[k, n_rows:]
     if not (n_f == 2 and _filter_pair(filt[0], b, b.shape[0], fo)):
         matvec(filt, n_f, b.shape[0], buf[k : k + 1], work[k : k + 1, n_rows:])
-    b[:n_f] = fo
+    for q in range(n_f):
+        b[q] = fo[q]
     f_end = force[m - 1]
     out = out_f[k]
     out[0] = f_end
-    out[1] = force.max()
+    out[1] = row_max(force, m)
     out[2] = gain * fo[0] + noise
     out[3] = y[2 * m - 1]
     b[b.shape[0] - 1] = f_end

@@ -16,6 +16,8 @@ from machining_envs.core.kernels import (
     matvec,
     powers,
     py_square,
+    row_max,
+    row_min,
     sincos_row,
     store8,
 )
@@ -280,3 +282,51 @@ def test_a_sine_is_the_same_in_a_row_of_any_length():
         assert s[:n].tobytes() == s1[lo : lo + n].tobytes()
         assert c[:n].tobytes() == c1[lo : lo + n].tobytes()
         assert np.all(s[n:] == 7.0) and np.all(c[n:] == 7.0)
+
+
+@numba.njit
+def _numbas_max_min(a, n):
+    return a[:n].max(), a[:n].min()
+
+
+@numba.njit
+def _rows_max_min(a, n):
+    return row_max(a, n), row_min(a, n)
+
+
+def test_row_max_and_min_are_numbas_max_and_min():
+    """The loops that kernels compiled without reference counting use in place of an
+    array's ``max`` and ``min`` give numba's numbers: the first NaN where there is one, the
+    first of equal values (so the sign of a zero), over any length."""
+    rng = np.random.default_rng(0)
+    for trial in range(400):
+        n = int(rng.integers(1, 60))
+        a = _random_matrix(rng, n + 3)
+        u = rng.random(n + 3)
+        if trial % 3 == 0:
+            a[u < 0.1] = np.nan
+        if trial % 5 == 0:
+            a[u < 0.4] = np.where(u[u < 0.4] < 0.2, 0.0, -0.0)
+        want = _numbas_max_min(a, n)
+        got = _rows_max_min(a, n)
+        assert np.array(got).tobytes() == np.array(want).tobytes(), (trial, a[:n])
+
+
+@numba.njit(_nrt=False)
+def _product_without_reference_counting(a, n, m, x, out):
+    matvec(a, n, m, x, out)
+
+
+@pytest.mark.parametrize("shape", [(1, 53), (3, 10), (2, 7)])
+def test_matvec_runs_inside_a_kernel_without_reference_counting(shape):
+    """``matvec`` keeps the runtime it needs for the shapes it hands to ``np.dot`` (one
+    row, two or three columns past the groups of four) when a kernel compiled with
+    ``_nrt=False`` calls it (the turning kernel, for a first-order sensor filter)."""
+    n, m = shape
+    rng = np.random.default_rng(1)
+    a = rng.standard_normal((1, n * m))
+    x = rng.standard_normal((4, m))
+    out = np.zeros((4, n))
+    _product_without_reference_counting(a, n, m, x, out)
+    want = [a[0].reshape(n, m) @ row if n > 1 else [np.dot(a[0], row)] for row in x]
+    np.testing.assert_array_equal(out, np.array(want))
