@@ -47,9 +47,11 @@ def _timed(obj, name: str, acc: dict, key: str) -> None:
     setattr(obj, name, wrapper)
 
 
-def breakdown(env_id: str, num_envs: int, episode_steps: float, seed: int) -> dict:
+def breakdown(
+    env_id: str, num_envs: int, episode_steps: float, seed: int, num_threads: int = 1
+) -> dict:
     """Seconds per lane-step of each part of a steady vector step, and resets per step."""
-    venv = gym.make_vec(env_id, num_envs=num_envs)
+    venv = gym.make_vec(env_id, num_envs=num_envs, num_threads=num_threads)
     space = venv.single_action_space
     rng = np.random.default_rng(seed)
     actions = rng.uniform(space.low, space.high, size=(256, num_envs, *space.shape))
@@ -90,10 +92,13 @@ def main(argv=None) -> None:
     ap.add_argument("--env", nargs="+", default=list(machining_envs.ENV_IDS))
     ap.add_argument("--episode-steps", type=int, default=20_000,
                     help="single-env steps that measure the mean episode")  # fmt: skip
+    ap.add_argument("--threads", type=int, default=1,
+                    help="the vector env's num_threads (the compiled part runs on them)")  # fmt: skip
     args = ap.parse_args(argv)
     parts = ("compiled", "resets", "env Python", "base")
     print(
-        f"steady vector step, N = {args.lanes}, one thread, random actions: µs per lane-step "
+        f"steady vector step, N = {args.lanes}, num_threads = {args.threads}, random actions: "
+        "µs per lane-step "
         "(share of the step)"
     )
     print(
@@ -104,7 +109,7 @@ def main(argv=None) -> None:
     for env_id in args.env:
         resets = steps_per_second(env_id, args.episode_steps, seed=0)[2]
         episode = args.episode_steps / max(resets, 1)  # as throughput.py's steady columns
-        b = breakdown(env_id, args.lanes, episode, seed=0)
+        b = breakdown(env_id, args.lanes, episode, seed=0, num_threads=args.threads)
         cells = "".join(
             f" {b[p] * 1e6:7.2f} ({b[p] / b['total']:4.0%})" for p in parts
         )  # fmt: skip
