@@ -305,7 +305,9 @@ def test_row_max_and_min_are_numbas_max_and_min():
         u = rng.random(n + 3)
         if trial % 3 == 0:
             a[u < 0.1] = np.nan
-        if trial % 5 == 0:
+        if trial % 2 == 0:  # the largest value a zero of either sign, or a negative one
+            a = -np.abs(a) if trial % 4 == 0 else np.abs(a)
+        if trial % 5 == 0 or trial % 4 == 0:
             a[u < 0.4] = np.where(u[u < 0.4] < 0.2, 0.0, -0.0)
         want = _numbas_max_min(a, n)
         got = _rows_max_min(a, n)
