@@ -34,7 +34,7 @@ takes the one-thread and the T-thread windows in turn, each paired with its own 
 single env (which always runs on one thread).
 
     python benchmarks/throughput.py [--steps 20000] [--rounds 5] [--lanes 1 64 1024 8192]
-                                    [--threads T]
+                                    [--threads T] [--env machining_envs/Turning-v0 ...]
 """
 
 from __future__ import annotations
@@ -164,7 +164,7 @@ def bytes_per_lane(env_id: str, num_envs: int) -> float:
 
 def vector_table(
     lanes: list[int], env_steps: int, sync_steps: int, singles: dict, rounds: int,
-    single_steps: int, threads: int,
+    single_steps: int, threads: int, env_ids: tuple = machining_envs.ENV_IDS,
 ) -> None:  # fmt: skip
     """The vector envs' table; ``singles[id]`` = the single env's mean episode length in
     steps (from the first table); each steady round is paired with ``single_steps`` steps of
@@ -188,7 +188,7 @@ def vector_table(
     print(f"{'CartPoleVectorEnv (reference)':34s}" + "".join(
         f" {cart:10.0f}" if n == ref_n else f" {'':>10s}" for n in lanes
     ))  # fmt: skip
-    for env_id in machining_envs.ENV_IDS:
+    for env_id in env_ids:
         if gym.spec(env_id).vector_entry_point is None:
             print(f"{env_id:34s} no native vector env yet")
             continue
@@ -216,11 +216,15 @@ def main(argv=None) -> None:
     ap.add_argument("--sync-steps", type=int, default=20_000, help="env-steps of SyncVectorEnv")
     ap.add_argument("--no-vector", action="store_true", help="single envs only")
     ap.add_argument(
+        "--env", nargs="+", default=list(machining_envs.ENV_IDS), choices=machining_envs.ENV_IDS,
+        help="the ids to measure (default: every one), each against Pendulum-v1 as ever",
+    )  # fmt: skip
+    ap.add_argument(
         "--threads", type=int, default=usable_cpus(),
         help="num_threads of the second steady columns (default: this process's CPUs; 1: none)",
     )  # fmt: skip
     args = ap.parse_args(argv)
-    ids = [PEER, *machining_envs.ENV_IDS]
+    ids = [PEER, *args.env]
     rates = {i: [] for i in ids}
     for r in range(args.rounds):
         for env_id in ids:
@@ -242,7 +246,7 @@ def main(argv=None) -> None:
         episodes = {i: args.steps / max(med[i][2], 1) for i in ids}
         vector_table(
             sorted(args.lanes), args.vector_steps, args.sync_steps, episodes, args.rounds,
-            args.steps, args.threads,
+            args.steps, args.threads, tuple(args.env),
         )  # fmt: skip
 
 
