@@ -246,7 +246,7 @@ def _step(ef, eb, feed, li, filt, z, buf, base, edges, d0, slope, lane_f, finish
     (row ``rng_table[k]``, ``core.normals``), a lane without draws none. ``work`` is the
     plant's scratch (``TurningLanes.work``): nothing is allocated here, so it is compiled
     without reference counting (``_nrt=False``): the views of each lane's rows it makes cost
-    no atomic counts (a fifth of the step). ``matvec``, which it calls for filters outside
+    no atomic counts (they took a fifth of it). ``matvec``, which it calls for filters outside
     the two-row scheme, keeps the runtime for what it hands to ``np.dot``.
     The env calls it through :func:`_step_packed` (one table for every argument)."""
     (actions, commands, noise, fr, vmax, brk, prev_action, fr_obs, rpm_obs, reward,
