@@ -503,18 +503,25 @@ class _FeedCore:
 
     # ---- per-lane episodes ---------------------------------------------------------------
     def _grow(self, n_seg: int, n_load: int) -> None:
+        """Widen the per-lane tables to ``n_seg`` segments and ``n_load`` load steps where
+        they are narrower; the kernel's arguments are gathered again only then (new
+        arguments are packed into a new table, some 60 µs at N = 1024)."""
+        grown = False
         if n_seg > self.tabs.shape[1]:
             tabs = np.zeros((self.n, n_seg, SEGMENT_COLUMNS))
             tabs[:, : self.tabs.shape[1]] = self.tabs
             self.tabs = tabs
             self._scratch = (self._float_scratch(n_seg), np.zeros(n_seg, dtype=np.int64))
+            grown = True
         if n_load > self.load_t.shape[1]:
             lt = np.full((self.n, n_load), np.inf)
             lt[:, : self.load_t.shape[1]] = self.load_t
             lv = np.zeros((self.n, n_load + 1, 2))
             lv[:, : self.load_v.shape[1]] = self.load_v
             self.load_t, self.load_v = lt, lv
-        self._bind()
+            grown = True
+        if grown:
+            self._bind()
 
     def start(self, lane: int, spec, rng: np.random.Generator) -> None:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its

@@ -30,7 +30,7 @@ import numba
 import numpy as np
 
 from machining_envs.contouring._exact import np_mean, py_hypot
-from machining_envs.core.kernels import sincos_row
+from machining_envs.core.kernels import sincos_row, vector_hypot
 
 __all__ = ["Line", "Arc", "Involute", "Path", "PAPER_CORNER_FEED_MM_S", "PAPER_FEED_MM_S"]
 __all__ += ["SEGMENT_COLUMNS", "path_point", "path_points", "path_heading", "path_distance"]
@@ -1005,25 +1005,46 @@ def _segment_distances(row, px, py, n, out):
         y0 = row[7]
         ux = row[8]
         uy = row[9]
-        for j in range(n):
+        for j in range(n):  # in vectors; the lengths vector_hypot leaves (NaN) then by libm
             t = min(max((px[j] - x0) * ux + (py[j] - y0) * uy, 0.0), row[10])
-            out[j] = math.hypot(px[j] - (x0 + ux * t), py[j] - (y0 + uy * t))
+            out[j] = vector_hypot(px[j] - (x0 + ux * t), py[j] - (y0 + uy * t))
+        for j in range(n):
+            if out[j] != out[j]:
+                t = min(max((px[j] - x0) * ux + (py[j] - y0) * uy, 0.0), row[10])
+                out[j] = math.hypot(px[j] - (x0 + ux * t), py[j] - (y0 + uy * t))
         return
     if kind == _ARC:
         # A point well inside the arc's wedge (by two cross products with the unit vectors
-        # to its ends) has the distance |rho - R| without the angle; a sweep under 3 rad
-        # keeps the wedge the meet of two half-planes, a radius not tiny beside the centre's
-        # coordinates keeps those unit vectors within 1e-10 of the angles' (margin 1e-8).
+        # to its ends) has the distance |rho - R| without the angle. A sweep under 3 rad
+        # makes the wedge the meet of two half-planes (both products positive), a sweep
+        # over 3.3 rad (beyond pi) their join (either positive); a radius not tiny beside
+        # the centre's coordinates keeps those unit vectors within 1e-10 of the angles'
+        # (margin 1e-8).
         cx = row[6]
         cy = row[7]
         r = row[8]
         sg = row[10]
-        wedge = row[11] < 3.0 and r >= 1e-5 * (abs(cx) + abs(cy) + 1.0)
+        sized = r >= 1e-5 * (abs(cx) + abs(cy) + 1.0)
+        wedge = row[11] < 3.0 and sized
+        join = row[11] > 3.3 and sized
         u0x = (row[12] - cx) / r
         u0y = (row[13] - cy) / r
         u1x = (row[14] - cx) / r
         u1y = (row[15] - cy) / r
+        # First, in vectors, the points inside the wedge whose radius is ordinary (its
+        # number libm's, vector_hypot); the others (marked -1) then point by point.
         for j in range(n):
+            dx = px[j] - cx
+            dy = py[j] - cy
+            rho = vector_hypot(dx, dy)
+            m = 1e-8 * rho
+            after_start = sg * (u0x * dy - u0y * dx) > m
+            before_end = sg * (dx * u1y - dy * u1x) > m
+            inside = (wedge & after_start & before_end) | (join & (after_start | before_end))
+            out[j] = abs(rho - r) if inside else -1.0
+        for j in range(n):
+            if not out[j] < 0.0:
+                continue
             dx = px[j] - row[6]
             dy = py[j] - row[7]
             rho = math.hypot(dx, dy)
@@ -1106,15 +1127,24 @@ def path_distances(tab, px, py, n, out, scratch, lower, order):
             i -= 1
         order[i] = k
     _segment_distances(tab[order[0]], px, py, n, out)
+    dmax = _largest(out, n)
     for q in range(1, ns):
         k = order[q]
-        dmax = out[0]
-        for j in range(1, n):
-            if out[j] > dmax or out[j] != out[j]:
-                dmax = out[j]
         if lower[k] - 1e-9 * (scale + abs(lower[k]) + dmax) >= dmax:
             continue
         _segment_distances(tab[k], px, py, n, scratch)
         for j in range(n):
             if scratch[j] < out[j]:
                 out[j] = scratch[j]
+        dmax = _largest(out, n)
+
+
+@numba.njit(cache=True, inline="always")
+def _largest(out, n):
+    """The largest of ``out[:n]``, or its last NaN if it holds one (then no segment is
+    skipped)."""
+    dmax = out[0]
+    for j in range(1, n):
+        if out[j] > dmax or out[j] != out[j]:
+            dmax = out[j]
+    return dmax

@@ -98,6 +98,10 @@ def _paths():
     out.append(Path([inv, line]))
     a = Arc((0.0, 0.0), 5.0, 0.0, -math.pi)
     out.append(Path([a, Line(a.end, (a.end[0], a.end[1] + 3.0))]))
+    # Arcs of more than half a turn, either way: their wedge is the join of two half-planes.
+    for sweep in (1.6 * math.pi, -1.3 * math.pi):
+        b = Arc((1.0, -2.0), 4.0, 0.5, sweep)
+        out += [Path([b]), Path([b, Line(b.end, (b.end[0] + 2.0, b.end[1] + 1.0))])]
     return out
 
 

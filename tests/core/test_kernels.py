@@ -1,5 +1,6 @@
-"""The shared compiled products, powers, sines and cosines (``machining_envs.core.kernels``)
-against numpy's products and libm's ``pow``, ``sin`` and ``cos``."""
+"""The shared compiled products, powers, sines, cosines and norms
+(``machining_envs.core.kernels``) against numpy's products and libm's ``pow``, ``sin``,
+``cos`` and ``hypot``."""
 
 import math
 
@@ -20,6 +21,7 @@ from machining_envs.core.kernels import (
     row_min,
     sincos_row,
     store8,
+    vector_hypot,
 )
 
 
@@ -332,3 +334,56 @@ def test_matvec_runs_inside_a_kernel_without_reference_counting(shape):
     _product_without_reference_counting(a, n, m, x, out)
     want = [a[0].reshape(n, m) @ row if n > 1 else [np.dot(a[0], row)] for row in x]
     np.testing.assert_array_equal(out, np.array(want))
+
+
+@numba.njit
+def _hypots(x, y, fast, libm):
+    for i in range(x.size):
+        fast[i] = vector_hypot(x[i], y[i])
+        libm[i] = math.hypot(x[i], y[i])
+
+
+def _glibc_235_or_later() -> bool:
+    import platform
+
+    name, version = platform.libc_ver()
+    parts = tuple(int(v) for v in version.split(".")[:2]) if version else ()
+    return name == "glibc" and parts >= (2, 35)
+
+
+def test_vector_hypot_is_libms_hypot_where_it_takes_the_values():
+    """The norms the contour errors are made of, in vectors: libm's ``hypot`` to the last
+    bit on glibc 2.35 and later (within one unit in the last place elsewhere) wherever both
+    magnitudes are ordinary; NaN, for ``math.hypot`` to take, only outside that (one
+    magnitude beyond 2**511, the other below 2**-459 but not zero, or either not finite),
+    and never for the contour errors' sizes."""
+    rng = np.random.default_rng(2)
+    n = 400_000
+    x = rng.standard_normal(n) * 2.0 ** np.round(rng.uniform(-540, 540, n))
+    ratio = rng.choice([1.0, -1e-17, 1e-8, 0.3, -2.0, 1e20, 0.0], n)
+    y = x * ratio + rng.standard_normal(n) * rng.choice([0.0, 1e-300, 1.0], n)
+    special = [0.0, -0.0, np.inf, -np.inf, np.nan, 5e-324, 2.0**511, 2.0**-459, 1e308, 1.0]
+    sx, sy = np.meshgrid(special, special)
+    # Equal magnitudes, one a few units from twice the other: the two branches of the
+    # correction and the edge between them.
+    a = rng.uniform(1e-3, 1e3, 2000)
+    x = np.concatenate([x, sx.ravel(), a, a, 2.0 * a])
+    y = np.concatenate([y, sy.ravel(), a, np.nextafter(a, 0.0), np.nextafter(a, np.inf)])
+    fast, libm = np.empty(x.size), np.empty(x.size)
+    _hypots(x, y, fast, libm)
+    hi = np.maximum(np.abs(x), np.abs(y))
+    lo = np.minimum(np.abs(x), np.abs(y))
+    with np.errstate(invalid="ignore"):
+        ordinary = (hi <= 2.0**511) & ((lo >= 2.0**-459) | (lo == 0.0))
+    taken = ~np.isnan(fast)
+    assert np.array_equal(taken, ordinary)
+    assert taken.mean() > 0.5
+    if _glibc_235_or_later():
+        assert fast[taken].tobytes() == libm[taken].tobytes()
+    else:
+        assert np.all(np.abs(fast[taken] - libm[taken]) <= np.spacing(libm[taken]))
+    # The contour errors' sizes (mm: 1e-9 to 1e4) are always taken.
+    d = rng.uniform(-1e4, 1e4, (2, 10000)) * 10.0 ** rng.uniform(-13, 0, (2, 10000))
+    fast, libm = np.empty(10000), np.empty(10000)
+    _hypots(d[0], d[1], fast, libm)
+    assert not np.isnan(fast).any()
