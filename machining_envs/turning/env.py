@@ -252,7 +252,7 @@ def _step(ef, eb, feed, li, filt, z, buf, base, edges, d0, slope, lane_f, finish
     (actions, commands, noise, fr, vmax, brk, prev_action, fr_obs, rpm_obs, reward,
      last_command) = _env_floats(ef)  # fmt: skip
     flags, clipped, last_clipped = eb[:, :6], eb[:, 6], eb[:, 7]
-    cols, nseg, seg, out_seg, lag = lane_ints(li)
+    cols, nseg, seg, out_seg = lane_ints(li)
     t = lane_f[:, 5]
     for k in range(z.shape[0]):
         prev_action[k] = actions[k]
@@ -261,7 +261,7 @@ def _step(ef, eb, feed, li, filt, z, buf, base, edges, d0, slope, lane_f, finish
         n_clipped[k] += clipped[k]
         noise[k] = lane_noise(rng_table, k, noise_counts[k])
         step_lane(
-            k, feed, base, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f,
+            k, feed, base, cols, li, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f,
             finished, m, n_f, commands[k], noise[k], out, out_seg, out_finish,
         )  # fmt: skip
         _env_lane(k, out, out_finish, t, gain, fs, meas, fr, vmax, brk, max_t, w, prev_action,

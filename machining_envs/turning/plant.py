@@ -599,18 +599,20 @@ def _step_lanes(
 ):  # fmt: skip
     """Advance every lane by one sample (:func:`step_lane` on each; ``li`` holds the
     lanes' integers, ``TurningLanes.li``)."""
-    cols, nseg, seg, out_seg, lag = lane_ints(li)
+    cols, nseg, seg, out_seg = lane_ints(li)
     for k in range(z.shape[0]):
         step_lane(
-            k, feed, base, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f,
+            k, feed, base, cols, li, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f,
             finished, m, n_f, commands[k], noise[k], out_f, out_seg, out_finish,
         )  # fmt: skip
 
 
 @numba.njit(cache=True, inline="always")
 def lane_ints(li):
-    """The columns of ``TurningLanes.li``: ``(cols, nseg, seg, out_segment, lag)``."""
-    return li[:, 0], li[:, 1], li[:, 2], li[:, 3], li[:, 4:]
+    """The first columns of ``TurningLanes.li``: ``(cols, nseg, seg, out_segment)``; lane
+    ``k``'s delay groups follow them (``li[k, 4:]``, which the compiler knows to be one
+    contiguous row, where ``li[:, 4:][k]`` is strided)."""
+    return li[:, 0], li[:, 1], li[:, 2], li[:, 3]
 
 
 @numba.njit(cache=True, inline="always")
@@ -659,9 +661,9 @@ def _sampled_rows(base, feed, lag, zk, m, y):
     _current_rows(base, n, z0, z1, z2, z3, 0, m, y)
     lo = 0
     while lo < m:  # the feed rows, in runs of one delay group
-        g = lag[lo]
+        g = lag[np.uint64(lo)]
         hi = lo + 1
-        while hi < m and lag[hi] == g:
+        while hi < m and lag[np.uint64(hi)] == g:
             hi += 1
         if g > 0:
             q = 4 * g
@@ -732,10 +734,11 @@ def _filter_pair(f, x, w, out):
 
 @numba.njit(cache=True)
 def step_lane(
-    k, feed, base, cols, lag, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f, finished,
+    k, feed, base, cols, li, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f, finished,
     m, n_f, command, noise, out_f, out_seg, out_finish,
 ):  # fmt: skip
-    """Advance lane ``k`` by one sample (see :class:`TurningLanes` for the layout).
+    """Advance lane ``k`` by one sample (see :class:`TurningLanes` for the layout; ``li``
+    is ``TurningLanes.li``, of which :func:`lane_ints` names the first columns).
 
     ``lane_f[k]`` holds ``[Kf, p, Ke, U_max, length, t, margin, Ts, wear per mm]``;
     ``out_f[k]`` gets
@@ -748,7 +751,7 @@ def step_lane(
     zk = z[k, :c]
     zk[3] = min(max(command, 0.0), cmax)
     y = work[k, :n_rows]
-    _sampled_rows(base, feed[k], lag[k], zk, m, y)
+    _sampled_rows(base, feed[k], li[k, 4:], zk, m, y)
     p_start = zk[2]
     p_end = y[m - 1]
     b = buf[k]
