@@ -174,9 +174,10 @@ def row_max(a, n):
 
     Four running maxima over every fourth value, so that four comparisons are under way at
     once where one chain waits for each (a row of 50 took a tenth of the turning kernel);
-    where that finds a NaN, or a largest value of zero (whose sign is the first zero's),
-    the values are taken again one by one as numba does. Any other largest value is the
-    same number wherever it occurs."""
+    where that finds a NaN, the values are taken again one by one as numba does. A
+    largest value of zero is the first zero of the row (numba keeps the first of equal
+    values, and every value before it is negative); any other largest value is the same
+    number wherever it occurs."""
     if n < 8:
         return _row_max_in_order(a, n)
     m0 = a[0]
@@ -204,8 +205,13 @@ def row_max(a, n):
     m01 = m1 if m1 > m0 else m0
     m23 = m3 if m3 > m2 else m2
     top = m23 if m23 > m01 else m01
-    if nan or top == 0.0:
+    if nan:
         return _row_max_in_order(a, n)
+    if top == 0.0:  # value by value, the first zero: every value before it is negative
+        j = 0
+        while a[j] != 0.0:
+            j += 1
+        return a[j]
     return top
 
 
