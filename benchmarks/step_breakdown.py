@@ -17,8 +17,13 @@ env's own methods timed in place:
   observations and info of the finished lanes).
 
 The shares tell which part a faster env must cut; the microseconds move with the machine.
+``--frozen`` adds the compiled step timed alone: the core's ``step`` called 200 times on the
+steady state reached, every array of the core put back before each call, so that each call
+steps the same lanes through the same sample (the median call; what an A/B of two versions
+of a kernel compares, with less noise than a step among resets and Python).
 
     python benchmarks/step_breakdown.py [--lanes 1024] [--env machining_envs/Turning-v0 ...]
+                                        [--threads K] [--frozen]
 """
 
 from __future__ import annotations
@@ -47,8 +52,54 @@ def _timed(obj, name: str, acc: dict, key: str) -> None:
     setattr(obj, name, wrapper)
 
 
+def _core_arrays(obj, depth: int = 2, seen: set | None = None) -> list[np.ndarray]:
+    """The writable numpy arrays a core holds: its attributes', and those of the library's
+    objects it holds (the plant's lanes, the servo loops), ``depth`` levels down."""
+    seen = set() if seen is None else seen
+    if id(obj) in seen:
+        return []
+    seen.add(id(obj))
+    names = list(getattr(obj, "__dict__", {})) + list(getattr(type(obj), "__slots__", ()))
+    out = []
+    for name in names:
+        v = getattr(obj, name, None)
+        items = v if isinstance(v, (tuple, list)) and len(v) < 64 else (v,)
+        for x in items:
+            if isinstance(x, np.ndarray):
+                if x.flags.writeable and x.dtype != object and id(x) not in seen:
+                    seen.add(id(x))
+                    out.append(x)
+            elif depth and type(x).__module__.startswith("machining_envs"):
+                out += _core_arrays(x, depth - 1, seen)
+    return out
+
+
+def frozen_step(venv, calls: int = 200) -> float:
+    """Seconds per lane of the core's ``step`` on the state reached, restored before each
+    call (median of ``calls``)."""
+    core = venv.unwrapped._core
+    step = type(core).step  # not the timed wrapper breakdown() put on the instance
+    arrays = _core_arrays(core)
+    saved = [a.copy() for a in arrays]
+    times = []
+    for _ in range(calls):
+        for a, v in zip(arrays, saved, strict=True):
+            a[...] = v
+        t0 = time.perf_counter()
+        step(core)
+        times.append(time.perf_counter() - t0)
+    for a, v in zip(arrays, saved, strict=True):
+        a[...] = v
+    return float(np.median(times)) / venv.num_envs
+
+
 def breakdown(
-    env_id: str, num_envs: int, episode_steps: float, seed: int, num_threads: int = 1
+    env_id: str,
+    num_envs: int,
+    episode_steps: float,
+    seed: int,
+    num_threads: int = 1,
+    frozen: bool = False,
 ) -> dict:
     """Seconds per lane-step of each part of a steady vector step, and resets per step."""
     venv = gym.make_vec(env_id, num_envs=num_envs, num_threads=num_threads)
@@ -72,6 +123,7 @@ def breakdown(
         _, _, terminated, truncated, _ = venv.step(actions[i % 256])
         ends += int(np.count_nonzero(terminated | truncated))
     total = time.perf_counter() - t0
+    alone = frozen_step(venv) if frozen else float("nan")
     venv.close()
     per = 1.0 / (n * num_envs)
     env_python = acc["step_lanes"] - acc["compiled"] + acc["info_now"]
@@ -83,6 +135,7 @@ def breakdown(
         "base": (total - acc["step_lanes"] - acc["resets"] - acc["info_now"]) * per,
         "resets/step": ends / n,
         "per reset": acc["resets"] / max(ends, 1),
+        "alone": alone,
     }
 
 
@@ -94,6 +147,8 @@ def main(argv=None) -> None:
                     help="single-env steps that measure the mean episode")  # fmt: skip
     ap.add_argument("--threads", type=int, default=1,
                     help="the vector env's num_threads (the compiled part runs on them)")  # fmt: skip
+    ap.add_argument("--frozen", action="store_true",
+                    help="also the compiled step timed alone on a frozen state")  # fmt: skip
     args = ap.parse_args(argv)
     parts = ("compiled", "resets", "env Python", "base")
     print(
@@ -105,17 +160,19 @@ def main(argv=None) -> None:
         f"{'env':34s} {'step':>6s}"
         + "".join(f" {p:>15s}" for p in parts)
         + f" {'resets/step':>11s} {'µs/reset':>9s}"
+        + (f" {'alone':>6s}" if args.frozen else "")
     )
     for env_id in args.env:
         resets = steps_per_second(env_id, args.episode_steps, seed=0)[2]
         episode = args.episode_steps / max(resets, 1)  # as throughput.py's steady columns
-        b = breakdown(env_id, args.lanes, episode, seed=0, num_threads=args.threads)
+        b = breakdown(env_id, args.lanes, episode, seed=0, num_threads=args.threads,
+                      frozen=args.frozen)  # fmt: skip
         cells = "".join(
             f" {b[p] * 1e6:7.2f} ({b[p] / b['total']:4.0%})" for p in parts
         )  # fmt: skip
         print(
             f"{env_id:34s} {b['total'] * 1e6:6.2f}{cells} {b['resets/step']:11.1f}"
-            f" {b['per reset'] * 1e6:9.0f}"
+            f" {b['per reset'] * 1e6:9.0f}" + (f" {b['alone'] * 1e6:6.2f}" if args.frozen else "")
         )
 
 
