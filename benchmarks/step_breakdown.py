@@ -76,7 +76,9 @@ def _core_arrays(obj, depth: int = 2, seen: set | None = None) -> list[np.ndarra
 
 def frozen_step(venv, calls: int = 200) -> float:
     """Seconds per lane of the core's ``step`` on the state reached, restored before each
-    call (median of ``calls``)."""
+    call (median of ``calls``). The lanes' noise generators are not arrays of the core and
+    run on: each call draws new sensor noise, which the arithmetic does not depend on; the
+    env is left for closing."""
     core = venv.unwrapped._core
     step = type(core).step  # not the timed wrapper breakdown() put on the instance
     arrays = _core_arrays(core)
