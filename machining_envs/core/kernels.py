@@ -514,13 +514,14 @@ def vector_hypot(x, y):
     magnitude above 2**511, the smaller below 2**-459 but not zero, or either not finite,
     which the caller then hands to ``math.hypot``.
 
-    This is the common case of glibc's ``hypot`` (2.35 on; its kernel for processors
-    without a guaranteed fused multiply-add, which x86-64 builds use): the square root of
-    the sum of squares, corrected once by the rounding errors of the squares, and the
-    larger magnitude alone where the smaller is below 2**-54 of it. Without branches or
-    library calls, a loop of it runs in the processor's vectors, where ``math.hypot`` is a
-    call per value. On glibc 2.35 and later it is libm's value to the last bit; on another
-    C library, within a unit in the last place of it (both are).
+    This is the common case of glibc's ``hypot`` (2.35 on), in the form glibc compiles for
+    the baseline x86-64 processor (no fused multiply-add): the square root of the sum of
+    squares, corrected once by the rounding errors of the squares, and the larger magnitude
+    alone where the smaller is below 2**-54 of it. Without branches or library calls, a loop
+    of it runs in the processor's vectors, where ``math.hypot`` is a call per value. Where
+    libm is that glibc it is libm's value to the last bit; elsewhere (an older glibc, a
+    build for processors with a fused multiply-add, another C library) within a unit in the
+    last place of it, both being within one of the exact norm.
     """
     ax = abs(x)
     ay = abs(y)
