@@ -179,7 +179,7 @@ def row_max(a, n):
     values, and every value before it is negative); any other largest value is the same
     number wherever it occurs."""
     if n < 8:
-        return _row_max_in_order(a, n)
+        return _row_extreme_in_order(a, n, True)
     m0 = a[0]
     m1 = a[1]
     m2 = a[2]
@@ -206,7 +206,7 @@ def row_max(a, n):
     m23 = m3 if m3 > m2 else m2
     top = m23 if m23 > m01 else m01
     if nan:
-        return _row_max_in_order(a, n)
+        return _row_extreme_in_order(a, n, True)
     if top == 0.0:  # value by value, the first zero: every value before it is negative
         j = 0
         while a[j] != 0.0:
@@ -216,8 +216,9 @@ def row_max(a, n):
 
 
 @numba.njit(cache=True, inline="always")
-def _row_max_in_order(a, n):
-    """:func:`row_max` value by value."""
+def _row_extreme_in_order(a, n, largest):
+    """``a[:n].max()`` (``largest``) or ``.min()`` as numba gives them, value by value:
+    the first NaN if any, else the first of the equal extreme values."""
     top = a[0]
     if top != top:
         return top
@@ -225,24 +226,16 @@ def _row_max_in_order(a, n):
         v = a[j]
         if v != v:
             return v
-        if v > top:
+        if (v > top) if largest else (v < top):
             top = v
     return top
 
 
 @numba.njit(cache=True, inline="always")
 def row_min(a, n):
-    """``a[:n].min()`` (``n >= 1``), as :func:`row_max` gives the max."""
-    low = a[0]
-    if low != low:
-        return low
-    for j in range(1, n):
-        v = a[j]
-        if v != v:
-            return v
-        if v < low:
-            low = v
-    return low
+    """``a[:n].min()`` (``n >= 1``), as :func:`row_max` gives the max (value by value: the
+    turning kernel asks for it only where a sample may cross a depth edge)."""
+    return _row_extreme_in_order(a, n, False)
 
 
 @numba.njit(cache=True, _nrt=True)
