@@ -26,14 +26,20 @@ from numba.extending import intrinsic, models, register_model
 __all__ = [
     "add8",
     "add_scaled8",
+    "clip8",
+    "data_address",
     "fma",
+    "fma8",
     "get8",
     "load8",
     "matvec",
+    "mul8",
     "powers",
     "py_square",
+    "shift8",
     "sincos_row",
     "store8",
+    "sub8",
     "vec8",
     "vector_hypot",
     "zero8",
@@ -164,6 +170,99 @@ def add8(typingctx, a, b):
         return builder.fadd(args[0], args[1])
 
     return vec8(vec8, vec8), codegen
+
+
+@intrinsic
+def data_address(typingctx, x):
+    """The address of ``x[0]`` (a 1-d float64 array) as an integer: where a kernel
+    places vectors of eight values on 64-byte boundaries, which one load reads at once
+    (a vector across two cache lines costs about twice as much)."""
+    if x != _F64:
+        return None
+
+    def codegen(context, builder, signature, args):
+        arr = context.make_array(_F64)(context, builder, args[0])
+        return builder.ptrtoint(arr.data, ir.IntType(64))
+
+    return types.int64(_F64), codegen
+
+
+def _fma8_ir(builder, a, b, c):
+    fn = cgutils.get_or_insert_function(
+        builder.module, ir.FunctionType(_V8, [_V8, _V8, _V8]), "llvm.fma.v8f64"
+    )
+    return builder.call(fn, [a, b, c])
+
+
+@intrinsic
+def fma8(typingctx, a, b, c):
+    """``a * b + c`` for three :class:`Vec8Type` values, value by value, each rounded once
+    (:func:`fma`'s number)."""
+    if not (a == vec8 and b == vec8 and c == vec8):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return _fma8_ir(builder, *args)
+
+    return vec8(vec8, vec8, vec8), codegen
+
+
+@intrinsic
+def mul8(typingctx, a, b):
+    """``a * b`` for two :class:`Vec8Type` values, value by value."""
+    if not (a == vec8 and b == vec8):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.fmul(args[0], args[1])
+
+    return vec8(vec8, vec8), codegen
+
+
+@intrinsic
+def sub8(typingctx, a, b):
+    """``a - b`` for two :class:`Vec8Type` values, value by value."""
+    if not (a == vec8 and b == vec8):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.fsub(args[0], args[1])
+
+    return vec8(vec8, vec8), codegen
+
+
+@intrinsic
+def clip8(typingctx, u, limit):
+    """Each value of ``u`` past ``+-limit`` set to the bound it passed, any other (NaN
+    too) left as it is: ``limit if u > limit else -limit`` where ``u > limit or u <
+    -limit``, else ``u``, value by value (two :class:`Vec8Type` values)."""
+    if not (u == vec8 and limit == vec8):
+        return None
+
+    def codegen(context, builder, signature, args):
+        u_, hi = args
+        lo = builder.fneg(hi)
+        over = builder.fcmp_ordered(">", u_, hi)
+        under = builder.fcmp_ordered("<", u_, lo)
+        return builder.select(builder.or_(over, under), builder.select(over, hi, lo), u_)
+
+    return vec8(vec8, vec8), codegen
+
+
+@intrinsic
+def shift8(typingctx, z, g, u, applied):
+    """``z + g * (applied - u)`` (a product, then a sum) where ``applied != u`` (a command
+    :func:`clip8` clipped), else ``z``, value by value (four :class:`Vec8Type` values)."""
+    if not (z == vec8 and g == vec8 and u == vec8 and applied == vec8):
+        return None
+
+    def codegen(context, builder, signature, args):
+        z_, g_, u_, ua = args
+        moved = builder.fcmp_ordered("!=", ua, u_)
+        shifted = builder.fadd(z_, builder.fmul(g_, builder.fsub(ua, u_)))
+        return builder.select(moved, shifted, z_)
+
+    return vec8(vec8, vec8, vec8, vec8), codegen
 
 
 @numba.njit(cache=True, inline="always")

@@ -21,7 +21,19 @@ from machining_envs.contouring.paths import (
     path_segment_index,
 )
 from machining_envs.contouring.plant import ContouringParams
-from machining_envs.contouring.servo import ServoLoop, lifted_matrix, servo_design
+from machining_envs.contouring.servo import (
+    LANES,
+    LANES_SCRATCH_SIZE,
+    ServoLanes,
+    ServoLoop,
+    gather_lanes,
+    lane_loops,
+    lifted_matrix,
+    run_block,
+    run_lanes,
+    scatter_lanes,
+    servo_design,
+)
 
 RNG = np.random.default_rng(20240)
 
@@ -183,3 +195,75 @@ def test_block_kernel_is_the_lifted_matrix_product(kind):
                 assert np.all(err <= tol), (k, np.max(err / tol))
                 # and a coefficient off by one part in 1e9 is seen
                 assert np.max(np.abs(want[sl]) * 1e-9) > np.max(tol)
+
+
+def _bits(x):
+    return np.ascontiguousarray(x, dtype=np.float64).view(np.int64)
+
+
+@pytest.mark.parametrize("kind", ["hinf", "pi"])
+@pytest.mark.parametrize("generic", [False, True])
+def test_eight_lanes_at_once_are_run_block_to_the_last_bit(kind, generic):
+    """``run_lanes`` (the lanes side by side) gives each lane ``run_block``'s numbers to the
+    last bit: positions, velocities, commands, torques and end states, over lanes on their
+    own plants, clipped commands, a lane with NaN inputs (the same values NaN, the others
+    equal), and a group of fewer than eight lanes after a full one (the places left over
+    hold the full group's coefficients; their zero state and inputs keep them apart).
+    ``generic``: the kernel compiled for any number of states (``ns`` 8, the rows past the
+    design's zero), where the designs' own have theirs unrolled."""
+    p = ContouringParams()
+    designs = tuple(servo_design(kind, p, ax) for ax in "xy")
+    nb, n = 50, 13
+    lanes = ServoLanes(designs, nb, n)
+    for k in range(n):
+        lanes.start(k, p.replace(inertia_x_kgm2=p.inertia_x_kgm2 * RNG.uniform(0.7, 1.4),
+                                 inertia_y_kgm2=p.inertia_y_kgm2 * RNG.uniform(0.7, 1.4)))  # fmt: skip
+    ns = lanes.n_states_axis
+    state = RNG.normal(0, 1e-3, (n, 2 * ns))
+    ref = np.cumsum(RNG.normal(0, 0.02, (n, nb, 2)), axis=1)
+    load = RNG.uniform(-1, 1, (n, nb, 2))
+    ref[2, 20:, 0] += 50.0  # a step far past what the drive can follow: clipped commands
+    ref[4, 30:, 1] -= 50.0
+    ref[9, 7, 1] = np.nan  # NaN from period 7 on
+    # run_block, lane by lane
+    want = [
+        np.empty((n, nb, 2)),
+        np.empty((n, nb + 1, 2)),
+        np.empty((n, nb, 2)),
+        np.empty((n, nb, 2)),
+    ]
+    want_state = state.copy()
+    clipped = []
+    for k in range(n):
+        ac, bc, cu, du, gu, tq, umax = lane_loops(lanes.buf[k])
+        clipped.append(run_block(ac, bc, cu, du, gu, tq, umax[0], want_state[k], ref[k], load[k],
+                                 want[0][k], want[1][k], want[2][k], want[3][k], np.zeros(16)))  # fmt: skip
+    assert clipped[2] and clipped[4] and not clipped[0]
+    # run_lanes, LANES at a time ([row, axis, place] arrays)
+    table = np.zeros(LANES_SCRATCH_SIZE - 128)
+    z = np.zeros(128)
+    got_state = state.copy()
+    for k0 in range(0, n, LANES):
+        m = min(LANES, n - k0)
+        g_ref = np.zeros((nb, 2, LANES))
+        g_load = np.zeros((nb, 2, LANES))
+        g_ref[:, :, :m] = ref[k0 : k0 + m].transpose(1, 2, 0)
+        g_load[:, :, :m] = load[k0 : k0 + m].transpose(1, 2, 0)
+        outs = [np.full((nb, 2, LANES), 7.0), np.full((nb + 1, 2, LANES), 7.0),
+                np.full((nb, 2, LANES), 7.0), np.full((nb, 2, LANES), 7.0)]  # fmt: skip
+        gather_lanes(lanes.buf, got_state, k0, m, table, z)
+        run_lanes(table, 8 if generic else ns, nb, z, g_ref.ravel(), g_load.ravel(),
+                  outs[0].reshape(-1), outs[1].reshape(-1), outs[2].reshape(-1),
+                  outs[3].reshape(-1))  # fmt: skip
+        scatter_lanes(got_state, k0, m, z)
+        for g, w in zip(outs, want, strict=True):
+            got = g[:, :, :m].transpose(2, 0, 1)
+            np.testing.assert_array_equal(np.isnan(got), np.isnan(w[k0 : k0 + m]))
+            fin = ~np.isnan(got)
+            assert np.array_equal(_bits(got[fin]), _bits(w[k0 : k0 + m][fin]))
+            if m < LANES:  # the places without a lane stayed at rest
+                assert not np.any(g[:, :, m:])
+    assert np.isnan(want_state[9, ns:]).all()  # the Y axis (the axes are apart)
+    np.testing.assert_array_equal(np.isnan(got_state), np.isnan(want_state))
+    fin = ~np.isnan(want_state)
+    assert np.array_equal(_bits(got_state[fin]), _bits(want_state[fin]))
