@@ -405,7 +405,7 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, state, consts, obs, flag
     Each lane's step is its inputs (:func:`_lane_inputs`), its closed loops over the
     block, then its outputs (:func:`_lane_outputs`). One lane (the single env) runs its
     loops by ``run_block``; more run ``LANES`` at a time, their loops side by side
-    (``run_lanes``, two to eight times faster a lane: the same numbers)."""
+    (``run_lanes``, about six times faster a lane: the same numbers)."""
     actions, applied, s, override, prev_action, reward = (
         lf[:, 0], lf[:, 1], lf[:, 2], lf[:, 3], lf[:, 4], lf[:, 5]
     )  # fmt: skip
