@@ -859,9 +859,21 @@ def path_points(tab, length, s, n, out_x, out_y, scratch):
     ang = scratch[:n]
     th = scratch[n : 2 * n]
     seg = scratch[2 * n : 3 * n]
+    last = tab.shape[0] - 1
+    k = -1
+    before = 0.0
     for j in range(n):
         sj = min(max(s[j], 0.0), length)
-        k = path_segment_index(tab, length, sj)
+        if k >= 0 and sj >= before:
+            # Not before the last point: its segment or one after it. The segments' starts
+            # are sorted, so walking on from there ends where path_segment_index's walk
+            # back from the last segment ends (a row of a block's points: a step or none,
+            # where the walk back passed every segment after it, for each point).
+            while k < last and tab[k + 1, 1] <= sj:
+                k += 1
+        else:
+            k = path_segment_index(tab, length, sj)
+        before = sj
         row = tab[k]
         loc = sj - row[1]
         seg[j] = k

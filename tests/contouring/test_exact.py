@@ -144,6 +144,15 @@ def test_compiled_geometry_is_the_path_methods(path):
     on_lines = np.array([tab[path_segment_index(tab, length, v), 0] == 0.0 for v in s])
     assert xs[on_lines].tobytes() == x[on_lines].tobytes()
     assert ys[on_lines].tobytes() == y[on_lines].tobytes()
+    # In increasing order (a block's set points, every segment's start among them), each
+    # point's segment is found walking on from the last point's: path_segment_index's (the
+    # scratch keeps it), and the same points.
+    up = np.argsort(s, kind="stable")
+    xo, yo = np.empty(s.size), np.empty(s.size)
+    path_points(tab, length, s[up], s.size, xo, yo, scratch)
+    segs = [path_segment_index(tab, length, v) for v in s[up]]
+    np.testing.assert_array_equal(scratch[2 * s.size :], segs)
+    assert xo.tobytes() == xs[up].tobytes() and yo.tobytes() == ys[up].tobytes()
     for lo in range(0, px.size - 50, 37):  # blocks of 50 points, as the feed env asks
         n = 50
         out, scratch = np.empty(n), np.empty(n)
