@@ -624,29 +624,34 @@ LANES_SCRATCH_SIZE = 2 * _L_AXIS + 2 * 64
 
 @numba.njit(cache=True, _nrt=False)
 def gather_lanes(loops, state, k0, w, table, z):
-    """The coefficients (rows ``loops[k0 : k0 + w]`` of ``ServoLanes.buf``) and states
-    (``state[k0 : k0 + w]``, both axes) of ``w <= LANES`` lanes into ``table`` and ``z``
-    for :func:`run_lanes`: lane ``k0 + p`` in place ``p``; the places from ``w`` on get
-    zeros (a zero loop at rest, whatever the scratch held)."""
+    """The coefficients (rows ``loops[k0 : k0 + w]`` of ``ServoLanes.buf``, laid out as
+    :func:`lane_loops` reads them) and states (``state[k0 : k0 + w]``, both axes) of ``w
+    <= LANES`` lanes into ``table`` and ``z`` for :func:`run_lanes`: lane ``k0 + p`` in
+    place ``p``; the places from ``w`` on get zeros (a zero loop at rest, whatever the
+    scratch held)."""
     ns = state.shape[1] // 2
     for p in range(LANES):
         lane = p < w
-        ac, bc, cu, du, gu, tq, umax = lane_loops(loops[k0 + (p if lane else 0)])
+        row = loops[k0 + (p if lane else 0)]
         for ax in range(2):
             o = ax * _L_AXIS
             for q in range(8):
                 for i in range(8):
-                    table[o + (8 * q + i) * 8 + p] = ac[ax, q, i] if lane else 0.0
+                    v = row[_O_AC + (8 * ax + q) * 8 + i]
+                    table[o + (8 * q + i) * 8 + p] = v if lane else 0.0
             for m in range(2):
                 for i in range(8):
-                    table[o + _L_B + (8 * m + i) * 8 + p] = bc[ax, m, i] if lane else 0.0
-                table[o + _L_GU + 8 * m + p] = gu[ax, m] if lane else 0.0
+                    v = row[_O_BC + (2 * ax + m) * 8 + i]
+                    table[o + _L_B + (8 * m + i) * 8 + p] = v if lane else 0.0
+                v = row[_O_GU + 2 * ax + m]
+                table[o + _L_GU + 8 * m + p] = v if lane else 0.0
             for q in range(8):
-                table[o + _L_C + 8 * q + p] = cu[ax, q] if lane else 0.0
+                v = row[_O_CU + 8 * ax + q]
+                table[o + _L_C + 8 * q + p] = v if lane else 0.0
                 z[ax * 64 + 8 * q + p] = state[k0 + p, ax * ns + q] if lane and q < ns else 0.0
-            table[o + _L_DU + p] = du[ax] if lane else 0.0
-            table[o + _L_TQ + p] = tq[ax] if lane else 0.0
-            table[o + _L_UMAX + p] = umax[0] if lane else 0.0
+            table[o + _L_DU + p] = row[_O_DU + ax] if lane else 0.0
+            table[o + _L_TQ + p] = row[_O_TQ + ax] if lane else 0.0
+            table[o + _L_UMAX + p] = row[_O_UMAX] if lane else 0.0
 
 
 @numba.njit(cache=True, _nrt=False)
