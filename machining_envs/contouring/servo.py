@@ -22,7 +22,7 @@ which keeps the numbers small and makes the loop indifferent to where on the tab
 Both are synthesised once per axis model and cached; nothing here runs per step except
 :class:`ServoLanes` (and :class:`ServoLoop`, one loop of it), which precomputes the closed
 loop of a design and a (true) plant and advances it a block of servo periods at a time,
-compiled (:func:`run_block`).
+compiled (:func:`run_block`; a vector env's lanes eight at a time, :func:`run_lanes`).
 
 python-control and slycot are imported only inside the H-infinity design.
 """

@@ -1,9 +1,10 @@
 """Compiled building blocks the process kernels share: the fused multiply-add, the small
 matrix-vector products of the sampled plants with numpy's rounding, eight-value vectors
-(fused multiply-adds of whole columns) for the contouring servo's closed-loop recursion, and
-the powers of a row of values (the force laws at a period's sub-steps) and the sines and
-cosines of a row of angles (the contouring paths' points) in vectors, and CPython's
-``x ** 2`` (libm's ``pow``) to the last bit without calling it for most values.
+(fused multiply-adds of whole columns, or of eight lanes' values side by side) for the
+contouring servo's closed-loop recursion, the powers of a row of values (the force laws at
+a period's sub-steps) and the sines and cosines of a row of angles (the contouring paths'
+points) in vectors, and CPython's ``x ** 2`` (libm's ``pow``) to the last bit without
+calling it for most values.
 
 The plants' sampled linear parts are products of small matrices with short vectors, once per
 lane and control period. A library call for each costs more than the arithmetic, so the
@@ -82,6 +83,14 @@ def _vector_at(context, builder, ary, idx):
     return builder.bitcast(builder.gep(arr.data, [idx]), _V8.as_pointer())
 
 
+def _fma8_ir(builder, a, b, c):
+    """LLVM's fused multiply-add of three ``<8 x double>`` values."""
+    fn = cgutils.get_or_insert_function(
+        builder.module, ir.FunctionType(_V8, [_V8, _V8, _V8]), "llvm.fma.v8f64"
+    )
+    return builder.call(fn, [a, b, c])
+
+
 def _splat8(builder, value):
     v = ir.Constant(_V8, ir.Undefined)
     for k in range(8):
@@ -136,13 +145,10 @@ def add_scaled8(typingctx, acc, a, b, o, sa, sb):
 
     def codegen(context, builder, signature, args):
         accv, av, bv, o_, sa_, sb_ = args
-        fn = cgutils.get_or_insert_function(
-            builder.module, ir.FunctionType(_V8, [_V8, _V8, _V8]), "llvm.fma.v8f64"
-        )
         ta = builder.load(_vector_at(context, builder, av, o_), align=8)
         tb = builder.load(_vector_at(context, builder, bv, o_), align=8)
-        accv = builder.call(fn, [ta, _splat8(builder, sa_), accv])
-        return builder.call(fn, [tb, _splat8(builder, sb_), accv])
+        accv = _fma8_ir(builder, ta, _splat8(builder, sa_), accv)
+        return _fma8_ir(builder, tb, _splat8(builder, sb_), accv)
 
     return sig, codegen
 
@@ -185,13 +191,6 @@ def data_address(typingctx, x):
         return builder.ptrtoint(arr.data, ir.IntType(64))
 
     return types.int64(_F64), codegen
-
-
-def _fma8_ir(builder, a, b, c):
-    fn = cgutils.get_or_insert_function(
-        builder.module, ir.FunctionType(_V8, [_V8, _V8, _V8]), "llvm.fma.v8f64"
-    )
-    return builder.call(fn, [a, b, c])
 
 
 @intrinsic
