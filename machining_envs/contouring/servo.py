@@ -672,6 +672,9 @@ def _lanes_row(table, o, i, ns, z0, z1, z2, z3, z4, z5, z6, z7, r, ld):
     b = o + _L_B + i * 8
     c0 = fma8(load8(table, a + 64), z1, fma8(load8(table, a), z0, zero8()))
     c0 = fma8(load8(table, b + 64), ld, fma8(load8(table, b), r, c0))
+    # The other three pairs of columns written out: a helper inlined for each (numba's
+    # inlining, 24 a version) made the three versions take about five times as long to
+    # compile.
     if ns > 3:
         c1 = fma8(load8(table, a + 192), z3, fma8(load8(table, a + 128), z2, zero8()))
     elif ns > 2:
