@@ -31,6 +31,7 @@ from machining_envs.contouring.paths import (
     path_point,
     path_points,
     path_segment_index,
+    row_largest,
 )
 from machining_envs.contouring.plant import AXES, ContouringParams
 from machining_envs.contouring.scenarios import (
@@ -166,8 +167,13 @@ def _bound(o, i, x, lo, hi):
 def _scratch_size(nb: int, n_seg: int, lanes: bool) -> int:
     """Values of ``_feed_step``'s float scratch (see :func:`_carve`), with room for
     :func:`_carve_lanes`'s where ``lanes`` (a core of more than one lane)."""
-    own = (nb + 1) + 6 * nb + 4 * nb + (8 * nb + 2) + SCRATCH_SIZE + n_seg + 3 * nb
-    return own + (_lanes_size(nb) if lanes else 0)
+    return _carve_size(nb, n_seg) + (_lanes_size(nb) if lanes else 0)
+
+
+@numba.njit(cache=True, inline="always")
+def _carve_size(nb, n_seg):
+    """Values of :func:`_carve`'s views, where :func:`_carve_lanes`'s start."""
+    return (nb + 1) + 6 * nb + 4 * nb + (8 * nb + 2) + SCRATCH_SIZE + n_seg + 3 * nb
 
 
 def _lanes_size(nb: int) -> int:
@@ -216,7 +222,7 @@ def _carve_lanes(sc, nb, n_seg):
     1``), each row both axes' places (``[row, axis, place]``). Each starts on a 64-byte
     boundary: ``run_lanes`` reads them eight values at a time, and a vector across two
     cache lines made it half as fast again."""
-    o = (nb + 1) + 6 * nb + 4 * nb + (8 * nb + 2) + SCRATCH_SIZE + n_seg + 3 * nb
+    o = _carve_size(nb, n_seg)
     o += (-(data_address(sc) // 8 + o)) % 8  # every run from a 64-byte boundary (a vector)
     m = LANES * (nb + 1)
     st = sc[o : o + m].reshape((LANES, nb + 1))
@@ -250,6 +256,13 @@ _N_OBS = len(_LIMS)
 
 
 @numba.njit(cache=True, inline="always")
+def _override(k, actions, applied, c):
+    """Lane ``k``'s feed override this step: what the CNC's actuation made of its action
+    where ``c[7]`` (actuated) is set, else the action's own."""
+    return applied[k] if c[7] != 0.0 else c[5] + c[6] * actions[k]
+
+
+@numba.njit(cache=True, inline="always")
 def _lane_inputs(k, tabs, nseg, pf, actions, applied, clipped, n_clipped, c, s, kk, n_load,
                  load_t, load_v, n, ts, st, rx, ry, ref, load, pts):  # fmt: skip
     """The first part of lane ``k``'s step (:func:`_feed_step`): the set point's path
@@ -259,9 +272,8 @@ def _lane_inputs(k, tabs, nseg, pf, actions, applied, clipped, n_clipped, c, s, 
     length = pf[k, 0]
     x0 = pf[k, 1]
     y0 = pf[k, 2]
-    a = actions[k]
     n_clipped[k] += clipped[k]
-    ov = applied[k] if c[7] != 0.0 else c[5] + c[6] * a
+    ov = _override(k, actions, applied, c)
     v = pf[k, 5] * ov
     vts = v * ts
     s0 = s[k]
@@ -298,7 +310,7 @@ def _lane_outputs(k, tabs, nseg, pf, actions, applied, c, w, look, lo, hi, tol, 
     x0 = pf[k, 1]
     y0 = pf[k, 2]
     a = actions[k]
-    ov = applied[k] if c[7] != 0.0 else c[5] + c[6] * a
+    ov = _override(k, actions, applied, c)
     s0 = s[k]
     diverged = False
     for j in range(n):
@@ -351,10 +363,7 @@ def _lane_outputs(k, tabs, nseg, pf, actions, applied, c, w, look, lo, hi, tol, 
     for j in range(n):
         tmp[j] = torque[j, 0] * torque[j, 0] + torque[j, 1] * torque[j, 1]
     tsq = np_mean(tmp[:n])
-    peak = eps[0]
-    for j in range(1, n):
-        if eps[j] > peak or eps[j] != eps[j]:
-            peak = eps[j]
+    peak = row_largest(eps, n)
     o = out[k]
     o[0] = t
     o[1] = cmd[n - 1, 0]

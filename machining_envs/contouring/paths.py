@@ -1139,7 +1139,7 @@ def path_distances(tab, px, py, n, out, scratch, lower, order):
             i -= 1
         order[i] = k
     _segment_distances(tab[order[0]], px, py, n, out)
-    dmax = _largest(out, n)
+    dmax = row_largest(out, n)
     for q in range(1, ns):
         k = order[q]
         if lower[k] - 1e-9 * (scale + abs(lower[k]) + dmax) >= dmax:
@@ -1148,13 +1148,13 @@ def path_distances(tab, px, py, n, out, scratch, lower, order):
         for j in range(n):
             if scratch[j] < out[j]:
                 out[j] = scratch[j]
-        dmax = _largest(out, n)
+        dmax = row_largest(out, n)
 
 
 @numba.njit(cache=True, inline="always")
-def _largest(out, n):
+def row_largest(out, n):
     """The largest of ``out[:n]``, or its last NaN if it holds one (then no segment is
-    skipped)."""
+    skipped; the feed env's peak contour error reads the same)."""
     dmax = out[0]
     for j in range(1, n):
         if out[j] > dmax or out[j] != out[j]:
