@@ -289,3 +289,42 @@ def test_depths_across_edges_are_the_profiles(profile):
             last = _profile_depths(x, edges, d0, slope, n, start, force, 50, kf)
             np.testing.assert_array_equal(force, 1.0 * want * kf)
             assert last == want[-1]
+
+
+def test_each_lanes_rows_are_its_step_matrix_after_starts_and_speed_changes():
+    """A lane's rows ``A @ z`` come from its feed rows in runs of one delay group, whose ends
+    the lanes keep beside the groups (found when the matrices are made, at a start and at a
+    change of speed): at every speed, they are the runs of the groups, and the rows are the
+    step matrix's (``_matrices(...).big``) times the lane's memory, to rounding."""
+    from machining_envs.turning.plant import TurningLanes, _LinearKey, _matrices, _sampled_rows
+
+    p = TurningParams.noh_kim_kim_1992().replace(spindle_power_W=5000.0)
+    m = p.substeps
+    speeds = (100.0, 173.3, 600.0, 1234.5, 2500.0, 3000.0)
+    lanes = TurningLanes(p, n=len(speeds))
+    profile = DepthProfile((0.0, 50.0), (2.0,), (2.0,))
+    rng = np.random.default_rng(3)
+    key = _LinearKey.of(p)
+    for k, rpm in enumerate(speeds):
+        lanes.start(k, p, rpm, profile)
+    for changed in (False, True):
+        if changed:  # every lane to another speed, as a power-limited spindle's drive does
+            for k, rpm in enumerate(speeds):
+                lanes.set_speed(k, speeds[(k + 2) % len(speeds)])
+        for k in range(len(speeds)):
+            lag = lanes.li[k, 4 : 4 + m]
+            ends = np.flatnonzero(np.diff(lag)) + 1
+            runs = lanes.li[k, 4 + m]
+            np.testing.assert_array_equal(lanes.li[k, 5 + m : 5 + m + runs], [*ends, m])
+            big = _matrices(key, float(lanes.spindle_rpm[k])).big
+            np.testing.assert_array_equal(
+                lag, _matrices(key, float(lanes.spindle_rpm[k])).delay_group
+            )
+            z = rng.standard_normal(big.shape[1])
+            zk = np.zeros(lanes.z.shape[1])
+            zk[: z.size] = z
+            y = np.zeros(2 * m + 3)
+            _sampled_rows(lanes.base, lanes.feed[k], lanes.li[k, 4:], zk, m, y)
+            ref = big @ z
+            assert np.all(np.abs(y - ref) <= 1e-13 * np.abs(big).max() * np.abs(z).sum())
+        assert any(lanes.li[k, 4 + m] > 1 for k in range(len(speeds)))  # runs of two groups
