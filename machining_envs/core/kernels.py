@@ -364,7 +364,9 @@ def matvec(a, n, m, x, out):
             if n == 1:  # numpy takes a one-row product as a dot product
                 out[k, 0] = np.dot(a[i, :m], x[k, :m])
             else:
-                out[k, :n] = np.dot(a[i, : n * m].reshape(n, m), x[k, :m])
+                y = np.dot(a[i, : n * m].reshape(n, m), x[k, :m])
+                for r in range(n):  # a loop, not a slice set from an array (slow to compile)
+                    out[k, r] = y[r]
         return
     mg = m - tail  # columns in whole groups of four
     nb = n & ~3

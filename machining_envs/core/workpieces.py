@@ -23,6 +23,7 @@ __all__ = [
     "drawn_profile",
     "drawn_lane_cuts",
     "drawn_lane_profile",
+    "lane_segments",
     "load_segments",
     "traverse_time",
 ]
@@ -378,10 +379,15 @@ def _draw_lane_cuts(table, lanes, key, before, lo, hi, n_lo, n_hi, s_lo, s_hi,
         lane_split_state(table, lanes[i], key, state)
         bi, cut, ai = _draw_cut(state, before, lo, hi, n_lo, n_hi, s_lo, s_hi,
                                 taper_probability, max_jump_ratio, after)  # fmt: skip
-        b[i] = bi
-        a[i] = ai
+        # Loops, not slices set from arrays: their error messages take seconds to compile.
+        for q in range(before):
+            b[i, q] = bi[q]
+        for q in range(after):
+            a[i, q] = ai[q]
         n = cut.shape[1] - 1
-        segments[i, :, : n + 1] = cut
+        for r in range(cut.shape[0]):
+            for q in range(n + 1):
+                segments[i, r, q] = cut[r, q]
         counts[i] = n
     return b, segments, counts, a
 
@@ -456,6 +462,21 @@ def traverse_time(segments, c, q, v_max):
                 aw = a0 + slope * (w - x0)
                 total += c * (aw ** (q + 1.0) - au ** (q + 1.0)) / ((q + 1.0) * slope)
     return total
+
+
+@numba.njit(cache=True)
+def lane_segments(segments, i, counts):
+    """Lane ``i``'s segments of a batch (:func:`drawn_lane_cuts`' ``segments`` and
+    ``counts``) as an array of their own, C-ordered and writable: the type of a profile's
+    ``segment_array().copy()``, which a single lane's start hands over, so that the
+    compiled start of a lane is compiled once for both (a view into the batch is another
+    type, and each type costs seconds of compiling)."""
+    n = counts[i] + 1
+    out = np.empty((segments.shape[1], n))
+    for r in range(segments.shape[1]):
+        for q in range(n):
+            out[r, q] = segments[i, r, q]
+    return out
 
 
 @numba.njit(cache=True)

@@ -1222,9 +1222,10 @@ def start_lane(k, row, eng_depth, eng_torque, eng_thrust, par, eng):
     (:meth:`DrillingLanes.lane_row`) and its engagement tables."""
     for i in range(par.shape[1]):
         par[k, i] = row[i]
-    eng[k, 0, :] = eng_depth
-    eng[k, 1, :] = eng_torque
-    eng[k, 2, :] = eng_thrust
+    for i in range(eng.shape[2]):  # loops, not slices set from arrays (slow to compile)
+        eng[k, 0, i] = eng_depth[i]
+        eng[k, 1, i] = eng_torque[i]
+        eng[k, 2, i] = eng_thrust[i]
 
 
 @numba.njit(cache=True)

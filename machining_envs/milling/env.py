@@ -57,7 +57,7 @@ from machining_envs.core.packed import (
     spaced_rows,
 )
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
-from machining_envs.core.workpieces import traverse_time
+from machining_envs.core.workpieces import lane_segments, traverse_time
 from machining_envs.milling.metrics import MILLING_TASK
 from machining_envs.milling.plant import (
     KGF,
@@ -434,7 +434,8 @@ def _start_drawn_lanes(t, lanes, nominal, v, scales, segments, counts):
             return i
         limit = n_limit * scales[i, 1]
         ks_scale = ks_lo + ks_span * v[i, 2]
-        row[:] = nominal[:nc]  # the columns the truth keeps
+        for q in range(nc):  # the columns the truth keeps (a loop: a slice set from an
+            row[q] = nominal[q]  # array compiles its error message, for seconds)
         row[_FT_PER_VF] = 60.0 / (rpm * teeth)
         if power_law != 0.0:
             row[_FEXP] = fexp * (m_lo + m_span * v[i, 3])
@@ -453,7 +454,7 @@ def _start_drawn_lanes(t, lanes, nominal, v, scales, segments, counts):
         x[6] = min(limit / n_limit, 10.0)
         x[7] = np.nan  # the score bound: worked out by _start
         x[8] = 60.0 * lag_rev / rpm
-        _start_packed(t, lanes[i], row, x, segments[i, :, : counts[i] + 1])
+        _start_packed(t, lanes[i], row, x, lane_segments(segments, i, counts))
     return -1
 
 
@@ -613,7 +614,7 @@ class _MillingCore:
                 "the tool would break before the limit binds",
             )
         # (true_params changes no field of the servo, so the lane fits the batch.)
-        segments = profile.segment_array()
+        segments = profile.segment_array().copy()  # the type lane_segments gives a batch
         self._fit(segments.shape[1] - 1)
         # The score bound: computed by the kernel for a sharp tool, here with wear.
         bound = math.nan if truth.wear_per_100mm == 0.0 else machining_time_bound(sc, truth, rpm)

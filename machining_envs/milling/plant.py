@@ -522,7 +522,8 @@ def lag_rows(m, h, lag_s, out):
             row[q] = alpha * row[q]
         row[1 + j] += b0
         row[2 + j] += b1
-        out[j, :] = row
+        for q in range(n):  # a loop, not a slice set from an array (slow to compile)
+            out[j, q] = row[q]
 
 
 @dataclass(slots=True)
@@ -869,7 +870,7 @@ class MillingLanes:
                 f"must be those of the batch ({self._key}), got {_ServoKey.of(params)}"
             )
         rpm = float(spindle_rpm)
-        segments = profile.segment_array()
+        segments = profile.segment_array().copy()  # the type the envs' starts hand over
         self.fit_segments(segments.shape[1] - 1)
         start_lane(lane, self.lane_constants(params, rpm), params.process_lag_s(rpm), segments,
                    self.lag, self.z, self.buf, self.edges, self.d0, self.slope, self.nseg,

@@ -57,7 +57,7 @@ from machining_envs.core.packed import (
     spaced_rows,
 )
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
-from machining_envs.core.workpieces import traverse_time
+from machining_envs.core.workpieces import lane_segments, traverse_time
 from machining_envs.turning.metrics import TURNING_TASK
 from machining_envs.turning.plant import (
     SPINDLE_RPM_RANGE,
@@ -402,7 +402,7 @@ def _start_drawn_lanes(t, s, lanes, nums, rpm, v, segments, counts):
         x[5] = diam
         x[6] = np.nan
         x[7] = power
-        ok[i] = _start_packed(t, s, lanes[i], full, consts, segments[i, :, : counts[i] + 1], x)
+        ok[i] = _start_packed(t, s, lanes[i], full, consts, lane_segments(segments, i, counts), x)
     return ok
 
 
@@ -560,7 +560,7 @@ class _TurningCore:
         # (true_params changes no field of the linear blocks, so the lane fits the batch.)
         lanes = self.lanes
         profile = sc.profile
-        segments = profile.segment_array()
+        segments = profile.segment_array().copy()  # the type lane_segments gives a batch
         lanes.fit_segments(segments.shape[1] - 1)
         rpm = float(sc.spindle_rpm)
         power_W = float(truth.spindle_power_W)
