@@ -140,13 +140,29 @@ def _pairwise_block(a, lo, n):
 # and no allocation, so that code without a runtime can use them).
 
 
+@numba.njit(cache=True, inline="always")
+def _halves(part, a, lo, n, n2):
+    """``part(a, lo, n2) + part(a, lo + n2, n - n2)``, with one call of ``part`` in a loop:
+    two calls would be inlined as two copies of everything below, so that the chain of
+    levels compiled 2**7 copies of the block sum (seconds of compiling)."""
+    left = 0.0
+    right = 0.0
+    for h in range(2):
+        v = part(a, lo + h * n2, n - n2 if h else n2)
+        if h:
+            right = v
+        else:
+            left = v
+    return left + right
+
+
 @numba.njit(cache=True)
 def _pairwise1(a, lo, n):
     if n <= 128:
         return _pairwise_block(a, lo, n)
     n2 = n // 2
     n2 -= n2 % 8
-    return _pairwise_block(a, lo, n2) + _pairwise_block(a, lo + n2, n - n2)
+    return _halves(_pairwise_block, a, lo, n, n2)
 
 
 @numba.njit(cache=True)
@@ -155,7 +171,7 @@ def _pairwise2(a, lo, n):
         return _pairwise_block(a, lo, n)
     n2 = n // 2
     n2 -= n2 % 8
-    return _pairwise1(a, lo, n2) + _pairwise1(a, lo + n2, n - n2)
+    return _halves(_pairwise1, a, lo, n, n2)
 
 
 @numba.njit(cache=True)
@@ -164,7 +180,7 @@ def _pairwise3(a, lo, n):
         return _pairwise_block(a, lo, n)
     n2 = n // 2
     n2 -= n2 % 8
-    return _pairwise2(a, lo, n2) + _pairwise2(a, lo + n2, n - n2)
+    return _halves(_pairwise2, a, lo, n, n2)
 
 
 @numba.njit(cache=True)
@@ -173,7 +189,7 @@ def _pairwise4(a, lo, n):
         return _pairwise_block(a, lo, n)
     n2 = n // 2
     n2 -= n2 % 8
-    return _pairwise3(a, lo, n2) + _pairwise3(a, lo + n2, n - n2)
+    return _halves(_pairwise3, a, lo, n, n2)
 
 
 @numba.njit(cache=True)
@@ -182,7 +198,7 @@ def _pairwise5(a, lo, n):
         return _pairwise_block(a, lo, n)
     n2 = n // 2
     n2 -= n2 % 8
-    return _pairwise4(a, lo, n2) + _pairwise4(a, lo + n2, n - n2)
+    return _halves(_pairwise4, a, lo, n, n2)
 
 
 @numba.njit(cache=True)
@@ -191,7 +207,7 @@ def _pairwise6(a, lo, n):
         return _pairwise_block(a, lo, n)
     n2 = n // 2
     n2 -= n2 % 8
-    return _pairwise5(a, lo, n2) + _pairwise5(a, lo + n2, n - n2)
+    return _halves(_pairwise5, a, lo, n, n2)
 
 
 @numba.njit(cache=True)
@@ -200,7 +216,7 @@ def _pairwise7(a, lo, n):
         return _pairwise_block(a, lo, n)
     n2 = n // 2
     n2 -= n2 % 8
-    return _pairwise6(a, lo, n2) + _pairwise6(a, lo + n2, n - n2)
+    return _halves(_pairwise6, a, lo, n, n2)
 
 
 @numba.njit(cache=True)

@@ -75,7 +75,7 @@ def test_vecmat_rows_gives_each_rows_product_alone(shape, n):
             assert np.isnan(out[2]).any() and (np.signbit(out[1]) == np.signbit(want[1])).all()
 
 
-@pytest.mark.parametrize("n", [1, 5, 8, 50, 128, 129, 300, 1000, 5000])
+@pytest.mark.parametrize("n", [1, 5, 8, 50, 128, 129, 300, 1000, 5000, 16384])
 def test_np_sum_and_mean_are_numpys_pairwise_sums(n):
     for _ in range(20):
         a = RNG.normal(size=n) * 10.0 ** RNG.uniform(-3, 3, n)
