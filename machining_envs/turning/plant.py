@@ -612,8 +612,8 @@ def _step_lanes(
 @numba.njit(cache=True, inline="always")
 def lane_ints(li):
     """The first columns of ``TurningLanes.li``: ``(cols, nseg, seg, out_segment)``; lane
-    ``k``'s delay groups and their runs follow them (``li[k, 4:]``, which the compiler
-    knows to be one contiguous row, where ``li[:, 4:][k]`` is strided)."""
+    ``k``'s delay groups follow them (``li[k, 4:]``, which the compiler knows to be one
+    contiguous row, where ``li[:, 4:][k]`` is strided)."""
     return li[:, 0], li[:, 1], li[:, 2], li[:, 3]
 
 
@@ -628,20 +628,6 @@ def _current_rows(base, n, z0, z1, z2, z3, lo, hi, y):
         s2 = fma(base[r + np.uint64(2) * n], z2, 0.0)
         s3 = fma(base[r + np.uint64(3) * n], z3, 0.0)
         y[r] = 0.0 + ((s0 + s2) + (s1 + s3))
-
-
-@numba.njit(cache=True)
-def _lag_runs(lag, m):
-    """Where the runs of equal delay groups end among the ``m`` feed rows' groups
-    ``lag[:m]``: their number into ``lag[m]``, each run's end (one past its last row) after
-    it, in order. ``lag`` is a row of ``TurningLanes.li`` past its first four columns
-    (``2 M + 1`` values)."""
-    runs = 0
-    for j in range(1, m + 1):
-        if j == m or lag[j] != lag[j - 1]:
-            lag[m + 1 + runs] = j
-            runs += 1
-    lag[m] = runs
 
 
 @numba.njit(cache=True)
@@ -664,9 +650,7 @@ def _sampled_rows(base, feed, lag, zk, m, y):
     The rows in whole groups of four (every position and feed row) go in runs that read
     the same numbers (the positions, the feed rows of one delay group after another, the
     next state): each run is one loop of the same operations for every row, which runs in
-    the processor's vectors, a row per value. ``lag`` holds the feed rows' delay groups
-    (``M`` values) and then where their runs end (:func:`_lag_runs`), found once when the
-    lane's matrices are made: searched at every step, they took a third of this function.
+    the processor's vectors, a row per value.
     """
     n_rows = 2 * m + 3
     nb = n_rows & ~3  # rows summed in fused groups of four; the feed rows are among them
@@ -678,9 +662,11 @@ def _sampled_rows(base, feed, lag, zk, m, y):
     nm = np.uint64(m)
     _current_rows(base, n, z0, z1, z2, z3, 0, m, y)
     lo = 0
-    for run in range(lag[m]):  # the feed rows, in runs of one delay group (_lag_runs)
-        hi = lag[m + 1 + run]
+    while lo < m:  # the feed rows, in runs of one delay group
         g = lag[np.uint64(lo)]
+        hi = lo + 1
+        while hi < m and lag[np.uint64(hi)] == g:
+            hi += 1
         if g > 0:
             q = 4 * g
             d0 = zk[q]
@@ -888,10 +874,8 @@ def start_lane(k, rpm, full_history, consts, segments, phis, gams, base, sa, sb,
     (:func:`_lane_matrices`, padded to the slowest speed's memory with ``full_history``),
     the lane's ``consts`` (:meth:`TurningLanes.lane_constants`) and clock. Returns False
     where the step matrix is left for ``zoh`` (:meth:`TurningLanes._load_matrices`)."""
-    m = (li.shape[1] - 5) // 2
-    lags = _lane_matrices(phis, gams, base, sa, sb, ts, rpm, feed[k].reshape((4, m)).T,
-                          li[k, 4 : 4 + m])  # fmt: skip
-    _lag_runs(li[k, 4:], m)
+    m = li.shape[1] - 4
+    lags = _lane_matrices(phis, gams, base, sa, sb, ts, rpm, feed[k].reshape((4, m)).T, li[k, 4:])
     li[k, 0] = z.shape[1] if full_history else 4 * (lags + 1)
     z[k, :] = 0.0
     buf[k, :] = 0.0
@@ -952,15 +936,11 @@ class TurningLanes:
         self.feed = np.zeros((self.n, 4 * m))
         #: The lanes' integers in one array (one argument of the kernel), read through the
         #: views below: the step matrix's columns, the workpiece's segments, the segment the
-        #: tool is in and was in after the last step, the delay groups of the feed rows,
-        #: and where the runs of equal groups end (``_lag_runs``: their number, then the
-        #: ends).
-        self.li = np.zeros((self.n, 5 + 2 * m), dtype=np.int64)
+        #: tool is in and was in after the last step, and the delay groups of the feed rows.
+        self.li = np.zeros((self.n, 4 + m), dtype=np.int64)
         self._bind_views()
         self.cols[:] = 4
         self.nseg[:] = 1
-        self.li[:, 4 + m] = 1  # the groups, all 0, in one run
-        self.li[:, 5 + m] = m
         #: The sensor filter's step matrix, which every lane shares (one row).
         self.filt = filt.reshape(1, -1).copy()
         self.z = np.zeros((self.n, c_max))
@@ -985,7 +965,7 @@ class TurningLanes:
     def _bind_views(self) -> None:
         """Name the columns of ``li``."""
         self.cols, self.nseg, self.seg, self.out_segment = (self.li[:, i] for i in range(4))
-        self.lag = self.li[:, 4 : 4 + self.m]
+        self.lag = self.li[:, 4:]
 
     def __getstate__(self) -> dict:
         # A pickled view is a copy: the views are made anew from li on loading.
@@ -1045,7 +1025,6 @@ class TurningLanes:
         m = self.m
         lags = _fill_matrices(self._key, spindle_rpm, self.feed[lane].reshape(4, m).T,
                               self.lag[lane])  # fmt: skip
-        _lag_runs(self.li[lane, 4:], m)
         self.cols[lane] = self.z.shape[1] if full_history else 4 * (lags + 1)
 
     def set_speed(self, lane: int, spindle_rpm: float) -> None:

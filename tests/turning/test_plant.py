@@ -292,10 +292,10 @@ def test_depths_across_edges_are_the_profiles(profile):
 
 
 def test_each_lanes_rows_are_its_step_matrix_after_starts_and_speed_changes():
-    """A lane's rows ``A @ z`` come from its feed rows in runs of one delay group, whose ends
-    the lanes keep beside the groups (found when the matrices are made, at a start and at a
-    change of speed): at every speed, they are the runs of the groups, and the rows are the
-    step matrix's (``_matrices(...).big``) times the lane's memory, to rounding."""
+    """What a lane holds of its step matrix (the shared rows, its feed rows and their delay
+    groups) after a start and after a change of speed (a power-limited spindle's) gives
+    the rows ``A @ z`` of the step matrix at its speed (``_matrices(...).big``), to
+    rounding, for any memory ``z``."""
     from machining_envs.turning.plant import TurningLanes, _LinearKey, _matrices, _sampled_rows
 
     p = TurningParams.noh_kim_kim_1992().replace(spindle_power_W=5000.0)
@@ -309,22 +309,17 @@ def test_each_lanes_rows_are_its_step_matrix_after_starts_and_speed_changes():
         lanes.start(k, p, rpm, profile)
     for changed in (False, True):
         if changed:  # every lane to another speed, as a power-limited spindle's drive does
-            for k, rpm in enumerate(speeds):
+            for k in range(len(speeds)):
                 lanes.set_speed(k, speeds[(k + 2) % len(speeds)])
         for k in range(len(speeds)):
-            lag = lanes.li[k, 4 : 4 + m]
-            ends = np.flatnonzero(np.diff(lag)) + 1
-            runs = lanes.li[k, 4 + m]
-            np.testing.assert_array_equal(lanes.li[k, 5 + m : 5 + m + runs], [*ends, m])
-            big = _matrices(key, float(lanes.spindle_rpm[k])).big
-            np.testing.assert_array_equal(
-                lag, _matrices(key, float(lanes.spindle_rpm[k])).delay_group
-            )
+            mats = _matrices(key, float(lanes.spindle_rpm[k]))
+            np.testing.assert_array_equal(lanes.lag[k], mats.delay_group)
+            big = mats.big
             z = rng.standard_normal(big.shape[1])
             zk = np.zeros(lanes.z.shape[1])
             zk[: z.size] = z
             y = np.zeros(2 * m + 3)
-            _sampled_rows(lanes.base, lanes.feed[k], lanes.li[k, 4:], zk, m, y)
+            _sampled_rows(lanes.base, lanes.feed[k], lanes.lag[k], zk, m, y)
             ref = big @ z
             assert np.all(np.abs(y - ref) <= 1e-13 * np.abs(big).max() * np.abs(z).sum())
-        assert any(lanes.li[k, 4 + m] > 1 for k in range(len(speeds)))  # runs of two groups
+    assert any(np.unique(lanes.lag[k]).size > 1 for k in range(len(speeds)))  # two groups
