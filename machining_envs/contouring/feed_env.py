@@ -434,10 +434,12 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, state, consts, obs, flag
             sc, n, order.size
         )
         ac, bc, cu, du, gu, tq, umax = lane_loops(loops[0])
-        _lane_inputs(0, tabs, nseg, pf, actions, applied, clipped, n_clipped, c, s, kk, n_load,
+        k = actions.shape[0] - 1  # lane 0, not the constant 0: each function it reaches
+        # would be compiled once more for a constant lane
+        _lane_inputs(k, tabs, nseg, pf, actions, applied, clipped, n_clipped, c, s, kk, n_load,
                      load_t, load_v, n, ts, st, rx, ry, ref, load, pts)  # fmt: skip
         run_block(ac, bc, cu, du, gu, tq, umax[0], state[0], ref, load, pos, vel, cmd, torque, zb)
-        _lane_outputs(0, tabs, nseg, pf, actions, applied, c, w, look, lo, hi, tol, s, kk,
+        _lane_outputs(k, tabs, nseg, pf, actions, applied, c, w, look, lo, hi, tol, s, kk,
                       override, prev_action, reward, segment, state, flags, out, obs, n, ts,
                       (st, rx, ry), (px, py, eps, tmp, lower, order),
                       (pos, vel, cmd, torque, load))  # fmt: skip
