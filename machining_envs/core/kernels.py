@@ -28,6 +28,7 @@ __all__ = [
     "add8",
     "add_scaled8",
     "clip8",
+    "copy_into",
     "data_address",
     "fma",
     "fma8",
@@ -264,6 +265,15 @@ def shift8(typingctx, z, g, u, applied):
     return vec8(vec8, vec8, vec8, vec8), codegen
 
 
+@numba.njit(cache=True)
+def copy_into(dst, src):
+    """``dst[:src.size] = src`` for 1-d arrays, value by value. Compiled code copies with
+    this, not by setting a slice from an array: numba compiles that statement's message for
+    a shape mismatch (string formatting) into every kernel that holds one, seconds each."""
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
+
+
 @numba.njit(cache=True, inline="always")
 def row_max(a, n):
     """``a[:n].max()`` (``n >= 1``) as numba's ``max`` gives it, the first NaN if any, in
@@ -364,9 +374,7 @@ def matvec(a, n, m, x, out):
             if n == 1:  # numpy takes a one-row product as a dot product
                 out[k, 0] = np.dot(a[i, :m], x[k, :m])
             else:
-                y = np.dot(a[i, : n * m].reshape(n, m), x[k, :m])
-                for r in range(n):  # a loop, not a slice set from an array (slow to compile)
-                    out[k, r] = y[r]
+                copy_into(out[k], np.dot(a[i, : n * m].reshape(n, m), x[k, :m]))
         return
     mg = m - tail  # columns in whole groups of four
     nb = n & ~3

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from machining_envs.core.kernels import copy_into
 from machining_envs.core.splits import _split_key, lane_split_state, stream_bounded, stream_fill
 
 __all__ = [
@@ -259,6 +260,12 @@ class DepthProfile:
         slopes of :meth:`segment_table`, each with an unused last value."""
         return self._segments
 
+    def segment_copy(self) -> np.ndarray:
+        """:meth:`segment_array` as a new writable array: what a compiled lane start takes,
+        the type :func:`lane_segments` gives a batch's lanes (a read-only array is another
+        type, and the start would be compiled again for it)."""
+        return self._segments.copy()
+
     def __call__(self, x_mm) -> np.ndarray:
         """Depth (mm) at positions ``x_mm`` (array); zero outside ``[0, length_mm)``."""
         x = np.asarray(x_mm, dtype=np.float64)
@@ -379,15 +386,11 @@ def _draw_lane_cuts(table, lanes, key, before, lo, hi, n_lo, n_hi, s_lo, s_hi,
         lane_split_state(table, lanes[i], key, state)
         bi, cut, ai = _draw_cut(state, before, lo, hi, n_lo, n_hi, s_lo, s_hi,
                                 taper_probability, max_jump_ratio, after)  # fmt: skip
-        # Loops, not slices set from arrays: their error messages take seconds to compile.
-        for q in range(before):
-            b[i, q] = bi[q]
-        for q in range(after):
-            a[i, q] = ai[q]
+        copy_into(b[i], bi)
+        copy_into(a[i], ai)
         n = cut.shape[1] - 1
         for r in range(cut.shape[0]):
-            for q in range(n + 1):
-                segments[i, r, q] = cut[r, q]
+            copy_into(segments[i, r], cut[r])
         counts[i] = n
     return b, segments, counts, a
 
@@ -467,15 +470,14 @@ def traverse_time(segments, c, q, v_max):
 @numba.njit(cache=True)
 def lane_segments(segments, i, counts):
     """Lane ``i``'s segments of a batch (:func:`drawn_lane_cuts`' ``segments`` and
-    ``counts``) as an array of their own, C-ordered and writable: the type of a profile's
-    ``segment_array().copy()``, which a single lane's start hands over, so that the
+    ``counts``) as an array of their own, C-ordered and writable: the type of
+    :meth:`DepthProfile.segment_copy`, which a single lane's start hands over, so that the
     compiled start of a lane is compiled once for both (a view into the batch is another
     type, and each type costs seconds of compiling)."""
     n = counts[i] + 1
     out = np.empty((segments.shape[1], n))
     for r in range(segments.shape[1]):
-        for q in range(n):
-            out[r, q] = segments[i, r, q]
+        copy_into(out[r], segments[i, r, :n])
     return out
 
 

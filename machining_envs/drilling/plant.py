@@ -59,7 +59,7 @@ from machining_envs.core.checks import (
     check_range,
     replace_checked,
 )
-from machining_envs.core.kernels import powers, py_square
+from machining_envs.core.kernels import copy_into, powers, py_square
 from machining_envs.core.lti import zoh
 
 __all__ = [
@@ -1222,10 +1222,9 @@ def start_lane(k, row, eng_depth, eng_torque, eng_thrust, par, eng):
     (:meth:`DrillingLanes.lane_row`) and its engagement tables."""
     for i in range(par.shape[1]):
         par[k, i] = row[i]
-    for i in range(eng.shape[2]):  # loops, not slices set from arrays (slow to compile)
-        eng[k, 0, i] = eng_depth[i]
-        eng[k, 1, i] = eng_torque[i]
-        eng[k, 2, i] = eng_thrust[i]
+    copy_into(eng[k, 0], eng_depth)
+    copy_into(eng[k, 1], eng_torque)
+    copy_into(eng[k, 2], eng_thrust)
 
 
 @numba.njit(cache=True)

@@ -41,6 +41,7 @@ from machining_envs.core.env import (
     settle_batch,
     split_batch,
 )
+from machining_envs.core.kernels import copy_into
 from machining_envs.core.normals import LaneGenerators, lane_noise
 from machining_envs.core.packed import (
     PackedArgs,
@@ -434,8 +435,7 @@ def _start_drawn_lanes(t, lanes, nominal, v, scales, segments, counts):
             return i
         limit = n_limit * scales[i, 1]
         ks_scale = ks_lo + ks_span * v[i, 2]
-        for q in range(nc):  # the columns the truth keeps (a loop: a slice set from an
-            row[q] = nominal[q]  # array compiles its error message, for seconds)
+        copy_into(row, nominal[:nc])  # the columns the truth keeps
         row[_FT_PER_VF] = 60.0 / (rpm * teeth)
         if power_law != 0.0:
             row[_FEXP] = fexp * (m_lo + m_span * v[i, 3])
@@ -614,7 +614,7 @@ class _MillingCore:
                 "the tool would break before the limit binds",
             )
         # (true_params changes no field of the servo, so the lane fits the batch.)
-        segments = profile.segment_array().copy()  # the type lane_segments gives a batch
+        segments = profile.segment_copy()
         self._fit(segments.shape[1] - 1)
         # The score bound: computed by the kernel for a sharp tool, here with wear.
         bound = math.nan if truth.wear_per_100mm == 0.0 else machining_time_bound(sc, truth, rpm)

@@ -48,7 +48,7 @@ import numba
 import numpy as np
 
 from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
-from machining_envs.core.kernels import matvec, powers
+from machining_envs.core.kernels import copy_into, matvec, powers
 from machining_envs.core.lti import zoh, zoh_tf
 from machining_envs.core.workpieces import load_segments
 
@@ -522,8 +522,7 @@ def lag_rows(m, h, lag_s, out):
             row[q] = alpha * row[q]
         row[1 + j] += b0
         row[2 + j] += b1
-        for q in range(n):  # a loop, not a slice set from an array (slow to compile)
-            out[j, q] = row[q]
+        copy_into(out[j], row)
 
 
 @dataclass(slots=True)
@@ -870,7 +869,7 @@ class MillingLanes:
                 f"must be those of the batch ({self._key}), got {_ServoKey.of(params)}"
             )
         rpm = float(spindle_rpm)
-        segments = profile.segment_array().copy()  # the type the envs' starts hand over
+        segments = profile.segment_copy()
         self.fit_segments(segments.shape[1] - 1)
         start_lane(lane, self.lane_constants(params, rpm), params.process_lag_s(rpm), segments,
                    self.lag, self.z, self.buf, self.edges, self.d0, self.slope, self.nseg,

@@ -560,7 +560,7 @@ class _TurningCore:
         # (true_params changes no field of the linear blocks, so the lane fits the batch.)
         lanes = self.lanes
         profile = sc.profile
-        segments = profile.segment_array().copy()  # the type lane_segments gives a batch
+        segments = profile.segment_copy()
         lanes.fit_segments(segments.shape[1] - 1)
         rpm = float(sc.spindle_rpm)
         power_W = float(truth.spindle_power_W)

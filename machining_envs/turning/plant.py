@@ -475,7 +475,7 @@ def _exp_row(a, b, dt, row, out):
     microsecond instead of some 60; elsewhere returns False and writes nothing."""
     n = a.shape[0]
     md = np.zeros((n + 1, n + 1))
-    for i in range(n):  # loops, not slices set from arrays: their error messages compile slowly
+    for i in range(n):  # loops, not slices set from arrays (core.kernels.copy_into)
         for j in range(n):
             md[i, j] = a[i, j] * dt
         md[i, n] = b[i, 0] * dt
@@ -984,7 +984,7 @@ class TurningLanes:
                 "a lane's servo, filter, sample time and sub-steps must be those of the "
                 f"batch ({self._key}), got {_LinearKey.of(params)}"
             )
-        segments = profile.segment_array().copy()  # the type the envs' starts hand over
+        segments = profile.segment_copy()
         self.fit_segments(segments.shape[1] - 1)
         rpm = float(spindle_rpm)
         full = math.isfinite(params.spindle_power_W)
