@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 from pathlib import Path
 
@@ -272,6 +273,8 @@ def _evaluate(args) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    # The command line a run records (config.json, sweep.json): this one, however called.
+    command = shlex.join(["machining-bench", *(sys.argv[1:] if argv is None else argv)])
     if args.command == "benchmark":
         from agents.bench.benchmark import run_benchmark
 
@@ -319,6 +322,7 @@ def main(argv: list[str] | None = None) -> int:
                 resume=args.resume,
                 progress_bar=not args.no_progress,
                 vec=args.vec,
+                command=command,
             )
         except (ConfigError, FileExistsError, FileNotFoundError) as exc:
             return _fail("train", exc)
@@ -344,7 +348,7 @@ def main(argv: list[str] | None = None) -> int:
             vec=args.vec,
         )
         try:
-            sweep(settings, args.out, resume=args.resume)
+            sweep(settings, args.out, resume=args.resume, command=command)
         except (ConfigError, ValueError, FileExistsError, FileNotFoundError, RuntimeError) as exc:
             return _fail("sweep", exc)
         return 0

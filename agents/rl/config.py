@@ -25,9 +25,21 @@ from pathlib import Path
 
 from agents.rl.algos import ALGOS, algorithm_classes
 
-__all__ = ["ALGOS", "CONFIG_DIR", "ConfigError", "TrainConfig", "load_config"]
+__all__ = ["ALGOS", "CONFIG_DIR", "ConfigError", "TrainConfig", "load_config", "source_label"]
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
+
+
+def source_label(path) -> str:
+    """How a run's record (``config.json``) names the config file ``path``: a shipped one as
+    ``agents/rl/configs/<name>`` wherever the package is installed, another by its path
+    relative to the working directory where it lies below it, else by its absolute path
+    (never a path of the machine that trained, for the shipped files)."""
+    p = Path(path).resolve()
+    for root, label in ((CONFIG_DIR, Path("agents/rl/configs")), (Path.cwd().resolve(), Path())):
+        if p.is_relative_to(root):
+            return (label / p.relative_to(root)).as_posix()
+    return str(p)
 
 
 class ConfigError(ValueError):
@@ -166,6 +178,7 @@ class TrainConfig:
     """``env_wrapper: SetpointResidual``: the ``ResidualSpec`` fields (the policy sets the
     setpoint of a classical regulator; ``agents.rl.residual``)."""
     source: str = ""
+    """The file the entry was read from (:func:`source_label`)."""
 
 
 def _check_type(where: str, key: str, value, types: tuple[type, ...]) -> None:
@@ -365,7 +378,7 @@ def load_config(env_id: str, algo: str, path=None, overrides: dict | None = None
         "policy",
         "env",
     }
-    cfg = TrainConfig(env_id=env_id, algo=algo, source=str(path))
+    cfg = TrainConfig(env_id=env_id, algo=algo, source=source_label(path))
     hyper = {}
     for key, value in entry.items():
         if key in ("policy_kwargs", "normalize") and isinstance(value, str):

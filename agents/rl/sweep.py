@@ -117,8 +117,9 @@ def _tune_space(algo: str) -> dict:
     return {k: make[kind](*args) for k, (kind, *args) in SEARCH_SPACES[algo].items()}
 
 
-def _trial(config: dict, settings: dict, root: str) -> None:
-    """One Ray Tune trial: a training run in ``root/trials/<trial id>``."""
+def _trial(config: dict, settings: dict, root: str, command: str) -> None:
+    """One Ray Tune trial: a training run in ``root/trials/<trial id>``, recording the
+    sweep's ``command`` (the worker's own command line is Ray's)."""
     from ray import tune
 
     from agents.rl.train import train
@@ -139,6 +140,7 @@ def _trial(config: dict, settings: dict, root: str) -> None:
         vec=settings["vec"],
         overrides=hyper or None,
         on_evaluation=lambda row: tune.report(dict(row)),
+        command=command,
     )
 
 
@@ -155,8 +157,16 @@ def _init_ray(settings: SweepSettings) -> bool:
     return True
 
 
-def sweep(settings: SweepSettings, out, resume: bool = False, verbose: bool = True) -> Path:
-    """Run the sweep into the results folder ``out``; returns it (see the module doc)."""
+def sweep(
+    settings: SweepSettings,
+    out,
+    resume: bool = False,
+    verbose: bool = True,
+    command: str | None = None,
+) -> Path:
+    """Run the sweep into the results folder ``out``; returns it (see the module doc).
+    ``command`` is the command line that ``sweep.json`` and every trial's ``config.json``
+    record (default: this process's)."""
     import ray
     from ray import tune
 
@@ -181,13 +191,18 @@ def sweep(settings: SweepSettings, out, resume: bool = False, verbose: bool = Tr
     elif out.exists() and any(out.iterdir()):
         raise FileExistsError(f"{out} is not empty: choose another --out or pass --resume")
     out.mkdir(parents=True, exist_ok=True)
-    (out / "sweep.json").write_text(
-        json.dumps({"settings": asdict(settings), "command": " ".join(sys.argv)}, indent=2)
-    )
+    command = " ".join(sys.argv) if command is None else command
+    if not resume:  # a resumed sweep keeps the record of the command that started it
+        (out / "sweep.json").write_text(
+            json.dumps({"settings": asdict(settings), "command": command}, indent=2)
+        )
+    else:
+        command = json.loads((out / "sweep.json").read_text()).get("command", command)
 
     started = _init_ray(settings)
     trainable = tune.with_resources(
-        tune.with_parameters(_trial, settings=asdict(settings), root=str(out)), {"cpu": 1}
+        tune.with_parameters(_trial, settings=asdict(settings), root=str(out), command=command),
+        {"cpu": 1},
     )
     t0 = time.perf_counter()
     if resume:

@@ -196,11 +196,14 @@ def train(
     vec: str | None = None,
     overrides: dict | None = None,
     on_evaluation=None,
+    command: str | None = None,
 ) -> Path:
     """Train ``algo`` on ``env_id``; returns the run folder. See the module docstring.
 
     ``overrides`` replaces keys of the config entry (checked like the file's);
-    ``on_evaluation`` is called with each validation evaluation's row (a sweep reports it).
+    ``on_evaluation`` is called with each validation evaluation's row (a sweep reports it);
+    ``command`` is the command line ``config.json`` records as the run's (default: this
+    process's; a sweep's trial, which runs in a Ray worker, is given the sweep's).
     """
     import torch
     from stable_baselines3.common.callbacks import CallbackList
@@ -260,7 +263,7 @@ def train(
             "algo": cfg.algo,
             "seed": seed,
             "config": asdict(cfg),
-            "command": " ".join(sys.argv),
+            "command": " ".join(sys.argv) if command is None else command,
             "vec": vec_kind,
         }
         if overrides:

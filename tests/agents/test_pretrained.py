@@ -2,6 +2,7 @@
 selected without the test split, loaded by the benchmark."""
 
 import json
+import re
 
 import pytest
 
@@ -47,6 +48,27 @@ def test_each_pretrained_policy_has_its_regeneration_command_and_is_small(folder
             assert f"--seed {seed}" in readme, (folder, seed)
     for _, model in pretrained_seeds(folder.name):
         assert (model.parent / "best_vecnormalize.json").is_file(), model
+
+
+@pytest.mark.parametrize("folder", FOLDERS, ids=lambda p: p.name)
+def test_each_pretrained_policys_record_names_the_command_and_config_that_made_it(folder):
+    """Each seed's ``config.json`` names the command of its README that trained it and
+    the shipped config file by its place in the repository, nothing of the machine that
+    ran it (a sweep's trial records the sweep's command, not its Ray worker's)."""
+    readme = _without_out((folder / "README.md").read_text())
+    for record in _records(folder):
+        command = record["command"]
+        assert command.startswith(f"machining-bench train --env {record['env_id']} ") or (
+            command.startswith(f"machining-bench sweep --env {record['env_id']} ")
+        ), (folder, command[:80])
+        assert _without_out(command) in readme, (folder, command[:80])
+        assert record["config"]["source"].startswith("agents/rl/configs/"), folder
+
+
+def _without_out(text: str) -> str:
+    """``text`` without the values of its ``--out`` options (a README may name the run
+    folder otherwise than the run did)."""
+    return re.sub(r"--out \S+", "--out", text)
 
 
 @pytest.mark.parametrize("folder", FOLDERS, ids=lambda p: p.name)

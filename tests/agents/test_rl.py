@@ -1,6 +1,7 @@
 """SB3 training: config validation, save/reload exactness, resume, seeded reproducibility."""
 
 import json
+import shlex
 
 import numpy as np
 import pytest
@@ -37,6 +38,17 @@ def tiny(tmp_path):
 def test_shipped_configs_load(algo):
     cfg = load_config(TURNING, algo)
     assert cfg.n_timesteps > 0 and cfg.env_kwargs["scenario"] == "train"
+    # named as in the repository, not by where this machine installed the package
+    assert cfg.source == f"agents/rl/configs/{algo}.yml"
+
+
+def test_a_config_outside_the_package_is_named_by_its_path(tmp_path, monkeypatch):
+    (tmp_path / "sub").mkdir()
+    path = tmp_path / "sub" / "mine.yml"
+    path.write_text(TINY)
+    assert load_config(TURNING, "ppo", path).source == str(path.resolve())
+    monkeypatch.chdir(tmp_path)  # below the working directory: relative to it
+    assert load_config(TURNING, "ppo", "sub/mine.yml").source == "sub/mine.yml"
 
 
 @pytest.mark.parametrize(
@@ -277,6 +289,14 @@ def test_cli_evaluate(tiny, tmp_path, capsys):
         == 0
     )
     assert "primary score" in capsys.readouterr().out
+
+
+def test_the_cli_records_its_own_command_line(tiny, tmp_path):
+    argv = ["train", "--env", TURNING, "--out", str(tmp_path / "run"), "--config", str(tiny)]
+    argv += ["--timesteps", "256", "--no-progress"]
+    assert main(argv) == 0
+    meta = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert meta["command"] == shlex.join(["machining-bench", *argv])
 
 
 def test_primary_score_charges_episodes_that_do_not_count():

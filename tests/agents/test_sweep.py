@@ -2,6 +2,7 @@
 
 import csv
 import json
+import shlex
 
 import pytest
 
@@ -25,7 +26,10 @@ def _rows(path):
 def test_a_search_runs_two_optuna_trials_and_keeps_the_best_policy(tmp_path, capsys):
     out = tmp_path / "search"
     argv = ["sweep", "--env", TURNING, "--out", str(out), "--search", "2"]
-    assert main([*argv, "--timesteps", str(STEPS), "--workers", "2"]) == 0
+    argv += ["--timesteps", str(STEPS), "--workers", "2"]
+    assert main(argv) == 0
+    command = shlex.join(["machining-bench", *argv])  # what every record names, not Ray's
+    assert json.loads((out / "sweep.json").read_text())["command"] == command
     printed = capsys.readouterr().out
     assert "2 trials in" in printed and "trials/min" in printed
 
@@ -38,6 +42,7 @@ def test_a_search_runs_two_optuna_trials_and_keeps_the_best_policy(tmp_path, cap
         meta = json.loads((out / "trials" / r["trial"] / "config.json").read_text())
         assert meta["overrides"]["learning_rate"] == pytest.approx(float(r["learning_rate"]))
         assert meta["config"]["hyperparams"]["n_steps"] == int(r["n_steps"])
+        assert meta["command"] == command
     curves = _rows(out / "curves.csv")
     assert {c["trial"] for c in curves} == {r["trial"] for r in rows}
     assert all(int(c["timesteps"]) >= STEPS for c in curves)
