@@ -1,10 +1,13 @@
-"""Packaging: the core install (envs, classical agents, harness) runs without the ``rl``
-extra, nothing in the package metadata pins an exact version, the license is an SPDX id."""
+"""Packaging: the wheel holds every file of the two packages, the core install (envs,
+classical agents, harness) runs without the ``rl`` extra, nothing in the package metadata
+pins an exact version, the license is an SPDX id."""
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -100,3 +103,42 @@ else:
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 0, out.stderr[-2000:]
+
+
+def _package_files(root: Path) -> set[str]:
+    """Every file of the two packages under ``root`` (their paths from ``root``), without
+    Python's and numba's caches."""
+    return {
+        p.relative_to(root).as_posix()
+        for pkg in ("machining_envs", "agents")
+        for p in (root / pkg).rglob("*")
+        if p.is_file() and "__pycache__" not in p.parts and p.suffix not in (".pyc", ".nbi", ".nbc")
+    }
+
+
+def test_the_wheel_holds_every_file_of_the_packages(tmp_path):
+    """What ``pip install machining-envs`` gets: the wheel built from a copy of the sources
+    holds every file of ``machining_envs`` and ``agents`` (the tuned settings, the configs,
+    every pretrained seed), so the benchmark of an installed package is the README's."""
+    src = tmp_path / "src"
+    shutil.copytree(
+        ROOT,
+        src,
+        ignore=shutil.ignore_patterns(
+            ".git", ".venv", "results", "runs", "build", "dist", "*.egg-info", "__pycache__",
+            "notebooks", "tests", "docs", "benchmarks",
+        ),
+    )  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", str(src), "--no-deps", "--no-build-isolation",
+         "--quiet", "-w", str(tmp_path / "wheel")],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    (wheel,) = (tmp_path / "wheel").glob("machining_envs-*.whl")
+    with zipfile.ZipFile(wheel) as z:
+        shipped = {n for n in z.namelist() if not n.split("/")[0].endswith(".dist-info")}
+    expected = _package_files(src)
+    assert "agents/bench/tuned.json" in expected  # the check sees the data files
+    assert not expected - shipped, sorted(expected - shipped)[:20]
+    assert not shipped - expected, sorted(shipped - expected)[:20]

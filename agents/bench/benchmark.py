@@ -15,11 +15,13 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
+from agents.bench import tune
 from agents.bench.declarations import BENCHMARKS, PROCESSES
 from agents.bench.spec import BenchmarkSpec
 from agents.bench.tune import load_tuned, tuned_factory
@@ -269,12 +271,25 @@ def _table(run: _EnvRun, split: str, ref: str | None, seed: int = 0) -> tuple[st
     return "\n".join(lines), stats
 
 
+def _tuned_settings() -> dict:
+    """The tuned settings (``agents/bench/tuned.json``) the "(tuned)" rows and the
+    residual policies run with; a warning where the file is missing, since the table then
+    holds the classical agents with their papers' settings only."""
+    if not tune.TUNED_FILE.is_file():
+        warnings.warn(
+            f"{tune.TUNED_FILE} not found: the benchmark runs no tuned classical agent "
+            "(`machining-bench tune` writes it)",
+            stacklevel=2,
+        )
+    return load_tuned(tune.TUNED_FILE)
+
+
 def _env_section(env_id, n_test, n_ood, n_oracle, quick, seed, out, verbose, t0):
     """One env's part of the benchmark: ``(env name, report lines, printed text, episode
     rows, seconds)``. Takes and returns plain data, so that it can run in another process."""
     spec = next(s for s in BENCHMARKS if s.env_id == env_id)
     out = Path(out)
-    tuned = load_tuned()
+    tuned = _tuned_settings()
     t_env = time.perf_counter()
     env_name = spec.env_id.split("/")[-1]
     run = _run_env(spec, n_test, n_ood, n_oracle, tuned, verbose, t0, one_seed=quick)

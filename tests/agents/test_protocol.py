@@ -119,6 +119,21 @@ def test_tuned_file_ships_settings_for_every_tuned_agent():
             assert tuned_factory(cls, spec.env_id, data) is not None
 
 
+def test_the_benchmark_warns_when_the_tuned_settings_are_missing(tmp_path, monkeypatch):
+    """Without ``tuned.json`` (an install that lost it) the benchmark's table would hold no
+    tuned classical agent: it says so instead of dropping them quietly."""
+    import warnings
+
+    from agents.bench import benchmark, tune
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the shipped file: no warning
+        assert benchmark._tuned_settings()["envs"]
+    monkeypatch.setattr(tune, "TUNED_FILE", tmp_path / "tuned.json")
+    with pytest.warns(UserWarning, match="tuned.json not found: the benchmark runs no tuned"):
+        assert benchmark._tuned_settings() == {}
+
+
 def _rows(values, policy_seed=None):
     out = []
     for i, v in enumerate(values):
