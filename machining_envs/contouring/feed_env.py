@@ -35,10 +35,19 @@ from machining_envs.contouring.paths import (
 )
 from machining_envs.contouring.plant import AXES, ContouringParams
 from machining_envs.contouring.scenarios import (
+    _D_A,
+    _D_B,
+    _D_LENGTH,
+    _D_X0,
+    _D_XE,
+    _D_Y0,
+    _D_YE,
     CONTOURING_SCENARIOS,
     ContouringScenario,
+    _RandomPaths,
     check_feed,
     contouring_scenario,
+    true_params_of,
 )
 from machining_envs.contouring.servo import (
     LANES,
@@ -64,6 +73,7 @@ from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
     LaneNames,
+    LaneObjects,
     adopt_core,
     check_reward_weights,
     check_scenario_spec,
@@ -74,8 +84,11 @@ from machining_envs.core.env import (
     resolve_params,
     resolve_reward,
     scenario_option,
+    settle_batch,
+    split_batch,
 )
 from machining_envs.core.kernels import data_address
+from machining_envs.core.normals import LaneGenerators
 from machining_envs.core.packed import PackedArgs, b1_2, f4_2, f8_1, f8_2, f8_3, i8_1, i8_2
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
 
@@ -506,6 +519,73 @@ def _feed_reset_obs(k, tabs, nseg, pf, s, override, prev_action, tol, look, lo, 
               0.0, tol, look, lo, hi, obs)  # fmt: skip
 
 
+@numba.njit(cache=True)
+def _start_drawn_lanes(lanes, ints, floats, drawn_tabs, feed, t_load, t_max, override_max,
+                       tabs, nseg, pf, bound, load_t, load_v, n_load, lf, li, state, out, flags,
+                       tol, look, lo, hi, obs):  # fmt: skip
+    """:meth:`_FeedCore.start`'s arrays for every lane ``lanes[i]`` of a split's batch, from
+    its drawn numbers (``_RandomPaths.draw_lanes``: ``ints``, ``floats``, the tables, feeds
+    and load times), in ``start``'s arithmetic; ``t_max`` NaN: the time limit from the
+    programmed time. The servo loops are started apart (``ServoLanes.start``)."""
+    s, override, prev_action = lf[:, 2], lf[:, 3], lf[:, 4]
+    in_clipped, kk, n_clipped, segment = li[:, 0], li[:, 3], li[:, 4], li[:, 5]
+    for i in range(lanes.size):
+        k = lanes[i]
+        n = ints[i, 0]
+        for r in range(tabs.shape[1]):
+            for c in range(tabs.shape[2]):
+                tabs[k, r, c] = drawn_tabs[i, r, c] if r < n else 0.0
+        nseg[k] = n
+        f = floats[i]
+        length = f[_D_LENGTH]
+        x0 = f[_D_X0]
+        y0 = f[_D_Y0]
+        prog = length / feed[i]
+        p = pf[k]
+        p[0] = length
+        p[1] = x0
+        p[2] = y0
+        p[3] = f[_D_XE]
+        p[4] = f[_D_YE]
+        p[5] = feed[i]
+        p[6] = prog
+        p[7] = 5.0 * prog + 0.5 if t_max != t_max else t_max
+        bound[k] = length / (override_max * feed[i])
+        for q in range(load_t.shape[1]):
+            load_t[k, q] = np.inf
+        for q in range(load_v.shape[1]):
+            load_v[k, q, 0] = 0.0
+            load_v[k, q, 1] = 0.0
+        if ints[i, 1]:
+            load_t[k, 0] = t_load[i]
+            load_v[k, 1, 0] = f[_D_A]
+            load_v[k, 1, 1] = f[_D_B]
+        n_load[k] = 1
+        s[k] = 0.0
+        kk[k] = 0
+        override[k] = 0.0
+        prev_action[k] = -1.0
+        n_clipped[k] = 0
+        for q in range(state.shape[1]):
+            state[k, q] = 0.0
+        _feed_reset_obs(k, tabs, nseg, pf, s, override, prev_action, tol, look, lo, hi, obs)
+        tab = tabs[k, :n]
+        rx, ry = path_point(tab, length, 0.0)
+        o = out[k]
+        for q in range(o.shape[0]):
+            o[q] = 0.0
+        o[3] = x0
+        o[4] = y0
+        o[5] = rx
+        o[6] = ry
+        o[18] = 0.0 * feed[i] if 0.0 < length else 0.0
+        o[20] = np.nan
+        for q in range(flags.shape[1]):
+            flags[k, q] = False
+        in_clipped[k] = 0
+        segment[k] = path_segment_index(tab, length, 0.0)
+
+
 class _FeedCore:
     """The state and arithmetic of N ContouringFeed-v0 episodes, shared by
     ``ContouringFeedEnv`` (one lane) and ``ContouringFeedVectorEnv`` (N lanes): each lane's
@@ -583,11 +663,18 @@ class _FeedCore:
         self.obs = np.zeros((n, 16), dtype=np.float32)
         self.flags = np.zeros((n, 4), dtype=np.bool_)
         self.out = np.zeros((n, len(_OUT)))
-        self.scenarios: list[ContouringScenario | None] = [None] * n
-        self.paths: list = [None] * n
+        #: Every lane's scenario and true parameters (built when read, for lanes started
+        #: together by :meth:`start_lanes`).
+        self.scenarios = LaneObjects(n)
+        self.truths = LaneObjects(n)
+        #: The generators the lanes of a batch draw their scenarios from (``start_lanes``).
+        self.rngs = LaneGenerators(n)
+        self._batch_ok: dict = {}  # _batches' checks, by factory
         self.names = LaneNames(n)
         self.servos = np.full(n, servo, dtype=object)
-        self.episode_info: list[dict] = [{}] * n
+        #: Per lane, the values of info that hold for the whole episode; None for a lane
+        #: started with others until :meth:`lane_info` reads them from the arrays.
+        self.episode_info: list[dict | None] = [{}] * n
         self.has_circle = np.zeros(n, dtype=bool)
         self.circle = np.zeros((n, 3))
         n_seg = self.tabs.shape[1]
@@ -665,13 +752,14 @@ class _FeedCore:
             self.act_lanes, lane, sc.actuation, self.actuation, self._actuation_lanes
         )
         self.scenarios[lane] = sc
-        self.loops.start(lane, sc.true_params(self.params))
+        truth = self.truths[lane] = sc.true_params(self.params)
+        self.loops.start(lane, truth)
         self.state[lane] = 0.0
         path = sc.path
-        self.paths[lane] = path
         tab = path.table()
         self._grow(tab.shape[0], len(sc.load_steps))
         self.tabs[lane, : tab.shape[0]] = tab
+        self.tabs[lane, tab.shape[0] :] = 0.0  # no rows of an earlier path left behind
         self.nseg[lane] = tab.shape[0]
         prog = path.length / sc.feed_mm_s
         t_max = self.max_episode_time_s
@@ -722,6 +810,53 @@ class _FeedCore:
         self.flags[lane] = False
         self.in_clipped[lane] = 0  # no action yet (the next step sets it)
         self.segment[lane] = path.segment_index(0.0)
+
+    def start_lanes(self, lanes: np.ndarray, spec, rngs) -> None:
+        """:meth:`start` for each lane ``k`` of ``lanes`` on the scenario ``spec``, drawn
+        with ``rngs[k]``: the same episodes, the same numbers. A split's scenarios (a name
+        such as ``"train"``) are drawn for all lanes in one compiled call and their arrays
+        set in another; each lane's servo loops are designed on its true table here, and
+        its scenario object is built only when read (``scenarios[k]``)."""
+        factory = split_batch(self, lanes, spec, rngs, CONTOURING_SCENARIOS)
+        if factory is None:
+            return
+        drawn = factory.draw_lanes(self.rngs.table, lanes)
+        self._grow(int(drawn.ints[:, 0].max()), 1)
+        ks = settle_batch(self, lanes, factory.build_lane, (drawn,), factory.actuation,
+                          factory.name)  # fmt: skip
+        for i, k in enumerate(ks):
+            self.loops.start(k, true_params_of(drawn.scale[i].tolist(), self.params))
+        t_max = self.max_episode_time_s
+        _start_drawn_lanes(
+            lanes, drawn.ints, drawn.floats, drawn.tabs, drawn.feed, drawn.t_load,
+            math.nan if t_max is None else float(t_max), self.override_max, self.tabs,
+            self.nseg, self.pf, self.bound, self.load_t, self.load_v, self.n_load, self.lf,
+            self.li, self.state, self.out, self.flags, self.tolerance_mm,
+            self.consts[_C_LOOK:_C_LO], self._lo, self._hi, self.obs,
+        )  # fmt: skip
+        self.has_circle[lanes] = False  # paths of several segments (_batches)
+        self.circle[lanes] = 0.0
+        info = self.episode_info
+        for k in ks:
+            info[k] = None  # lane_info reads it from the arrays
+
+    def _batches(self, factory) -> bool:
+        """Whether :meth:`start_lanes` may start ``factory``'s scenarios in one batch: a
+        split's random paths of two segments or more (no circle test), whose every
+        scenario passes the check ``start`` makes (those of the ranges' two ends, checked
+        once)."""
+        if not isinstance(factory, _RandomPaths) or factory.segments[0] < 2:
+            return False
+        ok = self._batch_ok.get(factory)
+        if ok is None:
+            try:
+                for sc in factory.extremes:
+                    check_feed(sc, self.params)
+                ok = True
+            except ValueError:
+                ok = False
+            self._batch_ok[factory] = ok
+        return ok
 
     def step(self) -> None:
         """Advance every lane with the (checked, clipped) actions in ``in_action``; whether
@@ -781,10 +916,27 @@ class _FeedCore:
             "path_speed_mm_s": o[18],
             "path_s_mm": o[19],
             "segment": segment,
-            **self.episode_info[k],
+            **self._episode_info(k),
         }
         if finished:
             info["machining_time_s"] = o[20]
+        return info
+
+    def _episode_info(self, k: int) -> dict:
+        """The values of lane ``k``'s info that hold for its whole episode."""
+        info = self.episode_info[k]
+        if info is None:  # a lane started with others (start_lanes): a path of several
+            # segments, so no circle; the numbers start wrote, as Python values
+            info = self.episode_info[k] = {
+                "contour_tolerance_mm": self.tolerance_mm,
+                "score_bound": float(self.bound[k]),
+                "path_length_mm": float(self.pf[k, 0]),
+                "feed_mm_s": float(self.pf[k, 5]),
+                "programmed_time_s": float(self.pf[k, 6]),
+                "time_limit_s": float(self.pf[k, 7]),
+                "servo": self.servo,
+                "scenario": self.names[k],
+            }
         return info
 
     def info_arrays(self) -> dict:
@@ -991,7 +1143,7 @@ class ContouringFeedEnv(gym.Env):
         core.start(0, scenario_option(options, self.default_scenario), self.np_random)
         info = core.lane_info(0)
         self.scenario = core.scenarios[0]
-        self._path = core.paths[0]
+        self._path = self.scenario.path
         self._started = True
         self._log = EpisodeLog(TRACE_LOG_FIELDS)
         if self.render_mode is not None:

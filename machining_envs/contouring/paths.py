@@ -34,7 +34,7 @@ from machining_envs.core.kernels import sincos_row, vector_hypot
 
 __all__ = ["Line", "Arc", "Involute", "Path", "PAPER_CORNER_FEED_MM_S", "PAPER_FEED_MM_S"]
 __all__ += ["SEGMENT_COLUMNS", "path_point", "path_points", "path_heading", "path_distance"]
-__all__ += ["path_distances", "path_segment_index"]
+__all__ += ["path_distances", "path_segment_index", "smooth_table"]
 
 #: Feed of the paper's corner test, mm/s (§5, Fig. 6).
 PAPER_CORNER_FEED_MM_S = 5.0
@@ -457,6 +457,92 @@ def _largest_hypot(x, y, cx, cy, neighbours):
 
 
 @numba.njit(cache=True)
+def smooth_table(draws, n, heading, line_mm, radius_mm, sweep_deg, line_probability, tab):
+    """The table (:meth:`Path.table`) of :meth:`Path.random_smooth`'s path from the start
+    ``(0, 0)`` into ``tab[:n]``, from its drawn numbers (``draws[r, k]``: the five numbers
+    of segment ``k``; ``heading``: the first heading) and ranges (pairs); returns the path's
+    ``(length, start x, start y, end x, end y)``. Every number is the one the segments'
+    and the path's own arithmetic gives in Python, in its order (``math.hypot`` as
+    CPython computes it: ``py_hypot``), so the table is ``Path.table()`` to the last bit
+    (``tests/contouring/test_batched_start.py``)."""
+    px = 0.0
+    py = 0.0
+    total = 0.0
+    head = 0.0
+    h1_prev = 0.0
+    h0_prev = 0.0
+    x0 = 0.0
+    y0 = 0.0
+    for k in range(n):
+        row = tab[k]
+        for c in range(row.shape[0]):
+            row[c] = 0.0
+        if draws[0, k] < line_probability:  # Line._set
+            length = line_mm[0] + (line_mm[1] - line_mm[0]) * draws[1, k]
+            ex = px + length * math.cos(heading)
+            ey = py + length * math.sin(heading)
+            dx = ex - px
+            dy = ey - py
+            seg_len = py_hypot(dx, dy)
+            h0 = math.atan2(dy, dx)
+            h1 = h0
+            sx = px
+            sy = py
+            row[0] = _LINE
+            row[6] = px
+            row[7] = py
+            row[8] = dx / seg_len
+            row[9] = dy / seg_len
+            row[10] = seg_len
+        else:  # Arc._derive, of random_smooth's centre, radius, start angle and sweep
+            r = radius_mm[0] + (radius_mm[1] - radius_mm[0]) * draws[1, k]
+            sweep = math.radians(sweep_deg[0] + (sweep_deg[1] - sweep_deg[0]) * draws[2, k])
+            sign = 1.0 if draws[3, k] < 0.5 else -1.0
+            cx = px - sign * r * math.sin(heading)
+            cy = py + sign * r * math.cos(heading)
+            a0 = math.atan2(py - cy, px - cx)
+            sw = sign * sweep
+            arc_sign = 1.0 if sw > 0 else -1.0
+            seg_len = r * abs(sw)
+            sx = cx + r * math.cos(a0)
+            sy = cy + r * math.sin(a0)
+            ex = cx + r * math.cos(a0 + sw)
+            ey = cy + r * math.sin(a0 + sw)
+            h0 = a0 + arc_sign * 0.5 * math.pi
+            h1 = h0 + sw
+            heading += sign * sweep
+            row[0] = _ARC
+            row[6] = cx
+            row[7] = cy
+            row[8] = r
+            row[9] = a0
+            row[10] = arc_sign
+            row[11] = abs(sw)
+            row[12] = sx
+            row[13] = sy
+            row[14] = ex
+            row[15] = ey
+        if k == 0:  # Path._build: the running arc length and the unwrapped heading
+            head = h0
+            x0 = sx
+            y0 = sy
+        else:
+            head = head + (h1_prev - h0_prev)
+            a = h0 - head  # _wrap(a)
+            head += a - _TWO_PI * math.floor((a + math.pi) / _TWO_PI)
+        row[1] = total
+        row[2] = head
+        row[3] = seg_len
+        total = seg_len if k == 0 else total + seg_len
+        h0_prev = h0
+        h1_prev = h1
+        px = ex
+        py = ey
+    _bounding_circles(tab[:n])
+    return total, x0, y0, px, py
+
+
+@numba.njit(cache=True)
 def _bounding_circles(tab):
     """:func:`_bounding_circle_of_row` of every row of ``tab`` into its columns 3-5, in one
     call (a reset builds a path of several segments); column 3 holds the segment's arc
@@ -605,8 +691,17 @@ class Path:
         draws = rng.random((5, n)).tolist()  # kind, length/radius, sweep, direction, spare
         heading = float(rng.uniform(-math.pi, math.pi))
         p = _point("start", start)
+        return cls._smooth(draws, heading, line_mm, radius_mm, sweep_deg, line_probability, p,
+                           str(name))  # fmt: skip
+
+    @classmethod
+    def _smooth(cls, draws, heading: float, line_mm, radius_mm, sweep_deg,
+                line_probability: float, p: tuple[float, float], name: str) -> Path:  # fmt: skip
+        """:meth:`random_smooth`'s path from its drawn numbers (``draws``: five lists of
+        one number per segment; ``heading``: the first heading; ``p``: the start), its
+        ranges checked; :func:`smooth_table` computes the same path's table."""
         segs: list[Segment] = []
-        for k in range(n):
+        for k in range(len(draws[0])):
             if draws[0][k] < line_probability:
                 length = float(line_mm[0] + (line_mm[1] - line_mm[0]) * draws[1][k])
                 end = (p[0] + length * math.cos(heading), p[1] + length * math.sin(heading))
@@ -623,8 +718,9 @@ class Path:
                 heading += sign * sweep
             p = segs[-1].end
         # Every number above is a finite Python float in the segments' ranges (the ranges
-        # checked here, the start by _point) and each segment starts where the last ends.
-        return cls._trusted(segs, str(name))
+        # checked by random_smooth, the start by _point) and each segment starts where the
+        # last ends.
+        return cls._trusted(segs, name)
 
     # ---- geometry ---------------------------------------------------------------------------
     @property

@@ -12,14 +12,28 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
-from machining_envs.contouring.paths import PAPER_CORNER_FEED_MM_S, PAPER_FEED_MM_S, Path
+from machining_envs.contouring.paths import (
+    PAPER_CORNER_FEED_MM_S,
+    PAPER_FEED_MM_S,
+    SEGMENT_COLUMNS,
+    Path,
+    smooth_table,
+)
 from machining_envs.contouring.plant import ContouringParams
 from machining_envs.core.actuation import Actuation
 from machining_envs.core.checks import check_below, check_range, drawn_instance
 from machining_envs.core.env import resolve_scenario
-from machining_envs.core.splits import split_stream
+from machining_envs.core.splits import (
+    _split_key,
+    lane_split_state,
+    split_stream,
+    stream_bounded,
+    stream_double,
+    stream_fill,
+)
 
 __all__ = [
     "ContouringScenario",
@@ -134,12 +148,18 @@ class ContouringScenario:
 
     def true_params(self, nominal: ContouringParams) -> ContouringParams:
         """The table this run really has (hidden from controllers)."""
-        sx, sy = self.inertia_scale
-        if sx == 1.0 and sy == 1.0:
-            return nominal
-        return nominal.replace(
-            inertia_x_kgm2=nominal.inertia_x_kgm2 * sx, inertia_y_kgm2=nominal.inertia_y_kgm2 * sy
-        )
+        return true_params_of(self.inertia_scale, nominal)
+
+
+def true_params_of(inertia_scale, nominal: ContouringParams) -> ContouringParams:
+    """The table with the inertias ``nominal``'s times ``inertia_scale`` (a scenario's
+    :meth:`ContouringScenario.true_params`)."""
+    sx, sy = inertia_scale
+    if sx == 1.0 and sy == 1.0:
+        return nominal
+    return nominal.replace(
+        inertia_x_kgm2=nominal.inertia_x_kgm2 * sx, inertia_y_kgm2=nominal.inertia_y_kgm2 * sy
+    )
 
 
 def _step(load: bool) -> Callable[[np.random.Generator], ContouringScenario]:
@@ -173,59 +193,176 @@ SHOPFLOOR_OVERRIDE = Actuation(quantum=0.005, max_rate_per_s=2.5, delay_steps=2,
                                max_accel_per_s2=60.0)  # fmt: skip
 
 
-def _random(
-    name: str,
-    segments: tuple[int, int],
-    line: tuple[float, float],
-    radius: tuple[float, float],
-    sweep: tuple[float, float],
-    feed: tuple[float, float],
-    inertia: tuple[float, float],
-    load_max: float,
-    actuation: Actuation | None = None,
-):
-    # The log-uniform draws' bounds, as numpy computes them, once.
-    log_feed = (np.log(feed[0]), np.log(feed[1]))
-    log_inertia = (np.log(inertia[0]), np.log(inertia[1]))
-    # Every drawn field lies between these two scenarios' (checked here, once): make()
-    # builds its scenarios without checking them again.
-    for end in (0, 1):
-        ContouringScenario(
-            name, Path.line((0.0, 0.0), (1.0, 0.0)), feed[end], ((0.0, load_max, -load_max),),
-            (inertia[end], inertia[end]), actuation=actuation,
-        )  # fmt: skip
+class _RandomPaths:
+    """The factory of a split's random scenarios: a tangent-continuous chain of lines and
+    arcs (:meth:`Path.random_smooth`), a log-uniform feed, log-uniform inertia scales and,
+    in half the runs, one load step at a random time, all drawn from the split's stream of
+    the env's generator. A vector env draws the numbers of many lanes at once
+    (:meth:`draw_lanes`, compiled) and builds a lane's scenario only when it is read
+    (:meth:`build_lane`): the same scenarios, the same numbers."""
 
-    def make(env_rng: np.random.Generator) -> ContouringScenario:
-        rng = split_stream(env_rng, name)
+    def __init__(
+        self,
+        name: str,
+        segments: tuple[int, int],
+        line: tuple[float, float],
+        radius: tuple[float, float],
+        sweep: tuple[float, float],
+        feed: tuple[float, float],
+        inertia: tuple[float, float],
+        load_max: float,
+        actuation: Actuation | None = None,
+    ) -> None:
+        self.name = name
+        self.segments, self.line, self.radius, self.sweep = segments, line, radius, sweep
+        self.feed, self.inertia, self.load_max, self.actuation = feed, inertia, load_max, actuation
+        # The log-uniform draws' bounds, as numpy computes them, once.
+        self.log_feed = (float(np.log(feed[0])), float(np.log(feed[1])))
+        self.log_inertia = (float(np.log(inertia[0])), float(np.log(inertia[1])))
+        # Every drawn field lies between these two scenarios' (checked here, once): the
+        # factory builds its scenarios without checking them again.
+        self.extremes = tuple(
+            ContouringScenario(
+                name,
+                Path.line((0.0, 0.0), (1.0, 0.0)),
+                feed[end],
+                ((0.0, load_max, -load_max),),
+                (inertia[end], inertia[end]),
+                actuation=actuation,
+            )  # fmt: skip
+            for end in (0, 1)
+        )
+
+    def __call__(self, env_rng: np.random.Generator) -> ContouringScenario:
+        rng = split_stream(env_rng, self.name)
         path = Path.random_smooth(
             rng,
-            n_segments=segments,
-            line_mm=line,
-            radius_mm=radius,
-            sweep_deg=sweep,
-            name=f"{name} path",
+            n_segments=self.segments,
+            line_mm=self.line,
+            radius_mm=self.radius,
+            sweep_deg=self.sweep,
+            name=f"{self.name} path",
         )
-        f = float(np.exp(rng.uniform(*log_feed)))
-        sx, sy = np.exp(rng.uniform(*log_inertia, 2)).tolist()
+        f = float(np.exp(rng.uniform(*self.log_feed)))
+        sx, sy = np.exp(rng.uniform(*self.log_inertia, 2)).tolist()
         loads = ()
         if rng.random() < 0.5:
             t = float(rng.uniform(0.0, path.length / f))
-            a, b = rng.uniform(-load_max, load_max, 2).tolist()
+            a, b = rng.uniform(-self.load_max, self.load_max, 2).tolist()
             loads = ((t, a, b),)
+        return self._scenario(path, f, (sx, sy), loads)
+
+    def _scenario(self, path: Path, f: float, scale: tuple, loads: tuple) -> ContouringScenario:
         return drawn_instance(
             ContouringScenario,
             {
-                "name": name,
+                "name": self.name,
                 "path": path,
                 "feed_mm_s": f,
                 "load_steps": loads,
-                "inertia_scale": (sx, sy),
+                "inertia_scale": scale,
                 "dwell_s": 0.0,
-                "actuation": actuation,
+                "actuation": self.actuation,
             },
         )
 
-    return make
+    def draw_lanes(self, table, lanes: np.ndarray) -> DrawnPaths:
+        """The numbers of :meth:`__call__` for every lane in ``lanes``, each drawn from the
+        split's stream of its generator in ``table`` (``LaneGenerators.table``) in one
+        compiled call, every generator left where ``__call__`` leaves it; the feeds and
+        inertia scales are numpy's ``exp`` of the drawn exponents, as there."""
+        seg_lo, seg_hi = self.segments
+        ints, floats, tabs, draws = _draw_smooth_lanes(
+            table, lanes, _split_key(self.name), seg_lo, seg_hi, np.array(self.line),
+            np.array(self.radius), np.array(self.sweep), _LINE_PROBABILITY,
+            np.array(self.log_feed), np.array(self.log_inertia), float(self.load_max),
+        )  # fmt: skip
+        feed = np.exp(floats[:, _D_FEED])
+        scale = np.exp(floats[:, _D_SX : _D_SY + 1])
+        length = floats[:, _D_LENGTH]
+        # uniform(0, length / f): low + (high - low) u, numpy's arithmetic
+        t_load = 0.0 + (length / feed - 0.0) * floats[:, _D_T]
+        return DrawnPaths(ints, floats, tabs, draws, feed, scale, t_load)
+
+    def build_lane(self, drawn: DrawnPaths, i: int) -> ContouringScenario:
+        """The scenario of lane ``i`` of the lanes' numbers from :meth:`draw_lanes`."""
+        n = int(drawn.ints[i, 0])
+        path = Path._smooth(
+            drawn.draws[i, :, :n].tolist(), float(drawn.floats[i, _D_HEADING]), self.line,
+            self.radius, self.sweep, _LINE_PROBABILITY, (0.0, 0.0), f"{self.name} path",
+        )  # fmt: skip
+        loads = ()
+        if drawn.ints[i, 1]:
+            a, b = drawn.floats[i, _D_A : _D_B + 1].tolist()
+            loads = ((float(drawn.t_load[i]), a, b),)
+        return self._scenario(path, float(drawn.feed[i]), tuple(drawn.scale[i].tolist()), loads)
+
+
+#: ``Path.random_smooth``'s default share of lines, which the split scenarios keep.
+_LINE_PROBABILITY = 0.4
+#: Columns of :func:`_draw_smooth_lanes`' floats: the first heading, the path's length,
+#: start and end, the exponents of the feed and of the inertia scales, the load's raw
+#: uniform for its time and its two torques.
+_D_HEADING, _D_LENGTH, _D_X0, _D_Y0, _D_XE, _D_YE = range(6)
+_D_FEED, _D_SX, _D_SY, _D_T, _D_A, _D_B = range(6, 12)
+
+
+@dataclass(frozen=True)
+class DrawnPaths:
+    """The numbers of many lanes' split scenarios (:meth:`_RandomPaths.draw_lanes`):
+    ``ints[i]`` = (segments, whether a load step); ``floats[i]``, columns ``_D_*``;
+    ``tabs[i, :segments]``, each path's table (``Path.table``); ``draws[i, :, :segments]``,
+    its segments' uniform numbers; the feeds, inertia scales and load times."""
+
+    ints: np.ndarray
+    floats: np.ndarray
+    tabs: np.ndarray
+    draws: np.ndarray
+    feed: np.ndarray
+    scale: np.ndarray
+    t_load: np.ndarray
+
+
+@numba.njit(cache=True)
+def _draw_smooth_lanes(table, lanes, key, seg_lo, seg_hi, line, radius, sweep, line_probability,
+                       log_feed, log_inertia, load_max):  # fmt: skip
+    """:meth:`_RandomPaths.draw_lanes`' compiled part: each lane's stream
+    (``lane_split_state``) and, in :meth:`_RandomPaths.__call__`'s order, the draws of
+    ``random_smooth`` (the number of segments, their uniforms, the first heading), of the
+    feed's and inertias' exponents (``low + (high - low) u``) and of the load step; each
+    path's table by :func:`~machining_envs.contouring.paths.smooth_table`."""
+    n_lanes = lanes.size
+    ints = np.zeros((n_lanes, 2), dtype=np.int64)
+    floats = np.zeros((n_lanes, 12))
+    tabs = np.zeros((n_lanes, seg_hi, SEGMENT_COLUMNS))
+    draws = np.zeros((n_lanes, 5, seg_hi))
+    state = np.empty(6, dtype=np.uint64)
+    u = np.empty(5 * seg_hi)
+    two = np.empty(2)
+    for i in range(n_lanes):
+        lane_split_state(table, lanes[i], key, state)
+        n = seg_lo + stream_bounded(state, seg_hi - seg_lo)
+        stream_fill(state, u[: 5 * n])
+        for r in range(5):
+            for k in range(n):
+                draws[i, r, k] = u[r * n + k]
+        f = floats[i]
+        f[_D_HEADING] = -math.pi + (math.pi - -math.pi) * stream_double(state)
+        f[_D_LENGTH], f[_D_X0], f[_D_Y0], f[_D_XE], f[_D_YE] = smooth_table(
+            draws[i], n, f[_D_HEADING], line, radius, sweep, line_probability, tabs[i]
+        )
+        f[_D_FEED] = log_feed[0] + (log_feed[1] - log_feed[0]) * stream_double(state)
+        stream_fill(state, two)
+        f[_D_SX] = log_inertia[0] + (log_inertia[1] - log_inertia[0]) * two[0]
+        f[_D_SY] = log_inertia[0] + (log_inertia[1] - log_inertia[0]) * two[1]
+        ints[i, 0] = n
+        if stream_double(state) < 0.5:
+            ints[i, 1] = 1
+            f[_D_T] = stream_double(state)
+            stream_fill(state, two)
+            f[_D_A] = -load_max + (load_max - -load_max) * two[0]
+            f[_D_B] = -load_max + (load_max - -load_max) * two[1]
+    return ints, floats, tabs, draws
 
 
 #: The ranges of the training distribution (segments, line length, radius, sweep, feed,
@@ -255,11 +392,11 @@ CONTOURING_SCENARIOS: dict[str, Callable[[np.random.Generator], ContouringScenar
         PAPER_FEED_MM_S,
         ((0.5, PAPER_LOAD_TORQUE_NM, PAPER_LOAD_TORQUE_NM),),
     ),
-    **{split: _random(split, *_TRAINING_RANGES) for split in ("train", "validation", "test")},
-    "ood": _random(
+    **{split: _RandomPaths(split, *_TRAINING_RANGES) for split in ("train", "validation", "test")},
+    "ood": _RandomPaths(
         "ood", (3, 6), (3.0, 20.0), (2.0, 40.0), (20.0, 240.0), (15.0, 90.0), (0.7, 1.4), 2.0
     ),
-    "shopfloor": _random("shopfloor", *_TRAINING_RANGES, actuation=SHOPFLOOR_OVERRIDE),
+    "shopfloor": _RandomPaths("shopfloor", *_TRAINING_RANGES, actuation=SHOPFLOOR_OVERRIDE),
 }
 
 
