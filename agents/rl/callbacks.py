@@ -24,7 +24,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from agents.rl.stats import save_stats
 
-__all__ = ["ValidationCallback", "JsonStatsCheckpoint"]
+__all__ = ["ValidationCallback", "JsonStatsCheckpoint", "save_model"]
 
 
 #: What an episode that does not count costs in the primary score, s: Turning-v0's time
@@ -48,6 +48,13 @@ def evaluation_setup(env_id: str, env_kwargs: dict):
     if not math.isfinite(failed):
         failed = FAILED_EPISODE_TIME_S
     return task.metrics, task.score, failed
+
+
+def save_model(model, path) -> None:
+    """``model.save(path)`` without the run's TensorBoard folder (``tensorboard_log``): a
+    model file names no folder of the machine that trained it, and a model loaded to train
+    further logs where its ``load(..., tensorboard_log=...)`` says, by default nowhere."""
+    model.save(path, exclude=["tensorboard_log"])
 
 
 class JsonStatsCheckpoint(CheckpointCallback):
@@ -252,7 +259,7 @@ class ValidationCallback(BaseCallback):
                     }
                 )
             if s["score"] < self.best:
-                self.model.save(self.out / "best_model.zip")
+                save_model(self.model, self.out / "best_model.zip")
                 if isinstance(venv, VecNormalize):
                     save_stats(venv, self.out / "best_vecnormalize.json")
         self.best = min(self.best, s["score"])

@@ -15,7 +15,12 @@ import gymnasium as gym
 import machining_envs  # noqa: F401  (registers the env ids)
 from agents.eval import Evaluation, evaluate
 from agents.rl.algos import algorithm_classes
-from agents.rl.callbacks import FAILED_EPISODE_TIME_S, ValidationCallback, evaluation_setup
+from agents.rl.callbacks import (
+    FAILED_EPISODE_TIME_S,
+    ValidationCallback,
+    evaluation_setup,
+    save_model,
+)
 from agents.rl.config import ConfigError, TrainConfig, load_config
 from agents.rl.policy import load_policy
 from agents.rl.stats import read_stats, restore_stats, save_stats, stats_path
@@ -291,11 +296,11 @@ def train(
         tb_log_name=cfg.algo,
     )
     learn_s = time.perf_counter() - t0
-    model.save(out / "final_model.zip")
+    save_model(model, out / "final_model.zip")
     if isinstance(venv, VecNormalize):
         save_stats(venv, out / "final_vecnormalize.json")
     if not (out / "best_model.zip").is_file():  # e.g. every evaluation scored inf
-        model.save(out / "best_model.zip")
+        save_model(model, out / "best_model.zip")
         if isinstance(venv, VecNormalize):
             save_stats(venv, out / "best_vecnormalize.json")
     venv.close()

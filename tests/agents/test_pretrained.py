@@ -3,6 +3,8 @@ selected without the test split, loaded by the benchmark."""
 
 import json
 import re
+import zipfile
+from pathlib import PurePosixPath
 
 import pytest
 
@@ -63,6 +65,20 @@ def test_each_pretrained_policys_record_names_the_command_and_config_that_made_i
         ), (folder, command[:80])
         assert _without_out(command) in readme, (folder, command[:80])
         assert record["config"]["source"].startswith("agents/rl/configs/"), folder
+
+
+@pytest.mark.parametrize("folder", FOLDERS, ids=lambda p: p.name)
+def test_each_pretrained_model_file_names_no_folder_of_a_machine(folder):
+    """A shipped ``.zip`` holds no TensorBoard folder (a model loaded to train further
+    would log there) nor any other absolute path among its saved attributes."""
+    for _, model in pretrained_seeds(folder.name):
+        with zipfile.ZipFile(model) as z:
+            data = json.loads(z.read("data"))
+        assert "tensorboard_log" not in data, model
+        paths = [
+            k for k, v in data.items() if isinstance(v, str) and PurePosixPath(v).is_absolute()
+        ]
+        assert not paths, (model, paths)
 
 
 def _without_out(text: str) -> str:

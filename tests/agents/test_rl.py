@@ -195,6 +195,11 @@ def test_train_save_reload_resume(tiny, tmp_path):
     from stable_baselines3 import PPO
 
     assert PPO.load(run / "final_model.zip").num_timesteps >= 512
+    # The model files name no folder of the machine that trained them: the run's TensorBoard
+    # folder is given again when a run resumes, and both sessions logged there.
+    for name in ("final_model.zip", "best_model.zip"):
+        assert PPO.load(run / name).tensorboard_log is None, name
+    assert len(list((run / "tb").rglob("events.out.tfevents.*"))) == 2
     suffixes = {p.suffix for p in (run / "checkpoints").iterdir()}
     assert suffixes == {".json", ".zip"}  # each checkpoint with its statistics
     assert not list(run.rglob("*.pkl")), "statistics are written as JSON only"
