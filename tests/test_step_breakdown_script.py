@@ -19,3 +19,30 @@ def test_step_breakdown_script_splits_every_env():
         assert total > 0 and parts[0] > 0, line  # the compiled step takes some time
         assert len(shares) == 4 and all(0 <= s <= 100 for s in shares), line
         assert abs(sum(parts) - total) <= 0.03, line  # printed to two decimals
+
+
+def test_frozen_steps_leave_the_lane_blocks_threads_alone(monkeypatch):
+    """``--frozen`` puts the core's arrays back before each call of the compiled step, and
+    not the worker threads' flags among them: a worker asleep whose flags were put back as
+    awake was never woken, and ``--threads 2 --frozen`` hung."""
+    import gymnasium as gym
+    import numpy as np
+
+    from tests.benchmark_scripts import BENCHMARKS
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    import step_breakdown
+
+    venv = gym.make_vec("machining_envs/EndMilling-v0", num_envs=256, num_threads=2)
+    try:
+        venv.reset(seed=0)
+        venv.step(np.zeros((256, 1), dtype=np.float32))  # starts the worker thread
+        blocks = venv.unwrapped._core.blocks
+        flags = [w.ctl for w in blocks._workers]
+        assert flags, "no worker thread to check"
+        restored = step_breakdown._core_arrays(venv.unwrapped._core)
+        assert restored, "no array of the core found"
+        assert not any(np.shares_memory(a, f) for a in restored for f in flags)
+        assert step_breakdown.frozen_step(venv, calls=3) > 0
+    finally:
+        venv.close()
