@@ -2,8 +2,11 @@
 
 import re
 
+import gymnasium as gym
+import numpy as np
+
 import machining_envs
-from tests.benchmark_scripts import run_benchmark
+from tests.benchmark_scripts import BENCHMARKS, run_benchmark
 
 
 def test_step_breakdown_script_splits_every_env():
@@ -25,11 +28,6 @@ def test_frozen_steps_leave_the_lane_blocks_threads_alone(monkeypatch):
     """``--frozen`` puts the core's arrays back before each call of the compiled step, and
     not the worker threads' flags among them: a worker asleep whose flags were put back as
     awake was never woken, and ``--threads 2 --frozen`` hung."""
-    import gymnasium as gym
-    import numpy as np
-
-    from tests.benchmark_scripts import BENCHMARKS
-
     monkeypatch.syspath_prepend(str(BENCHMARKS))
     import step_breakdown
 
