@@ -1199,6 +1199,68 @@ def _segment_distances(row, px, py, n, out):
         out[j] = best
 
 
+@numba.njit(cache=True, inline="always")
+def _near_distance(row, x, y):
+    """A lower bound of the distance of ``(x, y)`` to a segment (``Segment.closest``'s),
+    for :func:`path_distances`: the distance less an allowance for rounding (``1e-13`` of
+    the magnitudes it is computed from, some 500 units in the last place, where square
+    roots of sums of squares, not ``hypot``, and a difference of lengths round by a few).
+    An arc's is found without its angle (``atan2``): a point clearly inside the arc's
+    wedge (:func:`_segment_distances`' cross products) is ``|rho - R|`` from it, one
+    clearly outside is as far as the nearer end, and one near an edge of the wedge, or
+    of an arc whose wedge that test cannot tell, is no nearer than the lesser of the two.
+    Where a length falls outside ``[1e-100, 1e100]`` (squares that under- or overflow)
+    and for an involute: :func:`_segment_distance` itself."""
+    kind = row[0]
+    if kind == _LINE:
+        ux = row[8]
+        uy = row[9]
+        t = (x - row[6]) * ux + (y - row[7]) * uy
+        t = 0.0 if t < 0.0 else (row[10] if t > row[10] else t)
+        dx = x - (row[6] + ux * t)
+        dy = y - (row[7] + uy * t)
+        d = math.sqrt(dx * dx + dy * dy)
+        size = abs(row[6]) + abs(row[7]) + row[10]
+    elif kind == _ARC:
+        cx = row[6]
+        cy = row[7]
+        r = row[8]
+        dx = x - cx
+        dy = y - cy
+        rho = math.sqrt(dx * dx + dy * dy)
+        ex = x - row[12]
+        ey = y - row[13]
+        d0 = math.sqrt(ex * ex + ey * ey)
+        ex = x - row[14]
+        ey = y - row[15]
+        d1 = math.sqrt(ex * ex + ey * ey)
+        ends = d0 if d0 <= d1 else d1
+        radial = abs(rho - r)
+        d = radial if radial < ends else ends  # no nearer than this, wherever the point is
+        if r >= 1e-5 * (abs(cx) + abs(cy) + 1.0) and (row[11] < 3.0 or row[11] > 3.3):
+            m = 1e-8 * rho
+            sg = row[10]
+            a = sg * ((row[12] - cx) / r * dy - (row[13] - cy) / r * dx)  # after the start
+            b = sg * (dx * (row[15] - cy) / r - dy * (row[14] - cx) / r)  # before the end
+            if row[11] < 3.0:
+                inside = a > m and b > m
+                outside = a < -m or b < -m
+            else:
+                inside = a > m or b > m
+                outside = a < -m and b < -m
+            if inside:
+                d = radial
+            elif outside:
+                d = ends
+        d = d if rho > 1e-100 else -1.0  # (the centre: its tests are not sure)
+        size = abs(cx) + abs(cy) + r
+    else:
+        return _segment_distance(row, x, y)
+    if 1e-100 <= d <= 1e100:
+        return d - 1e-13 * (size + abs(x) + abs(y))
+    return _segment_distance(row, x, y)
+
+
 @numba.njit(cache=True)
 def path_distances(tab, px, py, n, out, scratch, lower, order):
     """``Path.distances(px[:n], py[:n])`` into ``out[:n]`` (scratch: ``scratch`` of ``n``
@@ -1206,28 +1268,32 @@ def path_distances(tab, px, py, n, out, scratch, lower, order):
 
     The numbers are those of ``Path.distances`` (each point's least distance over the
     segments, each distance computed as there), found with less work: the segments are
-    tried from the one nearest the points' centroid, and a segment is skipped when it can
-    be no nearer to any point than the largest distance found so far. A distance moves by
-    at most what its point moves, so a point lies no nearer to a segment than the
-    centroid's distance to it less the points' spread about the centroid; the test
-    leaves a margin far above the rounding of these numbers."""
+    tried from the one nearest a centre of the points, and a segment is skipped when it
+    can be no nearer to any point than the largest distance found so far. A distance moves
+    by at most what its point moves, so a point lies no nearer to a segment than the
+    centre's distance to it less the points' spread about the centre; the test leaves a
+    margin far above the rounding of these numbers. Any centre makes the test sound: here
+    the midpoint of the first and last points (a block's points run along the path), and
+    the centre's distances are :func:`_near_distance`'s, without its arc angles.
+    """
     ns = tab.shape[0]
     if ns == 1:
         _segment_distances(tab[0], px, py, n, out)
         return
-    mx = np_mean(px[:n])
-    my = np_mean(py[:n])
+    mx = 0.5 * (px[0] + px[n - 1])
+    my = 0.5 * (py[0] + py[n - 1])
     spread2 = 0.0
-    for j in range(n):
+    total = 0.0  # NaN where a point is not finite (or the centre): then nothing is skipped
+    for j in range(n):  # (a plain largest, which the compiler keeps in registers)
         dx = px[j] - mx
         dy = py[j] - my
         h2 = dx * dx + dy * dy
-        if h2 > spread2 or h2 != h2:
-            spread2 = h2
-    spread = math.sqrt(spread2)  # NaN where a point is not finite: then nothing is skipped
+        spread2 = h2 if h2 > spread2 else spread2
+        total += h2
+    spread = math.sqrt(spread2) if total == total else total
     scale = abs(mx) + abs(my) + spread
     for k in range(ns):  # a stable insertion sort of the segments by their lower bound
-        v = _segment_distance(tab[k], mx, my) - spread
+        v = _near_distance(tab[k], mx, my) - spread
         lower[k] = v
         i = k
         while i > 0 and lower[order[i - 1]] > v:

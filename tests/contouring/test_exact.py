@@ -13,6 +13,9 @@ from machining_envs.contouring.paths import (
     Involute,
     Line,
     Path,
+    _near_distance,
+    _segment_distance,
+    _segment_distances,
     path_distance,
     path_distances,
     path_heading,
@@ -162,6 +165,52 @@ def test_compiled_geometry_is_the_path_methods(path):
         # a difference of two lengths: equal to 1e-12 mm.
         ref = path.distances(px[lo : lo + n], py[lo : lo + n])
         np.testing.assert_allclose(out, ref, rtol=0, atol=1e-12)
+
+
+def _all_segments(tab, px, py):
+    """Each point's least distance over every segment of ``tab``, none skipped."""
+    best, d = np.full(px.size, np.inf), np.empty(px.size)
+    for row in tab:
+        _segment_distances(row, px, py, px.size, d)
+        best = np.where(d < best, d, best)
+    return best
+
+
+def _blocks(path):
+    """Blocks of 50 points as the feed env asks for them (a block's set points along the
+    path, the tool's positions near them: close, or up to a tenth of the segments away),
+    starting anywhere, at every junction and just before it; and clouds about each arc's
+    centre and ends (the edges of its wedge), from tight to as wide as the arc."""
+    tab, length = path.table(), path.length
+    starts = np.concatenate([RNG.uniform(0.0, length, 30), tab[:, 1], tab[:, 1] - 0.3])
+    for s0 in starts.tolist():
+        for step, off in ((0.01, 1e-4), (0.1, 0.01), (0.5, 0.3), (2.0, 2.0)):
+            x, y = path.points(np.clip(s0 + step * np.arange(50), 0.0, length))
+            yield x + RNG.normal(0.0, off, 50), y + RNG.normal(0.0, off, 50)
+    for row in tab[tab[:, 0] == 1.0]:
+        for cx, cy in ((row[6], row[7]), (row[12], row[13]), (row[14], row[15])):
+            for spread in (1e-7, 1e-3, 0.1 * row[8], row[8]):
+                yield cx + RNG.normal(0.0, spread, 50), cy + RNG.normal(0.0, spread, 50)
+
+
+@pytest.mark.parametrize("path", _paths(), ids=lambda p: f"{p.name}-{len(p.segments)}")
+def test_distances_skip_no_segment_that_is_nearer(path):
+    """``path_distances`` skips a segment by a lower bound of its distance (from a centre
+    of the block's points, ``_near_distance``): every block gives each point's least
+    distance over all the segments, to the last bit. And the bound is one, rounding
+    included: never above the segment's distance, for points anywhere about each
+    segment."""
+    tab = path.table()
+    lower, order = np.empty(len(tab)), np.empty(len(tab), np.int64)
+    out, scratch = np.empty(50), np.empty(50)
+    for px, py in _blocks(path):
+        path_distances(tab, px, py, 50, out, scratch, lower, order)
+        assert out.tobytes() == _all_segments(tab, px, py).tobytes()
+    for row in tab:
+        cx, cy, r = row[3], row[4], row[5]  # the segment's bounding circle
+        for spread in (1e-6 * r, 0.01 * r, r, 10.0 * r):
+            for x, y in RNG.normal((cx, cy), spread, (200, 2)).tolist():
+                assert _near_distance(row, x, y) <= _segment_distance(row, x, y)
 
 
 @pytest.mark.parametrize("kind", ["hinf", "pi"])
