@@ -390,10 +390,15 @@ Segment = Line | Arc | Involute
 def _bounding_circle(seg) -> tuple[float, float, float]:
     """A circle ``(cx, cy, radius)`` that contains the whole segment.
 
-    From 257 points along it: their centroid, and the largest distance to them plus the
-    largest gap between neighbours (the curve between two neighbours stays within that).
-    Compiled (:func:`_bounding_circle_of_row`): the numbers of ``np.linspace``, the
-    segment's ``points``, ``np.mean`` and ``np.hypot``, to the last bit.
+    A line's: its midpoint and half its length. An arc's of at most half a turn: the
+    circle on its chord (the arc sees the chord at a right angle or more, so it lies
+    inside); of more: its own circle. Each radius is widened by ``1e-9`` of the
+    segment's magnitudes (the coordinates of its centre or start, its length or radius),
+    far above the rounding of its points. An involute's, from 257 points along it: their
+    centroid, and the largest distance to them plus the largest gap between neighbours
+    (the curve between two neighbours stays within that), the numbers of
+    ``np.linspace``, the segment's ``points``, ``np.mean`` and ``np.hypot`` to the last
+    bit. Compiled (:func:`_bounding_circle_of_row`).
     """
     cx, cy, r = _bounding_circle_of_row(np.array(seg._row()), float(seg.length))
     return float(cx), float(cy), float(r)
@@ -402,6 +407,17 @@ def _bounding_circle(seg) -> tuple[float, float, float]:
 @numba.njit(cache=True)
 def _bounding_circle_of_row(row, length):
     """:func:`_bounding_circle` of the segment ``row`` (of arc length ``length``)."""
+    kind = row[0]
+    if kind == _LINE:
+        half = 0.5 * length
+        size = abs(row[6]) + abs(row[7]) + length
+        return row[6] + row[8] * half, row[7] + row[9] * half, half + 1e-9 * size
+    if kind == _ARC:
+        size = abs(row[6]) + abs(row[7]) + row[8]
+        if row[11] > math.pi:
+            return row[6], row[7], row[8] + 1e-9 * size
+        half = 0.5 * math.hypot(row[14] - row[12], row[15] - row[13])
+        return 0.5 * (row[12] + row[14]), 0.5 * (row[13] + row[15]), half + 1e-9 * size
     n = 257
     x = np.empty(n)
     y = np.empty(n)

@@ -158,36 +158,77 @@ def test_random_smooth_builds_what_the_checked_constructors_build():
         Path.random_smooth(np.random.default_rng(0), line_mm=(1e-12, 1e-12), line_probability=1.0)
 
 
+def _segments_at_scales(rng):
+    """Lines, arcs (every sweep, half a turn and just either side of it included) and
+    involutes, about the origin or far from it, tiny to huge."""
+    segs = []
+    for scale in (1e-150, 1e-6, 1.0, 1e3, 1e150, 1e160):
+        sweeps = [*rng.uniform(0.01, 6.28, 8), math.pi, math.pi - 1e-9, math.pi + 1e-9]
+        for sweep in sweeps:
+            c = tuple(rng.normal(size=2) * scale * 10 ** rng.uniform(-3, 3))
+            r = scale * rng.uniform(0.01, 10)
+            sign = rng.choice([-1, 1])
+            segs.append(Arc(c, r, rng.uniform(-7, 7), sweep * sign))
+            segs.append(Involute(c, r, rng.uniform(-7, 7), 0.0, rng.uniform(0.01, 20)))
+            if scale >= 1e-6:
+                segs.append(Line(c, tuple(np.add(c, rng.normal(size=2) * scale))))
+    return segs
+
+
 def test_bounding_circles_hold_their_segments():
     """Each row's bounding circle (table columns 3-5) holds its whole segment: the contour
-    error skips segments by it."""
+    error skips segments by it. Paths as drawn, and single segments of every kind and
+    sweep at every scale (5001 points along each)."""
+    from machining_envs.contouring.paths import _bounding_circle
+
     rng = np.random.default_rng(2)
     paths = [Path.random_smooth(rng, n_segments=(6, 6)) for _ in range(5)]
     paths += [Path.paper_involute(), Path.paper_corner(), Path.paper_circle()]
     for p in paths:
         for seg, (cx, cy, r) in zip(p.segments, p.table()[:, 3:6], strict=True):
+            assert (cx, cy, r) == _bounding_circle(seg)
             x, y = seg.points(np.linspace(0.0, seg.length, 5001))
             assert np.max(np.hypot(x - cx, y - cy)) <= r
+    for seg in _segments_at_scales(rng):
+        cx, cy, r = _bounding_circle(seg)
+        x, y = seg.points(np.linspace(0.0, seg.length, 5001))
+        assert np.max(np.hypot(x - cx, y - cy)) <= r
 
 
-def test_bounding_circles_are_numpys_to_the_last_bit():
-    """The compiled bounding circle (which takes hypot only near the largest sums of
-    squares) gives numpy's numbers over 257 points, at any scale."""
+def test_bounding_circles_of_lines_and_arcs_are_the_least():
+    """A line's and an arc's bounding circle is the least that holds it, but for the
+    widening (1e-9 of the segment's magnitudes): the midpoint and half length; the circle
+    on the chord of an arc of half a turn or less; the arc's own circle beyond."""
     from machining_envs.contouring.paths import _bounding_circle
 
-    rng = np.random.default_rng(4)
-    segs = []
-    for scale in (1e-150, 1e-6, 1.0, 1e3, 1e150, 1e160):
-        for _ in range(20):
-            c = tuple(rng.normal(size=2) * scale * 10 ** rng.uniform(-3, 3))
-            r = scale * rng.uniform(0.01, 10)
-            segs.append(
-                Arc(c, r, rng.uniform(-7, 7), rng.uniform(0.01, 6.28) * rng.choice([-1, 1]))
-            )
-            segs.append(Involute(c, r, rng.uniform(-7, 7), 0.0, rng.uniform(0.01, 20)))
-            if scale >= 1e-6:
-                segs.append(Line(c, tuple(np.add(c, rng.normal(size=2) * scale))))
-    for seg in segs:
+    for seg in _segments_at_scales(np.random.default_rng(3)):
+        if isinstance(seg, Involute):
+            continue
+        cx, cy, r = _bounding_circle(seg)
+        if isinstance(seg, Line):
+            (x0, y0), (x1, y1) = seg.start, seg.end
+            size = abs(x0) + abs(y0) + seg.length
+            least = (0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.5 * seg.length)
+        elif abs(seg.sweep) <= math.pi:
+            (x0, y0), (x1, y1) = seg.start, seg.end
+            size = abs(seg.center[0]) + abs(seg.center[1]) + seg.radius
+            least = (0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.5 * math.hypot(x1 - x0, y1 - y0))
+        else:
+            size = abs(seg.center[0]) + abs(seg.center[1]) + seg.radius
+            least = (*seg.center, seg.radius)
+        tol = 1e-12 * size
+        assert abs(cx - least[0]) <= tol and abs(cy - least[1]) <= tol
+        assert least[2] < r <= least[2] + 1.01e-9 * size
+
+
+def test_bounding_circles_of_involutes_are_numpys_to_the_last_bit():
+    """An involute's compiled bounding circle (which takes hypot only near the largest sums
+    of squares) gives numpy's numbers over 257 points, at any scale."""
+    from machining_envs.contouring.paths import _bounding_circle
+
+    for seg in _segments_at_scales(np.random.default_rng(4)):
+        if not isinstance(seg, Involute):
+            continue
         x, y = seg.points(np.linspace(0.0, seg.length, 257))
         cx, cy = np.mean(x), np.mean(y)
         far = np.max(np.hypot(x - cx, y - cy))
