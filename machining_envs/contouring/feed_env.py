@@ -824,8 +824,8 @@ class _FeedCore:
         self._grow(int(drawn.ints[:, 0].max()), 1)
         ks = settle_batch(self, lanes, factory.build_lane, (drawn,), factory.actuation,
                           factory.name)  # fmt: skip
-        for i, k in enumerate(ks):
-            self.loops.start(k, true_params_of(drawn.scale[i].tolist(), self.params))
+        scales = drawn.scale.tolist()
+        self.loops.start_lanes(lanes, [true_params_of(sc, self.params) for sc in scales])
         t_max = self.max_episode_time_s
         _start_drawn_lanes(
             lanes, drawn.ints, drawn.floats, drawn.tabs, drawn.feed, drawn.t_load,

@@ -164,27 +164,39 @@ assert tuple(_FIELD_RULES) == tuple(f.name for f in dataclasses.fields(Contourin
 @functools.lru_cache(maxsize=64)
 def _axis_zoh(a: float, load_gain: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """``machining_envs.core.lti.zoh(A, B, dt)`` of one axis (``A = [[0, 1], [0, -a]]``,
-    ``B = [[0, 0], [a, g]]``), read-only: :func:`_block_expm` of the same block matrix."""
-    # The block matrix times dt, product by product as numpy forms it.
-    z4 = (0.0, 0.0, 0.0, 0.0)
-    e = _block_expm(((0.0, 1.0 * dt, 0.0, 0.0), (0.0, -a * dt, a * dt, load_gain * dt), z4, z4))
+    ``B = [[0, 0], [a, g]]``), read-only: :func:`axes_zoh` of the one axis."""
+    e = axes_zoh(np.array([a]), np.array([load_gain]), np.array([dt]))[0]
     phi, gam = e[:2, :2], e[:2, 2:]
     phi.setflags(write=False)
     gam.setflags(write=False)
     return phi, gam
 
 
-def _block_expm(block) -> np.ndarray:
-    """``scipy.linalg.expm(block)`` of an axis's 4x4 ZOH block (upper triangular), to the
-    last bit, in a fraction of the time where no scaling is needed.
+def axes_zoh(a: np.ndarray, load_gain: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """The exponentials ``(n, 4, 4)`` of :func:`_axis_zoh`'s block matrices for ``n`` axes
+    (arrays of their ``a``, ``g`` and ``dt``): ``Phi`` in ``[:, :2, :2]``, ``Gamma`` in
+    ``[:, :2, 2:]``. A vector env's lanes discretise their tables, whose inertias are
+    random, at every reset: here the blocks of all of them are formed at once.
 
-    A vector env's lane discretises its table, whose inertias are random, at every reset;
-    ``expm``'s checks and its general handling of batches and triangular input then cost
-    some 50 us an axis, its compiled Pade step a few. Here that step runs on its own
-    (:func:`_pade_expm`); where it does not apply, ``expm`` itself runs.
-    """
-    e = None if _PADE is None else _pade_expm(block, _PADE)
-    return expm(np.array(block)) if e is None else e
+    Each is ``scipy.linalg.expm(block)`` (upper triangular) to the last bit, in a fraction
+    of its time where no scaling is needed: ``expm``'s checks and its general handling of
+    batches and triangular input cost some 50 us an axis, its compiled Pade step a few, and
+    that step runs on its own here (:func:`_pade_step`); where it does not apply,
+    ``expm`` itself runs."""
+    n = a.shape[0]
+    work = np.zeros((n, 5, 4, 4))
+    # Each block matrix times dt, product by product as numpy forms it.
+    work[:, 0, 0, 1] = 1.0 * dt
+    work[:, 0, 1, 1] = -a * dt
+    work[:, 0, 1, 2] = a * dt
+    work[:, 0, 1, 3] = load_gain * dt
+    blocks = work[:, 0].copy()  # (the Pade step spoils a block it declines)
+    done = [_PADE is not None and _pade_step(work[i], _PADE) for i in range(n)]
+    out = work[:, 0]
+    _zero_below(out)
+    for i in [i for i, ok in enumerate(done) if not ok]:
+        out[i] = expm(blocks[i])
+    return out
 
 
 def _pade_expm(block, pade) -> np.ndarray | None:
@@ -193,15 +205,27 @@ def _pade_expm(block, pade) -> np.ndarray | None:
     where scaling is needed. With no scaling (``s = 0``: every table of the scenarios,
     whose ``a dt`` is 0.02 to 0.07) ``expm`` returns the Pade approximant of an upper
     triangular matrix with the part below the diagonal zeroed, as here."""
-    pick, uv = pade
     work = np.empty((5, 4, 4))
     work[0] = block
-    m, s = pick(work)
-    if s != 0 or m < 0 or uv(work, m) != 0:
+    if not _pade_step(work, pade):
         return None
-    e = work[0]
-    e[1, 0] = e[2, 0] = e[2, 1] = e[3, 0] = e[3, 1] = e[3, 2] = 0.0
-    return e
+    _zero_below(work[0])
+    return work[0]
+
+
+def _pade_step(work: np.ndarray, pade) -> bool:
+    """scipy's Pade step on ``work`` (``(5, 4, 4)``, C-ordered, the block in ``work[0]``),
+    the approximant left in ``work[0]`` (its part below the diagonal not yet zeroed:
+    :func:`_zero_below`); False (``work`` spoilt) where scaling is needed."""
+    pick, uv = pade
+    m, s = pick(work)
+    return not (s != 0 or m < 0 or uv(work, m) != 0)
+
+
+def _zero_below(e: np.ndarray) -> None:
+    """The part below the diagonal of the 4x4 matrix ``e`` (or of each of a stack) set to
+    zero."""
+    e[..., 1, 0] = e[..., 2, 0] = e[..., 2, 1] = e[..., 3, 0] = e[..., 3, 1] = e[..., 3, 2] = 0.0
 
 
 def _usable_pade():
@@ -223,7 +247,7 @@ def _usable_pade():
     return pade
 
 
-#: scipy's compiled Pade step for :func:`_block_expm`, or None where it cannot be used.
+#: scipy's compiled Pade step for :func:`axes_zoh`, or None where it cannot be used.
 _PADE = _usable_pade()
 
 

@@ -38,7 +38,7 @@ import numpy as np
 from scipy.linalg import schur, solve_continuous_are
 from scipy.signal import cont2discrete
 
-from machining_envs.contouring.plant import AXES, ContouringParams
+from machining_envs.contouring.plant import AXES, ContouringParams, axes_zoh
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_integer, check_range
 from machining_envs.core.kernels import (
     add8,
@@ -804,6 +804,24 @@ _O_AC, _O_BC, _O_CU, _O_DU, _O_GU, _O_TQ, _O_UMAX, _O_END = _OFFSETS
 _S_AC, _S_BC, _S_CU, _S_GU = (dict(_LANE_ARRAYS)[k] for k in ("ac", "bc", "cu", "gu"))
 
 
+@numba.njit(cache=True)
+def _close_lanes(lanes, e, da0, db0, dc0, dd0, da1, db1, dc1, dd1, buf):
+    """:func:`_close_axis` of both axes of each lane ``lanes[i]`` on the exponentials
+    ``e[i, axis]`` (``plant.axes_zoh``: ``Phi`` then ``Gamma``), into its row of ``buf``
+    (``ServoLanes.buf``: ``Du``'s entry and ``Gamma``'s first column too)."""
+    for i in range(lanes.size):
+        ac, bc, cu, du, gu, _, _ = lane_loops(buf[lanes[i]])
+        for k in range(2):
+            phi = e[i, k, :2, :2]
+            gam = e[i, k, :2, 2:]
+            if k == 0:
+                du[k] = _close_axis(phi, gam, da0, db0, dc0, dd0, ac[k], bc[k], cu[k])
+            else:
+                du[k] = _close_axis(phi, gam, da1, db1, dc1, dd1, ac[k], bc[k], cu[k])
+            gu[k, 0] = gam[0, 0]
+            gu[k, 1] = gam[1, 0]
+
+
 @numba.njit(cache=True, inline="always")
 def lane_loops(row):
     """A lane's loops as views of its row of ``ServoLanes.buf`` (``_LANE_ARRAYS``):
@@ -887,15 +905,26 @@ class ServoLanes:
 
     def start(self, lane: int, truth: ContouringParams) -> None:
         """Set ``lane``'s loops to the designs on the plant ``truth``."""
-        for k, axis in enumerate(AXES):
-            phi, gam = truth.discrete_axis(axis)
-            da, db, dc, dd = self._design_arrays[k]
-            self.du[lane, k] = _close_axis(
-                phi, gam, da, db, dc, dd, self.ac[lane, k], self.bc[lane, k], self.cu[lane, k]
-            )
-            self.gu[lane, k] = gam[:, 0]
-            self.tq[lane, k] = truth.inertia_kgm2(axis) / (truth.mm_per_rad * truth.sample_time_s)
-        self.umax[lane] = truth.command_max_mm_s
+        self.start_lanes(np.array([lane]), [truth])
+
+    def start_lanes(self, lanes: np.ndarray, truths) -> None:
+        """Set each lane ``lanes[i]``'s loops to the designs on the plant ``truths[i]``:
+        both axes of every lane discretised in one call (``plant.axes_zoh``), their loops
+        closed in one compiled call (:func:`_close_lanes`)."""
+        n = len(truths)
+        # ContouringParams' derived quantities, in their order of operations.
+        gain = np.array([t.loop_gain_Nms for t in truths])
+        mm_per_rad = np.array([t.mm_per_rad for t in truths])
+        dt = np.array([t.sample_time_s for t in truths])
+        inertia = np.array([[t.inertia_kgm2(axis) for axis in AXES] for t in truths])
+        pole = gain[:, None] / inertia  # velocity_pole
+        load = -mm_per_rad[:, None] / inertia  # discrete_axis's load gain
+        steps = np.repeat(dt, 2)
+        e = axes_zoh(pole.ravel(), load.ravel(), steps).reshape((n, 2, 4, 4))
+        ((da0, db0, dc0, dd0), (da1, db1, dc1, dd1)) = self._design_arrays
+        _close_lanes(lanes, e, da0, db0, dc0, dd0, da1, db1, dc1, dd1, self.buf)
+        self.tq[lanes] = inertia / (mm_per_rad * dt)[:, None]
+        self.umax[lanes] = [t.command_max_mm_s for t in truths]
 
 
 class ServoLoop:

@@ -134,6 +134,7 @@ def test_discretisation_is_the_zoh_of_core_to_the_last_bit(fast, monkeypatch):
     if not fast:  # else the path the module chose at import (expm where no Pade step)
         monkeypatch.setattr(plant_module, "_PADE", None)
     rng = np.random.default_rng(0)
+    blocks = []
     for k in range(400):
         p = P.replace(
             inertia_x_kgm2=P.inertia_x_kgm2 * math.exp(rng.uniform(-0.7, 0.7)),
@@ -150,3 +151,10 @@ def test_discretisation_is_the_zoh_of_core_to_the_last_bit(fast, monkeypatch):
             ref_phi, ref_gam = zoh(*p.continuous_axis(axis), p.sample_time_s)
             assert phi.tobytes() == ref_phi.tobytes() and gam.tobytes() == ref_gam.tobytes()
             assert not phi.flags.writeable and not gam.flags.writeable
+            blocks.append((a, g, p.sample_time_s, ref_phi, ref_gam))
+    # Many axes at once (a vector env's lanes at a reset), those expm scales among them.
+    a, g, dt = (np.array([b[i] for b in blocks]) for i in range(3))
+    e = plant_module.axes_zoh(a, g, dt)
+    for i, (*_, ref_phi, ref_gam) in enumerate(blocks):
+        assert e[i, :2, :2].tobytes() == ref_phi.tobytes()
+        assert e[i, :2, 2:].tobytes() == ref_gam.tobytes()

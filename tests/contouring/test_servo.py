@@ -140,6 +140,41 @@ def test_lane_rows_hold_the_arrays_the_kernel_reads():
         np.testing.assert_array_equal(view, named, err_msg=name)
 
 
+@pytest.mark.parametrize("design", [pi_design, hinf_2dof_design])
+def test_lanes_started_together_hold_each_plants_closed_loop(design):
+    """``ServoLanes.start_lanes`` (every lane's axes discretised at once, their loops closed
+    in one compiled call) writes, for each lane on its own plant, ``closed_loop``'s
+    matrices (numpy's products) to the last bit, the torque factor and the command limit;
+    the lanes it is not given keep theirs."""
+    from machining_envs.contouring.servo import ServoLanes
+
+    designs = tuple(design(P, ax) for ax in "xy")
+    lanes = ServoLanes(designs, 50, 5)
+    lanes.buf[:] = 7.0
+    truths = [
+        P.replace(inertia_x_kgm2=P.inertia_x_kgm2 * sx, inertia_y_kgm2=P.inertia_y_kgm2 * sy)
+        for sx, sy in ((0.8, 1.25), (1.0, 1.0), (1.13, 0.91))
+    ]
+    truths[2] = truths[2].replace(
+        velocity_loop_gain=P.velocity_loop_gain * 1.7, motor_max_rpm=900.0
+    )
+    started = np.array([3, 0, 4])
+    lanes.start_lanes(started, truths)
+    ns = lanes.n_states_axis
+    for lane, truth in zip(started.tolist(), truths, strict=True):
+        for k, (axis, d) in enumerate(zip("xy", designs, strict=True)):
+            a, b, _, cu, du = closed_loop(truth, d, axis)
+            np.testing.assert_array_equal(lanes.ac[lane, k][:ns, :ns], a.T)
+            np.testing.assert_array_equal(lanes.bc[lane, k][:, :ns], b.T)
+            np.testing.assert_array_equal(lanes.cu[lane, k][:ns], cu[0])
+            assert lanes.du[lane, k] == du[0, 0]
+            np.testing.assert_array_equal(lanes.gu[lane, k], truth.discrete_axis(axis)[1][:, 0])
+            tq = truth.inertia_kgm2(axis) / (truth.mm_per_rad * truth.sample_time_s)
+            assert lanes.tq[lane, k] == tq
+        assert lanes.umax[lane] == truth.command_max_mm_s
+    assert (lanes.buf[[1, 2]] == 7.0).all()
+
+
 def test_a_nan_state_runs_through_unclipped():
     """A diverged loop (NaN state) gives NaN outputs and is not reported as clipped."""
     loop = ServoLoop(P, tuple(pi_design(P, ax) for ax in "xy"), 50)
