@@ -1120,6 +1120,24 @@ def path_distance(tab, px, py):
 # -- contour errors of many points (Path.distances, numpy arrays) --
 
 
+@numba.njit(cache=True, inline="always")
+def _arc_wedge(row):
+    """An arc's wedge, the angles it spans seen from its centre, as two cross products
+    with the unit vectors to its ends: ``(sg, wedge, join, u0x, u0y, u1x, u1y)``. A point
+    whose offset ``(dx, dy)`` from the centre has ``sg (u0x dy - u0y dx)`` (after the
+    start) and ``sg (dx u1y - dy u1x)`` (before the end) above ``1e-8 rho`` lies well
+    inside the wedge: both where ``wedge`` (a sweep under 3 rad: the meet of two
+    half-planes), either where ``join`` (over 3.3 rad, beyond pi: their join). Neither
+    holds for a sweep between, nor for a radius tiny beside the centre's coordinates;
+    otherwise the unit vectors lie within 1e-10 of the angles' (margin 1e-8)."""
+    cx = row[6]
+    cy = row[7]
+    r = row[8]
+    sized = r >= 1e-5 * (abs(cx) + abs(cy) + 1.0)
+    return (row[10], row[11] < 3.0 and sized, row[11] > 3.3 and sized, (row[12] - cx) / r,
+            (row[13] - cy) / r, (row[14] - cx) / r, (row[15] - cy) / r)  # fmt: skip
+
+
 @numba.njit(cache=True)
 def _segment_distances(row, px, py, n, out):
     """``Segment.closest_many(px[:n], py[:n])[0]`` into ``out[:n]``."""
@@ -1138,23 +1156,12 @@ def _segment_distances(row, px, py, n, out):
                 out[j] = math.hypot(px[j] - (x0 + ux * t), py[j] - (y0 + uy * t))
         return
     if kind == _ARC:
-        # A point well inside the arc's wedge (by two cross products with the unit vectors
-        # to its ends) has the distance |rho - R| without the angle. A sweep under 3 rad
-        # makes the wedge the meet of two half-planes (both products positive), a sweep
-        # over 3.3 rad (beyond pi) their join (either positive); a radius not tiny beside
-        # the centre's coordinates keeps those unit vectors within 1e-10 of the angles'
-        # (margin 1e-8).
+        # A point well inside the arc's wedge (_arc_wedge) has the distance |rho - R|
+        # without the angle.
         cx = row[6]
         cy = row[7]
         r = row[8]
-        sg = row[10]
-        sized = r >= 1e-5 * (abs(cx) + abs(cy) + 1.0)
-        wedge = row[11] < 3.0 and sized
-        join = row[11] > 3.3 and sized
-        u0x = (row[12] - cx) / r
-        u0y = (row[13] - cy) / r
-        u1x = (row[14] - cx) / r
-        u1y = (row[15] - cy) / r
+        sg, wedge, join, u0x, u0y, u1x, u1y = _arc_wedge(row)
         # First, in vectors, the points inside the wedge whose radius is ordinary (its
         # number libm's, vector_hypot); the others (marked -1) then point by point.
         for j in range(n):
@@ -1222,9 +1229,9 @@ def _near_distance(row, x, y):
     the magnitudes it is computed from, some 500 units in the last place, where square
     roots of sums of squares, not ``hypot``, and a difference of lengths round by a few).
     An arc's is found without its angle (``atan2``): a point clearly inside the arc's
-    wedge (:func:`_segment_distances`' cross products) is ``|rho - R|`` from it, one
-    clearly outside is as far as the nearer end, and one near an edge of the wedge, or
-    of an arc whose wedge that test cannot tell, is no nearer than the lesser of the two.
+    wedge (:func:`_arc_wedge`) is ``|rho - R|`` from it, one clearly outside is as far as
+    the nearer end, and one near an edge of the wedge, or of an arc whose wedge that test
+    cannot tell, is no nearer than the lesser of the two.
     Where a length falls outside ``[1e-100, 1e100]`` (squares that under- or overflow)
     and for an involute: :func:`_segment_distance` itself."""
     kind = row[0]
@@ -1253,12 +1260,12 @@ def _near_distance(row, x, y):
         ends = d0 if d0 <= d1 else d1
         radial = abs(rho - r)
         d = radial if radial < ends else ends  # no nearer than this, wherever the point is
-        if r >= 1e-5 * (abs(cx) + abs(cy) + 1.0) and (row[11] < 3.0 or row[11] > 3.3):
+        sg, wedge, join, u0x, u0y, u1x, u1y = _arc_wedge(row)
+        if wedge or join:
             m = 1e-8 * rho
-            sg = row[10]
-            a = sg * ((row[12] - cx) / r * dy - (row[13] - cy) / r * dx)  # after the start
-            b = sg * (dx * (row[15] - cy) / r - dy * (row[14] - cx) / r)  # before the end
-            if row[11] < 3.0:
+            a = sg * (u0x * dy - u0y * dx)  # after the start
+            b = sg * (dx * u1y - dy * u1x)  # before the end
+            if wedge:
                 inside = a > m and b > m
                 outside = a < -m or b < -m
             else:

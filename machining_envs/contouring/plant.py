@@ -191,10 +191,10 @@ def axes_zoh(a: np.ndarray, load_gain: np.ndarray, dt: np.ndarray) -> np.ndarray
     work[:, 0, 1, 2] = a * dt
     work[:, 0, 1, 3] = load_gain * dt
     blocks = work[:, 0].copy()  # (the Pade step spoils a block it declines)
-    done = [_PADE is not None and _pade_step(work[i], _PADE) for i in range(n)]
+    declined = [i for i in range(n) if _PADE is None or not _pade_step(work[i], _PADE)]
     out = work[:, 0]
     _zero_below(out)
-    for i in [i for i, ok in enumerate(done) if not ok]:
+    for i in declined:
         out[i] = expm(blocks[i])
     return out
 
