@@ -51,11 +51,11 @@ from machining_envs.contouring.scenarios import (
 )
 from machining_envs.contouring.servo import (
     LANES,
-    LANES_SCRATCH_SIZE,
+    LANES_STATE_SIZE,
     SCRATCH_SIZE,
     SERVO_KINDS,
     ServoLanes,
-    gather_lanes,
+    gather_states,
     lane_loops,
     run_block,
     run_lanes,
@@ -191,7 +191,7 @@ def _carve_size(nb, n_seg):
 
 def _lanes_size(nb: int) -> int:
     """Values of :func:`_carve_lanes`'s scratch (and seven to align it)."""
-    return LANES * (3 * nb + 1) + LANES_SCRATCH_SIZE + 2 * LANES * (6 * nb + 1) + 7
+    return LANES * (3 * nb + 1) + LANES_STATE_SIZE + 2 * LANES * (6 * nb + 1) + 7
 
 
 @numba.njit(cache=True, inline="always")
@@ -230,7 +230,7 @@ def _carve(sc, nb, n_seg):
 def _carve_lanes(sc, nb, n_seg):
     """The scratch of ``_feed_step``'s lanes taken ``LANES`` at a time, after
     :func:`_carve`'s: each place's set-point path positions ``(LANES, nb + 1)`` and
-    reference x and y ``(LANES, nb)``; ``run_lanes``' coefficients and states; the
+    reference x and y ``(LANES, nb)``; ``run_lanes``' states; the
     references, loads, positions, commands, torques (``nb`` rows) and velocities (``nb +
     1``), each row both axes' places (``[row, axis, place]``). Each starts on a 64-byte
     boundary: ``run_lanes`` reads them eight values at a time, and a vector across two
@@ -242,9 +242,8 @@ def _carve_lanes(sc, nb, n_seg):
     rx = sc[o + m : o + m + LANES * nb].reshape((LANES, nb))
     ry = sc[o + m + LANES * nb : o + m + 2 * LANES * nb].reshape((LANES, nb))
     o += m + 2 * LANES * nb
-    table = sc[o : o + LANES_SCRATCH_SIZE - 128]
-    z = sc[o + LANES_SCRATCH_SIZE - 128 : o + LANES_SCRATCH_SIZE]
-    o += LANES_SCRATCH_SIZE
+    z = sc[o : o + LANES_STATE_SIZE]
+    o += LANES_STATE_SIZE
     row = 2 * LANES
     ref = sc[o : o + row * nb]
     load = sc[o + row * nb : o + 2 * row * nb]
@@ -253,7 +252,7 @@ def _carve_lanes(sc, nb, n_seg):
     torque = sc[o + 4 * row * nb : o + 5 * row * nb]
     vel = sc[o + 5 * row * nb : o + 6 * row * nb + row]
     assert vel.size == row * (nb + 1)  # the buffer has room for every view
-    return st, rx, ry, table, z, ref, load, pos, cmd, torque, vel
+    return st, rx, ry, z, ref, load, pos, cmd, torque, vel
 
 
 #: Columns of ``_FeedCore.lf`` (per-lane floats) and ``_FeedCore.li`` (per-lane integers).
@@ -293,12 +292,15 @@ def _lane_inputs(k, tabs, nseg, pf, actions, applied, clipped, n_clipped, c, s, 
     for j in range(n + 1):
         st[j] = min(s0 + vts * float(j), length)
     path_points(tab, length, st, n, rx, ry, pts)
-    nl = n_load[k]
     for j in range(n):
         ref[j, 0] = rx[j] - x0
         ref[j, 1] = ry[j] - y0
+    # The load torque of each period: the last step of the lane's load at or before its
+    # instant. The instants rise, so each search goes on from the last one's step.
+    nl = n_load[k]
+    i = 0
+    for j in range(n):
         t = float(kk[k] + j) * ts + 1e-12
-        i = 0
         while i < nl and load_t[k, i] <= t:
             i += 1
         load[j, 0] = load_v[k, i, 0]
@@ -356,10 +358,14 @@ def _lane_outputs(k, tabs, nseg, pf, actions, applied, c, w, look, lo, hi, tol, 
     etrack = py_hypot(rxe - xe, rye - ye)
     diverged = diverged or etrack > c[4]
     hit = -1
-    for j in range(n):
-        if st[j + 1] >= length and math.hypot(px[j] - pf[k, 3], py[j] - pf[k, 4]) <= c[3]:
-            hit = j
-            break
+    # The set point's positions rise along the block (a feed and override never negative),
+    # so none reaches the end unless the last does: the search is skipped (the test keeps it
+    # exact for any positions).
+    if st[n] >= length or not st[n] >= st[0]:
+        for j in range(n):
+            if st[j + 1] >= length and math.hypot(px[j] - pf[k, 3], py[j] - pf[k, 4]) <= c[3]:
+                hit = j
+                break
     finished = hit >= 0 and not diverged
     terminated = diverged or finished
     truncated = (not terminated) and t >= pf[k, 7] - 1e-12
@@ -409,12 +415,14 @@ def _lane_outputs(k, tabs, nseg, pf, actions, applied, c, w, look, lo, hi, tol, 
 
 
 @numba.njit(cache=True, _nrt=False, nogil=True)
-def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, state, consts, obs, flags, out, sc,
-               order):  # fmt: skip
+def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, groups, lane, state, consts, obs,
+               flags, out, sc, order):  # fmt: skip
     """One decision step of every lane (``ContouringFeedEnv.step`` after its input checks).
 
     ``lf`` and ``li`` hold the per-lane floats and integers (columns ``_LF``, ``_LI``),
-    ``loops`` the lanes' closed loops (``ServoLanes.buf``),
+    ``loops`` the lanes' closed loops (``ServoLanes.buf``), ``groups`` the same eight lanes
+    to a row (``ServoLanes.groups``, of all lanes: a block's lanes are ``lane[0]`` on,
+    ``lane`` every lane's index),
     ``consts`` the env's constants: ``c`` = ``consts[:8]`` = ``[n_sub, Ts, tolerance,
     in_position, divergence, override mid, override half, actuated]``: where ``actuated``
     is 1 the override is ``applied[k]`` (what the CNC's actuation made of the action's),
@@ -459,7 +467,7 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, state, consts, obs, flag
         return
     # Several lanes: their loops LANES at a time (run_lanes: the same numbers, faster).
     _, _, _, px, py, eps, tmp, _, _, _, _, _, _, _, lower, pts = _carve(sc, n, order.size)
-    gst, grx, gry, table, z, gref, gload, gpos, gcmd, gtorque, gvel = _carve_lanes(
+    gst, grx, gry, z, gref, gload, gpos, gcmd, gtorque, gvel = _carve_lanes(
         sc, n, order.size
     )
     ref3 = gref.reshape((n, 2, LANES))
@@ -469,6 +477,7 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, state, consts, obs, flag
     torque3 = gtorque.reshape((n, 2, LANES))
     vel3 = gvel.reshape((n + 1, 2, LANES))
     ns = state.shape[1] // 2
+    g0 = lane[0] // LANES  # the block's first group (blocks start at multiples of LANES)
     for k0 in range(0, actions.shape[0], LANES):
         m = min(LANES, actions.shape[0] - k0)
         for p in range(m):
@@ -480,8 +489,8 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, state, consts, obs, flag
                 for q in range(2):
                     ref3[j, q, p] = 0.0
                     load3[j, q, p] = 0.0
-        gather_lanes(loops, state, k0, m, table, z)
-        run_lanes(table, ns, n, z, gref, gload, gpos, gvel, gcmd, gtorque)
+        gather_states(state, k0, m, z)
+        run_lanes(groups[g0 + k0 // LANES], ns, n, z, gref, gload, gpos, gvel, gcmd, gtorque)
         scatter_lanes(state, k0, m, z)
         for p in range(m):
             _lane_outputs(k0 + p, tabs, nseg, pf, actions, applied, c, w, look, lo, hi, tol, s,
@@ -496,8 +505,8 @@ def _feed_step_packed(t):
     """:func:`_feed_step` with its arguments in one table (``core.packed``): what every
     step calls (one array to unbox, not one per argument)."""
     _feed_step(f8_2(t, 0), i8_2(t, 1), f8_3(t, 2), f8_2(t, 3), f8_2(t, 4), f8_3(t, 5), f8_2(t, 6),
-               f8_2(t, 7), f8_1(t, 8), f4_2(t, 9), b1_2(t, 10), f8_2(t, 11), f8_1(t, 12),
-               i8_1(t, 13))  # fmt: skip
+               f8_2(t, 7), i8_1(t, 8), f8_2(t, 9), f8_1(t, 10), f4_2(t, 11), b1_2(t, 12),
+               f8_2(t, 13), f8_1(t, 14), i8_1(t, 15))  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)
@@ -509,7 +518,7 @@ def _serve_feed_step(ctl, table, polls):
 
 #: Where :func:`_feed_step`'s arguments (``_FeedCore._args``) hold the lanes: axis 0, none
 #: (shared) or scratch space, for :class:`~machining_envs.core.blocks.LaneBlocks`.
-_STEP_AXES = (0, 0, 0, 0, 0, 0, 0, 0, None, 0, 0, 0, SCRATCH, SCRATCH)
+_STEP_AXES = (0, 0, 0, 0, 0, 0, 0, None, 0, 0, None, 0, 0, 0, SCRATCH, SCRATCH)
 
 
 @numba.njit(cache=True)
@@ -654,6 +663,7 @@ class _FeedCore:
         self.act_lanes = None if self.actuation is None else self._actuation_lanes()
         self.nseg[:] = 1
         self.loops = ServoLanes(designs, n_sub, n)
+        self.lane = np.arange(n)  # each lane's index (the kernel's blocks read theirs)
         self.state = np.zeros((n, 2 * self.loops.n_states_axis))
         self.tabs = np.zeros((n, 4, SEGMENT_COLUMNS))
         self.pf = np.ones((n, len(_PF)))
@@ -877,7 +887,8 @@ class _FeedCore:
         :meth:`_grow` does), not attribute by attribute every step."""
         self._args = (
             self.lf, self.li, self.tabs, self.pf, self.load_t, self.load_v, self.loops.buf,
-            self.state, self.consts, self.obs, self.flags, self.out,
+            self.loops.groups, self.lane, self.state, self.consts, self.obs, self.flags,
+            self.out,
             *self._scratch,
         )  # fmt: skip
 

@@ -66,10 +66,12 @@ __all__ = [
     "lifted_matrix",
     "run_block",
     "run_lanes",
-    "gather_lanes",
+    "gather_loops",
+    "gather_states",
     "scatter_lanes",
     "LANES",
-    "LANES_SCRATCH_SIZE",
+    "GROUP_SIZE",
+    "LANES_STATE_SIZE",
     "ROW_SIZE",
     "SCRATCH_SIZE",
     "SERVO_KINDS",
@@ -600,13 +602,15 @@ def run_block(ac, bc, cu, du, gu, tq, umax, state, ref, load, pos, vel, cmd, tor
 # changes nothing. (Only a state already infinite or NaN, which the env takes for a
 # divergence, could spread its NaN differently: run_block's zero rows turn NaN too.)
 #
-# The lanes' coefficients are gathered from their rows of ``ServoLanes.buf`` into a table
-# with the eight lanes side by side (``gather_lanes``), per axis: A's entries, column q
+# Lanes 8 g .. 8 g + 7 form group g. When a lane starts, its coefficients are copied from
+# its row of ``ServoLanes.buf`` into its group's table (``ServoLanes.groups``, by
+# ``gather_loops``), with the eight lanes side by side, per axis: A's entries, column q
 # row i at ``(8 q + i) * 8``; B's (set point, then load) at ``_L_B + (8 m + i) * 8``;
 # Cu's at ``_L_C + 8 q``; Du, the plant's input column (two), the torque factor and the
-# command limit after them, each eight values, one per lane. A group of fewer than eight
-# lanes leaves the others' places as they were, with a zero state and zero inputs: they
-# stay zero.
+# command limit after them, each eight values, one per lane. A step copies only the
+# states (``gather_states``, ``scatter_lanes``): the coefficients stay put for the
+# episode. A group of fewer than eight lanes has zeros in the others' places, a zero
+# state and zero inputs: they stay zero.
 
 #: Lanes side by side in :func:`run_lanes`.
 LANES = 8
@@ -617,41 +621,53 @@ _L_GU = _L_DU + 8
 _L_TQ = _L_GU + 16
 _L_UMAX = _L_TQ + 8
 _L_AXIS = _L_UMAX + 8
-#: Values of the table of coefficients of eight lanes (both axes) and of their states
-#: (both axes, eight values each) that :func:`run_lanes` reads.
-LANES_SCRATCH_SIZE = 2 * _L_AXIS + 2 * 64
+#: Values of the table of coefficients of eight lanes (both axes) that :func:`run_lanes`
+#: reads (a row of ``ServoLanes.groups``).
+GROUP_SIZE = 2 * _L_AXIS
+#: Values of the states of eight lanes (both axes, eight values each) that
+#: :func:`run_lanes` reads and updates.
+LANES_STATE_SIZE = 2 * 64
 
 
 @numba.njit(cache=True, _nrt=False)
-def gather_lanes(loops, state, k0, w, table, z):
-    """The coefficients (rows ``loops[k0 : k0 + w]`` of ``ServoLanes.buf``, laid out as
-    :func:`lane_loops` reads them) and states (``state[k0 : k0 + w]``, both axes) of ``w
-    <= LANES`` lanes into ``table`` and ``z`` for :func:`run_lanes`: lane ``k0 + p`` in
-    place ``p``; the places from ``w`` on get zeros (a zero loop at rest, whatever the
-    scratch held)."""
-    ns = state.shape[1] // 2
-    for p in range(LANES):
-        lane = p < w
-        row = loops[k0 + (p if lane else 0)]
+def gather_loops(loops, lanes, groups):
+    """The coefficients of each lane ``lanes[i]`` (its row of ``ServoLanes.buf``, laid
+    out as :func:`lane_loops` reads them) into its place ``lanes[i] % LANES`` of its group's
+    table ``groups[lanes[i] // LANES]``, laid out as :func:`run_lanes` reads them
+    (``ServoLanes.groups``). A place without a lane keeps the zeros it was made with: a
+    zero loop, which stays at rest."""
+    for i in range(lanes.size):
+        lane = lanes[i]
+        row = loops[lane]
+        table = groups[lane // LANES]
+        p = lane % LANES
         for ax in range(2):
             o = ax * _L_AXIS
             for q in range(8):
-                for i in range(8):
-                    v = row[_O_AC + (8 * ax + q) * 8 + i]
-                    table[o + (8 * q + i) * 8 + p] = v if lane else 0.0
+                for r in range(8):
+                    table[o + (8 * q + r) * 8 + p] = row[_O_AC + (8 * ax + q) * 8 + r]
             for m in range(2):
-                for i in range(8):
-                    v = row[_O_BC + (2 * ax + m) * 8 + i]
-                    table[o + _L_B + (8 * m + i) * 8 + p] = v if lane else 0.0
-                v = row[_O_GU + 2 * ax + m]
-                table[o + _L_GU + 8 * m + p] = v if lane else 0.0
+                for r in range(8):
+                    table[o + _L_B + (8 * m + r) * 8 + p] = row[_O_BC + (2 * ax + m) * 8 + r]
+                table[o + _L_GU + 8 * m + p] = row[_O_GU + 2 * ax + m]
             for q in range(8):
-                v = row[_O_CU + 8 * ax + q]
-                table[o + _L_C + 8 * q + p] = v if lane else 0.0
-                z[ax * 64 + 8 * q + p] = state[k0 + p, ax * ns + q] if lane and q < ns else 0.0
-            table[o + _L_DU + p] = row[_O_DU + ax] if lane else 0.0
-            table[o + _L_TQ + p] = row[_O_TQ + ax] if lane else 0.0
-            table[o + _L_UMAX + p] = row[_O_UMAX] if lane else 0.0
+                table[o + _L_C + 8 * q + p] = row[_O_CU + 8 * ax + q]
+            table[o + _L_DU + p] = row[_O_DU + ax]
+            table[o + _L_TQ + p] = row[_O_TQ + ax]
+            table[o + _L_UMAX + p] = row[_O_UMAX]
+
+
+@numba.njit(cache=True, _nrt=False)
+def gather_states(state, k0, w, z):
+    """The states of ``w <= LANES`` lanes (``state[k0 : k0 + w]``, both axes) into ``z``
+    for :func:`run_lanes`: lane ``k0 + p`` in place ``p``; the places from ``w`` on get
+    zeros (at rest, whatever the scratch held)."""
+    ns = state.shape[1] // 2
+    for ax in range(2):
+        for q in range(8):
+            for p in range(LANES):
+                lane = p < w and q < ns
+                z[ax * 64 + 8 * q + p] = state[k0 + p, ax * ns + q] if lane else 0.0
 
 
 @numba.njit(cache=True, _nrt=False)
@@ -768,7 +784,8 @@ _lanes_8 = _lanes_kernel(8)  # any other (the rows past the state are zero)
 @numba.njit(cache=True, _nrt=False)
 def run_lanes(table, ns, nb, z, ref, load, pos, vel, cmd, torque):
     """:func:`run_block` for eight lanes at once (see above): their coefficients and
-    states from :func:`gather_lanes` in ``table`` and ``z`` (updated), ``ns`` states per
+    states in ``table`` (a row of ``ServoLanes.groups``) and ``z`` (from
+    :func:`gather_states`; updated), ``ns`` states per
     axis; ``ref``, ``load``, ``pos``, ``cmd``, ``torque`` hold ``nb`` rows and ``vel``
     ``nb + 1``, each row both axes' eight lanes (``[row, axis, lane]``, 16 values a row)."""
     if ns == 6:
@@ -881,6 +898,9 @@ class ServoLanes:
         #: Every lane's arrays in one row each (one argument for a compiled step); the
         #: named arrays below are views of it over all lanes, laid out by lane_loops.
         self.buf = _aligned_zeros((n, ROW_SIZE))
+        #: The same coefficients, eight lanes side by side in each row (group ``g``: lanes
+        #: ``8 g .. 8 g + 7``), as :func:`run_lanes` reads them (:func:`gather_loops`).
+        self.groups = _aligned_zeros((-(-n // LANES), GROUP_SIZE))
         self._bind_views()
         self._design_arrays = tuple(
             tuple(np.ascontiguousarray(m) for m in (d.a, d.b, d.c, d.d)) for d in self.designs
@@ -925,6 +945,7 @@ class ServoLanes:
         _close_lanes(lanes, e, da0, db0, dc0, dd0, da1, db1, dc1, dd1, self.buf)
         self.tq[lanes] = inertia / (mm_per_rad * dt)[:, None]
         self.umax[lanes] = [t.command_max_mm_s for t in truths]
+        gather_loops(self.buf, lanes, self.groups)
 
 
 class ServoLoop:

@@ -26,10 +26,10 @@ from machining_envs.contouring.paths import (
 from machining_envs.contouring.plant import ContouringParams
 from machining_envs.contouring.servo import (
     LANES,
-    LANES_SCRATCH_SIZE,
+    LANES_STATE_SIZE,
     ServoLanes,
     ServoLoop,
-    gather_lanes,
+    gather_states,
     lane_loops,
     lifted_matrix,
     run_block,
@@ -266,7 +266,7 @@ def test_eight_lanes_at_once_are_run_block_to_the_last_bit(kind, generic):
     last bit: positions, velocities, commands, torques and end states, over lanes on their
     own plants, clipped commands, a lane with NaN inputs (the same values NaN, the others
     equal), and a group of fewer than eight lanes after a full one (the places left over
-    hold the full group's coefficients; their zero state and inputs keep them apart).
+    hold zeros, a zero state and zero inputs: they stay at rest).
     ``generic``: the kernel compiled for any number of states (``ns`` 8, the rows past the
     design's zero), where the designs' own have theirs unrolled."""
     p = ContouringParams()
@@ -298,8 +298,7 @@ def test_eight_lanes_at_once_are_run_block_to_the_last_bit(kind, generic):
                                  want[0][k], want[1][k], want[2][k], want[3][k], np.zeros(16)))  # fmt: skip
     assert clipped[2] and clipped[4] and not clipped[0]
     # run_lanes, LANES at a time ([row, axis, place] arrays)
-    table = np.zeros(LANES_SCRATCH_SIZE - 128)
-    z = np.zeros(128)
+    z = np.zeros(LANES_STATE_SIZE)
     got_state = state.copy()
     for k0 in range(0, n, LANES):
         m = min(LANES, n - k0)
@@ -309,8 +308,9 @@ def test_eight_lanes_at_once_are_run_block_to_the_last_bit(kind, generic):
         g_load[:, :, :m] = load[k0 : k0 + m].transpose(1, 2, 0)
         outs = [np.full((nb, 2, LANES), 7.0), np.full((nb + 1, 2, LANES), 7.0),
                 np.full((nb, 2, LANES), 7.0), np.full((nb, 2, LANES), 7.0)]  # fmt: skip
-        gather_lanes(lanes.buf, got_state, k0, m, table, z)
-        run_lanes(table, 8 if generic else ns, nb, z, g_ref.ravel(), g_load.ravel(),
+        gather_states(got_state, k0, m, z)
+        run_lanes(lanes.groups[k0 // LANES], 8 if generic else ns, nb, z, g_ref.ravel(),
+                  g_load.ravel(),
                   outs[0].reshape(-1), outs[1].reshape(-1), outs[2].reshape(-1),
                   outs[3].reshape(-1))  # fmt: skip
         scatter_lanes(got_state, k0, m, z)

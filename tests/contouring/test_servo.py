@@ -144,12 +144,13 @@ def test_lane_rows_hold_the_arrays_the_kernel_reads():
 def test_lanes_started_together_hold_each_plants_closed_loop(design):
     """``ServoLanes.start_lanes`` (every lane's axes discretised at once, their loops closed
     in one compiled call) writes, for each lane on its own plant, ``closed_loop``'s
-    matrices (numpy's products) to the last bit, the torque factor and the command limit;
-    the lanes it is not given keep theirs."""
+    matrices (numpy's products) to the last bit, the torque factor and the command limit,
+    and copies them into each lane's place of its group's table (``groups``, as
+    ``run_lanes`` reads it); the lanes it is not given keep theirs (zeros in the tables)."""
     from machining_envs.contouring.servo import ServoLanes
 
     designs = tuple(design(P, ax) for ax in "xy")
-    lanes = ServoLanes(designs, 50, 5)
+    lanes = ServoLanes(designs, 50, 10)
     lanes.buf[:] = 7.0
     truths = [
         P.replace(inertia_x_kgm2=P.inertia_x_kgm2 * sx, inertia_y_kgm2=P.inertia_y_kgm2 * sy)
@@ -158,7 +159,7 @@ def test_lanes_started_together_hold_each_plants_closed_loop(design):
     truths[2] = truths[2].replace(
         velocity_loop_gain=P.velocity_loop_gain * 1.7, motor_max_rpm=900.0
     )
-    started = np.array([3, 0, 4])
+    started = np.array([3, 0, 9])  # lane 9: the second group's second place
     lanes.start_lanes(started, truths)
     ns = lanes.n_states_axis
     for lane, truth in zip(started.tolist(), truths, strict=True):
@@ -172,7 +173,27 @@ def test_lanes_started_together_hold_each_plants_closed_loop(design):
             tq = truth.inertia_kgm2(axis) / (truth.mm_per_rad * truth.sample_time_s)
             assert lanes.tq[lane, k] == tq
         assert lanes.umax[lane] == truth.command_max_mm_s
-    assert (lanes.buf[[1, 2]] == 7.0).all()
+    assert (lanes.buf[[1, 2, 8]] == 7.0).all()
+    assert lanes.groups.shape == (2, servo.GROUP_SIZE)
+    for lane in range(10):
+        g, p = divmod(lane, servo.LANES)
+        for k in range(2):
+            t = lanes.groups[g, k * servo._L_AXIS :]
+            placed = {
+                "ac": t[: servo._L_B].reshape(8, 8, 8)[:, :, p],
+                "bc": t[servo._L_B : servo._L_C].reshape(2, 8, 8)[:, :, p],
+                "cu": t[servo._L_C : servo._L_DU].reshape(8, 8)[:, p],
+                "du": t[servo._L_DU + p],
+                "gu": t[servo._L_GU : servo._L_TQ].reshape(2, 8)[:, p],
+                "tq": t[servo._L_TQ + p],
+                "umax": t[servo._L_UMAX + p],
+            }
+            for name, got in placed.items():
+                own = getattr(lanes, name)[lane]
+                want = own if name == "umax" else own[k]
+                if lane not in started:
+                    want = np.zeros_like(want)
+                np.testing.assert_array_equal(np.squeeze(got), want, err_msg=f"{name} {lane}")
 
 
 def test_a_nan_state_runs_through_unclipped():
