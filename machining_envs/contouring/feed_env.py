@@ -191,7 +191,7 @@ def _carve_size(nb, n_seg):
 
 def _lanes_size(nb: int) -> int:
     """Values of :func:`_carve_lanes`'s scratch (and seven to align it)."""
-    return LANES * (3 * nb + 1) + LANES_STATE_SIZE + 2 * LANES * (6 * nb + 1) + 7
+    return LANES * (3 * nb + 1) + LANES_STATE_SIZE + LANES + 2 * LANES * (6 * nb + 1) + 7
 
 
 @numba.njit(cache=True, inline="always")
@@ -230,7 +230,7 @@ def _carve(sc, nb, n_seg):
 def _carve_lanes(sc, nb, n_seg):
     """The scratch of ``_feed_step``'s lanes taken ``LANES`` at a time, after
     :func:`_carve`'s: each place's set-point path positions ``(LANES, nb + 1)`` and
-    reference x and y ``(LANES, nb)``; ``run_lanes``' states; the
+    reference x and y ``(LANES, nb)``; ``run_lanes``' states; a value per place; the
     references, loads, positions, commands, torques (``nb`` rows) and velocities (``nb +
     1``), each row both axes' places (``[row, axis, place]``). Each starts on a 64-byte
     boundary: ``run_lanes`` reads them eight values at a time, and a vector across two
@@ -243,7 +243,8 @@ def _carve_lanes(sc, nb, n_seg):
     ry = sc[o + m + LANES * nb : o + m + 2 * LANES * nb].reshape((LANES, nb))
     o += m + 2 * LANES * nb
     z = sc[o : o + LANES_STATE_SIZE]
-    o += LANES_STATE_SIZE
+    nan = sc[o + LANES_STATE_SIZE : o + LANES_STATE_SIZE + LANES]
+    o += LANES_STATE_SIZE + LANES
     row = 2 * LANES
     ref = sc[o : o + row * nb]
     load = sc[o + row * nb : o + 2 * row * nb]
@@ -252,7 +253,7 @@ def _carve_lanes(sc, nb, n_seg):
     torque = sc[o + 4 * row * nb : o + 5 * row * nb]
     vel = sc[o + 5 * row * nb : o + 6 * row * nb + row]
     assert vel.size == row * (nb + 1)  # the buffer has room for every view
-    return st, rx, ry, z, ref, load, pos, cmd, torque, vel
+    return st, rx, ry, z, nan, ref, load, pos, cmd, torque, vel
 
 
 #: Columns of ``_FeedCore.lf`` (per-lane floats) and ``_FeedCore.li`` (per-lane integers).
@@ -310,10 +311,12 @@ def _lane_inputs(k, tabs, nseg, pf, actions, applied, clipped, n_clipped, c, s, 
 @numba.njit(cache=True, inline="always")
 def _lane_outputs(k, tabs, nseg, pf, actions, applied, c, w, look, lo, hi, tol, s, kk,
                   override, prev_action, reward, segment, state, flags, out, obs, n, ts, path,
-                  work, block):  # fmt: skip
+                  work, block, unfinite):  # fmt: skip
     """The last part of lane ``k``'s step (:func:`_feed_step`), once its loops have run the
     block (``block`` = ``(pos, vel, cmd, torque, load)``, and its ``state`` at the block's
-    end): contour errors, progress, the episode's flags, reward, outputs and observation.
+    end; ``unfinite``: whether a position or velocity of the block is not finite, which
+    diverges the lane): contour errors, progress, the episode's flags, reward, outputs and
+    observation.
     ``path`` = ``(st, rx, ry)`` from :func:`_lane_inputs`, ``work`` = ``(px, py, eps,
     tmp, lower, order)`` scratch. (Fewer than 30 arguments: a call with more passes them
     as a tuple, which the compiler cannot inline.)"""
@@ -327,14 +330,10 @@ def _lane_outputs(k, tabs, nseg, pf, actions, applied, c, w, look, lo, hi, tol, 
     a = actions[k]
     ov = _override(k, actions, applied, c)
     s0 = s[k]
-    diverged = False
+    diverged = unfinite
     for j in range(n):
         px[j] = pos[j, 0] + x0
         py[j] = pos[j, 1] + y0
-        if not (np.isfinite(pos[j, 0]) and np.isfinite(pos[j, 1])):
-            diverged = True
-        if not (np.isfinite(vel[j + 1, 0]) and np.isfinite(vel[j + 1, 1])):
-            diverged = True
     if diverged:  # kept so that no NaN can reach an observation or a reward
         for j in range(n):
             px[j] = rx[j]
@@ -460,14 +459,18 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, groups, lane, state, con
         _lane_inputs(k, tabs, nseg, pf, actions, applied, clipped, n_clipped, c, s, kk, n_load,
                      load_t, load_v, n, ts, st, rx, ry, ref, load, pts)  # fmt: skip
         run_block(ac, bc, cu, du, gu, tq, umax[0], state[0], ref, load, pos, vel, cmd, torque, zb)
+        nan = 0.0  # NaN if a position or velocity is not finite (x - x is 0 for the others)
+        for j in range(n):
+            for q in range(2):
+                nan += (pos[j, q] - pos[j, q]) + (vel[j + 1, q] - vel[j + 1, q])
         _lane_outputs(k, tabs, nseg, pf, actions, applied, c, w, look, lo, hi, tol, s, kk,
                       override, prev_action, reward, segment, state, flags, out, obs, n, ts,
                       (st, rx, ry), (px, py, eps, tmp, lower, order),
-                      (pos, vel, cmd, torque, load))  # fmt: skip
+                      (pos, vel, cmd, torque, load), nan != nan)  # fmt: skip
         return
     # Several lanes: their loops LANES at a time (run_lanes: the same numbers, faster).
     _, _, _, px, py, eps, tmp, _, _, _, _, _, _, _, lower, pts = _carve(sc, n, order.size)
-    gst, grx, gry, z, gref, gload, gpos, gcmd, gtorque, gvel = _carve_lanes(
+    gst, grx, gry, z, nan, gref, gload, gpos, gcmd, gtorque, gvel = _carve_lanes(
         sc, n, order.size
     )
     ref3 = gref.reshape((n, 2, LANES))
@@ -492,12 +495,22 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, groups, lane, state, con
         gather_states(state, k0, m, z)
         run_lanes(groups[g0 + k0 // LANES], ns, n, z, gref, gload, gpos, gvel, gcmd, gtorque)
         scatter_lanes(state, k0, m, z)
+        # Whether each place's positions or velocities hold a value not finite, the eight
+        # places at once: nan[p] is NaN then (x - x is 0 for the others).
+        for p in range(LANES):
+            nan[p] = 0.0
+        for j in range(n):
+            for q in range(2):
+                a = (2 * j + q) * LANES
+                b = a + 2 * LANES  # velocities: from the second row on
+                for p in range(LANES):
+                    nan[p] += (gpos[a + p] - gpos[a + p]) + (gvel[b + p] - gvel[b + p])
         for p in range(m):
             _lane_outputs(k0 + p, tabs, nseg, pf, actions, applied, c, w, look, lo, hi, tol, s,
                           kk, override, prev_action, reward, segment, state, flags, out, obs, n,
                           ts, (gst[p], grx[p], gry[p]), (px, py, eps, tmp, lower, order),
                           (pos3[:, :, p], vel3[:, :, p], cmd3[:, :, p], torque3[:, :, p],
-                           load3[:, :, p]))  # fmt: skip
+                           load3[:, :, p]), nan[p] != nan[p])  # fmt: skip
 
 
 @numba.njit(cache=True, nogil=True)

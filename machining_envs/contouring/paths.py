@@ -974,6 +974,7 @@ def path_points(tab, length, s, n, out_x, out_y, scratch):
     last = tab.shape[0] - 1
     k = -1
     before = 0.0
+    curved = False  # whether a point lies on an arc or involute (else no sine is needed)
     for j in range(n):
         sj = min(max(s[j], 0.0), length)
         if k >= 0 and sj >= before:
@@ -996,11 +997,14 @@ def path_points(tab, length, s, n, out_x, out_y, scratch):
         elif kind == _ARC:
             th[j] = 0.0
             ang[j] = row[9] + row[10] * loc / row[8]
+            curved = True
         else:
             t = math.sqrt(row[12] + 2.0 * loc / row[8])
             th[j] = t
             ang[j] = t + row[9]
-    sincos_row(ang, n, out_y, out_x)  # the sines into out_y, the cosines into out_x
+            curved = True
+    if curved:  # (a point on a line reads neither)
+        sincos_row(ang, n, out_y, out_x)  # the sines into out_y, the cosines into out_x
     for j in range(n):
         row = tab[int(seg[j])]
         kind = row[0]

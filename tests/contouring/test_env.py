@@ -109,6 +109,39 @@ def test_episode_ends_when_the_path_is_done_or_diverged_and_a_feed_hold_is_trunc
     assert n == math.ceil((5 * 20 * math.pi / 50 + 0.5) / 0.01)
 
 
+def test_a_feed_lane_whose_loops_are_not_finite_diverges_alone_as_its_single_env():
+    """A ContouringFeed-v0 lane whose closed loops turn NaN or infinite in a block (set
+    here in its state) ends diverged, with a finite observation and reward, and only that
+    lane: in a vector env of two groups of eight lanes (the loops run eight at a time)
+    and in the single env with the lane's seed, the same numbers."""
+    n = 16
+    vec = gym.make_vec(FEED, num_envs=n)
+    vec.reset(seed=0)
+    actions = np.linspace(-0.5, 1.0, n, dtype=np.float32)[:, None]
+    for _ in range(3):
+        vec.step(actions)
+    bad = {3: np.nan, 9: np.inf, 15: -np.inf}
+    core = vec.unwrapped._core
+    for lane, v in bad.items():
+        core.state[lane, lane % core.state.shape[1]] = v
+    obs, reward, term, _, info = vec.step(actions)
+    hit = np.zeros(n, dtype=bool)
+    hit[list(bad)] = True
+    np.testing.assert_array_equal(info["final_info"]["diverged"] & hit, hit)
+    np.testing.assert_array_equal(term, hit)
+    assert np.isfinite(reward).all() and np.isfinite(obs).all()
+    for lane, v in bad.items():
+        env = gym.make(FEED).unwrapped
+        env.reset(seed=lane)
+        for _ in range(3):
+            env.step(actions[lane])
+        env._core.state[0, lane % env._core.state.shape[1]] = v
+        o, r, t, _, i = env.step(actions[lane])
+        assert t and i["diverged"]
+        assert np.array_equal(o, info["final_obs"][lane]) and r == reward[lane]
+    vec.close()
+
+
 def test_feed_override_moves_the_set_point_and_finishes():
     env = gym.make(FEED, scenario="paper_circle")
     env.reset(seed=0)
