@@ -967,11 +967,27 @@ def path_points(tab, length, s, n, out_x, out_y, scratch):
     :func:`path_point`'s to the last bit; on a curve a sine or cosine may differ from
     libm's by one unit in the last place (about 1e-16 of the radius); each point is the
     same wherever it falls in the row.
+
+    A row whose points all lie on one segment (most of a block's) takes that segment's
+    formulas in one straight loop (:func:`_segment_points`), the others point by point.
     """
     ang = scratch[:n]
     th = scratch[n : 2 * n]
     seg = scratch[2 * n : 3 * n]
     last = tab.shape[0] - 1
+    # The segment of the first point, and whether every point lies within it: the segment
+    # each point's own search finds is then this one.
+    k = path_segment_index(tab, length, s[0])
+    lo = tab[k, 1] if k > 0 else -np.inf
+    hi = tab[k + 1, 1] if k < last else np.inf
+    one = True
+    for j in range(n):
+        sj = min(max(s[j], 0.0), length)
+        one = one & (sj >= lo) & (sj < hi)  # (NaN: False, point by point)
+        seg[j] = k  # (each point's segment, as the loop point by point leaves it)
+    if one:
+        _segment_points(tab[k], length, s, n, out_x, out_y, ang, th)
+        return
     k = -1
     before = 0.0
     curved = False  # whether a point lies on an arc or involute (else no sine is needed)
@@ -1020,6 +1036,41 @@ def path_points(tab, length, s, n, out_x, out_y, scratch):
             t = th[j]
             out_x[j] = row[6] + row[8] * (c + t * sn)
             out_y[j] = row[7] + row[8] * (sn - t * c)
+
+
+@numba.njit(cache=True, inline="always")
+def _segment_points(row, length, s, n, out_x, out_y, ang, th):
+    """:func:`path_points` of a row of points that all lie on the segment ``row``: its
+    formulas, in their order, one loop of the same operations for every point (``ang``,
+    ``th``: scratch of ``n`` floats)."""
+    kind = row[0]
+    if kind == _LINE:
+        for j in range(n):
+            loc = min(max(s[j], 0.0), length) - row[1]
+            out_x[j] = row[6] + row[8] * loc
+            out_y[j] = row[7] + row[9] * loc
+        return
+    if kind == _ARC:
+        for j in range(n):
+            loc = min(max(s[j], 0.0), length) - row[1]
+            ang[j] = row[9] + row[10] * loc / row[8]
+        sincos_row(ang, n, out_y, out_x)  # the sines into out_y, the cosines into out_x
+        for j in range(n):
+            out_x[j] = row[6] + row[8] * out_x[j]
+            out_y[j] = row[7] + row[8] * out_y[j]
+        return
+    for j in range(n):
+        loc = min(max(s[j], 0.0), length) - row[1]
+        t = math.sqrt(row[12] + 2.0 * loc / row[8])
+        th[j] = t
+        ang[j] = t + row[9]
+    sincos_row(ang, n, out_y, out_x)
+    for j in range(n):
+        c = out_x[j]
+        sn = out_y[j]
+        t = th[j]
+        out_x[j] = row[6] + row[8] * (c + t * sn)
+        out_y[j] = row[7] + row[8] * (sn - t * c)
 
 
 @numba.njit(cache=True)

@@ -156,6 +156,16 @@ def test_compiled_geometry_is_the_path_methods(path):
     segs = [path_segment_index(tab, length, v) for v in s[up]]
     np.testing.assert_array_equal(scratch[2 * s.size :], segs)
     assert xo.tobytes() == xs[up].tobytes() and yo.tobytes() == ys[up].tobytes()
+    # A row within one segment (one loop of that segment's formulas) gives the points the
+    # row through every segment gives, to the last bit.
+    segs = np.array(segs)
+    for k in np.unique(segs).tolist():
+        within = np.flatnonzero(segs == k)
+        sub = s[up][within]
+        xk, yk, sk = np.empty(sub.size), np.empty(sub.size), np.empty(3 * sub.size)
+        path_points(tab, length, sub, sub.size, xk, yk, sk)
+        assert xk.tobytes() == xo[within].tobytes() and yk.tobytes() == yo[within].tobytes()
+        assert (sk[2 * sub.size :] == k).all()
     for lo in range(0, px.size - 50, 37):  # blocks of 50 points, as the feed env asks
         n = 50
         out, scratch = np.empty(n), np.empty(n)
