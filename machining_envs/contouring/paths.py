@@ -955,7 +955,7 @@ def path_point(tab, length, s):
     return _segment_point(tab[k], s - tab[k, 1])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def path_points(tab, length, s, n, out_x, out_y, scratch):
     """``Path.points(s[:n])`` into ``out_x[:n]``, ``out_y[:n]`` (``scratch``: ``3 n``
     floats), faster than :func:`path_point` point by point.
@@ -970,6 +970,9 @@ def path_points(tab, length, s, n, out_x, out_y, scratch):
 
     A row whose points all lie on one segment (most of a block's) takes that segment's
     formulas in one straight loop (:func:`_segment_points`), the others point by point.
+    It divides by radii as numpy does (``error_model="numpy"``: no test for a zero
+    divisor at each point, which kept the loop out of the processor's vectors; a path's
+    radii are positive, checked when it is made).
     """
     ang = scratch[:n]
     th = scratch[n : 2 * n]
