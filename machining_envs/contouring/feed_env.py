@@ -297,15 +297,27 @@ def _lane_inputs(k, tabs, nseg, pf, actions, applied, clipped, n_clipped, c, s, 
         ref[j, 0] = rx[j] - x0
         ref[j, 1] = ry[j] - y0
     # The load torque of each period: the last step of the lane's load at or before its
-    # instant. The instants rise, so each search goes on from the last one's step.
+    # instant. The instants rise, so each search goes on from the last one's step, and a
+    # block whose last instant comes before the next step holds the first period's load.
     nl = n_load[k]
+    k0 = kk[k]
     i = 0
-    for j in range(n):
-        t = float(kk[k] + j) * ts + 1e-12
-        while i < nl and load_t[k, i] <= t:
-            i += 1
-        load[j, 0] = load_v[k, i, 0]
-        load[j, 1] = load_v[k, i, 1]
+    t = float(k0) * ts + 1e-12
+    while i < nl and load_t[k, i] <= t:
+        i += 1
+    if i == nl or float(k0 + n - 1) * ts + 1e-12 < load_t[k, i]:
+        v0 = load_v[k, i, 0]
+        v1 = load_v[k, i, 1]
+        for j in range(n):
+            load[j, 0] = v0
+            load[j, 1] = v1
+    else:
+        for j in range(n):
+            t = float(k0 + j) * ts + 1e-12
+            while i < nl and load_t[k, i] <= t:
+                i += 1
+            load[j, 0] = load_v[k, i, 0]
+            load[j, 1] = load_v[k, i, 1]
 
 
 @numba.njit(cache=True, inline="always")

@@ -30,7 +30,7 @@ import numba
 import numpy as np
 
 from machining_envs.contouring._exact import np_mean, py_hypot
-from machining_envs.core.kernels import sincos_row, vector_hypot
+from machining_envs.core.kernels import bits_float, float_bits, sincos_row, vector_hypot
 
 __all__ = ["Line", "Arc", "Involute", "Path", "PAPER_CORNER_FEED_MM_S", "PAPER_FEED_MM_S"]
 __all__ += ["SEGMENT_COLUMNS", "path_point", "path_points", "path_heading", "path_distance"]
@@ -1394,10 +1394,26 @@ def path_distances(tab, px, py, n, out, scratch, lower, order):
         dmax = row_largest(out, n)
 
 
+#: The bits of +inf as an int64: from +0 to +inf, a float's bits as an int64 rise with it.
+_INF_BITS = 0x7FF0000000000000
+
+
 @numba.njit(cache=True, inline="always")
 def row_largest(out, n):
     """The largest of ``out[:n]``, or its last NaN if it holds one (then no segment is
-    skipped; the feed env's peak contour error reads the same)."""
+    skipped; the feed env's peak contour error reads the same).
+
+    A row of distances (every value from +0 to +inf) is found as the largest of their bits
+    read as integers, which rise with the values there: one loop in the processor's
+    vectors. Any other row (a NaN, a negative value or -0) is taken value by value."""
+    hi = float_bits(out[0])
+    lo = hi
+    for j in range(1, n):
+        b = float_bits(out[j])
+        hi = b if b > hi else hi
+        lo = b if b < lo else lo
+    if lo >= 0 and hi <= _INF_BITS:
+        return bits_float(hi)
     dmax = out[0]
     for j in range(1, n):
         if out[j] > dmax or out[j] != out[j]:
