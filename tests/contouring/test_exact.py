@@ -22,6 +22,7 @@ from machining_envs.contouring.paths import (
     path_point,
     path_points,
     path_segment_index,
+    row_largest,
 )
 from machining_envs.contouring.plant import ContouringParams
 from machining_envs.contouring.servo import (
@@ -335,3 +336,35 @@ def test_eight_lanes_at_once_are_run_block_to_the_last_bit(kind, generic):
     np.testing.assert_array_equal(np.isnan(got_state), np.isnan(want_state))
     fin = ~np.isnan(want_state)
     assert np.array_equal(_bits(got_state[fin]), _bits(want_state[fin]))
+
+
+def test_row_largest_is_the_largest_or_the_last_nan():
+    """``row_largest`` (the peak contour error; the distances' skip test) is the largest
+    value of a row, or its last NaN, to the last bit: rows of distances (+0 to +inf, the
+    path through the values' bits) and rows with a NaN of either sign, a negative value or
+    -0 (value by value)."""
+    def want(row):
+        m = row[0]
+        for v in row[1:]:
+            if v > m or v != v:
+                m = v
+        return m
+
+    nan_neg = -np.abs(np.float64(np.nan))  # x86's default NaN: the sign bit set
+    specials = [0.0, np.inf, 5e-324, 1e300, np.nan, nan_neg, -0.0, -1.0, -np.inf]
+    rows = [RNG.uniform(0, 2, n) for n in (1, 2, 7, 8, 9, 50, 64)]
+    for n in (1, 3, 50):
+        for v in specials:
+            for at in {0, n // 2, n - 1}:
+                row = RNG.uniform(0, 2, n)
+                row[at] = v
+                rows.append(row)
+    row = RNG.uniform(0, 2, 50)
+    row[[3, 40]] = [np.nan, nan_neg]  # two NaNs: the last one's bits
+    rows.append(row)
+    row = RNG.uniform(0, 2, 50)
+    row[[3, 40]] = np.array([0x7FF8000000000001, 0x7FF8000000000000]).view(np.float64)
+    rows.append(row)  # two NaNs, both of the sign bit clear
+    for row in rows:
+        got, ref = row_largest(row, row.size), want(row)
+        assert _bits(np.array([got])) == _bits(np.array([ref])), (row, got, ref)
