@@ -1184,15 +1184,19 @@ def _arc_wedge(row):
     with the unit vectors to its ends: ``(sg, wedge, join, u0x, u0y, u1x, u1y)``. A point
     whose offset ``(dx, dy)`` from the centre has ``sg (u0x dy - u0y dx)`` (after the
     start) and ``sg (dx u1y - dy u1x)`` (before the end) above ``1e-8 rho`` lies well
-    inside the wedge: both where ``wedge`` (a sweep under 3 rad: the meet of two
-    half-planes), either where ``join`` (over 3.3 rad, beyond pi: their join). Neither
-    holds for a sweep between, nor for a radius tiny beside the centre's coordinates;
-    otherwise the unit vectors lie within 1e-10 of the angles' (margin 1e-8)."""
+    inside the wedge: both where ``wedge`` (a sweep under pi: the meet of two
+    half-planes), either where ``join`` (pi or more: their join). At an angle ``a`` past
+    the start the two are ``rho sin(a)`` and ``rho sin(sweep - a)``: both positive is ``0 <
+    a < sweep`` for a sweep under pi, either positive is that for a sweep over pi, and at
+    pi the two tests are one. The unit vectors lie within 1e-10 of the angles' and the
+    margin is 1e-8, so an end whose rounding puts it across pi moves no point across
+    the margin. Neither holds for a radius tiny beside the centre's coordinates."""
     cx = row[6]
     cy = row[7]
     r = row[8]
     sized = r >= 1e-5 * (abs(cx) + abs(cy) + 1.0)
-    return (row[10], row[11] < 3.0 and sized, row[11] > 3.3 and sized, (row[12] - cx) / r,
+    half = row[11] < math.pi
+    return (row[10], half and sized, (not half) and sized, (row[12] - cx) / r,
             (row[13] - cy) / r, (row[14] - cx) / r, (row[15] - cy) / r)  # fmt: skip
 
 

@@ -118,6 +118,11 @@ def _paths():
     for sweep in (1.6 * math.pi, -1.3 * math.pi):
         b = Arc((1.0, -2.0), 4.0, 0.5, sweep)
         out += [Path([b]), Path([b, Line(b.end, (b.end[0] + 2.0, b.end[1] + 1.0))])]
+    # Arcs of about half a turn, either side of it: the meet of the half-planes below pi,
+    # their join from pi on, where the two tests differ least.
+    for d in (-0.05, -1e-6, -1e-12, 1e-12, 1e-6, 0.05):
+        for sg in (1.0, -1.0):
+            out.append(Path([Arc((3.0, 1.0), 6.0, 2.0, sg * (math.pi + d))]))
     return out
 
 
