@@ -947,7 +947,7 @@ def path_segment_index(tab, length, s):
     return k
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, _nrt=False)
 def path_point(tab, length, s):
     """``Path.point(s)``: one point, ``s`` clamped to the path."""
     s = min(max(s, 0.0), length)
@@ -955,7 +955,7 @@ def path_point(tab, length, s):
     return _segment_point(tab[k], s - tab[k, 1])
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
 def path_points(tab, length, s, n, out_x, out_y, scratch):
     """``Path.points(s[:n])`` into ``out_x[:n]``, ``out_y[:n]`` (``scratch``: ``3 n``
     floats), faster than :func:`path_point` point by point.
@@ -972,7 +972,9 @@ def path_points(tab, length, s, n, out_x, out_y, scratch):
     formulas in one straight loop (:func:`_segment_points`), the others point by point.
     It divides by radii as numpy does (``error_model="numpy"``: no test for a zero
     divisor at each point, which kept the loop out of the processor's vectors; a path's
-    radii are positive, checked when it is made).
+    radii are positive, checked when it is made). Like the other functions of a path
+    table that the feed env's step calls, it allocates nothing and keeps no reference
+    counts of its views (``_nrt=False``).
     """
     ang = scratch[:n]
     th = scratch[n : 2 * n]
@@ -1076,7 +1078,7 @@ def _segment_points(row, length, s, n, out_x, out_y, ang, th):
         out_y[j] = row[7] + row[8] * (sn - t * c)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, _nrt=False)
 def path_heading(tab, length, s):
     """``Path.headings([s])[0]``: the unwrapped heading at ``s`` (rad)."""
     s = min(max(s, 0.0), length)
@@ -1346,7 +1348,7 @@ def _near_distance(row, x, y):
     return _segment_distance(row, x, y)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, _nrt=False)
 def path_distances(tab, px, py, n, out, scratch, lower, order):
     """``Path.distances(px[:n], py[:n])`` into ``out[:n]`` (scratch: ``scratch`` of ``n``
     floats, ``lower`` and ``order`` of one float and one integer per segment).
