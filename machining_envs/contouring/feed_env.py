@@ -89,7 +89,17 @@ from machining_envs.core.env import (
 )
 from machining_envs.core.kernels import data_address
 from machining_envs.core.normals import LaneGenerators
-from machining_envs.core.packed import PackedArgs, b1_2, f4_2, f8_1, f8_2, f8_3, i8_1, i8_2
+from machining_envs.core.packed import (
+    PackedArgs,
+    b1_2,
+    f4_2,
+    f8_1,
+    f8_2,
+    f8_3,
+    i8_1,
+    i8_2,
+    spaced_rows,
+)
 from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
 
 __all__ = ["ContouringFeedEnv", "ContouringFeedVectorEnv", "FeedReward", "LOOKAHEAD_MM"]
@@ -623,6 +633,36 @@ def _start_drawn_lanes(lanes, ints, floats, drawn_tabs, feed, t_load, t_max, ove
         segment[k] = path_segment_index(tab, length, 0.0)
 
 
+#: The float keys of a vector step's info, one row each of the table :func:`_info_rows`
+#: fills (``_FeedCore.info_arrays``).
+_INFO_F = ("t_s", "command_x_mm_s", "command_y_mm_s", *_OUT[3:-1], "contour_tolerance_mm",
+           "cost", "score_bound", "path_length_mm", "feed_mm_s", "programmed_time_s",
+           "time_limit_s", "machining_time_s")  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _info_rows(out, pf, bound, flags, tol, rows):
+    """Every lane's float info into ``rows`` (one row per key of ``_INFO_F``, one column
+    per lane; rows spaced apart, ``core.packed.spaced_rows``), as
+    :meth:`_FeedCore.lane_info` reports it."""
+    m = out.shape[1] - 4  # the outputs x_mm .. path_s_mm
+    for k in range(out.shape[0]):
+        o = out[k]
+        rows[0, k] = o[0]
+        rows[1, k] = o[1]
+        rows[2, k] = o[2]
+        for i in range(m):
+            rows[3 + i, k] = o[3 + i]
+        rows[3 + m, k] = tol
+        rows[4 + m, k] = 1.0 if o[8] > tol else 0.0
+        rows[5 + m, k] = bound[k]
+        rows[6 + m, k] = pf[k, 0]
+        rows[7 + m, k] = pf[k, 5]
+        rows[8 + m, k] = pf[k, 6]
+        rows[9 + m, k] = pf[k, 7]
+        rows[10 + m, k] = o[20] if flags[k, 1] else np.nan
+
+
 class _FeedCore:
     """The state and arithmetic of N ContouringFeed-v0 episodes, shared by
     ``ContouringFeedEnv`` (one lane) and ``ContouringFeedVectorEnv`` (N lanes): each lane's
@@ -980,38 +1020,36 @@ class _FeedCore:
 
     def info_arrays(self) -> dict:
         """The step info of every lane, as arrays (keys that only some lanes have come with
-        their ``_key`` masks)."""
+        their ``_key`` masks): the float keys views of one table (:func:`_info_rows`)."""
         o = self.out
         f = self.flags
-        pf = self.pf
+        rows = spaced_rows(len(_INFO_F), self.n)
+        _info_rows(o, self.pf, self.bound, f, self.tolerance_mm, rows)
+        r = dict(zip(_INFO_F, rows, strict=True))
         info = {
-            "t_s": o[:, 0].copy(),
+            "t_s": r["t_s"],
             "command": o[:, 1:3].copy(),
-            "command_x_mm_s": o[:, 1].copy(),
-            "command_y_mm_s": o[:, 2].copy(),
+            "command_x_mm_s": r["command_x_mm_s"],
+            "command_y_mm_s": r["command_y_mm_s"],
             "action_clipped": self.in_clipped.astype(bool),
             "n_action_clipped": self.n_clipped.copy(),
             "breakage": np.zeros(self.n, dtype=bool),
             "diverged": f[:, 0].copy(),
             "finished": f[:, 1].copy(),
         }
-        for i, name in enumerate(_OUT[3:-1], start=3):
-            info[name] = o[:, i].copy()
-        info["contour_tolerance_mm"] = np.full(self.n, self.tolerance_mm)
-        info["cost"] = (o[:, 8] > self.tolerance_mm).astype(np.float64)
-        info["score_bound"] = self.bound.copy()
-        info["path_length_mm"] = pf[:, 0].copy()
+        for name in (*_OUT[3:-1], "contour_tolerance_mm", "cost", "score_bound",
+                     "path_length_mm"):  # fmt: skip
+            info[name] = r[name]
         info["segment"] = self.segment.copy()
-        info["feed_mm_s"] = pf[:, 5].copy()
-        info["programmed_time_s"] = pf[:, 6].copy()
-        info["time_limit_s"] = pf[:, 7].copy()
+        for name in ("feed_mm_s", "programmed_time_s", "time_limit_s"):
+            info[name] = r[name]
         info["servo"] = self.servos.copy()
         info["scenario"] = self.names.array()
         if self.has_circle.any():
             for i, key in enumerate(("circle_cx_mm", "circle_cy_mm", "circle_radius_mm")):
                 info[key] = self.circle[:, i].copy()
                 info["_" + key] = self.has_circle.copy()
-        info["machining_time_s"] = np.where(f[:, 1], o[:, 20], np.nan)
+        info["machining_time_s"] = r["machining_time_s"]
         info["_machining_time_s"] = f[:, 1].copy()
         return info
 
