@@ -47,7 +47,6 @@ from machining_envs.contouring.scenarios import (
     _RandomPaths,
     check_feed,
     contouring_scenario,
-    true_params_of,
 )
 from machining_envs.contouring.servo import (
     LANES,
@@ -902,8 +901,7 @@ class _FeedCore:
         self._grow(int(drawn.ints[:, 0].max()), 1)
         ks = settle_batch(self, lanes, factory.build_lane, (drawn,), factory.actuation,
                           factory.name)  # fmt: skip
-        scales = drawn.scale.tolist()
-        self.loops.start_lanes(lanes, [true_params_of(sc, self.params) for sc in scales])
+        self.loops.start_scaled(lanes, self.params, drawn.scale)  # (true_params_of's plants)
         t_max = self.max_episode_time_s
         _start_drawn_lanes(
             lanes, drawn.ints, drawn.floats, drawn.tabs, drawn.feed, drawn.t_load,

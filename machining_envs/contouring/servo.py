@@ -931,12 +931,36 @@ class ServoLanes:
         """Set each lane ``lanes[i]``'s loops to the designs on the plant ``truths[i]``:
         both axes of every lane discretised in one call (``plant.axes_zoh``), their loops
         closed in one compiled call (:func:`_close_lanes`)."""
-        n = len(truths)
         # ContouringParams' derived quantities, in their order of operations.
-        gain = np.array([t.loop_gain_Nms for t in truths])
-        mm_per_rad = np.array([t.mm_per_rad for t in truths])
-        dt = np.array([t.sample_time_s for t in truths])
-        inertia = np.array([[t.inertia_kgm2(axis) for axis in AXES] for t in truths])
+        self._start_arrays(
+            lanes,
+            np.array([t.loop_gain_Nms for t in truths]),
+            np.array([t.mm_per_rad for t in truths]),
+            np.array([t.sample_time_s for t in truths]),
+            np.array([[t.inertia_kgm2(axis) for axis in AXES] for t in truths]),
+            [t.command_max_mm_s for t in truths],
+        )
+
+    def start_scaled(self, lanes: np.ndarray, nominal: ContouringParams, scales) -> None:
+        """:meth:`start_lanes` on the plants ``nominal`` with its inertias scaled by
+        ``scales[i]`` (X, Y) in lane ``lanes[i]`` (``scenarios.true_params_of``'s plants,
+        their inertias the same products), without making them."""
+        n = len(lanes)
+        inertia = np.array([[nominal.inertia_x_kgm2, nominal.inertia_y_kgm2]]) * scales
+        self._start_arrays(
+            lanes,
+            np.full(n, nominal.loop_gain_Nms),
+            np.full(n, nominal.mm_per_rad),
+            np.full(n, nominal.sample_time_s),
+            inertia,
+            nominal.command_max_mm_s,
+        )
+
+    def _start_arrays(self, lanes, gain, mm_per_rad, dt, inertia, umax) -> None:
+        """The loops of ``lanes`` on plants of the loop gains ``gain``, screw leads
+        ``mm_per_rad``, sample times ``dt``, inertias ``inertia`` (X, Y) and command limits
+        ``umax`` (one of each per lane: :meth:`start_lanes`)."""
+        n = len(lanes)
         pole = gain[:, None] / inertia  # velocity_pole
         load = -mm_per_rad[:, None] / inertia  # discrete_axis's load gain
         steps = np.repeat(dt, 2)
@@ -944,7 +968,7 @@ class ServoLanes:
         ((da0, db0, dc0, dd0), (da1, db1, dc1, dd1)) = self._design_arrays
         _close_lanes(lanes, e, da0, db0, dc0, dd0, da1, db1, dc1, dd1, self.buf)
         self.tq[lanes] = inertia / (mm_per_rad * dt)[:, None]
-        self.umax[lanes] = [t.command_max_mm_s for t in truths]
+        self.umax[lanes] = umax
         gather_loops(self.buf, lanes, self.groups)
 
 

@@ -196,6 +196,25 @@ def test_lanes_started_together_hold_each_plants_closed_loop(design):
                 np.testing.assert_array_equal(np.squeeze(got), want, err_msg=f"{name} {lane}")
 
 
+@pytest.mark.parametrize("design", [pi_design, hinf_2dof_design])
+def test_lanes_started_on_scaled_inertias_hold_the_scaled_plants_loops(design):
+    """``ServoLanes.start_scaled`` (what a batch of a split's lanes starts with: the
+    nominal plant, each lane's inertia scales) writes what ``start_lanes`` writes for the
+    plants ``true_params_of`` makes of them, to the last bit, scales of 1 included."""
+    from machining_envs.contouring.scenarios import true_params_of
+    from machining_envs.contouring.servo import ServoLanes
+
+    designs = tuple(design(P, ax) for ax in "xy")
+    scales = np.array([[1.0, 1.0], [0.71, 1.38], [1.2, 0.9], [1.0, 1.3]])
+    lanes = np.array([5, 0, 9, 2])
+    want, got = ServoLanes(designs, 50, 12), ServoLanes(designs, 50, 12)
+    want.start_lanes(lanes, [true_params_of(tuple(sc), P) for sc in scales.tolist()])
+    got.start_scaled(lanes, P, scales)
+    assert got.buf.tobytes() == want.buf.tobytes()
+    assert got.groups.tobytes() == want.groups.tobytes()
+    assert np.any(got.buf[lanes] != 0.0, axis=1).all()
+
+
 def test_a_nan_state_runs_through_unclipped():
     """A diverged loop (NaN state) gives NaN outputs and is not reported as clipped."""
     loop = ServoLoop(P, tuple(pi_design(P, ax) for ax in "xy"), 50)
