@@ -1286,6 +1286,10 @@ def _segment_distances(row, px, py, n, out):
         out[j] = best
 
 
+#: The bits of +inf as an int64: from +0 to +inf, a float's bits as an int64 rise with it.
+_INF_BITS = 0x7FF0000000000000
+
+
 @numba.njit(cache=True, inline="always")
 def _near_distance(row, x, y):
     """A lower bound of the distance of ``(x, y)`` to a segment (``Segment.closest``'s),
@@ -1369,15 +1373,19 @@ def path_distances(tab, px, py, n, out, scratch, lower, order):
         return
     mx = 0.5 * (px[0] + px[n - 1])
     my = 0.5 * (py[0] + py[n - 1])
-    spread2 = 0.0
-    total = 0.0  # NaN where a point is not finite (or the centre): then nothing is skipped
-    for j in range(n):  # (a plain largest, which the compiler keeps in registers)
+    # The largest squared offset from the centre, as the largest of the squares' bits
+    # (squares are +0 to +inf, where the bits rise with the values: one loop in vectors);
+    # a NaN (bits above +inf's, or with the sign bit) where a point is not finite (or the
+    # centre): the spread is then NaN, and nothing is skipped.
+    hi = 0  # the bits of +0.0
+    lo = 0
+    for j in range(n):
         dx = px[j] - mx
         dy = py[j] - my
-        h2 = dx * dx + dy * dy
-        spread2 = h2 if h2 > spread2 else spread2
-        total += h2
-    spread = math.sqrt(spread2) if total == total else total
+        b = float_bits(dx * dx + dy * dy)
+        hi = b if b > hi else hi
+        lo = b if b < lo else lo
+    spread = math.sqrt(bits_float(hi)) if lo >= 0 and hi <= _INF_BITS else math.nan
     scale = abs(mx) + abs(my) + spread
     for k in range(ns):  # a stable insertion sort of the segments by their lower bound
         v = _near_distance(tab[k], mx, my) - spread
@@ -1398,10 +1406,6 @@ def path_distances(tab, px, py, n, out, scratch, lower, order):
             if scratch[j] < out[j]:
                 out[j] = scratch[j]
         dmax = row_largest(out, n)
-
-
-#: The bits of +inf as an int64: from +0 to +inf, a float's bits as an int64 rise with it.
-_INF_BITS = 0x7FF0000000000000
 
 
 @numba.njit(cache=True, inline="always")

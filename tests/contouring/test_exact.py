@@ -219,9 +219,18 @@ def test_distances_skip_no_segment_that_is_nearer(path):
     tab = path.table()
     lower, order = np.empty(len(tab)), np.empty(len(tab), np.int64)
     out, scratch = np.empty(50), np.empty(50)
-    for px, py in _blocks(path):
+    for i, (px, py) in enumerate(_blocks(path)):
         path_distances(tab, px, py, 50, out, scratch, lower, order)
         assert out.tobytes() == _all_segments(tab, px, py).tobytes()
+        if i < 12:  # a point not finite (the centre's too at 0 and 49): nothing skipped
+            bad = (np.nan, np.inf, -np.inf, -np.abs(np.float64(np.nan)))[i % 4]
+            j = (0, 17, 49)[i % 3]
+            qx = px.copy()
+            qx[j] = bad
+            path_distances(tab, qx, py, 50, out, scratch, lower, order)
+            others = np.arange(50) != j
+            assert out[others].tobytes() == _all_segments(tab, qx, py)[others].tobytes()
+            assert not np.isfinite(out[j])
     for row in tab:
         cx, cy, r = row[3], row[4], row[5]  # the segment's bounding circle
         for spread in (1e-6 * r, 0.01 * r, r, 10.0 * r):
