@@ -494,9 +494,7 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, groups, lane, state, con
         return
     # Several lanes: their loops LANES at a time (run_lanes: the same numbers, faster).
     _, _, _, px, py, eps, tmp, _, _, _, _, _, _, _, lower, pts = _carve(sc, n, order.size)
-    gst, grx, gry, z, nan, gref, gload, gpos, gcmd, gtorque, gvel = _carve_lanes(
-        sc, n, order.size
-    )
+    gst, grx, gry, z, nan, gref, gload, gpos, gcmd, gtorque, gvel = _carve_lanes(sc, n, order.size)
     ref3 = gref.reshape((n, 2, LANES))
     load3 = gload.reshape((n, 2, LANES))
     pos3 = gpos.reshape((n, 2, LANES))

@@ -357,6 +357,7 @@ def test_row_largest_is_the_largest_or_the_last_nan():
     value of a row, or its last NaN, to the last bit: rows of distances (+0 to +inf, the
     path through the values' bits) and rows with a NaN of either sign, a negative value or
     -0 (value by value)."""
+
     def want(row):
         m = row[0]
         for v in row[1:]:
