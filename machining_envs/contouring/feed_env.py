@@ -67,7 +67,13 @@ from machining_envs.core.actuation import (
     configure_lane,
     resolve_actuation,
 )
-from machining_envs.core.blocks import SCRATCH, LaneBlocks, check_num_threads, serve_one_table
+from machining_envs.core.blocks import (
+    ALIGN,
+    SCRATCH,
+    LaneBlocks,
+    check_num_threads,
+    serve_one_table,
+)
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
@@ -554,6 +560,9 @@ def _serve_feed_step(ctl, table, polls):
 #: Where :func:`_feed_step`'s arguments (``_FeedCore._args``) hold the lanes: axis 0, none
 #: (shared) or scratch space, for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (0, 0, 0, 0, 0, 0, 0, None, 0, 0, None, 0, 0, 0, SCRATCH, SCRATCH)
+# The kernel's blocks of lanes start at multiples of ALIGN, and so at a group's first lane:
+# a block reads its groups' coefficients from its first lane's group on (lane[0]).
+assert ALIGN % LANES == 0
 
 
 @numba.njit(cache=True)
