@@ -388,8 +388,8 @@ def _lane_outputs(k, tabs, nseg, pf, actions, applied, c, w, look, lo, hi, tol, 
     diverged = diverged or etrack > c[4]
     hit = -1
     # The set point's positions rise along the block (a feed and override never negative),
-    # so none reaches the end unless the last does: the search is skipped (the test keeps it
-    # exact for any positions).
+    # so none reaches the end unless the last does: the search is skipped (its second
+    # condition keeps it for positions that do not rise).
     if st[n] >= length or not st[n] >= st[0]:
         for j in range(n):
             if st[j + 1] >= length and math.hypot(px[j] - pf[k, 3], py[j] - pf[k, 4]) <= c[3]:

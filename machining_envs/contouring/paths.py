@@ -993,8 +993,7 @@ def path_points(tab, length, s, n, out_x, out_y, scratch):
     if one:
         _segment_points(tab[k], length, s, n, out_x, out_y, ang, th)
         return
-    k = -1
-    before = 0.0
+    before = min(max(s[0], 0.0), length)  # the first point walks on from its own segment
     curved = False  # whether a point lies on an arc or involute (else no sine is needed)
     for j in range(n):
         sj = min(max(s[j], 0.0), length)
@@ -1286,10 +1285,6 @@ def _segment_distances(row, px, py, n, out):
         out[j] = best
 
 
-#: The bits of +inf as an int64: from +0 to +inf, a float's bits as an int64 rise with it.
-_INF_BITS = 0x7FF0000000000000
-
-
 @numba.njit(cache=True, inline="always")
 def _near_distance(row, x, y):
     """A lower bound of the distance of ``(x, y)`` to a segment (``Segment.closest``'s),
@@ -1373,19 +1368,13 @@ def path_distances(tab, px, py, n, out, scratch, lower, order):
         return
     mx = 0.5 * (px[0] + px[n - 1])
     my = 0.5 * (py[0] + py[n - 1])
-    # The largest squared offset from the centre, as the largest of the squares' bits
-    # (squares are +0 to +inf, where the bits rise with the values: one loop in vectors);
-    # a NaN (bits above +inf's, or with the sign bit) where a point is not finite (or the
-    # centre): the spread is then NaN, and nothing is skipped.
-    hi = 0  # the bits of +0.0
-    lo = 0
+    # The largest squared offset from the centre (row_largest: in vectors); NaN where a
+    # point is not finite (or the centre): then nothing is skipped.
     for j in range(n):
         dx = px[j] - mx
         dy = py[j] - my
-        b = float_bits(dx * dx + dy * dy)
-        hi = b if b > hi else hi
-        lo = b if b < lo else lo
-    spread = math.sqrt(bits_float(hi)) if lo >= 0 and hi <= _INF_BITS else math.nan
+        scratch[j] = dx * dx + dy * dy
+    spread = math.sqrt(row_largest(scratch, n))
     scale = abs(mx) + abs(my) + spread
     for k in range(ns):  # a stable insertion sort of the segments by their lower bound
         v = _near_distance(tab[k], mx, my) - spread
@@ -1406,6 +1395,10 @@ def path_distances(tab, px, py, n, out, scratch, lower, order):
             if scratch[j] < out[j]:
                 out[j] = scratch[j]
         dmax = row_largest(out, n)
+
+
+#: The bits of +inf as an int64: from +0 to +inf, a float's bits as an int64 rise with it.
+_INF_BITS = 0x7FF0000000000000
 
 
 @numba.njit(cache=True, inline="always")
