@@ -22,6 +22,13 @@ steady state reached, every array of the core put back before each call, so that
 steps the same lanes through the same sample (the median call; what an A/B of two versions
 of a kernel compares, with less noise than a step among resets and Python).
 
+Each row also gives the single env's step (``gym.make(id)``, its resets counted, from the
+run that measures the mean episode) and the vector env's multiple of it (**x single**: the
+single env's µs per step over the vector env's per lane-step). With ``--frozen``,
+**ceiling** is that multiple if every part of the vector step but the compiled physics
+cost nothing: the single env's step over the compiled step alone. No vector env that runs
+the same physics per lane on these threads can go past it.
+
     python benchmarks/step_breakdown.py [--lanes 1024] [--env machining_envs/Turning-v0 ...]
                                         [--threads K] [--frozen]
 """
@@ -165,11 +172,12 @@ def main(argv=None) -> None:
     print(
         f"{'env':34s} {'step':>6s}"
         + "".join(f" {p:>15s}" for p in parts)
-        + f" {'resets/step':>11s} {'µs/reset':>9s}"
-        + (f" {'alone':>6s}" if args.frozen else "")
+        + f" {'resets/step':>11s} {'µs/reset':>9s} {'single':>6s} {'x single':>8s}"
+        + (f" {'alone':>6s} {'ceiling':>7s}" if args.frozen else "")
     )
     for env_id in args.env:
-        resets = steps_per_second(env_id, args.episode_steps, seed=0)[2]
+        _, single_rate, resets = steps_per_second(env_id, args.episode_steps, seed=0)
+        single = 1.0 / single_rate  # seconds per step of the single env, its resets counted
         episode = args.episode_steps / max(resets, 1)  # as throughput.py's steady columns
         b = breakdown(env_id, args.lanes, episode, seed=0, num_threads=args.threads,
                       frozen=args.frozen)  # fmt: skip
@@ -178,7 +186,8 @@ def main(argv=None) -> None:
         )  # fmt: skip
         print(
             f"{env_id:34s} {b['total'] * 1e6:6.2f}{cells} {b['resets/step']:11.1f}"
-            f" {b['per reset'] * 1e6:9.0f}" + (f" {b['alone'] * 1e6:6.2f}" if args.frozen else "")
+            f" {b['per reset'] * 1e6:9.0f} {single * 1e6:6.2f} {single / b['total']:8.1f}"
+            + (f" {b['alone'] * 1e6:6.2f} {single / b['alone']:7.1f}" if args.frozen else "")
         )
 
 

@@ -10,14 +10,20 @@ from tests.benchmark_scripts import BENCHMARKS, run_benchmark
 
 
 def test_step_breakdown_script_splits_every_env():
-    """The four parts add up to the step; ``--frozen``'s calls of the compiled step alone
+    """The four parts add up to the step, and the multiples of the single env are its step
+    over the vector env's and over the compiled step alone; ``--frozen``'s calls of the compiled step alone
     come after the timed steps and stay out of them."""
     out = run_benchmark("step_breakdown.py --lanes 16 --episode-steps 200 --frozen")
     for env_id in machining_envs.ENV_IDS:
         line = next(row for row in out.splitlines() if row.startswith(env_id))
         values = [float(x) for x in re.findall(r"(?<![\w(])-?\d+\.\d+(?!%)", line)]
         total, *parts = values[:5]
-        assert values[-1] > 0, line  # the compiled step alone
+        single, x_single, alone, ceiling = values[-4:]
+        assert single > 0 and alone > 0, line  # the single env's step, the compiled step alone
+        # Each multiple is the single env's step over the vector env's (printed rounded).
+        for ratio, per_lane in ((x_single, total), (ceiling, alone)):
+            slack = 0.05 + ratio * (0.005 / per_lane + 0.005 / single)
+            assert abs(ratio - single / per_lane) <= slack, line
         shares = [int(s) for s in re.findall(r"\(\s*(-?\d+)%\)", line)]
         assert total > 0 and parts[0] > 0, line  # the compiled step takes some time
         assert len(shares) == 4 and all(0 <= s <= 100 for s in shares), line
