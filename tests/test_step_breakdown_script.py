@@ -11,8 +11,8 @@ from tests.benchmark_scripts import BENCHMARKS, run_benchmark
 
 def test_step_breakdown_script_splits_every_env():
     """The four parts add up to the step, and the multiples of the single env are its step
-    over the vector env's and over the compiled step alone; ``--frozen``'s calls of the compiled step alone
-    come after the timed steps and stay out of them."""
+    over the vector env's and over the compiled step alone; ``--frozen``'s calls of the
+    compiled step alone come after the timed steps and stay out of them."""
     out = run_benchmark("step_breakdown.py --lanes 16 --episode-steps 200 --frozen")
     for env_id in machining_envs.ENV_IDS:
         line = next(row for row in out.splitlines() if row.startswith(env_id))
