@@ -411,7 +411,8 @@ def _bounding_circle_of_row(row, length):
     if kind == _LINE:
         half = 0.5 * length
         size = abs(row[6]) + abs(row[7]) + length
-        return row[6] + row[8] * half, row[7] + row[9] * half, half + 1e-9 * size
+        mx, my = _line_xy(row, half)
+        return mx, my, half + 1e-9 * size
     if kind == _ARC:
         size = abs(row[6]) + abs(row[7]) + row[8]
         if row[11] > math.pi:
@@ -921,19 +922,52 @@ def _segment_point(row, s):
     """Point of the segment ``row`` at arc length ``s`` from its start (``Segment.point``)."""
     kind = row[0]
     if kind == _LINE:
-        return row[6] + row[8] * s, row[7] + row[9] * s
+        return _line_xy(row, s)
     if kind == _ARC:
-        ang = row[9] + row[10] * s / row[8]
-        return row[6] + row[8] * math.cos(ang), row[7] + row[8] * math.sin(ang)
-    th = math.sqrt(row[12] + 2.0 * s / row[8])
-    return _involute_at(row, th)
+        ang = _arc_angle(row, s)
+        return _arc_xy(row, math.cos(ang), math.sin(ang))
+    return _involute_at(row, _involute_param(row, s))
 
 
 @numba.njit(cache=True)
 def _involute_at(row, th):
     phi = th + row[9]
-    c = math.cos(phi)
-    sn = math.sin(phi)
+    return _involute_xy(row, th, math.cos(phi), math.sin(phi))
+
+
+# A segment's point at ``loc`` along it, in its table row's terms: each formula once, for
+# the point-by-point functions and the rows of points alike (inlined: the same operations
+# in the same order wherever they run).
+
+
+@numba.njit(cache=True, inline="always")
+def _line_xy(row, loc):
+    """A line's point ``loc`` along it."""
+    return row[6] + row[8] * loc, row[7] + row[9] * loc
+
+
+@numba.njit(cache=True, inline="always")
+def _arc_angle(row, loc):
+    """The angle, seen from an arc's centre, of its point ``loc`` along it."""
+    return row[9] + row[10] * loc / row[8]
+
+
+@numba.njit(cache=True, inline="always")
+def _arc_xy(row, c, sn):
+    """An arc's point of the angle whose cosine and sine are ``c`` and ``sn``."""
+    return row[6] + row[8] * c, row[7] + row[8] * sn
+
+
+@numba.njit(cache=True, inline="always")
+def _involute_param(row, loc):
+    """The involute's parameter (its unrolled angle) at its point ``loc`` along it."""
+    return math.sqrt(row[12] + 2.0 * loc / row[8])
+
+
+@numba.njit(cache=True, inline="always")
+def _involute_xy(row, th, c, sn):
+    """An involute's point of parameter ``th``, ``c`` and ``sn`` the cosine and sine of
+    ``th`` plus its base angle."""
     return row[6] + row[8] * (c + th * sn), row[7] + row[8] * (sn - th * c)
 
 
@@ -1016,10 +1050,10 @@ def path_points(tab, length, s, n, out_x, out_y, scratch):
             ang[j] = 1.0  # unused: any angle in the vector path's range
         elif kind == _ARC:
             th[j] = 0.0
-            ang[j] = row[9] + row[10] * loc / row[8]
+            ang[j] = _arc_angle(row, loc)
             curved = True
         else:
-            t = math.sqrt(row[12] + 2.0 * loc / row[8])
+            t = _involute_param(row, loc)
             th[j] = t
             ang[j] = t + row[9]
             curved = True
@@ -1029,17 +1063,11 @@ def path_points(tab, length, s, n, out_x, out_y, scratch):
         row = tab[int(seg[j])]
         kind = row[0]
         if kind == _LINE:
-            out_x[j] = row[6] + row[8] * th[j]
-            out_y[j] = row[7] + row[9] * th[j]
+            out_x[j], out_y[j] = _line_xy(row, th[j])
         elif kind == _ARC:
-            out_x[j] = row[6] + row[8] * out_x[j]
-            out_y[j] = row[7] + row[8] * out_y[j]
+            out_x[j], out_y[j] = _arc_xy(row, out_x[j], out_y[j])
         else:
-            c = out_x[j]
-            sn = out_y[j]
-            t = th[j]
-            out_x[j] = row[6] + row[8] * (c + t * sn)
-            out_y[j] = row[7] + row[8] * (sn - t * c)
+            out_x[j], out_y[j] = _involute_xy(row, th[j], out_x[j], out_y[j])
 
 
 @numba.njit(cache=True, inline="always")
@@ -1050,31 +1078,22 @@ def _segment_points(row, length, s, n, out_x, out_y, ang, th):
     kind = row[0]
     if kind == _LINE:
         for j in range(n):
-            loc = min(max(s[j], 0.0), length) - row[1]
-            out_x[j] = row[6] + row[8] * loc
-            out_y[j] = row[7] + row[9] * loc
+            out_x[j], out_y[j] = _line_xy(row, min(max(s[j], 0.0), length) - row[1])
         return
     if kind == _ARC:
         for j in range(n):
-            loc = min(max(s[j], 0.0), length) - row[1]
-            ang[j] = row[9] + row[10] * loc / row[8]
+            ang[j] = _arc_angle(row, min(max(s[j], 0.0), length) - row[1])
         sincos_row(ang, n, out_y, out_x)  # the sines into out_y, the cosines into out_x
         for j in range(n):
-            out_x[j] = row[6] + row[8] * out_x[j]
-            out_y[j] = row[7] + row[8] * out_y[j]
+            out_x[j], out_y[j] = _arc_xy(row, out_x[j], out_y[j])
         return
     for j in range(n):
-        loc = min(max(s[j], 0.0), length) - row[1]
-        t = math.sqrt(row[12] + 2.0 * loc / row[8])
+        t = _involute_param(row, min(max(s[j], 0.0), length) - row[1])
         th[j] = t
         ang[j] = t + row[9]
     sincos_row(ang, n, out_y, out_x)
     for j in range(n):
-        c = out_x[j]
-        sn = out_y[j]
-        t = th[j]
-        out_x[j] = row[6] + row[8] * (c + t * sn)
-        out_y[j] = row[7] + row[8] * (sn - t * c)
+        out_x[j], out_y[j] = _involute_xy(row, th[j], out_x[j], out_y[j])
 
 
 @numba.njit(cache=True, _nrt=False)
@@ -1089,7 +1108,7 @@ def path_heading(tab, length, s):
         return row[2] + 0.0
     if kind == _ARC:
         return row[2] + row[10] * loc / row[8]
-    return row[2] + (math.sqrt(row[12] + 2.0 * loc / row[8]) - row[10])
+    return row[2] + (_involute_param(row, loc) - row[10])
 
 
 # -- scalar contour error (Path.distance, Python floats) --
