@@ -199,20 +199,6 @@ def axes_zoh(a: np.ndarray, load_gain: np.ndarray, dt: np.ndarray) -> np.ndarray
     return out
 
 
-def _pade_expm(block, pade) -> np.ndarray | None:
-    """``expm(block)`` from scipy's compiled Pade step ``pade`` (``pick_pade_structure``,
-    ``pade_UV_calc`` of ``scipy.linalg._matfuncs_expm``, which ``expm`` calls), or None
-    where scaling is needed. With no scaling (``s = 0``: every table of the scenarios,
-    whose ``a dt`` is 0.02 to 0.07) ``expm`` returns the Pade approximant of an upper
-    triangular matrix with the part below the diagonal zeroed, as here."""
-    work = np.empty((5, 4, 4))
-    work[0] = block
-    if not _pade_step(work, pade):
-        return None
-    _zero_below(work[0])
-    return work[0]
-
-
 def _pade_step(work: np.ndarray, pade) -> bool:
     """scipy's Pade step on ``work`` (``(5, 4, 4)``, C-ordered, the block in ``work[0]``),
     the approximant left in ``work[0]`` (its part below the diagonal not yet zeroed:
@@ -229,8 +215,12 @@ def _zero_below(e: np.ndarray) -> None:
 
 
 def _usable_pade():
-    """scipy's Pade step for :func:`_pade_expm`, if this scipy has it (a private module)
-    and it gives ``expm``'s numbers on the blocks of a few tables; else None."""
+    """scipy's Pade step (``pick_pade_structure``, ``pade_UV_calc`` of
+    ``scipy.linalg._matfuncs_expm``, which ``expm`` calls) for :func:`axes_zoh`, if this
+    scipy has it (a private module) and it gives ``expm``'s numbers on the blocks of a few
+    tables; else None. With no scaling (``s = 0``: every table of the scenarios, whose
+    ``a dt`` is 0.02 to 0.07) ``expm`` returns the Pade approximant of an upper triangular
+    matrix with the part below the diagonal zeroed, as :func:`axes_zoh` does."""
     try:
         from scipy.linalg._matfuncs_expm import pade_UV_calc, pick_pade_structure
     except ImportError:
@@ -239,8 +229,12 @@ def _usable_pade():
     try:
         for a, g in ((182.0, -185.1), (91.0, -92.6), (364.1, -370.2), (137.1, -139.4)):
             block = np.array([[0.0, 1.0, 0.0, 0.0], [0.0, -a, a, g], [0.0] * 4, [0.0] * 4]) * 2e-4
-            e = _pade_expm(block, pade)
-            if e is None or e.tobytes() != expm(block).tobytes():
+            work = np.empty((5, 4, 4))
+            work[0] = block
+            if not _pade_step(work, pade):
+                return None
+            _zero_below(work[0])
+            if work[0].tobytes() != expm(block).tobytes():
                 return None
     except Exception:  # another signature in another scipy: expm itself is used
         return None

@@ -822,19 +822,18 @@ _S_AC, _S_BC, _S_CU, _S_GU = (dict(_LANE_ARRAYS)[k] for k in ("ac", "bc", "cu", 
 
 
 @numba.njit(cache=True)
-def _close_lanes(lanes, e, da0, db0, dc0, dd0, da1, db1, dc1, dd1, buf):
+def _close_lanes(lanes, e, designs, buf):
     """:func:`_close_axis` of both axes of each lane ``lanes[i]`` on the exponentials
-    ``e[i, axis]`` (``plant.axes_zoh``: ``Phi`` then ``Gamma``), into its row of ``buf``
+    ``e[i, axis]`` (``plant.axes_zoh``: ``Phi`` then ``Gamma``) with the axis's design
+    ``designs[axis]`` (``ServoLanes._design_arrays``), into its row of ``buf``
     (``ServoLanes.buf``: ``Du``'s entry and ``Gamma``'s first column too)."""
     for i in range(lanes.size):
         ac, bc, cu, du, gu, _, _ = lane_loops(buf[lanes[i]])
         for k in range(2):
             phi = e[i, k, :2, :2]
             gam = e[i, k, :2, 2:]
-            if k == 0:
-                du[k] = _close_axis(phi, gam, da0, db0, dc0, dd0, ac[k], bc[k], cu[k])
-            else:
-                du[k] = _close_axis(phi, gam, da1, db1, dc1, dd1, ac[k], bc[k], cu[k])
+            da, db, dc, dd = designs[k]
+            du[k] = _close_axis(phi, gam, da, db, dc, dd, ac[k], bc[k], cu[k])
             gu[k, 0] = gam[0, 0]
             gu[k, 1] = gam[1, 0]
 
@@ -965,8 +964,7 @@ class ServoLanes:
         load = -mm_per_rad[:, None] / inertia  # discrete_axis's load gain
         steps = np.repeat(dt, 2)
         e = axes_zoh(pole.ravel(), load.ravel(), steps).reshape((n, 2, 4, 4))
-        ((da0, db0, dc0, dd0), (da1, db1, dc1, dd1)) = self._design_arrays
-        _close_lanes(lanes, e, da0, db0, dc0, dd0, da1, db1, dc1, dd1, self.buf)
+        _close_lanes(lanes, e, self._design_arrays, self.buf)
         self.tq[lanes] = inertia / (mm_per_rad * dt)[:, None]
         self.umax[lanes] = umax
         gather_loops(self.buf, lanes, self.groups)
