@@ -9,7 +9,7 @@ of lanes can run at the same time on threads: the kernels are compiled with
 the same, to the last bit, whatever the number of threads.
 
 :class:`LaneBlocks` splits the lanes into contiguous blocks (one per thread, none smaller
-than ``MIN_BLOCK`` lanes) and runs a kernel over them: the calling thread takes the first
+than ``min_block`` lanes, ``MIN_BLOCK`` by default) and runs a kernel over them: the calling thread takes the first
 block, a pool of worker threads the others. Each argument of the kernel is declared as one
 of:
 
@@ -69,8 +69,9 @@ __all__ = [
     "serve_one_table_with_tail",
 ]
 
-#: Fewest lanes a thread steps: below this, handing a block to a thread (tens of µs)
-#: costs more than the block's own step saves.
+#: Fewest lanes a thread steps, by default: a block must carry more work than handing it
+#: to a thread costs. A process whose kernel costs more a lane may allow smaller blocks
+#: (``LaneBlocks``'s ``min_block``; the vector envs' ``min_block``).
 MIN_BLOCK = 128
 #: Block edges fall on multiples of this (kernels that step a few lanes at a time keep
 #: their groups).
@@ -93,11 +94,14 @@ def check_num_threads(num_threads) -> int:
     return int(num_threads)
 
 
-def block_edges(n: int, num_threads: int) -> list[tuple[int, int]]:
+def block_edges(n: int, num_threads: int, min_block: int = MIN_BLOCK) -> list[tuple[int, int]]:
     """Contiguous blocks ``(lo, hi)`` covering lanes ``0 .. n-1``: at most ``num_threads``,
-    each of at least ``MIN_BLOCK`` lanes (one block if ``n`` is too small for two), inner
-    edges on multiples of ``ALIGN``, sizes as even as that allows."""
-    k = max(1, min(num_threads, n // MIN_BLOCK))
+    as many as hold ``min_block`` lanes each (a multiple of ``ALIGN``; one block if ``n`` is
+    too small for two), inner edges on multiples of ``ALIGN``, sizes as even as that
+    allows."""
+    if not (isinstance(min_block, int) and min_block >= ALIGN and min_block % ALIGN == 0):
+        raise ValueError(f"min_block must be a positive multiple of {ALIGN}, got {min_block!r}")
+    k = max(1, min(num_threads, n // min_block))
     cuts = [0]
     for i in range(1, k):
         cuts.append(int(round(n * i / k / ALIGN)) * ALIGN)
@@ -305,13 +309,13 @@ def _stop_all(workers: list, pid: int) -> None:
 
 
 class LaneBlocks:
-    """The blocks of ``n`` lanes for ``num_threads`` threads, and the threads that step them
-    (see the module docstring)."""
+    """The blocks of ``n`` lanes for ``num_threads`` threads, none smaller than ``min_block``
+    lanes (:func:`block_edges`), and the threads that step them (see the module docstring)."""
 
-    def __init__(self, n: int, num_threads: int = 1) -> None:
+    def __init__(self, n: int, num_threads: int = 1, min_block: int = MIN_BLOCK) -> None:
         self.n = int(n)
         self.num_threads = check_num_threads(num_threads)
-        self.edges = block_edges(self.n, self.num_threads)
+        self.edges = block_edges(self.n, self.num_threads, min_block)
         #: One block: the kernel runs over all lanes on the calling thread (a core calls it
         #: itself then, sparing :meth:`run`'s call, 0.7 µs of a single env's step).
         self.one = len(self.edges) == 1

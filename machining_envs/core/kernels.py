@@ -28,6 +28,8 @@ __all__ = [
     "add8",
     "add_scaled8",
     "clip8",
+    "clip_unit",
+    "clip_unit_linear",
     "copy_into",
     "data_address",
     "fma",
@@ -263,6 +265,31 @@ def shift8(typingctx, z, g, u, applied):
         return builder.select(moved, shifted, z_)
 
     return vec8(vec8, vec8, vec8, vec8), codegen
+
+
+@numba.njit(cache=True)
+def clip_unit(a, action, clipped):
+    """A vector env's actions into its lanes' inputs in one pass: ``action[k]`` is ``a[k]``
+    clipped to ``[-1, 1]`` (numpy's ``minimum(maximum(a, -1), 1)``, ``-0.0`` kept) and
+    ``clipped[k]`` whether it was outside (``a < -1 or a > 1``). The actions are finite
+    (the vector env checked them); any of the outputs may be a strided column."""
+    for k in range(a.shape[0]):
+        x = a[k]
+        clipped[k] = x < -1.0 or x > 1.0
+        action[k] = min(max(x, -1.0), 1.0)
+
+
+@numba.njit(cache=True)
+def clip_unit_linear(a, action, clipped, command, mid, half):
+    """:func:`clip_unit`, and ``command[k] = mid + half * action[k]``: the command of a
+    linear ``ActionMap`` (``_mid``, ``_half``), rounded as numpy rounds it (a product, then
+    a sum; no fused multiply-add)."""
+    for k in range(a.shape[0]):
+        x = a[k]
+        clipped[k] = x < -1.0 or x > 1.0
+        y = min(max(x, -1.0), 1.0)
+        action[k] = y
+        command[k] = mid + half * y
 
 
 @numba.njit(cache=True)

@@ -51,7 +51,7 @@ with the same seed, as Gymnasium's ``SyncVectorEnv`` in that mode runs them:
 
 Every vector env takes ``num_threads`` (default 1): its kernel then steps blocks of lanes on
 that many threads at once (:mod:`machining_envs.core.blocks`; blocks of at least
-``MIN_BLOCK`` lanes, so a small N runs on fewer), with the same numbers in every lane. The
+``min_block`` lanes, so a small N runs on fewer), with the same numbers in every lane. The
 rest of a step (the checks, resets, info) stays on the calling thread. A process whose
 resets call BLAS (``resets_call_blas``) runs them with BLAS on one thread
 (``one_blas_thread``: OpenBLAS's threads spin after every call and would keep the other
@@ -71,7 +71,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from machining_envs.core.blocks import LaneBlocks, one_blas_thread
+from machining_envs.core.blocks import MIN_BLOCK, LaneBlocks, one_blas_thread
 from machining_envs.core.env import check_scenario_spec, real_actions, scenario_option
 
 __all__ = ["LaneVectorEnv", "check_num_envs", "check_autoreset_mode", "first_scenario"]
@@ -119,6 +119,10 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
     #: Whether the process's resets call BLAS (a plant discretised through scipy at every
     #: reset): they then run with BLAS on one thread (``core.blocks.one_blas_thread``).
     resets_call_blas: bool = False
+    #: Fewest lanes a thread steps (``core.blocks.block_edges``; a multiple of 64): a
+    #: process whose kernel costs little a lane keeps the default, 128; one whose kernel
+    #: costs more hands out smaller blocks, so that a few hundred lanes use more threads.
+    min_block: int = MIN_BLOCK
 
     def __init__(
         self,
@@ -134,7 +138,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
         #: The blocks of lanes the process's kernel steps at once, on ``num_threads``
         #: threads (the process's core runs its kernel through it).
-        self.lane_blocks = LaneBlocks(self.num_envs, num_threads)
+        self.lane_blocks = LaneBlocks(self.num_envs, num_threads, self.min_block)
         self.single_observation_space = single_observation_space
         self.single_action_space = single_action_space
         self.observation_space = batch_space(single_observation_space, self.num_envs)

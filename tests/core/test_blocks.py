@@ -22,19 +22,44 @@ from machining_envs.core.blocks import (
 from machining_envs.core.packed import b1_1, f8_1, f8_2, i8_1
 
 
-@pytest.mark.parametrize("n", [1, 5, 127, 128, 255, 256, 300, 1000, 1024, 8192, 10_001])
+@pytest.mark.parametrize("n", [1, 5, 63, 64, 127, 128, 191, 255, 256, 300, 1000, 1024, 8192, 10_001])
 @pytest.mark.parametrize("threads", [1, 2, 3, 4, 16, 256])
-def test_blocks_cover_the_lanes_in_order(n, threads):
-    edges = block_edges(n, threads)
+@pytest.mark.parametrize("min_block", [MIN_BLOCK, ALIGN])
+def test_blocks_cover_the_lanes_in_order(n, threads, min_block):
+    edges = block_edges(n, threads, min_block)
     assert edges[0][0] == 0 and edges[-1][1] == n
     for (_, hi), (lo, _) in zip(edges[:-1], edges[1:], strict=True):
         assert hi == lo and lo % ALIGN == 0
     assert 1 <= len(edges) <= threads
     # as many blocks as the lanes allow (a small batch stays on one thread), none much
-    # smaller than MIN_BLOCK (an edge moves by at most ALIGN / 2 to fall on a multiple)
-    assert len(edges) == max(1, min(threads, n // MIN_BLOCK))
+    # smaller than min_block (an edge moves by at most ALIGN / 2 to fall on a multiple)
+    assert len(edges) == max(1, min(threads, n // min_block))
     if len(edges) > 1:
-        assert all(hi - lo >= MIN_BLOCK - ALIGN for lo, hi in edges)
+        assert all(hi - lo >= min_block - ALIGN for lo, hi in edges)
+        assert all(hi - lo >= ALIGN // 2 for lo, hi in edges)
+
+
+@pytest.mark.parametrize("bad", [0, 32, 100, -64, 64.0, None])
+def test_a_minimum_block_off_the_alignment_is_refused_naming_it(bad):
+    with pytest.raises(ValueError, match="min_block must be a positive multiple of 64"):
+        block_edges(1024, 4, bad)
+
+
+def test_the_heavier_kernels_step_smaller_blocks():
+    """Turning-v0 and ContouringFeed-v0 (a lane's step 0.5 and 1.3 µs compiled) hand out
+    blocks of 64 lanes; the lighter kernels keep 128."""
+    import gymnasium as gym
+
+    import machining_envs  # noqa: F401  (registers the ids)
+
+    for env_id, lanes in (("Turning-v0", 64), ("ContouringFeed-v0", 64), ("EndMilling-v0", 128),
+                          ("MicroDrilling-v0", 128), ("Contouring-v0", 128)):  # fmt: skip
+        venv = gym.make_vec(f"machining_envs/{env_id}", num_envs=128, num_threads=4)
+        try:
+            assert venv.unwrapped.min_block == lanes
+            assert len(venv.unwrapped.lane_blocks.edges) == 128 // lanes, env_id
+        finally:
+            venv.close()
 
 
 def test_bad_thread_counts_are_refused_naming_the_parameter():

@@ -381,3 +381,27 @@ def test_vector_hypot_is_libms_hypot_where_it_takes_the_values():
     fast, libm = np.empty(10000), np.empty(10000)
     _hypots(d[0], d[1], fast, libm)
     assert not np.isnan(fast).any()
+
+
+def test_clip_unit_is_numpys_clip_and_linear_map_to_the_last_bit():
+    """The vector envs' one-pass clip (and linear command) against the numpy expressions
+    they replace, on strided outputs, the edges, -0.0 and values far outside."""
+    from machining_envs.core.kernels import clip_unit, clip_unit_linear
+
+    rng = np.random.default_rng(3)
+    a = np.concatenate([rng.uniform(-3.0, 3.0, 500), [-1.0, 1.0, -0.0, 0.0, 1e300, -1e300,
+                        np.nextafter(1.0, 2.0), np.nextafter(-1.0, -2.0)]])  # fmt: skip
+    n = a.size
+    table = np.zeros((n, 3))
+    flags = np.zeros((n, 2), dtype=bool)
+    ints = np.zeros((n, 2), dtype=np.int64)
+    want = np.minimum(np.maximum(a, -1.0), 1.0)
+    want_clipped = (a < -1.0) | (a > 1.0)
+    clip_unit(a, table[:, 0], ints[:, 1])
+    assert table[:, 0].tobytes() == want.tobytes()
+    assert np.array_equal(ints[:, 1], want_clipped.astype(np.int64))
+    mid, half = 0.5 * (150.0 + 3.0), 0.5 * (150.0 - 3.0)
+    clip_unit_linear(a, table[:, 1], flags[:, 1], table[:, 2], mid, half)
+    assert table[:, 1].tobytes() == want.tobytes()
+    assert np.array_equal(flags[:, 1], want_clipped)
+    assert table[:, 2].tobytes() == (mid + half * want).tobytes()
