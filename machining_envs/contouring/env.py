@@ -842,8 +842,6 @@ class ContouringVectorEnv(LaneVectorEnv):
     """
 
     env_name = "ContouringEnv"
-    # Every reset discretises the lane's plant at its own parameters (scipy, BLAS).
-    resets_call_blas = True
 
     def __init__(
         self,

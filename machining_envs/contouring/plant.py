@@ -32,7 +32,6 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
-from scipy.linalg import expm
 
 from machining_envs.core.checks import check_field, replace_checked
 
@@ -163,8 +162,10 @@ assert tuple(_FIELD_RULES) == tuple(f.name for f in dataclasses.fields(Contourin
 
 @functools.lru_cache(maxsize=64)
 def _axis_zoh(a: float, load_gain: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """``machining_envs.core.lti.zoh(A, B, dt)`` of one axis (``A = [[0, 1], [0, -a]]``,
-    ``B = [[0, 0], [a, g]]``), read-only: :func:`axes_zoh` of the one axis."""
+    """The exact ZOH ``(Phi, Gamma)`` of one axis (``A = [[0, 1], [0, -a]]``,
+    ``B = [[0, 0], [a, g]]``), read-only: :func:`axes_zoh` of the one axis, the one source
+    of the axes' discretisation (the plant, the servo's designs and the vector env's
+    lanes)."""
     e = axes_zoh(np.array([a]), np.array([load_gain]), np.array([dt]))[0]
     phi, gam = e[:2, :2], e[:2, 2:]
     phi.setflags(write=False)
@@ -173,76 +174,69 @@ def _axis_zoh(a: float, load_gain: float, dt: float) -> tuple[np.ndarray, np.nda
 
 
 def axes_zoh(a: np.ndarray, load_gain: np.ndarray, dt: np.ndarray) -> np.ndarray:
-    """The exponentials ``(n, 4, 4)`` of :func:`_axis_zoh`'s block matrices for ``n`` axes
-    (arrays of their ``a``, ``g`` and ``dt``): ``Phi`` in ``[:, :2, :2]``, ``Gamma`` in
-    ``[:, :2, 2:]``. A vector env's lanes discretise their tables, whose inertias are
-    random, at every reset: here the blocks of all of them are formed at once.
+    r"""The exact ZOH discretisations ``(n, 4, 4)`` of ``n`` axes (arrays of their ``a``,
+    ``g`` and ``dt``): the exponential of :func:`_axis_zoh`'s block matrix
+    ``[[A, B], [0, 0]] dt``, ``Phi`` in ``[:, :2, :2]``, ``Gamma`` in ``[:, :2, 2:]``. A
+    vector env's lanes discretise their tables, whose inertias are random, at every reset:
+    here all of them in one compiled call (:func:`_axes_zoh_into`).
 
-    Each is ``scipy.linalg.expm(block)`` (upper triangular) to the last bit, in a fraction
-    of its time where no scaling is needed: ``expm``'s checks and its general handling of
-    batches and triangular input cost some 50 us an axis, its compiled Pade step a few, and
-    that step runs on its own here (:func:`_pade_step`); where it does not apply,
-    ``expm`` itself runs."""
-    n = a.shape[0]
-    work = np.zeros((n, 5, 4, 4))
-    # Each block matrix times dt, product by product as numpy forms it.
-    work[:, 0, 0, 1] = 1.0 * dt
-    work[:, 0, 1, 1] = -a * dt
-    work[:, 0, 1, 2] = a * dt
-    work[:, 0, 1, 3] = load_gain * dt
-    blocks = work[:, 0].copy()  # (the Pade step spoils a block it declines)
-    declined = [i for i in range(n) if _PADE is None or not _pade_step(work[i], _PADE)]
-    out = work[:, 0]
-    _zero_below(out)
-    for i in declined:
-        out[i] = expm(blocks[i])
+    The axis is a velocity loop of pole ``a`` behind an integrator, so its exponential has a
+    closed form in ``q = a dt``: with ``E = exp(-q)``, ``phi1 = (1 - E) / q`` and
+    ``phi2 = (q - 1 + E) / q^2``,
+
+    .. math::
+
+        \Phi = \begin{bmatrix} 1 & dt\,\phi_1 \\ 0 & E \end{bmatrix}, \qquad
+        \Gamma = \begin{bmatrix} dt\,q\,\phi_2 & g\,dt^2 \phi_2 \\
+                                  q\,\phi_1 & g\,dt\,\phi_1 \end{bmatrix}
+
+    (the step responses of ``v' = -a v + b w``, ``x' = v`` to a held input ``w``, ``b = a``
+    for the command and ``g`` for the load torque). ``phi1`` comes from ``expm1``, ``phi2``
+    from its Taylor series below ``q = 1`` (where ``q - 1 + E`` would cancel), so each entry
+    is the exact value to ``16 + q`` units in the last place (against 40-digit arithmetic),
+    and scipy's ``expm`` (``core.lti.zoh``) to 1e-13 over the scenarios' tables (``expm``
+    is itself up to 64 units from the exact values there; ``tests/contouring/test_plant.py``).
+    ``expm``, a Pade approximant through BLAS and LAPACK, cost about 5 µs an axis and woke
+    OpenBLAS's threads at every reset."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    g = np.ascontiguousarray(load_gain, dtype=np.float64)
+    h = np.ascontiguousarray(dt, dtype=np.float64)
+    out = np.zeros((a.shape[0], 4, 4))
+    _axes_zoh_into(a, g, h, out)
     return out
 
 
-def _pade_step(work: np.ndarray, pade) -> bool:
-    """scipy's Pade step on ``work`` (``(5, 4, 4)``, C-ordered, the block in ``work[0]``),
-    the approximant left in ``work[0]`` (its part below the diagonal not yet zeroed:
-    :func:`_zero_below`); False (``work`` spoilt) where scaling is needed."""
-    pick, uv = pade
-    m, s = pick(work)
-    return not (s != 0 or m < 0 or uv(work, m) != 0)
+#: Taylor coefficients of ``phi2(q) = (q - 1 + exp(-q)) / q^2 = sum_k (-q)^k / (k + 2)!``,
+#: ``k = 0 .. 21`` (below ``q = 1`` the first term left out is under 1e-22 of the sum).
+_PHI2_SERIES = np.array([(-1.0) ** k / math.factorial(k + 2) for k in range(22)])
 
 
-def _zero_below(e: np.ndarray) -> None:
-    """The part below the diagonal of the 4x4 matrix ``e`` (or of each of a stack) set to
-    zero."""
-    e[..., 1, 0] = e[..., 2, 0] = e[..., 2, 1] = e[..., 3, 0] = e[..., 3, 1] = e[..., 3, 2] = 0.0
-
-
-def _usable_pade():
-    """scipy's Pade step (``pick_pade_structure``, ``pade_UV_calc`` of
-    ``scipy.linalg._matfuncs_expm``, which ``expm`` calls) for :func:`axes_zoh`, if this
-    scipy has it (a private module) and it gives ``expm``'s numbers on the blocks of a few
-    tables; else None. With no scaling (``s = 0``: every table of the scenarios, whose
-    ``a dt`` is 0.02 to 0.07) ``expm`` returns the Pade approximant of an upper triangular
-    matrix with the part below the diagonal zeroed, as :func:`axes_zoh` does."""
-    try:
-        from scipy.linalg._matfuncs_expm import pade_UV_calc, pick_pade_structure
-    except ImportError:
-        return None
-    pade = (pick_pade_structure, pade_UV_calc)
-    try:
-        for a, g in ((182.0, -185.1), (91.0, -92.6), (364.1, -370.2), (137.1, -139.4)):
-            block = np.array([[0.0, 1.0, 0.0, 0.0], [0.0, -a, a, g], [0.0] * 4, [0.0] * 4]) * 2e-4
-            work = np.empty((5, 4, 4))
-            work[0] = block
-            if not _pade_step(work, pade):
-                return None
-            _zero_below(work[0])
-            if work[0].tobytes() != expm(block).tobytes():
-                return None
-    except Exception:  # another signature in another scipy: expm itself is used
-        return None
-    return pade
-
-
-#: scipy's compiled Pade step for :func:`axes_zoh`, or None where it cannot be used.
-_PADE = _usable_pade()
+@numba.njit(cache=True)
+def _axes_zoh_into(a, g, dt, out):
+    """:func:`axes_zoh`'s closed form for each axis ``i`` into ``out[i]`` (zeros on
+    entry)."""
+    c = _PHI2_SERIES
+    for i in range(a.shape[0]):
+        h = dt[i]
+        q = a[i] * h
+        em1 = math.expm1(-q)  # E - 1
+        phi1 = -em1 / q
+        if q < 1.0:
+            phi2 = c[c.size - 1]
+            for k in range(c.size - 2, -1, -1):
+                phi2 = phi2 * q + c[k]
+        else:
+            phi2 = (q + em1) / (q * q)
+        e = out[i]
+        e[0, 0] = 1.0
+        e[0, 1] = h * phi1
+        e[0, 2] = h * q * phi2
+        e[0, 3] = g[i] * h * h * phi2
+        e[1, 1] = math.exp(-q)
+        e[1, 2] = q * phi1
+        e[1, 3] = g[i] * h * phi1
+        e[2, 2] = 1.0
+        e[3, 3] = 1.0
 
 
 class ContouringStep(NamedTuple):

@@ -18,13 +18,11 @@ of:
 - ``SCRATCH``: scratch space the kernel reuses lane after lane: each block gets its own
   array of the same shape (the first block the array itself).
 
-Resets run on the calling thread, and some of them (the exact discretisations of the
-contouring plants, through scipy) call OpenBLAS, whose threads spin for about
-0.1 ms after every call, even a 4x4 product. A single env resets now and then, but a vector
-env of many lanes resets some at almost every step, and its BLAS threads then kept the
-other cores busy: a two-thread ContouringFeed-v0 ran no faster than one. So the vector env
-of such a process runs its resets in :func:`one_blas_thread`, with BLAS on one thread: the
-numbers are the same, the cores stay free.
+Resets run on the calling thread, and none of them calls BLAS: OpenBLAS's threads spin for
+about 0.1 ms after a call they take part in (scipy's ``expm`` of a 4x4 block was one, through
+LAPACK's threaded solve), and a vector env resets some lanes at almost every step, so they
+would keep the kernel's cores busy (a two-thread ContouringFeed-v0 once ran no faster than
+one). The discretisations the resets make are compiled instead.
 
 A compiled kernel (numba) with no other trailing argument than one integer runs on
 **workers that wait in compiled code**: each worker thread polls a flag of its own, without
@@ -36,14 +34,12 @@ enough for the next step of an env stepped in a loop to find it awake), then sle
 the next block; while an env is stepped without pause, its workers keep their cores busy.
 Anything else (a Python kernel, other trailing arguments) runs on the pool.
 
-This module imports numpy, numba, threadpoolctl, ``core.packed`` and the standard library
-only.
+This module imports numpy, numba, ``core.packed`` and the standard library only.
 """
 
 from __future__ import annotations
 
 import os
-import sys
 import threading
 import time
 import weakref
@@ -64,7 +60,6 @@ __all__ = [
     "SCRATCH",
     "LaneBlocks",
     "check_num_threads",
-    "one_blas_thread",
     "serve_one_table",
     "serve_one_table_with_tail",
 ]
@@ -489,61 +484,3 @@ class LaneBlocks:
             self._pool.shutdown(wait=True)
         self._pool = None
         self._stop_workers()
-
-
-_BLAS_LOCK = threading.Lock()
-_BLAS_SEEN: list = [0, 0, []]  # pid, len(sys.modules), the BLAS libraries' controllers
-
-
-def _blas_libraries() -> list:
-    """threadpoolctl's controllers of the BLAS libraries loaded, looked up (a few ms) at the
-    first use, in a forked copy, and after any import since the last look (a module may
-    have brought a BLAS of its own)."""
-    with _BLAS_LOCK:
-        if _BLAS_SEEN[0] != os.getpid() or _BLAS_SEEN[1] != len(sys.modules):
-            from threadpoolctl import ThreadpoolController
-
-            libs = ThreadpoolController().select(user_api="blas").lib_controllers
-            _BLAS_SEEN[:] = [os.getpid(), len(sys.modules), libs]
-        return _BLAS_SEEN[2]
-
-
-class _OneBlasThread(threading.local):
-    """The context of :func:`one_blas_thread`, per Python thread: the outermost entry sets
-    the BLAS libraries to one thread, its exit puts back the counts it found and gives up
-    the control of OpenBLAS's pool as ``threadpoolctl.threadpool_limits`` does (while
-    another thread holds that control, this thread's settings do nothing: threadpoolctl's
-    rule for OpenBLAS's process-wide pool)."""
-
-    def __init__(self) -> None:
-        self.depth = 0
-        self.saved: list = []
-
-    def __enter__(self) -> None:
-        if self.depth == 0:
-            self.saved = [(lib, lib.num_threads) for lib in _blas_libraries()]
-            for lib, _ in self.saved:
-                lib.set_num_threads(1)
-        self.depth += 1
-
-    def __exit__(self, *exc) -> None:
-        self.depth -= 1
-        if self.depth == 0:
-            for lib, count in self.saved:
-                lib.set_num_threads(count)
-            for cls in {type(lib) for lib, _ in self.saved}:
-                clear = getattr(cls, "clear_controlling_thread", None)
-                if clear is not None:
-                    clear()
-            self.saved = []
-
-
-_ONE_BLAS_THREAD = _OneBlasThread()
-
-
-def one_blas_thread() -> _OneBlasThread:
-    """A context in which the BLAS libraries numpy and scipy loaded run on one thread (about
-    20 µs to enter and leave, more in a busy step); a nested use keeps it until the
-    outermost one leaves. The resets of a vector env whose resets call BLAS run in it (see
-    the module docstring)."""
-    return _ONE_BLAS_THREAD

@@ -52,16 +52,14 @@ with the same seed, as Gymnasium's ``SyncVectorEnv`` in that mode runs them:
 Every vector env takes ``num_threads`` (default 1): its kernel then steps blocks of lanes on
 that many threads at once (:mod:`machining_envs.core.blocks`; blocks of at least
 ``min_block`` lanes, so a small N runs on fewer), with the same numbers in every lane. The
-rest of a step (the checks, resets, info) stays on the calling thread. A process whose
-resets call BLAS (``resets_call_blas``) runs them with BLAS on one thread
-(``one_blas_thread``: OpenBLAS's threads spin after every call and would keep the other
-cores busy).
+rest of a step (the checks, resets, info) stays on the calling thread. No process's resets
+call BLAS (its discretisations are compiled): OpenBLAS's threads spin on the cores for
+about 0.1 ms after a call they take part in, which would slow the kernel's threads.
 """
 
 from __future__ import annotations
 
 import abc
-import contextlib
 import math
 from typing import Any
 
@@ -71,13 +69,10 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from machining_envs.core.blocks import MIN_BLOCK, LaneBlocks, one_blas_thread
+from machining_envs.core.blocks import MIN_BLOCK, LaneBlocks
 from machining_envs.core.env import check_scenario_spec, real_actions, scenario_option
 
 __all__ = ["LaneVectorEnv", "check_num_envs", "check_autoreset_mode", "first_scenario"]
-
-_NO_CONTEXT = contextlib.nullcontext()
-
 
 def first_scenario(spec):
     """The first of a list or tuple of per-lane scenarios, else ``spec`` itself (what a
@@ -116,9 +111,6 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
     #: Name used in error messages (the single env's class name, say).
     env_name: str = "LaneVectorEnv"
-    #: Whether the process's resets call BLAS (a plant discretised through scipy at every
-    #: reset): they then run with BLAS on one thread (``core.blocks.one_blas_thread``).
-    resets_call_blas: bool = False
     #: Fewest lanes a thread steps (``core.blocks.block_edges``; a multiple of 64): a
     #: process whose kernel costs little a lane keeps the default, 128; one whose kernel
     #: costs more hands out smaller blocks, so that a few hundred lanes use more threads.
@@ -183,8 +175,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             for i in lanes.tolist():
                 if seeds[i] is not None:
                     self.lane_rngs[i] = seeding.np_random(seeds[i])[0]
-        with one_blas_thread() if self.resets_call_blas else _NO_CONTEXT:
-            obs = self._reset_lanes(lanes, options)
+        obs = self._reset_lanes(lanes, options)
         self._started = True
         self._ended[lanes] = False
         info = self._info_now()
@@ -327,8 +318,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             final_obs[i] = row
         # The step's info arrays are the final info; _reset_lanes does not write to them,
         # nor to obs, the step's own new array (_step_lanes), which takes the first ones.
-        with one_blas_thread() if self.resets_call_blas else _NO_CONTEXT:
-            obs[lanes] = self._reset_lanes(lanes, None)
+        obs[lanes] = self._reset_lanes(lanes, None)
         final_info = self._final_info(info, known, done)
         top = self._info_now()  # every lane's info again: the reset lanes' is their reset info
         self._with_masks(top)
@@ -347,8 +337,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         if pending.size:
             for i, state in zip(pending.tolist(), states, strict=True):
                 self.lane_rngs[i].bit_generator.state = state
-            with one_blas_thread() if self.resets_call_blas else _NO_CONTEXT:
-                obs[pending] = self._reset_lanes(pending, None)
+            obs[pending] = self._reset_lanes(pending, None)
             reward[pending] = 0.0
             terminated[pending] = False
             truncated[pending] = False

@@ -1039,10 +1039,6 @@ class TurningVectorEnv(LaneVectorEnv):
     """
 
     env_name = "TurningEnv"
-    # A reset discretises the lane's plant at its speed in compiled code, with no BLAS call
-    # (scipy's zoh, which calls BLAS, only where the series declines: never in the plant's
-    # ranges), so it does not need BLAS limited to one thread.
-    resets_call_blas = False
     # A lane's sample costs about 0.5 µs compiled (50 sub-steps), so a block of 64 lanes
     # is some 30 µs of work, well above handing it to a thread: at N = 128-192 on two
     # threads two blocks step 13-15 % faster than one.

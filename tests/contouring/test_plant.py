@@ -123,16 +123,36 @@ def test_bad_parameters_raise_naming_the_field():
         ContouringPlant("not params")
 
 
-@pytest.mark.parametrize("fast", [True, False])
-def test_discretisation_is_the_zoh_of_core_to_the_last_bit(fast, monkeypatch):
-    """An axis's ZOH (scipy's compiled Pade step without ``expm``'s overhead, a reset
-    pays it) is ``core.lti.zoh``'s to the last bit: over the inertias the scenarios draw
-    and far beyond (where ``expm`` scales and runs itself), and without the fast path."""
+def _exact_axis_zoh(a: float, g: float, dt: float) -> np.ndarray:
+    """``[Phi, Gamma]`` of one axis, ``(2, 4)``, from the closed form in 40-digit decimal
+    arithmetic on the given floats: the exact discretisation, independent of the code and
+    of scipy (``(1 - E) / q`` and ``(q - 1 + E) / q^2`` cancel nothing at this precision)."""
+    import decimal
+
+    ctx = decimal.Context(prec=40)
+    a_, g_, h = (decimal.Decimal(x) for x in (a, g, dt))
+    q = ctx.multiply(a_, h)
+    e = ctx.exp(-q)
+    phi1 = ctx.divide(1 - e, q)
+    phi2 = ctx.divide(q - 1 + e, ctx.multiply(q, q))
+    rows = [[1, h * phi1, h * q * phi2, g_ * h * h * phi2], [0, e, q * phi1, g_ * h * phi1]]
+    return np.array([[float(ctx.plus(x)) for x in row] for row in rows])
+
+
+def test_discretisation_is_exact_to_a_few_units_in_the_last_place():
+    """An axis's ZOH (the closed form a reset pays, compiled) is the exact discretisation
+    to a few units in the last place, over the inertias the scenarios draw and far beyond
+    (gains over seven decades, sample times over four): each entry within ``(16 + q)``
+    units of its size, ``q = a dt`` (the rounding of ``a dt`` itself moves ``exp(-q)`` by
+    ``q`` units). Over the scenarios' inertias it is also scipy's ``expm`` (``core.lti.zoh``)
+    to 1e-13, which is that far from the exact values itself (64 units measured, against
+    40-digit arithmetic); beyond, where ``expm`` scales and squares, scipy's numbers are
+    the less exact ones (3 600 units at ``q = 4``). Many axes at once give the numbers of
+    each alone, to the last bit."""
     from machining_envs.contouring import plant as plant_module
     from machining_envs.core.lti import zoh
 
-    if not fast:  # else the path the module chose at import (expm where no Pade step)
-        monkeypatch.setattr(plant_module, "_PADE", None)
+    eps = np.finfo(float).eps
     rng = np.random.default_rng(0)
     blocks = []
     for k in range(400):
@@ -146,15 +166,24 @@ def test_discretisation_is_the_zoh_of_core_to_the_last_bit(fast, monkeypatch):
                 sample_time_s=10.0 ** rng.uniform(-6.0, -2.0),
             )
         for axis in "xy":
-            a, g = p.velocity_pole(axis), -p.mm_per_rad / p.inertia_kgm2(axis)
-            phi, gam = plant_module._axis_zoh.__wrapped__(a, g, p.sample_time_s)
-            ref_phi, ref_gam = zoh(*p.continuous_axis(axis), p.sample_time_s)
-            assert phi.tobytes() == ref_phi.tobytes() and gam.tobytes() == ref_gam.tobytes()
+            a, g, dt = p.velocity_pole(axis), -p.mm_per_rad / p.inertia_kgm2(axis), p.sample_time_s
+            phi, gam = plant_module._axis_zoh.__wrapped__(a, g, dt)
             assert not phi.flags.writeable and not gam.flags.writeable
-            blocks.append((a, g, p.sample_time_s, ref_phi, ref_gam))
-    # Many axes at once (a vector env's lanes at a reset), those expm scales among them.
+            got = np.hstack([phi, gam])
+            exact = _exact_axis_zoh(a, g, dt)
+            np.testing.assert_array_equal(got[exact == 0], 0.0)
+            assert np.all(np.abs(got - exact) <= (16.0 + a * dt) * eps * np.abs(exact)), (a, dt)
+            if k < 300:
+                ref = np.hstack(zoh(*p.continuous_axis(axis), dt))
+                np.testing.assert_allclose(got, ref, rtol=1e-13, atol=0.0)
+            blocks.append((a, g, dt, got))
+    # Many axes at once (a vector env's lanes at a reset): each alone's numbers.
     a, g, dt = (np.array([b[i] for b in blocks]) for i in range(3))
     e = plant_module.axes_zoh(a, g, dt)
-    for i, (*_, ref_phi, ref_gam) in enumerate(blocks):
-        assert e[i, :2, :2].tobytes() == ref_phi.tobytes()
-        assert e[i, :2, 2:].tobytes() == ref_gam.tobytes()
+    for i, (*_, got) in enumerate(blocks):
+        assert e[i, :2].tobytes() == got.tobytes()
+        np.testing.assert_array_equal(e[i, 2:], np.eye(4)[2:])
+    # the two ways phi2 is computed (series below q = 1, the closed form above) meet
+    q = np.array([1.0 - 2 * eps, 1.0, 1.0 + 2 * eps])
+    e = plant_module.axes_zoh(q, -q, np.ones(3))
+    np.testing.assert_allclose(e[:, 0, 2], e[1, 0, 2], rtol=8 * eps, atol=0.0)

@@ -16,7 +16,6 @@ from machining_envs.core.blocks import (
     LaneBlocks,
     block_edges,
     check_num_threads,
-    one_blas_thread,
     serve_one_table,
 )
 from machining_envs.core.packed import b1_1, f8_1, f8_2, i8_1
@@ -167,48 +166,6 @@ def test_blocks_pickle_without_their_threads():
     np.testing.assert_array_equal(hits, 1.0)
     copy.close()
     blocks.close()
-
-
-def _blas_threads() -> list[int]:
-    from threadpoolctl import threadpool_info
-
-    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
-
-
-def test_one_blas_thread_holds_until_the_outermost_use_leaves():
-    import scipy.linalg  # noqa: F401  (its BLAS too)
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(2, user_api="blas"):  # the counts to come back to
-        before = _blas_threads()
-        assert before and all(n == 2 for n in before)
-        with one_blas_thread():
-            assert all(n == 1 for n in _blas_threads())
-            with one_blas_thread():
-                assert all(n == 1 for n in _blas_threads())
-            assert all(n == 1 for n in _blas_threads())
-            # another thread's use, meanwhile, changes nothing of this one's
-            other = threading.Thread(target=lambda: one_blas_thread().__enter__())
-            other.start()
-            other.join()
-            assert all(n == 1 for n in _blas_threads())
-        assert _blas_threads() == before
-        with pytest.raises(RuntimeError, match="inside"), one_blas_thread():
-            raise RuntimeError("inside")
-        assert _blas_threads() == before
-    # and the control of OpenBLAS's pool is given up: a limit set in another thread applies
-    with one_blas_thread():
-        pass
-    seen = []
-
-    def limit_elsewhere():
-        with threadpool_limits(1, user_api="blas"):
-            seen.extend(_blas_threads())
-
-    worker = threading.Thread(target=limit_elsewhere)
-    worker.start()
-    worker.join()
-    assert seen and all(n == 1 for n in seen)
 
 
 @numba.njit(nogil=True)

@@ -313,54 +313,6 @@ def test_a_bad_thread_count_is_refused_naming_it(env_id):
         gym.make_vec(env_id, num_envs=2, num_threads=1.5)
 
 
-#: The processes whose every reset discretises a plant through scipy, and so calls BLAS
-#: (Turning-v0's discretises its plant in compiled code, without BLAS).
-BLAS_RESETS = {
-    "machining_envs/Contouring-v0",
-    "machining_envs/ContouringFeed-v0",
-}
-
-
-@pytest.mark.parametrize("env_id", VECTOR_IDS)
-def test_resets_that_call_blas_run_with_one_blas_thread(env_id, monkeypatch):
-    """A vector env whose resets call BLAS runs every lane's reset (at reset and autoreset)
-    with BLAS on one thread, whose threads would otherwise spin on the cores after the
-    discretisations' calls (``machining_envs.core.blocks``); the others leave BLAS as it is
-    (entering and leaving the limit costs tens of µs a step); the counts are as they were
-    afterwards."""
-    from threadpoolctl import threadpool_info, threadpool_limits
-
-    seen = []
-    started = []  # lanes started by each call
-
-    def watch(core):
-        for name in ("start", "start_lanes"):  # a lane's start, and many lanes' at once
-            if hasattr(core, name):
-                monkeypatch.setattr(core, name, watched(getattr(core, name)))
-
-    def watched(start):
-        def call(lanes, *args, **kwargs):
-            seen.append([i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"])
-            started.append(np.size(lanes))
-            return start(lanes, *args, **kwargs)
-
-        return call
-
-    kwargs = ENV_KWARGS.get(env_id, {})
-    with threadpool_limits(2, user_api="blas"):
-        venv = gym.make_vec(env_id, num_envs=3, **kwargs)
-        assert venv.unwrapped.resets_call_blas == (env_id in BLAS_RESETS)
-        watch(venv.unwrapped._core)
-        venv.reset(seed=0)
-        rng = np.random.default_rng(0)
-        for _ in range(400):
-            venv.step(_actions(rng, env_id, venv.single_action_space, 3))
-        assert all(i["num_threads"] == 2 for i in threadpool_info() if i["user_api"] == "blas")
-    assert sum(started) > 3 + 1, "the run should cross autoresets (3 lanes at reset)"
-    expected = 1 if env_id in BLAS_RESETS else 2
-    assert all(counts and all(n == expected for n in counts) for counts in seen), seen
-
-
 def _lane_specs(env_id: str, n: int) -> list:
     """n different scenario names of the env (its own list, in order)."""
     names = sorted(gym.make_vec(env_id, num_envs=1)._core.scenario_types[1])
