@@ -178,7 +178,7 @@ def axes_zoh(a: np.ndarray, load_gain: np.ndarray, dt: np.ndarray) -> np.ndarray
     ``g`` and ``dt``): the exponential of :func:`_axis_zoh`'s block matrix
     ``[[A, B], [0, 0]] dt``, ``Phi`` in ``[:, :2, :2]``, ``Gamma`` in ``[:, :2, 2:]``. A
     vector env's lanes discretise their tables, whose inertias are random, at every reset:
-    here all of them in one compiled call (:func:`_axes_zoh_into`).
+    here all of them in one compiled call (:func:`axes_zoh_into`).
 
     The axis is a velocity loop of pole ``a`` behind an integrator, so its exponential has a
     closed form in ``q = a dt``: with ``E = exp(-q)``, ``phi1 = (1 - E) / q`` and
@@ -202,7 +202,7 @@ def axes_zoh(a: np.ndarray, load_gain: np.ndarray, dt: np.ndarray) -> np.ndarray
     g = np.ascontiguousarray(load_gain, dtype=np.float64)
     h = np.ascontiguousarray(dt, dtype=np.float64)
     out = np.zeros((a.shape[0], 4, 4))
-    _axes_zoh_into(a, g, h, out)
+    axes_zoh_into(a, g, h, out)
     return out
 
 
@@ -212,7 +212,7 @@ _PHI2_SERIES = np.array([(-1.0) ** k / math.factorial(k + 2) for k in range(22)]
 
 
 @numba.njit(cache=True)
-def _axes_zoh_into(a, g, dt, out):
+def axes_zoh_into(a, g, dt, out):
     """:func:`axes_zoh`'s closed form for each axis ``i`` into ``out[i]`` (zeros on
     entry)."""
     c = _PHI2_SERIES

@@ -38,7 +38,7 @@ import numpy as np
 from scipy.linalg import schur, solve_continuous_are
 from scipy.signal import cont2discrete
 
-from machining_envs.contouring.plant import AXES, ContouringParams, axes_zoh
+from machining_envs.contouring.plant import AXES, ContouringParams, axes_zoh_into
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_integer, check_range
 from machining_envs.core.kernels import (
     add8,
@@ -839,6 +839,41 @@ def _close_lanes(lanes, e, designs, buf):
 
 
 @numba.njit(cache=True, inline="always")
+def _one_or_each(x, i):
+    """``x[i]``, or ``x[0]`` where ``x`` holds one value for all."""
+    return x[i] if x.size > 1 else x[0]
+
+
+@numba.njit(cache=True)
+def _start_loops(lanes, gain, mm_per_rad, dt, inertia, umax, designs, buf, groups):
+    """:meth:`ServoLanes._start_arrays`: the plants' poles ``gain / J`` and load gains
+    ``-mm_per_rad / J`` (``ContouringParams.velocity_pole``, ``discrete_axis``'s load), both
+    axes of every lane discretised (``plant.axes_zoh_into``), their loops closed
+    (:func:`_close_lanes`), the torque factors ``J / (mm_per_rad dt)`` and command limits
+    set, and the lanes' places in their groups written (:func:`gather_loops`). ``gain``,
+    ``mm_per_rad``, ``dt`` and ``umax`` hold one value per lane or one for all."""
+    n = lanes.size
+    a = np.empty(2 * n)
+    g = np.empty(2 * n)
+    h = np.empty(2 * n)
+    for i in range(n):
+        for j in range(2):
+            a[2 * i + j] = _one_or_each(gain, i) / inertia[i, j]
+            g[2 * i + j] = -_one_or_each(mm_per_rad, i) / inertia[i, j]
+            h[2 * i + j] = _one_or_each(dt, i)
+    e = np.zeros((2 * n, 4, 4))
+    axes_zoh_into(a, g, h, e)
+    _close_lanes(lanes, e.reshape((n, 2, 4, 4)), designs, buf)
+    for i in range(n):
+        _, _, _, _, _, tq, um = lane_loops(buf[lanes[i]])
+        scale = _one_or_each(mm_per_rad, i) * _one_or_each(dt, i)
+        tq[0] = inertia[i, 0] / scale
+        tq[1] = inertia[i, 1] / scale
+        um[0] = _one_or_each(umax, i)
+    gather_loops(buf, lanes, groups)
+
+
+@numba.njit(cache=True, inline="always")
 def lane_loops(row):
     """A lane's loops as views of its row of ``ServoLanes.buf`` (``_LANE_ARRAYS``):
     ``(ac, bc, cu, du, gu, tq, umax)`` as :func:`run_block` takes them, except ``umax``, an
@@ -928,8 +963,8 @@ class ServoLanes:
 
     def start_lanes(self, lanes: np.ndarray, truths) -> None:
         """Set each lane ``lanes[i]``'s loops to the designs on the plant ``truths[i]``:
-        both axes of every lane discretised in one call (``plant.axes_zoh``), their loops
-        closed in one compiled call (:func:`_close_lanes`)."""
+        both axes of every lane discretised and their loops closed in one compiled call
+        (:func:`_start_loops`)."""
         # ContouringParams' derived quantities, in their order of operations.
         self._start_arrays(
             lanes,
@@ -944,13 +979,12 @@ class ServoLanes:
         """:meth:`start_lanes` on the plants ``nominal`` with its inertias scaled by
         ``scales[i]`` (X, Y) in lane ``lanes[i]`` (``scenarios.true_params_of``'s plants,
         their inertias the same products), without making them."""
-        n = len(lanes)
         inertia = np.array([[nominal.inertia_x_kgm2, nominal.inertia_y_kgm2]]) * scales
         self._start_arrays(
             lanes,
-            np.full(n, nominal.loop_gain_Nms),
-            np.full(n, nominal.mm_per_rad),
-            np.full(n, nominal.sample_time_s),
+            np.array([nominal.loop_gain_Nms]),
+            np.array([nominal.mm_per_rad]),
+            np.array([nominal.sample_time_s]),
             inertia,
             nominal.command_max_mm_s,
         )
@@ -958,16 +992,11 @@ class ServoLanes:
     def _start_arrays(self, lanes, gain, mm_per_rad, dt, inertia, umax) -> None:
         """The loops of ``lanes`` on plants of the loop gains ``gain``, screw leads
         ``mm_per_rad``, sample times ``dt``, inertias ``inertia`` (X, Y) and command limits
-        ``umax`` (one of each per lane: :meth:`start_lanes`)."""
-        n = len(lanes)
-        pole = gain[:, None] / inertia  # velocity_pole
-        load = -mm_per_rad[:, None] / inertia  # discrete_axis's load gain
-        steps = np.repeat(dt, 2)
-        e = axes_zoh(pole.ravel(), load.ravel(), steps).reshape((n, 2, 4, 4))
-        _close_lanes(lanes, e, self._design_arrays, self.buf)
-        self.tq[lanes] = inertia / (mm_per_rad * dt)[:, None]
-        self.umax[lanes] = umax
-        gather_loops(self.buf, lanes, self.groups)
+        ``umax`` (one of each per lane, or one for all but the inertias), in one compiled
+        call (:func:`_start_loops`)."""
+        umax = np.asarray(umax, dtype=np.float64).reshape(-1)
+        _start_loops(lanes, gain, mm_per_rad, dt, inertia, umax, self._design_arrays,
+                     self.buf, self.groups)  # fmt: skip
 
 
 class ServoLoop:
