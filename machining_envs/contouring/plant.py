@@ -220,7 +220,7 @@ def axes_zoh_into(a, g, dt, out):
         h = dt[i]
         q = a[i] * h
         em1 = math.expm1(-q)  # E - 1
-        phi1 = -em1 / q
+        phi1 = -em1 / q if q != 0.0 else 1.0  # (no velocity loop: a double integrator)
         if q < 1.0:
             phi2 = c[c.size - 1]
             for k in range(c.size - 2, -1, -1):

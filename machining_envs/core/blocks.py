@@ -9,9 +9,9 @@ of lanes can run at the same time on threads: the kernels are compiled with
 the same, to the last bit, whatever the number of threads.
 
 :class:`LaneBlocks` splits the lanes into contiguous blocks (one per thread, none smaller
-than ``min_block`` lanes, ``MIN_BLOCK`` by default) and runs a kernel over them: the calling thread takes the first
-block, a pool of worker threads the others. Each argument of the kernel is declared as one
-of:
+than ``min_block`` lanes, ``MIN_BLOCK`` by default) and runs a kernel over them: the calling
+thread takes the first block, a pool of worker threads the others. Each argument of the
+kernel is declared as one of:
 
 - ``0`` or ``1``: an array whose axis 0 (or 1) is the lanes: each block gets its view;
 - ``None``: shared by all lanes (constants, tables, integers), passed as it is;

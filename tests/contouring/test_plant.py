@@ -183,6 +183,9 @@ def test_discretisation_is_exact_to_a_few_units_in_the_last_place():
     for i, (*_, got) in enumerate(blocks):
         assert e[i, :2].tobytes() == got.tobytes()
         np.testing.assert_array_equal(e[i, 2:], np.eye(4)[2:])
+    # a = 0 (no velocity loop, a gain too small to count): the double integrator's ZOH
+    e = plant_module.axes_zoh(np.array([0.0]), np.array([-3.0]), np.array([0.5]))[0]
+    np.testing.assert_array_equal(e[:2], [[1.0, 0.5, 0.0, -3.0 * 0.125], [0.0, 1.0, 0.0, -1.5]])
     # the two ways phi2 is computed (series below q = 1, the closed form above) meet
     q = np.array([1.0 - 2 * eps, 1.0, 1.0 + 2 * eps])
     e = plant_module.axes_zoh(q, -q, np.ones(3))
