@@ -74,6 +74,7 @@ from machining_envs.core.env import check_scenario_spec, real_actions, scenario_
 
 __all__ = ["LaneVectorEnv", "check_num_envs", "check_autoreset_mode", "first_scenario"]
 
+
 def first_scenario(spec):
     """The first of a list or tuple of per-lane scenarios, else ``spec`` itself (what a
     vector env's core checks when it is built; the base checks the whole list)."""

@@ -21,7 +21,9 @@ from machining_envs.core.blocks import (
 from machining_envs.core.packed import b1_1, f8_1, f8_2, i8_1
 
 
-@pytest.mark.parametrize("n", [1, 5, 63, 64, 127, 128, 191, 255, 256, 300, 1000, 1024, 8192, 10_001])
+@pytest.mark.parametrize(
+    "n", [1, 5, 63, 64, 127, 128, 191, 255, 256, 300, 1000, 1024, 8192, 10_001]
+)
 @pytest.mark.parametrize("threads", [1, 2, 3, 4, 16, 256])
 @pytest.mark.parametrize("min_block", [MIN_BLOCK, ALIGN])
 def test_blocks_cover_the_lanes_in_order(n, threads, min_block):
