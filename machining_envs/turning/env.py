@@ -18,7 +18,7 @@ from machining_envs.core.actuation import (
     configure_lane,
     resolve_actuation,
 )
-from machining_envs.core.blocks import LaneBlocks, check_num_threads, serve_one_table
+from machining_envs.core.blocks import LaneBlocks, check_num_threads, serve_one_table_with_tail
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_below, check_range
 from machining_envs.core.env import (
     ActionMap,
@@ -270,21 +270,49 @@ def _step(ef, eb, feed, li, filt, z, buf, base, edges, d0, slope, lane_f, finish
 
 
 @numba.njit(cache=True, nogil=True)
-def _step_packed(t):
-    """:func:`_step` with its arguments in one table (``core.packed``): what every
-    step calls (one array to unbox, not one per argument)."""
-    _step(f8_2(t, 0), b1_2(t, 1), f8_2(t, 2), i8_2(t, 3), f8_2(t, 4), f8_2(t, 5), f8_2(t, 6),
-          f8_1(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12), as_int(t, 13),
-          as_int(t, 14), f8_2(t, 15), f8_1(t, 16), as_float(t, 17), as_float(t, 18), f8_2(t, 19),
-          as_float(t, 20), f8_1(t, 21), f4_2(t, 22), i8_1(t, 23), i8_2(t, 24),
-          f8_1(t, 25), f8_2(t, 26))  # fmt: skip
+def _step_packed(t, op):
+    """The core's kernel with its arguments in one table (``core.packed``;
+    ``_TurningCore._kernel_args``), one array to unbox, not one per argument: ``op`` 0 is
+    :func:`_step` of the table's lanes, 1 starts those of its lanes that the pending table
+    lists (:func:`_start_pending`). On several threads each block of lanes runs it on its
+    own table, so a vector env's resetting lanes start on the blocks' threads too."""
+    if op == 0:
+        _step(f8_2(t, 0), b1_2(t, 1), f8_2(t, 2), i8_2(t, 3), f8_2(t, 4), f8_2(t, 5), f8_2(t, 6),
+              f8_1(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12),
+              as_int(t, 13), as_int(t, 14), f8_2(t, 15), f8_1(t, 16), as_float(t, 17),
+              as_float(t, 18), f8_2(t, 19), as_float(t, 20), f8_1(t, 21), f4_2(t, 22),
+              i8_1(t, 23), i8_2(t, 24), f8_1(t, 25), f8_2(t, 26))  # fmt: skip
+    else:
+        _start_pending(t)
 
 
 @numba.njit(cache=True, nogil=True)
 def _serve_step(ctl, table, polls):
     """The lane blocks' worker loop for :func:`_step_packed` (``core.blocks``), compiled with
     this module and cached, not at the first step on several threads."""
-    return serve_one_table(_step_packed, ctl, table, polls)
+    return serve_one_table_with_tail(_step_packed, ctl, table, polls)
+
+
+#: Where the kernel's table (``_TurningCore._kernel_args``) holds the start's arrays
+#: (``_TurningCore._start_args``, in its order), then each lane's index, then the pending
+#: starts: ``[count, lanes...]``, the split's numbers, and each pending lane's speed,
+#: uniforms, segments, segment count and whether its step matrix was made.
+_T_START = 27
+_T_LANE = _T_START + 14
+_T_PENDING = _T_LANE + 1
+
+
+@numba.njit(cache=True)
+def _start_pending(t):
+    """:func:`_start_drawn_lanes` for the pending lanes (the table's, ``_T_PENDING``) that
+    lie in the table's block of lanes (its first lane's index at ``_T_LANE``), each lane
+    writing its own rows and its ``ok``."""
+    first = i8_1(t, _T_LANE)
+    pending = i8_1(t, _T_PENDING)
+    p = _T_PENDING
+    _start_drawn_lanes(t, t, _T_START, pending[1 : pending[0] + 1], first[0],
+                       first[0] + first.size, f8_1(t, p + 1), f8_1(t, p + 2), f8_2(t, p + 3),
+                       f8_3(t, p + 4), i8_1(t, p + 5), b1_1(t, p + 6))  # fmt: skip
 
 
 @numba.njit(cache=True)
@@ -376,22 +404,24 @@ def _batch_numbers(core, factory) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def _start_drawn_lanes(t, s, lanes, nums, rpm, v, segments, counts):
-    """:func:`_start_packed` for every lane ``lanes[i]`` of a split's batch: its speed
-    ``rpm[i]``, segments ``segments[i, :, : counts[i] + 1]`` and uniforms ``v[i]`` (the
-    split factory's ``draw_lanes``), on the split's and nominal numbers ``nums``
-    (``_batch_numbers``): the true parameters ``TurningScenario.true_params`` makes of
-    them (a sharp tool), in its order of operations. Whether each lane's step matrix was
-    made (:func:`_start_packed`'s return)."""
+def _start_drawn_lanes(t, s, s0, lanes, lo, hi, nums, rpm, v, segments, counts, ok):
+    """:func:`_start_packed` for every lane ``lanes[i]`` of a split's batch that lies in
+    ``lo .. hi - 1`` (the lanes of ``t``, whose first is lane ``lo``): its speed ``rpm[i]``,
+    segments ``segments[i, :, : counts[i] + 1]`` and uniforms ``v[i]`` (the split factory's
+    ``draw_lanes``), on the split's and nominal numbers ``nums`` (``_batch_numbers``): the
+    true parameters ``TurningScenario.true_params`` makes of them (a sharp tool), in its
+    order of operations. ``ok[i]``: whether the lane's step matrix was made
+    (:func:`_start_packed`'s return)."""
     (kf, pexp, ke, cmax, margin, power, vmax, brk, noise_std, diam, kf_lo, kf_span, p_lo,
      p_span, n_lo, n_span, varies, l_lo, l_span) = (
         nums[0], nums[1], nums[2], nums[3], nums[4], nums[5], nums[6], nums[7], nums[8],
         nums[9], nums[10], nums[11], nums[12], nums[13], nums[14], nums[15], nums[16],
         nums[17], nums[18])  # fmt: skip
     full = math.isfinite(power)
-    ok = np.empty(lanes.size, dtype=np.bool_)
     x = np.empty(8)
     for i in range(lanes.size):
+        if not lo <= lanes[i] < hi:
+            continue
         vi = v[i]
         consts = (kf * (kf_lo + kf_span * vi[0]), pexp * (p_lo + p_span * vi[1]), ke, cmax,
                   margin, 0.0)  # fmt: skip
@@ -403,21 +433,23 @@ def _start_drawn_lanes(t, s, lanes, nums, rpm, v, segments, counts):
         x[5] = diam
         x[6] = np.nan
         x[7] = power
-        ok[i] = _start_packed(t, s, lanes[i], full, consts, lane_segments(segments, i, counts), x)
-    return ok
+        ok[i] = _start_packed(t, s, s0, lanes[i] - lo, full, consts,
+                              lane_segments(segments, i, counts), x)  # fmt: skip
 
 
 @numba.njit(cache=True)
-def _start_packed(t, s, k, full_history, consts, segments, x):
-    """:func:`_start` with the step's table ``t`` (:func:`_step_packed`'s) and the table
-    ``s`` of the other arrays it writes (``_TurningCore._start_args``)."""
+def _start_packed(t, s, s0, k, full_history, consts, segments, x):
+    """:func:`_start` with the step's table ``t`` (:func:`_step_packed`'s) and the other
+    arrays it writes (``_TurningCore._start_args``) in the table ``s`` from its entry
+    ``s0`` on (a table of their own, or the kernel's, ``_T_START``); ``k`` is the lane's
+    index in ``t``."""
     return _start(
         k, full_history, consts, segments, x, f8_2(t, 0), b1_2(t, 1), f8_2(t, 2), i8_2(t, 3),
         f8_2(t, 5), f8_2(t, 6), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12),
         f8_2(t, 15), f8_1(t, 16), as_float(t, 18), f8_2(t, 19), f4_2(t, 22), i8_1(t, 23),
-        f8_1(s, 0), f8_1(s, 1), f8_1(s, 2), f8_1(s, 3), f8_2(s, 4), f8_1(s, 5), f8_1(s, 6),
-        f8_1(s, 7), f8_3(s, 8), f8_2(s, 9), f8_2(s, 10), f8_2(s, 11), f8_2(s, 12),
-        as_float(s, 13),
+        f8_1(s, s0), f8_1(s, s0 + 1), f8_1(s, s0 + 2), f8_1(s, s0 + 3), f8_2(s, s0 + 4),
+        f8_1(s, s0 + 5), f8_1(s, s0 + 6), f8_1(s, s0 + 7), f8_3(s, s0 + 8), f8_2(s, s0 + 9),
+        f8_2(s, s0 + 10), f8_2(s, s0 + 11), f8_2(s, s0 + 12), as_float(s, s0 + 13),
     )  # fmt: skip
 
 
@@ -425,7 +457,10 @@ def _start_packed(t, s, k, full_history, consts, segments, x):
 #: or none (shared), for :class:`~machining_envs.core.blocks.LaneBlocks`.
 _STEP_AXES = (
     0, 0, 0, 0, None, 0, 0, None, 0, 0, 0, 0, 0, None, None, 0, 0, None, None, 0, None, None, 0, 0, 0,
-    0, 0,
+    0, 0,  # _step's
+    0, 0, 0, 0, 0, 0, 0, 0, None, None, None, None, None, None,  # the start's (_T_START)
+    0,  # each lane's index (_T_LANE)
+    None, None, None, None, None, None, None,  # the pending starts (_T_PENDING)
 )  # fmt: skip
 
 
@@ -510,6 +545,14 @@ class _TurningCore:
         self._s_args: tuple | None = None
         self._s_args_version = -1
         self._packed_start = PackedArgs()  # _start_args in one table
+        #: Each lane's index (a block's first tells the kernel where its lanes begin).
+        self.lane_index = np.arange(n, dtype=np.int64)
+        #: The starts a vector env's blocks make (_start_pending): [count, lanes...], the
+        #: split's numbers, and each lane's draws (sized for the first batch, grown with it).
+        self._pending = np.zeros(n + 1, dtype=np.int64)
+        self._pending_draws = (np.zeros(len(_BATCH_NUMBERS)), np.zeros(n), np.zeros((n, 4)),
+                               np.zeros((n, 4, 2)), np.zeros(n, dtype=np.int64),
+                               np.zeros(n, dtype=np.bool_))  # fmt: skip
         #: The blocks of lanes the kernel steps at once (one thread unless a vector env
         #: asks for more).
         self.blocks = LaneBlocks(n)
@@ -572,8 +615,8 @@ class _TurningCore:
         x = np.array((rpm, limit, truth.max_feed_velocity_mm_s, truth.breakage_force_N,
                       truth.sensor_gain * truth.noise_std_N, diameter, bound, power_W))  # fmt: skip
         if not _start_packed(
-            self._packed(self._kernel_args()), self._packed_start(self._start_args()), lane,
-            full, lanes.lane_constants(truth), segments, x,
+            self._packed(self._kernel_args()), self._packed_start(self._start_args()), 0,
+            lane, full, lanes.lane_constants(truth), segments, x,
         ):  # fmt: skip
             lanes._load_matrices(lane, rpm, full)
         if not self.bound[lane] == self.bound[lane]:  # refused by the kernel: let it say why
@@ -606,10 +649,14 @@ class _TurningCore:
             nums = self._batch_numbers[factory] = _batch_numbers(self, factory)
         full = math.isfinite(nums[5])
         self.lanes.fit_segments(int(counts.max()))
-        ok = _start_drawn_lanes(
-            self._packed(self._kernel_args()), self._packed_start(self._start_args()), lanes,
-            nums, rpm, v, segments, counts,
-        )  # fmt: skip
+        if self.blocks.one:
+            ok = np.empty(lanes.size, dtype=np.bool_)
+            _start_drawn_lanes(
+                self._packed(self._kernel_args()), self._packed_start(self._start_args()), 0,
+                lanes, 0, self.n, nums, rpm, v, segments, counts, ok,
+            )  # fmt: skip
+        else:  # each block of lanes starts its own, on its thread
+            ok = self._start_in_blocks(lanes, nums, rpm, v, segments, counts)
         ks = lanes.tolist()
         for i in np.flatnonzero(~ok).tolist():  # left for zoh (never in the plant's ranges)
             self.lanes._load_matrices(ks[i], float(rpm[i]), full)
@@ -692,6 +739,10 @@ class _TurningCore:
                 self.rngs.table,
                 self.noise_counts,
                 lanes.work,
+                *self._start_args(),
+                self.lane_index,
+                self._pending,
+                *self._pending_draws,
             )
             self._args_version = lanes.version
         return self._args
@@ -704,13 +755,42 @@ class _TurningCore:
         if self.act_lanes is not None:
             self.in_command[:] = self.act_lanes.apply(self.in_command)
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
-            _step_packed(self._packed(self._kernel_args()))
+            _step_packed(self._packed(self._kernel_args()), 0)
         else:
-            self.blocks.run(
-                _step, self._kernel_args(), _STEP_AXES, packed=_step_packed, serve=_serve_step
-            )
+            self._run_blocks(0)
         if self.power_lanes:
             self._spindle_drives()
+
+    def _run_blocks(self, op: int) -> None:
+        """:func:`_step_packed`'s ``op`` on every block of lanes, on the blocks' threads
+        (its tables always pack: every array holds the lanes on axis 0 or is shared)."""
+        self.blocks.run(_step, self._kernel_args(), _STEP_AXES, op, packed=_step_packed,
+                        serve=_serve_step)  # fmt: skip
+
+    def _start_in_blocks(self, lanes, nums, rpm, v, segments, counts) -> np.ndarray:
+        """:func:`_start_drawn_lanes` for a batch, each block of lanes starting its own on
+        its thread (:func:`_start_pending`): the same numbers as one call over the batch.
+        Whether each lane's step matrix was made."""
+        size = lanes.size
+        shapes = (v.shape[1], segments.shape[2])
+        draws = self._pending_draws
+        if shapes[0] > draws[2].shape[1] or shapes[1] > draws[3].shape[2]:  # grow them
+            n = self.n
+            self._pending_draws = draws = (
+                draws[0], draws[1], np.zeros((n, max(shapes[0], draws[2].shape[1]))),
+                np.zeros((n, 4, max(shapes[1], draws[3].shape[2]))), draws[4], draws[5],
+            )  # fmt: skip
+            self._args = None  # the kernel's table holds them
+        p_nums, p_rpm, p_v, p_segments, p_counts, p_ok = draws
+        self._pending[0] = size
+        self._pending[1 : size + 1] = lanes
+        p_nums[:] = nums
+        p_rpm[:size] = rpm
+        p_v[:size, : shapes[0]] = v
+        p_segments[:size, :, : shapes[1]] = segments
+        p_counts[:size] = counts
+        self._run_blocks(1)
+        return p_ok[:size].copy()
 
     def _spindle_drives(self) -> None:
         """The power-limited spindles (``TurningParams.spindle_power_W``): each lane's speed
