@@ -293,10 +293,11 @@ def _serve_step(ctl, table, polls):
     return serve_one_table_with_tail(_step_packed, ctl, table, polls)
 
 
-#: Where the kernel's table (``_TurningCore._kernel_args``) holds the start's arrays
-#: (``_TurningCore._start_args``, in its order), then each lane's index, then the pending
-#: starts: ``[count, lanes...]``, the split's numbers, and each pending lane's speed,
-#: uniforms, segments, segment count and whether its step matrix was made.
+#: Where the kernel's table (``_TurningCore._kernel_args``) holds, after :func:`_step`'s
+#: arguments, the other arrays :func:`_start` writes and the linear blocks' tables, then
+#: each lane's index, then the pending starts: ``[count, lanes...]``, the split's numbers,
+#: and each pending lane's speed, uniforms, segments, segment count and whether its step
+#: matrix was made.
 _T_START = 27
 _T_LANE = _T_START + 14
 _T_PENDING = _T_LANE + 1
@@ -310,9 +311,9 @@ def _start_pending(t):
     first = i8_1(t, _T_LANE)
     pending = i8_1(t, _T_PENDING)
     p = _T_PENDING
-    _start_drawn_lanes(t, t, _T_START, pending[1 : pending[0] + 1], first[0],
-                       first[0] + first.size, f8_1(t, p + 1), f8_1(t, p + 2), f8_2(t, p + 3),
-                       f8_3(t, p + 4), i8_1(t, p + 5), b1_1(t, p + 6))  # fmt: skip
+    _start_drawn_lanes(t, pending[1 : pending[0] + 1], first[0], first[0] + first.size,
+                       f8_1(t, p + 1), f8_1(t, p + 2), f8_2(t, p + 3), f8_3(t, p + 4),
+                       i8_1(t, p + 5), b1_1(t, p + 6))  # fmt: skip
 
 
 @numba.njit(cache=True)
@@ -404,7 +405,7 @@ def _batch_numbers(core, factory) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def _start_drawn_lanes(t, s, s0, lanes, lo, hi, nums, rpm, v, segments, counts, ok):
+def _start_drawn_lanes(t, lanes, lo, hi, nums, rpm, v, segments, counts, ok):
     """:func:`_start_packed` for every lane ``lanes[i]`` of a split's batch that lies in
     ``lo .. hi - 1`` (the lanes of ``t``, whose first is lane ``lo``): its speed ``rpm[i]``,
     segments ``segments[i, :, : counts[i] + 1]`` and uniforms ``v[i]`` (the split factory's
@@ -433,23 +434,21 @@ def _start_drawn_lanes(t, s, s0, lanes, lo, hi, nums, rpm, v, segments, counts, 
         x[5] = diam
         x[6] = np.nan
         x[7] = power
-        ok[i] = _start_packed(t, s, s0, lanes[i] - lo, full, consts,
-                              lane_segments(segments, i, counts), x)  # fmt: skip
+        ok[i] = _start_packed(t, lanes[i] - lo, full, consts, lane_segments(segments, i, counts), x)
 
 
 @numba.njit(cache=True)
-def _start_packed(t, s, s0, k, full_history, consts, segments, x):
-    """:func:`_start` with the step's table ``t`` (:func:`_step_packed`'s) and the other
-    arrays it writes (``_TurningCore._start_args``) in the table ``s`` from its entry
-    ``s0`` on (a table of their own, or the kernel's, ``_T_START``); ``k`` is the lane's
-    index in ``t``."""
+def _start_packed(t, k, full_history, consts, segments, x):
+    """:func:`_start` with its arrays in the kernel's table ``t`` (:func:`_step_packed`'s:
+    the step's, then the start's from ``_T_START``); ``k`` is the lane's index in ``t``."""
+    s = _T_START
     return _start(
         k, full_history, consts, segments, x, f8_2(t, 0), b1_2(t, 1), f8_2(t, 2), i8_2(t, 3),
         f8_2(t, 5), f8_2(t, 6), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12),
         f8_2(t, 15), f8_1(t, 16), as_float(t, 18), f8_2(t, 19), f4_2(t, 22), i8_1(t, 23),
-        f8_1(s, s0), f8_1(s, s0 + 1), f8_1(s, s0 + 2), f8_1(s, s0 + 3), f8_2(s, s0 + 4),
-        f8_1(s, s0 + 5), f8_1(s, s0 + 6), f8_1(s, s0 + 7), f8_3(s, s0 + 8), f8_2(s, s0 + 9),
-        f8_2(s, s0 + 10), f8_2(s, s0 + 11), f8_2(s, s0 + 12), as_float(s, s0 + 13),
+        f8_1(t, s), f8_1(t, s + 1), f8_1(t, s + 2), f8_1(t, s + 3), f8_2(t, s + 4),
+        f8_1(t, s + 5), f8_1(t, s + 6), f8_1(t, s + 7), f8_3(t, s + 8), f8_2(t, s + 9),
+        f8_2(t, s + 10), f8_2(t, s + 11), f8_2(t, s + 12), as_float(t, s + 13),
     )  # fmt: skip
 
 
@@ -542,9 +541,6 @@ class _TurningCore:
         self._args: tuple | None = None
         self._args_version = -1
         self._packed = PackedArgs()  # the kernel's arguments in one table (core.packed)
-        self._s_args: tuple | None = None
-        self._s_args_version = -1
-        self._packed_start = PackedArgs()  # _start_args in one table
         #: Each lane's index (a block's first tells the kernel where its lanes begin).
         self.lane_index = np.arange(n, dtype=np.int64)
         #: The starts a vector env's blocks make (_start_pending): [count, lanes...], the
@@ -567,13 +563,12 @@ class _TurningCore:
 
     def __getstate__(self) -> dict:
         # A pickled view is a copy: the views are made anew from ef and eb on loading.
-        views = {*_EF, "flags", "in_clipped", "clipped", "_args", "_s_args"}
+        views = {*_EF, "flags", "in_clipped", "clipped", "_args"}
         return {k: v for k, v in self.__dict__.items() if k not in views}
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         self._args = None
-        self._s_args = None
         self._bind_views()
 
     def _actuation_lanes(self) -> ActuationLanes:
@@ -615,8 +610,8 @@ class _TurningCore:
         x = np.array((rpm, limit, truth.max_feed_velocity_mm_s, truth.breakage_force_N,
                       truth.sensor_gain * truth.noise_std_N, diameter, bound, power_W))  # fmt: skip
         if not _start_packed(
-            self._packed(self._kernel_args()), self._packed_start(self._start_args()), 0,
-            lane, full, lanes.lane_constants(truth), segments, x,
+            self._packed(self._kernel_args()), lane, full, lanes.lane_constants(truth),
+            segments, x,
         ):  # fmt: skip
             lanes._load_matrices(lane, rpm, full)
         if not self.bound[lane] == self.bound[lane]:  # refused by the kernel: let it say why
@@ -651,10 +646,8 @@ class _TurningCore:
         self.lanes.fit_segments(int(counts.max()))
         if self.blocks.one:
             ok = np.empty(lanes.size, dtype=np.bool_)
-            _start_drawn_lanes(
-                self._packed(self._kernel_args()), self._packed_start(self._start_args()), 0,
-                lanes, 0, self.n, nums, rpm, v, segments, counts, ok,
-            )  # fmt: skip
+            _start_drawn_lanes(self._packed(self._kernel_args()), lanes, 0, self.n, nums, rpm, v,
+                               segments, counts, ok)  # fmt: skip
         else:  # each block of lanes starts its own, on its thread
             ok = self._start_in_blocks(lanes, nums, rpm, v, segments, counts)
         ks = lanes.tolist()
@@ -696,19 +689,10 @@ class _TurningCore:
             self._batch_ok[factory] = ok
         return ok
 
-    def _start_args(self) -> tuple:
-        """The arrays :func:`_start` writes besides the step's, and the linear blocks' tables
-        (:func:`_start_packed`'s second table)."""
-        lanes = self.lanes
-        if self._s_args is None or self._s_args_version != lanes.version:
-            self._s_args = (self.bound, self.noise_counts, self.spindle,
-                            self.spindle_set, self.power, self.diameter, self.length,
-                            lanes.spindle_rpm, *lanes.speed_free)  # fmt: skip
-            self._s_args_version = lanes.version
-        return self._s_args
-
     def _kernel_args(self) -> tuple:
-        """The arguments of :func:`_step`, in order (rebuilt when the plant's arrays are)."""
+        """The kernel's arguments (:func:`_step`'s, then from ``_T_START`` on what
+        :func:`_start` writes besides and the pending starts), in order, rebuilt when the
+        plant's arrays are: one table serves the step and every start."""
         lanes = self.lanes
         if self._args is None or self._args_version != lanes.version:
             self._args = (
@@ -739,7 +723,16 @@ class _TurningCore:
                 self.rngs.table,
                 self.noise_counts,
                 lanes.work,
-                *self._start_args(),
+                # what _start writes besides (_T_START), and the linear blocks' tables
+                self.bound,
+                self.noise_counts,
+                self.spindle,
+                self.spindle_set,
+                self.power,
+                self.diameter,
+                self.length,
+                lanes.spindle_rpm,
+                *lanes.speed_free,
                 self.lane_index,
                 self._pending,
                 *self._pending_draws,
