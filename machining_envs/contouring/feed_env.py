@@ -38,6 +38,7 @@ from machining_envs.contouring.scenarios import (
     _D_A,
     _D_B,
     _D_LENGTH,
+    _D_T,
     _D_X0,
     _D_XE,
     _D_Y0,
@@ -51,6 +52,7 @@ from machining_envs.contouring.scenarios import (
 from machining_envs.contouring.servo import (
     LANES,
     LANES_STATE_SIZE,
+    NOMINAL_LOOP_NUMBERS,
     SCRATCH_SIZE,
     SERVO_KINDS,
     ServoLanes,
@@ -60,6 +62,7 @@ from machining_envs.contouring.servo import (
     run_lanes,
     scatter_lanes,
     servo_design,
+    start_scaled_loops,
 )
 from machining_envs.core.actuation import (
     Actuation,
@@ -96,6 +99,7 @@ from machining_envs.core.kernels import clip_unit, data_address
 from machining_envs.core.normals import LaneGenerators
 from machining_envs.core.packed import (
     PackedArgs,
+    b1_1,
     b1_2,
     f4_2,
     f8_1,
@@ -559,7 +563,16 @@ def _serve_feed_step(ctl, table, polls):
 
 #: Where :func:`_feed_step`'s arguments (``_FeedCore._args``) hold the lanes: axis 0, none
 #: (shared) or scratch space, for :class:`~machining_envs.core.blocks.LaneBlocks`.
-_STEP_AXES = (0, 0, 0, 0, 0, 0, 0, None, 0, 0, None, 0, 0, 0, SCRATCH, SCRATCH)
+_STEP_AXES = (
+    0, 0, 0, 0, 0, 0, 0, None, 0, 0, None, 0, 0, 0, SCRATCH, SCRATCH,  # _feed_step's
+    0, 0, 0, None, None, None, None, None, None, None, None, None,  # the start's (_F_START)
+)  # fmt: skip
+#: Where the kernel's table (``_FeedCore._args``) holds, after :func:`_feed_step`'s
+#: arguments, what a batch's start (:func:`_start_batch`) writes besides or reads: the
+#: score bounds, whether each lane's path is a circle and its circle, the start's
+#: constants (``_FeedCore._start_consts``) and both axes' designs (``A``, ``B``, ``C``,
+#: ``D`` of X, then of Y).
+_F_START = 16
 # The kernel's blocks of lanes start at multiples of ALIGN, and so at a group's first lane:
 # a block reads its groups' coefficients from its first lane's group on (lane[0]).
 assert ALIGN % LANES == 0
@@ -639,18 +652,67 @@ def _start_drawn_lanes(lanes, ints, floats, drawn_tabs, feed, t_load, t_max, ove
         segment[k] = path_segment_index(tab, length, 0.0)
 
 
+@numba.njit(cache=True)
+def _start_batch(t, lanes, ints, floats, drawn_tabs, feed, scale):
+    """:meth:`_FeedCore.start_lanes`' arrays for every lane ``lanes[i]`` of a split's batch
+    from its drawn numbers (``_RandomPaths.draw_lanes``), in one call on the kernel's
+    table ``t``: its servo loops on the nominal plant with the inertias scaled by
+    ``scale[i]`` (``ServoLanes.start_scaled``'s numbers), then :func:`_start_drawn_lanes`;
+    the lane's path is no circle (paths of several segments)."""
+    lf, li, tabs, pf = f8_2(t, 0), i8_2(t, 1), f8_3(t, 2), f8_2(t, 3)
+    load_t, load_v, buf, groups = f8_2(t, 4), f8_3(t, 5), f8_2(t, 6), f8_2(t, 7)
+    state, consts, obs, flags, out = f8_2(t, 9), f8_1(t, 10), f4_2(t, 11), b1_2(t, 12), f8_2(t, 13)
+    o = _F_START
+    bound, has_circle, circle, sc = f8_1(t, o), b1_1(t, o + 1), f8_2(t, o + 2), f8_1(t, o + 3)
+    designs = (
+        (f8_2(t, o + 4), f8_2(t, o + 5), f8_2(t, o + 6), f8_2(t, o + 7)),
+        (f8_2(t, o + 8), f8_2(t, o + 9), f8_2(t, o + 10), f8_2(t, o + 11)),
+    )
+    m = lanes.size
+    t_load = np.empty(m)
+    for i in range(m):
+        f = floats[i]
+        t_load[i] = 0.0 + (f[_D_LENGTH] / feed[i] - 0.0) * f[_D_T]  # (scenarios.load_time)
+    start_scaled_loops(lanes, sc[:_S_TMAX], scale, designs, buf, groups)
+    _start_drawn_lanes(
+        lanes, ints, floats, drawn_tabs, feed, t_load, sc[_S_TMAX], sc[_S_OVERRIDE], tabs,
+        li[:, 1], pf, bound, load_t, load_v, li[:, 2], lf, li, state, out, flags, consts[2],
+        consts[_C_LOOK:_C_LO], consts[_C_LO:_C_HI], consts[_C_HI : _C_HI + _N_OBS], obs,
+    )  # fmt: skip
+    for i in range(m):
+        has_circle[lanes[i]] = False
+        for q in range(3):
+            circle[lanes[i], q] = 0.0
+
+
+#: ``_FeedCore._start_consts``: the nominal plant's numbers (``NOMINAL_LOOP_NUMBERS``), then
+#: the time limit (NaN: from the programmed time) and the largest override.
+_S_TMAX = len(NOMINAL_LOOP_NUMBERS)
+_S_OVERRIDE = _S_TMAX + 1
+
+
 #: The float keys of a vector step's info, one row each of the table :func:`_info_rows`
 #: fills (``_FeedCore.info_arrays``).
 _INFO_F = ("t_s", "command_x_mm_s", "command_y_mm_s", *_OUT[3:-1], "contour_tolerance_mm",
            "cost", "score_bound", "path_length_mm", "feed_mm_s", "programmed_time_s",
            "time_limit_s", "machining_time_s")  # fmt: skip
+#: The float keys between the flags and ``segment`` in the info's order.
+_INFO_OUT = (*_OUT[3:-1], "contour_tolerance_mm", "cost", "score_bound", "path_length_mm")
+
+
+#: The boolean and integer keys of a vector step's info, one row each of the tables
+#: :func:`_info_rows` fills (``_machining_time_s``: the lanes that finished).
+_INFO_B = ("action_clipped", "breakage", "diverged", "finished", "_machining_time_s")
+_INFO_I = ("n_action_clipped", "segment")
 
 
 @numba.njit(cache=True)
-def _info_rows(out, pf, bound, flags, tol, rows, command):
-    """Every lane's float info into ``rows`` (one row per key of ``_INFO_F``, one column
-    per lane; rows spaced apart, ``core.packed.spaced_rows``), and its two commands into
-    ``command`` (``(N, 2)``), as :meth:`_FeedCore.lane_info` reports them."""
+def _info_rows(out, pf, bound, flags, li, tol, rows, command, bits, ints):
+    """Every lane's info, as :meth:`_FeedCore.lane_info` reports it, one column per lane:
+    the float keys into ``rows`` (one row per key of ``_INFO_F``; rows spaced apart,
+    ``core.packed.spaced_rows``), its two commands into ``command`` (``(N, 2)``), the
+    boolean keys into ``bits`` (``_INFO_B``) and the integer ones into ``ints``
+    (``_INFO_I``)."""
     m = out.shape[1] - 4  # the outputs x_mm .. path_s_mm
     for k in range(out.shape[0]):
         o = out[k]
@@ -669,6 +731,13 @@ def _info_rows(out, pf, bound, flags, tol, rows, command):
         rows[8 + m, k] = pf[k, 6]
         rows[9 + m, k] = pf[k, 7]
         rows[10 + m, k] = o[20] if flags[k, 1] else np.nan
+        bits[0, k] = li[k, 0] != 0
+        bits[1, k] = False
+        bits[2, k] = flags[k, 0]
+        bits[3, k] = flags[k, 1]
+        bits[4, k] = flags[k, 1]
+        ints[0, k] = li[k, 4]
+        ints[1, k] = li[k, 5]
 
 
 class _FeedCore:
@@ -758,11 +827,18 @@ class _FeedCore:
         self._batch_ok: dict = {}  # _batches' checks, by factory
         self.names = LaneNames(n)
         self.servos = np.full(n, servo, dtype=object)
+        self.servos.flags.writeable = False  # every step's info holds it
         #: Per lane, the values of info that hold for the whole episode; None for a lane
         #: started with others until :meth:`lane_info` reads them from the arrays.
         self.episode_info: list[dict | None] = [{}] * n
         self.has_circle = np.zeros(n, dtype=bool)
         self.circle = np.zeros((n, 3))
+        p = self.params
+        t_max = self.max_episode_time_s
+        self._start_consts = np.array([  # (_S_*)
+            *(getattr(p, name) for name in NOMINAL_LOOP_NUMBERS),
+            math.nan if t_max is None else float(t_max), self.override_max,
+        ])  # fmt: skip
         n_seg = self.tabs.shape[1]
         self._scratch = (self._float_scratch(n_seg), np.zeros(n_seg, dtype=np.int64))
         self._packed = PackedArgs()  # the kernel's arguments in one table (core.packed)
@@ -788,6 +864,7 @@ class _FeedCore:
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
+        self.servos.flags.writeable = False  # (a pickle's array is writable)
         self._bind_views()
         self._bind()
 
@@ -907,20 +984,12 @@ class _FeedCore:
         if factory is None:
             return
         drawn = factory.draw_lanes(self.rngs.table, lanes)
-        self._grow(int(drawn.ints[:, 0].max()), 1)
+        if factory.segments[1] > self.tabs.shape[1]:
+            self._grow(factory.segments[1], 1)
         ks = settle_batch(self, lanes, factory.build_lane, (drawn,), factory.actuation,
                           factory.name)  # fmt: skip
-        self.loops.start_scaled(lanes, self.params, drawn.scale)  # (true_params_of's plants)
-        t_max = self.max_episode_time_s
-        _start_drawn_lanes(
-            lanes, drawn.ints, drawn.floats, drawn.tabs, drawn.feed, drawn.t_load,
-            math.nan if t_max is None else float(t_max), self.override_max, self.tabs,
-            self.nseg, self.pf, self.bound, self.load_t, self.load_v, self.n_load, self.lf,
-            self.li, self.state, self.out, self.flags, self.tolerance_mm,
-            self.consts[_C_LOOK:_C_LO], self._lo, self._hi, self.obs,
-        )  # fmt: skip
-        self.has_circle[lanes] = False  # paths of several segments (_batches)
-        self.circle[lanes] = 0.0
+        _start_batch(self._packed(self._args), lanes, drawn.ints, drawn.floats, drawn.tabs,
+                     drawn.feed, drawn.scale)  # fmt: skip
         info = self.episode_info
         for k in ks:
             info[k] = None  # lane_info reads it from the arrays
@@ -965,6 +1034,9 @@ class _FeedCore:
             self.loops.groups, self.lane, self.state, self.consts, self.obs, self.flags,
             self.out,
             *self._scratch,
+            # what a batch's start writes besides or reads (_F_START)
+            self.bound, self.has_circle, self.circle, self._start_consts,
+            *(m for axis in self.loops._design_arrays for m in axis),
         )  # fmt: skip
 
     def lane_info(self, k: int) -> dict:
@@ -1027,39 +1099,44 @@ class _FeedCore:
 
     def info_arrays(self) -> dict:
         """The step info of every lane, as arrays (keys that only some lanes have come with
-        their ``_key`` masks): the float keys views of one table (:func:`_info_rows`)."""
-        o = self.out
-        f = self.flags
-        rows = spaced_rows(len(_INFO_F), self.n)
+        their ``_key`` masks): the float, boolean and integer keys rows of three tables
+        filled in one compiled call (:func:`_info_rows`); the servo and scenario names
+        arrays no reset writes to."""
+        n = self.n
+        rows = spaced_rows(len(_INFO_F), n)
         # The commands are filled with the rows: a copy of out's two columns is slower.
-        command = np.empty((self.n, 2))
-        _info_rows(o, self.pf, self.bound, f, self.tolerance_mm, rows, command)
+        command = np.empty((n, 2))
+        bits = np.empty((len(_INFO_B), n), dtype=np.bool_)
+        ints = np.empty((len(_INFO_I), n), dtype=np.int64)
+        _info_rows(self.out, self.pf, self.bound, self.flags, self.li, self.tolerance_mm, rows,
+                   command, bits, ints)  # fmt: skip
         r = dict(zip(_INFO_F, rows, strict=True))
+        b = dict(zip(_INFO_B, bits, strict=True))
+        i = dict(zip(_INFO_I, ints, strict=True))
         info = {
             "t_s": r["t_s"],
             "command": command,
             "command_x_mm_s": r["command_x_mm_s"],
             "command_y_mm_s": r["command_y_mm_s"],
-            "action_clipped": self.in_clipped.astype(bool),
-            "n_action_clipped": self.n_clipped.copy(),
-            "breakage": np.zeros(self.n, dtype=bool),
-            "diverged": f[:, 0].copy(),
-            "finished": f[:, 1].copy(),
+            "action_clipped": b["action_clipped"],
+            "n_action_clipped": i["n_action_clipped"],
+            "breakage": b["breakage"],
+            "diverged": b["diverged"],
+            "finished": b["finished"],
         }
-        for name in (*_OUT[3:-1], "contour_tolerance_mm", "cost", "score_bound",
-                     "path_length_mm"):  # fmt: skip
+        for name in _INFO_OUT:
             info[name] = r[name]
-        info["segment"] = self.segment.copy()
+        info["segment"] = i["segment"]
         for name in ("feed_mm_s", "programmed_time_s", "time_limit_s"):
             info[name] = r[name]
-        info["servo"] = self.servos.copy()
+        info["servo"] = self.servos  # read-only, one servo for every lane
         info["scenario"] = self.names.array()
         if self.has_circle.any():
-            for i, key in enumerate(("circle_cx_mm", "circle_cy_mm", "circle_radius_mm")):
-                info[key] = self.circle[:, i].copy()
+            for j, key in enumerate(("circle_cx_mm", "circle_cy_mm", "circle_radius_mm")):
+                info[key] = self.circle[:, j].copy()
                 info["_" + key] = self.has_circle.copy()
         info["machining_time_s"] = r["machining_time_s"]
-        info["_machining_time_s"] = f[:, 1].copy()
+        info["_machining_time_s"] = b["_machining_time_s"]
         return info
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -219,6 +220,12 @@ class _RandomPaths:
         # The log-uniform draws' bounds, as numpy computes them, once.
         self.log_feed = (float(np.log(feed[0])), float(np.log(feed[1])))
         self.log_inertia = (float(np.log(inertia[0])), float(np.log(inertia[1])))
+        # What draw_lanes hands its compiled draw besides the generators and lanes, made once.
+        self._draw_args = (
+            _split_key(name), segments[0], segments[1], np.array(line), np.array(radius),
+            np.array(sweep), _LINE_PROBABILITY, np.array(self.log_feed),
+            np.array(self.log_inertia), float(load_max),
+        )  # fmt: skip
         # Every drawn field lies between these two scenarios' (checked here, once): the
         # factory builds its scenarios without checking them again.
         self.extremes = tuple(
@@ -271,18 +278,10 @@ class _RandomPaths:
         split's stream of its generator in ``table`` (``LaneGenerators.table``) in one
         compiled call, every generator left where ``__call__`` leaves it; the feeds and
         inertia scales are numpy's ``exp`` of the drawn exponents, as there."""
-        seg_lo, seg_hi = self.segments
-        ints, floats, tabs, draws = _draw_smooth_lanes(
-            table, lanes, _split_key(self.name), seg_lo, seg_hi, np.array(self.line),
-            np.array(self.radius), np.array(self.sweep), _LINE_PROBABILITY,
-            np.array(self.log_feed), np.array(self.log_inertia), float(self.load_max),
-        )  # fmt: skip
+        ints, floats, tabs, draws = _draw_smooth_lanes(table, lanes, *self._draw_args)
         feed = np.exp(floats[:, _D_FEED])
         scale = np.exp(floats[:, _D_SX : _D_SY + 1])
-        length = floats[:, _D_LENGTH]
-        # uniform(0, length / f): low + (high - low) u, numpy's arithmetic
-        t_load = 0.0 + (length / feed - 0.0) * floats[:, _D_T]
-        return DrawnPaths(ints, floats, tabs, draws, feed, scale, t_load)
+        return DrawnPaths(ints, floats, tabs, draws, feed, scale)
 
     def build_lane(self, drawn: DrawnPaths, i: int) -> ContouringScenario:
         """The scenario of lane ``i`` of the lanes' numbers from :meth:`draw_lanes`."""
@@ -293,8 +292,8 @@ class _RandomPaths:
         )  # fmt: skip
         loads = ()
         if drawn.ints[i, 1]:
-            a, b = drawn.floats[i, _D_A : _D_B + 1].tolist()
-            loads = ((float(drawn.t_load[i]), a, b),)
+            length, u, a, b = drawn.floats[i, [_D_LENGTH, _D_T, _D_A, _D_B]].tolist()
+            loads = ((load_time(length, float(drawn.feed[i]), u), a, b),)
         return self._scenario(path, float(drawn.feed[i]), tuple(drawn.scale[i].tolist()), loads)
 
 
@@ -307,12 +306,12 @@ _D_HEADING, _D_LENGTH, _D_X0, _D_Y0, _D_XE, _D_YE = range(6)
 _D_FEED, _D_SX, _D_SY, _D_T, _D_A, _D_B = range(6, 12)
 
 
-@dataclass(frozen=True)
-class DrawnPaths:
+class DrawnPaths(NamedTuple):
     """The numbers of many lanes' split scenarios (:meth:`_RandomPaths.draw_lanes`):
     ``ints[i]`` = (segments, whether a load step); ``floats[i]``, columns ``_D_*``;
     ``tabs[i, :segments]``, each path's table (``Path.table``); ``draws[i, :, :segments]``,
-    its segments' uniform numbers; the feeds, inertia scales and load times."""
+    its segments' uniform numbers; the feeds and inertia scales. A load step's time is
+    :func:`load_time` of the lane's numbers."""
 
     ints: np.ndarray
     floats: np.ndarray
@@ -320,7 +319,13 @@ class DrawnPaths:
     draws: np.ndarray
     feed: np.ndarray
     scale: np.ndarray
-    t_load: np.ndarray
+
+
+def load_time(length: float, feed: float, u: float) -> float:
+    """The time of a drawn load step: ``uniform(0, length / feed)`` from its uniform ``u``,
+    in numpy's arithmetic (``low + (high - low) u``), as :meth:`_RandomPaths.__call__`
+    draws it (a compiled start repeats these operations)."""
+    return 0.0 + (length / feed - 0.0) * u
 
 
 @numba.njit(cache=True)

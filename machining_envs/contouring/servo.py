@@ -873,6 +873,28 @@ def _start_loops(lanes, gain, mm_per_rad, dt, inertia, umax, designs, buf, group
     gather_loops(buf, lanes, groups)
 
 
+#: The nominal plant's numbers :func:`start_scaled_loops` reads, in this order: its loop
+#: gain, screw lead (mm/rad), sample time, X and Y inertias and command limit.
+NOMINAL_LOOP_NUMBERS = (
+    "loop_gain_Nms", "mm_per_rad", "sample_time_s", "inertia_x_kgm2", "inertia_y_kgm2",
+    "command_max_mm_s",
+)  # fmt: skip
+
+
+@numba.njit(cache=True)
+def start_scaled_loops(lanes, nominal, scale, designs, buf, groups):
+    """:meth:`ServoLanes.start_scaled`'s compiled part: the loops of each lane
+    ``lanes[i]`` on the nominal plant (``nominal``: ``NOMINAL_LOOP_NUMBERS``) with its
+    inertias (X, Y) scaled by ``scale[i]``, by :func:`_start_loops`."""
+    m = lanes.size
+    inertia = np.empty((m, 2))
+    for i in range(m):
+        inertia[i, 0] = nominal[3] * scale[i, 0]
+        inertia[i, 1] = nominal[4] * scale[i, 1]
+    _start_loops(lanes, nominal[0:1], nominal[1:2], nominal[2:3], inertia, nominal[5:6], designs,
+                 buf, groups)  # fmt: skip
+
+
 @numba.njit(cache=True, inline="always")
 def lane_loops(row):
     """A lane's loops as views of its row of ``ServoLanes.buf`` (``_LANE_ARRAYS``):
@@ -978,16 +1000,11 @@ class ServoLanes:
     def start_scaled(self, lanes: np.ndarray, nominal: ContouringParams, scales) -> None:
         """:meth:`start_lanes` on the plants ``nominal`` with its inertias scaled by
         ``scales[i]`` (X, Y) in lane ``lanes[i]`` (``scenarios.true_params_of``'s plants,
-        their inertias the same products), without making them."""
-        inertia = np.array([[nominal.inertia_x_kgm2, nominal.inertia_y_kgm2]]) * scales
-        self._start_arrays(
-            lanes,
-            np.array([nominal.loop_gain_Nms]),
-            np.array([nominal.mm_per_rad]),
-            np.array([nominal.sample_time_s]),
-            inertia,
-            nominal.command_max_mm_s,
-        )
+        their inertias the same products), without making them (:func:`start_scaled_loops`,
+        which a compiled batch start calls itself)."""
+        numbers = np.array([getattr(nominal, name) for name in NOMINAL_LOOP_NUMBERS])
+        start_scaled_loops(lanes, numbers, np.asarray(scales, dtype=np.float64),
+                           self._design_arrays, self.buf, self.groups)  # fmt: skip
 
     def _start_arrays(self, lanes, gain, mm_per_rad, dt, inertia, umax) -> None:
         """The loops of ``lanes`` on plants of the loop gains ``gain``, screw leads

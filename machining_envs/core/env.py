@@ -8,6 +8,8 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from machining_envs.core.actuation import configure_lane
+
 __all__ = [
     "ActionMap",
     "adopt_core",
@@ -347,10 +349,16 @@ class LaneNames:
     def __getitem__(self, lane: int) -> str:
         return self._names[lane]
 
-    def set_many(self, lanes: np.ndarray, name: str) -> None:
-        """Every lane of ``lanes`` (an index array) is named ``name``."""
-        if (self._names[lanes] != name).any():  # else nothing to copy or write
-            self._writable()[lanes] = name
+    def set_many(self, lanes: np.ndarray, name: str, ks: list[int] | None = None) -> None:
+        """Every lane of ``lanes`` (an index array; ``ks``, the same as a list, if at hand)
+        is named ``name``."""
+        names = self._names
+        if ks is None:
+            ks = lanes.tolist()
+        for k in ks:
+            if names[k] != name:  # else nothing to copy or write
+                self._writable()[lanes] = name
+                return
 
     def _writable(self) -> np.ndarray:
         """The names array to write: a copy of it once it has been handed out."""
@@ -444,8 +452,6 @@ def settle_batch(core, lanes: np.ndarray, build, args: tuple, actuation, name: s
     parameters from that scenario (:class:`LaneObjects`), the CNC's ``actuation`` of the
     split (None: the env's option) in each lane, the split's ``name``. Returns ``lanes`` as
     a list."""
-    from machining_envs.core.actuation import configure_lane
-
     ks = lanes.tolist()
     core.scenarios.defer(lanes, build, *args)
     core.truths.defer(lanes, lane_truth, core.scenarios, lanes.copy(), core.params)
@@ -454,7 +460,7 @@ def settle_batch(core, lanes: np.ndarray, build, args: tuple, actuation, name: s
             core.act_lanes = configure_lane(
                 core.act_lanes, k, actuation, core.actuation, core._actuation_lanes
             )
-    core.names.set_many(lanes, name)
+    core.names.set_many(lanes, name, ks)
     return ks
 
 

@@ -141,6 +141,8 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         #: gets and the (key, mask) pairs, worked out once per set of keys.
         self._mask_keys: dict[tuple, tuple] = {}
         self._every = np.ones(self.num_envs, dtype=bool)
+        #: The default scenario last checked by :meth:`_reset_lanes` (not a list of them).
+        self._default_ok = None
         self.lane_rngs: list[np.random.Generator] = [
             seeding.np_random()[0] for _ in range(self.num_envs)
         ]
@@ -233,7 +235,11 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         """Start new episodes in ``lanes``; their first observations (see the module
         docstring). Every scenario is checked before any lane starts."""
         core = self._core
-        spec = self._lane_scenarios(scenario_option(options, self.default_scenario), lanes)
+        spec = self.default_scenario
+        if options is not None or spec is not self._default_ok:
+            spec = self._lane_scenarios(scenario_option(options, spec), lanes)
+            if options is None and not isinstance(spec, list):
+                self._default_ok = spec  # checked: the autoresets' scenario, as a rule
         start_lanes = getattr(core, "start_lanes", None)  # a core that starts many at once
         if start_lanes is not None and not isinstance(spec, list):
             start_lanes(lanes, spec, self.lane_rngs)

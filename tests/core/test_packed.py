@@ -175,7 +175,13 @@ KERNELS = {
     "EndMilling-v0": (milling_env._step, milling_env._step_packed, (3,)),
     "MicroDrilling-v0": (drilling_env._step, drilling_env._step_packed, ()),
     "Contouring-v0": (contouring_env._contour_step, contouring_env._contour_step_packed, ()),
-    "ContouringFeed-v0": (feed_env._feed_step, feed_env._feed_step_packed, ()),
+    # (ContouringFeed-v0's also holds what a batch's start reads and writes, after
+    # _feed_step's)
+    "ContouringFeed-v0": (
+        lambda *args: feed_env._feed_step(*args[: feed_env._F_START]),
+        feed_env._feed_step_packed,
+        (),
+    ),
 }
 
 
