@@ -833,6 +833,7 @@ class _FeedCore:
         self.episode_info: list[dict | None] = [{}] * n
         self.has_circle = np.zeros(n, dtype=bool)
         self.circle = np.zeros((n, 3))
+        self._circles = 0  # lanes whose path is a circle (has_circle's count)
         p = self.params
         t_max = self.max_episode_time_s
         self._start_consts = np.array([  # (_S_*)
@@ -946,6 +947,7 @@ class _FeedCore:
         self.n_clipped[lane] = 0
         self.names[lane] = sc.name
         circles = _circle_info(path)
+        self._circles += bool(circles) - bool(self.has_circle[lane])
         self.has_circle[lane] = bool(circles)
         self.circle[lane] = tuple(circles.values()) or (0.0, 0.0, 0.0)
         # The values of info that hold for the whole episode.
@@ -988,6 +990,8 @@ class _FeedCore:
             self._grow(factory.segments[1], 1)
         ks = settle_batch(self, lanes, factory.build_lane, (drawn,), factory.actuation,
                           factory.name)  # fmt: skip
+        if self._circles:  # the batch's paths are no circles
+            self._circles -= int(np.count_nonzero(self.has_circle[lanes]))
         _start_batch(self._packed(self._args), lanes, drawn.ints, drawn.floats, drawn.tabs,
                      drawn.feed, drawn.scale)  # fmt: skip
         info = self.episode_info
@@ -1131,7 +1135,7 @@ class _FeedCore:
             info[name] = r[name]
         info["servo"] = self.servos  # read-only, one servo for every lane
         info["scenario"] = self.names.array()
-        if self.has_circle.any():
+        if self._circles:
             for j, key in enumerate(("circle_cx_mm", "circle_cy_mm", "circle_radius_mm")):
                 info[key] = self.circle[:, j].copy()
                 info["_" + key] = self.has_circle.copy()

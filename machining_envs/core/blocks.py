@@ -27,7 +27,8 @@ one). The discretisations the resets make are compiled instead.
 A compiled kernel (numba) with no other trailing argument than one integer runs on
 **workers that wait in compiled code**: each worker thread polls a flag of its own, without
 the GIL, and calls the kernel on its block itself when the flag moves, so handing it a
-block costs about a microsecond. A pool's thread sleeps between blocks, and waking it took
+block costs about a microsecond (the calling thread sets every worker's flag in one
+compiled call, and waits for them all in another). A pool's thread sleeps between blocks, and waking it took
 90-100 µs on a virtual machine (``benchmarks/thread_handoff.py``), as long as a whole
 kernel of a thousand lanes. A worker polls for a few milliseconds after each block (long
 enough for the next step of an env stepped in a loop to find it awake), then sleeps until
@@ -168,15 +169,6 @@ def _get(ctl, i):
     return _load(ctl, i)
 
 
-@numba.njit(cache=True)
-def _ask(ctl, number, tail):
-    """Ask for block ``number`` with the integer ``tail``; whether the worker is asleep (or
-    about to be), and must be woken. One compiled call from Python."""
-    _store(ctl, _TAIL, tail)
-    _store(ctl, _GO, number)
-    return _load(ctl, _AWAKE) == 0
-
-
 @numba.njit(inline="always")
 def _call(kernel, args, ctl):
     kernel(*args)
@@ -243,11 +235,45 @@ def serve_loop(call, kernel, ctl, args, polls):
             _store(ctl, _AWAKE, 1)
 
 
-class _Worker:
-    """A thread that serves one block of lanes from compiled code (module docstring)."""
+@numba.njit(cache=True)
+def _ask_all(ctls, number, tail, asleep):
+    """Ask every worker (row ``w`` of ``ctls``) for block ``number`` with the integer
+    ``tail``, in one compiled call: whether each is asleep (or about to be), and must be
+    woken, into ``asleep[w]``; whether any is."""
+    woken = False
+    for w in range(ctls.shape[0]):
+        row = ctls[w]
+        _store(row, _TAIL, tail)
+        _store(row, _GO, number)
+        asleep[w] = _load(row, _AWAKE) == 0
+        woken = woken or asleep[w]
+    return woken
 
-    def __init__(self, kernel, args: tuple, with_tail: bool, serve=None) -> None:
-        self.ctl = np.zeros(8, dtype=np.int64)  # a cache line of its own
+
+@numba.njit(nogil=True, cache=True)
+def _poll_all(ctls, number, polls):
+    """Poll every worker's ``_DONE`` (row ``w`` of ``ctls``) until it is ``number``: -1
+    once all are, else the first worker that ``polls`` reads found not done."""
+    for w in range(ctls.shape[0]):
+        if not _poll(ctls[w], _DONE, number, polls):
+            return w
+    return -1
+
+
+def _control_rows(n: int) -> np.ndarray:
+    """Zeros of ``n`` rows of eight int64 values, each row a 64-byte cache line of its own
+    (the workers' flags, :class:`_Worker`), so that no two workers' flags share a line."""
+    raw = np.zeros(8 * n + 8, dtype=np.int64)
+    skip = (-raw.ctypes.data % 64) // 8
+    return raw[skip : skip + 8 * n].reshape(n, 8)
+
+
+class _Worker:
+    """A thread that serves one block of lanes from compiled code (module docstring), with
+    its flags in ``ctl`` (eight int64 values, a row of :func:`_control_rows`)."""
+
+    def __init__(self, kernel, args: tuple, with_tail: bool, serve=None, ctl=None) -> None:
+        self.ctl = _control_rows(1)[0] if ctl is None else ctl
         self.ctl[_AWAKE] = 1
         self.wake = threading.Event()
         self.error: BaseException | None = None
@@ -277,18 +303,6 @@ class _Worker:
             if _get(ctl, _GO) < 0:
                 return
             _set(ctl, _AWAKE, 1)
-
-    def ask(self, number: int, tail: int) -> None:
-        """Ask for block ``number`` (after the last one finished), with the integer ``tail``."""
-        if _ask(self.ctl, number, tail):
-            self.wake.set()
-
-    def wait(self, number: int) -> None:
-        """Wait until block ``number`` is done."""
-        while not _poll(self.ctl, _DONE, number, _POLLS):
-            if not self.thread.is_alive():
-                raise RuntimeError("a worker thread of the lane blocks has stopped")
-            time.sleep(0)
 
     def stop(self) -> None:
         _set(self.ctl, _GO, -1)
@@ -330,13 +344,16 @@ class LaneBlocks:
         self._workers_pid = 0
         self._number = 0
         self._finalizer: weakref.finalize | None = None
+        # The workers' flags (a row each) and whether each was asleep when last asked.
+        self._ctls: np.ndarray | None = None
+        self._asleep: np.ndarray | None = None
 
     def __getstate__(self) -> dict:
         # Threads and views do not pickle: made anew when next needed.
         state = dict(self.__dict__)
         state.update(_pool=None, _pool_pid=0, _source=None, _blocks=[], _tables=None,
                      _tables_of=None, _workers=[], _served=None, _workers_pid=0, _number=0,
-                     _finalizer=None)  # fmt: skip
+                     _finalizer=None, _ctls=None, _asleep=None)  # fmt: skip
         return state
 
     def _block_args(self, args: tuple, axes: tuple) -> list[tuple]:
@@ -447,7 +464,13 @@ class LaneBlocks:
             or old[3] is not serve
         ):
             self._stop_workers()
-            self._workers = [_Worker(kernel, b, with_tail, serve) for b in blocks[1:]]
+            # Every worker's flags in one array, asked and waited for in one call each.
+            self._ctls = _control_rows(len(blocks) - 1)
+            self._asleep = np.zeros(len(blocks) - 1, dtype=np.bool_)
+            self._workers = [
+                _Worker(kernel, b, with_tail, serve, self._ctls[i])
+                for i, b in enumerate(blocks[1:])
+            ]
             self._served = (kernel, blocks, with_tail, serve)
             self._workers_pid = os.getpid()
             # Stopped with the blocks, if never closed: they hold the lanes' arrays.
@@ -455,19 +478,27 @@ class LaneBlocks:
         self._number += 1
         number = self._number
         value = int(tail[0]) if tail else 0
-        for worker in self._workers:
-            worker.ask(number, value)
+        if _ask_all(self._ctls, number, value, self._asleep):
+            for i in np.flatnonzero(self._asleep).tolist():
+                self._workers[i].wake.set()
         try:
             kernel(*blocks[0], *tail)
         finally:
-            for worker in self._workers:  # every block done before anything else touches
-                worker.wait(number)  # the lanes
+            self._wait_all(number)  # every block done before anything else touches the lanes
             error = next((w.error for w in self._workers if w.error is not None), None)
             if error is not None:
                 for worker in self._workers:  # raised once (the calling thread's first)
                     worker.error = None
         if error is not None:
             raise error
+
+    def _wait_all(self, number: int) -> None:
+        """Wait until every worker has done block ``number``; a worker whose thread has
+        stopped is an error."""
+        while (w := _poll_all(self._ctls, number, _POLLS)) >= 0:
+            if not self._workers[w].thread.is_alive():
+                raise RuntimeError("a worker thread of the lane blocks has stopped")
+            time.sleep(0)
 
     def _stop_workers(self) -> None:
         finalizer = getattr(self, "_finalizer", None)

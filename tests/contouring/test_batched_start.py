@@ -82,3 +82,30 @@ def test_the_compiled_table_is_the_paths_own(ranges):
         np.testing.assert_array_equal(tab[:n], path.table(), strict=True)
         assert ends == (path.length, *path.start, *path.end)
         assert np.isnan(tab[n:]).all()  # nothing written past the path's rows
+
+
+def test_the_circle_keys_come_and_go_with_the_lanes_on_circles():
+    """A vector step's info holds the circle keys (with their masks) while some lane's path
+    is a circle, and not once none is: circle lanes restarted on a split's paths together
+    (``start_lanes``) or one by one (``start``) leave the count ``info_arrays`` reads."""
+    import gymnasium as gym
+
+    venv = gym.make_vec(CONTOURING_FEED, num_envs=6)
+    specs = ["paper_circle", "train", "paper_circle", "train", "paper_corner", "train"]
+    venv.reset(seed=0, options={"scenario": specs})
+    core = venv.unwrapped._core
+    _, _, _, _, info = venv.step(np.zeros((6, 1), dtype=np.float32))
+    assert core._circles == 2
+    np.testing.assert_array_equal(info["_circle_radius_mm"], core.has_circle, strict=True)
+    np.testing.assert_array_equal(info["circle_radius_mm"][[0, 2]], [10.0, 10.0])
+    core.start_lanes(np.array([0, 1]), "train", venv.unwrapped.lane_rngs)  # one circle left
+    assert core._circles == 1 and "circle_radius_mm" in core.info_arrays()
+    core.start(2, "paper_corner", venv.unwrapped.lane_rngs[2])  # none
+    assert core._circles == 0 and not core.has_circle.any()
+    assert not any(k.startswith(("circle", "_circle")) for k in core.info_arrays())
+    core.start(5, "paper_circle", venv.unwrapped.lane_rngs[5])
+    core.start(5, "paper_circle", venv.unwrapped.lane_rngs[5])  # (counted once)
+    assert core._circles == 1 and core.info_arrays()["_circle_radius_mm"].tolist() == [
+        False, False, False, False, False, True
+    ]  # fmt: skip
+    venv.close()
