@@ -389,7 +389,7 @@ class LaneObjects:
     __slots__ = ("_items", "_batch", "_place", "_recipes", "_next", "_prune_at")
 
     def __init__(self, n: int) -> None:
-        self._items: list = [None] * n
+        self._items = np.full(n, None, dtype=object)  # (None: left to a recipe, or never set)
         #: The recipe each lane's object is left to (its key in ``_recipes``), or -1.
         self._batch = np.full(n, -1, dtype=np.int64)
         #: Each lane's place in the batch its object is left to.
@@ -421,9 +421,7 @@ class LaneObjects:
         self._recipes[key] = (build, *args)
         self._batch[lanes] = key
         self._place[lanes] = np.arange(lanes.size)
-        items = self._items
-        for lane in lanes.tolist():
-            items[lane] = None
+        self._items[lanes] = None
         if len(self._recipes) > self._prune_at:  # forget the recipes no lane is left to
             live = set(np.unique(self._batch).tolist())
             self._recipes = {k: r for k, r in self._recipes.items() if k in live}
@@ -441,8 +439,7 @@ def split_batch(core, lanes: np.ndarray, spec, rngs, factories: dict):
         for k in lanes.tolist():
             core.start(k, spec, rngs[k])
         return None
-    for k in lanes.tolist():
-        core.rngs.bind(k, rngs[k])  # the scenario is drawn with it, and the noise
+    core.rngs.bind_many(lanes.tolist(), rngs)  # the scenarios are drawn with them, and the noise
     return factory
 
 

@@ -93,6 +93,13 @@ class LaneGenerators:
         self.table[lane] = row
         self.generators[lane] = rng
 
+    def bind_many(self, lanes: list[int], rngs) -> None:
+        """:meth:`bind` of each lane ``k`` of ``lanes`` to ``rngs[k]``."""
+        generators = self.generators
+        for k in lanes:
+            if generators[k] is not rngs[k]:
+                self.bind(k, rngs[k])
+
     def __getstate__(self) -> dict:
         return {"generators": self.generators, "table": self.table}
 

@@ -651,14 +651,16 @@ class _TurningCore:
         else:  # each block of lanes starts its own, on its thread
             ok = self._start_in_blocks(lanes, nums, rpm, v, segments, counts)
         ks = lanes.tolist()
-        for i in np.flatnonzero(~ok).tolist():  # left for zoh (never in the plant's ranges)
-            self.lanes._load_matrices(ks[i], float(rpm[i]), full)
+        if not ok.all():
+            for i in np.flatnonzero(~ok).tolist():  # left for zoh (never in the plant's ranges)
+                self.lanes._load_matrices(ks[i], float(rpm[i]), full)
         settle_batch(self, lanes, factory.build_lane, (rpm, segments, counts, v),
                      factory.shop["actuation"], factory.name)  # fmt: skip
         bounds = self.bound[lanes]
-        for i in np.flatnonzero(bounds != bounds).tolist():  # refused by the kernel: let it
-            k = ks[i]  # say why
-            self.bound[k] = machining_time_bound(self.scenarios[k], self.truths[k])
+        if np.isnan(bounds).any():  # refused by the kernel: let it say why
+            for i in np.flatnonzero(bounds != bounds).tolist():
+                k = ks[i]
+                self.bound[k] = machining_time_bound(self.scenarios[k], self.truths[k])
         if full:
             self.power_lanes.update(ks)
         else:
