@@ -202,6 +202,33 @@ def test_a_compiled_kernel_runs_on_workers_that_raise_its_errors():
     blocks.close()
 
 
+def test_workers_asleep_are_woken_for_the_next_block():
+    """Workers idle past their polls sleep; the next run wakes each of them (the flags
+    all set in one call say which sleep), and every block is stepped. Their flags lie a
+    cache line apart."""
+    import time
+
+    from machining_envs.core.blocks import _AWAKE
+
+    n = 512
+    lanes, done = np.arange(n), np.zeros(n, dtype=np.bool_)
+    blocks = LaneBlocks(n, 4)
+    blocks.run(_mark, (lanes, done), (0, 0), 1)
+    ctls = blocks._ctls
+    assert ctls.shape == (3, 8) and ctls.strides == (64, 8) and ctls.ctypes.data % 64 == 0
+    deadline = time.monotonic() + 30.0
+    while ctls[:, _AWAKE].any() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert not ctls[:, _AWAKE].any()  # all asleep
+    done[:] = False
+    runner = threading.Thread(target=blocks.run, args=(_mark, (lanes, done), (0, 0), 1))
+    runner.start()
+    runner.join(timeout=30.0)
+    assert not runner.is_alive() and done.all()
+    assert blocks._asleep.all()  # each was found asleep, and woken
+    blocks.close()
+
+
 def test_workers_stop_with_their_blocks():
     """Workers hold the lanes' arrays: blocks never closed stop theirs when collected."""
     blocks = LaneBlocks(512, 2)
