@@ -8,8 +8,9 @@ env's own methods timed in place:
 
 - **compiled**: the core's ``step`` (the kernel over every lane, and the CNC actuation
   where a scenario has one);
-- **resets**: ``_reset_lanes`` (each finished lane's new scenario, plant and first
-  observation, in Python, one lane at a time);
+- **resets**: ``_reset_lanes`` (the finished lanes' new scenarios, plants and first
+  observations: a split's lanes drawn and started together in compiled calls, with their
+  bookkeeping in Python; other scenarios one lane at a time);
 - **env Python**: the rest of ``_step_lanes`` (the actions' clipping, the sensor noise's
   draws, the copies of the step's outputs and info arrays) and ``_info_now`` (every lane's
   info read again at a step that resets lanes);
