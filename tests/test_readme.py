@@ -4,6 +4,7 @@ first lines are the two commands."""
 import re
 from pathlib import Path
 
+import gymnasium as gym
 import pytest
 
 README = Path(__file__).resolve().parents[1] / "README.md"
@@ -32,7 +33,10 @@ def test_the_own_project_example_runs():
     section = README.read_text().split("## In your own project", 1)[1]
     code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
     scope: dict = {}
-    exec(compile(code, "README: In your own project", "exec"), scope)
+    try:
+        exec(compile(code, "README: In your own project", "exec"), scope)
+    finally:  # the example's own id leaves the registry as it found it
+        gym.registry.pop("mylab/MyLathe-v0", None)
     assert scope["vec"].num_envs == 1024 and scope["vec64"].num_envs == 64
     assert scope["obs"].shape == (1024, 7)  # as its comment says
     assert scope["fast_venv"].num_envs == 1024

@@ -16,13 +16,17 @@ def test_register_own_id_with_own_machine():
         kwargs={"params": mine, "scenario": "paper_405"},
         max_episode_steps=500,
     )
-    env = gym.make("mylab/MyLathe-v0")
-    env.reset(seed=0)
-    assert env.unwrapped.params.force_coefficient == 2100.0
-    assert env.spec.max_episode_steps == 500
-    # Overrides still work on top of the registered kwargs.
-    env = gym.make("mylab/MyLathe-v0", sensor_gain=14.0)
-    assert env.unwrapped.params.sensor_gain == 14.0 and env.unwrapped.params.feed_exponent == 0.8
+    try:
+        env = gym.make("mylab/MyLathe-v0")
+        env.reset(seed=0)
+        assert env.unwrapped.params.force_coefficient == 2100.0
+        assert env.spec.max_episode_steps == 500
+        # Overrides still work on top of the registered kwargs.
+        env = gym.make("mylab/MyLathe-v0", sensor_gain=14.0)
+        params = env.unwrapped.params
+        assert params.sensor_gain == 14.0 and params.feed_exponent == 0.8
+    finally:  # the registry as the test found it
+        gym.registry.pop("mylab/MyLathe-v0", None)
 
 
 def test_module_prefix_and_make_vec_env_in_a_fresh_interpreter():

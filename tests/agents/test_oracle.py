@@ -37,9 +37,10 @@ def test_oracle_keeps_the_limit_near_the_bound_and_beats_the_adaptive_pi():
 def test_oracle_runs_under_sb3_evaluate_policy():
     pytest.importorskip("stable_baselines3")
     from stable_baselines3.common.evaluation import evaluate_policy
+    from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    venv = DummyVecEnv([lambda: gym.make(TURNING, scenario="paper_700")])
+    venv = DummyVecEnv([lambda: Monitor(gym.make(TURNING, scenario="paper_700"))])
     oracle = TurningMPCOracle.from_env(venv.envs[0])
     mean, _ = evaluate_policy(oracle, venv, n_eval_episodes=1)
     assert np.isfinite(mean)
