@@ -28,9 +28,9 @@ A compiled kernel (numba) with no other trailing argument than one integer runs 
 **workers that wait in compiled code**: each worker thread polls a flag of its own, without
 the GIL, and calls the kernel on its block itself when the flag moves, so handing it a
 block costs about a microsecond (the calling thread sets every worker's flag in one
-compiled call, and waits for them all in another). A pool's thread sleeps between blocks, and waking it took
-90-100 µs on a virtual machine (``benchmarks/thread_handoff.py``), as long as a whole
-kernel of a thousand lanes. A worker polls for a few milliseconds after each block (long
+compiled call, and waits for them all in another). A pool's thread sleeps between blocks,
+and waking it took 90-100 µs on a virtual machine (``benchmarks/thread_handoff.py``), as
+long as a whole kernel of a thousand lanes. A worker polls for a few milliseconds after each block (long
 enough for the next step of an env stepped in a loop to find it awake), then sleeps until
 the next block; while an env is stepped without pause, its workers keep their cores busy.
 Anything else (a Python kernel, other trailing arguments) runs on the pool.
