@@ -48,6 +48,7 @@ from machining_envs.contouring.scenarios import (
     _RandomPaths,
     check_feed,
     contouring_scenario,
+    load_time,
 )
 from machining_envs.contouring.servo import (
     LANES,
@@ -592,7 +593,7 @@ def _start_drawn_lanes(lanes, ints, floats, drawn_tabs, feed, t_load, t_max, ove
     """:meth:`_FeedCore.start`'s arrays for every lane ``lanes[i]`` of a split's batch, from
     its drawn numbers (``_RandomPaths.draw_lanes``: ``ints``, ``floats``, the tables, feeds
     and load times), in ``start``'s arithmetic; ``t_max`` NaN: the time limit from the
-    programmed time. The servo loops are started apart (``ServoLanes.start``)."""
+    programmed time. The servo loops are started apart (:func:`_start_batch`)."""
     s, override, prev_action = lf[:, 2], lf[:, 3], lf[:, 4]
     in_clipped, kk, n_clipped, segment = li[:, 0], li[:, 3], li[:, 4], li[:, 5]
     for i in range(lanes.size):
@@ -672,7 +673,7 @@ def _start_batch(t, lanes, ints, floats, drawn_tabs, feed, scale):
     t_load = np.empty(m)
     for i in range(m):
         f = floats[i]
-        t_load[i] = 0.0 + (f[_D_LENGTH] / feed[i] - 0.0) * f[_D_T]  # (scenarios.load_time)
+        t_load[i] = load_time(f[_D_LENGTH], feed[i], f[_D_T])
     start_scaled_loops(lanes, sc[:_S_TMAX], scale, designs, buf, groups)
     _start_drawn_lanes(
         lanes, ints, floats, drawn_tabs, feed, t_load, sc[_S_TMAX], sc[_S_OVERRIDE], tabs,

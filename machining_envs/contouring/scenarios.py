@@ -321,10 +321,11 @@ class DrawnPaths(NamedTuple):
     scale: np.ndarray
 
 
-def load_time(length: float, feed: float, u: float) -> float:
+@numba.njit(cache=True)
+def load_time(length, feed, u):
     """The time of a drawn load step: ``uniform(0, length / feed)`` from its uniform ``u``,
     in numpy's arithmetic (``low + (high - low) u``), as :meth:`_RandomPaths.__call__`
-    draws it (a compiled start repeats these operations)."""
+    draws it; compiled, for a batch's compiled start and a lane's scenario alike."""
     return 0.0 + (length / feed - 0.0) * u
 
 

@@ -30,9 +30,9 @@ the GIL, and calls the kernel on its block itself when the flag moves, so handin
 block costs about a microsecond (the calling thread sets every worker's flag in one
 compiled call, and waits for them all in another). A pool's thread sleeps between blocks,
 and waking it took 90-100 µs on a virtual machine (``benchmarks/thread_handoff.py``), as
-long as a whole kernel of a thousand lanes. A worker polls for a few milliseconds after each block (long
-enough for the next step of an env stepped in a loop to find it awake), then sleeps until
-the next block; while an env is stepped without pause, its workers keep their cores busy.
+long as a whole kernel of a thousand lanes. A worker polls for a few milliseconds after
+each block (long enough for the next step of an env stepped in a loop to find it awake),
+then sleeps until the next block; while an env is stepped without pause, its workers keep their cores busy.
 Anything else (a Python kernel, other trailing arguments) runs on the pool.
 
 This module imports numpy, numba, ``core.packed`` and the standard library only.
@@ -272,8 +272,8 @@ class _Worker:
     """A thread that serves one block of lanes from compiled code (module docstring), with
     its flags in ``ctl`` (eight int64 values, a row of :func:`_control_rows`)."""
 
-    def __init__(self, kernel, args: tuple, with_tail: bool, serve=None, ctl=None) -> None:
-        self.ctl = _control_rows(1)[0] if ctl is None else ctl
+    def __init__(self, kernel, args: tuple, with_tail: bool, serve, ctl: np.ndarray) -> None:
+        self.ctl = ctl
         self.ctl[_AWAKE] = 1
         self.wake = threading.Event()
         self.error: BaseException | None = None

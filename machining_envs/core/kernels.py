@@ -267,16 +267,21 @@ def shift8(typingctx, z, g, u, applied):
     return vec8(vec8, vec8, vec8, vec8), codegen
 
 
+@numba.njit(cache=True, inline="always")
+def _unit(x):
+    """``x`` clipped to ``[-1, 1]`` (numpy's ``minimum(maximum(x, -1), 1)``, ``-0.0`` kept),
+    and whether it was outside."""
+    return min(max(x, -1.0), 1.0), x < -1.0 or x > 1.0
+
+
 @numba.njit(cache=True)
 def clip_unit(a, action, clipped):
     """A vector env's actions into its lanes' inputs in one pass: ``action[k]`` is ``a[k]``
-    clipped to ``[-1, 1]`` (numpy's ``minimum(maximum(a, -1), 1)``, ``-0.0`` kept) and
-    ``clipped[k]`` whether it was outside (``a < -1 or a > 1``). The actions are finite
-    (the vector env checked them); any of the outputs may be a strided column."""
+    clipped to ``[-1, 1]`` and ``clipped[k]`` whether it was outside (:func:`_unit`). The
+    actions are finite (the vector env checked them); any of the outputs may be a strided
+    column."""
     for k in range(a.shape[0]):
-        x = a[k]
-        clipped[k] = x < -1.0 or x > 1.0
-        action[k] = min(max(x, -1.0), 1.0)
+        action[k], clipped[k] = _unit(a[k])
 
 
 @numba.njit(cache=True)
@@ -285,9 +290,7 @@ def clip_unit_linear(a, action, clipped, command, mid, half):
     linear ``ActionMap`` (``_mid``, ``_half``), rounded as numpy rounds it (a product, then
     a sum; no fused multiply-add)."""
     for k in range(a.shape[0]):
-        x = a[k]
-        clipped[k] = x < -1.0 or x > 1.0
-        y = min(max(x, -1.0), 1.0)
+        y, clipped[k] = _unit(a[k])
         action[k] = y
         command[k] = mid + half * y
 
