@@ -302,6 +302,13 @@ class _LinearKey(NamedTuple):
         )
 
 
+def _read_only(*arrays: np.ndarray) -> tuple:
+    """``arrays``, each made read-only: the tables a cache hands to every caller."""
+    for a in arrays:
+        a.flags.writeable = False
+    return arrays
+
+
 @functools.lru_cache(maxsize=16)
 def _servo_system(params: _LinearKey) -> tuple[np.ndarray, np.ndarray]:
     """Continuous servo + running integral, state ``[Vf, dVf/dt, I]``, input U (counts);
@@ -310,13 +317,13 @@ def _servo_system(params: _LinearKey) -> tuple[np.ndarray, np.ndarray]:
     z = params.servo_damping
     a = np.array([[0.0, 1.0, 0.0], [-(wn**2), -2.0 * z * wn, 0.0], [1.0, 0.0, 0.0]])
     b = np.array([[0.0], [params.servo_gain * params.gear_ratio * wn**2], [0.0]])
-    a.flags.writeable = b.flags.writeable = False
-    return a, b
+    return _read_only(a, b)
 
 
 @functools.lru_cache(maxsize=16)
 def _speed_free(params: _LinearKey):
-    """Parts that do not depend on the spindle speed: servo transitions over i*h, filter."""
+    """Parts that do not depend on the spindle speed: servo transitions over i*h, filter;
+    read-only (every lane and env of these parameters shares them)."""
     m = params.substeps
     h = params.sample_time_s / m
     a, b = _servo_system(params)
@@ -339,7 +346,7 @@ def _speed_free(params: _LinearKey):
     # The input over each sub-step is the trapezoidal mean of the force at its two ends.
     filt_h = 0.5 * held
     filt_h[:, :-1] += 0.5 * held[:, 1:]
-    return phis, gams, acc, filt_h, 0.5 * held[:, 0], fc
+    return _read_only(phis, gams, acc, filt_h, 0.5 * held[:, 0], fc)
 
 
 @functools.lru_cache(maxsize=16)
@@ -368,7 +375,8 @@ def _velocity_bound(params: _LinearKey, command_max: float) -> float:
 
 @functools.lru_cache(maxsize=16)
 def _speed_free_rows(params: _LinearKey) -> tuple[np.ndarray, np.ndarray]:
-    """Rows of the step matrix on the current pair ``(x_k, u_k)`` and the filter's matrix."""
+    """Rows of the step matrix on the current pair ``(x_k, u_k)`` and the filter's matrix,
+    read-only (shared as :func:`_speed_free`'s)."""
     m = params.substeps
     phis, gams, filt_a_m, filt_h, filt_prev, filt_c = _speed_free(params)
     base = np.zeros((2 * m + 3, 4))
@@ -380,7 +388,7 @@ def _speed_free_rows(params: _LinearKey) -> tuple[np.ndarray, np.ndarray]:
     # The filter's output is its first state (both orders): y = x_f[0].
     assert filt_c[0] == 1.0 and not np.any(filt_c[1:])
     filt_step = np.hstack([filt_a_m, filt_h, filt_prev[:, None]])
-    return base, filt_step
+    return _read_only(base, filt_step)
 
 
 @functools.lru_cache(maxsize=256)

@@ -184,6 +184,31 @@ def test_packed_step_matrix_is_the_step_matrix(rpm):
     assert (mats.delay_group > 0).any()  # the delayed groups are tested
 
 
+def test_the_shared_tables_of_the_linear_blocks_are_read_only():
+    """The tables every lane and env of one set of linear parameters share (cached once)
+    refuse writes, so that no caller can change another env's plant through them; the
+    lanes' own rows are copies and stay writable."""
+    from machining_envs.turning.plant import (
+        TurningLanes,
+        _LinearKey,
+        _servo_system,
+        _speed_free,
+        _speed_free_rows,
+        _speed_free_tables,
+    )
+
+    key = _LinearKey.of(TurningParams())
+    shared = [*_servo_system(key), *_speed_free(key), *_speed_free_rows(key)]
+    shared += [t for t in _speed_free_tables(key) if isinstance(t, np.ndarray)]
+    assert len(shared) == 15
+    for table in shared:
+        assert not table.flags.writeable
+        with pytest.raises(ValueError, match="read-only"):
+            table[(0,) * table.ndim] = 1.0
+    lanes = TurningLanes(TurningParams(), n=2)
+    assert lanes.base.flags.writeable and lanes.filt.flags.writeable
+
+
 def test_exponential_row_of_a_delayed_instant_is_the_exact_discretisation():
     """The I-row of ``[Phi(rho), Gamma(rho)]`` that places a delayed instant between grid
     points (compiled Taylor series) equals scipy's ``expm``-based ``zoh`` to 1e-15 of the
