@@ -393,6 +393,8 @@ def _speed_free_rows(params: _LinearKey) -> tuple[np.ndarray, np.ndarray]:
 
 @functools.lru_cache(maxsize=256)
 def _matrices(params: _LinearKey, spindle_rpm: float) -> _Matrices:
+    """The step matrices at ``spindle_rpm`` (:class:`_Matrices`), read-only: cached, every
+    lane at that speed reads them."""
     m = params.substeps
     feed = np.empty((4, m)).T  # column after column, as the lanes hold it
     lag = np.empty(m, dtype=np.int64)
@@ -403,6 +405,7 @@ def _matrices(params: _LinearKey, spindle_rpm: float) -> _Matrices:
     now = lag == 0
     packed[m : 2 * m][now, :4] = feed[now]
     packed[m : 2 * m][~now, 4:] = feed[~now]
+    _read_only(lag, packed)
     return _Matrices(lags, lag, filt, packed)
 
 

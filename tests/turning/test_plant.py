@@ -191,6 +191,7 @@ def test_the_shared_tables_of_the_linear_blocks_are_read_only():
     from machining_envs.turning.plant import (
         TurningLanes,
         _LinearKey,
+        _matrices,
         _servo_system,
         _speed_free,
         _speed_free_rows,
@@ -200,7 +201,9 @@ def test_the_shared_tables_of_the_linear_blocks_are_read_only():
     key = _LinearKey.of(TurningParams())
     shared = [*_servo_system(key), *_speed_free(key), *_speed_free_rows(key)]
     shared += [t for t in _speed_free_tables(key) if isinstance(t, np.ndarray)]
-    assert len(shared) == 15
+    mats = _matrices(key, 405.0)
+    shared += [mats.delay_group, mats.filt_step, mats.packed]
+    assert len(shared) == 18
     for table in shared:
         assert not table.flags.writeable
         with pytest.raises(ValueError, match="read-only"):
