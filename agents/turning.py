@@ -16,6 +16,7 @@ import numpy as np
 
 from agents.base import Agent, check_positive, unwrap_as
 from machining_envs.core.checks import PY_NUMBER_TYPES
+from machining_envs.core.lti import read_only
 from machining_envs.turning.env import TurningEnv
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams
 
@@ -179,11 +180,12 @@ class ConstantFeed(Agent):
 
 @functools.lru_cache(maxsize=512)
 def _unit_plant(params: TurningParams, spindle_rpm: float) -> np.ndarray:
-    """``[b1, b2, b3, a1, a2, a3]`` of the unit-gain discrete plant of eq. (14) at this speed."""
+    """``[b1, b2, b3, a1, a2, a3]`` of the unit-gain discrete plant of eq. (14) at this speed
+    (read-only: cached)."""
     numd, dend = params.discrete_open_loop(spindle_rpm)
     numd = np.pad(numd, (0, 4 - numd.size))
     dend = np.pad(dend, (0, 4 - dend.size))
-    return np.concatenate([numd[1:4], dend[1:4]])
+    return read_only(np.concatenate([numd[1:4], dend[1:4]]))
 
 
 class VariableGainPI(Agent):

@@ -34,6 +34,7 @@ import numba
 import numpy as np
 
 from machining_envs.core.checks import check_field, replace_checked
+from machining_envs.core.lti import read_only
 
 __all__ = ["ContouringParams", "ContouringPlant", "ContouringStep", "AXES", "step_axes"]
 __all__ += ["PLANT_COLUMNS"]
@@ -167,10 +168,7 @@ def _axis_zoh(a: float, load_gain: float, dt: float) -> tuple[np.ndarray, np.nda
     of the axes' discretisation (the plant, the servo's designs and the vector env's
     lanes)."""
     e = axes_zoh(np.array([a]), np.array([load_gain]), np.array([dt]))[0]
-    phi, gam = e[:2, :2], e[:2, 2:]
-    phi.setflags(write=False)
-    gam.setflags(write=False)
-    return phi, gam
+    return read_only(e[:2, :2], e[:2, 2:])
 
 
 def axes_zoh(a: np.ndarray, load_gain: np.ndarray, dt: np.ndarray) -> np.ndarray:

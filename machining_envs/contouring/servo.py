@@ -54,6 +54,7 @@ from machining_envs.core.kernels import (
     sub8,
     zero8,
 )
+from machining_envs.core.lti import read_only
 
 __all__ = [
     "ServoDesign",
@@ -123,12 +124,8 @@ class ServoDesign:
 
 
 def _frozen(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
-    out = []
-    for a in arrays:
-        a = np.array(a, dtype=np.float64)
-        a.setflags(write=False)
-        out.append(a)
-    return tuple(out)
+    """Read-only float64 copies of ``arrays`` (a design's matrices: designs are cached)."""
+    return tuple(read_only(np.array(a, dtype=np.float64)) for a in arrays)
 
 
 def _tustin(a, b, c, d, ts):

@@ -60,7 +60,7 @@ from machining_envs.core.checks import (
     replace_checked,
 )
 from machining_envs.core.kernels import copy_into, powers, py_square
-from machining_envs.core.lti import zoh
+from machining_envs.core.lti import read_only, zoh
 
 __all__ = [
     "DrillingParams",
@@ -601,8 +601,9 @@ def _cutting_geometry(shape: tuple, diameter_mm: float) -> _Geometry:
         math.sin(beta) ** 2, r_ind, dc, _TWO_PI * n_rev, v_f, math.radians(chisel_rake),
         math.tan(k), _LIP_MID, _CHISEL_MID, _LIP_EDGES, lips, chisel, depth,
     )  # fmt: skip
-    r, sin_phi, fp_angle, fq_den, fq_angle, q = lips
-    rc, cos_a, neg_sin_a, cos_b, sin_b, den = chisel
+    r, sin_phi, fp_angle, fq_den, fq_angle, q = read_only(*lips)
+    rc, cos_a, neg_sin_a, cos_b, sin_b, den = read_only(*chisel)
+    read_only(depth)
     return _Geometry(
         sk, bt, r, sin_phi, fp_angle, fq_den, fq_angle, q, dc, rc, cos_a, neg_sin_a, cos_b,
         sin_b, den, indent, depth,
@@ -750,8 +751,8 @@ def _cutting_forces(g: _Geometry, tau: float) -> CuttingCoefficients:
         chisel_torque_per_feed=ch_t,
         chisel_thrust_per_feed=ch_h,
         engage_depth_mm=g.depth,
-        engage_torque=cum_t / cum_t[-1],
-        engage_thrust=cum_h / cum_h[-1],
+        engage_torque=read_only(cum_t / cum_t[-1]),
+        engage_thrust=read_only(cum_h / cum_h[-1]),
     )
 
 
@@ -774,7 +775,7 @@ def _valve_matrices(wn: float, zeta: float, k1: float, ts: float, m: int):
         p = phi_half @ p
     phi, gam = zoh(a, b, ts)
     step = np.hstack([phi, gam])
-    return half, step
+    return read_only(half, step)
 
 
 @functools.lru_cache(maxsize=32)

@@ -49,7 +49,7 @@ import numpy as np
 
 from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
 from machining_envs.core.kernels import copy_into, matvec, powers
-from machining_envs.core.lti import zoh, zoh_tf
+from machining_envs.core.lti import read_only, zoh, zoh_tf
 from machining_envs.core.workpieces import load_segments
 
 __all__ = [
@@ -484,7 +484,7 @@ class _ServoKey(NamedTuple):
 @functools.lru_cache(maxsize=64)
 def _servo_matrix(key: _ServoKey) -> np.ndarray:
     """``big @ [Vf, dVf/dt, x, U]``: the feed velocity at the M sub-step points, the position
-    at the M sub-step points and the next state (3 rows), all exact (ZOH)."""
+    at the M sub-step points and the next state (3 rows), all exact (ZOH); read-only."""
     m = key.substeps
     h = key.sample_time_s / m
     wn, z = key.wn, key.damping
@@ -499,7 +499,7 @@ def _servo_matrix(key: _ServoKey) -> np.ndarray:
         big[j, :3], big[j, 3] = phi[0], gam[0]
         big[m + j, :3], big[m + j, 3] = phi[2], gam[2]
     big[2 * m :, :3], big[2 * m :, 3] = phi, gam
-    return big
+    return read_only(big)
 
 
 @numba.njit(cache=True)

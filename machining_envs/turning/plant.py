@@ -32,7 +32,7 @@ import numpy as np
 
 from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
 from machining_envs.core.kernels import fma, matvec, powers, row_max, row_min
-from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
+from machining_envs.core.lti import butterworth_lowpass, read_only, zoh, zoh_tf
 from machining_envs.core.workpieces import load_segments
 
 __all__ = [
@@ -302,13 +302,6 @@ class _LinearKey(NamedTuple):
         )
 
 
-def _read_only(*arrays: np.ndarray) -> tuple:
-    """``arrays``, each made read-only: the tables a cache hands to every caller."""
-    for a in arrays:
-        a.flags.writeable = False
-    return arrays
-
-
 @functools.lru_cache(maxsize=16)
 def _servo_system(params: _LinearKey) -> tuple[np.ndarray, np.ndarray]:
     """Continuous servo + running integral, state ``[Vf, dVf/dt, I]``, input U (counts);
@@ -317,7 +310,7 @@ def _servo_system(params: _LinearKey) -> tuple[np.ndarray, np.ndarray]:
     z = params.servo_damping
     a = np.array([[0.0, 1.0, 0.0], [-(wn**2), -2.0 * z * wn, 0.0], [1.0, 0.0, 0.0]])
     b = np.array([[0.0], [params.servo_gain * params.gear_ratio * wn**2], [0.0]])
-    return _read_only(a, b)
+    return read_only(a, b)
 
 
 @functools.lru_cache(maxsize=16)
@@ -346,7 +339,7 @@ def _speed_free(params: _LinearKey):
     # The input over each sub-step is the trapezoidal mean of the force at its two ends.
     filt_h = 0.5 * held
     filt_h[:, :-1] += 0.5 * held[:, 1:]
-    return _read_only(phis, gams, acc, filt_h, 0.5 * held[:, 0], fc)
+    return read_only(phis, gams, acc, filt_h, 0.5 * held[:, 0], fc)
 
 
 @functools.lru_cache(maxsize=16)
@@ -388,7 +381,7 @@ def _speed_free_rows(params: _LinearKey) -> tuple[np.ndarray, np.ndarray]:
     # The filter's output is its first state (both orders): y = x_f[0].
     assert filt_c[0] == 1.0 and not np.any(filt_c[1:])
     filt_step = np.hstack([filt_a_m, filt_h, filt_prev[:, None]])
-    return _read_only(base, filt_step)
+    return read_only(base, filt_step)
 
 
 @functools.lru_cache(maxsize=256)
@@ -405,7 +398,7 @@ def _matrices(params: _LinearKey, spindle_rpm: float) -> _Matrices:
     now = lag == 0
     packed[m : 2 * m][now, :4] = feed[now]
     packed[m : 2 * m][~now, 4:] = feed[~now]
-    _read_only(lag, packed)
+    read_only(lag, packed)
     return _Matrices(lags, lag, filt, packed)
 
 
