@@ -16,7 +16,7 @@ import numpy as np
 
 from agents.base import Agent, check_positive, unwrap_as
 from machining_envs.core.checks import PY_NUMBER_TYPES
-from machining_envs.core.lti import read_only
+from machining_envs.core.kernels import read_only
 from machining_envs.turning.env import TurningEnv
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams
 

@@ -34,7 +34,7 @@ import numba
 import numpy as np
 
 from machining_envs.core.checks import check_field, replace_checked
-from machining_envs.core.lti import read_only
+from machining_envs.core.kernels import read_only
 
 __all__ = ["ContouringParams", "ContouringPlant", "ContouringStep", "AXES", "step_axes"]
 __all__ += ["PLANT_COLUMNS"]

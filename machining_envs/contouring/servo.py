@@ -49,12 +49,12 @@ from machining_envs.core.kernels import (
     get8,
     load8,
     mul8,
+    read_only,
     shift8,
     store8,
     sub8,
     zero8,
 )
-from machining_envs.core.lti import read_only
 
 __all__ = [
     "ServoDesign",

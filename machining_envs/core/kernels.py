@@ -11,6 +11,8 @@ lane and control period. A library call for each costs more than the arithmetic,
 kernels do the products themselves; to keep the numbers numpy gives (and with them the
 golden closed-loop data), they sum in the order of numpy's BLAS.
 
+Beside them, :func:`read_only` freezes the cached tables the kernels read.
+
 This module imports numpy and numba only; it knows nothing of gymnasium.
 """
 
@@ -40,6 +42,7 @@ __all__ = [
     "mul8",
     "powers",
     "py_square",
+    "read_only",
     "shift8",
     "sincos_row",
     "store8",
@@ -293,6 +296,16 @@ def clip_unit_linear(a, action, clipped, command, mid, half):
         y, clipped[k] = _unit(a[k])
         action[k] = y
         command[k] = mid + half * y
+
+
+def read_only(*arrays: np.ndarray):
+    """``arrays`` made read-only in place: the array, or a tuple of them when given several.
+    What a cache (``functools.lru_cache``) hands to every env of the same parameters is made
+    so where it is made, since a write to it would change them all. (A read-only array is a
+    type of its own to a compiled kernel: made so once, every call hands the same type.)"""
+    for a in arrays:
+        a.flags.writeable = False
+    return arrays[0] if len(arrays) == 1 else arrays
 
 
 @numba.njit(cache=True)

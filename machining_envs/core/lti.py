@@ -11,16 +11,7 @@ import numpy as np
 from scipy.linalg import expm
 from scipy.signal import cont2discrete
 
-__all__ = ["zoh", "zoh_tf", "critical_gain", "butterworth_lowpass", "read_only"]
-
-
-def read_only(*arrays: np.ndarray):
-    """``arrays`` made read-only in place: the array, or a tuple of them when given several.
-    What a cache (``functools.lru_cache``) hands to every caller, the discretisations above
-    all, is made so: a caller that wrote to it would change every env built on it."""
-    for a in arrays:
-        a.flags.writeable = False
-    return arrays[0] if len(arrays) == 1 else arrays
+__all__ = ["zoh", "zoh_tf", "critical_gain", "butterworth_lowpass"]
 
 
 def zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:

@@ -59,8 +59,8 @@ from machining_envs.core.checks import (
     check_range,
     replace_checked,
 )
-from machining_envs.core.kernels import copy_into, powers, py_square
-from machining_envs.core.lti import read_only, zoh
+from machining_envs.core.kernels import copy_into, powers, py_square, read_only
+from machining_envs.core.lti import zoh
 
 __all__ = [
     "DrillingParams",

@@ -48,8 +48,8 @@ import numba
 import numpy as np
 
 from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
-from machining_envs.core.kernels import copy_into, matvec, powers
-from machining_envs.core.lti import read_only, zoh, zoh_tf
+from machining_envs.core.kernels import copy_into, matvec, powers, read_only
+from machining_envs.core.lti import zoh, zoh_tf
 from machining_envs.core.workpieces import load_segments
 
 __all__ = [

@@ -31,8 +31,8 @@ import numba
 import numpy as np
 
 from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
-from machining_envs.core.kernels import fma, matvec, powers, row_max, row_min
-from machining_envs.core.lti import butterworth_lowpass, read_only, zoh, zoh_tf
+from machining_envs.core.kernels import fma, matvec, powers, read_only, row_max, row_min
+from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
 from machining_envs.core.workpieces import load_segments
 
 __all__ = [
