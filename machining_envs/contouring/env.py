@@ -34,7 +34,7 @@ from machining_envs.contouring.scenarios import (
     check_feed,
     contouring_scenario,
 )
-from machining_envs.core.blocks import LaneBlocks, check_num_threads, serve_one_table
+from machining_envs.core.blocks import LaneBlocks, serve_one_table
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
 from machining_envs.core.env import (
     ActionMap,
@@ -53,7 +53,12 @@ from machining_envs.core.env import (
 )
 from machining_envs.core.kernels import py_square
 from machining_envs.core.packed import PackedArgs, b1_2, f4_2, f8_1, f8_2, f8_3, i8_1, i8_2
-from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
+from machining_envs.core.vector import (
+    LaneVectorEnv,
+    check_num_envs,
+    check_vector_args,
+    first_scenario,
+)
 
 __all__ = [
     "ContouringEnv",
@@ -856,7 +861,7 @@ class ContouringVectorEnv(LaneVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
         **overrides,
     ):
-        check_num_threads(num_threads)
+        check_vector_args(self.env_name, num_threads, overrides)
         self._core = core = _ContouringCore(
             type(self).__name__, check_num_envs(num_envs), first_scenario(scenario), params, reward,
             max_episode_time_s, in_position_mm, divergence_mm, overrides,

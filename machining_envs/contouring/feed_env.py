@@ -75,7 +75,6 @@ from machining_envs.core.blocks import (
     ALIGN,
     SCRATCH,
     LaneBlocks,
-    check_num_threads,
     serve_one_table,
 )
 from machining_envs.core.env import (
@@ -110,7 +109,12 @@ from machining_envs.core.packed import (
     i8_2,
     spaced_rows,
 )
-from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
+from machining_envs.core.vector import (
+    LaneVectorEnv,
+    check_num_envs,
+    check_vector_args,
+    first_scenario,
+)
 
 __all__ = ["ContouringFeedEnv", "ContouringFeedVectorEnv", "FeedReward", "LOOKAHEAD_MM"]
 __all__ += ["DEFAULT_TOLERANCE_MM"]
@@ -1384,7 +1388,7 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
         **overrides,
     ):
-        check_num_threads(num_threads)
+        check_vector_args(self.env_name, num_threads, overrides)
         self._core = core = _FeedCore(
             type(self).__name__, check_num_envs(num_envs), first_scenario(scenario), params, servo,
             tolerance_mm, reward, decision_interval_s, override_max, max_episode_time_s,

@@ -69,10 +69,16 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from machining_envs.core.blocks import MIN_BLOCK, LaneBlocks
+from machining_envs.core.blocks import MIN_BLOCK, LaneBlocks, check_num_threads
 from machining_envs.core.env import check_scenario_spec, real_actions, scenario_option
 
-__all__ = ["LaneVectorEnv", "check_num_envs", "check_autoreset_mode", "first_scenario"]
+__all__ = [
+    "LaneVectorEnv",
+    "check_num_envs",
+    "check_autoreset_mode",
+    "check_vector_args",
+    "first_scenario",
+]
 
 
 def first_scenario(spec):
@@ -95,6 +101,23 @@ def check_autoreset_mode(mode) -> AutoresetMode:
         "autoreset_mode must be a gymnasium.vector.AutoresetMode or one of "
         f"{[m.name for m in AutoresetMode]}, got {mode!r}"
     )
+
+
+def check_vector_args(env_name: str, num_threads, overrides: dict) -> int:
+    """What a vector env's constructor checks before it builds anything: ``num_threads``
+    (:func:`~machining_envs.core.blocks.check_num_threads`, returned as an int), and no
+    ``render_mode`` among its other keyword arguments ``overrides`` (``None`` is taken:
+    no rendering). A vector env keeps no lane's history to draw; the single env with the
+    lane's seed replays the lane's episode and renders it."""
+    mode = overrides.pop("render_mode", None)
+    if mode is not None:
+        raise ValueError(
+            f"{env_name} (vector): render_mode={mode!r}, but the vector envs do not render "
+            "(metadata['render_modes'] is empty); lane i after reset(seed=s) runs the episode "
+            "of the single env after reset(seed=s + i): render that one, gym.make(id, "
+            "render_mode=...)"
+        )
+    return check_num_threads(num_threads)
 
 
 def check_num_envs(num_envs) -> int:

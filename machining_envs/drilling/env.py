@@ -11,7 +11,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 
-from machining_envs.core.blocks import LaneBlocks, check_num_threads, serve_one_table
+from machining_envs.core.blocks import LaneBlocks, serve_one_table
 from machining_envs.core.checks import check_below
 from machining_envs.core.env import (
     ActionMap,
@@ -33,7 +33,12 @@ from machining_envs.core.env import (
 )
 from machining_envs.core.normals import LaneGenerators, standard_normal
 from machining_envs.core.packed import PackedArgs, as_int, b1_2, f4_2, f8_1, f8_2, f8_3, i8_2
-from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
+from machining_envs.core.vector import (
+    LaneVectorEnv,
+    check_num_envs,
+    check_vector_args,
+    first_scenario,
+)
 from machining_envs.drilling.metrics import DRILLING_TASK
 from machining_envs.drilling.plant import (
     _N_IN,
@@ -798,7 +803,7 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
         **overrides,
     ):
-        check_num_threads(num_threads)
+        check_vector_args(self.env_name, num_threads, overrides)
         self._core = _DrillingCore(
             type(self).__name__,
             check_num_envs(num_envs),

@@ -17,7 +17,7 @@ from machining_envs.core.actuation import (
     configure_lane,
     resolve_actuation,
 )
-from machining_envs.core.blocks import LaneBlocks, check_num_threads, serve_one_table_with_tail
+from machining_envs.core.blocks import LaneBlocks, serve_one_table_with_tail
 from machining_envs.core.checks import check_below
 from machining_envs.core.env import (
     ACTION_MAPS,
@@ -57,7 +57,12 @@ from machining_envs.core.packed import (
     i8_2,
     spaced_rows,
 )
-from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
+from machining_envs.core.vector import (
+    LaneVectorEnv,
+    check_num_envs,
+    check_vector_args,
+    first_scenario,
+)
 from machining_envs.core.workpieces import lane_segments, traverse_time
 from machining_envs.milling.metrics import MILLING_TASK
 from machining_envs.milling.plant import (
@@ -1113,7 +1118,7 @@ class EndMillingVectorEnv(LaneVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
         **overrides,
     ):
-        check_num_threads(num_threads)
+        check_vector_args(self.env_name, num_threads, overrides)
         self._core = _MillingCore(
             type(self).__name__,
             check_num_envs(num_envs),

@@ -18,7 +18,7 @@ from machining_envs.core.actuation import (
     configure_lane,
     resolve_actuation,
 )
-from machining_envs.core.blocks import LaneBlocks, check_num_threads, serve_one_table_with_tail
+from machining_envs.core.blocks import LaneBlocks, serve_one_table_with_tail
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_below, check_range
 from machining_envs.core.env import (
     ActionMap,
@@ -57,7 +57,12 @@ from machining_envs.core.packed import (
     i8_2,
     spaced_rows,
 )
-from machining_envs.core.vector import LaneVectorEnv, check_num_envs, first_scenario
+from machining_envs.core.vector import (
+    LaneVectorEnv,
+    check_num_envs,
+    check_vector_args,
+    first_scenario,
+)
 from machining_envs.core.workpieces import lane_segments, traverse_time
 from machining_envs.turning.metrics import TURNING_TASK
 from machining_envs.turning.plant import (
@@ -1132,7 +1137,7 @@ class TurningVectorEnv(LaneVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
         **overrides,
     ):
-        check_num_threads(num_threads)
+        check_vector_args(self.env_name, num_threads, overrides)
         self._core = _TurningCore(
             type(self).__name__,
             check_num_envs(num_envs),

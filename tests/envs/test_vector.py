@@ -313,6 +313,18 @@ def test_a_bad_thread_count_is_refused_naming_it(env_id):
         gym.make_vec(env_id, num_envs=2, num_threads=1.5)
 
 
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_a_render_mode_is_refused_pointing_to_the_single_env(env_id):
+    """The vector envs keep no lane's history to draw: asking for a render mode is an error
+    that says so and names the single env's reset that replays a lane (before, Python's
+    "unexpected keyword argument"); None (no rendering) is taken."""
+    with pytest.raises(ValueError, match=r"render_mode='rgb_array'.*reset\(seed=s \+ i\)"):
+        gym.make_vec(env_id, num_envs=2, render_mode="rgb_array")
+    env = gym.make_vec(env_id, num_envs=2, render_mode=None)
+    assert env.render_mode is None and env.metadata["render_modes"] == []
+    env.close()
+
+
 def _lane_specs(env_id: str, n: int) -> list:
     """n different scenario names of the env (its own list, in order)."""
     names = sorted(gym.make_vec(env_id, num_envs=1)._core.scenario_types[1])
