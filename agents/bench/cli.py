@@ -2,8 +2,9 @@
 
 machining-bench benchmark [--quick] [--out results] [--env ID ...]
 machining-bench tune [--env ID] [--trials 30] [--episodes 16]
-machining-bench reproduce turning [--out results] [--sensor-gain 17]
+machining-bench reproduce {turning,milling,drilling,contouring} [--out results]
 machining-bench train --env ID --out runs/x [--algo ppo] [--resume]
+machining-bench sweep --env ID --out sweeps/x [--search N] [--seeds 0 1 2 3 4]
 machining-bench evaluate --model runs/x/best_model.zip --env ID
 machining-bench export --onnx --model runs/x/best_model.zip
 machining-bench export --zoo --model runs/x/best_model.zip
