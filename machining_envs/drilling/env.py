@@ -611,7 +611,8 @@ class MicroDrillingEnv(gym.Env):
     ``t_s``, ``command`` (V or mm/s), ``action_clipped``, ``n_action_clipped``, ``breakage``,
     ``diverged``, ``finished``, ``torque_Nmm`` (true torque), ``torque_limit_Nmm``,
     ``cost``, ``score_bound`` (s),
-    ``measured`` (torque the controller saw, N·mm), ``peak_torque_Nmm``,
+    ``measured`` (torque the controller saw, N·mm), ``peak_torque_Nmm`` (the largest
+    torque over the step's sub-steps),
     ``breakage_torque_Nmm``, ``thrust_N``, ``measured_thrust_N``, ``spindle_hz``,
     ``measured_spindle_hz``, ``spindle_rpm``, ``voltage_V``, ``valve_opening``,
     ``feed_velocity_mm_s``, ``feed_mm_per_rev``, ``cutting``, ``engagement`` (engaged share

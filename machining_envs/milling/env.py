@@ -949,7 +949,8 @@ class EndMillingEnv(gym.Env):
     ``breakage``, ``diverged``, ``finished``, ``torque_Nmm`` (true torque),
     ``torque_limit_Nmm``, ``cost``, ``score_bound`` (s), ``measured`` (torque the
     controller saw, N·mm),
-    ``measured_counts``, ``peak_torque_Nmm``, ``feed_mm_per_rev`` (at the sample instant),
+    ``measured_counts``, ``peak_torque_Nmm`` (the largest torque over the sample's
+    sub-steps), ``feed_mm_per_rev`` (at the sample instant),
     ``mean_feed_mm_per_rev`` (over the last sample: the f(i) of eq. 20),
     ``feed_per_tooth_mm``, ``feed_velocity_mm_s``, ``depth_mm`` (radial), ``spindle_rpm``,
     ``position_mm``, ``segment`` (index of the workpiece segment being cut),

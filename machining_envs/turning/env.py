@@ -967,10 +967,11 @@ class TurningEnv(gym.Env):
     ``t_s``, ``command`` (U, counts), ``action_clipped``, ``n_action_clipped``,
     ``breakage``, ``diverged``, ``finished``, ``force_N`` (true force), ``force_limit_N``,
     ``cost``, ``score_bound`` (s),
-    ``measured`` (force the controller saw, N), ``measured_counts``, ``peak_force_N``,
-    ``feed_mm_per_rev``, ``feed_velocity_mm_s``, ``depth_mm``, ``spindle_rpm``,
-    ``position_mm``, ``segment`` (index of the workpiece segment being cut),
-    ``workpiece_length_mm``, ``scenario``, and ``machining_time_s`` once the cut is finished.
+    ``measured`` (force the controller saw, N), ``measured_counts``, ``peak_force_N``
+    (the largest force over the sample's sub-steps, N), ``feed_mm_per_rev``,
+    ``feed_velocity_mm_s``, ``depth_mm``, ``spindle_rpm``, ``position_mm``, ``segment``
+    (index of the workpiece segment being cut), ``workpiece_length_mm``, ``scenario``, and
+    ``machining_time_s`` once the cut is finished.
 
     ## Vector env
     ``gym.make_vec("machining_envs/Turning-v0", num_envs=N)`` gives a
