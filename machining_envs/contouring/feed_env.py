@@ -696,13 +696,12 @@ _S_TMAX = len(NOMINAL_LOOP_NUMBERS)
 _S_OVERRIDE = _S_TMAX + 1
 
 
-#: The float keys of a vector step's info, one row each of the table :func:`_info_rows`
-#: fills (``_FeedCore.info_arrays``).
-_INFO_F = ("t_s", "command_x_mm_s", "command_y_mm_s", *_OUT[3:-1], "contour_tolerance_mm",
-           "cost", "score_bound", "path_length_mm", "feed_mm_s", "programmed_time_s",
-           "time_limit_s", "machining_time_s")  # fmt: skip
 #: The float keys between the flags and ``segment`` in the info's order.
 _INFO_OUT = (*_OUT[3:-1], "contour_tolerance_mm", "cost", "score_bound", "path_length_mm")
+#: The float keys of a vector step's info, one row each of the table :func:`_info_rows`
+#: fills (``_FeedCore.info_arrays``).
+_INFO_F = ("t_s", "command_x_mm_s", "command_y_mm_s", *_INFO_OUT, "feed_mm_s",
+           "programmed_time_s", "time_limit_s", "machining_time_s")  # fmt: skip
 
 
 #: The boolean and integer keys of a vector step's info, one row each of the tables

@@ -32,7 +32,8 @@ compiled call, and waits for them all in another). A pool's thread sleeps betwee
 and waking it took 90-100 µs on a virtual machine (``benchmarks/thread_handoff.py``), as
 long as a whole kernel of a thousand lanes. A worker polls for a few milliseconds after
 each block (long enough for the next step of an env stepped in a loop to find it awake),
-then sleeps until the next block; while an env is stepped without pause, its workers keep their cores busy.
+then sleeps until the next block; while an env is stepped without pause, its workers keep
+their cores busy.
 Anything else (a Python kernel, other trailing arguments) runs on the pool.
 
 This module imports numpy, numba, ``core.packed`` and the standard library only.

@@ -107,8 +107,9 @@ def check_vector_args(env_name: str, num_threads, overrides: dict) -> int:
     """What a vector env's constructor checks before it builds anything: ``num_threads``
     (:func:`~machining_envs.core.blocks.check_num_threads`, returned as an int), and no
     ``render_mode`` among its other keyword arguments ``overrides`` (``None`` is taken:
-    no rendering). A vector env keeps no lane's history to draw; the single env with the
-    lane's seed replays the lane's episode and renders it."""
+    no rendering; the key is removed from ``overrides``, which go on to the core). A
+    vector env keeps no lane's history to draw; the single env with the lane's seed
+    replays the lane's episode and renders it."""
     mode = overrides.pop("render_mode", None)
     if mode is not None:
         raise ValueError(

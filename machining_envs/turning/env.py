@@ -302,9 +302,9 @@ def _serve_step(ctl, table, polls):
 #: arguments, the other arrays :func:`_start` writes and the linear blocks' tables, then
 #: each lane's index, then the pending starts: ``[count, lanes...]``, the split's numbers,
 #: and each pending lane's speed, uniforms, segments, segment count and whether its step
-#: matrix was made.
+#: matrix was made. (The noise scales :func:`_start` writes are :func:`_step`'s, at 25.)
 _T_START = 27
-_T_LANE = _T_START + 14
+_T_LANE = _T_START + 13
 _T_PENDING = _T_LANE + 1
 
 
@@ -451,9 +451,9 @@ def _start_packed(t, k, full_history, consts, segments, x):
         k, full_history, consts, segments, x, f8_2(t, 0), b1_2(t, 1), f8_2(t, 2), i8_2(t, 3),
         f8_2(t, 5), f8_2(t, 6), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12),
         f8_2(t, 15), f8_1(t, 16), as_float(t, 18), f8_2(t, 19), f4_2(t, 22), i8_1(t, 23),
-        f8_1(t, s), f8_1(t, s + 1), f8_1(t, s + 2), f8_1(t, s + 3), f8_2(t, s + 4),
-        f8_1(t, s + 5), f8_1(t, s + 6), f8_1(t, s + 7), f8_3(t, s + 8), f8_2(t, s + 9),
-        f8_2(t, s + 10), f8_2(t, s + 11), f8_2(t, s + 12), as_float(t, s + 13),
+        f8_1(t, s), f8_1(t, 25), f8_1(t, s + 1), f8_1(t, s + 2), f8_2(t, s + 3),
+        f8_1(t, s + 4), f8_1(t, s + 5), f8_1(t, s + 6), f8_3(t, s + 7), f8_2(t, s + 8),
+        f8_2(t, s + 9), f8_2(t, s + 10), f8_2(t, s + 11), as_float(t, s + 12),
     )  # fmt: skip
 
 
@@ -462,7 +462,7 @@ def _start_packed(t, k, full_history, consts, segments, x):
 _STEP_AXES = (
     0, 0, 0, 0, None, 0, 0, None, 0, 0, 0, 0, 0, None, None, 0, 0, None, None, 0, None, None, 0, 0, 0,
     0, 0,  # _step's
-    0, 0, 0, 0, 0, 0, 0, 0, None, None, None, None, None, None,  # the start's (_T_START)
+    0, 0, 0, 0, 0, 0, 0, None, None, None, None, None, None,  # the start's (_T_START)
     0,  # each lane's index (_T_LANE)
     None, None, None, None, None, None, None,  # the pending starts (_T_PENDING)
 )  # fmt: skip
@@ -732,7 +732,6 @@ class _TurningCore:
                 lanes.work,
                 # what _start writes besides (_T_START), and the linear blocks' tables
                 self.bound,
-                self.noise_counts,
                 self.spindle,
                 self.spindle_set,
                 self.power,
