@@ -7,7 +7,6 @@ import functools
 import math
 from dataclasses import dataclass
 
-import gymnasium as gym
 import numba
 import numpy as np
 from gymnasium import spaces
@@ -39,17 +38,14 @@ from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
 from machining_envs.core.env import (
     ActionMap,
     EpisodeLog,
+    LaneEnv,
     LaneNames,
-    adopt_core,
     check_scenario_spec,
-    episode_ended,
     present_frame,
     ready_to_render,
     real_actions,
-    record_step,
     resolve_params,
     resolve_reward,
-    scenario_option,
 )
 from machining_envs.core.kernels import py_square
 from machining_envs.core.packed import PackedArgs, b1_2, f4_2, f8_1, f8_2, f8_3, i8_1, i8_2
@@ -648,7 +644,7 @@ class _ContouringCore:
         return info
 
 
-class ContouringEnv(gym.Env):
+class ContouringEnv(LaneEnv):
     """Two-axis contouring: command both feed axes so that the tool follows a path.
 
     ## Description
@@ -753,6 +749,7 @@ class ContouringEnv(gym.Env):
     task = CONTOURING_TASK
     #: Positions of the observation's fields, for controllers that read them by name.
     OBS_INDEX = {"error": 0, "velocity": 2, "reference": 4, "preview": 6, "prev_action": 12}
+    _LOG_FIELDS = TRACE_LOG_FIELDS
 
     def __init__(
         self,
@@ -769,11 +766,10 @@ class ContouringEnv(gym.Env):
             type(self).__name__, 1, scenario, params, reward, max_episode_time_s,
             in_position_mm, divergence_mm, overrides,
         )  # fmt: skip
-        adopt_core(self, core, scenario, render_mode)
+        self._adopt(core, scenario, render_mode)
         self.in_position_mm = core.in_position_mm
         self.divergence_mm = core.divergence_mm
         self._umax = self.params.command_max_mm_s
-        self.scenario: ContouringScenario | None = None
         self.plant: ContouringPlant | None = None
 
     @property
@@ -781,51 +777,26 @@ class ContouringEnv(gym.Env):
         """Actions clipped so far this episode (``info["n_action_clipped"]``)."""
         return int(self._core.li[0, _ICLIP])
 
-    # ---- the command map, for classical agents -----------------------------------------
-    def action_to_command(self, action):
-        """Velocity commands (mm/s) for actions in [-1, 1]."""
-        return self.command_map.action_to_command(action)
-
-    def command_to_action(self, command):
-        """Actions in [-1, 1] for velocity commands (mm/s)."""
-        return self.command_map.command_to_action(command)
-
-    # ---- gymnasium API -------------------------------------------------------------------
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
-        self._ended = False
-        core = self._core
-        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
-        info = core.lane_info(0)
-        self.scenario = core.scenarios[0]
+    def _began(self, core) -> None:
         #: The table of this episode (its true parameters in ``plant.params``).
         self.plant = core.plants[0]
         self._path = self.scenario.path
-        self._log = EpisodeLog(TRACE_LOG_FIELDS)
-        if self.render_mode is not None:
-            self._log.record(info)
-        return core.obs[0].copy(), info
 
-    def step(self, action):
-        if self.plant is None:
-            raise RuntimeError("ContouringEnv: call reset() before step()")
-        if self._ended:
-            raise episode_ended("ContouringEnv")
+    def _set_action(self, action) -> None:
         (ax, ay), clipped = check_action_vector(action, 2, "ContouringEnv")
         core = self._core
         act = core.act[0]
         act[0] = ax
         act[1] = ay
         core.clipped[0] = clipped
-        core.step()
-        info = core.lane_info(0)
-        record_step(self, self._log, info)
+
+    def _outcome(self) -> tuple[float, bool, bool]:
+        core = self._core
         f = core.flags[0]
-        self._ended = bool(f[2] or f[3])
-        return core.obs[0].copy(), float(core.out[0, 0]), bool(f[2]), bool(f[3]), info
+        return float(core.out[0, 0]), bool(f[2]), bool(f[3])
 
     def render(self):
-        if not ready_to_render(self, "ContouringEnv"):
+        if not ready_to_render(self):
             return None
         img = render_trace(self._path, self._log, f"Contouring-v0 | {self.scenario.name}")
         return present_frame(img, self.render_mode, "Contouring-v0")

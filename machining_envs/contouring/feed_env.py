@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import gymnasium as gym
 import numba
 import numpy as np
 from gymnasium import spaces
@@ -79,19 +78,15 @@ from machining_envs.core.blocks import (
 )
 from machining_envs.core.env import (
     ActionMap,
-    EpisodeLog,
+    LaneEnv,
     LaneNames,
     LaneObjects,
-    adopt_core,
     check_reward_weights,
     check_scenario_spec,
-    episode_ended,
     present_frame,
     ready_to_render,
-    record_step,
     resolve_params,
     resolve_reward,
-    scenario_option,
     settle_batch,
     split_batch,
 )
@@ -1148,7 +1143,7 @@ class _FeedCore:
         return info
 
 
-class ContouringFeedEnv(gym.Env):
+class ContouringFeedEnv(LaneEnv):
     """Feed override for contouring: as fast as the contour-error tolerance allows.
 
     ## Description
@@ -1260,6 +1255,7 @@ class ContouringFeedEnv(gym.Env):
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = FEED_TASK
+    _LOG_FIELDS = TRACE_LOG_FIELDS
 
     def __init__(
         self,
@@ -1282,7 +1278,7 @@ class ContouringFeedEnv(gym.Env):
             decision_interval_s, override_max, max_episode_time_s, in_position_mm,
             divergence_mm, overrides, actuation,
         )  # fmt: skip
-        adopt_core(self, core, scenario, render_mode)
+        self._adopt(core, scenario, render_mode)
         self.servo = core.servo
         self.tolerance_mm = core.tolerance_mm
         self.decision_interval_s = core.decision_interval_s
@@ -1290,55 +1286,28 @@ class ContouringFeedEnv(gym.Env):
         self.override_max = core.override_max
         self.in_position_mm = core.in_position_mm
         self.divergence_mm = core.divergence_mm
-        self.scenario: ContouringScenario | None = None
-        self._started = False
 
     @property
     def _n_clipped(self) -> int:
         """Actions clipped so far this episode (``info["n_action_clipped"]``)."""
         return int(self._core.n_clipped[0])
 
-    def action_to_command(self, action):
-        """Feed override for an action in [-1, 1]."""
-        return self.command_map.action_to_command(action)
-
-    def command_to_action(self, override):
-        """Action in [-1, 1] for a feed override."""
-        return self.command_map.command_to_action(override)
-
-    # ---- gymnasium API -------------------------------------------------------------------
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
-        self._ended = False
-        core = self._core
-        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
-        info = core.lane_info(0)
-        self.scenario = core.scenarios[0]
+    def _began(self, core) -> None:
         self._path = self.scenario.path
-        self._started = True
-        self._log = EpisodeLog(TRACE_LOG_FIELDS)
-        if self.render_mode is not None:
-            self._log.record(info)
-        return core.obs[0].copy(), info
 
-    def step(self, action):
-        if not self._started:
-            raise RuntimeError("ContouringFeedEnv: call reset() before step()")
-        if self._ended:
-            raise episode_ended("ContouringFeedEnv")
+    def _set_action(self, action) -> None:
         (a,), clipped = check_action_vector(action, 1, "ContouringFeedEnv")
         core = self._core
         core.in_action[0] = a
         core.in_clipped[0] = clipped
-        core.step()
-        info = core.lane_info(0)
-        record_step(self, self._log, info)
+
+    def _outcome(self) -> tuple[float, bool, bool]:
+        core = self._core
         terminated, truncated = core.flags[0, 2:].tolist()
-        self._ended = terminated or truncated
-        return core.obs[0].copy(), float(core.reward[0]), terminated, truncated, info
+        return float(core.reward[0]), terminated, truncated
 
     def render(self):
-        if not ready_to_render(self, "ContouringFeedEnv", started=self._started):
+        if not ready_to_render(self):
             return None
         img = render_trace(
             self._path,

@@ -1,4 +1,5 @@
-"""What every regulation env shares: action scaling, bad-input checks, keyword checks, plots."""
+"""What every env shares: action scaling, bad-input checks, keyword checks, plots, and
+:class:`LaneEnv`, the base of the single envs."""
 
 from __future__ import annotations
 
@@ -6,13 +7,14 @@ import difflib
 import math
 from collections.abc import Iterable, Sequence
 
+import gymnasium as gym
 import numpy as np
 
 from machining_envs.core.actuation import configure_lane
 
 __all__ = [
     "ActionMap",
-    "adopt_core",
+    "LaneEnv",
     "check_action",
     "episode_ended",
     "real_actions",
@@ -113,20 +115,6 @@ def real_actions(action, env_name: str) -> np.ndarray:
             f"{env_name}: action must be real numbers, got {action!r:.60} (dtype {a.dtype})"
         )
     return a.astype(np.float64, copy=False)
-
-
-def adopt_core(env, core, scenario, render_mode) -> None:
-    """Give a single env (a core of one lane) the public attributes every env has:
-    ``params``, ``reward_weights``, ``max_episode_time_s``, ``default_scenario``
-    (``scenario``), ``render_mode`` (checked), ``command_map`` and the two spaces."""
-    env.params = core.params
-    env.reward_weights = core.reward_weights
-    env.max_episode_time_s = core.max_episode_time_s
-    env.default_scenario = scenario
-    env.render_mode = check_render_mode(render_mode, env.metadata["render_modes"])
-    env.command_map = core.command_map
-    env.action_space = core.action_space
-    env.observation_space = core.observation_space
 
 
 def check_action(action, env_name: str) -> tuple[float, bool]:
@@ -503,18 +491,102 @@ def record_step(env, log: EpisodeLog, info: dict) -> None:
             env.render()
 
 
-def ready_to_render(env, owner: str, started: bool | None = None) -> bool:
-    """False (with a warning) without a render mode; ``RuntimeError`` before the first reset.
-
-    ``started`` says whether ``reset()`` has run; by default, whether ``env.plant`` is set.
-    """
+def ready_to_render(env) -> bool:
+    """False (with a warning) without a render mode; ``RuntimeError`` before the first reset."""
+    owner = type(env).__name__
     if env.render_mode is None:
-        import gymnasium as gym
-
         gym.logger.warn(
             f"{owner}.render() called without a render_mode; pass render_mode='rgb_array'"
         )
         return False
-    if not (env.plant is not None if started is None else started):
+    if not env._started:
         raise RuntimeError(f"{owner}: call reset() before render()")
     return True
+
+
+class LaneEnv(gym.Env):
+    """The single env of a process whose physics is a core of lanes: the core of one lane
+    that its vector env holds N of, so that a lane and the single env run the same code.
+
+    A subclass builds its core in ``__init__`` and hands it to :meth:`_adopt`, and says
+    how an action goes in (:meth:`_set_action`) and what a step gave
+    (:meth:`_outcome`); ``reset``, ``step`` and the command map are shared. The core
+    provides ``start(lane, spec, rng)``, ``step()``, ``lane_info(lane)``, ``obs``,
+    ``scenarios``, ``params``, ``reward_weights``, ``max_episode_time_s``,
+    ``command_map`` and the two spaces. ``_LOG_FIELDS`` names what a rendered episode
+    records of ``info`` (:class:`EpisodeLog`).
+    """
+
+    _LOG_FIELDS: dict[str, str] = {}
+
+    def _adopt(self, core, scenario, render_mode) -> None:
+        """Take ``core`` (of one lane) and give the env the public attributes every env
+        has: ``params``, ``reward_weights``, ``max_episode_time_s``, ``default_scenario``
+        (``scenario``), ``render_mode`` (checked), ``command_map`` and the two spaces."""
+        self._core = core
+        self.params = core.params
+        self.reward_weights = core.reward_weights
+        self.max_episode_time_s = core.max_episode_time_s
+        self.default_scenario = scenario
+        self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
+        self.command_map = core.command_map
+        self.action_space = core.action_space
+        self.observation_space = core.observation_space
+        self.scenario = None
+        self._started = False
+        self._ended = False
+        self._log = EpisodeLog(self._LOG_FIELDS)
+
+    # ---- the command map, for classical agents -----------------------------------------
+    def action_to_command(self, action):
+        """The physical command for an action in [-1, 1] (``command_map``; its unit is in
+        the env's Action Space)."""
+        return self.command_map.action_to_command(action)
+
+    def command_to_action(self, command):
+        """The action in [-1, 1] for a physical command (``command_map``)."""
+        return self.command_map.command_to_action(command)
+
+    # ---- what a subclass says --------------------------------------------------------------
+    def _set_action(self, action) -> None:
+        """Check ``action`` (``ValueError`` naming the env) and write it into lane 0 of the
+        core, with whether it was clipped."""
+        raise NotImplementedError
+
+    def _outcome(self) -> tuple[float, bool, bool]:
+        """Lane 0's reward, terminated and truncated after a step, as Python values."""
+        raise NotImplementedError
+
+    def _began(self, core) -> None:
+        """Called when an episode has started (``self.scenario`` is set): what a subclass
+        keeps of it."""
+
+    # ---- gymnasium API -------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        core = self._core
+        self._started = False  # until the start has gone through
+        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        self._started = True
+        self._ended = False
+        info = core.lane_info(0)
+        self.scenario = core.scenarios[0]
+        self._began(core)
+        self._log = EpisodeLog(self._LOG_FIELDS)
+        if self.render_mode is not None:
+            self._log.record(info)
+        return core.obs[0].copy(), info
+
+    def step(self, action):
+        if not self._started:
+            raise RuntimeError(f"{type(self).__name__}: call reset() before step()")
+        if self._ended:
+            raise episode_ended(type(self).__name__)
+        self._set_action(action)
+        core = self._core
+        core.step()
+        info = core.lane_info(0)
+        record_step(self, self._log, info)
+        reward, terminated, truncated = self._outcome()
+        self._ended = terminated or truncated
+        return core.obs[0].copy(), reward, terminated, truncated, info

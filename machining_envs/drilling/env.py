@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import gymnasium as gym
 import numba
 import numpy as np
 from gymnasium import spaces
@@ -15,21 +14,17 @@ from machining_envs.core.blocks import LaneBlocks, serve_one_table
 from machining_envs.core.checks import check_below
 from machining_envs.core.env import (
     ActionMap,
-    EpisodeLog,
+    LaneEnv,
     LaneNames,
-    adopt_core,
     check_action,
     check_episode_time,
     check_reward_weights,
     check_scenario_spec,
-    episode_ended,
     present_frame,
     ready_to_render,
-    record_step,
     render_signals,
     resolve_params,
     resolve_reward,
-    scenario_option,
 )
 from machining_envs.core.normals import LaneGenerators, standard_normal
 from machining_envs.core.packed import PackedArgs, as_int, b1_2, f4_2, f8_1, f8_2, f8_3, i8_2
@@ -68,15 +63,6 @@ _HISTORY = 3
 _TORQUE_OBS = (-1.0, 10.0)
 #: What the action commands: the valve voltage (the paper's loop) or the feed velocity.
 CONTROL_MODES = ("voltage", "feed")
-#: The signals render() draws: name -> the info key each is read from.
-_LOG_FIELDS = {
-    "t": "t_s",
-    "torque": "torque_Nmm",
-    "measured": "measured",
-    "speed": "spindle_hz",
-    "depth": "depth_mm",
-    "position": "position_mm",
-}
 
 
 @dataclass(frozen=True)
@@ -519,7 +505,7 @@ class _DrillingCore:
         }
 
 
-class MicroDrillingEnv(gym.Env):
+class MicroDrillingEnv(LaneEnv):
     """Micro drilling under a torque limit by the spindle speed (Cheong & Cho, seed 003).
 
     ## Description
@@ -668,6 +654,15 @@ class MicroDrillingEnv(gym.Env):
         "diameter": 8,
         "history": 9,
     }
+    #: The signals render() draws: name -> the info key each is read from.
+    _LOG_FIELDS = {
+        "t": "t_s",
+        "torque": "torque_Nmm",
+        "measured": "measured",
+        "speed": "spindle_hz",
+        "depth": "depth_mm",
+        "position": "position_mm",
+    }
     #: Scales of the observation fields that are not set by the parameters.
     SPEED_SCALE_HZ = 1000.0
     LENGTH_SCALE_MM = 10.0
@@ -682,7 +677,7 @@ class MicroDrillingEnv(gym.Env):
         max_episode_time_s: float = 150.0,
         **overrides,
     ):
-        self._core = _DrillingCore(
+        core = _DrillingCore(
             type(self).__name__,
             1,
             scenario,
@@ -692,10 +687,8 @@ class MicroDrillingEnv(gym.Env):
             max_episode_time_s,
             overrides,
         )
-        core = self._core
-        adopt_core(self, core, scenario, render_mode)
+        self._adopt(core, scenario, render_mode)
         self.control = core.control
-        self.scenario: DrillingScenario | None = None
         self.plant: DrillingLanes | None = None
 
     @property
@@ -703,52 +696,22 @@ class MicroDrillingEnv(gym.Env):
         """Actions clipped so far this episode (``info["n_action_clipped"]``)."""
         return int(self._core.counts[0, _C_N_CLIPPED])
 
-    # ---- the command map, for classical agents -----------------------------------------
-    def action_to_command(self, action):
-        """Physical command (V, or mm/s with ``control="feed"``) for an action in [-1, 1]."""
-        return self.command_map.action_to_command(action)
-
-    def command_to_action(self, command):
-        """Action in [-1, 1] for a physical command (V, or mm/s with ``control="feed"``)."""
-        return self.command_map.command_to_action(command)
-
-    # ---- gymnasium API -------------------------------------------------------------------
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
-        self._ended = False
-        core = self._core
-        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
-        info = core.lane_info(0)
-        self.scenario = core.scenarios[0]
+    def _began(self, core) -> None:
         self.plant = core.lanes
-        self._log = EpisodeLog(_LOG_FIELDS)
-        self._log.record(info)
-        return core.obs[0].copy(), info
 
-    def step(self, action):
-        if self.plant is None:
-            raise RuntimeError("MicroDrillingEnv: call reset() before step()")
-        if self._ended:
-            raise episode_ended("MicroDrillingEnv")
+    def _set_action(self, action) -> None:
         core = self._core
         a, clipped = check_action(action, "MicroDrillingEnv")
         core.ev[0, _E_ACTION] = a
         core.flags[0, _F_IN_CLIPPED] = clipped
-        core.step()
-        info = core.lane_info(0)
-        record_step(self, self._log, info)
+
+    def _outcome(self) -> tuple[float, bool, bool]:
+        core = self._core
         f = core.flags[0]
-        self._ended = bool(f[_F_TERMINATED] or f[_F_TRUNCATED])
-        return (
-            core.obs[0].copy(),
-            float(core.ev[0, _E_REWARD]),
-            bool(f[_F_TERMINATED]),
-            bool(f[_F_TRUNCATED]),
-            info,
-        )
+        return float(core.ev[0, _E_REWARD]), bool(f[_F_TERMINATED]), bool(f[_F_TRUNCATED])
 
     def render(self):
-        if not ready_to_render(self, "MicroDrillingEnv"):
+        if not ready_to_render(self):
             return None
         log = self._log
         t = log["t"]

@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import gymnasium as gym
 import numba
 import numpy as np
 from gymnasium import spaces
@@ -22,22 +21,18 @@ from machining_envs.core.checks import check_below
 from machining_envs.core.env import (
     ACTION_MAPS,
     ActionMap,
-    EpisodeLog,
+    LaneEnv,
     LaneNames,
     LaneObjects,
-    adopt_core,
     check_action,
     check_episode_time,
     check_reward_weights,
     check_scenario_spec,
-    episode_ended,
     present_frame,
     ready_to_render,
-    record_step,
     render_signals,
     resolve_params,
     resolve_reward,
-    scenario_option,
     settle_batch,
     split_batch,
 )
@@ -94,14 +89,6 @@ _HISTORY = 3
 #: approach feeds resolvable.
 COMMAND_DECADES = 3.0
 _TORQUE_OBS = (-1.0, 10.0)
-#: The signals render() draws: name -> the info key each is read from.
-_LOG_FIELDS = {
-    "t": "t_s",
-    "torque": "torque_Nmm",
-    "measured": "measured",
-    "feed": "feed_mm_per_rev",
-    "depth": "depth_mm",
-}
 #: The numeric step info computed by the compiled step, one row each (``_MillingCore.info_f``).
 _INFO_F = (
     "t_s",
@@ -857,7 +844,7 @@ class _MillingCore:
         }
 
 
-class EndMillingEnv(gym.Env):
+class EndMillingEnv(LaneEnv):
     """End milling as fast as the cutting-torque limit allows, by feed (Park & Yoon 1986).
 
     ## Description
@@ -993,6 +980,14 @@ class EndMillingEnv(gym.Env):
     task = MILLING_TASK
     #: Positions of the observation's fields, for controllers that read them by name.
     OBS_INDEX = {"measured": 0, "limit": 1, "prev_action": 2, "spindle": 3, "history": 4}
+    #: The signals render() draws: name -> the info key each is read from.
+    _LOG_FIELDS = {
+        "t": "t_s",
+        "torque": "torque_Nmm",
+        "measured": "measured",
+        "feed": "feed_mm_per_rev",
+        "depth": "depth_mm",
+    }
 
     def __init__(
         self,
@@ -1005,7 +1000,7 @@ class EndMillingEnv(gym.Env):
         actuation: Actuation | dict | None = None,
         **overrides,
     ):
-        self._core = _MillingCore(
+        core = _MillingCore(
             type(self).__name__,
             1,
             scenario,
@@ -1016,9 +1011,7 @@ class EndMillingEnv(gym.Env):
             overrides,
             actuation,
         )
-        core = self._core
-        adopt_core(self, core, scenario, render_mode)
-        self.scenario: MillingScenario | None = None
+        self._adopt(core, scenario, render_mode)
         self.plant: MillingLanes | None = None
 
     @property
@@ -1026,46 +1019,22 @@ class EndMillingEnv(gym.Env):
         """Actions clipped so far this episode (``info["n_action_clipped"]``)."""
         return int(self._core.n_clipped[0])
 
-    # ---- the command map, for classical agents -----------------------------------------
-    def action_to_command(self, action):
-        """Command U (counts) for an action in [-1, 1]."""
-        return self.command_map.action_to_command(action)
-
-    def command_to_action(self, command):
-        """Action in [-1, 1] for a command U (counts)."""
-        return self.command_map.command_to_action(command)
-
-    # ---- gymnasium API -------------------------------------------------------------------
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
-        self._ended = False
-        core = self._core
-        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
-        info = core.lane_info(0)
-        self.scenario = core.scenarios[0]
+    def _began(self, core) -> None:
         self.plant = core.lanes
-        self._log = EpisodeLog(_LOG_FIELDS)
-        self._log.record(info)
-        return core.obs[0].copy(), info
 
-    def step(self, action):
-        if self.plant is None:
-            raise RuntimeError("EndMillingEnv: call reset() before step()")
-        if self._ended:
-            raise episode_ended("EndMillingEnv")
+    def _set_action(self, action) -> None:
         core = self._core
         a, clipped = check_action(action, "EndMillingEnv")
         core.in_action[0] = a
         core.in_clipped[0] = clipped
-        core.step()
-        info = core.lane_info(0)
-        record_step(self, self._log, info)
+
+    def _outcome(self) -> tuple[float, bool, bool]:
+        core = self._core
         flags = core.flags[0]
-        self._ended = bool(flags[3] or flags[4])
-        return core.obs[0].copy(), float(core.reward[0]), bool(flags[3]), bool(flags[4]), info
+        return float(core.reward[0]), bool(flags[3]), bool(flags[4])
 
     def render(self):
-        if not ready_to_render(self, "EndMillingEnv"):
+        if not ready_to_render(self):
             return None
         log = self._log
         t = log["t"]

@@ -6,7 +6,6 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-import gymnasium as gym
 import numba
 import numpy as np
 from gymnasium import spaces
@@ -22,22 +21,18 @@ from machining_envs.core.blocks import LaneBlocks, serve_one_table_with_tail
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_below, check_range
 from machining_envs.core.env import (
     ActionMap,
-    EpisodeLog,
+    LaneEnv,
     LaneNames,
     LaneObjects,
-    adopt_core,
     check_action,
     check_episode_time,
     check_reward_weights,
     check_scenario_spec,
-    episode_ended,
     present_frame,
     ready_to_render,
-    record_step,
     render_signals,
     resolve_params,
     resolve_reward,
-    scenario_option,
     settle_batch,
     split_batch,
 )
@@ -87,14 +82,6 @@ __all__ = ["TurningEnv", "TurningVectorEnv", "TurningReward"]
 
 _HISTORY = 3
 _FORCE_OBS = (-1.0, 10.0)
-#: The signals render() draws: name -> the info key each is read from.
-_LOG_FIELDS = {
-    "t": "t_s",
-    "force": "force_N",
-    "measured": "measured",
-    "feed": "feed_mm_per_rev",
-    "depth": "depth_mm",
-}
 
 
 @dataclass(frozen=True)
@@ -885,7 +872,7 @@ class _TurningCore:
         }
 
 
-class TurningEnv(gym.Env):
+class TurningEnv(LaneEnv):
     """Turning as fast as the cutting-force limit allows, by feed (Noh, Kim & Kim 1992).
 
     ## Description
@@ -1007,6 +994,14 @@ class TurningEnv(gym.Env):
     task = TURNING_TASK
     #: Positions of the observation's fields, for controllers that read them by name.
     OBS_INDEX = {"measured": 0, "limit": 1, "prev_action": 2, "spindle": 3, "history": 4}
+    #: The signals render() draws: name -> the info key each is read from.
+    _LOG_FIELDS = {
+        "t": "t_s",
+        "force": "force_N",
+        "measured": "measured",
+        "feed": "feed_mm_per_rev",
+        "depth": "depth_mm",
+    }
 
     def __init__(
         self,
@@ -1019,7 +1014,7 @@ class TurningEnv(gym.Env):
         actuation: Actuation | dict | None = None,
         **overrides,
     ):
-        self._core = _TurningCore(
+        core = _TurningCore(
             type(self).__name__,
             1,
             scenario,
@@ -1030,10 +1025,8 @@ class TurningEnv(gym.Env):
             overrides,
             actuation,
         )
-        core = self._core
-        adopt_core(self, core, scenario, render_mode)
+        self._adopt(core, scenario, render_mode)
         self.spindle_rpm_override = core.spindle_rpm_override
-        self.scenario: TurningScenario | None = None
         self.plant: TurningLanes | None = None
 
     @property
@@ -1041,48 +1034,24 @@ class TurningEnv(gym.Env):
         """Actions clipped so far this episode (``info["n_action_clipped"]``)."""
         return int(self._core.n_clipped[0])
 
-    # ---- the command map, for classical agents -----------------------------------------
-    def action_to_command(self, action):
-        """Servo command U (counts) for an action in [-1, 1]."""
-        return self.command_map.action_to_command(action)
-
-    def command_to_action(self, command):
-        """Action in [-1, 1] for a servo command U (counts)."""
-        return self.command_map.command_to_action(command)
-
-    # ---- gymnasium API -------------------------------------------------------------------
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
-        self._ended = False
-        core = self._core
-        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
-        info = core.lane_info(0)
-        self.scenario = core.scenarios[0]
+    def _began(self, core) -> None:
         self.plant = core.lanes
-        self._log = EpisodeLog(_LOG_FIELDS)
-        self._log.record(info)
-        return core.obs[0].copy(), info
 
-    def step(self, action):
-        if self.plant is None:
-            raise RuntimeError("TurningEnv: call reset() before step()")
-        if self._ended:
-            raise episode_ended("TurningEnv")
+    def _set_action(self, action) -> None:
         core = self._core
         a, clipped = check_action(action, "TurningEnv")
         ef = core.ef[0]
         ef[0] = a  # in_action, in_command (_EF)
         ef[1] = self.command_map.action_to_command(a)
         core.in_clipped[0] = clipped
-        core.step()
-        info = core.lane_info(0)
-        record_step(self, self._log, info)
+
+    def _outcome(self) -> tuple[float, bool, bool]:
+        core = self._core
         terminated, truncated = core.eb[0, 3:5].tolist()
-        self._ended = terminated or truncated
-        return core.obs[0].copy(), float(ef[_EF_REWARD]), terminated, truncated, info
+        return float(core.ef[0, _EF_REWARD]), terminated, truncated
 
     def render(self):
-        if not ready_to_render(self, "TurningEnv"):
+        if not ready_to_render(self):
             return None
         log = self._log
         t = log["t"]

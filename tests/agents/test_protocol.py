@@ -9,8 +9,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+import machining_envs.core.env as core_env
 import machining_envs.core.vector as core_vector
-import machining_envs.turning.env as turning_env
 from agents.bench.tune import TuningBudget, load_tuned, paper_settings, tune_agent, tuned_factory
 from agents.rl import ConfigError, train
 from agents.turning import FixedGainPI
@@ -23,7 +23,7 @@ from tests.helpers import TURNING
 def scenarios_seen(monkeypatch):
     """Every scenario any Turning-v0 reset (single env or vector lane) asks for."""
     seen: list = []
-    real = turning_env.scenario_option
+    real = core_env.scenario_option
 
     def spy(options, default):
         spec = real(options, default)
@@ -31,7 +31,7 @@ def scenarios_seen(monkeypatch):
             seen.append(one if isinstance(one, str) else getattr(one, "name", one))
         return spec
 
-    monkeypatch.setattr(turning_env, "scenario_option", spy)  # the single env's resets
+    monkeypatch.setattr(core_env, "scenario_option", spy)  # the single envs' resets (LaneEnv)
     monkeypatch.setattr(core_vector, "scenario_option", spy)  # the vector envs' lanes
     return seen
 

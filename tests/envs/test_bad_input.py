@@ -96,6 +96,25 @@ def test_stepping_after_the_episode_ended_is_refused_until_reset(env, action_val
     short.close()
 
 
+def test_a_step_needs_a_reset_that_went_through(env):
+    """Before the first reset, and after a reset that raised, there is no episode to step:
+    the step raises RuntimeError naming the env, and a good reset starts one."""
+    fresh = gym.make(env.spec.id, render_mode="rgb_array", disable_env_checker=True).unwrapped
+    action = np.zeros(fresh.action_space.shape, dtype=np.float32)
+    with pytest.raises(RuntimeError, match=f"{type(fresh).__name__}: call reset"):
+        fresh.step(action)
+    fresh.reset(seed=0)
+    fresh.step(action)
+    with pytest.raises(ValueError, match="scenario"):
+        fresh.reset(options={"scenario": "nonexistent"})
+    with pytest.raises(RuntimeError, match=f"{type(fresh).__name__}: call reset"):
+        fresh.step(action)
+    with pytest.raises(RuntimeError, match=f"{type(fresh).__name__}: call reset"):
+        fresh.render()
+    fresh.reset(seed=1)
+    fresh.step(action)
+
+
 # ---- checks across fields: each message names both fields ----------------------------------
 def test_a_turning_limit_above_the_tools_breakage_force_is_refused():
     env = gym.make("machining_envs/Turning-v0", scenario="paper_405", breakage_force_N=900.0)
