@@ -325,6 +325,44 @@ def test_a_render_mode_is_refused_pointing_to_the_single_env(env_id):
     env.close()
 
 
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_a_step_needs_a_reset_that_went_through(env_id):
+    """As for the single env: before the first reset, and after a reset that raised (some
+    lanes may have started, one half-way), there is no batch to step."""
+    env = gym.make_vec(env_id, num_envs=2)
+    actions = np.zeros(env.action_space.shape, dtype=np.float32)
+    with pytest.raises(RuntimeError, match="call reset"):
+        env.step(actions)
+    env.reset(seed=0)
+    env.step(actions)
+    with pytest.raises(ValueError, match="scenario"):
+        env.reset(options={"scenario": "nonexistent"})
+    with pytest.raises(RuntimeError, match="call reset"):
+        env.step(actions)
+    env.reset(seed=1)
+    env.step(actions)
+    env.close()
+
+
+@pytest.mark.parametrize("mode", ["SAME_STEP", "NEXT_STEP"])
+def test_an_autoreset_that_raises_leaves_the_batch_to_reset(mode):
+    """A lane's next scenario drawn in a step can be one its parameters refuse (here an
+    ``ood`` force limit above a 1 kN breakage force): the step raises naming it, and the
+    batch, with that lane half-started, steps no further until reset()."""
+    env = gym.make_vec(
+        "machining_envs/Turning-v0", num_envs=1, scenario="ood", breakage_force_N=1000.0,
+        max_episode_time_s=0.3, autoreset_mode=mode,
+    )  # fmt: skip
+    env.reset(seed=1)  # its first limit is below 1 kN
+    action = np.zeros((1, 1), dtype=np.float32)
+    with pytest.raises(ValueError, match="force_limit_N .* below the tool's breakage_force_N"):
+        for _ in range(20):  # three steps an episode
+            env.step(action)
+    with pytest.raises(RuntimeError, match="call reset"):
+        env.step(action)
+    env.close()
+
+
 def _lane_specs(env_id: str, n: int) -> list:
     """n different scenario names of the env (its own list, in order)."""
     names = sorted(gym.make_vec(env_id, num_envs=1)._core.scenario_types[1])
