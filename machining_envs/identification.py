@@ -109,7 +109,7 @@ class IdentificationError(ValueError):
 
 
 # ---- input checks ---------------------------------------------------------------------------
-def _vector(name: str, values, n: int | None = None) -> np.ndarray:
+def _vector(name: str, values, n: int | None = None, per: str = "cut") -> np.ndarray:
     try:
         a = np.asarray(values, dtype=np.float64)
     except (TypeError, ValueError):
@@ -119,11 +119,16 @@ def _vector(name: str, values, n: int | None = None) -> np.ndarray:
     if a.ndim != 1:
         raise IdentificationError(f"{name} must be one-dimensional, got shape {a.shape}")
     if n is not None and a.size != n:
-        raise IdentificationError(f"{name} must hold {n} values (one per cut), got {a.size}")
+        raise IdentificationError(f"{name} must hold {n} values (one per {per}), got {a.size}")
     bad = np.flatnonzero(~np.isfinite(a))
     if bad.size:
         raise IdentificationError(f"{name} must be finite; entry {bad[0]} is {a[bad[0]]!r}")
     return a
+
+
+def _is_number(v) -> bool:
+    """A real number, not a bool (``True`` is no step height)."""
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
 
 
 def _positive(name: str, a: np.ndarray) -> np.ndarray:
@@ -205,6 +210,9 @@ def fit_power_law(
     unknown = set(fixed) - set(factors)
     if unknown:
         raise IdentificationError(f"fixed_exponents names unknown factors {sorted(unknown)}")
+    for k, e in fixed.items():
+        if not (_is_number(e) and math.isfinite(e)):
+            raise IdentificationError(f"fixed_exponents[{k!r}] must be a finite number, got {e!r}")
     y = _positive("response", _vector("response", response))
     n = y.size
     cols = {k: _positive(k, _vector(k, v, n)) for k, v in factors.items()}
@@ -568,8 +576,8 @@ def fit_servo(
     """
     t = _vector("t_s", t_s)
     n = t.size
-    u = _vector("command", command, n)
-    y = _vector("response", response, n)
+    u = _vector("command", command, n, "sample")
+    y = _vector("response", response, n, "sample")
     if n < 20:
         raise IdentificationError(f"need at least 20 samples of the response, got {n}")
     dts = np.diff(t)
@@ -654,7 +662,7 @@ def fit_servo_step(
     t_s, response, step: float = 1.0, base: TurningParams | MillingParams | None = None
 ) -> ServoFit:
     """Fit the servo to its response to a command step of height ``step`` at ``t_s[0]``."""
-    if not (isinstance(step, (int, float)) and math.isfinite(step) and step != 0):
+    if not (_is_number(step) and math.isfinite(step) and step != 0):
         raise IdentificationError(f"step must be a non-zero number, got {step!r}")
     t = _vector("t_s", t_s)
     return fit_servo(t, np.full(t.size, float(step)), response, base)
@@ -675,8 +683,10 @@ def fit_servo_sine(
     alone cannot separate (two numbers, gain and phase, for three unknowns).
     """
     for name, v in (("amplitude", amplitude), ("freq_hz", freq_hz)):
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+        if not (_is_number(v) and math.isfinite(v) and v > 0):
             raise IdentificationError(f"{name} must be > 0, got {v!r}")
+    if not (_is_number(offset) and math.isfinite(offset)):
+        raise IdentificationError(f"offset must be a finite number, got {offset!r}")
     t = _vector("t_s", t_s)
     u = offset + amplitude * np.sin(2.0 * math.pi * freq_hz * (t - t[0]))
     return fit_servo(t, u, response, base)
@@ -715,6 +725,8 @@ class TurningRecordFit:
     def interval(self, name: str, z: float = 1.96) -> tuple[float, float]:
         """Approximate 95 % interval (``z`` standard errors) of ``"force_coefficient"`` (Kf,
         from the log-space error) or ``"feed_exponent"`` (p)."""
+        if not (_is_number(z) and 0 < z < math.inf):
+            raise ValueError(f"z must be a positive number of standard errors, got {z!r}")
         if name == "force_coefficient":
             c, se = self.fit.coefficient, self.fit.std_errors["log_coefficient"]
             return c * math.exp(-z * se), c * math.exp(z * se)
@@ -811,15 +823,24 @@ def fit_turning_record(
     cols = read_turning_record(record) if not isinstance(record, Mapping) else dict(record)
     t = _vector("time_s", cols.get("time_s"))
     n = t.size
-    u = _vector("command", cols.get("command"), n)
-    force = _vector("force_N", cols.get("force_N"), n)
-    rpm = _positive("spindle_rpm", _vector("spindle_rpm", cols.get("spindle_rpm"), n))
+    u = _vector("command", cols.get("command"), n, "sample")
+    force = _vector("force_N", cols.get("force_N"), n, "sample")
+    rpm = _positive("spindle_rpm", _vector("spindle_rpm", cols.get("spindle_rpm"), n, "sample"))
     if depth_mm is not None and "depth_mm" in cols:
         raise IdentificationError("give depth_mm as a column or as an argument, not both")
+    if depth_mm is not None and not (_is_number(depth_mm) and 0 < depth_mm < math.inf):
+        raise IdentificationError(
+            f"depth_mm must be a positive number (the depth of the whole record), got {depth_mm!r}"
+        )
+    if not (_is_number(steady_tolerance) and 0 < steady_tolerance < 1):
+        raise IdentificationError(
+            "steady_tolerance must lie in (0, 1) (the share of the command by which the "
+            f"lagged command may differ from it), got {steady_tolerance!r}"
+        )
     depth_src = cols.get("depth_mm") if depth_mm is None else np.full(n, float(depth_mm))
     if depth_src is None:
         raise IdentificationError("the record has no depth_mm column: pass depth_mm=")
-    depth = _vector("depth_mm", depth_src, n)
+    depth = _vector("depth_mm", depth_src, n, "sample")
     dt = np.diff(t)
     if n < 3 or not np.all(dt > 0) or np.ptp(dt) > 1e-6 * dt.mean():
         raise IdentificationError("time_s must increase in equal steps (one sample time)")

@@ -82,6 +82,9 @@ def test_power_law_rejects_data_it_cannot_fit():
         fit_power_law(np.ones(6), {"a": [1, 2, 3, 1, 2, 3], "b": [2, 4, 6, 2, 4, 6]})
     with pytest.raises(IdentificationError, match="one per cut"):
         fit_milling_torque(DEPTH, FEED[:-1], np.ones(DEPTH.size))
+    for e in (np.nan, True, "1"):  # a NaN exponent gave a fit of NaNs
+        with pytest.raises(IdentificationError, match=r"fixed_exponents\['b'\] must be a finite"):
+            fit_power_law([1, 2, 3, 4, 5], {"a": [1, 2, 3, 5, 4], "b": [1, 1, 2, 3, 2]}, {"b": e})
     with pytest.raises(IdentificationError, match="outside what the plant accepts"):
         # An exponent above 2: not a cutting law the plant accepts.
         fit_milling_torque(DEPTH, FEED, FEED**3.0 * 1e4)
@@ -253,6 +256,12 @@ def test_servo_fit_rejects_data_it_cannot_fit():
         fit_servo_step(t, np.r_[np.linspace(0, 1, 99), np.inf])
     with pytest.raises(IdentificationError, match="step"):
         fit_servo_step(t, np.linspace(0, 1, 100), step=0.0)
+    with pytest.raises(IdentificationError, match="step must be a non-zero number, got True"):
+        fit_servo_step(t, np.linspace(0, 1, 100), step=True)
+    with pytest.raises(IdentificationError, match="response must hold 100 values .one per sample"):
+        fit_servo(t, np.ones(100), np.ones(99))
+    with pytest.raises(IdentificationError, match="offset must be a finite number"):
+        fit_servo_sine(t, np.linspace(0, 1, 100), 1.0, 2.0, offset=np.nan)
     # A sine command whose response is a plain step (the drive clipped it): no servo fits.
     u = 1000.0 + 500.0 * np.sin(2 * np.pi * 1.5 * t)
     y = 0.02 * 150.0 * (1.0 - np.exp(-t / 0.3))

@@ -65,6 +65,9 @@ def test_a_record_recovers_the_hidden_plant_within_its_intervals(tmp_path):
     lo, hi = fit.interval("feed_exponent")
     assert lo < 0.72 < hi
     assert fit.fit.r_squared > 0.99 and fit.used.sum() > 200
+    for z in (0.0, np.nan, True):
+        with pytest.raises(ValueError, match="z must be a positive number"):
+            fit.interval("feed_exponent", z)
     assert fit.plot(tmp_path / "fit.png") is not None and (tmp_path / "fit.png").is_file()
 
 
@@ -100,3 +103,9 @@ def test_records_it_cannot_fit_are_refused_saying_why(tmp_path):
     ramp = {**cols, "command": np.linspace(1.0, 900.0, cols["time_s"].size)}
     with pytest.raises(IdentificationError, match="quasi-steady"):
         fit_turning_record(ramp, steady_tolerance=1e-6)
+    for tol in (0.0, -1.0, 5.0, np.nan, True):
+        with pytest.raises(IdentificationError, match=r"steady_tolerance must lie in \(0, 1\)"):
+            fit_turning_record(cols, steady_tolerance=tol)
+    for depth in (0.0, np.nan, True, "1"):
+        with pytest.raises(IdentificationError, match="depth_mm must be a positive number"):
+            fit_turning_record(no_depth, depth_mm=depth)
