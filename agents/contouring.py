@@ -333,12 +333,8 @@ class ConstantOverride(Agent):
     TUNABLE = {"override": (0.1, 2.0, False)}
 
     def __init__(self, override: float, override_max: float):
-        if not (isinstance(override, (int, float)) and math.isfinite(override)):
-            raise ValueError(f"override must be a finite number, got {override!r}")
-        if not 0.0 < override <= override_max:
-            raise ValueError(f"override must be in (0, {override_max}], got {override!r}")
-        self.override = float(override)
-        self.override_max = float(override_max)
+        self.override_max = check_positive("override_max", override_max, 10.0)  # the env's range
+        self.override = check_positive("override", override, self.override_max)
         self.name = f"constant override {override:.2f}"
 
     @classmethod

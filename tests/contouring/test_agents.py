@@ -106,7 +106,9 @@ def test_agents_refuse_other_envs():
         PIPosition.from_env(gym.make(TURNING))
     with pytest.raises(TypeError, match="ContouringFeedEnv"):
         ConstantOverride.from_env(gym.make(CONTOURING))
-    with pytest.raises(ValueError, match="override"):
+    with pytest.raises(ValueError, match=r"override must be in \(0, 2\]"):
         ConstantOverride(3.0, 2.0)
+    with pytest.raises(ValueError, match="override must be"):
+        ConstantOverride(True, 2.0)  # a bool is no override
     with pytest.raises(ValueError, match="rho"):
         hinf_2dof_design(P, "x", rho=-1.0)
