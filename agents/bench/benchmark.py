@@ -29,7 +29,7 @@ from agents.eval import Evaluation, agent_name, evaluate, rollout
 from agents.eval.stats import agent_stats, iqm, paired_difference, rliable_seed
 from machining_envs.core.splits import split_seeds
 
-__all__ = ["run_benchmark", "SIZES"]
+__all__ = ["run_benchmark", "check_env_ids", "SIZES"]
 
 #: Episodes per agent for the quick and the full run: (test, ood, at most this many test
 #: episodes for an oracle, which also stops at its spec's ``oracle_episodes``).
@@ -359,6 +359,18 @@ def _show(section, verbose: bool) -> None:
         print(section[2], flush=True)
 
 
+def check_env_ids(envs: str | list[str] | None) -> list[str] | None:
+    """``envs`` as a list of benchmarked ids (one id may be given as a string), or None
+    for all; ``ValueError`` naming any id the benchmark does not know."""
+    known = [spec.env_id for spec in BENCHMARKS]
+    if isinstance(envs, str):
+        envs = [envs]
+    unknown = [e for e in envs or () if e not in known]
+    if unknown:
+        raise ValueError(f"envs (--env) must be ids among {known}, got {unknown}")
+    return None if envs is None else list(envs)
+
+
 def run_benchmark(
     out_dir="results", quick: bool = False, seed: int = 0, verbose: bool = True,
     envs: list[str] | None = None, reproductions: bool = True, jobs: int | None = None,
@@ -372,6 +384,7 @@ def run_benchmark(
     once, each in its own process (default 1; on 2 cores it does not pay, since the
     contouring envs already use both); the numbers do not depend on it.
     """
+    envs = check_env_ids(envs)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     n_test, n_ood, n_oracle = SIZES["quick" if quick else "full"]

@@ -277,8 +277,12 @@ def main(argv: list[str] | None = None) -> int:
     # The command line a run records (config.json, sweep.json): this one, however called.
     command = shlex.join(["machining-bench", *(sys.argv[1:] if argv is None else argv)])
     if args.command == "benchmark":
-        from agents.bench.benchmark import run_benchmark
+        from agents.bench.benchmark import check_env_ids, run_benchmark
 
+        try:
+            check_env_ids(args.env)
+        except ValueError as exc:
+            return _fail("benchmark", exc)
         try:
             run_benchmark(
                 args.out, quick=args.quick, seed=args.seed, envs=args.env,

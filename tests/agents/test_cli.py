@@ -77,6 +77,12 @@ def test_cli_user_errors_are_one_line_with_exit_2(tmp_path, capsys):
     blocker.write_text("")
     assert main(["benchmark", "--quick", "--out", str(blocker)]) == 2
     assert "machining-bench benchmark:" in capsys.readouterr().err
+    # An id the benchmark does not know (it ran nothing and then failed on an empty table).
+    out = tmp_path / "bench"
+    assert main(["benchmark", "--quick", "--env", "nope", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "envs (--env) must be ids among" in err and "['nope']" in err
+    assert err.count("\n") == 1 and not out.exists()
     assert main(["convert-stats", str(blocker)]) == 2
     assert "convert-stats" in capsys.readouterr().err
 
