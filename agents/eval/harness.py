@@ -266,6 +266,18 @@ class Evaluation:
             w.writerows(self.rows)
 
 
+def _is_int(v) -> bool:
+    return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+
+
+def _iterable(v) -> bool:
+    try:
+        iter(v)
+    except TypeError:
+        return False
+    return True
+
+
 def evaluate(
     agent,
     env_id: str,
@@ -288,7 +300,8 @@ def evaluate(
     env_id : str
         A registered id, e.g. ``"machining_envs/Turning-v0"``.
     scenarios : sequence
-        Scenario names or objects, passed to ``reset(options={"scenario": ...})``.
+        Scenario names or objects, passed to ``reset(options={"scenario": ...})`` (one name
+        or object alone is a list of one).
     n_episodes : int
         Episodes per scenario; episode ``i`` uses seed ``seed + i``, so every agent meets the
         same workpieces and noise.
@@ -307,10 +320,21 @@ def evaluate(
     progress : bool
         Show a progress bar (tqdm, on stderr) over the episodes.
     """
-    if not isinstance(n_episodes, int) or n_episodes < 1:
+    if not _is_int(n_episodes) or n_episodes < 1:
         raise ValueError(f"n_episodes must be an integer >= 1, got {n_episodes!r}")
+    if not _is_int(seed) or seed < 0:
+        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+    if env_kwargs is not None and not isinstance(env_kwargs, dict):
+        raise TypeError(f"env_kwargs must be a dict or None, got {type(env_kwargs).__name__}")
+    if batched is not None and not isinstance(batched, (bool, np.bool_)):
+        raise TypeError(f"batched must be True, False or None, got {batched!r}")
     has_vector = gym.spec(env_id).vector_entry_point is not None
-    scenarios = list(scenarios)
+    # One scenario (a name or an object) is a list of one.
+    scenarios = (
+        [scenarios] if isinstance(scenarios, str) or not _iterable(scenarios) else list(scenarios)
+    )
+    if not scenarios:
+        raise ValueError("scenarios must hold at least one scenario name or object, got none")
     if batched is None:
         batched = has_vector and n_episodes * len(scenarios) > 1
     elif batched and not has_vector:

@@ -33,6 +33,23 @@ def test_evaluate_table_and_csv(tmp_path):
         evaluate(FixedGainPI.from_env, TURNING, ["paper_700"], n_episodes=0)
 
 
+def test_bad_arguments_are_refused_naming_them_and_one_scenario_is_a_list_of_one():
+    f = FixedGainPI.from_env
+    for kwargs, error, match in (
+        ({"n_episodes": True}, ValueError, "n_episodes must be an integer >= 1, got True"),
+        ({"seed": -1}, ValueError, "seed must be an integer >= 0, got -1"),
+        ({"seed": "a"}, ValueError, "seed must be an integer >= 0"),
+        ({"env_kwargs": "x"}, TypeError, "env_kwargs must be a dict"),
+        ({"batched": "yes"}, TypeError, "batched must be True, False or None"),
+        ({"scenarios": []}, ValueError, "scenarios must hold at least one"),
+    ):
+        with pytest.raises(error, match=match):
+            evaluate(f, TURNING, **{"scenarios": ["paper_700"], **kwargs})
+    # A name alone was iterated letter by letter ("scenario of lane 0: ... 'p'").
+    one = evaluate(f, TURNING, "paper_700", n_episodes=2)
+    assert one.rows == evaluate(f, TURNING, ["paper_700"], n_episodes=2).rows
+
+
 def test_same_seeds_give_every_agent_the_same_workpieces():
     a = evaluate(
         FixedGainPI.from_env, TURNING, ["ood"], n_episodes=3, seed=5, keep_trajectories=True
