@@ -512,7 +512,7 @@ class LaneEnv(gym.Env):
     how an action goes in (:meth:`_set_action`) and what a step gave
     (:meth:`_outcome`); ``reset``, ``step`` and the command map are shared. The core
     provides ``start(lane, spec, rng)``, ``step()``, ``lane_info(lane)``, ``obs``,
-    ``scenarios``, ``params``, ``reward_weights``, ``max_episode_time_s``,
+    ``scenarios``, ``scenario_types`` (the scenario class and the names), ``params``, ``reward_weights``, ``max_episode_time_s``,
     ``command_map`` and the two spaces. ``_LOG_FIELDS`` names what a rendered episode
     records of ``info`` (:class:`EpisodeLog`).
     """
@@ -565,8 +565,10 @@ class LaneEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         core = self._core
-        self._started = False  # until the start has gone through
-        core.start(0, scenario_option(options, self.default_scenario), self.np_random)
+        spec = scenario_option(options, self.default_scenario)
+        check_scenario_spec(spec, *core.scenario_types)  # refused: the episode goes on
+        self._started = False  # a start that raises part-way leaves nothing to step
+        core.start(0, spec, self.np_random)
         self._started = True
         self._ended = False
         info = core.lane_info(0)

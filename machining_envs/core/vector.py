@@ -202,7 +202,6 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             for i in lanes.tolist():
                 if seeds[i] is not None:
                     self.lane_rngs[i] = seeding.np_random(seeds[i])[0]
-        self._started = False  # a reset that raises leaves no episode to step
         obs = self._reset_lanes(lanes, options)
         self._started = True
         self._ended[lanes] = False
@@ -258,7 +257,10 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
 
     def _reset_lanes(self, lanes: np.ndarray, options: dict | None) -> np.ndarray:
         """Start new episodes in ``lanes``; their first observations (see the module
-        docstring). Every scenario is checked before any lane starts."""
+        docstring). Every scenario is checked before any lane starts: options refused
+        change nothing. A start that raises (a scenario the lane's parameters refuse, such
+        as a drawn limit above the tool's breakage) may leave lanes started part-way, so
+        nothing steps until a ``reset()`` goes through."""
         core = self._core
         spec = self.default_scenario
         if options is not None or spec is not self._default_ok:
@@ -266,11 +268,15 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             if options is None and not isinstance(spec, list):
                 self._default_ok = spec  # checked: the autoresets' scenario, as a rule
         start_lanes = getattr(core, "start_lanes", None)  # a core that starts many at once
-        if start_lanes is not None and not isinstance(spec, list):
-            start_lanes(lanes, spec, self.lane_rngs)
-        else:
-            for i in lanes.tolist():
-                core.start(i, spec[i] if isinstance(spec, list) else spec, self.lane_rngs[i])
+        try:
+            if start_lanes is not None and not isinstance(spec, list):
+                start_lanes(lanes, spec, self.lane_rngs)
+            else:
+                for i in lanes.tolist():
+                    core.start(i, spec[i] if isinstance(spec, list) else spec, self.lane_rngs[i])
+        except BaseException:
+            self._started = False
+            raise
         return core.obs[lanes]  # their info is their reset info until they step (_info_now)
 
     @abc.abstractmethod
@@ -350,23 +356,13 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             final_obs[i] = row
         # The step's info arrays are the final info; _reset_lanes does not write to them,
         # nor to obs, the step's own new array (_step_lanes), which takes the first ones.
-        obs[lanes] = self._autoreset(lanes)
+        obs[lanes] = self._reset_lanes(lanes, None)
         final_info = self._final_info(info, known, done)
         top = self._info_now()  # every lane's info again: the reset lanes' is their reset info
         self._with_masks(top)
         top["final_obs"], top["_final_obs"] = final_obs, done.copy()
         top["final_info"], top["_final_info"] = final_info, done.copy()
         return obs, reward, terminated, truncated, top
-
-    def _autoreset(self, lanes: np.ndarray) -> np.ndarray:
-        """:meth:`_reset_lanes` of ``lanes`` on the constructor's scenario, in a step. A
-        start that raises (a drawn scenario the lane's parameters refuse) leaves the batch
-        to ``reset()``, as a reset that raises does."""
-        try:
-            return self._reset_lanes(lanes, None)
-        except BaseException:
-            self._started = False
-            raise
 
     def _step_without_same_step_reset(self, a: np.ndarray):
         """``step`` in the ``NEXT_STEP`` and ``DISABLED`` modes (module docstring)."""
@@ -379,7 +375,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         if pending.size:
             for i, state in zip(pending.tolist(), states, strict=True):
                 self.lane_rngs[i].bit_generator.state = state
-            obs[pending] = self._autoreset(pending)
+            obs[pending] = self._reset_lanes(pending, None)
             reward[pending] = 0.0
             terminated[pending] = False
             truncated[pending] = False

@@ -4,6 +4,7 @@ with a message that names the env or the field."""
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 
 import gymnasium as gym
@@ -96,23 +97,37 @@ def test_stepping_after_the_episode_ended_is_refused_until_reset(env, action_val
     short.close()
 
 
-def test_a_step_needs_a_reset_that_went_through(env):
-    """Before the first reset, and after a reset that raised, there is no episode to step:
-    the step raises RuntimeError naming the env, and a good reset starts one."""
+def test_a_step_needs_a_reset_and_refused_options_change_nothing(env):
+    """Before the first reset there is no episode to step (RuntimeError naming the env);
+    a reset whose options are refused changes nothing: the episode goes on."""
     fresh = gym.make(env.spec.id, render_mode="rgb_array", disable_env_checker=True).unwrapped
     action = np.zeros(fresh.action_space.shape, dtype=np.float32)
-    with pytest.raises(RuntimeError, match=f"{type(fresh).__name__}: call reset"):
-        fresh.step(action)
+    for call in (lambda: fresh.step(action), fresh.render):
+        with pytest.raises(RuntimeError, match=f"{type(fresh).__name__}: call reset"):
+            call()
     fresh.reset(seed=0)
     fresh.step(action)
+    twin = copy.deepcopy(fresh)
     with pytest.raises(ValueError, match="scenario"):
         fresh.reset(options={"scenario": "nonexistent"})
-    with pytest.raises(RuntimeError, match=f"{type(fresh).__name__}: call reset"):
-        fresh.step(action)
-    with pytest.raises(RuntimeError, match=f"{type(fresh).__name__}: call reset"):
-        fresh.render()
-    fresh.reset(seed=1)
-    fresh.step(action)
+    np.testing.assert_array_equal(fresh.step(action)[0], twin.step(action)[0])
+
+
+def test_a_start_that_raises_part_way_leaves_no_episode_to_step():
+    """A scenario the parameters refuse (a limit above the tool's breakage force) raises in
+    the start, after the lane has taken some of the new episode: nothing steps until a
+    reset goes through."""
+    env = gym.make("machining_envs/Turning-v0", breakage_force_N=1500.0).unwrapped
+    action = np.zeros(1, dtype=np.float32)
+    env.reset(seed=0, options={"scenario": "paper_405"})  # 1 kN limit
+    env.step(action)
+    high = dataclasses.replace(env.scenario, force_limit_N=2000.0)
+    with pytest.raises(ValueError, match="below the tool's breakage_force_N"):
+        env.reset(options={"scenario": high})
+    with pytest.raises(RuntimeError, match="TurningEnv: call reset"):
+        env.step(action)
+    env.reset(seed=1, options={"scenario": "paper_405"})
+    env.step(action)
 
 
 # ---- checks across fields: each message names both fields ----------------------------------

@@ -7,6 +7,7 @@ Parametrised over every id registered with a ``vector_entry_point``.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import pickle
 
 import gymnasium as gym
@@ -325,22 +326,22 @@ def test_a_render_mode_is_refused_pointing_to_the_single_env(env_id):
     env.close()
 
 
-@pytest.mark.parametrize("env_id", VECTOR_IDS)
-def test_a_step_needs_a_reset_that_went_through(env_id):
-    """As for the single env: before the first reset, and after a reset that raised (some
-    lanes may have started, one half-way), there is no batch to step."""
-    env = gym.make_vec(env_id, num_envs=2)
-    actions = np.zeros(env.action_space.shape, dtype=np.float32)
+def test_a_start_that_raises_part_way_leaves_the_batch_to_reset():
+    """As for the single env: lane 0 started on the list's first scenario, lane 1's (a limit
+    above the tool's breakage force) raised in its start; nothing steps until reset()."""
+    env = gym.make_vec("machining_envs/Turning-v0", num_envs=2, breakage_force_N=1500.0)
+    action = np.zeros((2, 1), dtype=np.float32)
     with pytest.raises(RuntimeError, match="call reset"):
-        env.step(actions)
-    env.reset(seed=0)
-    env.step(actions)
-    with pytest.raises(ValueError, match="scenario"):
-        env.reset(options={"scenario": "nonexistent"})
+        env.step(action)
+    env.reset(seed=0, options={"scenario": "paper_405"})  # 1 kN limits
+    env.step(action)
+    high = dataclasses.replace(env._core.scenarios[0], force_limit_N=2000.0)
+    with pytest.raises(ValueError, match="below the tool's breakage_force_N"):
+        env.reset(options={"scenario": ["paper_405", high]})
     with pytest.raises(RuntimeError, match="call reset"):
-        env.step(actions)
-    env.reset(seed=1)
-    env.step(actions)
+        env.step(action)
+    env.reset(seed=1, options={"scenario": "paper_405"})
+    env.step(action)
     env.close()
 
 
