@@ -224,7 +224,12 @@ PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
 
 
 def pretrained(name: str):
-    """Factory ``env -> agent`` for a shipped policy ``agents/rl/pretrained/<name>/best_model.zip``."""
+    """Factory ``env -> agent`` for a shipped policy ``agents/rl/pretrained/<name>/best_model.zip``.
+
+    ``ValueError`` naming the shipped policies when ``name`` is not one of them."""
+    shipped = sorted(p.parent.name for p in PRETRAINED_DIR.glob("*/best_model.zip"))
+    if name not in shipped:
+        raise ValueError(f"pretrained name must be one of {shipped}, got {name!r}")
     path = PRETRAINED_DIR / name / "best_model.zip"
 
     def make(env=None) -> PolicyAgent:

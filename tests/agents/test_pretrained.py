@@ -10,7 +10,7 @@ import pytest
 
 import machining_envs
 from agents.bench.declarations import BENCHMARKS
-from agents.rl import PRETRAINED_DIR, pretrained_seeds
+from agents.rl import PRETRAINED_DIR, pretrained, pretrained_seeds
 from machining_envs.core.splits import HELD_OUT
 
 FOLDERS = sorted(p for p in PRETRAINED_DIR.iterdir() if p.is_dir())
@@ -32,6 +32,13 @@ def test_every_env_has_a_pretrained_policy_in_the_benchmark():
     for spec in BENCHMARKS:
         for name in spec.learned:
             assert {r["env_id"] for r in _records(PRETRAINED_DIR / name)} == {spec.env_id}, name
+
+
+def test_an_unknown_pretrained_name_is_refused_at_once_naming_the_shipped_ones():
+    # It gave a factory that failed only when called ("no model at ...").
+    with pytest.raises(ValueError, match=r"pretrained name must be one of \[.*'turning_ppo'"):
+        pretrained("turning_pp")
+    assert pretrained("turning_ppo").learned
 
 
 @pytest.mark.parametrize("folder", FOLDERS, ids=lambda p: p.name)
