@@ -11,6 +11,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 import gymnasium as gym
+import numpy as np
 
 import machining_envs  # noqa: F401  (registers the env ids)
 from agents.eval import Evaluation, evaluate
@@ -217,7 +218,13 @@ def train(
     cfg = load_config(env_id, algo, config_path, overrides)  # all checks before anything starts
     _check_env_setup(cfg)
     vec_kind = _vec_kind(env_id, vec)
+    if not (isinstance(seed, (int, np.integer)) and not isinstance(seed, bool)) or not (
+        0 <= seed < 2**32
+    ):
+        raise ConfigError(f"seed must be an integer in [0, 2**32), got {seed!r}")
     if n_timesteps is not None:
+        if not isinstance(n_timesteps, (int, np.integer)) or isinstance(n_timesteps, bool):
+            raise ConfigError(f"n_timesteps must be an integer >= 1, got {n_timesteps!r}")
         if n_timesteps < 1:
             raise ConfigError(f"n_timesteps must be >= 1, got {n_timesteps}")
         cfg.n_timesteps = int(n_timesteps)

@@ -416,6 +416,24 @@ def test_native_vector_training_reproduces_a_fixed_seed_run(tmp_path, increment)
         np.testing.assert_array_equal(pa, pd)
 
 
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"seed": -1}, r"seed must be an integer in \[0, 2\*\*32\), got -1"),
+        ({"seed": True}, "seed must be an integer"),
+        ({"seed": "a"}, "seed must be an integer"),
+        ({"n_timesteps": 2.5}, "n_timesteps must be an integer >= 1, got 2.5"),
+    ],
+)
+def test_bad_seed_and_timesteps_are_refused_before_anything_is_written(
+    tiny, tmp_path, kwargs, message
+):
+    # A seed of -1 failed in SB3 after the run folder was made; 2.5 steps became 2.
+    with pytest.raises(ConfigError, match=message):
+        train(TURNING, "ppo", tmp_path / "r", config_path=tiny, progress_bar=False, **kwargs)
+    assert not (tmp_path / "r").exists()
+
+
 def test_bad_vec_kind_is_refused_before_training(tiny, tmp_path):
     with pytest.raises(ConfigError, match="vec must be one of"):
         train(TURNING, "ppo", tmp_path / "r", config_path=tiny, progress_bar=False, vec="gpu")
