@@ -833,17 +833,11 @@ class ContouringVectorEnv(LaneVectorEnv):
         **overrides,
     ):
         check_vector_args(self.env_name, num_threads, overrides)
-        self._core = core = _ContouringCore(
+        core = _ContouringCore(
             type(self).__name__, check_num_envs(num_envs), first_scenario(scenario), params, reward,
             max_episode_time_s, in_position_mm, divergence_mm, overrides,
         )  # fmt: skip
-        super().__init__(
-            num_envs, core.observation_space, core.action_space, num_threads, autoreset_mode
-        )
-        core.blocks = self.lane_blocks
-        self.default_scenario = self._lane_scenarios(scenario)
-        self.params = core.params
-        self.command_map = core.command_map
+        super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
 
     def _step_lanes(self, actions):
         core = self._core

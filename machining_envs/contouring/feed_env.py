@@ -1357,21 +1357,15 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
         **overrides,
     ):
         check_vector_args(self.env_name, num_threads, overrides)
-        self._core = core = _FeedCore(
+        core = _FeedCore(
             type(self).__name__, check_num_envs(num_envs), first_scenario(scenario), params, servo,
             tolerance_mm, reward, decision_interval_s, override_max, max_episode_time_s,
             in_position_mm, divergence_mm, overrides, actuation,
         )  # fmt: skip
-        super().__init__(
-            num_envs, core.observation_space, core.action_space, num_threads, autoreset_mode
-        )
-        core.blocks = self.lane_blocks
-        self.default_scenario = self._lane_scenarios(scenario)
-        self.params = core.params
+        super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
         self.servo = core.servo
         self.tolerance_mm = core.tolerance_mm
         self.override_max = core.override_max
-        self.command_map = core.command_map
 
     def _step_lanes(self, actions):
         core = self._core

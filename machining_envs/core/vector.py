@@ -144,11 +144,16 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
     def __init__(
         self,
         num_envs: int,
-        single_observation_space: gym.Space,
-        single_action_space: gym.Space,
+        core,
+        scenario,
         num_threads: int = 1,
         autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
     ) -> None:
+        """Take the process's ``core`` of ``num_envs`` lanes (built by the subclass from its
+        keywords): its kernel runs on this env's blocks of lanes, and the env has the
+        attributes every vector env has: ``params``, ``command_map``,
+        ``max_episode_time_s`` and ``default_scenario`` (``scenario``, checked: one for
+        every lane or a list of one per lane)."""
         self.num_envs = check_num_envs(num_envs)
         #: What happens to a lane whose episode ends (see the module docstring).
         self.autoreset_mode = check_autoreset_mode(autoreset_mode)
@@ -156,10 +161,15 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         #: The blocks of lanes the process's kernel steps at once, on ``num_threads``
         #: threads (the process's core runs its kernel through it).
         self.lane_blocks = LaneBlocks(self.num_envs, num_threads, self.min_block)
-        self.single_observation_space = single_observation_space
-        self.single_action_space = single_action_space
-        self.observation_space = batch_space(single_observation_space, self.num_envs)
-        self.action_space = batch_space(single_action_space, self.num_envs)
+        self._core = core
+        core.blocks = self.lane_blocks
+        self.single_observation_space = core.observation_space
+        self.single_action_space = core.action_space
+        self.observation_space = batch_space(core.observation_space, self.num_envs)
+        self.action_space = batch_space(core.action_space, self.num_envs)
+        self.params = core.params
+        self.command_map = core.command_map
+        self.max_episode_time_s = core.max_episode_time_s
         self.render_mode = None
         #: The step info's keys (as ``_step_lanes`` returns them) -> the masks every lane
         #: gets and the (key, mask) pairs, worked out once per set of keys.
@@ -174,6 +184,17 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         #: Lanes whose episode ended at the last step and that have not been reset since
         #: (``NEXT_STEP``: reset at the next step; ``DISABLED``: not steppable).
         self._ended = np.zeros(self.num_envs, dtype=bool)
+        self.default_scenario = self._lane_scenarios(scenario)
+
+    # ---- the command map, for classical agents -----------------------------------------
+    def action_to_command(self, action):
+        """The physical command for an action in [-1, 1] (``command_map``), as the single
+        env's."""
+        return self.command_map.action_to_command(action)
+
+    def command_to_action(self, command):
+        """The action in [-1, 1] for a physical command (``command_map``)."""
+        return self.command_map.command_to_action(command)
 
     # ---- the VectorEnv interface ------------------------------------------------------------
     def reset(

@@ -768,7 +768,7 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
         **overrides,
     ):
         check_vector_args(self.env_name, num_threads, overrides)
-        self._core = _DrillingCore(
+        core = _DrillingCore(
             type(self).__name__,
             check_num_envs(num_envs),
             first_scenario(scenario),
@@ -778,19 +778,8 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
             max_episode_time_s,
             overrides,
         )
-        super().__init__(
-            num_envs,
-            self._core.observation_space,
-            self._core.action_space,
-            num_threads,
-            autoreset_mode,
-        )
-        self._core.blocks = self.lane_blocks
-        self.default_scenario = self._lane_scenarios(scenario)
-        self.params = self._core.params
-        self.control = self._core.control
-        self.command_map = self._core.command_map
-        self.max_episode_time_s = self._core.max_episode_time_s
+        super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
+        self.control = core.control
 
     def _step_lanes(self, actions):
         core = self._core

@@ -1089,7 +1089,7 @@ class EndMillingVectorEnv(LaneVectorEnv):
         **overrides,
     ):
         check_vector_args(self.env_name, num_threads, overrides)
-        self._core = _MillingCore(
+        core = _MillingCore(
             type(self).__name__,
             check_num_envs(num_envs),
             first_scenario(scenario),
@@ -1100,26 +1100,7 @@ class EndMillingVectorEnv(LaneVectorEnv):
             overrides,
             actuation,
         )
-        super().__init__(
-            num_envs,
-            self._core.observation_space,
-            self._core.action_space,
-            num_threads,
-            autoreset_mode,
-        )
-        self._core.blocks = self.lane_blocks
-        self.default_scenario = self._lane_scenarios(scenario)
-        self.params = self._core.params
-        self.command_map = self._core.command_map
-        self.max_episode_time_s = self._core.max_episode_time_s
-
-    def action_to_command(self, action):
-        """Command U (counts) for an action in [-1, 1]."""
-        return self.command_map.action_to_command(action)
-
-    def command_to_action(self, command):
-        """Action in [-1, 1] for a command U (counts)."""
-        return self.command_map.command_to_action(command)
+        super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
 
     def _step_lanes(self, actions):
         core = self._core

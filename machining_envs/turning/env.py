@@ -1107,7 +1107,7 @@ class TurningVectorEnv(LaneVectorEnv):
         **overrides,
     ):
         check_vector_args(self.env_name, num_threads, overrides)
-        self._core = _TurningCore(
+        core = _TurningCore(
             type(self).__name__,
             check_num_envs(num_envs),
             first_scenario(scenario),
@@ -1118,18 +1118,7 @@ class TurningVectorEnv(LaneVectorEnv):
             overrides,
             actuation,
         )
-        super().__init__(
-            num_envs,
-            self._core.observation_space,
-            self._core.action_space,
-            num_threads,
-            autoreset_mode,
-        )
-        self._core.blocks = self.lane_blocks
-        self.default_scenario = self._lane_scenarios(scenario)
-        self.params = self._core.params
-        self.command_map = self._core.command_map
-        self.max_episode_time_s = self._core.max_episode_time_s
+        super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
 
     def _step_lanes(self, actions):
         core = self._core

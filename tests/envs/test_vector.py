@@ -364,6 +364,24 @@ def test_an_autoreset_that_raises_leaves_the_batch_to_reset(mode):
     env.close()
 
 
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_a_vector_env_has_the_single_envs_attributes_and_command_map(env_id):
+    """What agents and users read of an env, the same on both (the contouring vector envs
+    had no max_episode_time_s nor action_to_command)."""
+    single = gym.make(env_id).unwrapped
+    vec = gym.make_vec(env_id, num_envs=2)
+    assert vec.params == single.params
+    assert vec.max_episode_time_s == single.max_episode_time_s
+    for a in (-1.0, -0.3, 0.0, 0.7):
+        action = np.full(single.action_space.shape, a)
+        command = single.action_to_command(action)
+        np.testing.assert_array_equal(vec.action_to_command(action), command)
+        np.testing.assert_array_equal(
+            vec.command_to_action(command), single.command_to_action(command)
+        )
+    vec.close()
+
+
 def _lane_specs(env_id: str, n: int) -> list:
     """n different scenario names of the env (its own list, in order)."""
     names = sorted(gym.make_vec(env_id, num_envs=1)._core.scenario_types[1])
