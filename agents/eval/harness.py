@@ -217,11 +217,26 @@ class Evaluation:
         skip = {"agent", "scenario", "episode", "seed", "env_id"}
         return [k for k in self.rows[0] if k not in skip] if self.rows else []
 
+    def _columns(self, metrics) -> list[str]:
+        """``metrics`` as a list (one name alone is a list of one; none: every metric)."""
+        if isinstance(metrics, str):
+            return [metrics]
+        return list(metrics or self.metric_names())
+
     def summary(
         self, metrics: Sequence[str] | None = None, by: Sequence[str] = ("agent", "scenario")
     ):
-        """Mean, standard deviation and count of each metric per group."""
-        metrics = list(metrics or self.metric_names())
+        """Mean, standard deviation and count of each metric per group. ``ValueError``
+        names a metric or grouping key that some row lacks, with the metrics there are."""
+        metrics = self._columns(metrics)
+        by = [by] if isinstance(by, str) else list(by)
+        for key in [*by, *metrics]:
+            missing = sum(key not in r for r in self.rows)
+            if missing:
+                raise ValueError(
+                    f"{key!r} is not a column of {missing} of the {len(self.rows)} rows; "
+                    f"the metrics of the first row are {self.metric_names()}"
+                )
         groups: dict[tuple, list[dict]] = {}
         for r in self.rows:
             groups.setdefault(tuple(r[k] for k in by), []).append(r)
@@ -240,7 +255,8 @@ class Evaluation:
         self, metrics: Sequence[str] | None = None, by: Sequence[str] = ("agent", "scenario")
     ) -> str:
         """Markdown table of ``mean ± std`` per group (breakage and finished as counts)."""
-        metrics = list(metrics or self.metric_names())
+        metrics = self._columns(metrics)
+        by = [by] if isinstance(by, str) else list(by)
         summ = self.summary(metrics, by)
         head = [*by, "n", *metrics]
         lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]

@@ -46,7 +46,8 @@ class SB3VecEnv(VecEnv):
         counts episodes itself) may pass ``()``: the terminal observation and
         ``TimeLimit.truncated`` are then given where an env ends, all SB3 reads. The
         copies are Python work per env and key: at N = 1024 the full info costs several
-        times the batched step itself.
+        times the batched step itself. A key the env's info does not hold at the first
+        reset is refused then (``ValueError`` listing the keys it has).
     """
 
     def __init__(self, venv: gym.vector.VectorEnv, info_keys: Iterable[str] | None = None):
@@ -57,7 +58,10 @@ class SB3VecEnv(VecEnv):
                 f"AutoresetMode.SAME_STEP, got {mode!r}"
             )
         self.venv = venv
+        if isinstance(info_keys, str):  # one key alone (a string would be its letters)
+            info_keys = (info_keys,)
         self.info_keys = None if info_keys is None else tuple(info_keys)
+        self._keys_checked = self.info_keys is None
         super().__init__(venv.num_envs, venv.single_observation_space, venv.single_action_space)
         self.render_mode = getattr(venv, "render_mode", None)
         self._actions: np.ndarray | None = None
@@ -77,6 +81,14 @@ class SB3VecEnv(VecEnv):
                 "'scenario' may be a list of one scenario per env)"
             )
         obs, info = self.venv.reset(seed=seed, options=options)
+        if not self._keys_checked:
+            unknown = [k for k in self.info_keys if k not in info]
+            if unknown:
+                raise ValueError(
+                    f"info_keys {unknown} are not keys of the env's info; it has "
+                    f"{sorted(k for k in info if not k.startswith('_'))}"
+                )
+            self._keys_checked = True
         self._reset_seeds()
         self._reset_options()
         self.reset_infos = self._split(info, np.zeros(self.num_envs, dtype=bool))

@@ -50,6 +50,13 @@ def test_bad_arguments_are_refused_naming_them_and_one_scenario_is_a_list_of_one
     assert one.rows == evaluate(f, TURNING, ["paper_700"], n_episodes=2).rows
 
 
+def test_a_table_of_a_metric_the_rows_lack_names_it_and_the_metrics_there_are():
+    ev = evaluate(FixedGainPI.from_env, TURNING, ["paper_700"], n_episodes=2)
+    with pytest.raises(ValueError, match=r"'iea' is not a column of 2 of the 2 rows.*'iae'"):
+        ev.to_markdown(["iea"])  # a bare KeyError: 'iea'
+    assert ev.to_markdown("iae") == ev.to_markdown(["iae"])  # was the letters i, a, e
+
+
 def test_same_seeds_give_every_agent_the_same_workpieces():
     a = evaluate(
         FixedGainPI.from_env, TURNING, ["ood"], n_episodes=3, seed=5, keep_trajectories=True

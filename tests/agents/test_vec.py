@@ -11,6 +11,7 @@ from stable_baselines3.common.env_util import make_vec_env
 
 import machining_envs
 from agents.rl.vec import SB3VecEnv
+from tests.helpers import TURNING
 
 
 def _pair(env_id: str, n: int, seed: int, **kwargs):
@@ -103,3 +104,13 @@ def test_refuses_different_options_per_env():
     venv.set_options({"scenario": "paper_405"})  # one dict for every env
     venv.reset()
     assert list(venv.venv.unwrapped._core.names.array()) == ["paper_405", "paper_405"]
+
+
+def test_info_keys_are_checked_at_the_first_reset_and_one_key_is_a_tuple_of_one():
+    # An unknown key was dropped without a word; a string was taken letter by letter.
+    venv = SB3VecEnv(gym.make_vec(TURNING, num_envs=2), info_keys=("nope", "force_N"))
+    with pytest.raises(ValueError, match=r"info_keys \['nope'\] are not keys.*'force_N'"):
+        venv.reset()
+    venv = SB3VecEnv(gym.make_vec(TURNING, num_envs=2), info_keys="force_N")
+    venv.reset()
+    assert [set(i) for i in venv.reset_infos] == [{"force_N"}, {"force_N"}]
