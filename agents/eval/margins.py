@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import gymnasium as gym
 import numpy as np
 
+from agents.base import check_positive
 from machining_envs.turning import TurningEnv
 from machining_envs.turning.scenarios import DepthProfile, TurningScenario
 
@@ -38,6 +39,15 @@ class OperatingPoint:
     depth_mm: float
     force_limit_N: float = 1000.0
     settle_steps: int = 300
+
+    def __post_init__(self) -> None:
+        steps = self.settle_steps
+        if not (
+            isinstance(steps, (int, np.integer)) and not isinstance(steps, bool) and steps >= 1
+        ):
+            raise ValueError(f"settle_steps must be an integer >= 1, got {steps!r}")
+        check_positive("depth_mm", self.depth_mm, 1e3)
+        self.scenario()  # the scenario's own checks: speed, depth and limit in its ranges
 
     def scenario(self) -> TurningScenario:
         profile = DepthProfile.steps((self.depth_mm,), 2000.0, name=f"{self.depth_mm} mm")

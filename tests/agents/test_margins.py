@@ -82,3 +82,18 @@ def test_an_agent_that_does_not_settle_is_reported_not_linearised():
 
     with pytest.raises(ValueError, match="has not settled"):
         settle(Oscillating(), OperatingPoint(405.0, 2.0, settle_steps=60))
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"settle_steps": 0}, "settle_steps must be an integer >= 1, got 0"),
+        ({"settle_steps": 2.5}, "settle_steps must be an integer >= 1"),  # range(2.5)
+        ({"depth_mm": -1.0}, r"depth_mm must be in \(0, 1000\]"),
+        ({"spindle_rpm": float("nan")}, "spindle_rpm must be in"),
+    ],
+)
+def test_a_bad_operating_point_is_refused_when_made_naming_the_field(kwargs, message):
+    # settle_steps=0 failed deep in the linearisation ("zero-size array to reduction").
+    with pytest.raises(ValueError, match=message):
+        OperatingPoint(**{"spindle_rpm": 405.0, "depth_mm": 1.0, **kwargs})
