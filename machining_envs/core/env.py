@@ -30,6 +30,7 @@ __all__ = [
     "EpisodeLog",
     "LaneNames",
     "LaneObjects",
+    "start_each",
     "record_step",
 ]
 
@@ -416,6 +417,17 @@ class LaneObjects:
             self._prune_at = 2 * len(self._recipes) + 64
 
 
+def start_each(core, lanes: np.ndarray, spec, rngs) -> None:
+    """``core.start`` of each lane ``k`` of ``lanes`` on ``spec`` (one for all, or a list of
+    one per lane) with ``rngs[k]``; a start's ``ValueError`` (a scenario its parameters
+    refuse) names the lane."""
+    for k in lanes.tolist():
+        try:
+            core.start(k, spec[k] if isinstance(spec, list) else spec, rngs[k])
+        except ValueError as err:
+            raise ValueError(f"lane {k}: {err}") from None
+
+
 def split_batch(core, lanes: np.ndarray, spec, rngs, factories: dict):
     """The first half of a core's ``start_lanes``: the split factory of ``spec`` (a name in
     ``factories``) whose scenarios ``core`` starts ``lanes`` on together
@@ -424,8 +436,7 @@ def split_batch(core, lanes: np.ndarray, spec, rngs, factories: dict):
     (another name, a scenario object, a split the batch does not take)."""
     factory = factories.get(spec) if isinstance(spec, str) else None
     if not core._batches(factory):
-        for k in lanes.tolist():
-            core.start(k, spec, rngs[k])
+        start_each(core, lanes, spec, rngs)
         return None
     core.rngs.bind_many(lanes.tolist(), rngs)  # the scenarios are drawn with them, and the noise
     return factory

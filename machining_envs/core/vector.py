@@ -70,7 +70,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from machining_envs.core.blocks import MIN_BLOCK, LaneBlocks, check_num_threads
-from machining_envs.core.env import check_scenario_spec, real_actions, scenario_option
+from machining_envs.core.env import check_scenario_spec, real_actions, scenario_option, start_each
 
 __all__ = [
     "LaneVectorEnv",
@@ -293,8 +293,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             if start_lanes is not None and not isinstance(spec, list):
                 start_lanes(lanes, spec, self.lane_rngs)
             else:
-                for i in lanes.tolist():
-                    core.start(i, spec[i] if isinstance(spec, list) else spec, self.lane_rngs[i])
+                start_each(core, lanes, spec, self.lane_rngs)
         except BaseException:
             self._started = False
             raise

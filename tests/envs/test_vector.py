@@ -336,7 +336,7 @@ def test_a_start_that_raises_part_way_leaves_the_batch_to_reset():
     env.reset(seed=0, options={"scenario": "paper_405"})  # 1 kN limits
     env.step(action)
     high = dataclasses.replace(env._core.scenarios[0], force_limit_N=2000.0)
-    with pytest.raises(ValueError, match="below the tool's breakage_force_N"):
+    with pytest.raises(ValueError, match="^lane 1: .* below the tool's breakage_force_N"):
         env.reset(options={"scenario": ["paper_405", high]})
     with pytest.raises(RuntimeError, match="call reset"):
         env.step(action)
@@ -356,7 +356,7 @@ def test_an_autoreset_that_raises_leaves_the_batch_to_reset(mode):
     )  # fmt: skip
     env.reset(seed=1)  # its first limit is below 1 kN
     action = np.zeros((1, 1), dtype=np.float32)
-    with pytest.raises(ValueError, match="force_limit_N .* below the tool's breakage_force_N"):
+    with pytest.raises(ValueError, match="^lane 0: .*force_limit_N .* below the tool's breakage"):
         for _ in range(20):  # three steps an episode
             env.step(action)
     with pytest.raises(RuntimeError, match="call reset"):
