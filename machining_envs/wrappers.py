@@ -34,6 +34,10 @@ from gymnasium import spaces
 __all__ = ["IncrementalAction", "ActionIncrement"]
 
 
+def _is_real(v) -> bool:
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+
+
 class ActionIncrement(NamedTuple):
     """What :class:`IncrementalAction` does, as data: enough to apply it outside the wrapper
     (``agents.rl.PolicyAgent``) and to record it with a trained policy (``_asdict()``)."""
@@ -41,6 +45,25 @@ class ActionIncrement(NamedTuple):
     max_step: float
     prev_action_index: int
     hide_action: bool = False
+
+    def check(self, n_obs: int | None = None) -> ActionIncrement:
+        """``self`` if its fields can be applied (``max_step`` in (0, 2], an index of the
+        observation's ``n_obs`` fields, ``hide_action`` a bool); else ``ValueError`` naming
+        the field."""
+        step, index = self.max_step, self.prev_action_index
+        if not (_is_real(step) and math.isfinite(step) and 0.0 < step <= 2.0):
+            raise ValueError(f"max_step must be a number in (0, 2], got {step!r}")
+        hi = "n_obs - 1" if n_obs is None else n_obs - 1
+        if not (
+            isinstance(index, (int, np.integer))
+            and not isinstance(index, bool)
+            and 0 <= index
+            and (n_obs is None or index < n_obs)
+        ):
+            raise ValueError(f"prev_action_index must be an integer in [0, {hi}], got {index!r}")
+        if not isinstance(self.hide_action, (bool, np.bool_)):
+            raise ValueError(f"hide_action must be True or False, got {self.hide_action!r}")
+        return self
 
     def policy_observation(self, obs) -> np.ndarray:
         """What the agent sees of ``obs``."""
@@ -70,13 +93,7 @@ class IncrementalAction(gym.Wrapper):
 
     def __init__(self, env: gym.Env, max_step: float = 0.25, hide_action: bool = False):
         super().__init__(env)
-        if not (
-            isinstance(max_step, (int, float))
-            and not isinstance(max_step, bool)
-            and math.isfinite(max_step)
-            and 0.0 < max_step <= 2.0
-        ):
-            raise ValueError(f"max_step must be a number in (0, 2], got {max_step!r}")
+        ActionIncrement(max_step, 0, False).check()  # max_step, before the env's checks
         base = env.unwrapped
         index = getattr(base, "OBS_INDEX", {}).get("prev_action")
         space = env.action_space
@@ -90,9 +107,7 @@ class IncrementalAction(gym.Wrapper):
                 f"IncrementalAction needs an env with a Box(-1, 1, (1,)) action and an "
                 f"OBS_INDEX['prev_action'] field; {type(base).__name__} has not"
             )
-        if not isinstance(hide_action, bool):
-            raise ValueError(f"hide_action must be True or False, got {hide_action!r}")
-        self.increment = ActionIncrement(float(max_step), int(index), hide_action)
+        self.increment = ActionIncrement(float(max_step), int(index), hide_action).check()
         self._obs: np.ndarray | None = None
 
     @staticmethod

@@ -164,7 +164,7 @@ def load_policy(model_path, name: str | None = None, algo: str | None = None, st
     if meta.get("action_increment"):
         from machining_envs.wrappers import ActionIncrement
 
-        increment = ActionIncrement(**meta["action_increment"])
+        increment = ActionIncrement(**meta["action_increment"]).check()
     if algo is None:
         m = re.search(r"(ppo|sac|td3)", model_path.name.lower())
         if m is None:

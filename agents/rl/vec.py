@@ -173,7 +173,8 @@ class VecIncrementalAction(VecEnvWrapper):
 
     def __init__(self, venv: VecEnv, increment: ActionIncrement):
         super().__init__(venv)
-        self.increment = increment
+        shape = venv.observation_space.shape
+        self.increment = ActionIncrement(*increment).check(shape[0] if shape else None)
         self._raw: np.ndarray | None = None
 
     def reset(self):

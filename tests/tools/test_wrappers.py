@@ -4,7 +4,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from machining_envs.wrappers import IncrementalAction
+from machining_envs.wrappers import ActionIncrement, IncrementalAction
 from tests.helpers import CONTOURING, DRILLING, MILLING, TURNING
 
 
@@ -74,3 +74,22 @@ def test_non_finite_delta_and_step_before_reset_raise():
     env.reset(seed=0)
     with pytest.raises(ValueError, match="finite"):
         _step(env, float("nan"))
+
+
+@pytest.mark.parametrize(
+    "fields, message",
+    [
+        ((float("nan"), 2), r"max_step must be a number in \(0, 2\], got nan"),
+        ((True, 2), "max_step must be a number"),
+        ((0.1, 7), r"prev_action_index must be an integer in \[0, 6\], got 7"),
+        ((0.1, 2, "yes"), "hide_action must be True or False"),
+    ],
+)
+def test_the_batched_increment_checks_its_fields(fields, message):
+    # An ActionIncrement made by hand was applied as it came: a NaN step made NaN actions,
+    # an index past the observation empty ones, (2, 0), refused by the env mid-step.
+    from agents.rl.vec import SB3VecEnv, VecIncrementalAction
+
+    venv = SB3VecEnv(gym.make_vec("machining_envs/Turning-v0", num_envs=2))
+    with pytest.raises(ValueError, match=message):
+        VecIncrementalAction(venv, ActionIncrement(*fields))
