@@ -385,6 +385,10 @@ def run_benchmark(
     contouring envs already use both); the numbers do not depend on it.
     """
     envs = check_env_ids(envs)
+    if not (isinstance(seed, (int, np.integer)) and not isinstance(seed, bool)) or not (
+        0 <= seed < 2**32
+    ):
+        raise ValueError(f"seed must be an integer in [0, 2**32), got {seed!r}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     n_test, n_ood, n_oracle = SIZES["quick" if quick else "full"]

@@ -34,6 +34,16 @@ def _positive_float(text: str) -> float:
     return v
 
 
+def _seed(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if not 0 <= v < 2**32:
+        raise argparse.ArgumentTypeError(f"must be in [0, 2**32), got {text}")
+    return v
+
+
 def _positive_int(text: str) -> int:
     try:
         v = int(text)
@@ -114,7 +124,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--out", default="results", help="output folder (default: results)")
     b.add_argument("--env", nargs="+", default=None, help="only these env ids (default: all)")
     b.add_argument("--no-reproductions", action="store_true", help="skip the paper reproductions")
-    b.add_argument("--seed", type=int, default=0, help="seed of the bootstrap intervals")
+    b.add_argument("--seed", type=_seed, default=0, help="seed of the bootstrap intervals")
     b.add_argument("--jobs", type=_positive_int, default=None,
                    help="envs run at once, one process each (default: 1)")  # fmt: skip
 
@@ -138,7 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     r.add_argument("process", choices=[p.name for p in PROCESSES], help="which paper")
     r.add_argument("--out", default="results", help="folder for the figure (default: results)")
-    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--seed", type=_seed, default=0)
     r.add_argument(
         "--sensor-gain",
         type=_positive_float,
@@ -153,7 +163,7 @@ def build_parser() -> argparse.ArgumentParser:
         "normalisation statistics, checkpoints and its evaluations on the validation split.",
     )
     _training_arguments(t, "run folder (must be new unless --resume)")
-    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--seed", type=_seed, default=0)
     t.add_argument("--resume", action="store_true", help="continue from the run's last checkpoint")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -190,7 +200,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--env", required=True, help="env id, e.g. machining_envs/Turning-v0")
     e.add_argument("--scenarios", nargs="+", default=["validation"], help="scenario names")
     e.add_argument("--episodes", type=int, default=20, help="episodes per scenario")
-    e.add_argument("--seed", type=int, default=5000, help="first episode seed (validation's)")
+    e.add_argument("--seed", type=_seed, default=5000, help="first episode seed (validation's)")
     e.add_argument("--algo", choices=["ppo", "sac", "td3"], default=None,
                    help="the model's algorithm (default: from config.json or the file name)")  # fmt: skip
     e.add_argument("--stats", default=None,

@@ -42,6 +42,24 @@ def test_cli_rejects_bad_arguments():
         main(["reproduce", "turning", "--sensor-gain", "-3"])
 
 
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["benchmark", "--quick"],
+        ["reproduce", "turning"],
+        ["train", "--env", "x", "--out", "y"],
+        ["evaluate", "--model", "m", "--env", "x"],
+    ],
+)
+def test_a_negative_seed_is_refused_before_anything_runs(command, capsys):
+    # The benchmark ran its first env and then failed in numpy ("Seed must be between 0
+    # and 2**32 - 1"); reproduce failed in gymnasium.
+    with pytest.raises(SystemExit) as exit_:
+        main([*command, "--seed", "-1"])
+    assert exit_.value.code == 2
+    assert "--seed: must be in [0, 2**32), got -1" in capsys.readouterr().err
+
+
 def test_cli_help_shows_defaults_and_version(capsys):
     with pytest.raises(SystemExit) as exit_:
         main(["--version"])
@@ -83,6 +101,11 @@ def test_cli_user_errors_are_one_line_with_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "envs (--env) must be ids among" in err and "['nope']" in err
     assert err.count("\n") == 1 and not out.exists()
+    from agents.bench.benchmark import run_benchmark
+
+    with pytest.raises(ValueError, match=r"seed must be an integer in \[0, 2\*\*32\)"):
+        run_benchmark(out, quick=True, seed=-1)
+    assert not out.exists()
     assert main(["convert-stats", str(blocker)]) == 2
     assert "convert-stats" in capsys.readouterr().err
 
