@@ -49,6 +49,7 @@ import numpy as np
 from scipy.linalg import expm
 from scipy.optimize import least_squares
 
+from machining_envs.core.checks import is_real
 from machining_envs.milling.plant import KGF, MillingParams, mean_forces
 from machining_envs.turning.plant import TurningParams
 
@@ -124,11 +125,6 @@ def _vector(name: str, values, n: int | None = None, per: str = "cut") -> np.nda
     if bad.size:
         raise IdentificationError(f"{name} must be finite; entry {bad[0]} is {a[bad[0]]!r}")
     return a
-
-
-def _is_number(v) -> bool:
-    """A real number, not a bool (``True`` is no step height)."""
-    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
 
 
 def _positive(name: str, a: np.ndarray) -> np.ndarray:
@@ -211,7 +207,7 @@ def fit_power_law(
     if unknown:
         raise IdentificationError(f"fixed_exponents names unknown factors {sorted(unknown)}")
     for k, e in fixed.items():
-        if not (_is_number(e) and math.isfinite(e)):
+        if not (is_real(e) and math.isfinite(e)):
             raise IdentificationError(f"fixed_exponents[{k!r}] must be a finite number, got {e!r}")
     y = _positive("response", _vector("response", response))
     n = y.size
@@ -662,7 +658,7 @@ def fit_servo_step(
     t_s, response, step: float = 1.0, base: TurningParams | MillingParams | None = None
 ) -> ServoFit:
     """Fit the servo to its response to a command step of height ``step`` at ``t_s[0]``."""
-    if not (_is_number(step) and math.isfinite(step) and step != 0):
+    if not (is_real(step) and math.isfinite(step) and step != 0):
         raise IdentificationError(f"step must be a non-zero number, got {step!r}")
     t = _vector("t_s", t_s)
     return fit_servo(t, np.full(t.size, float(step)), response, base)
@@ -683,9 +679,9 @@ def fit_servo_sine(
     alone cannot separate (two numbers, gain and phase, for three unknowns).
     """
     for name, v in (("amplitude", amplitude), ("freq_hz", freq_hz)):
-        if not (_is_number(v) and math.isfinite(v) and v > 0):
+        if not (is_real(v) and math.isfinite(v) and v > 0):
             raise IdentificationError(f"{name} must be > 0, got {v!r}")
-    if not (_is_number(offset) and math.isfinite(offset)):
+    if not (is_real(offset) and math.isfinite(offset)):
         raise IdentificationError(f"offset must be a finite number, got {offset!r}")
     t = _vector("t_s", t_s)
     u = offset + amplitude * np.sin(2.0 * math.pi * freq_hz * (t - t[0]))
@@ -725,7 +721,7 @@ class TurningRecordFit:
     def interval(self, name: str, z: float = 1.96) -> tuple[float, float]:
         """Approximate 95 % interval (``z`` standard errors) of ``"force_coefficient"`` (Kf,
         from the log-space error) or ``"feed_exponent"`` (p)."""
-        if not (_is_number(z) and 0 < z < math.inf):
+        if not (is_real(z) and 0 < z < math.inf):
             raise ValueError(f"z must be a positive number of standard errors, got {z!r}")
         if name == "force_coefficient":
             c, se = self.fit.coefficient, self.fit.std_errors["log_coefficient"]
@@ -828,11 +824,11 @@ def fit_turning_record(
     rpm = _positive("spindle_rpm", _vector("spindle_rpm", cols.get("spindle_rpm"), n, "sample"))
     if depth_mm is not None and "depth_mm" in cols:
         raise IdentificationError("give depth_mm as a column or as an argument, not both")
-    if depth_mm is not None and not (_is_number(depth_mm) and 0 < depth_mm < math.inf):
+    if depth_mm is not None and not (is_real(depth_mm) and 0 < depth_mm < math.inf):
         raise IdentificationError(
             f"depth_mm must be a positive number (the depth of the whole record), got {depth_mm!r}"
         )
-    if not (_is_number(steady_tolerance) and 0 < steady_tolerance < 1):
+    if not (is_real(steady_tolerance) and 0 < steady_tolerance < 1):
         raise IdentificationError(
             "steady_tolerance must lie in (0, 1) (the share of the command by which the "
             f"lagged command may differ from it), got {steady_tolerance!r}"

@@ -31,11 +31,9 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from machining_envs.core.checks import is_integer, is_real
+
 __all__ = ["IncrementalAction", "ActionIncrement"]
-
-
-def _is_real(v) -> bool:
-    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
 
 
 class ActionIncrement(NamedTuple):
@@ -51,15 +49,10 @@ class ActionIncrement(NamedTuple):
         observation's ``n_obs`` fields, ``hide_action`` a bool); else ``ValueError`` naming
         the field."""
         step, index = self.max_step, self.prev_action_index
-        if not (_is_real(step) and math.isfinite(step) and 0.0 < step <= 2.0):
+        if not (is_real(step) and math.isfinite(step) and 0.0 < step <= 2.0):
             raise ValueError(f"max_step must be a number in (0, 2], got {step!r}")
         hi = "n_obs - 1" if n_obs is None else n_obs - 1
-        if not (
-            isinstance(index, (int, np.integer))
-            and not isinstance(index, bool)
-            and 0 <= index
-            and (n_obs is None or index < n_obs)
-        ):
+        if not (is_integer(index) and 0 <= index and (n_obs is None or index < n_obs)):
             raise ValueError(f"prev_action_index must be an integer in [0, {hi}], got {index!r}")
         if not isinstance(self.hide_action, (bool, np.bool_)):
             raise ValueError(f"hide_action must be True or False, got {self.hide_action!r}")

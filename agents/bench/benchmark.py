@@ -27,6 +27,7 @@ from agents.bench.spec import BenchmarkSpec
 from agents.bench.tune import load_tuned, tuned_factory
 from agents.eval import Evaluation, agent_name, evaluate, rollout
 from agents.eval.stats import agent_stats, iqm, paired_difference, rliable_seed
+from machining_envs.core.checks import is_seed
 from machining_envs.core.splits import split_seeds
 
 __all__ = ["run_benchmark", "check_env_ids", "SIZES"]
@@ -385,9 +386,7 @@ def run_benchmark(
     contouring envs already use both); the numbers do not depend on it.
     """
     envs = check_env_ids(envs)
-    if not (isinstance(seed, (int, np.integer)) and not isinstance(seed, bool)) or not (
-        0 <= seed < 2**32
-    ):
+    if not is_seed(seed):
         raise ValueError(f"seed must be an integer in [0, 2**32), got {seed!r}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

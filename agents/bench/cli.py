@@ -20,6 +20,7 @@ import sys
 from pathlib import Path
 
 from agents.bench.declarations import PROCESSES, benchmark_spec, process
+from machining_envs.core.checks import is_seed
 
 __all__ = ["main", "build_parser"]
 
@@ -39,7 +40,7 @@ def _seed(text: str) -> int:
         v = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if not 0 <= v < 2**32:
+    if not is_seed(v):
         raise argparse.ArgumentTypeError(f"must be in [0, 2**32), got {text}")
     return v
 

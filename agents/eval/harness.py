@@ -11,6 +11,7 @@ import gymnasium as gym
 import numpy as np
 
 import machining_envs  # noqa: F401  (registers the env ids)
+from machining_envs.core.checks import is_integer
 from machining_envs.core.metrics import regulation_metrics
 from machining_envs.core.score import REGULATION_SCORE, Task
 
@@ -282,10 +283,6 @@ class Evaluation:
             w.writerows(self.rows)
 
 
-def _is_int(v) -> bool:
-    return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
-
-
 def _iterable(v) -> bool:
     try:
         iter(v)
@@ -336,9 +333,9 @@ def evaluate(
     progress : bool
         Show a progress bar (tqdm, on stderr) over the episodes.
     """
-    if not _is_int(n_episodes) or n_episodes < 1:
+    if not is_integer(n_episodes) or n_episodes < 1:
         raise ValueError(f"n_episodes must be an integer >= 1, got {n_episodes!r}")
-    if not _is_int(seed) or seed < 0:
+    if not is_integer(seed) or seed < 0:
         raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
     if env_kwargs is not None and not isinstance(env_kwargs, dict):
         raise TypeError(f"env_kwargs must be a dict or None, got {type(env_kwargs).__name__}")

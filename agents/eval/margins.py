@@ -22,6 +22,7 @@ import gymnasium as gym
 import numpy as np
 
 from agents.base import check_positive
+from machining_envs.core.checks import is_integer
 from machining_envs.turning import TurningEnv
 from machining_envs.turning.scenarios import DepthProfile, TurningScenario
 
@@ -42,9 +43,7 @@ class OperatingPoint:
 
     def __post_init__(self) -> None:
         steps = self.settle_steps
-        if not (
-            isinstance(steps, (int, np.integer)) and not isinstance(steps, bool) and steps >= 1
-        ):
+        if not (is_integer(steps) and steps >= 1):
             raise ValueError(f"settle_steps must be an integer >= 1, got {steps!r}")
         check_positive("depth_mm", self.depth_mm, 1e3)
         self.scenario()  # the scenario's own checks: speed, depth and limit in its ranges

@@ -25,6 +25,7 @@ from agents.rl.callbacks import (
 from agents.rl.config import ConfigError, TrainConfig, load_config
 from agents.rl.policy import load_policy
 from agents.rl.stats import read_stats, restore_stats, save_stats, stats_path
+from machining_envs.core.checks import is_integer, is_seed
 from machining_envs.core.score import REGULATION_SCORE, PrimaryScore
 from machining_envs.core.splits import check_not_held_out
 
@@ -127,7 +128,6 @@ def _action_noise(cfg: TrainConfig, venv) -> dict:
     process per action dimension), or nothing."""
     if cfg.noise_type is None:
         return {}
-    import numpy as np
     from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
 
     n = venv.action_space.shape[0]
@@ -218,12 +218,10 @@ def train(
     cfg = load_config(env_id, algo, config_path, overrides)  # all checks before anything starts
     _check_env_setup(cfg)
     vec_kind = _vec_kind(env_id, vec)
-    if not (isinstance(seed, (int, np.integer)) and not isinstance(seed, bool)) or not (
-        0 <= seed < 2**32
-    ):
+    if not is_seed(seed):
         raise ConfigError(f"seed must be an integer in [0, 2**32), got {seed!r}")
     if n_timesteps is not None:
-        if not isinstance(n_timesteps, (int, np.integer)) or isinstance(n_timesteps, bool):
+        if not is_integer(n_timesteps):
             raise ConfigError(f"n_timesteps must be an integer >= 1, got {n_timesteps!r}")
         if n_timesteps < 1:
             raise ConfigError(f"n_timesteps must be >= 1, got {n_timesteps}")

@@ -23,6 +23,9 @@ __all__ = [
     "REAL_TYPES",
     "PY_NUMBER_TYPES",
     "INTEGER_TYPES",
+    "is_real",
+    "is_integer",
+    "is_seed",
     "check_range",
     "check_integer",
     "check_below",
@@ -34,6 +37,22 @@ REAL_TYPES: tuple[type, ...] = (int, float, np.integer, np.floating)
 PY_NUMBER_TYPES: tuple[type, ...] = (int, float)
 #: Python's and numpy's integer types: what an integer check accepts by default.
 INTEGER_TYPES: tuple[type, ...] = (int, np.integer)
+
+
+def is_real(value) -> bool:
+    """Whether ``value`` is a real number of ``REAL_TYPES`` and not a bool (finite or not:
+    the caller says which range it takes)."""
+    return isinstance(value, REAL_TYPES) and not isinstance(value, bool)
+
+
+def is_integer(value) -> bool:
+    """Whether ``value`` is an integer of ``INTEGER_TYPES`` and not a bool."""
+    return isinstance(value, INTEGER_TYPES) and not isinstance(value, bool)
+
+
+def is_seed(value) -> bool:
+    """Whether ``value`` can seed numpy's generators: an integer in ``[0, 2**32)``."""
+    return is_integer(value) and 0 <= value < 2**32
 
 
 def check_range(
