@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import abc
 import difflib
 import math
 from collections.abc import Iterable, Sequence
@@ -515,15 +516,16 @@ def ready_to_render(env) -> bool:
     return True
 
 
-class LaneEnv(gym.Env):
+class LaneEnv(gym.Env, abc.ABC):
     """The single env of a process whose physics is a core of lanes: the core of one lane
     that its vector env holds N of, so that a lane and the single env run the same code.
 
     A subclass builds its core in ``__init__`` and hands it to :meth:`_adopt`, and says
-    how an action goes in (:meth:`_set_action`) and what a step gave
-    (:meth:`_outcome`); ``reset``, ``step`` and the command map are shared. The core
-    provides ``start(lane, spec, rng)``, ``step()``, ``lane_info(lane)``, ``obs``,
-    ``scenarios``, ``scenario_types`` (the scenario class and the names), ``params``, ``reward_weights``, ``max_episode_time_s``,
+    how an action goes in (:meth:`_set_action`), what a step gave (:meth:`_outcome`) and
+    what it keeps of a new episode (:meth:`_began`); ``reset``, ``step`` and the command
+    map are shared. The core provides ``start(lane, spec, rng)``, ``step()``,
+    ``lane_info(lane)``, ``obs``, ``scenarios``, ``scenario_types`` (the scenario class
+    and the names), ``params``, ``reward_weights``, ``max_episode_time_s``,
     ``command_map`` and the two spaces. ``_LOG_FIELDS`` names what a rendered episode
     records of ``info`` (:class:`EpisodeLog`).
     """
@@ -559,18 +561,19 @@ class LaneEnv(gym.Env):
         return self.command_map.command_to_action(command)
 
     # ---- what a subclass says --------------------------------------------------------------
+    @abc.abstractmethod
     def _set_action(self, action) -> None:
         """Check ``action`` (``ValueError`` naming the env) and write it into lane 0 of the
         core, with whether it was clipped."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def _outcome(self) -> tuple[float, bool, bool]:
         """Lane 0's reward, terminated and truncated after a step, as Python values."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def _began(self, core) -> None:
-        """Called when an episode has started (``self.scenario`` is set): what a subclass
-        keeps of it."""
+        """Called when an episode has started (``self.scenario`` is set): what the env
+        keeps of it (its ``plant``, its path)."""
 
     # ---- gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
