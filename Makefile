@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 RESULTS ?= results
 
-.PHONY: demo test lint format bench-speed clean
+.PHONY: demo test lint format bench-speed docs clean
 
 # constraints.txt pins torch to the CPU build on this kind of machine (no CUDA packages);
 # the package itself does not pin it.
@@ -33,8 +33,12 @@ format: $(STAMP)
 	$(BIN)/ruff format machining_envs agents tests benchmarks
 	$(BIN)/ruff check --fix machining_envs agents tests benchmarks
 
+# The documentation site (mkdocs.yml) into site/; --strict: a broken link or reference fails.
+docs: $(STAMP)
+	$(BIN)/mkdocs build --strict --site-dir site
+
 bench-speed: $(STAMP)
 	$(BIN)/python benchmarks/throughput.py
 
 clean:
-	rm -rf $(VENV) $(RESULTS) .pytest_cache .ruff_cache
+	rm -rf $(VENV) $(RESULTS) site .pytest_cache .ruff_cache

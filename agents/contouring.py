@@ -220,6 +220,8 @@ class HInf2DOF(LinearServoAgent):
     prefilter makes the steady state exact. ``gammas`` holds the achieved H-infinity norm
     of each axis's design (X, Y).
 
+    Examples
+    --------
     >>> import gymnasium as gym
     >>> import machining_envs
     >>> agent = HInf2DOF.from_env(gym.make("machining_envs/Contouring-v0"))
