@@ -818,6 +818,7 @@ class ContouringVectorEnv(LaneVectorEnv):
     """
 
     env_name = "ContouringEnv"
+    task = CONTOURING_TASK
 
     def __init__(
         self,

@@ -1333,6 +1333,7 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
     """
 
     env_name = "ContouringFeedEnv"
+    task = FEED_TASK
     # A lane's decision costs about 1.3 µs compiled (50 servo periods), so a block of 64
     # lanes is some 80 µs of work: at N = 128-192 on two threads two blocks step 22-33 %
     # faster than one.

@@ -10,7 +10,15 @@ import math
 
 import numpy as np
 
-from machining_envs.core.metrics import episode_flag, finish_time, reads_info, score_bound
+from machining_envs.core.metrics import (
+    episode_flag,
+    excess_ratio,
+    finish_time,
+    overload_ratio,
+    reads_info,
+    score_bound,
+    severity,
+)
 from machining_envs.core.score import PrimaryScore, Task
 
 __all__ = [
@@ -66,6 +74,7 @@ def circle_radius_errors(traj: dict, steady_fraction: float = STEADY_FRACTION):
     "circle_radius_mm", "circle_cx_mm", "circle_cy_mm", "path_s_mm", "path_length_mm",
     "x_mm", "y_mm", "finished", "machining_time_s", "torque_sq_Nm2", "command_x_mm_s",
     "command_y_mm_s", "cost", "score_bound", "time_limit_s", "diverged",
+    "contour_tolerance_mm", "overload_ratio",
 )  # fmt: skip
 def contouring_metrics(traj: dict) -> dict[str, float]:
     """Metrics of one contouring episode.
@@ -83,6 +92,8 @@ def contouring_metrics(traj: dict) -> dict[str, float]:
       effort; ``peak_command_mm_s``: largest velocity command;
     - ``time_over_tolerance``: share of steps with a constraint cost (``info["cost"]``: the
       contour error past the tolerance; NaN where the env reports no cost);
+    - ``peak_excess``, ``over_impulse_s``, ``overloaded``: how far past the tolerance
+      (``machining_envs.core.metrics.severity``; where the env reports a cost);
     - ``score_bound``: the floor of the score from the run's truth (NaN where none);
     - ``time_limit_s``: the episode's truncation time, where the env reports it
       (ContouringFeed-v0; the primary score charges it to runs that do not count);
@@ -110,6 +121,9 @@ def contouring_metrics(traj: dict) -> dict[str, float]:
     if "cost" in traj:
         cost = np.asarray(traj["cost"], dtype=np.float64)[1:]
         out["time_over_tolerance"] = float(np.mean(cost > 0.0)) if cost.size else 0.0
+        tol = np.asarray(traj["contour_tolerance_mm"], dtype=np.float64)[1:]
+        dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+        out.update(severity(excess_ratio(peak, tol, cost), dt, overload_ratio(traj)))
     else:
         out["time_over_tolerance"] = math.nan
     out["score_bound"] = score_bound(traj)
@@ -142,6 +156,8 @@ FEED_SCORE = PrimaryScore(
     secondary_label="largest contour error (mm)",
 )
 #: Contouring-v0's episode metrics and primary score.
-CONTOURING_TASK = Task(contouring_metrics, CONTOURING_SCORE)
+CONTOURING_TASK = Task(
+    contouring_metrics, CONTOURING_SCORE, ("contour_error_mm", "contour_tolerance_mm")
+)
 #: ContouringFeed-v0's episode metrics and primary score.
-FEED_TASK = Task(contouring_metrics, FEED_SCORE)
+FEED_TASK = Task(contouring_metrics, FEED_SCORE, ("peak_contour_error_mm", "contour_tolerance_mm"))

@@ -63,6 +63,13 @@ PAPER_LOAD_TIME_S = 0.15
 FEED_RANGE_MM_S = (0.01, 1000.0)
 
 
+#: The overload ceiling of a run, a multiple of its contour tolerance: 2. Past the
+#: tolerance the part is out of tolerance at that spot, which a short excursion may leave
+#: within what finishing removes; an error twice the tolerance is a gouge as deep as the
+#: whole tolerance band beyond it, which inspection rejects however short it is.
+OVERLOAD_RATIO = 2.0
+
+
 @dataclass(frozen=True)
 class ContouringScenario:
     """One contouring run: path, feed, load torques and the table's hidden inertias.
@@ -87,6 +94,10 @@ class ContouringScenario:
         The CNC's handling of the feed override for this run (ContouringFeed-v0 only,
         ``machining_envs.core.actuation``); None (default): the env's ``actuation`` option
         decides. Contouring-v0 commands the axes directly and refuses it.
+    overload_ratio : float
+        The overload ceiling, a multiple of the contour tolerance (1 to 10, default
+        ``OVERLOAD_RATIO``): a run whose contour error passes it does not count, however
+        short the excursion (``machining_envs.core.score``).
     """
 
     name: str
@@ -96,8 +107,13 @@ class ContouringScenario:
     inertia_scale: tuple[float, float] = (1.0, 1.0)
     dwell_s: float = 0.0
     actuation: Actuation | None = None
+    overload_ratio: float = OVERLOAD_RATIO
 
     def __post_init__(self) -> None:
+        if not (
+            isinstance(self.overload_ratio, (int, float)) and 1.0 < self.overload_ratio <= 10.0
+        ):
+            raise ValueError(f"overload_ratio must be in (1, 10], got {self.overload_ratio!r}")
         if not isinstance(self.path, Path):
             raise ValueError(f"path must be a Path, got {type(self.path).__name__}")
         if not (isinstance(self.feed_mm_s, (int, float)) and self.feed_mm_s == math.inf):

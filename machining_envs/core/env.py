@@ -12,6 +12,7 @@ import gymnasium as gym
 import numpy as np
 
 from machining_envs.core.actuation import configure_lane
+from machining_envs.core.metrics import note_severity
 
 __all__ = [
     "ActionMap",
@@ -575,6 +576,14 @@ class LaneEnv(gym.Env, abc.ABC):
         """Called when an episode has started (``self.scenario`` is set): what the env
         keeps of it (its ``plant``, its path)."""
 
+    def _noted(self, info: dict) -> dict:
+        """``info`` with the step's ``excess`` over the limit and the scenario's
+        ``overload_ratio`` (the class's ``task.limit_keys``,
+        :func:`machining_envs.core.metrics.note_severity`)."""
+        task = getattr(type(self), "task", None)
+        keys = getattr(task, "limit_keys", None)
+        return note_severity(info, keys, getattr(self.scenario, "overload_ratio", math.inf))
+
     # ---- gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
@@ -585,8 +594,8 @@ class LaneEnv(gym.Env, abc.ABC):
         core.start(0, spec, self.np_random)
         self._started = True
         self._ended = False
-        info = core.lane_info(0)
         self.scenario = core.scenarios[0]
+        info = self._noted(core.lane_info(0))
         self._began(core)
         self._log = EpisodeLog(self._LOG_FIELDS)
         if self.render_mode is not None:
@@ -601,7 +610,7 @@ class LaneEnv(gym.Env, abc.ABC):
         self._set_action(action)
         core = self._core
         core.step()
-        info = core.lane_info(0)
+        info = self._noted(core.lane_info(0))
         record_step(self, self._log, info)
         reward, terminated, truncated = self._outcome()
         self._ended = terminated or truncated

@@ -11,18 +11,24 @@ with many keys.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
 
 __all__ = [
     "reads_info",
+    "excess_ratio",
+    "severity",
+    "note_severity",
+    "SEVERITY_KEYS",
     "regulation_metrics",
     "segment_bounds",
     "oscillation_amplitude",
     "episode_flag",
     "finish_time",
     "score_bound",
+    "overload_ratio",
     "SETTLE_BAND",
     "OSC_WINDOW_S",
 ]
@@ -44,6 +50,62 @@ def reads_info(*keys: str) -> Callable[[Callable], Callable]:
         return fn
 
     return mark
+
+
+#: The per-step ``info`` keys :func:`note_severity` adds (a metrics function that reads
+#: severity declares them).
+SEVERITY_KEYS = ("excess", "overload_ratio")
+
+
+def excess_ratio(signal, limit, cost) -> np.ndarray:
+    """Per step, how far the constrained signal went over its limit: ``signal / limit - 1``
+    on a step with a constraint cost (``cost > 0``, the env's own test of the limit), 0 on
+    the others. Never NaN: a non-finite ratio (a zero limit) counts as 0."""
+    y = np.asarray(signal, dtype=np.float64)
+    lim = np.asarray(limit, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(np.asarray(cost, dtype=np.float64) > 0.0, y / lim - 1.0, 0.0)
+    return np.where(np.isfinite(r), np.maximum(r, 0.0), 0.0)
+
+
+def severity(excess: np.ndarray, dt: float, overload_ratio: float) -> dict[str, float]:
+    """The episode's severity from its per-step excess ratios (the steps that count):
+
+    - ``peak_excess``: the largest excess ratio (0.57: 57 % over the limit at worst);
+    - ``over_impulse_s``: the time integral of the excess ratio, s (1 s at 10 % over and
+      0.1 s at 100 % over both give 0.1 s);
+    - ``overloaded``: 1.0 where the load passed the overload ceiling (``peak_excess`` above
+      ``overload_ratio - 1``; the scenario's ``overload_ratio``), else 0.0. Such an episode
+      does not count, whatever its share of steps over the limit
+      (:meth:`machining_envs.core.score.PrimaryScore.counts`).
+
+    The share of steps over the limit is each task's ``time_over_limit`` (or
+    ``time_over_tolerance``).
+    """
+    e = np.asarray(excess, dtype=np.float64)
+    peak = float(e.max()) if e.size else 0.0
+    ceiling = float(overload_ratio) - 1.0 if math.isfinite(overload_ratio) else math.inf
+    return {
+        "peak_excess": peak,
+        "over_impulse_s": float(e.sum() * dt),
+        "overloaded": float(peak > ceiling),
+    }
+
+
+def note_severity(info: dict, keys: tuple[str, str] | None, overload_ratio) -> dict:
+    """Add to a step's ``info`` (one env's, or a vector env's arrays) its ``excess`` (see
+    :func:`excess_ratio`; ``keys`` = (signal, limit) info keys of the task, read with
+    ``info["cost"]``) and ``overload_ratio`` (the scenario's overload ceiling, a multiple
+    of the limit). Nothing is added for a task with no constrained signal (``keys`` None)
+    or an info without those keys. Returns ``info``."""
+    if keys is None or keys[0] not in info or keys[1] not in info or "cost" not in info:
+        return info
+    ex = excess_ratio(info[keys[0]], info[keys[1]], info["cost"])
+    info["excess"] = float(ex) if ex.ndim == 0 else ex
+    info["overload_ratio"] = (
+        float(overload_ratio) if np.ndim(overload_ratio) == 0 else np.asarray(overload_ratio)
+    )
+    return info
 
 
 def episode_flag(traj: dict, key: str) -> bool:
@@ -85,6 +147,17 @@ def oscillation_amplitude(e: np.ndarray, window: int) -> float:
     return float(0.5 * np.ptp(r)) if r.size else 0.0
 
 
+def overload_ratio(traj: dict) -> float:
+    """The episode's overload ceiling (``info["overload_ratio"]``, a multiple of the limit,
+    constant over an episode); inf (no ceiling) where the env reports none."""
+    v = traj.get("overload_ratio")
+    if v is None:
+        return math.inf
+    v = np.asarray(v, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    return float(v[0]) if v.size else math.inf
+
+
 def score_bound(traj: dict) -> float:
     """The episode's floor of its score (``info["score_bound"]``, constant over an
     episode), NaN where the env gives none."""
@@ -98,7 +171,7 @@ def score_bound(traj: dict) -> float:
 
 @reads_info(
     "t_s", "force_N", "force_limit_N", "cost", "depth_mm", "segment", "score_bound",
-    "finished", "machining_time_s", "breakage", "diverged",
+    "finished", "machining_time_s", "breakage", "diverged", "overload_ratio",
 )  # fmt: skip
 def regulation_metrics(
     traj: dict, signal: str = "force_N", limit: str = "force_limit_N"
@@ -121,6 +194,8 @@ def regulation_metrics(
       moving mean, over the segment's second half (sustained oscillation, not slow drift);
     - ``time_over_limit``: share of samples with a constraint cost (``info["cost"] > 0``,
       ``y`` above ``L``);
+    - ``peak_excess``, ``over_impulse_s``, ``overloaded``: how far over the limit, see
+      :func:`severity` (the ceiling from ``info["overload_ratio"]``; none where absent);
     - ``score_bound``: the episode's floor of the machining time (``info["score_bound"]``);
     - ``machining_time_s``: when the workpiece was finished (the episode's length if not);
     - ``finished``, ``breakage``, ``diverged`` (1.0 / 0.0); ``n_steps``.
@@ -138,6 +213,7 @@ def regulation_metrics(
     # and only while the tool is in the workpiece (the last sample of a finished cut is air).
     cutting = np.asarray(traj.get("depth_mm", np.ones(t.size)), dtype=np.float64)[1:] > 0
     te, ee = t[1:][cutting], e[1:][cutting]
+    excess = excess_ratio(y[1:][cutting], r[1:][cutting], cost[1:][cutting])
     cost = cost[1:][cutting]
     ae = np.abs(ee)
     out: dict[str, float] = {
@@ -167,6 +243,7 @@ def regulation_metrics(
     out["steady_state_error"] = float(np.mean(sse)) if sse else 0.0
     out["oscillation"] = float(max(osc)) if osc else 0.0
     out["time_over_limit"] = float(np.mean(cost > 0.0)) if cost.size else 0.0
+    out.update(severity(excess, dt, overload_ratio(traj)))
     out["score_bound"] = score_bound(traj)
     finished = episode_flag(traj, "finished")
     out["machining_time_s"] = finish_time(traj, "machining_time_s", finished, t)

@@ -9,8 +9,15 @@ constraint. The score's second column is a tracking measure reported beside it.
 An episode counts if it finished, nothing broke or diverged, and (where the env has one)
 the constrained signal spent under 2 % of the time over its limit: the share of steps with
 a constraint cost (``info["cost"] > 0``: force or torque above the scenario's process limit,
-contour error above its tolerance) stays under ``OVER_LIMIT_SHARE``. The limit is the
-scenario's, the same for every agent; where to regulate below it is each agent's choice.
+contour error above its tolerance) stays under ``OVER_LIMIT_SHARE``, and the signal never
+passed the scenario's overload ceiling (``overload_ratio`` times the limit: the episode's
+``overloaded`` metric), however short the excursion, as a CNC's overload monitor stops the
+program there. The limit is the scenario's, the same for every agent; where to regulate
+below it is each agent's choice.
+
+The 2 % is where a line is drawn, so the benchmark also scores every agent at the
+``ALLOWANCES`` (0.5, 1 and 2 % of steps, the ceiling always on): ``counts``, ``charged``
+and ``__call__`` take the allowance as ``allowance=``.
 
 Each env also reports ``info["score_bound"]``: a floor of the episode's value computed from
 its hidden truth (for Turning-v0, the time to cut the workpiece with the force exactly at
@@ -32,11 +39,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["PrimaryScore", "Task", "REGULATION_SCORE", "OVER_LIMIT_SHARE"]
+__all__ = ["PrimaryScore", "Task", "REGULATION_SCORE", "OVER_LIMIT_SHARE", "ALLOWANCES"]
 
 #: An episode counts only if its constrained signal spent less than this share of the
 #: time over its limit.
 OVER_LIMIT_SHARE = 0.02
+#: The allowances (shares of steps over the limit) a verdict must hold at.
+ALLOWANCES = (0.005, 0.01, 0.02)
 
 
 @dataclass(frozen=True)
@@ -64,19 +73,22 @@ class PrimaryScore:
     bound_key: str | None = "score_bound"
     """Per-episode floor of ``value_key`` from the episode's truth (NaN or absent: none)."""
 
-    def counts(self, row: dict) -> bool:
-        """Whether an episode counts: finished, nothing broke or diverged, constraint held."""
+    def counts(self, row: dict, allowance: float = OVER_LIMIT_SHARE) -> bool:
+        """Whether an episode counts: finished, nothing broke or diverged, the load never
+        passed the overload ceiling (``overloaded``) and the constraint held on all but
+        less than ``allowance`` of the steps."""
         ok = row.get("finished", 0.0) == 1.0
         ok = ok and row.get("breakage", 0.0) == 0.0 and row.get("diverged", 0.0) == 0.0
+        ok = ok and row.get("overloaded", 0.0) == 0.0
         if self.over_key is not None:
             over = row.get(self.over_key, math.nan)
-            ok = ok and math.isfinite(over) and over < OVER_LIMIT_SHARE
+            ok = ok and math.isfinite(over) and over < allowance
         return bool(ok)
 
-    def charged(self, row: dict, failed_value: float) -> float:
+    def charged(self, row: dict, failed_value: float, allowance: float = OVER_LIMIT_SHARE) -> float:
         """What one episode adds to the score: its value, or the failure cost."""
         value = float(row[self.value_key])
-        if self.counts(row):
+        if self.counts(row, allowance):
             return value
         cost = float(row.get("time_limit_s", failed_value))
         return max(cost, value) if math.isfinite(value) else cost
@@ -136,3 +148,7 @@ class Task:
     """Per-episode metrics from a recorded ``info`` trajectory (dict of arrays)."""
     score: PrimaryScore
     """The primary score over those metrics."""
+    limit_keys: tuple[str, str] | None = None
+    """``(signal, limit)``: the ``info`` keys of the constrained signal and its limit, from
+    which the env reports each step's ``excess`` (``machining_envs.core.metrics.
+    note_severity``); None for a task with no constrained signal."""

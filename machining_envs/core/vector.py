@@ -71,6 +71,7 @@ from gymnasium.vector.utils import batch_space
 
 from machining_envs.core.blocks import MIN_BLOCK, LaneBlocks, check_num_threads
 from machining_envs.core.env import check_scenario_spec, real_actions, scenario_option, start_each
+from machining_envs.core.metrics import note_severity
 
 __all__ = [
     "LaneVectorEnv",
@@ -140,6 +141,9 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
     #: process whose kernel costs little a lane keeps the default, 128; one whose kernel
     #: costs more hands out smaller blocks, so that a few hundred lanes use more threads.
     min_block: int = MIN_BLOCK
+    #: The env's task (``machining_envs.core.score.Task``, the single env's): its
+    #: ``limit_keys`` give each step's ``excess`` (``core.metrics.note_severity``).
+    task = None
 
     def __init__(
         self,
@@ -184,6 +188,8 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         #: Lanes whose episode ended at the last step and that have not been reset since
         #: (``NEXT_STEP``: reset at the next step; ``DISABLED``: not steppable).
         self._ended = np.zeros(self.num_envs, dtype=bool)
+        #: Each lane's overload ceiling (its scenario's ``overload_ratio``), for the info.
+        self._overload = np.full(self.num_envs, math.inf)
         self.default_scenario = self._lane_scenarios(scenario)
 
     # ---- the command map, for classical agents -----------------------------------------
@@ -297,16 +303,34 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         except BaseException:
             self._started = False
             raise
+        if isinstance(spec, list):
+            self._overload[lanes] = [self._overload_of(spec[k]) for k in lanes.tolist()]
+        else:
+            self._overload[lanes] = self._overload_of(spec)
         return core.obs[lanes]  # their info is their reset info until they step (_info_now)
 
     @abc.abstractmethod
     def _step_lanes(self, actions: np.ndarray) -> tuple:
         """Advance every lane by one control period (see the module docstring)."""
 
+    def _overload_of(self, spec) -> float:
+        """The overload ceiling of a scenario spec: an object's ``overload_ratio``; a
+        name's, the scenario class's default (the processes' named scenarios keep it)."""
+        ratio = getattr(spec, "overload_ratio", None)
+        if ratio is None:
+            ratio = getattr(self._core.scenario_types[0], "overload_ratio", math.inf)
+        return float(ratio)
+
+    def _noted(self, info: dict) -> dict:
+        """``info`` with each lane's ``excess`` and ``overload_ratio`` (the task's
+        ``limit_keys``, :func:`machining_envs.core.metrics.note_severity`)."""
+        keys = self.task.limit_keys if self.task is not None else None
+        return note_severity(info, keys, self._overload.copy())
+
     def _info_now(self) -> dict:
         """Every lane's info as it stands, as new arrays (a key only some lanes hold comes
         with its ``_key`` mask); a lane just reset reports its reset info."""
-        return self._core.info_arrays()
+        return self._noted(self._core.info_arrays())
 
     def _with_masks(self, info: dict) -> tuple:
         """Add to ``info`` (a new dict) the mask of every lane for each key that has none:
@@ -366,6 +390,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         if mode is not AutoresetMode.SAME_STEP:
             return self._step_without_same_step_reset(a)
         obs, reward, terminated, truncated, info = self._step_lanes(a)
+        info = self._noted(info)
         known = self._with_masks(info)  # _step_lanes' dict is new at every step
         done = np.logical_or(terminated, truncated)
         if not done.any():
@@ -392,6 +417,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         # draws what the single env's reset after the end draws.
         states = [self.lane_rngs[i].bit_generator.state for i in pending.tolist()]
         obs, reward, terminated, truncated, info = self._step_lanes(a)
+        info = self._noted(info)
         if pending.size:
             for i, state in zip(pending.tolist(), states, strict=True):
                 self.lane_rngs[i].bit_generator.state = state

@@ -754,6 +754,7 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
     """
 
     env_name = "MicroDrillingEnv"
+    task = DRILLING_TASK
 
     def __init__(
         self,

@@ -8,7 +8,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from machining_envs.core.metrics import episode_flag, finish_time, reads_info, score_bound
+from machining_envs.core.metrics import (
+    episode_flag,
+    excess_ratio,
+    finish_time,
+    overload_ratio,
+    reads_info,
+    score_bound,
+    severity,
+)
 from machining_envs.core.score import PrimaryScore, Task
 
 __all__ = ["DRILLING_SCORE", "DRILLING_TASK", "drilling_metrics", "drilling_mask"]
@@ -29,7 +37,7 @@ def drilling_mask(traj: dict) -> np.ndarray:
 @reads_info(
     "t_s", "cutting", "engagement", "torque_Nmm", "thrust_N", "torque_limit_Nmm", "cost",
     "spindle_hz", "peak_torque_Nmm", "breakage_torque_Nmm", "finished", "drilling_time_s",
-    "position_mm", "depth_mm", "score_bound", "breakage", "diverged",
+    "position_mm", "depth_mm", "score_bound", "breakage", "diverged", "overload_ratio",
 )  # fmt: skip
 def drilling_metrics(traj: dict) -> dict[str, float]:
     """Metrics of one micro-drilling episode.
@@ -41,7 +49,8 @@ def drilling_metrics(traj: dict) -> dict[str, float]:
     - ``torque_mean_rel``, ``torque_std_rel``: the same over the torque limit;
     - ``thrust_mean_N``, ``thrust_std_N``: mean and standard deviation of the thrust;
     - ``time_over_limit``: share of those samples with a constraint cost (torque above the
-      limit, ``info["cost"]``);
+      limit, ``info["cost"]``); ``peak_excess``, ``over_impulse_s`` and ``overloaded``
+      over the same samples (``machining_envs.core.metrics.severity``);
     - ``spindle_min_hz``, ``spindle_max_hz``, ``spindle_range_hz``: the spindle frequency's
       range while drilling;
 
@@ -62,7 +71,8 @@ def drilling_metrics(traj: dict) -> dict[str, float]:
     ref = np.asarray(traj["torque_limit_Nmm"], dtype=np.float64)[1:][mask]
     cost = np.asarray(traj["cost"], dtype=np.float64)[1:][mask]
     hz = np.asarray(traj["spindle_hz"], dtype=np.float64)[1:][mask]
-    out: dict[str, float] = {}
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    out: dict[str, float] = severity(excess_ratio(tq, ref, cost), dt, overload_ratio(traj))
     if tq.size:
         r = float(np.mean(ref))
         out["torque_mean_Nmm"] = float(np.mean(tq))
@@ -117,4 +127,4 @@ DRILLING_SCORE = PrimaryScore(
     secondary_label="torque std / limit",
 )
 #: MicroDrilling-v0's episode metrics and primary score.
-DRILLING_TASK = Task(drilling_metrics, DRILLING_SCORE)
+DRILLING_TASK = Task(drilling_metrics, DRILLING_SCORE, ("torque_Nmm", "torque_limit_Nmm"))

@@ -38,6 +38,14 @@ PAPER_DIAMETERS_MM = (0.5, 0.6, 0.7, 0.8)
 PAPER_ASPECT_RATIO = 10.0
 
 
+#: The overload ceiling of a hole, a multiple of its torque limit: 1.5. A micro drill
+#: breaks by static torsion at 3.9-6.2x the chip-free torque (``DrillingParams.
+#: breakage_coeff_N_per_mm2``), but far lower by fatigue and chip clogging, which load
+#: peaks drive; 1.5x the limit is the torque a torque-monitored drilling cycle treats as a
+#: clogged hole and retracts from, so a hole that passes it does not count.
+OVERLOAD_RATIO = 1.5
+
+
 @dataclass(frozen=True)
 class DrillingScenario:
     """One hole: drill, depth, torque limit and the hidden process truth.
@@ -70,6 +78,10 @@ class DrillingScenario:
     wear_per_mm : float
         Drill wear within the hole: the chip-free cutting torque grows by this share per mm
         drilled (``DrillingParams.wear_per_mm``; 0 to 10, 0 a sharp drill).
+    overload_ratio : float
+        The overload ceiling, a multiple of the torque limit (1 to 10, default
+        ``OVERLOAD_RATIO``): a hole whose torque passes it does not count, however short
+        the excursion (``machining_envs.core.score``).
     """
 
     name: str
@@ -82,8 +94,13 @@ class DrillingScenario:
     noise_scale: float = 1.0
     torque_limit_scale: float = 1.0
     wear_per_mm: float = 0.0
+    overload_ratio: float = OVERLOAD_RATIO
 
     def __post_init__(self) -> None:
+        if not (
+            isinstance(self.overload_ratio, (int, float)) and 1.0 < self.overload_ratio <= 10.0
+        ):
+            raise ValueError(f"overload_ratio must be in (1, 10], got {self.overload_ratio!r}")
         check_range("diameter_mm", self.diameter_mm, *DIAMETER_RANGE_MM)
         check_range("aspect_ratio", self.aspect_ratio, 1.0, 20.0)
         if self.torque_limit_Nmm is not None:

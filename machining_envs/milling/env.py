@@ -1074,6 +1074,7 @@ class EndMillingVectorEnv(LaneVectorEnv):
     """
 
     env_name = "EndMillingEnv"
+    task = MILLING_TASK
 
     def __init__(
         self,

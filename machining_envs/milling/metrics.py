@@ -60,4 +60,4 @@ def milling_metrics(traj: dict) -> dict[str, float]:
 
 #: EndMilling-v0's episode metrics and primary score: the machining time of the workpiece,
 #: counted only where the torque kept its limit.
-MILLING_TASK = Task(milling_metrics, REGULATION_SCORE)
+MILLING_TASK = Task(milling_metrics, REGULATION_SCORE, ("torque_Nmm", "torque_limit_Nmm"))

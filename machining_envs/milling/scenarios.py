@@ -62,6 +62,14 @@ PAPER_TAPER_DEPTHS_MM = (0.0, 3.0)
 PAPER_CONSTANT_FEED_MM_MIN = {"paper_step": 40.0 / 11.797, "paper_taper": 40.0 / 15.914}
 
 
+#: The overload ceiling of a cut, a multiple of its torque limit: 1.5, as in turning. The
+#: end mill breaks at 4x the reference torque (``MillingParams.breakage_torque_Nmm``), the
+#: limit's own margin; a torque 1.5x the limit spends a third of that margin at once and
+#: loads the spindle past its rating, where a spindle-load monitor (the overload reaction
+#: of an adaptive feed control) stops the program.
+OVERLOAD_RATIO = 1.5
+
+
 @dataclass(frozen=True)
 class MillingScenario:
     """One end-milling cut: workpiece, spindle speed, torque limit and the hidden process truth.
@@ -90,6 +98,10 @@ class MillingScenario:
     actuation : Actuation or None
         The CNC's actuation for this cut (``machining_envs.core.actuation``); None (default):
         the env's ``actuation`` option decides.
+    overload_ratio : float
+        The overload ceiling, a multiple of the torque limit (1 to 10, default
+        ``OVERLOAD_RATIO``): an episode whose torque passes it does not count, however
+        short the excursion (``machining_envs.core.score``).
     """
 
     name: str
@@ -101,8 +113,13 @@ class MillingScenario:
     noise_scale: float = 1.0
     wear_per_100mm: float = 0.0
     actuation: Actuation | None = None
+    overload_ratio: float = OVERLOAD_RATIO
 
     def __post_init__(self) -> None:
+        if not (
+            isinstance(self.overload_ratio, (int, float)) and 1.0 < self.overload_ratio <= 10.0
+        ):
+            raise ValueError(f"overload_ratio must be in (1, 10], got {self.overload_ratio!r}")
         if not isinstance(self.profile, DepthProfile):
             raise ValueError(f"profile must be a DepthProfile, got {type(self.profile).__name__}")
         check_range("spindle_scale", self.spindle_scale, 0.25, 4.0)

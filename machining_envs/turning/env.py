@@ -1088,6 +1088,7 @@ class TurningVectorEnv(LaneVectorEnv):
     """
 
     env_name = "TurningEnv"
+    task = TURNING_TASK
     # A lane's sample costs about 0.5 µs compiled (50 sub-steps), so a block of 64 lanes
     # is some 30 µs of work, well above handing it to a thread: at N = 128-192 on two
     # threads two blocks step 13-15 % faster than one.

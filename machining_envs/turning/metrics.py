@@ -10,4 +10,4 @@ from machining_envs.core.score import REGULATION_SCORE, Task
 __all__ = ["TURNING_TASK"]
 
 #: Turning-v0's episode metrics and primary score.
-TURNING_TASK = Task(regulation_metrics, REGULATION_SCORE)
+TURNING_TASK = Task(regulation_metrics, REGULATION_SCORE, ("force_N", "force_limit_N"))

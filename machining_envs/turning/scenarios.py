@@ -49,6 +49,14 @@ __all__ = [
 PAPER_STEP_SEGMENT_MM = 15.0
 
 
+#: The overload ceiling of a cut, a multiple of its force limit: 1.5. The insert breaks at
+#: 3x the limit (``TurningParams.breakage_force_N``, 3 kN against 1 kN); a force 1.5x the
+#: limit leaves a safety factor of 2 to breakage, the least a tool maker's cutting data
+#: keep, so a CNC's overload monitor (the overload reaction of an adaptive feed control,
+#: such as Heidenhain's AFC) stops the program there.
+OVERLOAD_RATIO = 1.5
+
+
 @dataclass(frozen=True)
 class TurningScenario:
     """One turning cut: workpiece, spindle speed, force limit and the hidden process truth.
@@ -78,6 +86,10 @@ class TurningScenario:
     actuation : Actuation or None
         The CNC's actuation for this cut (``machining_envs.core.actuation``); None (default):
         the env's ``actuation`` option decides.
+    overload_ratio : float
+        The overload ceiling, a multiple of the force limit (1 to 10, default
+        ``OVERLOAD_RATIO``): an episode whose force passes it does not count, however
+        short the excursion (``machining_envs.core.score``).
     """
 
     name: str
@@ -90,8 +102,13 @@ class TurningScenario:
     wear_per_100mm: float = 0.0
     spindle_power_W: float = math.inf
     actuation: Actuation | None = None
+    overload_ratio: float = OVERLOAD_RATIO
 
     def __post_init__(self) -> None:
+        if not (
+            isinstance(self.overload_ratio, (int, float)) and 1.0 < self.overload_ratio <= 10.0
+        ):
+            raise ValueError(f"overload_ratio must be in (1, 10], got {self.overload_ratio!r}")
         if not isinstance(self.profile, DepthProfile):
             raise ValueError(f"profile must be a DepthProfile, got {type(self.profile).__name__}")
         _check("spindle_rpm", self.spindle_rpm, *SPINDLE_RPM_RANGE)
