@@ -11,7 +11,11 @@ training seeds, the ``policy_seed`` of its rows): each contributes its own colum
   averaged over its seeds, with a 95 % bootstrap interval over episodes (scipy), positive
   when the agent is better (lower values are better);
 - ``probability_of_improvement``: rliable's P(agent better than reference) on an episode,
-  ties counting one half.
+  ties counting one half;
+- ``verdict``: the agent against the reference at every allowance of steps over the limit
+  (``machining_envs.core.score.ALLOWANCES``): *better* only where the paired interval is
+  above zero at each, *worse* only where below at each (:func:`verdict`);
+- ``seed_count_shares``: each training seed's share of episodes that count.
 
 rliable needs the ``bench`` extra (``pip install 'machining-envs[bench]'``).
 """
@@ -25,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from machining_envs.core.score import PrimaryScore
+from machining_envs.core.score import ALLOWANCES, OVER_LIMIT_SHARE, PrimaryScore
 
 __all__ = [
     "AgentStats",
@@ -33,8 +37,15 @@ __all__ = [
     "iqm_interval",
     "agent_stats",
     "paired_difference",
+    "verdict",
+    "allowance_sweep",
+    "seed_count_shares",
+    "VERDICTS",
     "BOOTSTRAP_REPS",
 ]
+
+#: The verdicts :func:`verdict` gives.
+VERDICTS = ("better", "worse", "depends on the allowance", "unresolved")
 
 #: Bootstrap resamples for every interval (rliable's default is 50 000; 2 000 keeps the
 #: interval's end points within about 1 % of it at 100 episodes and the table fast).
@@ -65,14 +76,20 @@ class AgentStats:
     n_seeds: int
 
 
-def score_matrix(rows: Sequence[dict], score: PrimaryScore, failed_value: float):
+def score_matrix(
+    rows: Sequence[dict],
+    score: PrimaryScore,
+    failed_value: float,
+    allowance: float = OVER_LIMIT_SHARE,
+):
     """``(seeds, matrix)``: the episode seeds in order and the charged values as an array
     ``(n_episodes, n_policy_seeds)`` (one column per ``policy_seed``; one column for rows
-    without it). Every policy must have run the same episodes."""
+    without it), an episode counting at ``allowance``. Every policy must have run the same
+    episodes."""
     by_policy: dict = {}
     for r in rows:
         by_policy.setdefault(r.get("policy_seed", 0), {})[r["seed"]] = score.charged(
-            r, failed_value
+            r, failed_value, allowance
         )
     seeds = sorted(next(iter(by_policy.values())))
     for p, vals in by_policy.items():
@@ -158,8 +175,10 @@ def paired_difference(
     score: PrimaryScore,
     failed_value: float,
     seed: int = 0,
+    allowance: float = OVER_LIMIT_SHARE,
 ) -> dict:
-    """The agent against a reference agent over the episodes both ran.
+    """The agent against a reference agent over the episodes both ran, an episode counting
+    at ``allowance`` (share of steps over the limit).
 
     ``diff`` (mean of reference - agent, positive when the agent is better) with
     ``low``/``high`` (95 % bootstrap interval over episodes, BCa where defined), and
@@ -169,8 +188,8 @@ def paired_difference(
     from scipy.stats import bootstrap
 
     _, metrics = _rliable()
-    s_ref, m_ref = score_matrix(reference, score, failed_value)
-    s_ag, m_ag = score_matrix(agent, score, failed_value)
+    s_ref, m_ref = score_matrix(reference, score, failed_value, allowance)
+    s_ag, m_ag = score_matrix(agent, score, failed_value, allowance)
     common = sorted(set(s_ref) & set(s_ag))
     if not common:
         raise ValueError("the two agents share no episode")
@@ -192,3 +211,60 @@ def paired_difference(
     # rliable's (runs x tasks) layout with each episode a task: P(-agent > -reference).
     p = float(metrics.probability_of_improvement(-ag[None, :], -ref[None, :]))
     return {"diff": float(d.mean()), "low": low, "high": high, "p_improve": p, "n": len(common)}
+
+
+def verdict(intervals: Sequence[tuple[float, float]]) -> str:
+    """The verdict of an agent against the reference from its paired 95 % intervals
+    ``(low, high)`` of (reference - agent), one per allowance: ``"better"`` if every
+    interval is above zero, ``"worse"`` if every one is below, ``"depends on the
+    allowance"`` if some are resolved (above or below zero) and others not, or resolved
+    both ways, and ``"unresolved"`` if none is.
+
+    >>> verdict([(0.5, 2.0), (0.1, 1.0), (0.2, 3.0)])
+    'better'
+    >>> verdict([(-3.0, -1.0), (-1.0, 1.0), (1.0, 2.0)])
+    'depends on the allowance'
+    """
+    if not intervals:
+        raise ValueError("intervals must hold one (low, high) per allowance, got none")
+    above = [lo > 0.0 for lo, _ in intervals]
+    below = [hi < 0.0 for _, hi in intervals]
+    if all(above):
+        return "better"
+    if all(below):
+        return "worse"
+    if any(above) or any(below):
+        return "depends on the allowance"
+    return "unresolved"
+
+
+def allowance_sweep(
+    reference: Sequence[dict],
+    agent: Sequence[dict],
+    score: PrimaryScore,
+    failed_value: float,
+    seed: int = 0,
+    allowances: Sequence[float] = ALLOWANCES,
+) -> tuple[list[dict], str]:
+    """:func:`paired_difference` at each of ``allowances`` and the :func:`verdict` over
+    them. A score without an over-limit share (``over_key`` None) has one comparison,
+    whatever the allowance: it is repeated."""
+    if score.over_key is None:
+        d = paired_difference(reference, agent, score, failed_value, seed)
+        diffs = [d] * len(allowances)
+    else:
+        diffs = [
+            paired_difference(reference, agent, score, failed_value, seed, a) for a in allowances
+        ]
+    return diffs, verdict([(d["low"], d["high"]) for d in diffs])
+
+
+def seed_count_shares(
+    rows: Sequence[dict], score: PrimaryScore, allowance: float = OVER_LIMIT_SHARE
+) -> dict:
+    """Each ``policy_seed``'s share of its episodes that count at ``allowance`` (rows
+    without a policy seed: one entry, key 0)."""
+    by: dict = {}
+    for r in rows:
+        by.setdefault(r.get("policy_seed", 0), []).append(score.counts(r, allowance))
+    return {k: float(np.mean(v)) for k, v in sorted(by.items())}
