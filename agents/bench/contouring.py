@@ -169,7 +169,7 @@ def reproduce_contouring(out_dir=None, seed: int = 0, verbose: bool = True):
 
 
 def _um(v: float) -> str:
-    return f"{1000.0 * v:.3g} um"
+    return f"{1000.0 * v:.3g} µm"
 
 
 def _print(results, dt: float) -> None:
@@ -247,7 +247,7 @@ def plot_contouring_reproduction(results, path) -> None:
     ax.set_xlim(1000 * PAPER_LOAD_TIME_S - 20, None)
     ax.set_ylim(-20, 20)
     ax.set_xlabel("time (ms)")
-    ax.set_ylabel("x - set point (um)")
+    ax.set_ylabel("x - set point (µm)")
     ax.set_title("Fig. 5: load torque 1 N m from 0.15 s", fontsize=10)
     ax.legend(fontsize=8)
 
@@ -279,7 +279,7 @@ def plot_contouring_reproduction(results, path) -> None:
         ax.plot(ang, 1000 * (rho - 10.0), color=c, lw=1.2, label=label)
     ax.axhline(0.0, color="k", ls="--", lw=0.8)
     ax.set_xlabel("angle on the circle (deg)")
-    ax.set_ylabel("radius - R (um)")
+    ax.set_ylabel("radius - R (µm)")
     ax.set_title("Fig. 7: circle R 10 mm at 50 mm/s", fontsize=10)
     ax.legend(fontsize=8)
 
@@ -295,7 +295,7 @@ def plot_contouring_reproduction(results, path) -> None:
             label=label,
         )
     ax.set_xlabel("set point along the involute (mm)")
-    ax.set_ylabel("contour error (um)")
+    ax.set_ylabel("contour error (µm)")
     ax.set_title("Fig. 8: involute R 50 mm at 50 mm/s", fontsize=10)
     ax.legend(fontsize=8)
 
@@ -307,7 +307,7 @@ def plot_contouring_reproduction(results, path) -> None:
         ax.bar(xs + (i - 0.5) * 0.38, vals, width=0.38, color=c, label=label)
     ax.set_yscale("log")
     ax.set_xticks(xs, ["corner", "circle", "involute"])
-    ax.set_ylabel("largest contour error (um)")
+    ax.set_ylabel("largest contour error (µm)")
     ax.set_title("largest contour errors", fontsize=10)
     ax.legend(fontsize=8)
     g = results[0]["gammas"]

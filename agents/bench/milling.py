@@ -430,9 +430,9 @@ PROCESS = Process(
             tuned=(MillingConstantFeed, FixedGainIntegral, IntegralACC),
             learned=("end_milling_ppo",),
             oracle=_oracle,
-            oracle_episodes=3,
-            oracle_in_quick=False,  # a cut of some 2000 samples: 40 s
-            oracle_seconds=40.0,
+            oracle_episodes=20,
+            oracle_in_quick=False,  # a cut of some 2000 samples: about 16 s
+            oracle_seconds=16.0,
             extra_splits=("wear", "shopfloor"),
             robustness=Robustness(
                 "spindle speed (x nominal)",

@@ -259,7 +259,7 @@ PROCESS = Process(
             extra_splits=("wear", "shopfloor"),
             margin_points=tuple(OperatingPoint(rpm, 2.0) for rpm in (245.0, 405.0, 700.0)),
             oracle=_oracle,
-            oracle_episodes=10,
+            oracle_episodes=20,
             robustness=Robustness(
                 "spindle speed (rpm)",
                 (245.0, 350.0, 500.0, 700.0),

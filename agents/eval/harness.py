@@ -302,6 +302,8 @@ def evaluate(
     metrics_fn: Callable[[dict], dict] | None = None,
     batched: bool | None = None,
     progress: bool = False,
+    keep_seeds: Iterable[int] | None = None,
+    extra_keys: Iterable[str] = (),
 ) -> Evaluation:
     """Evaluate ``agent`` on ``env_id`` over ``scenarios`` x ``n_episodes``.
 
@@ -332,6 +334,12 @@ def evaluate(
         one episode each included).
     progress : bool
         Show a progress bar (tqdm, on stderr) over the episodes.
+    keep_seeds : iterable of int, optional
+        Keep the trajectories of the episodes with these seeds only (with the metrics'
+        keys and ``extra_keys``), as a benchmark keeps the episodes it plots without
+        running them again.
+    extra_keys : iterable of str
+        Info keys recorded beside the metrics' own (where those are declared).
     """
     if not is_integer(n_episodes) or n_episodes < 1:
         raise ValueError(f"n_episodes must be an integer >= 1, got {n_episodes!r}")
@@ -359,6 +367,9 @@ def evaluate(
             metrics_fn = task_of(env).metrics
         # The keys the metrics read, where they say (None: every key); all when kept.
         keys = None if keep_trajectories else getattr(metrics_fn, "info_keys", None)
+        if keys is not None:
+            keys = frozenset(keys) | frozenset(extra_keys)
+        kept = None if keep_seeds is None else {int(s) for s in keep_seeds}
         if not hasattr(agent, "predict") and callable(agent):
             agent = agent(env)
         name = agent_name(agent)
@@ -407,8 +418,9 @@ def evaluate(
                 }
                 row.update(metrics_fn(traj))
                 ev.rows.append(row)
-                if keep_trajectories:
+                if keep_trajectories or (kept is not None and seed + i in kept):
                     traj["agent"] = name
+                    traj["seed"] = seed + i
                     ev.trajectories.append(traj)
         if bar is not None:
             bar.close()

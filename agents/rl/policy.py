@@ -13,7 +13,14 @@ from agents.base import check_observation
 from agents.rl.algos import ALGOS, algorithm_classes
 from agents.rl.stats import read_stats, stats_path
 
-__all__ = ["PolicyAgent", "load_policy", "pretrained", "pretrained_seeds", "PRETRAINED_DIR"]
+__all__ = [
+    "PolicyAgent",
+    "ExactActor",
+    "load_policy",
+    "pretrained",
+    "pretrained_seeds",
+    "PRETRAINED_DIR",
+]
 
 
 class PolicyAgent:
@@ -98,44 +105,106 @@ class PolicyAgent:
 
     @property
     def _fast(self) -> bool:
-        """Whether :meth:`_mean_action` computes what SB3's deterministic ``predict`` does:
-        an actor-critic policy with a diagonal Gaussian on a box, no squashing."""
-        fast = getattr(self, "_fast_cached", None)
-        if fast is None:
-            from gymnasium import spaces
-            from stable_baselines3.common.distributions import DiagGaussianDistribution
-            from stable_baselines3.common.policies import ActorCriticPolicy
-
-            pol = self.model.policy
-            fast = (
-                isinstance(pol, ActorCriticPolicy)
-                and isinstance(pol.action_dist, DiagGaussianDistribution)
-                and isinstance(pol.action_space, spaces.Box)
-                and isinstance(pol.observation_space, spaces.Box)
-                and not pol.squash_output
-            )
-            if fast:
-                pol.set_training_mode(False)
-            self._fast_cached = fast
-        return fast
+        """Whether :meth:`_mean_action` computes SB3's deterministic ``predict``: a plain
+        MLP actor (:class:`ExactActor`: PPO/A2C with a diagonal Gaussian on a box, or
+        TD3's deterministic actor)."""
+        actor = getattr(self, "_actor_cached", None)
+        if actor is None:
+            actor = self._actor_cached = ExactActor.of(self.model.policy) or False
+        return actor is not False
 
     def _mean_action(self, obs: np.ndarray) -> np.ndarray:
-        """The policy's mean action, clipped to the box: SB3's deterministic ``predict`` of an
-        actor-critic policy (same layers, same float32 arithmetic) without its per-call
-        set-up (training-mode switch, distribution object), which costs more than the
-        network itself on the 5 kHz servo."""
-        import torch
+        """The policy's deterministic action (:class:`ExactActor`): the same for an
+        observation whatever the batch it comes in, on any machine."""
+        return self._actor_cached(obs)
 
-        pol = self.model.policy
-        shape = pol.action_space.shape
-        with torch.no_grad():
-            t = torch.as_tensor(obs, device=pol.device)
-            features = pol.extract_features(t.reshape(-1, *pol.observation_space.shape),
-                                            pol.pi_features_extractor)  # fmt: skip
-            mean = pol.action_net(pol.mlp_extractor.forward_actor(features))
-        a = np.clip(mean.cpu().numpy().reshape(-1, *shape), pol.action_space.low,
-                    pol.action_space.high)  # fmt: skip
-        return a[0] if obs.ndim == len(pol.observation_space.shape) else a
+
+class ExactActor:
+    """A policy's deterministic action computed in float64 without BLAS, one observation's
+    arithmetic not depending on the batch it is in.
+
+    Torch's float32 matrix products pick kernels, blockings and thread splits by the batch
+    size and the CPU, so the same observation gave different actions alone and in a batch
+    of 64 (1 in 10^7 relative; enough to move an episode near the counting threshold). Here
+    every layer is ``np.einsum`` in float64 (numpy's own loops: each output a sum over the
+    inputs in order, whatever the batch), with the layers' float32 weights exactly; the
+    action is rounded to float32 at the end. Against SB3's float32 ``predict`` it differs
+    by float32 rounding only.
+
+    :meth:`of` builds it for an actor-critic policy with a diagonal Gaussian (PPO, A2C: the
+    mean action, clipped to the box) or TD3's actor (tanh, then scaled to the box), each a
+    ``Flatten`` extractor and ``Linear`` layers with ``Tanh``/``ReLU``; None otherwise.
+    """
+
+    def __init__(self, layers, obs_shape, low, high, squash: bool):
+        self.layers = layers  # (W float64 (out, in), b float64 (out,), activation or None)
+        self.obs_shape = tuple(obs_shape)
+        self.low, self.high, self.squash = low, high, squash
+
+    @classmethod
+    def of(cls, pol) -> ExactActor | None:
+        from gymnasium import spaces
+        from stable_baselines3.common.torch_layers import FlattenExtractor
+
+        if not isinstance(pol.action_space, spaces.Box) or not isinstance(
+            pol.observation_space, spaces.Box
+        ):
+            return None
+        seqs = cls._modules_of(pol)
+        if seqs is None:
+            return None
+        extractor, modules, squash = seqs
+        if not isinstance(extractor, FlattenExtractor):
+            return None
+        layers = []
+        for m in modules:
+            name = type(m).__name__
+            if name == "Linear":
+                w = m.weight.detach().cpu().numpy().astype(np.float64)
+                b = m.bias.detach().cpu().numpy().astype(np.float64)
+                layers.append([w, b, None])
+            elif name in ("Tanh", "ReLU") and layers and layers[-1][2] is None:
+                layers[-1][2] = name
+            else:
+                return None
+        pol.set_training_mode(False)
+        space = pol.action_space
+        return cls([tuple(x) for x in layers], pol.observation_space.shape,
+                   space.low.astype(np.float64), space.high.astype(np.float64), squash)  # fmt: skip
+
+    @staticmethod
+    def _modules_of(pol):
+        """``(features extractor, modules in order, squashed)`` of a supported policy."""
+        from stable_baselines3.common.distributions import DiagGaussianDistribution
+        from stable_baselines3.common.policies import ActorCriticPolicy
+
+        if isinstance(pol, ActorCriticPolicy):
+            if not isinstance(pol.action_dist, DiagGaussianDistribution) or pol.squash_output:
+                return None
+            net = list(pol.mlp_extractor.policy_net) + [pol.action_net]
+            return pol.pi_features_extractor, net, False
+        actor = getattr(pol, "actor", None)
+        mu = getattr(actor, "mu", None)
+        if type(pol).__name__ == "TD3Policy" and mu is not None and pol.squash_output:
+            return actor.features_extractor, list(mu), True
+        return None
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        x = np.asarray(obs, dtype=np.float64)
+        one = x.ndim == len(self.obs_shape)
+        x = x.reshape(-1, int(np.prod(self.obs_shape, dtype=int)))
+        for w, b, act in self.layers:
+            x = np.einsum("bi,oi->bo", x, w) + b
+            if act == "Tanh":
+                x = np.tanh(x)
+            elif act == "ReLU":
+                x = np.maximum(x, 0.0)
+        if self.squash:  # TD3: the actor's tanh output scaled to the box
+            x = self.low + 0.5 * (x + 1.0) * (self.high - self.low)
+        else:
+            x = np.clip(x, self.low, self.high)
+        a = x.astype(np.float32)
+        return a[0] if one else a
 
 
 def load_policy(model_path, name: str | None = None, algo: str | None = None, stats=None):
