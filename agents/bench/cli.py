@@ -129,6 +129,16 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--jobs", type=_positive_int, default=None,
                    help="envs run at once, one process each (default: 1)")  # fmt: skip
 
+    sy = command(
+        "synthesize",
+        "re-synthesise the stored H-infinity designs; says where it writes",
+        "Synthesise the H-infinity 2-DOF designs the benchmark runs (both axes at the paper's "
+        "rho, the tuned rho and the residual policies' base rho) on this machine and write "
+        "them, matrices and gamma, to the package's agents/hinf_designs.json (or --out). "
+        "HInf2DOF loads them from there, so every machine runs the same controller.",
+    )
+    sy.add_argument("--out", default=None, help="file to write (default: the package's)")
+
     tu = command(
         "tune",
         "tune the classical agents on the train split (Optuna); writes tuned.json",
@@ -399,6 +409,18 @@ def main(argv: list[str] | None = None) -> int:
         except (FileNotFoundError, ValueError) as exc:
             return _fail("export", exc)
         print(result.summary())
+        return 0
+    if args.command == "synthesize":
+        from agents.bench.tune import stored_design_rhos
+        from agents.contouring import hinf_designs_file, synthesize_stored_designs
+
+        rhos = stored_design_rhos()
+        target = args.out or hinf_designs_file()
+        print(f"synthesising H-infinity designs at rho {rhos}; writing {target}")
+        try:
+            print(f"wrote {synthesize_stored_designs(rhos, target)}")
+        except (OSError, RuntimeError, ImportError) as exc:
+            return _fail("synthesize", exc)
         return 0
     if args.command == "convert-stats":
         from agents.rl.stats import convert_pickle

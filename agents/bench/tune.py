@@ -206,3 +206,24 @@ def tuned_factory(cls, env_id: str, tuned: dict | None = None):
     make.__name__ = f"{cls.__name__}_tuned"
     make.tuned_params = params
     return make
+
+
+def stored_design_rhos() -> list[float]:
+    """The rho of every H-infinity design the benchmark runs, whose designs are stored
+    (``machining-bench synthesize``): the paper's, the tuned one (``tuned.json``) and the
+    base of each shipped residual policy over ``HInf2DOF``."""
+    import json
+
+    from machining_envs.contouring.servo import HINF_RHO
+
+    rhos = {float(HINF_RHO)}
+    for entries in load_tuned().get("envs", {}).values():
+        if "HInf2DOF" in entries:
+            rhos.add(float(entries["HInf2DOF"]["params"]["rho"]))
+    from agents.rl.policy import PRETRAINED_DIR
+
+    for cfg in PRETRAINED_DIR.glob("**/config.json"):
+        res = json.loads(cfg.read_text()).get("residual") or {}
+        if res.get("base") == "agents.contouring.HInf2DOF" and "rho" in res.get("params", {}):
+            rhos.add(float(res["params"]["rho"]))
+    return sorted(rhos)

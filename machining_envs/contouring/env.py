@@ -727,8 +727,9 @@ class ContouringEnv(LaneEnv):
     ## Version History
     * v0: first version. The step now runs compiled, shared with the vector env (the same
       numbers to the last bit). ``info`` gives ``contour_tolerance_mm``
-      (``CONTOUR_TOLERANCE_MM``, 10 um), ``cost`` (1 on a servo period whose contour error
-      is above it); no ``score_bound`` (the floor of a contour error is zero); the
+      (``CONTOUR_TOLERANCE_MM``, 10 µm), ``cost`` (1 on a servo period whose contour error
+      is above it), ``excess`` (error / tolerance - 1 there, else 0) and ``overload_ratio``
+      (the scenario's overload ceiling, ``docs/benchmark.md``); no ``score_bound`` (the floor of a contour error is zero); the
       scenarios ``train``, ``validation``, ``test`` (one distribution, separate streams)
       and ``ood`` (the former ``test`` ranges) replace ``train``/``test``.
 

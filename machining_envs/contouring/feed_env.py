@@ -1184,7 +1184,9 @@ class ContouringFeedEnv(LaneEnv):
     ## Cost and score
     The limit is the contour-error tolerance ``tolerance_mm`` (the errors are observed as
     multiples of it). ``info["cost"]`` is 1.0 on a step whose largest contour error passed
-    it. The score (``task``) is the cycle time, counted if the run finished without
+    it; ``info["excess"]`` is how far (error / tolerance - 1 on such a step, else 0) and
+    ``info["overload_ratio"]`` the scenario's overload ceiling (a run past it does not
+    count: ``docs/benchmark.md``). The score (``task``) is the cycle time, counted if the run finished without
     diverging and under 2 % of its steps had a cost; else the run's time limit is charged.
     ``info["score_bound"]`` is the floor of the cycle time: the path at the largest override
     of the programmed feed (``override_max x F``; the drives' acceleration is left out, so

@@ -563,7 +563,10 @@ class MicroDrillingEnv(LaneEnv):
 
     ## Cost and score
     ``info["cost"]`` is 1.0 on a step where the drill is cutting and its torque is above the
-    limit, else 0.0 (the Safety-Gymnasium convention). The score (``task``) is the drilling
+    limit, else 0.0 (the Safety-Gymnasium convention); ``info["excess"]`` is how far over
+    (torque / limit - 1 on such a step, else 0) and ``info["overload_ratio"]`` the
+    scenario's overload ceiling (an episode past it does not count: ``docs/benchmark.md``).
+    The score (``task``) is the drilling
     time, counted if the hole was finished, the drill did not break and under 2 % of the
     drilling steps had a cost; else the time limit is charged. **What the score ranks:**
     with ``control="voltage"`` the feed is the programmed constant, so every hole that

@@ -899,7 +899,10 @@ class EndMillingEnv(LaneEnv):
 
     ## Cost and score
     ``info["cost"]`` is 1.0 on a step whose torque sample is above the limit, else 0.0 (the
-    Safety-Gymnasium convention). The score (``task``) is the machining time, counted if the
+    Safety-Gymnasium convention); ``info["excess"]`` is how far over (torque / limit - 1 on
+    such a step, else 0) and ``info["overload_ratio"]`` the scenario's overload ceiling (an
+    episode past it does not count: ``docs/benchmark.md``).
+    The score (``task``) is the machining time, counted if the
     workpiece was finished, the tool did not break and under 2 % of the steps had a cost;
     else the time limit is charged. ``info["score_bound"]`` is the floor of the machining
     time from the cut's truth (``machining_time_bound``).

@@ -917,7 +917,10 @@ class TurningEnv(LaneEnv):
 
     ## Cost and score
     ``info["cost"]`` is 1.0 on a step whose force sample is above the limit, else 0.0 (the
-    Safety-Gymnasium convention). The task's score (``task``, ``machining_envs.core.score``)
+    Safety-Gymnasium convention); ``info["excess"]`` is how far over (force / limit - 1 on
+    such a step, else 0) and ``info["overload_ratio"]`` the scenario's overload ceiling (an
+    episode past it does not count: ``docs/benchmark.md``).
+    The task's score (``task``, ``machining_envs.core.score``)
     is the machining time, counted if the bar was finished, the tool did not break and
     under 2 % of the steps had a cost; else the time limit is charged.
     ``info["score_bound"]`` is the floor of the machining time from the cut's truth
