@@ -157,11 +157,18 @@ def hinf_designs(designs: list | None = None):
         seen.append((args, design))
         return design
 
+    # The agents' own stored designs (agents/hinf_designs.json) step aside: a case runs
+    # on the designs it recorded, through ``servo._hinf``.
+    import agents.contouring as contouring_agents
+
+    shipped = contouring_agents._stored_designs
     servo._hinf = lookup
+    contouring_agents._stored_designs = dict
     try:
         yield seen
     finally:
         servo._hinf = synthesise
+        contouring_agents._stored_designs = shipped
 
 
 def pack_designs(designs: list) -> dict:
@@ -209,6 +216,12 @@ def unpack_designs(golden: dict) -> list:
     return out
 
 
+#: Info keys computed from other recorded signals, not recorded: each step's ``excess`` (the
+#: force, torque or contour error over its limit, from the recorded signal, limit and cost)
+#: and the scenario's ``overload_ratio`` (tests/core/test_severity.py checks both).
+DERIVED_INFO = frozenset({"excess", "overload_ratio"})
+
+
 def run_case(
     env_id: str, kwargs: dict, factory, scenario: str, seed: int, designs: list | None = None
 ) -> dict:
@@ -252,7 +265,10 @@ def _run_episode(env_id: str, kwargs: dict, factory, scenario: str, seed: int) -
         "terminated": np.array(term_l, dtype=np.int8),
         "truncated": np.array(trunc_l, dtype=np.int8),
     }
-    keys = sorted(k for k, v in info_l[-1].items() if isinstance(v, (bool, int, float, np.number)))
+    keys = sorted(
+        k for k, v in info_l[-1].items()
+        if isinstance(v, (bool, int, float, np.number)) and k not in DERIVED_INFO
+    )  # fmt: skip
     for k in keys:
         out["info/" + k] = np.array([r.get(k, math.nan) for r in info_l], dtype=np.float64)
     return out
