@@ -142,9 +142,7 @@ class TurningMPCOracle(Agent):
         built NLP, made one CasADi function for the episode's solves: ``(plant memory,
         initial commands, initial slacks, initial multipliers) -> (commands, slacks,
         multipliers)``. Each solve starts from the last one's solution shifted by a sample
-        and its constraint multipliers (IPOPT's warm start), to a tolerance of 1e-6 (the
-        commands move by 1e-7 of their range against 1e-8); on EndMilling-v0 that solves in
-        0.4 of the time (measured: docs/performance.md)."""
+        and its constraint multipliers (IPOPT's warm start), to a tolerance of 1e-6."""
         ca = _casadi()
         opti.minimize(objective + 1e-9 * ca.sumsqr(ca.diff(u)))
         opti.subject_to(opti.bounded(0.0, u, umax))
