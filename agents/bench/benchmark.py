@@ -168,7 +168,10 @@ def run_benchmark(
         "score (2 % allowance), share that counts, efficiency, the paired difference "
         "against the reference at each allowance (positive = better), the verdict over "
         "them and a learned row's worst training seed's counting share (report.md has the "
-        "intervals).",
+        "intervals). An episode counts if it finished, nothing broke, its load never passed "
+        "the scenario's overload ceiling and under the allowance of its steps were over the "
+        "limit. Verdict against the best tuned classical agent: *better* only where the "
+        "paired 95 % interval is above zero at 0.5, 1 and 2 %; claims of a win rest on it.",
         "",
     ]
     flags = []
@@ -207,7 +210,17 @@ def run_benchmark(
         "",
     ]
     (out / "report.md").write_text("\n".join(report))
-    compact += [f"Wall time: {total:.0f} s (jobs={jobs}).", ""]
+    import datetime
+    import os
+    import platform
+
+    compact += [
+        f"Wall time: {total:.0f} s with jobs={jobs} on {os.cpu_count()} CPUs "
+        f"({platform.processor() or platform.machine()}), {datetime.date.today()}; per env: "
+        + ", ".join(f"{k} {v:.0f} s" for k, v in times.items())
+        + ".",
+        "",
+    ]
     (out / "results.md").write_text("\n".join(compact))
     if verbose:
         per_env = ", ".join(f"{k} {v:.0f} s" for k, v in times.items())

@@ -146,3 +146,11 @@ assert plt.get_fignums() == []
 """
     subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
     assert (tmp_path / "Turning-v0_trajectories.png").stat().st_size > 0
+    # The quick report: the allowance columns, the verdict column, each learned row's worst
+    # seed, the oracle beside the bound on its own episodes; results.md one number a cell.
+    report = (tmp_path / "report.md").read_text()
+    for text in ("Δ at 0.5 %", "Δ at 1 %", "Δ at 2 %", "verdict vs", "worst seed counts",
+                 "physical bound, on the oracle's 1 ep.", "| reference |"):  # fmt: skip
+        assert text in report, text
+    assert (tmp_path / "Turning-v0_allowances.png").stat().st_size > 0
+    assert "| verdict |" in (tmp_path / "results.md").read_text()
