@@ -74,15 +74,16 @@ class PrimaryScore:
     """Per-episode floor of ``value_key`` from the episode's truth (NaN or absent: none)."""
 
     def counts(self, row: dict, allowance: float = OVER_LIMIT_SHARE) -> bool:
-        """Whether an episode counts: finished, nothing broke or diverged, the load never
-        passed the overload ceiling (``overloaded``) and the constraint held on all but
-        less than ``allowance`` of the steps."""
+        """Whether an episode counts: finished, nothing broke or diverged and, where the
+        score has a share over the limit (``over_key``), the load never passed the overload
+        ceiling (``overloaded``) and the constraint held on all but less than
+        ``allowance`` of the steps."""
         ok = row.get("finished", 0.0) == 1.0
         ok = ok and row.get("breakage", 0.0) == 0.0 and row.get("diverged", 0.0) == 0.0
-        ok = ok and row.get("overloaded", 0.0) == 0.0
-        if self.over_key is not None:
+        if self.over_key is not None:  # (a score of the error itself needs neither)
             over = row.get(self.over_key, math.nan)
             ok = ok and math.isfinite(over) and over < allowance
+            ok = ok and row.get("overloaded", 0.0) == 0.0
         return bool(ok)
 
     def charged(self, row: dict, failed_value: float, allowance: float = OVER_LIMIT_SHARE) -> float:
