@@ -4,25 +4,32 @@ Every agent follows Stable-Baselines3's ``predict`` signature, so classical cont
 SB3 models run under one harness (and under SB3's own ``evaluate_policy``)::
 
     action, state = agent.predict(obs, state=None, episode_start=None, deterministic=True)
+
+``import agents`` loads none of them: each class is imported on first use
+(``from agents import VariableGainPI`` loads the turning controllers only).
 """
 
-from agents.base import Agent
-from agents.contouring import ConstantOverride, HInf2DOF, LookAheadFeed, PIPosition
-from agents.drilling import PD, NoControl, PeckDrilling, SlidingMode
-from agents.milling import FixedGainIntegral, IntegralACC, MillingConstantFeed
-from agents.turning import ConstantFeed, FixedGainPI, VariableGainPI
+from __future__ import annotations
 
-__all__ = [
-    "Agent",
-    "ConstantFeed",
-    "FixedGainPI",
-    "VariableGainPI",
-    "FixedGainIntegral",
-    "IntegralACC",
-    "MillingConstantFeed",
-    "ConstantOverride",
-    "LookAheadFeed",
-    "HInf2DOF",
-    "PIPosition",
-]
-__all__ += ["NoControl", "PD", "PeckDrilling", "SlidingMode"]
+from machining_envs.core.lazy import lazy_exports
+
+#: The classes this package exports, loaded on first use.
+_EXPORTS = {
+    "Agent": "agents.base",
+    "ConstantFeed": "agents.turning",
+    "FixedGainPI": "agents.turning",
+    "VariableGainPI": "agents.turning",
+    "FixedGainIntegral": "agents.milling",
+    "IntegralACC": "agents.milling",
+    "MillingConstantFeed": "agents.milling",
+    "ConstantOverride": "agents.contouring",
+    "LookAheadFeed": "agents.contouring",
+    "HInf2DOF": "agents.contouring",
+    "PIPosition": "agents.contouring",
+    "NoControl": "agents.drilling",
+    "PD": "agents.drilling",
+    "PeckDrilling": "agents.drilling",
+    "SlidingMode": "agents.drilling",
+}
+__all__ = list(_EXPORTS)
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -1,5 +1,6 @@
-"""Import time of ``machining_envs`` against ``gymnasium`` (which it needs anyway), each in
-a fresh interpreter, median of several runs; and what ``gym.make`` then costs.
+"""Import time of ``machining_envs`` and ``agents`` against ``gymnasium`` (which they need
+anyway), each in a fresh interpreter, median of several runs; and what ``gym.make`` and the
+first agent class then cost.
 
     python benchmarks/import_time.py [--runs 7]
 """
@@ -14,6 +15,8 @@ import sys
 CASES = {
     "import gymnasium": "import gymnasium",
     "import machining_envs": "import machining_envs",
+    "import agents": "import agents",
+    "+ from agents import VariableGainPI": "from agents import VariableGainPI",
     "+ gym.make(Turning-v0)": "import gymnasium as g, machining_envs; "
     "g.make('machining_envs/Turning-v0')",
 }

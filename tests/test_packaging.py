@@ -105,6 +105,30 @@ else:
     assert out.returncode == 0, out.stderr[-2000:]
 
 
+def test_importing_agents_loads_no_controller():
+    """``import agents`` loads none of its controllers (nor numba, scipy, torch): each
+    class comes on first use, and one process's class loads no other process's modules
+    (the contouring servo's scipy.signal took a second)."""
+    code = """
+import sys
+import agents
+heavy = [m for m in sys.modules if m.split(".")[0] in ("numba", "scipy", "matplotlib", "torch")
+         or m.startswith("agents.")]
+assert not heavy, heavy
+from agents import VariableGainPI, Agent
+assert issubclass(VariableGainPI, Agent) and "VariableGainPI" in dir(agents)
+assert "scipy.signal" not in sys.modules and "agents.contouring" not in sys.modules
+assert sorted(agents.__all__) == sorted(
+    ["Agent", "ConstantFeed", "FixedGainPI", "VariableGainPI", "FixedGainIntegral",
+     "IntegralACC", "MillingConstantFeed", "ConstantOverride", "LookAheadFeed", "HInf2DOF",
+     "PIPosition", "NoControl", "PD", "PeckDrilling", "SlidingMode"])
+for name in agents.__all__:
+    getattr(agents, name)
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr[-2000:]
+
+
 def _package_files(root: Path) -> set[str]:
     """Every file of the two packages under ``root`` (their paths from ``root``), without
     Python's and numba's caches."""

@@ -36,7 +36,6 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 from scipy.linalg import schur, solve_continuous_are
-from scipy.signal import cont2discrete
 
 from machining_envs.contouring.plant import AXES, ContouringParams, axes_zoh_into
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_integer, check_range
@@ -129,6 +128,8 @@ def _frozen(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 def _tustin(a, b, c, d, ts):
+    from scipy.signal import cont2discrete  # here: scipy.signal takes seconds to import
+
     ad, bd, cd, dd, _ = cont2discrete((a, b, c, d), ts, method="bilinear")
     return ad, bd, cd, dd
 

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import expm
-from scipy.signal import cont2discrete
 
 __all__ = ["zoh", "zoh_tf", "critical_gain", "butterworth_lowpass"]
 
@@ -41,6 +40,8 @@ def zoh(a: np.ndarray, b: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray
 
 def zoh_tf(num, den, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """ZOH-discretise a transfer function; coefficients in powers of ``z^-1``, ``den[0] = 1``."""
+    from scipy.signal import cont2discrete  # here: scipy.signal takes seconds to import
+
     numd, dend, _ = cont2discrete((num, den), dt, method="zoh")
     numd = np.atleast_1d(np.squeeze(numd))
     dend = np.atleast_1d(np.squeeze(dend))
