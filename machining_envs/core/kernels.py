@@ -26,6 +26,10 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic, models, register_model
 
+from machining_envs.core.notice import announce_compiling
+
+announce_compiling()  # a line on stderr while numba compiles (the first use on a machine)
+
 __all__ = [
     "add8",
     "add_scaled8",
