@@ -5,9 +5,9 @@ The first use of an env on a machine (or after an upgrade) compiles its kernels,
 process loads them in a fraction of a second. Without a word, those 30 s look like a hang,
 so :func:`announce_compiling` (installed by :mod:`machining_envs.core.kernels`, which every
 env imports) listens to numba's ``numba:compile`` events, which fire only where the cache
-has nothing, and prints one line the first time each part of the package (a process, or
-the shared ``core``) compiles in a process. ``machining-bench warmup`` compiles every
-env's kernels ahead.
+has nothing, and prints one line the first time a function of the package compiles in a
+process (later ones compile without a word: the line has said what the wait is).
+``machining-bench warmup`` compiles every env's kernels ahead.
 
 This module imports numba only when installed; it knows nothing of gymnasium.
 """
@@ -19,23 +19,19 @@ import sys
 __all__ = ["announce_compiling"]
 
 _installed = False
-_announced: set[str] = set()
+_announced = False
 
 
 def _notice(module: str) -> str | None:
     """The line for a compile of a function of ``module``; None where there is none to
-    print (another package's function, or a part already announced)."""
-    parts = module.split(".")
-    if parts[0] != "machining_envs" or len(parts) < 2:
+    print (another package's function, or one said already)."""
+    global _announced
+    if _announced or module.split(".")[0] != "machining_envs":
         return None
-    part = parts[1]
-    if part in _announced:
-        return None
-    _announced.add(part)
-    what = "the shared" if part == "core" else f"the {part}"
+    _announced = True
     return (
-        f"machining_envs: compiling {what} kernels (numba, first use on this machine: up to "
-        "a minute; cached afterwards; `machining-bench warmup` compiles every env ahead)"
+        "machining_envs: compiling the numba kernels on first use (up to a minute an env; "
+        "cached afterwards; `machining-bench warmup` compiles every env ahead)"
     )
 
 
