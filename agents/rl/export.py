@@ -26,7 +26,7 @@ import numpy as np
 
 from agents.rl.policy import PolicyAgent, load_policy
 
-__all__ = ["ExportResult", "export_onnx", "control_period_s"]
+__all__ = ["ExportResult", "export_onnx", "control_period_s", "saved_algorithm"]
 
 
 @dataclass(frozen=True)
@@ -50,6 +50,28 @@ class ExportResult:
             f"{self.latency_s * 1e6:.0f} us, {share:.2%} of the env's control period "
             f"({self.control_period_s * 1e3:g} ms)"
         )
+
+
+#: The policy classes SB3 records in a saved model, and their algorithm.
+_POLICY_CLASSES = {"ActorCriticPolicy": "ppo", "SACPolicy": "sac", "TD3Policy": "td3"}
+
+
+def saved_algorithm(model_path) -> str | None:
+    """The algorithm (``"ppo"``, ``"sac"``, ``"td3"``) of the SB3 model saved at
+    ``model_path``, read from the policy class its zip records (without loading it); None
+    where the file does not tell."""
+    import json
+    import re
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(model_path) as z:
+            data = json.loads(z.read("data"))
+        text = json.dumps(data.get("policy_class", {}))
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile, AttributeError):
+        return None
+    found = {algo for cls, algo in _POLICY_CLASSES.items() if re.search(rf"\b{cls}\b", text)}
+    return found.pop() if len(found) == 1 else None
 
 
 def control_period_s(env) -> float:
@@ -163,6 +185,11 @@ def export_onnx(
     import torch
 
     model_path = Path(model_path)
+    if env_id is not None and env_id not in gym.registry:
+        raise ValueError(f"unknown env id {env_id!r}")
+    recorded = saved_algorithm(model_path)
+    if algo is not None and recorded is not None and algo != recorded:
+        raise ValueError(f"algo {algo!r}: {model_path} is a {recorded} model")
     agent = load_policy(model_path, algo=algo, stats=stats)
     if not isinstance(agent, PolicyAgent):
         raise ValueError(
@@ -175,6 +202,14 @@ def export_onnx(
             raise ValueError(f"no config.json beside {model_path}: give the env id")
         env_id = json.loads(meta.read_text())["env_id"]
     out = Path(out) if out is not None else model_path.with_suffix(".onnx")
+    probe = gym.make(env_id)
+    space = probe.observation_space
+    probe.close()
+    if space.shape != agent.model.observation_space.shape:
+        raise ValueError(
+            f"{model_path} takes observations of shape {agent.model.observation_space.shape}, "
+            f"{env_id} gives {space.shape}"
+        )
     module = _module(agent)
     obs = _observations(env_id, n_check, seed)
     n_obs = obs.shape[1]

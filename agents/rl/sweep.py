@@ -42,7 +42,7 @@ from pathlib import Path
 
 from agents.rl.algos import ALGOS
 
-__all__ = ["SEARCH_SPACES", "SweepSettings", "sweep"]
+__all__ = ["SEARCH_SPACES", "SweepSettings", "check_address", "sweep"]
 
 #: The hyperparameters a search draws, per algorithm: key -> ("log", lo, hi) for a
 #: log-uniform float, ("uniform", lo, hi), or ("choice", [values]). Ranges around SB3's and
@@ -106,6 +106,36 @@ class SweepSettings:
             raise ValueError(f"n_timesteps must be >= 1, got {self.n_timesteps!r}")
 
 
+def check_address(address: str, timeout_s: float = 5.0) -> None:
+    """``ValueError`` unless a Ray cluster may be listening at ``address`` (``"auto"``: one
+    this machine knows of; ``"[ray://]host:port"``: something accepts a TCP connection
+    there within ``timeout_s``), so that a sweep fails at once instead of waiting for Ray's
+    own connection timeout."""
+    import socket
+
+    if address == "local":
+        return
+    if address == "auto":
+        try:
+            from ray._private.services import canonicalize_bootstrap_address
+        except ImportError:  # pragma: no cover - a Ray without it: Ray's own check only
+            return
+        try:
+            address = canonicalize_bootstrap_address("auto")
+        except (ConnectionError, ValueError) as exc:
+            raise ValueError(f"--address auto: no running Ray cluster here ({exc})") from None
+        if address is None:
+            raise ValueError("--address auto: no running Ray cluster on this machine")
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not host or not port.isdigit():
+        raise ValueError(f"--address must be 'auto' or [ray://]host:port, got {address!r}")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+        raise ValueError(f"--address {address}: no Ray cluster answers there ({reason})") from None
+
+
 def _tune_space(algo: str) -> dict:
     from ray import tune
 
@@ -157,16 +187,48 @@ def _init_ray(settings: SweepSettings) -> bool:
     return True
 
 
+def _progress(total: int):
+    """A progress bar over the ``total`` trials (tqdm, on stderr) as a Ray Tune callback
+    in the driver: a trial counts when it ends; the postfix is the best validation score
+    reported so far."""
+    from ray import tune
+    from tqdm import tqdm
+
+    class Progress(tune.Callback):
+        def __init__(self):
+            self.bar = tqdm(total=total, unit="trial", desc="sweep")
+            self.best = math.inf
+
+        def on_trial_result(self, iteration, trials, trial, result, **info):
+            score = result.get("best", result.get("score"))
+            if score is not None and score < self.best:
+                self.best = float(score)
+                self.bar.set_postfix(best=f"{self.best:.4g}")
+
+        def on_trial_complete(self, iteration, trials, trial, **info):
+            self.bar.update()
+
+        def on_trial_error(self, iteration, trials, trial, **info):
+            self.bar.update()
+
+        def on_experiment_end(self, trials, **info):
+            self.bar.close()
+
+    return Progress()
+
+
 def sweep(
     settings: SweepSettings,
     out,
     resume: bool = False,
     verbose: bool = True,
     command: str | None = None,
+    progress: bool = True,
 ) -> Path:
     """Run the sweep into the results folder ``out``; returns it (see the module doc).
     ``command`` is the command line that ``sweep.json`` and every trial's ``config.json``
-    record (default: this process's)."""
+    record (default: this process's). ``progress``: a progress bar over the trials (with
+    ``verbose``). Ray is connected to (or started) before anything is written."""
     import ray
     from ray import tune
 
@@ -190,6 +252,9 @@ def sweep(
             )
     elif out.exists() and any(out.iterdir()):
         raise FileExistsError(f"{out} is not empty: choose another --out or pass --resume")
+    if settings.address is not None:
+        check_address(settings.address)
+    started = _init_ray(settings)
     out.mkdir(parents=True, exist_ok=True)
     command = " ".join(sys.argv) if command is None else command
     if not resume:  # a resumed sweep keeps the record of the command that started it
@@ -198,12 +263,12 @@ def sweep(
         )
     else:
         command = json.loads((out / "sweep.json").read_text()).get("command", command)
-
-    started = _init_ray(settings)
     trainable = tune.with_resources(
         tune.with_parameters(_trial, settings=asdict(settings), root=str(out), command=command),
         {"cpu": 1},
     )
+    total = settings.n_search or len(settings.seeds)
+    callbacks = [_progress(total)] if verbose and progress else []
     t0 = time.perf_counter()
     if resume:
         tuner = tune.Tuner.restore(
@@ -229,7 +294,9 @@ def sweep(
                 num_samples=n_samples,
                 max_concurrent_trials=settings.workers,
             ),
-            run_config=tune.RunConfig(name="tune", storage_path=str(out), verbose=0),
+            run_config=tune.RunConfig(
+                name="tune", storage_path=str(out), verbose=0, callbacks=callbacks
+            ),
         )
     grid = tuner.fit()
     wall = time.perf_counter() - t0
