@@ -131,7 +131,7 @@ def tune_agent(
     optuna.logging.set_verbosity(optuna.logging.WARNING)  # one summary line per agent instead
     study = optuna.create_study(direction="minimize", sampler=sampler)
     study.enqueue_trial({k: float(v) for k, v in paper.items()})
-    study.optimize(objective, n_trials=budget.trials)
+    study.optimize(objective, n_trials=budget.trials, show_progress_bar=verbose)  # tqdm
     best = {k: float(v) for k, v in study.best_params.items()}
     entry = {
         "params": best,

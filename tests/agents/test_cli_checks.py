@@ -75,6 +75,17 @@ def test_tune_refuses_an_out_under_a_file_or_a_folder(tmp_path, blocker, capsys)
     assert _snapshot(tmp_path) == before
 
 
+def test_tune_shows_a_progress_bar_and_writes_a_new_out(tmp_path, capsys):
+    pytest.importorskip("optuna")
+    out = tmp_path / "tuned.json"
+    assert (
+        main(["tune", "--env", TURNING, "--trials", "2", "--episodes", "1", "--out", str(out)]) == 0
+    )
+    err = capsys.readouterr().err
+    assert "2/2" in err and "Best value" in err  # Optuna's bar, one an agent
+    assert set(json.loads(out.read_text())["envs"]) == {TURNING}
+
+
 # ---- sweep -------------------------------------------------------------------------------------
 def test_sweep_refuses_an_out_under_a_file(tmp_path, blocker, capsys):
     pytest.importorskip("ray")

@@ -30,8 +30,10 @@ def test_a_search_runs_two_optuna_trials_and_keeps_the_best_policy(tmp_path, cap
     assert main(argv) == 0
     command = shlex.join(["machining-bench", *argv])  # what every record names, not Ray's
     assert json.loads((out / "sweep.json").read_text())["command"] == command
-    printed = capsys.readouterr().out
+    captured = capsys.readouterr()
+    printed = captured.out
     assert "2 trials in" in printed and "trials/min" in printed
+    assert "sweep: 100%" in captured.err and "2/2" in captured.err  # the trials' progress bar
 
     rows = _rows(out / "results.csv")
     assert len(rows) == 2
