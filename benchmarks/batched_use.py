@@ -39,9 +39,10 @@ def _rate(step, actions) -> float:
 
 def adapter_rates(env_id: str, n: int, steps: int, rounds: int) -> tuple[float, float, float]:
     """Steps/s of the bare vector env, the adapter with every info key, and with none."""
-    raw = gym.make_vec(env_id, num_envs=n)
-    full = SB3VecEnv(gym.make_vec(env_id, num_envs=n))
-    bare = SB3VecEnv(gym.make_vec(env_id, num_envs=n), info_keys=())
+    same = {"autoreset_mode": "SAME_STEP"}  # the adapter's mode, in all three
+    raw = gym.make_vec(env_id, num_envs=n, **same)
+    full = SB3VecEnv(gym.make_vec(env_id, num_envs=n, **same))
+    bare = SB3VecEnv(gym.make_vec(env_id, num_envs=n, **same), info_keys=())
     space = raw.single_action_space
     rng = np.random.default_rng(0)
     actions = rng.uniform(space.low, space.high, (steps, n, *space.shape)).astype(space.dtype)

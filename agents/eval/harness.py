@@ -388,7 +388,10 @@ def evaluate(
                 if venv is None or venv.num_envs != len(batch):
                     if venv is not None:
                         venv.close()
-                    venv = gym.make_vec(env_id, num_envs=len(batch), **(env_kwargs or {}))
+                    venv = gym.make_vec(
+                        env_id, num_envs=len(batch), autoreset_mode="SAME_STEP",
+                        **(env_kwargs or {}),
+                    )  # fmt: skip
                 trajs = rollout_batch(
                     agent,
                     venv,

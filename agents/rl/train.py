@@ -91,7 +91,12 @@ def _make_vec(cfg: TrainConfig, seed: int, vec: str | None = None):
         info_keys = None if cfg.callbacks else ()
         venv = VecMonitor(
             SB3VecEnv(
-                gym.make_vec(cfg.env_id, num_envs=cfg.n_envs, **dict(cfg.env_kwargs)),
+                gym.make_vec(
+                    cfg.env_id,
+                    num_envs=cfg.n_envs,
+                    autoreset_mode="SAME_STEP",
+                    **dict(cfg.env_kwargs),
+                ),
                 info_keys=info_keys,
             )
         )

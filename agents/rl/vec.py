@@ -55,7 +55,8 @@ class SB3VecEnv(VecEnv):
         if mode != AutoresetMode.SAME_STEP:
             raise ValueError(
                 "SB3VecEnv needs a vector env with metadata['autoreset_mode'] == "
-                f"AutoresetMode.SAME_STEP, got {mode!r}"
+                f"AutoresetMode.SAME_STEP, got {mode!r}: make it with "
+                "gym.make_vec(id, num_envs=N, autoreset_mode='SAME_STEP')"
             )
         self.venv = venv
         if isinstance(info_keys, str):  # one key alone (a string would be its letters)

@@ -813,8 +813,8 @@ class ContouringVectorEnv(LaneVectorEnv):
     ``reset(seed=s)`` runs exactly the episode ``ContouringEnv.reset(seed=s + i)`` runs,
     with the same observations, rewards and ``info`` (here a dict of arrays; the circle's
     keys and ``machining_time_s`` with their masks); every lane draws its own scenario from
-    its own generator. Finished lanes are reset in the same step by default
-    (``autoreset_mode``; also ``"NEXT_STEP"`` or ``"DISABLED"``): see
+    its own generator. Finished lanes are reset at the next step by default, as Gymnasium's
+    (``autoreset_mode``; also ``"SAME_STEP"`` or ``"DISABLED"``): see
     ``machining_envs.core.vector``.
     """
 
@@ -831,7 +831,7 @@ class ContouringVectorEnv(LaneVectorEnv):
         in_position_mm: float = 0.005,
         divergence_mm: float = 50.0,
         num_threads: int = 1,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **overrides,
     ):
         check_vector_args(self.env_name, num_threads, overrides)

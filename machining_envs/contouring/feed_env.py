@@ -1329,8 +1329,8 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
     ``i`` after ``reset(seed=s)`` runs exactly the episode ``ContouringFeedEnv.reset(seed=s
     + i)`` runs, with the same observations, rewards and ``info`` (here a dict of arrays;
     the circle's keys and ``machining_time_s`` with their masks); every lane draws its own
-    scenario from its own generator. Finished lanes are reset in the same step by default
-    (``autoreset_mode``; also ``"NEXT_STEP"`` or ``"DISABLED"``): see
+    scenario from its own generator. Finished lanes are reset at the next step by default, as Gymnasium's
+    (``autoreset_mode``; also ``"SAME_STEP"`` or ``"DISABLED"``): see
     ``machining_envs.core.vector``.
     """
 
@@ -1356,7 +1356,7 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
         divergence_mm: float = 50.0,
         actuation: Actuation | dict | None = None,
         num_threads: int = 1,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **overrides,
     ):
         check_vector_args(self.env_name, num_threads, overrides)

@@ -35,14 +35,15 @@ ends is the ``autoreset_mode`` every vector env takes (Gymnasium's
 ``metadata["autoreset_mode"]``; in each mode a lane runs the episodes of the single env
 with the same seed, as Gymnasium's ``SyncVectorEnv`` in that mode runs them:
 
-- ``SAME_STEP`` (the default; what :class:`agents.rl.vec.SB3VecEnv` needs): the lane is
-  reset in the step where it ends. The returned observation is its new episode's first;
-  its last observation and info are in ``info["final_obs"]`` and ``info["final_info"]``.
-- ``NEXT_STEP`` (Gymnasium's own default, which its vector observation wrappers such as
-  ``NormalizeObservation`` require): the step where a lane ends returns its last
+- ``NEXT_STEP`` (the default, as Gymnasium's own; its vector wrappers such as
+  ``NormalizeObservation`` require it): the step where a lane ends returns its last
   observation; the next step resets it instead of stepping it (its action is ignored,
   its reward is 0, it is neither terminated nor truncated, and its info is its reset
   info).
+- ``SAME_STEP`` (what :class:`agents.rl.vec.SB3VecEnv` and the harness's batched rollouts
+  need, and pass): the lane is reset in the step where it ends. The returned observation
+  is its new episode's first; its last observation and info are in ``info["final_obs"]``
+  and ``info["final_info"]``.
 - ``DISABLED``: nothing is reset by itself. ``reset(options={"reset_mask": mask})`` resets
   the lanes where the boolean array ``mask`` is true (``seed``, if given, seeds those
   lanes only; the other lanes keep their observations, and the info's masks select the
@@ -134,7 +135,7 @@ def check_num_envs(num_envs) -> int:
 class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
     """Base of the native vector envs (see the module docstring)."""
 
-    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
     #: Name used in error messages (the single env's class name, say).
     env_name: str = "LaneVectorEnv"
     #: Fewest lanes a thread steps (``core.blocks.block_edges``; a multiple of 64): a
@@ -151,7 +152,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         core,
         scenario,
         num_threads: int = 1,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
     ) -> None:
         """Take the process's ``core`` of ``num_envs`` lanes (built by the subclass from its
         keywords): its kernel runs on this env's blocks of lanes, and the env has the

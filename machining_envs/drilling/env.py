@@ -752,7 +752,7 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
     episode ``MicroDrillingEnv.reset(seed=s + i)`` runs, with the same observations, rewards
     and ``info`` (here a dict of arrays; ``drilling_time_s`` and ``machining_time_s`` come
     with masks); every lane draws its own scenario from its own generator. Finished lanes
-    are reset in the same step by default (``autoreset_mode``; also ``"NEXT_STEP"`` or
+    are reset at the next step by default, as Gymnasium's (``autoreset_mode``; also ``"SAME_STEP"`` or
     ``"DISABLED"``): see ``machining_envs.core.vector``.
     """
 
@@ -768,7 +768,7 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
         reward: DrillingReward | dict | None = None,
         max_episode_time_s: float = 150.0,
         num_threads: int = 1,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **overrides,
     ):
         check_vector_args(self.env_name, num_threads, overrides)

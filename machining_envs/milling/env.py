@@ -1071,8 +1071,8 @@ class EndMillingVectorEnv(LaneVectorEnv):
     threads that step the lanes (``machining_envs.core.vector``). Lane ``i`` after
     ``reset(seed=s)`` runs exactly the episode ``EndMillingEnv.reset(seed=s + i)`` runs,
     with the same observations, rewards and ``info`` (here a dict of arrays); every lane
-    draws its own scenario from its own generator. Finished lanes are reset in the same step
-    by default (``autoreset_mode``; also ``"NEXT_STEP"`` or ``"DISABLED"``): see
+    draws its own scenario from its own generator. Finished lanes are reset at the next step
+    by default, as Gymnasium's (``autoreset_mode``; also ``"SAME_STEP"`` or ``"DISABLED"``): see
     ``machining_envs.core.vector``.
     """
 
@@ -1089,7 +1089,7 @@ class EndMillingVectorEnv(LaneVectorEnv):
         action_map: str = "log",
         actuation: Actuation | dict | None = None,
         num_threads: int = 1,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **overrides,
     ):
         check_vector_args(self.env_name, num_threads, overrides)

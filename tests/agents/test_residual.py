@@ -82,7 +82,9 @@ def test_the_replaying_agent_runs_what_the_wrapper_ran():
 def test_the_vector_form_runs_each_lane_as_the_wrapper_does_across_resets():
     n, policy = 3, _Policy()
     spec = ResidualSpec(BASE, span=0.3)
-    venv = vec_setpoint_residual(SB3VecEnv(gym.make_vec(TURNING, num_envs=n)), spec, TURNING, {})
+    venv = vec_setpoint_residual(
+        SB3VecEnv(gym.make_vec(TURNING, num_envs=n, autoreset_mode="SAME_STEP")), spec, TURNING, {}
+    )
     venv.seed(20)
     obs = venv.reset()
     singles = [SetpointResidual(gym.make(TURNING), BASE, span=0.3) for _ in range(n)]

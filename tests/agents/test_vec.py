@@ -76,7 +76,7 @@ def test_native_vector_env_is_dummy_vec_env_to_sb3(env_id):
     ``DummyVecEnv`` of single envs gives: observations, rewards, dones and every info key,
     at every step and across resets (a fresh ``reset()`` after seeding included)."""
     n = 3
-    native = SB3VecEnv(gym.make_vec(env_id, num_envs=n))
+    native = SB3VecEnv(gym.make_vec(env_id, num_envs=n, autoreset_mode="SAME_STEP"))
     dummy = make_vec_env(env_id, n_envs=n)
     native.seed(11)
     dummy.seed(11)
@@ -97,7 +97,9 @@ def test_native_vector_env_is_dummy_vec_env_to_sb3(env_id):
 def test_refuses_different_options_per_env():
     """SB3's ``set_options`` may give each env its own options; the batched env resets every
     lane with one dict, so different ones are refused, not dropped."""
-    venv = SB3VecEnv(gym.make_vec("machining_envs/Turning-v0", num_envs=2))
+    venv = SB3VecEnv(
+        gym.make_vec("machining_envs/Turning-v0", num_envs=2, autoreset_mode="SAME_STEP")
+    )
     venv.set_options([{"scenario": "train"}, {"scenario": "validation"}])
     with pytest.raises(ValueError, match="same options"):
         venv.reset()
@@ -108,9 +110,13 @@ def test_refuses_different_options_per_env():
 
 def test_info_keys_are_checked_at_the_first_reset_and_one_key_is_a_tuple_of_one():
     # An unknown key was dropped without a word; a string was taken letter by letter.
-    venv = SB3VecEnv(gym.make_vec(TURNING, num_envs=2), info_keys=("nope", "force_N"))
+    venv = SB3VecEnv(
+        gym.make_vec(TURNING, num_envs=2, autoreset_mode="SAME_STEP"), info_keys=("nope", "force_N")
+    )
     with pytest.raises(ValueError, match=r"info_keys \['nope'\] are not keys.*'force_N'"):
         venv.reset()
-    venv = SB3VecEnv(gym.make_vec(TURNING, num_envs=2), info_keys="force_N")
+    venv = SB3VecEnv(
+        gym.make_vec(TURNING, num_envs=2, autoreset_mode="SAME_STEP"), info_keys="force_N"
+    )
     venv.reset()
     assert [set(i) for i in venv.reset_infos] == [{"force_N"}, {"force_N"}]

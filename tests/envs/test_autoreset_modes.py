@@ -1,9 +1,9 @@
-"""The native vector envs in Gymnasium's other two autoreset modes
+"""The native vector envs in their default autoreset mode, Gymnasium's, and in ``DISABLED``
 (``gym.make_vec(id, num_envs=N, autoreset_mode=...)``): with ``NEXT_STEP`` a lane that ends
 is reset at the next step instead of stepped, with ``DISABLED`` only by
 ``reset(options={"reset_mask": mask})``; in both, lane i runs exactly the single env's
 episodes, as Gymnasium's ``SyncVectorEnv`` in that mode would run them.
-(``test_vector.py`` covers the default, ``SAME_STEP``.)"""
+(``test_vector.py`` covers ``SAME_STEP``, SB3's.)"""
 
 from __future__ import annotations
 
@@ -126,7 +126,7 @@ def test_gymnasium_observation_wrappers_take_the_next_step_mode():
 def test_a_bad_autoreset_mode_or_mask_is_refused_naming_it():
     with pytest.raises(ValueError, match="autoreset_mode must be .*NEXT_STEP"):
         gym.make_vec("machining_envs/Turning-v0", num_envs=2, autoreset_mode="sometimes")
-    same = gym.make_vec("machining_envs/Turning-v0", num_envs=2)
+    same = gym.make_vec("machining_envs/Turning-v0", num_envs=2, autoreset_mode="SAME_STEP")
     same.reset(seed=0)
     with pytest.raises(ValueError, match="reset_mask.*DISABLED"):
         same.reset(options={"reset_mask": np.array([True, False])})
@@ -150,3 +150,38 @@ def test_a_masked_reset_takes_the_scenarios_of_its_lanes_only():
     np.testing.assert_array_equal(info["_scenario"], mask)
     with pytest.raises(ValueError, match="scenario of lane 0"):
         venv.reset(options={"reset_mask": mask, "scenario": [None, "ood", "ood", "ood"]})
+
+
+@pytest.mark.parametrize("env_id", VECTOR_IDS)
+def test_gymnasium_vector_wrappers_run_on_the_default_vector_env(env_id):
+    """``gym.make_vec(id, num_envs=8)`` as it comes (``NEXT_STEP``, Gymnasium's default)
+    under Gymnasium's ``ClipAction``, ``NormalizeObservation`` and
+    ``RecordEpisodeStatistics`` with their default arguments (``NormalizeObservation``
+    refused the envs' former default, ``SAME_STEP``); with a time limit of 40 decisions,
+    so that every lane ends and restarts twice, the statistics record every episode."""
+    from gymnasium.wrappers.vector import ClipAction, NormalizeObservation, RecordEpisodeStatistics
+
+    venv = NormalizeObservation(gym.make_vec(env_id, num_envs=8))  # the issue's case
+    venv.reset(seed=0)
+    venv.step(venv.action_space.sample())
+    venv.close()
+    probe = gym.make(env_id)
+    period = getattr(probe.unwrapped, "decision_interval_s", None)
+    period = period if period is not None else probe.unwrapped.params.sample_time_s
+    probe.close()
+    base = gym.make_vec(env_id, num_envs=8, max_episode_time_s=40 * period)
+    assert base.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP
+    venv = RecordEpisodeStatistics(NormalizeObservation(ClipAction(base)))
+    venv.reset(seed=0)
+    rng = np.random.default_rng(0)
+    shape = venv.action_space.shape
+    episodes = 0
+    for _ in range(130):
+        obs, reward, terminated, truncated, info = venv.step(rng.uniform(-2.0, 2.0, shape))
+        assert np.isfinite(obs).all() and np.isfinite(reward).all()
+        if "episode" in info:
+            episodes += int(info["_episode"].sum())
+            assert (info["episode"]["l"][info["_episode"]] >= 1).all()
+    assert episodes >= 16  # every lane ended at least twice
+    assert len(venv.return_queue) == min(episodes, venv.return_queue.maxlen)
+    venv.close()

@@ -1,7 +1,8 @@
 """The native vector envs (``gym.make_vec(id, num_envs=N)``): every lane is the single env,
 and the vector env keeps Gymnasium's vector conventions.
 
-Parametrised over every id registered with a ``vector_entry_point``.
+Parametrised over every id registered with a ``vector_entry_point``, in the ``SAME_STEP``
+autoreset mode (SB3's; ``test_autoreset_modes.py`` covers the default, ``NEXT_STEP``).
 """
 
 from __future__ import annotations
@@ -17,6 +18,13 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 import machining_envs
+
+
+def make_vec(env_id: str, **kwargs):
+    """``gym.make_vec`` in the mode this file covers, ``SAME_STEP``, unless told another."""
+    kwargs.setdefault("autoreset_mode", "SAME_STEP")
+    return gym.make_vec(env_id, **kwargs)
+
 
 VECTOR_IDS = [i for i in machining_envs.ENV_IDS if gym.spec(i).vector_entry_point is not None]
 #: Steps of the lane-by-lane comparison, and how far random actions reach (below +1 the
@@ -83,7 +91,7 @@ def _run_beside_singles(venv, singles, env_id: str, rng, steps: int) -> int:
 
 def test_turning_has_a_native_vector_env():
     assert "machining_envs/Turning-v0" in VECTOR_IDS
-    venv = gym.make_vec("machining_envs/Turning-v0", num_envs=3)
+    venv = make_vec("machining_envs/Turning-v0", num_envs=3)
     assert isinstance(venv, gym.vector.VectorEnv)
     assert type(venv).__name__ == "TurningVectorEnv"
 
@@ -96,7 +104,7 @@ def test_every_lane_is_the_single_env_across_autoresets(env_id):
     ``final_info``) and then with the single env's next episode."""
     n, seed = 4, 11
     kwargs = ENV_KWARGS.get(env_id, {})
-    venv = gym.make_vec(env_id, num_envs=n, **kwargs)
+    venv = make_vec(env_id, num_envs=n, **kwargs)
     singles = [gym.make(env_id, **kwargs) for _ in range(n)]
     obs, info = venv.reset(seed=seed)
     for i, env in enumerate(singles):
@@ -115,7 +123,7 @@ def test_an_autoreset_changes_the_info_of_the_ended_lanes_only(env_id):
     lanes end at different steps."""
     n = 8
     kwargs = ENV_KWARGS.get(env_id, {})
-    venv = gym.make_vec(env_id, num_envs=n, **kwargs)
+    venv = make_vec(env_id, num_envs=n, **kwargs)
     _, info = venv.reset(seed=3)
     always = [k for k in info if k[0] != "_" and info["_" + k].all()]
     assert len(always) >= 5
@@ -157,7 +165,7 @@ def test_vector_conventions(env_id):
     """Batched spaces, declared autoreset mode, dtypes, info as a dict of arrays with masks,
     observations inside the space."""
     n = 5
-    venv = gym.make_vec(env_id, num_envs=n)
+    venv = make_vec(env_id, num_envs=n)
     single = gym.make(env_id)
     assert venv.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
     assert venv.num_envs == n
@@ -189,7 +197,7 @@ def test_vector_conventions(env_id):
 @pytest.mark.parametrize("env_id", VECTOR_IDS)
 def test_seeding_reproduces_and_distinguishes(env_id):
     def run(seed):
-        venv = gym.make_vec(env_id, num_envs=3)
+        venv = make_vec(env_id, num_envs=3)
         obs, _ = venv.reset(seed=seed)
         out = [obs]
         rng = np.random.default_rng(5)
@@ -203,8 +211,8 @@ def test_seeding_reproduces_and_distinguishes(env_id):
 
 @pytest.mark.parametrize("env_id", VECTOR_IDS)
 def test_a_non_finite_action_names_its_lane_and_nothing_is_stepped(env_id):
-    a_env = gym.make_vec(env_id, num_envs=3)
-    b_env = gym.make_vec(env_id, num_envs=3)
+    a_env = make_vec(env_id, num_envs=3)
+    b_env = make_vec(env_id, num_envs=3)
     a_env.reset(seed=0)
     b_env.reset(seed=0)
     good = np.zeros((3, *a_env.single_action_space.shape), dtype=np.float32)
@@ -222,7 +230,7 @@ def test_a_non_finite_action_names_its_lane_and_nothing_is_stepped(env_id):
 
 @pytest.mark.parametrize("env_id", VECTOR_IDS)
 def test_reset_options_apply_to_every_lane_and_are_checked(env_id):
-    venv = gym.make_vec(env_id, num_envs=3)
+    venv = make_vec(env_id, num_envs=3)
     name = "paper_405" if "Turning" in env_id else "ood"
     _, info = venv.reset(seed=0, options={"scenario": name})
     assert list(info["scenario"]) == [name] * 3
@@ -231,7 +239,7 @@ def test_reset_options_apply_to_every_lane_and_are_checked(env_id):
     with pytest.raises(ValueError, match="seed"):
         venv.reset(seed=[1, 2])
     with pytest.raises((TypeError, ValueError), match="num_envs"):
-        gym.make_vec(env_id, num_envs=0)
+        make_vec(env_id, num_envs=0)
 
 
 @pytest.mark.parametrize("env_id", VECTOR_IDS)
@@ -244,7 +252,7 @@ def test_sb3_trains_and_evaluates_through_the_adapter(env_id):
 
     from agents.rl.vec import SB3VecEnv
 
-    venv = VecNormalize(VecMonitor(SB3VecEnv(gym.make_vec(env_id, num_envs=4))))
+    venv = VecNormalize(VecMonitor(SB3VecEnv(make_vec(env_id, num_envs=4))))
     venv.seed(0)
     model = PPO("MlpPolicy", venv, n_steps=64, batch_size=64, n_epochs=1, seed=0, device="cpu")
     model.learn(256)
@@ -271,8 +279,8 @@ def test_lanes_on_threads_step_as_on_one(env_id):
 
     n = 300
     kwargs = THREAD_KWARGS.get(env_id, {})
-    one = gym.make_vec(env_id, num_envs=n, **kwargs)
-    two = gym.make_vec(env_id, num_envs=n, num_threads=2, **kwargs)
+    one = make_vec(env_id, num_envs=n, **kwargs)
+    two = make_vec(env_id, num_envs=n, num_threads=2, **kwargs)
     assert one.unwrapped.lane_blocks.edges == [(0, n)]
     assert two.unwrapped.lane_blocks.edges == [(0, 128), (128, n)]
 
@@ -309,9 +317,9 @@ def test_lanes_on_threads_step_as_on_one(env_id):
 @pytest.mark.parametrize("env_id", VECTOR_IDS)
 def test_a_bad_thread_count_is_refused_naming_it(env_id):
     with pytest.raises(ValueError, match=r"num_threads must be an integer in \[1, 256\], got 0"):
-        gym.make_vec(env_id, num_envs=2, num_threads=0)
+        make_vec(env_id, num_envs=2, num_threads=0)
     with pytest.raises(TypeError, match="num_threads"):
-        gym.make_vec(env_id, num_envs=2, num_threads=1.5)
+        make_vec(env_id, num_envs=2, num_threads=1.5)
 
 
 @pytest.mark.parametrize("env_id", VECTOR_IDS)
@@ -320,8 +328,8 @@ def test_a_render_mode_is_refused_pointing_to_the_single_env(env_id):
     that says so and names the single env's reset that replays a lane (before, Python's
     "unexpected keyword argument"); None (no rendering) is taken."""
     with pytest.raises(ValueError, match=r"render_mode='rgb_array'.*reset\(seed=s \+ i\)"):
-        gym.make_vec(env_id, num_envs=2, render_mode="rgb_array")
-    env = gym.make_vec(env_id, num_envs=2, render_mode=None)
+        make_vec(env_id, num_envs=2, render_mode="rgb_array")
+    env = make_vec(env_id, num_envs=2, render_mode=None)
     assert env.render_mode is None and env.metadata["render_modes"] == []
     env.close()
 
@@ -329,7 +337,7 @@ def test_a_render_mode_is_refused_pointing_to_the_single_env(env_id):
 def test_a_start_that_raises_part_way_leaves_the_batch_to_reset():
     """As for the single env: lane 0 started on the list's first scenario, lane 1's (a limit
     above the tool's breakage force) raised in its start; nothing steps until reset()."""
-    env = gym.make_vec("machining_envs/Turning-v0", num_envs=2, breakage_force_N=1500.0)
+    env = make_vec("machining_envs/Turning-v0", num_envs=2, breakage_force_N=1500.0)
     action = np.zeros((2, 1), dtype=np.float32)
     with pytest.raises(RuntimeError, match="call reset"):
         env.step(action)
@@ -350,7 +358,7 @@ def test_an_autoreset_that_raises_leaves_the_batch_to_reset(mode):
     """A lane's next scenario drawn in a step can be one its parameters refuse (here an
     ``ood`` force limit above a 1 kN breakage force): the step raises naming it, and the
     batch, with that lane half-started, steps no further until reset()."""
-    env = gym.make_vec(
+    env = make_vec(
         "machining_envs/Turning-v0", num_envs=1, scenario="ood", breakage_force_N=1000.0,
         max_episode_time_s=0.3, autoreset_mode=mode,
     )  # fmt: skip
@@ -369,7 +377,7 @@ def test_a_vector_env_has_the_single_envs_attributes_and_command_map(env_id):
     """What agents and users read of an env, the same on both (the contouring vector envs
     had no max_episode_time_s nor action_to_command)."""
     single = gym.make(env_id).unwrapped
-    vec = gym.make_vec(env_id, num_envs=2)
+    vec = make_vec(env_id, num_envs=2)
     assert vec.params == single.params
     assert vec.max_episode_time_s == single.max_episode_time_s
     for a in (-1.0, -0.3, 0.0, 0.7):
@@ -384,7 +392,7 @@ def test_a_vector_env_has_the_single_envs_attributes_and_command_map(env_id):
 
 def _lane_specs(env_id: str, n: int) -> list:
     """n different scenario names of the env (its own list, in order)."""
-    names = sorted(gym.make_vec(env_id, num_envs=1)._core.scenario_types[1])
+    names = sorted(make_vec(env_id, num_envs=1)._core.scenario_types[1])
     return [names[i % len(names)] for i in range(n)]
 
 
@@ -398,7 +406,7 @@ def test_a_list_of_scenarios_gives_each_lane_its_own(env_id):
         kwargs = {"max_episode_time_s": 20.0}
     first = _lane_specs(env_id, n)
     later = first[::-1]
-    venv = gym.make_vec(env_id, num_envs=n, scenario=first, **kwargs)
+    venv = make_vec(env_id, num_envs=n, scenario=first, **kwargs)
     singles = [gym.make(env_id, scenario=first[i], **kwargs) for i in range(n)]
     obs, info = venv.reset(seed=seed, options={"scenario": later})
     for i, env in enumerate(singles):
@@ -419,7 +427,7 @@ def test_what_a_step_returned_never_changes_later(env_id):
     if env_id == "machining_envs/EndMilling-v0":  # a time limit ends its long cuts
         kwargs = {"max_episode_time_s": 20.0}
     first = _lane_specs(env_id, n)
-    venv = gym.make_vec(env_id, num_envs=n, scenario=first, **kwargs)
+    venv = make_vec(env_id, num_envs=n, scenario=first, **kwargs)
     returned = [venv.reset(seed=1, options={"scenario": first[::-1]})]
     rng = np.random.default_rng(0)
     ends = 0
@@ -448,10 +456,10 @@ def test_what_a_step_returned_never_changes_later(env_id):
 @pytest.mark.parametrize("env_id", VECTOR_IDS)
 def test_a_bad_list_of_scenarios_is_refused_naming_the_lane(env_id):
     with pytest.raises(ValueError, match="one per lane \\(3\\), got 2"):
-        gym.make_vec(env_id, num_envs=3, scenario=["train", "train"])
+        make_vec(env_id, num_envs=3, scenario=["train", "train"])
     with pytest.raises(ValueError, match="scenario of lane 1"):
-        gym.make_vec(env_id, num_envs=2, scenario=["train", "no such scenario"])
-    venv = gym.make_vec(env_id, num_envs=2)
+        make_vec(env_id, num_envs=2, scenario=["train", "no such scenario"])
+    venv = make_vec(env_id, num_envs=2)
     venv.reset(seed=0)
     twin = pickle.loads(pickle.dumps(venv))
     with pytest.raises(ValueError, match="scenario of lane 1"):
