@@ -1,10 +1,18 @@
-"""Writes the notebooks of this folder from the cell sources below (run it after editing).
+"""Writes the notebooks of this folder from the cell sources below (run it after editing),
+and executes them with their outputs stored, so that they read without running.
 
-Keeping the sources here keeps the notebooks reviewable as code; the tests execute the
-written .ipynb files top to bottom. Each notebook reads ``MACHINING_NB_QUICK`` (set by the
-tests) to shrink its budgets.
+    python notebooks/make_notebooks.py             # write the notebooks whose cells changed
+    python notebooks/make_notebooks.py --execute   # ... and run every notebook, storing outputs
+    python notebooks/make_notebooks.py --execute 03_benchmark.ipynb
+
+Keeping the sources here keeps the notebooks reviewable as code; a notebook whose cells are
+unchanged keeps its stored outputs. The tests execute the notebooks top to bottom with small
+budgets: each reads ``MACHINING_NB_QUICK`` (set by the tests) to shrink them. Executing
+needs the ``notebooks`` extra (Jupyter's kernel and ipywidgets).
 """
 
+import argparse
+import tempfile
 from pathlib import Path
 
 import nbformat
@@ -36,6 +44,11 @@ NOTEBOOKS = {
             '    broke = bool(tr["breakage"].any())\n'
             "    print(f\"{name}: cut in {tr['machining_time_s'][-1]:.1f} s, broke: {broke}\")"
         ),
+        new_markdown_cell(
+            "Force, feed and depth of cut over the bar: the adaptive PI holds the force at its "
+            "1000 N reference through every step of depth, where the constant feed, set for the "
+            "deepest step, wastes time on the shallow ones."
+        ),
         new_code_cell(
             "fig, ax = plt.subplots(3, 1, figsize=(8, 6), sharex=True)\n"
             "for name, tr in trajs.items():\n"
@@ -54,30 +67,78 @@ NOTEBOOKS = {
         new_markdown_cell(
             "# Train a feed-rate policy with Stable-Baselines3\n\nPPO with the hyperparameters of "
             "`agents/rl/configs/ppo.yml`, VecNormalize kept with the model, evaluated on the held-out "
-            "scenarios by the same harness as the classical controllers."
+            "scenarios by the same harness as the classical controllers.\n\n"
+            "**Budget.** This run trains 100 000 steps (a few minutes on one CPU core; 2 000 "
+            "under the tests, `MACHINING_NB_QUICK=1`). The shipped policy "
+            "(`agents/rl/pretrained/turning_ppo`) trained 400 000 steps a seed: its five seeds' "
+            "learning curves are drawn beside this run's."
         ),
         new_code_cell(QUICK),
         new_code_cell(
             "import tempfile\nfrom pathlib import Path\n\n"
-            "from agents import VariableGainPI\nfrom agents.eval import evaluate\n"
-            "from agents.rl import load_policy, primary_score, train\n\n"
+            "from agents.rl import train\n\n"
             'out = Path(tempfile.mkdtemp()) / "ppo_turning"\n'
             "run = train(\n"
             '    "machining_envs/Turning-v0",\n'
             '    "ppo",\n'
             "    out,\n"
             "    seed=0,\n"
-            "    n_timesteps=2_000 if QUICK else 300_000,\n"
-            "    progress_bar=not QUICK,\n"
+            "    n_timesteps=2_000 if QUICK else 100_000,\n"
+            "    progress_bar=False,\n"
+            "    verbose=False,\n"
             ")"
         ),
+        new_markdown_cell(
+            "## Learning curve\n\nThe run evaluates its policy on 10 `validation` episodes every "
+            "25 000 steps (`eval.csv` in the run folder): the env's primary score, the mean "
+            "machining time with every episode that breaks the tool, overloads it or does not "
+            "finish charged the 200 s time limit (lower is better)."
+        ),
         new_code_cell(
+            "import csv\n\n"
+            "import matplotlib.pyplot as plt\n\n"
+            "from agents.rl.policy import PRETRAINED_DIR\n\n\n"
+            "def curve(folder):\n"
+            '    with open(folder / "eval.csv") as fh:\n'
+            "        rows = list(csv.DictReader(fh))\n"
+            '    return [int(r["timesteps"]) for r in rows], [float(r["score"]) for r in rows]\n\n\n'
+            'shipped = PRETRAINED_DIR / "turning_ppo"\n'
+            "fig, ax = plt.subplots(figsize=(8, 4))\n"
+            'for k, folder in enumerate([shipped, *sorted(shipped.glob("seed_*"))]):\n'
+            '    label = "shipped policy (5 seeds, 400 000 steps)" if k == 0 else None\n'
+            '    ax.plot(*curve(folder), color="0.75", lw=1, label=label)\n'
+            'ax.plot(*curve(run), "C0o-", label="this run")\n'
+            'ax.axhline(200, color="k", ls=":", lw=0.8)\n'
+            'ax.set(xlabel="training steps", ylabel="validation score (s)", title="PPO on Turning-v0")\n'
+            "ax.legend()\n"
+            "plt.show()"
+        ),
+        new_markdown_cell(
+            "## Against the paper's adaptive PI\n\nThe same `validation` episodes for every agent "
+            "(`test` is kept for the benchmark's final table)."
+        ),
+        new_code_cell(
+            "from IPython.display import Markdown, display\n\n"
+            "from agents import VariableGainPI\n"
+            "from agents.eval import Evaluation, evaluate\n"
+            "from agents.rl import load_policy, primary_score\n\n"
             "n = 2 if QUICK else 20\n"
-            'policy = load_policy(run / "best_model.zip")\n'
-            "for agent in (policy, VariableGainPI.from_env):\n"
-            "    # validation: the split for checking a model; test is the benchmark's final table\n"
-            '    ev = evaluate(agent, "machining_envs/Turning-v0", ["validation"], n_episodes=n, seed=5000)\n'
-            '    print(ev.rows[0]["agent"], primary_score(ev.rows))'
+            "agents = [\n"
+            '    load_policy(run / "best_model.zip", name="PPO (this run)"),\n'
+            '    load_policy(shipped / "best_model.zip", name="PPO (shipped, seed 0)"),\n'
+            "    VariableGainPI.from_env,\n"
+            "]\n"
+            "evs = [\n"
+            '    evaluate(a, "machining_envs/Turning-v0", ["validation"], n_episodes=n, seed=5000)\n'
+            "    for a in agents\n"
+            "]\n"
+            'lines = ["| agent | score (s) | episodes that count |", "|---|---|---|"]\n'
+            "for ev in evs:\n"
+            "    s = primary_score(ev.rows)\n"
+            "    lines.append(f\"| {ev.rows[0]['agent']} | {s['score']:.1f} | {s['valid']:.0%} |\")\n"
+            'display(Markdown("\\n".join(lines)))\n'
+            "metrics = [\"machining_time_s\", \"iae\", \"breakage\", \"finished\"]\n"
+            "display(Markdown(Evaluation.concat(evs).to_markdown(metrics)))"
         ),
     ],
     "03_benchmark.ipynb": [
@@ -87,26 +148,47 @@ NOTEBOOKS = {
             "with interquartile means and 95 % intervals (`machining-bench benchmark` does this for "
             "every env). `test` is the final table's split; tuning and training never touch it."
         ),
-        new_code_cell(QUICK),
+        new_markdown_cell(
+            "The quick benchmark of Turning-v0 (`--quick`: 8 `test` episodes an agent, the "
+            "oracle on one) writes its report (`report.md`: the score table, the margins, the "
+            "plots); here it is shown as it reads, its tables as tables and its plots inline. "
+            "The full run is `machining-bench benchmark`."
+        ),
         new_code_cell(
-            "import tempfile\n\n"
+            "import re\n"
+            "import tempfile\n"
+            "from pathlib import Path\n\n"
+            "from IPython.display import Image, Markdown, display\n\n"
             "from agents.bench.benchmark import run_benchmark\n\n"
-            "out = tempfile.mkdtemp()\n"
-            'ev = run_benchmark(out, quick=True, envs=["machining_envs/Turning-v0"], reproductions=False)\n'
-            'print(sorted({r["agent"] for r in ev.rows}))'
+            "out = Path(tempfile.mkdtemp())\n"
+            'ev = run_benchmark(out, quick=True, envs=["machining_envs/Turning-v0"], reproductions=False,\n'
+            "                   verbose=False)\n"
+            'report = (out / "report.md").read_text()\n'
+            "# The report's text as Markdown; each plot it links (![...](file.png)) inline.\n"
+            "for part in re.split(r\"!\\[[^\\]]*\\]\\(([^)]+\\.png)\\)\", report):\n"
+            '    if part.endswith(".png"):\n'
+            "        display(Image(filename=str(out / part)))\n"
+            "    elif part.strip():\n"
+            "        display(Markdown(part))"
         ),
     ],
     "04_reproduce_papers.ipynb": [
         new_markdown_cell(
-            "# Reproducing the papers\n\nNoh, Kim & Kim (1992), Fig. 8-15: fixed-gain PI at three gains "
-            "and three spindle speeds, and the adaptive PI."
+            "# Reproducing the papers\n\nThe experiments of each process's source paper on the "
+            "simulated plant, the paper's finding beside ours row by row, and the figure "
+            "(`machining-bench reproduce <process>` runs one): turning, Noh, Kim & Kim (1992), "
+            "Fig. 8-15, fixed-gain PI at three gains and three spindle speeds and the adaptive "
+            "PI; then end milling, micro-drilling and two-axis contouring. A row that does not "
+            "show the paper's behaviour says NO."
         ),
         new_code_cell(
-            "import tempfile\nfrom pathlib import Path\n\nfrom IPython.display import Image, display\n\n"
+            "from pathlib import Path\n\nfrom IPython.display import Image, Markdown, display\n\n"
             "from agents.bench.declarations import PROCESSES\n\n"
-            "out = Path(tempfile.mkdtemp())\n"
+            'out = Path("results")  # where `machining-bench reproduce` writes its figures too\n'
             "for process in PROCESSES:\n"
             "    results = process.reproduce(out)\n"
+            "    matched = sum(bool(r['match']) for r in results)\n"
+            '    display(Markdown(f"### {process.name}: {matched}/{len(results)} checks show the paper\'s behaviour"))\n'
             '    display(Image(filename=str(out / f"reproduce_{process.name}.png")))'
         ),
     ],
@@ -227,7 +309,8 @@ NOTEBOOKS = {
             "±20 % of the fitted ones; `test` is kept for a final comparison)."
         ),
         new_code_cell(
-            "import gymnasium as gym\n\n"
+            "import gymnasium as gym\n"
+            "from IPython.display import Markdown, display\n\n"
             "from agents import IntegralACC\n"
             "from agents.eval import Evaluation, evaluate\n"
             "from machining_envs.milling.metrics import milling_metrics\n\n"
@@ -244,7 +327,7 @@ NOTEBOOKS = {
             "kw = dict(n_episodes=n, seed=5000, env_kwargs=machine, metrics_fn=milling_metrics)\n"
             'acc = evaluate(IntegralACC.from_env, ENV_ID, ["validation"], **kw)\n'
             'COLUMNS = ["machining_time_min", "iae", "oscillation", "time_over_limit", "breakage", "finished"]\n'
-            "print(acc.to_markdown(COLUMNS))"
+            "display(Markdown(acc.to_markdown(COLUMNS)))"
         ),
         new_markdown_cell(
             "## 4. Train a policy on it\n\n"
@@ -256,11 +339,11 @@ NOTEBOOKS = {
             "The hyperparameters and reward are the shipped EndMilling-v0 entry of "
             "`agents/rl/configs/ppo.yml` (the one that trained `agents/rl/pretrained/end_milling_ppo`); "
             "only the plant constants and the budget change.\n\n"
-            "**Budget.** Under the tests (`MACHINING_NB_QUICK=1`) PPO gets 4 096 steps: far too "
-            "few to learn anything, so the policy below is close to its random start and loses "
-            "to the ACC. Without that flag it gets the entry's full budget (800 000 steps, "
-            "about 10 minutes on one CPU core): read the table, not this text, to see whether "
-            "it matches the ACC on your machine."
+            "**Budget.** Here PPO trains 100 000 steps (a few minutes on one CPU core), an "
+            "eighth of the entry's own budget (800 000 steps, which trained the shipped "
+            "policy; pass `n_timesteps=None` for it); under the tests (`MACHINING_NB_QUICK=1`) "
+            "4 096, far too few to learn anything. Read the table, not this text, to see "
+            "whether the policy matches the ACC on your machine."
         ),
         new_code_cell(
             "import tempfile\n"
@@ -279,8 +362,9 @@ NOTEBOOKS = {
             '    folder / "run",\n'
             "    seed=0,\n"
             '    config_path=folder / "ppo.yml",\n'
-            "    n_timesteps=4_096 if QUICK else None,  # None: the entry's own budget\n"
-            "    progress_bar=not QUICK,\n"
+            "    n_timesteps=4_096 if QUICK else 100_000,  # None: the entry's own budget\n"
+            "    progress_bar=False,\n"
+            "    verbose=False,\n"
             ")"
         ),
         new_markdown_cell(
@@ -293,11 +377,13 @@ NOTEBOOKS = {
         new_code_cell(
             'policy = load_policy(run / "best_model.zip", name="PPO (your machine)")\n'
             'ev = Evaluation.concat([acc, evaluate(policy, ENV_ID, ["validation"], **kw)])\n'
-            "print(ev.to_markdown(COLUMNS))\n"
+            "display(Markdown(ev.to_markdown(COLUMNS)))\n"
             "limit = env.unwrapped.max_episode_time_s\n"
+            'lines = ["| agent | score (s) | episodes that count |", "|---|---|---|"]\n'
             'for name in dict.fromkeys(r["agent"] for r in ev.rows):\n'
-            '    score = primary_score([r for r in ev.rows if r["agent"] == name], limit)\n'
-            '    print(f"{name}: {score}")'
+            '    s = primary_score([r for r in ev.rows if r["agent"] == name], limit)\n'
+            "    lines.append(f\"| {name} | {s['score']:.1f} | {s['valid']:.0%} |\")\n"
+            'display(Markdown("\\n".join(lines)))'
         ),
         new_markdown_cell(
             "To use your machine from another project, register it under an id of your own: "
@@ -378,18 +464,62 @@ NOTEBOOKS = {
 }
 
 
-def main() -> None:
-    for name, cells in NOTEBOOKS.items():
-        for i, cell in enumerate(cells):
-            cell.id = f"cell-{i}"  # stable ids: rewriting an unchanged notebook changes nothing
-        nb = new_notebook(
-            cells=cells,
-            metadata={
-                "kernelspec": {"name": "python3", "display_name": "Python 3", "language": "python"}
-            },
+def _sources(nb) -> list[tuple[str, str]]:
+    return [(c.cell_type, c.source) for c in nb.cells]
+
+
+def write(name: str) -> bool:
+    """Write notebook ``name`` from its cells unless the file holds them already (and with
+    them its stored outputs); True if written."""
+    cells = NOTEBOOKS[name]
+    for i, cell in enumerate(cells):
+        cell.id = f"cell-{i}"  # stable ids: rewriting an unchanged notebook changes nothing
+    path = HERE / name
+    if path.is_file() and _sources(nbformat.read(path, as_version=4)) == _sources_of(cells):
+        return False
+    nb = new_notebook(
+        cells=cells,
+        metadata={
+            "kernelspec": {"name": "python3", "display_name": "Python 3", "language": "python"}
+        },
+    )
+    nbformat.write(nb, path)
+    return True
+
+
+def _sources_of(cells) -> list[tuple[str, str]]:
+    return [(c.cell_type, c.source) for c in cells]
+
+
+def execute(name: str, timeout_s: int = 3600) -> None:
+    """Run notebook ``name`` top to bottom with its full budgets in a scratch folder and
+    store its outputs in the file."""
+    from nbclient import NotebookClient
+
+    path = HERE / name
+    nb = nbformat.read(path, as_version=4)
+    with tempfile.TemporaryDirectory() as scratch:
+        client = NotebookClient(
+            nb, timeout=timeout_s, kernel_name="python3", resources={"metadata": {"path": scratch}}
         )
-        nbformat.write(nb, HERE / name)
-        print("wrote", name)
+        client.execute()
+    nbformat.write(nb, path)
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--execute", nargs="*", metavar="NAME", default=None,
+                    help="run these notebooks (default: all) and store their outputs")  # fmt: skip
+    args = ap.parse_args(argv)
+    for name in NOTEBOOKS:
+        if write(name):
+            print("wrote", name, "(without outputs: run with --execute)")
+    if args.execute is not None:
+        for name in args.execute or NOTEBOOKS:
+            if name not in NOTEBOOKS:
+                raise SystemExit(f"no notebook {name!r}; the notebooks: {list(NOTEBOOKS)}")
+            print("executing", name, flush=True)
+            execute(name)
 
 
 if __name__ == "__main__":

@@ -47,3 +47,37 @@ def test_notebooks_are_what_make_notebooks_writes():
         written = [(c.cell_type, c.source) for c in nbformat.read(path, as_version=4).cells]
         sources = [(c.cell_type, c.source) for c in mod.NOTEBOOKS[path.name]]
         assert written == sources, f"{path.name}: run python notebooks/make_notebooks.py"
+
+
+def _outputs(path):
+    nb = nbformat.read(path, as_version=4)
+    return nb, [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
+def test_stored_notebooks_hold_their_outputs(path):
+    """The notebooks read without running (``make_notebooks.py --execute`` stores their
+    outputs): every code cell ran, none failed, and no output shows a scratch folder."""
+    nb, outputs = _outputs(path)
+    assert all(c.get("execution_count") for c in nb.cells if c.cell_type == "code"), path.name
+    assert not [o for o in outputs if o.output_type == "error"]
+    text = "".join(
+        o.get("text", "") + o.get("data", {}).get("text/markdown", "")
+        + o.get("data", {}).get("text/plain", "")
+        for o in outputs
+    )  # fmt: skip
+    assert "/tmp" not in text and "ipywidgets" not in text
+    assert any("image/png" in o.get("data", {}) for o in outputs), "no plot"
+
+
+def test_the_benchmark_and_training_notebooks_show_tables_and_plots():
+    """03 shows the report's tables as Markdown and its plots inline; 02 a learning curve
+    and its results as a table."""
+    for name, plots in (("03_benchmark.ipynb", 3), ("02_train_sb3.ipynb", 1)):
+        _, outputs = _outputs(NOTEBOOKS[0].parent / name)
+        tables = [
+            o["data"]["text/markdown"] for o in outputs if "text/markdown" in o.get("data", {})
+        ]
+        assert any("|---|" in t for t in tables), name
+        assert sum("image/png" in o.get("data", {}) for o in outputs) >= plots, name
+        assert not [o for o in outputs if o.output_type == "stream" and "| agent |" in o.text]
