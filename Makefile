@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 RESULTS ?= results
 
-.PHONY: demo test lint format bench-speed docs clean
+.PHONY: demo test lint format bench-speed docs warmup wheel clean
 
 # constraints.txt pins torch to the CPU build on this kind of machine (no CUDA packages);
 # the package itself does not pin it.
@@ -39,6 +39,14 @@ docs: $(STAMP)
 
 bench-speed: $(STAMP)
 	$(BIN)/python benchmarks/throughput.py
+
+# Compile every env's numba kernels now (cached on disk) instead of at their first use.
+warmup: $(STAMP)
+	$(BIN)/machining-bench warmup
+
+# Build the wheel (python -m build), install it in a clean venv and run the quickstart there.
+wheel: $(STAMP)
+	PYTHON=$(BIN)/python .ci/wheel
 
 clean:
 	rm -rf $(VENV) $(RESULTS) site .pytest_cache .ruff_cache

@@ -4,6 +4,7 @@ pins an exact version, the license is an SPDX id."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -166,3 +167,21 @@ def test_the_wheel_holds_every_file_of_the_packages(tmp_path):
     assert "agents/bench/tuned.json" in expected  # the check sees the data files
     assert not expected - shipped, sorted(expected - shipped)[:20]
     assert not shipped - expected, sorted(shipped - expected)[:20]
+
+
+@pytest.mark.slow
+def test_the_wheel_installs_in_a_clean_venv_and_runs_the_quickstart():
+    """``.ci/wheel`` (``make wheel``, a step of ``.ci/run``): ``python -m build`` makes the
+    wheel, a clean venv installs it with its dependencies (a few minutes from a package
+    cache), and the README's quickstart runs there, outside the source tree."""
+    pytest.importorskip("build")
+    out = subprocess.run(
+        [str(ROOT / ".ci" / "wheel")],
+        capture_output=True,
+        text=True,
+        timeout=1800,
+        env={**os.environ, "PYTHON": sys.executable},
+    )
+    assert out.returncode == 0, (out.stdout[-2000:], out.stderr[-2000:])
+    assert "wheel ok: machining_envs-" in out.stdout
+    assert "cut in" in out.stdout  # the quickstart's own output
