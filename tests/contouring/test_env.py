@@ -115,7 +115,7 @@ def test_a_feed_lane_whose_loops_are_not_finite_diverges_alone_as_its_single_env
     lane: in a vector env of two groups of eight lanes (the loops run eight at a time)
     and in the single env with the lane's seed, the same numbers."""
     n = 16
-    vec = gym.make_vec(FEED, num_envs=n)
+    vec = gym.make_vec(FEED, num_envs=n, autoreset_mode="SAME_STEP")  # final_obs, final_info
     vec.reset(seed=0)
     actions = np.linspace(-0.5, 1.0, n, dtype=np.float32)[:, None]
     for _ in range(3):

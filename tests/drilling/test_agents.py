@@ -279,7 +279,9 @@ def test_no_controller_breaks_a_drill_no_control_would_not_and_peck_never_breaks
     ):
         env = gym.make(DRILLING, control=control)
         agent = factory(env)
-        venv = gym.make_vec(DRILLING, num_envs=len(ood), control=control)
+        venv = gym.make_vec(
+            DRILLING, num_envs=len(ood), control=control, autoreset_mode="SAME_STEP"
+        )
         trajs = rollout_batch(agent, venv, "ood", list(ood))
         trajs += [rollout(agent, env, p, 0) for p in papers]
         rows = [drilling_metrics(t) for t in trajs]

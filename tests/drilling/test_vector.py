@@ -33,7 +33,7 @@ def _compare_lanes(kwargs: dict, actions, n_steps: int, n: int = 4, seed: int = 
     """Step the vector env and ``n`` single envs with the same actions; every lane must be
     its single env bit for bit (observations, rewards, flags, every info value, across
     autoresets). Returns how the single envs' episodes ended."""
-    venv = gym.make_vec(DRILLING, num_envs=n, **kwargs)
+    venv = gym.make_vec(DRILLING, num_envs=n, autoreset_mode="SAME_STEP", **kwargs)
     singles = [gym.make(DRILLING, **kwargs) for _ in range(n)]
     obs, info = venv.reset(seed=seed)
     for i, env in enumerate(singles):

@@ -90,6 +90,8 @@ def test_the_batched_increment_checks_its_fields(fields, message):
     # an index past the observation empty ones, (2, 0), refused by the env mid-step.
     from agents.rl.vec import SB3VecEnv, VecIncrementalAction
 
-    venv = SB3VecEnv(gym.make_vec("machining_envs/Turning-v0", num_envs=2))
+    venv = SB3VecEnv(
+        gym.make_vec("machining_envs/Turning-v0", num_envs=2, autoreset_mode="SAME_STEP")
+    )
     with pytest.raises(ValueError, match=message):
         VecIncrementalAction(venv, ActionIncrement(*fields))
