@@ -195,9 +195,24 @@ def _progress(total: int):
     from tqdm import tqdm
 
     class Progress(tune.Callback):
+        """The bar is made at the first event and never pickled (Ray Tune saves its
+        callbacks with the experiment's state)."""
+
         def __init__(self):
-            self.bar = tqdm(total=total, unit="trial", desc="sweep")
+            self._bar = None
             self.best = math.inf
+
+        def __getstate__(self):
+            return {**self.__dict__, "_bar": None}
+
+        @property
+        def bar(self):
+            if self._bar is None:
+                self._bar = tqdm(total=total, unit="trial", desc="sweep")
+            return self._bar
+
+        def setup(self, **info):
+            self.bar.refresh()
 
         def on_trial_result(self, iteration, trials, trial, result, **info):
             score = result.get("best", result.get("score"))
