@@ -44,7 +44,7 @@ bench-speed: $(STAMP)
 warmup: $(STAMP)
 	$(BIN)/machining-bench warmup
 
-# Build the wheel (python -m build), install it in a clean venv and run the quickstart there.
+# Build the wheel (python -m build), install it in a clean venv and run the README's example there.
 wheel: $(STAMP)
 	PYTHON=$(BIN)/python .ci/wheel
 

@@ -173,7 +173,7 @@ def test_the_wheel_holds_every_file_of_the_packages(tmp_path):
 def test_the_wheel_installs_in_a_clean_venv_and_runs_the_quickstart():
     """``.ci/wheel`` (``make wheel``, a step of ``.ci/run``): ``python -m build`` makes the
     wheel, a clean venv installs it with its dependencies (a few minutes from a package
-    cache), and the README's quickstart runs there, outside the source tree."""
+    cache), and the README's first example runs there, outside the source tree."""
     pytest.importorskip("build")
     out = subprocess.run(
         [str(ROOT / ".ci" / "wheel")],
@@ -184,4 +184,4 @@ def test_the_wheel_installs_in_a_clean_venv_and_runs_the_quickstart():
     )
     assert out.returncode == 0, (out.stdout[-2000:], out.stderr[-2000:])
     assert "wheel ok: machining_envs-" in out.stdout
-    assert "cut in" in out.stdout  # the quickstart's own output
+    assert "cut in" in out.stdout  # the example's own output
