@@ -25,7 +25,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from agents.bench.declarations import BENCHMARKS, PROCESSES, benchmark_spec, process
 from machining_envs.core.checks import is_seed
 
 __all__ = ["main", "build_parser", "COMMANDS", "EXTRAS", "missing_extras", "warm_up"]
@@ -39,6 +38,10 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "ray": ("ray", "optuna"),
 }
 ALGO_CHOICES = ["ppo", "sac", "td3"]
+#: The processes ``reproduce`` takes: ``agents.bench.declarations.PROCESSES``' names (a
+#: test holds them equal). Named here so that ``--help``, ``--version`` and the checks of a
+#: command run before the agents and their compiled envs load.
+PROCESS_NAMES = ("turning", "milling", "drilling", "contouring")
 
 
 class UsageError(ValueError):
@@ -264,6 +267,8 @@ def _benchmark_arguments(b):
 
 
 def _benchmark_check(args):
+    from agents.bench.declarations import BENCHMARKS
+
     known = [spec.env_id for spec in BENCHMARKS]
     unknown = [e for e in args.env or () if e not in known]
     if unknown:
@@ -315,6 +320,8 @@ def _tune_out(args) -> Path:
 
 
 def _tune_check(args):
+    from agents.bench.declarations import BENCHMARKS, benchmark_spec
+
     if args.env is not None and benchmark_spec(args.env) is None:
         raise UsageError(f"--env must be one of {[b.env_id for b in BENCHMARKS]}, got {args.env!r}")
     out = _tune_out(args)
@@ -332,6 +339,7 @@ def _tune_check(args):
 
 
 def _tune(args, command):
+    from agents.bench.declarations import BENCHMARKS
     from agents.bench.tune import TuningBudget, tune_all
 
     tune_all(BENCHMARKS, TuningBudget(args.trials, args.episodes), _tune_out(args), only=args.env)
@@ -339,7 +347,7 @@ def _tune(args, command):
 
 
 def _reproduce_arguments(r):
-    r.add_argument("process", choices=[p.name for p in PROCESSES], help="which paper")
+    r.add_argument("process", choices=PROCESS_NAMES, help="which paper")
     r.add_argument("--out", default="results", help="folder for the figure (default: results)")
     r.add_argument("--seed", type=_seed, default=0)
     r.add_argument(
@@ -360,6 +368,8 @@ def _reproduce(args, command):
     kwargs = {"seed": args.seed}
     if args.sensor_gain is not None:
         kwargs["sensor_gain"] = args.sensor_gain
+    from agents.bench.declarations import process
+
     results = process(args.process).reproduce(args.out, **kwargs)
     return 0 if all(r["match"] for r in results) else 1
 
@@ -501,6 +511,8 @@ def _evaluate(args, command):
         Path(args.model), args.env, args.scenarios, args.episodes, args.seed, algo=args.algo,
         stats=args.stats, progress=True,
     )  # fmt: skip
+    from agents.bench.declarations import benchmark_spec
+
     spec = benchmark_spec(args.env)
     print(ev.to_markdown(spec.table_metrics if spec else ev.metric_names()))
     print(

@@ -116,6 +116,26 @@ def test_warmup_runs_without_extras(core_only):
     assert f"compiled {TURNING}" in out.stderr  # no tqdm: a line an env instead of a bar
 
 
+def test_help_and_the_checks_load_no_agent():
+    """``--help``, ``--version`` and a command's checks run before the agents (and the
+    envs' kernels, which some of them compile on import) load."""
+    import subprocess
+
+    code = """
+import sys
+from agents.bench.cli import PROCESS_NAMES, build_parser, main
+build_parser()
+assert main(["train", "--env", "machining_envs/Turning-v0", "--out", "/sys/x"]) == 2
+loaded = [m for m in sys.modules if m.startswith("agents.") and m != "agents.bench.cli"
+          and m != "agents.bench" or m.startswith(("numba", "torch"))]
+assert not loaded, loaded
+from agents.bench.declarations import PROCESSES
+assert PROCESS_NAMES == tuple(p.name for p in PROCESSES)
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr[-2000:]
+
+
 def test_version_and_help_run_without_extras(core_only):
     out, _ = _run(core_only, "--version")
     assert out.returncode == 0 and out.stdout.startswith("machining-bench ")
