@@ -117,15 +117,18 @@ def missing_extras(extras) -> list[tuple[str, str]]:
     imported (found without importing it)."""
     out = []
     for extra in extras:
-        for module in EXTRAS[extra]:
-            try:
-                found = importlib.util.find_spec(module) is not None
-            except (ImportError, ValueError):
-                found = False
-            if not found:
-                out.append((extra, module))
-                break
+        missing = next((m for m in EXTRAS[extra] if not _importable(m)), None)
+        if missing is not None:
+            out.append((extra, missing))
     return out
+
+
+def _importable(module: str) -> bool:
+    """Whether ``module`` can be imported (found, not imported)."""
+    try:
+        return importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):
+        return False
 
 
 def _extras_line(extras, missing: list[tuple[str, str]]) -> str:
@@ -621,7 +624,7 @@ def warm_up(env_ids=None, progress: bool = True) -> None:
 
     ids = list(env_ids or machining_envs.ENV_IDS)
     bar = None
-    if progress and importlib.util.find_spec("tqdm") is not None:
+    if progress and _importable("tqdm"):
         from tqdm import tqdm
 
         bar = tqdm(total=len(ids), unit="env", desc="compiling")
