@@ -675,8 +675,9 @@ COMMANDS: dict[str, Command] = {
             "Synthesise the H-infinity 2-DOF designs the benchmark runs (both axes at the "
             "paper's rho, the tuned rho and the residual policies' base rho) on this machine "
             "and write them, matrices and gamma, to the package's agents/hinf_designs.json (or "
-            "--out). HInf2DOF loads them from there, so every machine runs the same controller.",
-            _synthesize_arguments, _synthesize, check=_synthesize_check,
+            "--out). HInf2DOF loads them from there, so every machine runs the same controller. "
+            "Needs the rl extra (the residual policies' base rho).",
+            _synthesize_arguments, _synthesize, _rl, _synthesize_check,
         ),
         Command(
             "tune",

@@ -230,6 +230,8 @@ def test_evaluate_and_train_refuse_bad_paths_before_any_work(run, tmp_path, bloc
     _one_line(capsys, "unknown env id")
     assert main(["reproduce", "milling", "--sensor-gain", "2"]) == 2
     _one_line(capsys, "--sensor-gain applies to 'reproduce turning' only")
+    assert main(["synthesize", "--out", str(UNWRITABLE / "designs.json")]) == 2
+    _one_line(capsys, "cannot write")
     assert main(["warmup", "--env", "nope/Nope-v0"]) == 2
     _one_line(capsys, "unknown env id")
     assert not (tmp_path / "r").exists()

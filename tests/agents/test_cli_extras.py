@@ -78,6 +78,7 @@ NEEDS = {
     "export --onnx": (["export", "--onnx", "--model", MODEL, "--out", "{tmp}/p.onnx"], "rl,onnx"),
     "export --zoo": (["export", "--zoo", "--model", MODEL, "--out", "{tmp}/zoo"], "rl"),
     "convert-stats": (["convert-stats", "{tmp}/x_vecnormalize.pkl"], "rl"),
+    "synthesize": (["synthesize", "--out", "{tmp}/designs.json"], "rl"),
 }
 
 
