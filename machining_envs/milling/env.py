@@ -52,6 +52,7 @@ from machining_envs.core.packed import (
     i8_2,
     spaced_rows,
 )
+from machining_envs.core.sensors import PowerSensor, PowerSensorLanes, resolve_power_sensor
 from machining_envs.core.vector import (
     LaneVectorEnv,
     check_num_envs,
@@ -487,10 +488,12 @@ class _MillingCore:
     scenario_types = (MillingScenario, MILLING_SCENARIOS)
 
     def __init__(self, owner, n, scenario, params, reward, max_episode_time_s, action_map,
-                 overrides, actuation=None):  # fmt: skip
+                 overrides, actuation=None, power_sensor=None):  # fmt: skip
         self.params = resolve_params(
             owner, params, MillingParams, MillingParams.park_yoon_1986, overrides
         )
+        sensor = resolve_power_sensor(power_sensor)  # the spindle power as the load channel
+        self.power_sensor = sensor and PowerSensorLanes(sensor, n, self.params.sample_time_s)
         self.actuation = resolve_actuation(actuation)
         self.reward_weights = resolve_reward(reward, MillingReward)
         w = self.reward_weights
@@ -624,6 +627,8 @@ class _MillingCore:
             self.act_lanes, lane, sc.actuation, self.actuation, self._actuation_lanes
         )
         self.names[lane] = sc.name
+        if self.power_sensor:
+            self._sense_power([lane])
 
     def _fit(self, n_segments: int) -> None:
         """Widen the lanes' workpiece tables (the plant's and the cumulative areas) to hold
@@ -670,6 +675,8 @@ class _MillingCore:
                 self.bound[k] = machining_time_bound(
                     self.scenarios[k], self.truths[k], float(self.spindle[k])
                 )
+        if self.power_sensor:
+            self._sense_power(lanes)
 
     def _batches(self, factory) -> bool:
         """Whether :meth:`start_lanes` may start ``factory``'s scenarios in one batch: a
@@ -755,11 +762,25 @@ class _MillingCore:
         args = self._kernel_args()
         if self.act_lanes is None:
             self._run(args, 3)
-            return
-        self._run(args, 1)
-        self.commands[:] = self.act_lanes.apply(self.commands)
-        self.info_f[1] = self.commands
-        self._run(args, 2)
+        else:
+            self._run(args, 1)
+            self.commands[:] = self.act_lanes.apply(self.commands)
+            self.info_f[1] = self.commands
+            self._run(args, 2)
+        if self.power_sensor:
+            self._sense_power()
+
+    def _sense_power(self, lanes=None) -> None:
+        """The drive's power reading into the observations (option ``power_sensor``,
+        ``machining_envs.core.sensors``): of ``lanes`` that start, else a step of all."""
+        i = self.info_arrays()
+        rpm = i["spindle_rpm"]
+        w = rpm * (math.pi / 30.0) * 1e-3  # angular speed, rad/s, per N·mm
+        args = (self.obs, i["torque_Nmm"] * w, rpm, i["torque_limit_Nmm"] * w)
+        if lanes is None:
+            self.power_sensor.step(*args)
+        else:
+            self.power_sensor.start(lanes, *args)
 
     def _run(self, args: tuple, stage: int) -> None:
         """:func:`_step` of ``stage`` over every lane (on the blocks of lanes, if several)."""
@@ -804,6 +825,8 @@ class _MillingCore:
         }
         if finished:
             info["machining_time_s"] = finish
+        if self.power_sensor:
+            info.update(self.power_sensor.lane_info(k))
         return info
 
     def info_arrays(self) -> dict:
@@ -841,6 +864,7 @@ class _MillingCore:
             "scenario": self.names.array(),
             "machining_time_s": c[13],  # NaN where the lane did not finish
             "_machining_time_s": self.flags[:, 2].copy(),
+            **(self.power_sensor.info_arrays() if self.power_sensor else {}),
         }
 
 
@@ -926,6 +950,10 @@ class EndMillingEnv(LaneEnv):
     override between the command and the servo: delay, quantisation, rate and acceleration
     limits (``machining_envs.core.actuation.Actuation`` or a dict of its fields; a
     scenario's own ``actuation``, as in the ``shopfloor`` split, wins for its episode);
+    ``power_sensor`` (off by default) shows the spindle drive's power reading in the load
+    channels instead of the torque sensor's, and the limit as a power
+    (``machining_envs.core.sensors.PowerSensor``, a dict of its fields or ``True``; ``info``
+    adds ``spindle_power_measured_W`` and ``power_limit_W``; the task stays on the torque);
     ``params`` a ``MillingParams`` (nominal: what controllers are
     designed from; ``MillingParams.ahn_choi_al6061()`` for the Al6061 set); ``overrides``
     change single fields of it (``servo_gain=0.025``, ``force_model="average_force"``,
@@ -1001,6 +1029,7 @@ class EndMillingEnv(LaneEnv):
         max_episode_time_s: float = 1200.0,
         action_map: str = "log",
         actuation: Actuation | dict | None = None,
+        power_sensor: PowerSensor | dict | bool | None = None,
         **overrides,
     ):
         core = _MillingCore(
@@ -1013,6 +1042,7 @@ class EndMillingEnv(LaneEnv):
             action_map,
             overrides,
             actuation,
+            power_sensor,
         )
         self._adopt(core, scenario, render_mode)
         self.plant: MillingLanes | None = None
@@ -1088,6 +1118,7 @@ class EndMillingVectorEnv(LaneVectorEnv):
         max_episode_time_s: float = 1200.0,
         action_map: str = "log",
         actuation: Actuation | dict | None = None,
+        power_sensor: PowerSensor | dict | bool | None = None,
         num_threads: int = 1,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **overrides,
@@ -1103,6 +1134,7 @@ class EndMillingVectorEnv(LaneVectorEnv):
             action_map,
             overrides,
             actuation,
+            power_sensor,
         )
         super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
 

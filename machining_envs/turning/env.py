@@ -52,6 +52,7 @@ from machining_envs.core.packed import (
     i8_2,
     spaced_rows,
 )
+from machining_envs.core.sensors import PowerSensor, PowerSensorLanes, resolve_power_sensor
 from machining_envs.core.vector import (
     LaneVectorEnv,
     check_num_envs,
@@ -465,10 +466,12 @@ class _TurningCore:
     scenario_types = (TurningScenario, TURNING_SCENARIOS)
 
     def __init__(self, owner, n, scenario, params, spindle_rpm, reward, max_episode_time_s,
-                 overrides, actuation=None):  # fmt: skip
+                 overrides, actuation=None, power_sensor=None):  # fmt: skip
         self.params = resolve_params(
             owner, params, TurningParams, TurningParams.noh_kim_kim_1992, overrides
         )
+        sensor = resolve_power_sensor(power_sensor)  # the spindle power as the load channel
+        self.power_sensor = sensor and PowerSensorLanes(sensor, n, self.params.sample_time_s)
         self.actuation = resolve_actuation(actuation)
         if spindle_rpm is not None:
             spindle_rpm = check_range(
@@ -620,6 +623,8 @@ class _TurningCore:
         # What the episode's infos repeat, as Python values: read once, not at every step.
         self.episode_info[lane] = (float(self.bound[lane]), float(self.length[lane]), sc.name,
                                    rpm, diameter)  # fmt: skip
+        if self.power_sensor:
+            self._sense_power([lane])
 
     def start_lanes(self, lanes: np.ndarray, spec, rngs) -> None:
         """:meth:`start` for each lane ``k`` of ``lanes`` on the scenario ``spec``, drawn
@@ -660,6 +665,8 @@ class _TurningCore:
         info = self.episode_info
         for k in ks:
             info[k] = None  # lane_info reads it from the arrays
+        if self.power_sensor:
+            self._sense_power(lanes)
 
     def _batches(self, factory) -> bool:
         """Whether :meth:`start_lanes` may start ``factory``'s scenarios in one batch: a
@@ -746,6 +753,20 @@ class _TurningCore:
             self._run_blocks(0)
         if self.power_lanes:
             self._spindle_drives()
+        if self.power_sensor:
+            self._sense_power()
+
+    def _sense_power(self, lanes=None) -> None:
+        """The drive's power reading into the observations (option ``power_sensor``,
+        ``machining_envs.core.sensors``): of ``lanes`` that start, else a step of all."""
+        i = self.info_arrays()
+        rpm = i["spindle_rpm"]
+        v = rpm * (math.pi / 30.0) * self.diameter * 0.0005  # cutting speed, m/s
+        args = (self.obs, i["cutting_power_W"], rpm, i["force_limit_N"] * v)
+        if lanes is None:
+            self.power_sensor.step(*args)
+        else:
+            self.power_sensor.start(lanes, *args)
 
     def _run_blocks(self, op: int) -> None:
         """:func:`_step_packed`'s ``op`` on every block of lanes, on the blocks' threads
@@ -843,6 +864,8 @@ class _TurningCore:
         }
         if finished:
             info["machining_time_s"] = float(lanes.out_finish[k])
+        if self.power_sensor:
+            info.update(self.power_sensor.lane_info(k))
         return info
 
     def info_arrays(self) -> dict:
@@ -869,6 +892,7 @@ class _TurningCore:
             "scenario": self.names.array(),
             "machining_time_s": info["machining_time_s"],
             "_machining_time_s": self.eb[:, 2].copy(),
+            **(self.power_sensor.info_arrays() if self.power_sensor else {}),
         }
 
 
@@ -947,7 +971,11 @@ class TurningEnv(LaneEnv):
     default) puts a real CNC between the action and the servo: interpolator delay, override
     quantisation and rate limit (``machining_envs.core.actuation.Actuation`` or a dict,
     e.g. ``{"quantum": 0.01, "max_rate_per_s": 2.0, "delay_steps": 2}``; ``info["command"]``
-    is then what the servo got). Unknown keywords raise ``TypeError``; out-of-range values
+    is then what the servo got); ``power_sensor`` (off by default) shows the spindle drive's
+    power reading in the load channels instead of the dynamometer's force, and the limit as
+    a power (``machining_envs.core.sensors.PowerSensor``, a dict of its fields or ``True``
+    for the defaults; ``info`` adds ``spindle_power_measured_W`` and ``power_limit_W``;
+    the task, its cost and its score stay on the force). Unknown keywords raise ``TypeError``; out-of-range values
     raise ``ValueError`` naming the parameter.
 
     Reset options: ``{"scenario": name_or_TurningScenario}``.
@@ -1015,6 +1043,7 @@ class TurningEnv(LaneEnv):
         reward: TurningReward | dict | None = None,
         max_episode_time_s: float = 200.0,
         actuation: Actuation | dict | None = None,
+        power_sensor: PowerSensor | dict | bool | None = None,
         **overrides,
     ):
         core = _TurningCore(
@@ -1027,6 +1056,7 @@ class TurningEnv(LaneEnv):
             max_episode_time_s,
             overrides,
             actuation,
+            power_sensor,
         )
         self._adopt(core, scenario, render_mode)
         self.spindle_rpm_override = core.spindle_rpm_override
@@ -1106,6 +1136,7 @@ class TurningVectorEnv(LaneVectorEnv):
         reward: TurningReward | dict | None = None,
         max_episode_time_s: float = 200.0,
         actuation: Actuation | dict | None = None,
+        power_sensor: PowerSensor | dict | bool | None = None,
         num_threads: int = 1,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **overrides,
@@ -1121,6 +1152,7 @@ class TurningVectorEnv(LaneVectorEnv):
             max_episode_time_s,
             overrides,
             actuation,
+            power_sensor,
         )
         super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
 
