@@ -16,6 +16,7 @@ from machining_envs.core.lazy import lazy_exports
 #: The classes this package exports, loaded on first use.
 _EXPORTS = {
     "Agent": "agents.base",
+    "AdaptiveFeedControl": "agents.afc",
     "ConstantFeed": "agents.turning",
     "FixedGainPI": "agents.turning",
     "VariableGainPI": "agents.turning",

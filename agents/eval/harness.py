@@ -71,6 +71,9 @@ def rollout(
     traj = {k: np.array([r.get(k, math.nan) for r in rows]) for k in numbers}
     traj["reward"] = np.array(rewards)
     traj["scenario"] = rows[0].get("scenario")
+    episode_log = getattr(agent, "episode_log", None)
+    if episode_log is not None:  # what the agent logged of the episode (e.g. AFC's flags)
+        traj["agent_log"] = episode_log(state)[0]
     return traj
 
 
@@ -107,6 +110,8 @@ def rollout_batch(
     length = np.zeros(n, dtype=np.int64)
     done = np.zeros(n, dtype=bool)
     state, start = None, np.ones(n, dtype=bool)
+    episode_log = getattr(agent, "episode_log", None)
+    logs: list = [None] * n
     while not done.all():
         action, state = agent.predict(obs, state=state, episode_start=start, deterministic=True)
         obs, reward, terminated, truncated, info = venv.step(action)
@@ -114,9 +119,16 @@ def rollout_batch(
         infos.append(info)
         rewards.append(np.asarray(reward, dtype=np.float64))
         length[ended & ~done] = len(infos) - 1
+        if episode_log is not None:  # the agent's log of each lane's episode, as it ends
+            for i in np.flatnonzero(ended & ~done).tolist():
+                logs[i] = episode_log(np.asarray(state)[i : i + 1])[0]
         done |= ended
         start = ended
-    return _lane_trajectories(infos, rewards, length, keys)
+    trajs = _lane_trajectories(infos, rewards, length, keys)
+    if episode_log is not None:
+        for traj, log in zip(trajs, logs, strict=True):
+            traj["agent_log"] = log
+    return trajs
 
 
 def _rows(items: list, dtype) -> np.ndarray:
@@ -419,7 +431,11 @@ def evaluate(
                     "episode": i,
                     "seed": seed + i,
                 }
+                log = traj.pop("agent_log", None)
                 row.update(metrics_fn(traj))
+                if log:  # the agent's own log of the episode (AFC: teach-in, flags ...)
+                    prefix = getattr(agent, "log_prefix", "agent_")
+                    row.update({prefix + k: v for k, v in log.items()})
                 ev.rows.append(row)
                 if keep_trajectories or (kept is not None and seed + i in kept):
                     traj["agent"] = name

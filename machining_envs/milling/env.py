@@ -1045,6 +1045,8 @@ class EndMillingEnv(LaneEnv):
             power_sensor,
         )
         self._adopt(core, scenario, render_mode)
+        #: The spindle-power sensor's settings (option ``power_sensor``), None when off.
+        self.power_sensor = core.power_sensor and core.power_sensor.sensor
         self.plant: MillingLanes | None = None
 
     @property

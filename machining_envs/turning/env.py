@@ -1059,6 +1059,8 @@ class TurningEnv(LaneEnv):
             power_sensor,
         )
         self._adopt(core, scenario, render_mode)
+        #: The spindle-power sensor's settings (option ``power_sensor``), None when off.
+        self.power_sensor = core.power_sensor and core.power_sensor.sensor
         self.spindle_rpm_override = core.spindle_rpm_override
         self.plant: TurningLanes | None = None
 
