@@ -147,6 +147,8 @@ class AdaptiveFeedControl(Agent):
         breakage_margin: float | None = None,
     ):
         self.programmed = programmed
+        #: The programmed feed's design depth (a tuned setting; NaN for a feed given).
+        self.design_depth_mm = float(getattr(programmed, "design_depth_mm", float("nan")))
         self.command_map = command_map
         self.load_units = load_units
         self.programmed_obs = programmed_obs

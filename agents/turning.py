@@ -10,6 +10,7 @@ declares its free parameters in ``TUNABLE`` for ``agents.bench.tune``.
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,7 +21,14 @@ from machining_envs.core.kernels import read_only
 from machining_envs.turning.env import TurningEnv
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams
 
-__all__ = ["FixedGainPI", "ConstantFeed", "TurningIO", "VariableGainPI"]
+__all__ = [
+    "FixedGainPI",
+    "ConstantFeed",
+    "TurningIO",
+    "VariableGainPI",
+    "DelayAwarePI",
+    "delay_aware_gain",
+]
 
 _I = TurningEnv.OBS_INDEX
 
@@ -281,6 +289,136 @@ class VariableGainPI(Agent):
         ok = (y >= self.min_command) & (fm >= self.min_force_fraction * fr)
         kp_hat = np.where(ok, fm / np.where(ok, y, 1.0), state[:, 1])
         kh = self.k / kp_hat
+        e = fr - fm
+        u = np.clip(u_hist[:, 0] + kh * (self.kgh * e - state[:, 0]), 0.0, self.io.command_max)
+        state[:, 0] = e
+        state[:, 1] = kp_hat
+        state[:, 3:5] = u_hist[:, 0:2].copy()
+        state[:, 2] = u
+        state[:, 6:8] = y_hist[:, 0:2].copy()
+        state[:, 5] = y
+        return self.io.action(u)
+
+
+@functools.lru_cache(maxsize=256)
+def delay_aware_gain(params: TurningParams, spindle_rpm: float, kgh: float, delay_steps: int,
+                     phase_margin_deg: float, k_max: float = 0.8) -> float:  # fmt: skip
+    r"""The open-loop gain ``K`` of the adaptive PI that leaves ``phase_margin_deg`` of phase
+    margin on a machine that delays the command by ``delay_steps`` periods.
+
+    The adaptive PI holds ``Kh Kp`` at ``K`` (eq. 15), so its loop at any depth is
+
+    .. math:: L(z) = p K \frac{K_{gh} - z^{-1}}{1 - z^{-1}} P_1(z) z^{-d}
+
+    with :math:`P_1` the paper's unit-gain plant at the spindle speed (eq. 14) and ``p`` the
+    feed exponent (the force's tangent gain is ``p`` times the secant gain the PI
+    estimates). The margin falls as ``K`` grows; the largest ``K`` in ``(0, k_max]`` whose
+    margin (python-control's ``stability_margins``) is at least ``phase_margin_deg`` is found
+    by bisection. Cached per argument set.
+    """
+    import control
+
+    numd, dend = params.discrete_open_loop(spindle_rpm)
+    ts = params.sample_time_s
+    plant = control.tf(np.asarray(numd, float), np.asarray(dend, float), ts)
+    pi = control.tf([kgh, -1.0], [1.0, -1.0], ts)
+    delay = control.tf([1.0], [1.0] + [0.0] * delay_steps, ts)
+    base = params.feed_exponent * pi * plant * delay
+
+    def margin(k: float) -> float:
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            _, pm, *_ = control.stability_margins(k * base)
+        closed = control.poles(control.feedback(k * base, 1))
+        if not np.all(np.abs(closed) < 1.0):
+            return -math.inf
+        return float(pm) if math.isfinite(pm) else math.inf
+
+    if margin(k_max) >= phase_margin_deg:
+        return k_max
+    lo, hi = 0.0, k_max
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        if mid > 0 and margin(mid) >= phase_margin_deg:
+            lo = mid
+        else:
+            hi = mid
+    return max(lo, 1e-4)
+
+
+class DelayAwarePI(VariableGainPI):
+    """The adaptive PI of :class:`VariableGainPI` with its gain derived with the CNC's delay
+    in the loop (:func:`delay_aware_gain`).
+
+    On a machine whose control delays the feed command by ``delay_steps`` periods (the
+    interpolator delay of ``machining_envs.core.actuation``), the paper's open-loop gain
+    (K = 0.5, chosen for a loop without delay) leaves little phase margin. Here ``K`` is
+    worked out for each episode's spindle speed as the largest gain that keeps
+    ``phase_margin_deg`` of phase margin with the delay in the loop; the rest is the
+    adaptive PI. ``agents.eval.margins.loop_margins(agent, point, delay_steps=d)`` reads the
+    gain, phase and delay margins of the result at an operating point.
+
+    Parameters
+    ----------
+    io : TurningIO
+    delay_steps : int
+        Control periods of command delay designed for, 0 to 50.
+    phase_margin_deg : float
+        The design's phase margin, degrees, in [10, 89].
+    kgh, setpoint, ...
+        As for :class:`VariableGainPI`.
+    """
+
+    TUNABLE = {
+        "phase_margin_deg": (20.0, 80.0, False),
+        "kgh": (1.05, 5.0, True),
+        "setpoint": (0.5, 1.0, False),
+    }
+
+    def __init__(self, io: TurningIO, delay_steps: int = 2, phase_margin_deg: float = 45.0,
+                 kgh: float = 1.9, setpoint: float = 1.0, **kwargs):  # fmt: skip
+        from machining_envs.core.checks import check_integer, check_range
+
+        super().__init__(io, 0.5, kgh, setpoint=setpoint, **kwargs)
+        self.delay_steps = check_integer("delay_steps", delay_steps, 0, 50)
+        self.phase_margin_deg = check_range("phase_margin_deg", phase_margin_deg, 10.0, 89.0)
+        self.name = f"delay-aware PI PM={self.phase_margin_deg:.0f}°, delay {self.delay_steps}"
+        # [adaptive PI's state, K of the episode]
+        self.state_size = VariableGainPI.state_size + 1
+
+    @classmethod
+    def from_env(cls, env, delay_steps: int | None = None, phase_margin_deg: float = 45.0,
+                 kgh: float = 1.9, setpoint: float = 1.0, **kwargs) -> DelayAwarePI:  # fmt: skip
+        """The design for ``env``; ``delay_steps`` by default the delay of the env's
+        ``actuation`` option (0 without one)."""
+        base = unwrap_as(env, TurningEnv, "a turning controller")
+        if delay_steps is None:
+            act = getattr(base, "actuation", None)
+            delay_steps = 0 if act is None else int(act.delay_steps)
+        return cls(TurningIO.from_env(env), delay_steps, phase_margin_deg, kgh, setpoint, **kwargs)
+
+    def gain_at(self, spindle_rpm: float) -> float:
+        """The open-loop gain K designed for ``spindle_rpm``."""
+        rpm = float(np.clip(spindle_rpm, *SPINDLE_RPM_RANGE))
+        return delay_aware_gain(self.io.params, round(rpm, 3), self.kgh, self.delay_steps,
+                                self.phase_margin_deg)  # fmt: skip
+
+    def initial_state(self, n, obs):
+        st = super().initial_state(n, obs)  # state_size wide: the last column is K
+        rpm = self.io.spindle_rpm(obs)
+        st[:, -1] = [self.gain_at(r) for r in rpm.tolist()]
+        return st
+
+    def _act(self, obs, state):
+        fm, fr = self.io.force_counts(obs, self.setpoint)
+        u_hist = state[:, 2:5]
+        y_hist = state[:, 5:8]
+        y = np.sum(state[:, 8:11] * u_hist, axis=1) - np.sum(state[:, 11:14] * y_hist, axis=1)
+        ok = (y >= self.min_command) & (fm >= self.min_force_fraction * fr)
+        kp_hat = np.where(ok, fm / np.where(ok, y, 1.0), state[:, 1])
+        kh = state[:, -1] / kp_hat
         e = fr - fm
         u = np.clip(u_hist[:, 0] + kh * (self.kgh * e - state[:, 0]), 0.0, self.io.command_max)
         state[:, 0] = e

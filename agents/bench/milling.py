@@ -33,6 +33,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+from agents.afc import AdaptiveFeedControl
 from agents.bench.spec import BenchmarkSpec, Process, Robustness
 from agents.eval import rollout
 from agents.milling import FixedGainIntegral, IntegralACC, MillingConstantFeed
@@ -427,7 +428,7 @@ PROCESS = Process(
             (MillingConstantFeed.from_env, FixedGainIntegral.from_env, IntegralACC.from_env),
             ("paper_step", "paper_taper"),
             "paper_step",
-            tuned=(MillingConstantFeed, FixedGainIntegral, IntegralACC),
+            tuned=(MillingConstantFeed, FixedGainIntegral, IntegralACC, AdaptiveFeedControl),
             learned=("end_milling_ppo",),
             oracle=_oracle,
             oracle_episodes=20,

@@ -23,6 +23,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+from agents.afc import AdaptiveFeedControl
 from agents.bench.spec import BenchmarkSpec, Process, Robustness
 from agents.eval import rollout
 from agents.eval.margins import OperatingPoint
@@ -254,7 +255,7 @@ PROCESS = Process(
             (ConstantFeed.from_env, FixedGainPI.from_env, VariableGainPI.from_env),
             ("paper_245", "paper_405", "paper_700", "taper_405"),
             "paper_405",
-            tuned=(ConstantFeed, FixedGainPI, VariableGainPI),
+            tuned=(ConstantFeed, FixedGainPI, VariableGainPI, AdaptiveFeedControl),
             learned=("turning_ppo", "turning_ppo_residual", "turning_td3_residual"),
             extra_splits=("wear", "shopfloor"),
             margin_points=tuple(OperatingPoint(rpm, 2.0) for rpm in (245.0, 405.0, 700.0)),

@@ -10,7 +10,11 @@ memoryless SB3 policy and a stateful controller are read the same way. The plant
 paper's model at that point: the servo and cutting lag of eq. (11), discretised as eq. (14),
 times the tangent process gain ``dF/dU = p F / U`` (eq. 8's feed exponent ``p`` times the
 secant gain ``Kp`` of eq. 11). Closing ``L(z) = -C(z) P(z)`` gives python-control's gain and
-phase margins and the sensitivity peak ``Ms = max |1 / (1 + L)|``.
+phase margins and the sensitivity peak ``Ms = max |1 / (1 + L)|``, and the delay margin
+``phase margin / crossover frequency``: the extra loop delay, in seconds, that would take
+the phase margin to zero. On a machine whose control delays the command by ``d`` periods
+(``loop_margins(..., delay_steps=d)``) the plant carries ``z^-d`` and the agent settles
+with that delay.
 """
 
 from __future__ import annotations
@@ -26,7 +30,15 @@ from machining_envs.core.checks import is_integer
 from machining_envs.turning import TurningEnv
 from machining_envs.turning.scenarios import DepthProfile, TurningScenario
 
-__all__ = ["OperatingPoint", "Margins", "settle", "controller_ss", "plant_tf", "loop_margins"]
+__all__ = [
+    "OperatingPoint",
+    "Margins",
+    "settle",
+    "controller_ss",
+    "plant_tf",
+    "loop_margins",
+    "delay_margin",
+]
 
 _I = TurningEnv.OBS_INDEX
 _HISTORY = 3  # past measured forces in the observation
@@ -63,12 +75,18 @@ class Margins:
     sensitivity_peak: float
     force_N: float
     """The steady force the agent holds at the point."""
+    delay_margin_s: float = math.nan
+    """The extra loop delay the loop tolerates, s (phase margin / crossover frequency;
+    inf without a gain crossover)."""
 
 
-def settle(agent, point: OperatingPoint, env_id: str = "machining_envs/Turning-v0"):
+def settle(agent, point: OperatingPoint, env_id: str = "machining_envs/Turning-v0",
+           delay_steps: int = 0):  # fmt: skip
     """Run ``agent`` at ``point`` until it settles; ``(env, obs, state, action)`` at the end.
-    ``ValueError`` if the episode ends first or the force has not settled (within 0.1 %)."""
-    env = gym.make(env_id, max_episode_time_s=1e4).unwrapped
+    ``ValueError`` if the episode ends first or the force has not settled (within 0.1 %).
+    ``delay_steps``: control periods the CNC delays the command by (0: none)."""
+    act = {"delay_steps": delay_steps} if delay_steps else None
+    env = gym.make(env_id, max_episode_time_s=1e4, actuation=act).unwrapped
     obs, _ = env.reset(seed=0, options={"scenario": point.scenario()})
     state, forces = None, []
     for _ in range(point.settle_steps):
@@ -154,13 +172,20 @@ def plant_tf(env, point: OperatingPoint, action0):
     return control.tf(gain * np.asarray(num), np.asarray(den), p.sample_time_s)
 
 
-def loop_margins(agent, point: OperatingPoint) -> Margins:
-    """Gain and phase margins and sensitivity peak of ``agent`` at ``point``."""
+def loop_margins(agent, point: OperatingPoint, delay_steps: int = 0) -> Margins:
+    """Gain, phase and delay margins and sensitivity peak of ``agent`` at ``point``, on a
+    machine that delays the command by ``delay_steps`` control periods."""
     import control
 
-    env, obs, state, action = settle(agent, point)
-    ctrl = controller_ss(agent, obs, state, action, env.params.sample_time_s)
-    loop = -ctrl * plant_tf(env, point, action)
+    if not (is_integer(delay_steps) and 0 <= delay_steps <= 50):
+        raise ValueError(f"delay_steps must be an integer in [0, 50], got {delay_steps!r}")
+    env, obs, state, action = settle(agent, point, delay_steps=delay_steps)
+    ts = env.params.sample_time_s
+    ctrl = controller_ss(agent, obs, state, action, ts)
+    plant = plant_tf(env, point, action)
+    if delay_steps:
+        plant = plant * control.tf([1.0], [1.0] + [0.0] * delay_steps, ts)
+    loop = -ctrl * plant
     return margins_of(loop, float(obs[_I["measured"]]) * env.params.force_scale_N, control)
 
 
@@ -172,6 +197,17 @@ def margins_of(loop, force_N: float = math.nan, control=None) -> Margins:
 
     with warnings.catch_warnings():  # python-control warns where a margin is infinite
         warnings.simplefilter("ignore")
-        gm, pm, sm, *_ = control.stability_margins(loop)
+        gm, pm, sm, _, wgc, _ = control.stability_margins(loop)
     gm_db = 20.0 * math.log10(gm) if gm and math.isfinite(gm) and gm > 0 else math.inf
-    return Margins(gm_db, float(pm), 1.0 / sm if sm > 0 else math.inf, force_N)
+    dm = delay_margin(pm, wgc)
+    return Margins(gm_db, float(pm), 1.0 / sm if sm > 0 else math.inf, force_N, dm)
+
+
+def delay_margin(phase_margin_deg: float, crossover_rad_s: float) -> float:
+    """The delay margin, s, from python-control's phase margin and gain-crossover
+    frequency (``stability_margins``): inf where the loop gain never crosses 1, 0 for a
+    loop already unstable at its crossover (negative phase margin)."""
+    pm, w = float(phase_margin_deg), float(crossover_rad_s)
+    if not (math.isfinite(pm) and math.isfinite(w) and w > 0):
+        return math.inf
+    return max(0.0, math.radians(pm) / w)

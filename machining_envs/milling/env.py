@@ -1047,6 +1047,8 @@ class EndMillingEnv(LaneEnv):
         self._adopt(core, scenario, render_mode)
         #: The spindle-power sensor's settings (option ``power_sensor``), None when off.
         self.power_sensor = core.power_sensor and core.power_sensor.sensor
+        #: The CNC's actuation (option ``actuation``), None when ideal.
+        self.actuation = core.actuation
         self.plant: MillingLanes | None = None
 
     @property

@@ -1061,6 +1061,8 @@ class TurningEnv(LaneEnv):
         self._adopt(core, scenario, render_mode)
         #: The spindle-power sensor's settings (option ``power_sensor``), None when off.
         self.power_sensor = core.power_sensor and core.power_sensor.sensor
+        #: The CNC's actuation (option ``actuation``), None when ideal.
+        self.actuation = core.actuation
         self.spindle_rpm_override = core.spindle_rpm_override
         self.plant: TurningLanes | None = None
 
