@@ -1,0 +1,70 @@
+"""The machine description file (machining_envs.core.machine)."""
+
+from pathlib import Path
+
+import gymnasium as gym
+import pytest
+
+import machining_envs  # noqa: F401
+from machining_envs.core.actuation import SHOPFLOOR_ACTUATION
+from machining_envs.core.machine import SHOPFLOOR_MACHINE, Machine, load_machine
+from machining_envs.core.sensors import PowerSensor
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "docs" / "my_cnc.yml"
+
+
+def test_example_file_is_the_shopfloor_machine():
+    m = load_machine(EXAMPLE)
+    assert m.name == "my_lathe"
+    assert m.actuation == SHOPFLOOR_ACTUATION
+    assert m.spindle_power_W == SHOPFLOOR_MACHINE.spindle_power_W
+    assert m.power_sensor is None
+
+
+def test_env_kwargs_per_env(tmp_path):
+    f = tmp_path / "m.yml"
+    f.write_text(
+        "actuation: {delay_steps: 1}\nspindle_power_W: 3000\npower_sensor: {quantum_W: 2}\n"
+    )
+    m = load_machine(f)
+    assert m.name == "m"
+    assert m.power_sensor == PowerSensor(quantum_W=2.0)
+    for env_id in ("machining_envs/Turning-v0", "machining_envs/EndMilling-v0"):
+        kw = m.env_kwargs(env_id)
+        assert ("spindle_power_W" in kw) == env_id.endswith("Turning-v0")
+        assert kw["power_sensor"]["quantum_W"] == 2.0
+        env = gym.make(env_id, **kw)
+        env.reset(seed=0)
+        assert env.unwrapped.actuation.delay_steps == 1
+        assert env.unwrapped.power_sensor.quantum_W == 2.0
+    assert Machine("ideal").env_kwargs("machining_envs/Turning-v0") == {}
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("speed: 3\n", "unknown keys"),
+        ("actuation: {delay_steps: 99}\n", "delay_steps"),
+        ("spindle_power_W: -1\n", "spindle_power_W"),
+        ("power_sensor: {idle_W: -5}\n", "idle_W"),
+        ("- 1\n- 2\n", "mapping"),
+        ("actuation: {delay: 1}\n", "unknown settings"),
+    ],
+)
+def test_bad_files_name_the_key(tmp_path, text, match):
+    f = tmp_path / "bad.yml"
+    f.write_text(text)
+    with pytest.raises(ValueError, match=match):
+        load_machine(f)
+
+
+def test_missing_file():
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        load_machine("/nonexistent/machine.yml")
+
+
+def test_spread_around_the_description():
+    variants = SHOPFLOOR_MACHINE.spread()
+    assert {v.delay_steps for v in variants} == {1, 2, 3}
+    assert {v.max_rate_per_s for v in variants} == {0.4, 0.625}
+    assert all(v.quantum == 0.01 for v in variants)
