@@ -79,6 +79,17 @@ class Machine:
             kw["power_sensor"] = dataclasses.asdict(self.power_sensor)
         return kw
 
+    def as_dict(self) -> dict:
+        """The description as a machine file holds it (JSON-friendly)."""
+        return {
+            "name": self.name,
+            "actuation": None if self.actuation is None else dataclasses.asdict(self.actuation),
+            "spindle_power_W": self.spindle_power_W,
+            "power_sensor": (
+                None if self.power_sensor is None else dataclasses.asdict(self.power_sensor)
+            ),
+        }
+
     def spread(self) -> list[Actuation]:
         """The actuation variants around the description: delay one period less (not below
         0) and more, the rate and acceleration limits 0.8x and 1.25x (module docstring)."""

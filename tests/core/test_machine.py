@@ -19,6 +19,8 @@ def test_example_file_is_the_shopfloor_machine():
     assert m.actuation == SHOPFLOOR_ACTUATION
     assert m.spindle_power_W == SHOPFLOOR_MACHINE.spindle_power_W
     assert m.power_sensor is None
+    assert load_machine(EXAMPLE).as_dict() == {**m.as_dict()}
+    assert Machine(**{**m.as_dict(), "name": "x"}).actuation == m.actuation
 
 
 def test_env_kwargs_per_env(tmp_path):
