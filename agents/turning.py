@@ -281,6 +281,10 @@ class VariableGainPI(Agent):
             st[i, 8:14] = _unit_plant(self.io.params, round(float(rpm[i]), 6))
         return st
 
+    def _open_loop_gain(self, state: np.ndarray):
+        """The open-loop gain K the law holds (``k``; a subclass may set it per episode)."""
+        return self.k
+
     def _act(self, obs, state):
         fm, fr = self.io.force_counts(obs, self.setpoint)
         u_hist = state[:, 2:5]
@@ -288,7 +292,7 @@ class VariableGainPI(Agent):
         y = np.sum(state[:, 8:11] * u_hist, axis=1) - np.sum(state[:, 11:14] * y_hist, axis=1)
         ok = (y >= self.min_command) & (fm >= self.min_force_fraction * fr)
         kp_hat = np.where(ok, fm / np.where(ok, y, 1.0), state[:, 1])
-        kh = self.k / kp_hat
+        kh = self._open_loop_gain(state) / kp_hat
         e = fr - fm
         u = np.clip(u_hist[:, 0] + kh * (self.kgh * e - state[:, 0]), 0.0, self.io.command_max)
         state[:, 0] = e
@@ -411,20 +415,5 @@ class DelayAwarePI(VariableGainPI):
         st[:, -1] = [self.gain_at(r) for r in rpm.tolist()]
         return st
 
-    def _act(self, obs, state):
-        fm, fr = self.io.force_counts(obs, self.setpoint)
-        u_hist = state[:, 2:5]
-        y_hist = state[:, 5:8]
-        y = np.sum(state[:, 8:11] * u_hist, axis=1) - np.sum(state[:, 11:14] * y_hist, axis=1)
-        ok = (y >= self.min_command) & (fm >= self.min_force_fraction * fr)
-        kp_hat = np.where(ok, fm / np.where(ok, y, 1.0), state[:, 1])
-        kh = state[:, -1] / kp_hat
-        e = fr - fm
-        u = np.clip(u_hist[:, 0] + kh * (self.kgh * e - state[:, 0]), 0.0, self.io.command_max)
-        state[:, 0] = e
-        state[:, 1] = kp_hat
-        state[:, 3:5] = u_hist[:, 0:2].copy()
-        state[:, 2] = u
-        state[:, 6:8] = y_hist[:, 0:2].copy()
-        state[:, 5] = y
-        return self.io.action(u)
+    def _open_loop_gain(self, state: np.ndarray) -> np.ndarray:
+        return state[:, -1]  # the episode's K, designed at its spindle speed

@@ -21,10 +21,10 @@ import time
 import gymnasium as gym
 
 from agents import AdaptiveFeedControl, ConstantFeed, MillingConstantFeed
-from agents.turning import DelayAwarePI
 from agents.bench.tune import TuningBudget, tune_agent
 from agents.eval import evaluate, task_of
 from agents.eval.stats import paired_difference
+from agents.turning import DelayAwarePI
 from machining_envs.core.actuation import SHOPFLOOR_ACTUATION
 from machining_envs.core.splits import split_seeds
 from machining_envs.turning.scenarios import SHOPFLOOR_SPINDLE_POWER_W

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from machining_envs.core.checks import check_integer, check_range
+from machining_envs.core.checks import check_integer, check_range, resolve_settings
 
 __all__ = [
     "Actuation",
@@ -88,18 +88,7 @@ def resolve_actuation(actuation) -> Actuation | None:
     """``None`` (off), a dict of :class:`Actuation` fields, or an ``Actuation``."""
     if actuation is None:
         return None
-    if isinstance(actuation, dict):
-        import dataclasses
-
-        known = [f.name for f in dataclasses.fields(Actuation)]
-        bad = sorted(set(actuation) - set(known))
-        if bad:
-            raise TypeError(f"actuation: unknown settings {bad}; allowed {known}")
-        actuation = Actuation(**actuation)
-    if not isinstance(actuation, Actuation):
-        raise ValueError(
-            f"actuation must be an Actuation, a dict or None, got {type(actuation).__name__}"
-        )
+    actuation = resolve_settings("actuation", actuation, Actuation)
     return actuation if actuation.active else None
 
 

@@ -29,6 +29,7 @@ __all__ = [
     "check_range",
     "check_integer",
     "check_below",
+    "resolve_settings",
 ]
 
 #: Python's and numpy's real scalar types: what a parameter check accepts by default.
@@ -216,3 +217,21 @@ def drawn_instance(cls: type, fields: dict):
     new = object.__new__(cls)
     new.__dict__.update(fields)
     return new
+
+
+def resolve_settings(name: str, value, cls: type):
+    """A settings dataclass ``cls`` from ``value``: an instance, or a dict of its fields
+    (``TypeError`` naming unknown keys, as ``"{name}: unknown settings [...]; allowed
+    [...]"``); ``ValueError`` for anything else. ``None`` is the caller's to handle."""
+    if isinstance(value, dict):
+        known = [f.name for f in dataclasses.fields(cls)]
+        bad = sorted(set(value) - set(known))
+        if bad:
+            raise TypeError(f"{name}: unknown settings {bad}; allowed {known}")
+        value = cls(**value)
+    if not isinstance(value, cls):
+        article = "an" if cls.__name__[:1] in "AEIOU" else "a"
+        raise ValueError(
+            f"{name} must be {article} {cls.__name__}, a dict or None, got {type(value).__name__}"
+        )
+    return value

@@ -47,7 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from machining_envs.core.checks import check_range
+from machining_envs.core.checks import check_range, resolve_settings
 
 __all__ = ["PowerSensor", "PowerSensorLanes", "resolve_power_sensor", "POWER_INFO_KEYS"]
 
@@ -108,20 +108,7 @@ def resolve_power_sensor(power_sensor) -> PowerSensor | None:
         return None
     if power_sensor is True:
         return PowerSensor()
-    if isinstance(power_sensor, dict):
-        import dataclasses
-
-        known = [f.name for f in dataclasses.fields(PowerSensor)]
-        bad = sorted(set(power_sensor) - set(known))
-        if bad:
-            raise TypeError(f"power_sensor: unknown settings {bad}; allowed {known}")
-        power_sensor = PowerSensor(**power_sensor)
-    if not isinstance(power_sensor, PowerSensor):
-        raise ValueError(
-            "power_sensor must be a PowerSensor, a dict, True or None, got "
-            f"{type(power_sensor).__name__}"
-        )
-    return power_sensor
+    return resolve_settings("power_sensor", power_sensor, PowerSensor)
 
 
 class PowerSensorLanes:
@@ -183,6 +170,14 @@ class PowerSensorLanes:
         self.limit[lanes] = self._limit(np.asarray(limit_cut_W, dtype=np.float64),
                                         np.asarray(rpm, dtype=np.float64))[lanes]  # fmt: skip
         self._write(obs, lanes)
+
+    def update(self, obs: np.ndarray, lanes, cutting_W, rpm, limit_cut_W) -> None:
+        """:meth:`start` for ``lanes`` that start an episode, or (``lanes`` None) a
+        :meth:`step` of every lane: what the envs call after their own start or step."""
+        if lanes is None:
+            self.step(obs, cutting_W, rpm, limit_cut_W)
+        else:
+            self.start(lanes, obs, cutting_W, rpm, limit_cut_W)
 
     def step(self, obs: np.ndarray, cutting_W, rpm, limit_cut_W) -> None:
         """Every lane advances one control period to the drive power of this sample; the

@@ -776,11 +776,9 @@ class _MillingCore:
         i = self.info_arrays()
         rpm = i["spindle_rpm"]
         w = rpm * (math.pi / 30.0) * 1e-3  # angular speed, rad/s, per N·mm
-        args = (self.obs, i["torque_Nmm"] * w, rpm, i["torque_limit_Nmm"] * w)
-        if lanes is None:
-            self.power_sensor.step(*args)
-        else:
-            self.power_sensor.start(lanes, *args)
+        self.power_sensor.update(
+            self.obs, lanes, i["torque_Nmm"] * w, rpm, i["torque_limit_Nmm"] * w
+        )
 
     def _run(self, args: tuple, stage: int) -> None:
         """:func:`_step` of ``stage`` over every lane (on the blocks of lanes, if several)."""

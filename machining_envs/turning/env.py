@@ -762,11 +762,7 @@ class _TurningCore:
         i = self.info_arrays()
         rpm = i["spindle_rpm"]
         v = rpm * (math.pi / 30.0) * self.diameter * 0.0005  # cutting speed, m/s
-        args = (self.obs, i["cutting_power_W"], rpm, i["force_limit_N"] * v)
-        if lanes is None:
-            self.power_sensor.step(*args)
-        else:
-            self.power_sensor.start(lanes, *args)
+        self.power_sensor.update(self.obs, lanes, i["cutting_power_W"], rpm, i["force_limit_N"] * v)
 
     def _run_blocks(self, op: int) -> None:
         """:func:`_step_packed`'s ``op`` on every block of lanes, on the blocks' threads
