@@ -33,7 +33,6 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-from agents.afc import AdaptiveFeedControl
 from agents.bench.spec import BenchmarkSpec, Process, Robustness
 from agents.eval import rollout
 from agents.milling import FixedGainIntegral, IntegralACC, MillingConstantFeed
@@ -428,7 +427,7 @@ PROCESS = Process(
             (MillingConstantFeed.from_env, FixedGainIntegral.from_env, IntegralACC.from_env),
             ("paper_step", "paper_taper"),
             "paper_step",
-            tuned=(MillingConstantFeed, FixedGainIntegral, IntegralACC, AdaptiveFeedControl),
+            tuned=(MillingConstantFeed, FixedGainIntegral, IntegralACC),
             learned=("end_milling_ppo",),
             oracle=_oracle,
             oracle_episodes=20,
