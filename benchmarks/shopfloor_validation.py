@@ -8,6 +8,7 @@ bootstrap interval of the machining-time difference, positive: faster than the c
 feed). The held-out ``shopfloor`` split itself is not touched.
 
     python benchmarks/shopfloor_validation.py --env machining_envs/Turning-v0 --out x.json
+    python benchmarks/shopfloor_validation.py --env machining_envs/EndMilling-v0 --only afc
 """
 
 from __future__ import annotations
@@ -38,6 +39,14 @@ MACHINES = {
 }
 
 
+#: --only's names of the runs.
+KEYS = {
+    "afc": "AFC (force/torque channel)",
+    "afc-power": "AFC (spindle power)",
+    "delay-aware": "delay-aware PI",
+}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--env", default="machining_envs/Turning-v0", choices=sorted(MACHINES))
@@ -45,7 +54,8 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=16)
     ap.add_argument("--validation", type=int, default=100)
     ap.add_argument("--out", default=None)
-    ap.add_argument("--only", nargs="*", default=None, help="labels of the runs to make")
+    ap.add_argument("--only", nargs="*", default=None, choices=sorted(KEYS),
+                    help="the runs to make besides the constant feed")  # fmt: skip
     args = ap.parse_args()
     machine = MACHINES[args.env]
     constant = ConstantFeed if "Turning" in args.env else MillingConstantFeed
@@ -57,7 +67,8 @@ def main() -> None:
     if "Turning" in args.env:
         runs["delay-aware PI"] = (DelayAwarePI, machine)
     if args.only:
-        runs = {k: v for k, v in runs.items() if k in args.only or k == "constant feed"}
+        keep = {KEYS[k] for k in args.only} | {"constant feed"}
+        runs = {k: v for k, v in runs.items() if k in keep}
     budget = TuningBudget(args.trials, args.episodes)
     env = gym.make(args.env)
     score, failed = task_of(env).score, task_of(env).score.failed_value(env)
