@@ -343,7 +343,7 @@ def delay_aware_gain(params: TurningParams, spindle_rpm: float, kgh: float, dela
     if margin(k_max) >= phase_margin_deg:
         return k_max
     lo, hi = 0.0, k_max
-    for _ in range(40):
+    for _ in range(16):  # K to k_max / 2**16 (about 1e-5)
         mid = 0.5 * (lo + hi)
         if mid > 0 and margin(mid) >= phase_margin_deg:
             lo = mid
