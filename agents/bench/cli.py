@@ -2,9 +2,9 @@
 
 machining-bench benchmark [--quick] [--out results] [--env ID ...]
 machining-bench synthesize [--out agents/hinf_designs.json]
-machining-bench tune [--env ID] [--trials 30] [--episodes 16]
+machining-bench tune [--env ID] [--trials 30] [--episodes 16] [--machine my_cnc.yml]
 machining-bench reproduce {turning,milling,drilling,contouring} [--out results]
-machining-bench train --env ID --out runs/x [--algo ppo] [--resume]
+machining-bench train --env ID --out runs/x [--algo ppo] [--resume] [--machine my_cnc.yml]
 machining-bench sweep --env ID --out sweeps/x [--search N] [--seeds 0 1 2 3 4]
 machining-bench evaluate --model runs/x/best_model.zip --env ID
 machining-bench export --onnx --model runs/x/best_model.zip
@@ -313,13 +313,33 @@ def _tune_arguments(tu):
     tu.add_argument("--env", default=None, help="only this env id (default: all)")
     tu.add_argument("--trials", type=_positive_int, default=30, help="trials per agent")
     tu.add_argument("--episodes", type=_positive_int, default=16, help="train episodes per trial")
-    tu.add_argument("--out", default=None, help="file to write (default: agents/bench/tuned.json)")
+    tu.add_argument("--out", default=None,
+                    help="file to write (default: agents/bench/tuned.json; with --machine, "
+                    "tuned_<machine name>.json here)")  # fmt: skip
+    tu.add_argument("--machine", default=None, metavar="YAML",
+                    help="tune for this machine (docs/shopfloor.md): every env made with its "
+                    "actuation, spindle power and power sensor")  # fmt: skip
+
+
+def _machine(args):
+    """The machine ``--machine`` names (None without it); a bad file is a usage error."""
+    if getattr(args, "machine", None) is None:
+        return None
+    from machining_envs.core.machine import load_machine
+
+    try:
+        return load_machine(args.machine)
+    except (ValueError, FileNotFoundError) as exc:
+        raise UsageError(f"--machine: {exc}") from None
 
 
 def _tune_out(args) -> Path:
     from agents.bench.tune import TUNED_FILE
 
-    return Path(args.out) if args.out is not None else TUNED_FILE
+    if args.out is not None:
+        return Path(args.out)
+    machine = _machine(args)
+    return TUNED_FILE if machine is None else Path(f"tuned_{machine.name}.json")
 
 
 def _tune_check(args):
@@ -345,7 +365,8 @@ def _tune(args, command):
     from agents.bench.declarations import BENCHMARKS
     from agents.bench.tune import TuningBudget, tune_all
 
-    tune_all(BENCHMARKS, TuningBudget(args.trials, args.episodes), _tune_out(args), only=args.env)
+    tune_all(BENCHMARKS, TuningBudget(args.trials, args.episodes), _tune_out(args), only=args.env,
+             machine=_machine(args), machine_file=args.machine)  # fmt: skip
     return 0
 
 
@@ -408,11 +429,20 @@ def _train_arguments(t):
     t.add_argument("--seed", type=_seed, default=0)
     t.add_argument("--resume", action="store_true", help="continue from the run's last checkpoint")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
+    t.add_argument("--machine", default=None, metavar="YAML",
+                   help="train for this machine (docs/shopfloor.md): its env options join the "
+                   "config's env_kwargs")  # fmt: skip
 
 
 def _train(args, command):
     from agents.rl import train
 
+    overrides, machine = None, _machine(args)
+    if machine is not None:  # the machine's env options over the config's
+        from agents.rl.config import load_config
+
+        cfg = load_config(args.env, args.algo, args.config)
+        overrides = {"env_kwargs": {**cfg.env_kwargs, **machine.env_kwargs(args.env)}}
     train(
         args.env,
         args.algo,
@@ -423,6 +453,7 @@ def _train(args, command):
         resume=args.resume,
         progress_bar=not args.no_progress,
         vec=args.vec,
+        overrides=overrides,
         command=command,
     )
     return 0
