@@ -135,7 +135,7 @@ def _learning_curves(run: EnvRun, ref: str | None, path: Path, pngs: list, seed:
 
 
 def _margin_table(run: EnvRun) -> list:
-    """The report's loop-margin table (``spec.margin_points``): gain margin, phase margin and
+    """The report's loop-margin table (``spec.margin_points``): gain, phase and delay margin and
     sensitivity peak of every paper, tuned and learned agent (a learned row: its first
     training seed) linearised at each operating point."""
     points = run.spec.margin_points
@@ -147,7 +147,8 @@ def _margin_table(run: EnvRun) -> list:
     lines = [
         "Loop margins at steady cuts (2 mm deep, no noise; the agent linearised around its own "
         "steady state, the plant as eq. 11/14 with the tangent process gain; "
-        "`agents.eval.margins`): gain margin / phase margin / sensitivity peak Ms.",
+        "`agents.eval.margins`): gain margin / phase margin / delay margin / sensitivity "
+        "peak Ms.",
         "",
         "| agent | " + " | ".join(f"{p.spindle_rpm:.0f} rpm" for p in points) + " |",
         "|---|" + "---|" * len(points),
@@ -167,7 +168,8 @@ def _margin_table(run: EnvRun) -> list:
                 continue
             gm = "∞" if math.isinf(m.gain_margin_db) else f"{m.gain_margin_db:.1f} dB"
             pm = "∞" if math.isinf(m.phase_margin_deg) else f"{m.phase_margin_deg:.0f}°"
-            cells.append(f"{gm} / {pm} / {m.sensitivity_peak:.2f}")
+            dm = "∞" if math.isinf(m.delay_margin_s) else f"{m.delay_margin_s:.2f} s"
+            cells.append(f"{gm} / {pm} / {dm} / {m.sensitivity_peak:.2f}")
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     env.close()
     return [*lines, ""]

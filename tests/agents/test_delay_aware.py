@@ -99,3 +99,22 @@ def _crossover(agent, point):
     loop = -controller_ss(agent, obs, state, action, ts) * plant_tf(env, point, action)
     loop = loop * control.tf([1.0], [1.0, 0.0, 0.0], ts)
     return control.stability_margins(loop)[4]
+
+
+def test_report_prints_the_delay_margin_beside_gain_and_phase():
+    from agents.bench.declarations import benchmark_spec
+    from agents.bench.report import _margin_table
+    from agents.bench.run import EnvRun
+
+    run = EnvRun(benchmark_spec("machining_envs/Turning-v0"))
+    run.kind = {"adaptive PI": "paper"}
+    run.factory = {"adaptive PI": VariableGainPI.from_env}
+    lines = _margin_table(run)
+    assert "delay margin" in lines[0]
+    row = lines[-2]
+    cells = [c.strip() for c in row.strip("|").split("|")[1:]]
+    assert len(cells) == 3
+    for cell in cells:
+        gm, pm, dm, ms = cell.split(" / ")
+        assert gm.endswith("dB") and pm.endswith("°") and dm.endswith(" s")
+        assert float(dm[:-2]) > 0
