@@ -35,14 +35,13 @@ import numpy as np
 from scipy.linalg import block_diag
 
 from agents.base import Agent, check_positive, unwrap, unwrap_as
-from machining_envs.contouring._exact import vecmat_rows
 from machining_envs.contouring.env import ERROR_SCALE_MM, POSITION_SCALE_MM, ContouringEnv
 from machining_envs.contouring.feed_env import (
     DEFAULT_TOLERANCE_MM,
     LOOKAHEAD_MM,
     ContouringFeedEnv,
 )
-from machining_envs.contouring.plant import AXES, ContouringParams
+from machining_envs.contouring.plant import AXES, ContouringParams, vecmat_rows
 from machining_envs.contouring.servo import HINF_RHO, ServoDesign, hinf_2dof_design, pi_design
 
 __all__ = [

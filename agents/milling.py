@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agents.base import Agent, check_positive, unwrap_as
-from machining_envs.core.env import ActionMap
+from machining_envs.core.actions import ActionMap
 from machining_envs.milling.env import EndMillingEnv
 from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams
 from machining_envs.milling.scenarios import PAPER_CONSTANT_FEED_MM_MIN

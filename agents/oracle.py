@@ -36,7 +36,6 @@ import numpy as np
 
 from agents.base import Agent, check_positive, unwrap_as
 from machining_envs.milling.env import EndMillingEnv
-from machining_envs.milling.plant import LANE_CONSTANTS
 from machining_envs.turning.env import TurningEnv
 from machining_envs.turning.plant import sampled_model
 
@@ -195,9 +194,6 @@ class TurningMPCOracle(Agent):
         return self._command_to_action(self._solve(self._nlp_values()))
 
 
-_LC = {name: i for i, name in enumerate(LANE_CONSTANTS)}
-
-
 class MillingMPCOracle(TurningMPCOracle):
     """MPC with the true plant and the workpiece previewed, for EndMilling-v0 (see the
     module docstring). Parameters as :class:`TurningMPCOracle`, but ``horizon`` 6 by default
@@ -217,20 +213,18 @@ class MillingMPCOracle(TurningMPCOracle):
         return np.concatenate([lanes.z[0, :3], lanes.buf[0, :2]])
 
     def _clock(self) -> float:
-        return float(self.env.plant.lane_f[0, _LC["t_s"]])
+        return self.env.plant.cut_model(0).t_s
 
     def _build(self, scenario) -> None:
         ca = _casadi()
         lanes = self.env.plant
         m = lanes.m
-        lf = lanes.lane_f[0]
+        cut = lanes.cut_model(0)
         big = lanes.big.reshape(2 * m + 3, 4)
         lag = lanes.lag[0].reshape(m, m + 2)
-        ftpv, e = lf[_LC["ft_per_vf"]], lf[_LC["feed_exponent"]]
-        c, l_exp = lf[_LC["torque_gain"]], lf[_LC["depth_exponent"]]
-        if lf[_LC["power_law"]] == 0.0:
-            l_exp = 1.0
-        umax = lf[_LC["command_max"]]
+        ftpv, e = cut.ft_per_vf, cut.feed_exponent
+        c, l_exp = cut.torque_gain, cut.depth_exponent
+        umax = cut.command_max
         limit = self.margin * float(self.env._core.torque_limit[0])
         prof = scenario.profile
         reach = umax * self.env.params.servo_gain * self.env.params.sample_time_s

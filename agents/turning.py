@@ -17,9 +17,8 @@ import numpy as np
 
 from agents.base import Agent, check_positive, unwrap_as
 from machining_envs.core.checks import PY_NUMBER_TYPES
-from machining_envs.core.kernels import read_only
 from machining_envs.turning.env import TurningEnv
-from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams
+from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams, unit_plant_coefficients
 
 __all__ = [
     "FixedGainPI",
@@ -186,16 +185,6 @@ class ConstantFeed(Agent):
         return self.io.action(np.clip(u, 0.0, self.io.command_max))
 
 
-@functools.lru_cache(maxsize=512)
-def _unit_plant(params: TurningParams, spindle_rpm: float) -> np.ndarray:
-    """``[b1, b2, b3, a1, a2, a3]`` of the unit-gain discrete plant of eq. (14) at this speed
-    (read-only: cached)."""
-    numd, dend = params.discrete_open_loop(spindle_rpm)
-    numd = np.pad(numd, (0, 4 - numd.size))
-    dend = np.pad(dend, (0, 4 - dend.size))
-    return read_only(np.concatenate([numd[1:4], dend[1:4]]))
-
-
 class VariableGainPI(Agent):
     r"""PI controller whose gain holds the open-loop gain ``K = Kh Kp`` constant, eq. (15)-(16).
 
@@ -278,7 +267,7 @@ class VariableGainPI(Agent):
         fr_N = np.where(fr_N > 0, fr_N, self.io.force_scale_N)
         st[:, 1] = self.nominal_process_gain(rpm, fr_N)
         for i in range(n):  # the model at each env's spindle speed (cached per speed)
-            st[i, 8:14] = _unit_plant(self.io.params, round(float(rpm[i]), 6))
+            st[i, 8:14] = unit_plant_coefficients(self.io.params, round(float(rpm[i]), 6))
         return st
 
     def _open_loop_gain(self, state: np.ndarray):

@@ -44,7 +44,7 @@ import numpy as np
 from throughput import steady_window, steps_per_second  # this folder's script
 
 import machining_envs
-from machining_envs.core.blocks import LaneBlocks
+from machining_envs.core.compiled.blocks import LaneBlocks
 
 
 def _timed(obj, name: str, acc: dict, key: str) -> None:
@@ -64,7 +64,7 @@ def _timed(obj, name: str, acc: dict, key: str) -> None:
 def _core_arrays(obj, depth: int = 2, seen: set | None = None) -> list[np.ndarray]:
     """The writable numpy arrays a core holds: its attributes', and those of the library's
     objects it holds (the plant's lanes, the servo loops), ``depth`` levels down. Not the
-    lane blocks' (``core.blocks``): their workers' flags are the threads' handshake, not
+    lane blocks' (``core.compiled.blocks``): their workers' flags are the threads' handshake, not
     the lanes' state, and a worker asleep whose flags were put back as awake is never
     woken again."""
     seen = set() if seen is None else seen

@@ -1,5 +1,5 @@
 """What running a kernel on blocks of lanes costs on several threads against one: the
-handoff of ``machining_envs.core.blocks.LaneBlocks`` (its workers wait for their blocks in
+handoff of ``machining_envs.core.compiled.blocks.LaneBlocks`` (its workers wait for their blocks in
 compiled code, and the calling thread waits for them), measured on this machine.
 
 A compiled kernel (no GIL) does ``work`` multiply-adds per lane over 1024 lanes; one
@@ -20,7 +20,7 @@ import time
 import numba
 import numpy as np
 
-from machining_envs.core.blocks import LaneBlocks
+from machining_envs.core.compiled.blocks import LaneBlocks
 
 
 @numba.njit(nogil=True)

@@ -27,6 +27,7 @@ _EXPORTS = {
     "ContouringScenario": "machining_envs.contouring",
     "Path": "machining_envs.contouring",
     "DepthProfile": "machining_envs.core.workpieces",
+    "LimitReward": "machining_envs.core.reward",
     "TURNING_SCENARIOS": "machining_envs.turning",
     "TurningEnv": "machining_envs.turning",
     "TurningParams": "machining_envs.turning",

@@ -11,12 +11,12 @@ operations here are those whose rounding differs from a plain loop:
   array (``np.sum``, ``np.mean``);
 - :func:`gemv_row`: one element of OpenBLAS's ``dgemv`` (``A @ x`` of a C-ordered float64
   matrix, x86-64 Haswell kernels, one thread): four interleaved FMA chains per row
-  (``machining_envs.core.kernels.fma``: one rounding, as the BLAS kernels use).
+  (``machining_envs.core.compiled.kernels.fma``: one rounding, as the BLAS kernels use).
 
 CPython's ``x ** 2`` is libm's ``pow``, which differs from ``x * x`` for about one value
 in a thousand; compiled code gets it from ``math.pow(x, two)`` with ``two`` read at run
 time (a constant exponent is rewritten into ``x * x`` by the compiler), and
-``machining_envs.core.kernels.py_square`` calls it only where ``x * x`` could differ.
+``machining_envs.core.compiled.kernels.py_square`` calls it only where ``x * x`` could differ.
 
 The tests in ``tests/contouring/test_exact.py`` compare every function here with the
 operation it reproduces on random data.
@@ -29,7 +29,7 @@ import math
 import numba
 import numpy as np
 
-from machining_envs.core.kernels import bits_float, float_bits, fma
+from machining_envs.core.compiled.kernels import bits_float, float_bits, fma
 
 __all__ = [
     "py_hypot",

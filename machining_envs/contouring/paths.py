@@ -30,7 +30,8 @@ import numba
 import numpy as np
 
 from machining_envs.contouring._exact import np_mean, py_hypot
-from machining_envs.core.kernels import bits_float, float_bits, sincos_row, vector_hypot
+from machining_envs.core.checks import is_real
+from machining_envs.core.compiled.kernels import bits_float, float_bits, sincos_row, vector_hypot
 
 __all__ = ["Line", "Arc", "Involute", "Path", "PAPER_CORNER_FEED_MM_S", "PAPER_FEED_MM_S"]
 __all__ += ["SEGMENT_COLUMNS", "path_point", "path_points", "path_heading", "path_distance"]
@@ -45,8 +46,7 @@ _TWO_PI = 2.0 * math.pi
 
 
 def _finite(name: str, value) -> float:
-    ok = isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool)
-    if not (ok and math.isfinite(value)):
+    if not (is_real(value) and math.isfinite(value)):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
     return float(value)
 
@@ -996,7 +996,7 @@ def path_points(tab, length, s, n, out_x, out_y, scratch):
 
     The segments' formulas are :func:`path_point`'s in the same order, with the sines
     and cosines of the arcs' and involutes' angles from
-    :func:`~machining_envs.core.kernels.sincos_row`, all the angles of the row at once in
+    :func:`~machining_envs.core.compiled.kernels.sincos_row`, all the angles of the row at once in
     the processor's vectors, instead of libm's one at a time. A point on a line is
     :func:`path_point`'s to the last bit; on a curve a sine or cosine may differ from
     libm's by one unit in the last place (about 1e-16 of the radius); each point is the

@@ -33,11 +33,15 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from machining_envs.contouring._exact import vecmat_rows
 from machining_envs.core.checks import check_field, replace_checked
-from machining_envs.core.kernels import read_only
+from machining_envs.core.compiled.kernels import read_only
 
 __all__ = ["ContouringParams", "ContouringPlant", "ContouringStep", "AXES", "step_axes"]
-__all__ += ["PLANT_COLUMNS"]
+__all__ += ["PLANT_COLUMNS", "vecmat_rows"]
+# ``vecmat_rows(z, mt, out)``: ``out[i] = z[i] @ mt.T`` row by row, each row exactly as numpy
+# computes the 1-D product alone (the order the servo loops sum in), for controllers that
+# must give the numbers the env's own loops give (``agents.contouring``).
 
 #: The two feed axes, in the order every array of this package uses.
 AXES = ("x", "y")

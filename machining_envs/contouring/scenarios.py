@@ -25,7 +25,13 @@ from machining_envs.contouring.paths import (
 )
 from machining_envs.contouring.plant import ContouringParams
 from machining_envs.core.actuation import Actuation
-from machining_envs.core.checks import check_below, check_range, drawn_instance
+from machining_envs.core.checks import (
+    PY_NUMBER_TYPES,
+    check_below,
+    check_range,
+    drawn_instance,
+    is_real,
+)
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.splits import (
     _split_key,
@@ -116,7 +122,7 @@ class ContouringScenario:
             raise ValueError(f"overload_ratio must be in (1, 10], got {self.overload_ratio!r}")
         if not isinstance(self.path, Path):
             raise ValueError(f"path must be a Path, got {type(self.path).__name__}")
-        if not (isinstance(self.feed_mm_s, (int, float)) and self.feed_mm_s == math.inf):
+        if not (is_real(self.feed_mm_s, PY_NUMBER_TYPES) and self.feed_mm_s == math.inf):
             check_range("feed_mm_s", self.feed_mm_s, *FEED_RANGE_MM_S)
         try:
             steps = tuple((float(t), float(a), float(b)) for t, a, b in self.load_steps)

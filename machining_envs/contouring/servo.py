@@ -39,7 +39,7 @@ from scipy.linalg import schur, solve_continuous_are
 
 from machining_envs.contouring.plant import AXES, ContouringParams, axes_zoh_into
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_integer, check_range
-from machining_envs.core.kernels import (
+from machining_envs.core.compiled.kernels import (
     add8,
     add_scaled8,
     clip8,
@@ -410,7 +410,7 @@ def servo_design(kind: str, params: ContouringParams, axis: str) -> ServoDesign:
 # A block of ``nb`` servo periods of one axis's closed loop ``z+ = A z + B w`` (w = [r, T_L],
 # ``u = Cu z + Du r``) runs as its recursion, compiled: period by period, the next state is
 # the sum of A's columns scaled by the state's values and of B's by the inputs, all eight
-# values of a column at once (``core.kernels``: one fused multiply-add per value, so the
+# values of a column at once (``core.compiled.kernels``: one fused multiply-add per value, so the
 # numbers do not depend on the processor's vector width and a lane equals the single env to
 # the last bit). A lane keeps per axis the columns of ``A`` (``ac``, eight of eight values,
 # zero past the state), of ``B`` (``bc``), ``Cu`` (``cu``, eight values), ``Du``, the

@@ -40,10 +40,11 @@ PY_NUMBER_TYPES: tuple[type, ...] = (int, float)
 INTEGER_TYPES: tuple[type, ...] = (int, np.integer)
 
 
-def is_real(value) -> bool:
-    """Whether ``value`` is a real number of ``REAL_TYPES`` and not a bool (finite or not:
+def is_real(value, types: tuple[type, ...] = REAL_TYPES) -> bool:
+    """Whether ``value`` is a real number of ``types`` (``REAL_TYPES``, or
+    ``PY_NUMBER_TYPES`` where numpy scalars are refused) and not a bool (finite or not:
     the caller says which range it takes)."""
-    return isinstance(value, REAL_TYPES) and not isinstance(value, bool)
+    return isinstance(value, types) and not isinstance(value, bool)
 
 
 def is_integer(value) -> bool:

@@ -30,7 +30,8 @@ import numba
 import numpy as np
 from numpy.random.bit_generator import ISeedSequence
 
-from machining_envs.core.normals import next_word
+from machining_envs.core.checks import is_integer
+from machining_envs.core.compiled.normals import next_word
 
 __all__ = [
     "SPLITS",
@@ -138,7 +139,7 @@ def split_state(rng: np.random.Generator, split: str) -> np.ndarray:
 @numba.njit(cache=True)
 def lane_split_state(table, k, key, state):
     """:func:`split_state` in compiled code, for lane ``k`` of a generator table
-    (:class:`~machining_envs.core.normals.LaneGenerators`) and a split's ``key``
+    (:class:`~machining_envs.core.compiled.normals.LaneGenerators`) and a split's ``key``
     (``_split_key``): ``state`` seeded from the lane generator's next draw below 2**63
     (its next 64-bit word shifted right by one, :func:`draw_below_2_63`'s number)."""
     x = next_word(table, k) >> _U1
@@ -358,11 +359,7 @@ def split_seeds(split: str, n: int) -> range:
     """The reset seeds of the first ``n`` fixed episodes of ``split``."""
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
-    if (
-        isinstance(n, bool)
-        or not isinstance(n, (int, np.integer))
-        or not 1 <= n <= MAX_SPLIT_EPISODES
-    ):
+    if not is_integer(n) or not 1 <= n <= MAX_SPLIT_EPISODES:
         raise ValueError(
             f"n (episodes of split {split!r}) must be an integer in [1, {MAX_SPLIT_EPISODES}], got {n!r}"
         )

@@ -3,7 +3,8 @@
 A process's vector env subclasses :class:`LaneVectorEnv`. It holds its batched physics as
 ``self._core``, the process's core that its single env shares, and its default scenario
 as ``self.default_scenario`` (from :meth:`LaneVectorEnv._lane_scenarios`). Through the
-core the base implements two of the three methods of a step:
+core's public hooks (:class:`machining_envs.core.lanes.LaneCore`) the base implements the
+three methods of a step:
 
 - ``_reset_lanes(lanes, options)``: start new episodes in the lanes ``lanes`` (an index
   array), drawing each lane's scenario from its own generator ``self.lane_rngs[i]``
@@ -15,12 +16,11 @@ core the base implements two of the three methods of a step:
 - ``_info_now()``: every lane's info as it stands (``core.info_arrays()``), as new arrays
   of length ``num_envs`` (a key that only some lanes have comes with a boolean mask under
   ``"_" + key``; the base adds the masks of the others to it);
-
-and the subclass implements the third, ``_step_lanes(actions)``: advance every lane by one
-control period with the checked actions ``(num_envs, *action_shape)``; return
-observations, rewards, terminations, truncations and the step info in the same form. The
-arrays are new, not views of the lanes' state: they become the ``final_info`` of the lanes
-that end, which are reset after them.
+- ``_step_lanes(actions)``: advance every lane by one control period with the checked
+  actions ``(num_envs, *action_shape)`` (``core.set_actions``, ``core.step``); return
+  observations, rewards, terminations, truncations and the step info in the same form.
+  The arrays are new, not views of the lanes' state: they become the ``final_info`` of
+  the lanes that end, which are reset after them.
 
 A scenario (the constructor's ``scenario`` or ``reset(options={"scenario": ...})``) is one
 for every lane, or a list of one per lane: lane ``i`` then runs the ``i``-th (a name is
@@ -51,7 +51,7 @@ with the same seed, as Gymnasium's ``SyncVectorEnv`` in that mode runs them:
   ``RuntimeError``, as the single env does.
 
 Every vector env takes ``num_threads`` (default 1): its kernel then steps blocks of lanes on
-that many threads at once (:mod:`machining_envs.core.blocks`; blocks of at least
+that many threads at once (:mod:`machining_envs.core.compiled.blocks`; blocks of at least
 ``min_block`` lanes, so a small N runs on fewer), with the same numbers in every lane. The
 rest of a step (the checks, resets, info) stays on the calling thread. No process's resets
 call BLAS (its discretisations are compiled): OpenBLAS's threads spin on the cores for
@@ -70,8 +70,14 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from machining_envs.core.blocks import MIN_BLOCK, LaneBlocks, check_num_threads
-from machining_envs.core.env import check_scenario_spec, real_actions, scenario_option, start_each
+from machining_envs.core.actions import real_actions
+from machining_envs.core.checks import is_integer
+from machining_envs.core.compiled.blocks import MIN_BLOCK, LaneBlocks, check_num_threads
+from machining_envs.core.env import (
+    check_scenario_spec,
+    scenario_option,
+)
+from machining_envs.core.lanes import start_each
 from machining_envs.core.metrics import note_severity
 
 __all__ = [
@@ -107,7 +113,7 @@ def check_autoreset_mode(mode) -> AutoresetMode:
 
 def check_vector_args(env_name: str, num_threads, overrides: dict) -> int:
     """What a vector env's constructor checks before it builds anything: ``num_threads``
-    (:func:`~machining_envs.core.blocks.check_num_threads`, returned as an int), and no
+    (:func:`~machining_envs.core.compiled.blocks.check_num_threads`, returned as an int), and no
     ``render_mode`` among its other keyword arguments ``overrides`` (``None`` is taken:
     no rendering; the key is removed from ``overrides``, which go on to the core). A
     vector env keeps no lane's history to draw; the single env with the lane's seed
@@ -125,7 +131,7 @@ def check_vector_args(env_name: str, num_threads, overrides: dict) -> int:
 
 def check_num_envs(num_envs) -> int:
     """``num_envs`` as an int >= 1 (``TypeError`` / ``ValueError`` naming it otherwise)."""
-    if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
+    if not is_integer(num_envs):
         raise TypeError(f"num_envs must be an integer >= 1, got {num_envs!r}")
     if num_envs < 1:
         raise ValueError(f"num_envs must be an integer >= 1, got {num_envs}")
@@ -138,7 +144,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
     #: Name used in error messages (the single env's class name, say).
     env_name: str = "LaneVectorEnv"
-    #: Fewest lanes a thread steps (``core.blocks.block_edges``; a multiple of 64): a
+    #: Fewest lanes a thread steps (``core.compiled.blocks.block_edges``; a multiple of 64): a
     #: process whose kernel costs little a lane keeps the default, 128; one whose kernel
     #: costs more hands out smaller blocks, so that a few hundred lanes use more threads.
     min_block: int = MIN_BLOCK
@@ -219,7 +225,7 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             options = {k: v for k, v in options.items() if k != "reset_mask"} or None
         lanes = np.arange(self.num_envs) if mask is None else np.flatnonzero(mask)
         if seed is not None:
-            if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            if is_integer(seed):
                 seeds = [int(seed) + i for i in range(self.num_envs)]
             elif isinstance(seed, (list, tuple)) and len(seed) == self.num_envs:
                 seeds = list(seed)
@@ -295,10 +301,9 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             spec = self._lane_scenarios(scenario_option(options, spec), lanes)
             if options is None and not isinstance(spec, list):
                 self._default_ok = spec  # checked: the autoresets' scenario, as a rule
-        start_lanes = getattr(core, "start_lanes", None)  # a core that starts many at once
         try:
-            if start_lanes is not None and not isinstance(spec, list):
-                start_lanes(lanes, spec, self.lane_rngs)
+            if not isinstance(spec, list):
+                core.start_lanes(lanes, spec, self.lane_rngs)
             else:
                 start_each(core, lanes, spec, self.lane_rngs)
         except BaseException:
@@ -310,9 +315,19 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             self._overload[lanes] = self._overload_of(spec)
         return core.obs[lanes]  # their info is their reset info until they step (_info_now)
 
-    @abc.abstractmethod
     def _step_lanes(self, actions: np.ndarray) -> tuple:
         """Advance every lane by one control period (see the module docstring)."""
+        core = self._core
+        core.set_actions(actions)
+        core.step()
+        reward, terminated, truncated = core.step_arrays()
+        return (
+            core.obs.copy(),
+            reward.copy(),
+            terminated.copy(),
+            truncated.copy(),
+            core.info_arrays(),
+        )
 
     def _overload_of(self, spec) -> float:
         """The overload ceiling of a scenario spec: an object's ``overload_ratio``; a

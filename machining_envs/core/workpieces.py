@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from machining_envs.core.kernels import copy_into
+from machining_envs.core.checks import PY_NUMBER_TYPES, is_real
+from machining_envs.core.compiled.kernels import copy_into
 from machining_envs.core.splits import _split_key, lane_split_state, stream_bounded, stream_fill
 
 __all__ = [
@@ -151,7 +152,7 @@ class DepthProfile:
         """
         d = tuple(float(v) for v in depths_mm)
         if not (
-            isinstance(segment_mm, (int, float)) and math.isfinite(segment_mm) and segment_mm > 0
+            is_real(segment_mm, PY_NUMBER_TYPES) and math.isfinite(segment_mm) and segment_mm > 0
         ):
             raise ValueError(f"segment_mm must be > 0, got {segment_mm!r}")
         edges = tuple(segment_mm * i for i in range(len(d) + 1))
@@ -353,7 +354,7 @@ def drawn_lane_cuts(table, lanes: np.ndarray, split: str, before: int, depth_ran
                     after: int):  # fmt: skip
     """:func:`drawn_profile`'s numbers for many lanes in one compiled call, each from the
     ``split``'s stream of its own generator (row ``lanes[i]`` of ``table``, a
-    :class:`~machining_envs.core.normals.LaneGenerators` table): what ``drawn_profile(
+    :class:`~machining_envs.core.compiled.normals.LaneGenerators` table): what ``drawn_profile(
     split_state(rng_i, split), ...)`` gives lane by lane, every generator left where that
     leaves it. Returns ``(before, segments, counts, after)``: the uniforms before, of
     shape ``(L, before)``; every lane's segments (:meth:`DepthProfile.segment_array`'s

@@ -59,7 +59,7 @@ from machining_envs.core.checks import (
     check_range,
     replace_checked,
 )
-from machining_envs.core.kernels import copy_into, powers, py_square, read_only
+from machining_envs.core.compiled.kernels import copy_into, powers, py_square, read_only
 from machining_envs.core.lti import zoh
 
 __all__ = [
@@ -1003,7 +1003,7 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp, rows):
     sensors), so that the slow operations of different lanes (divisions, ``exp``) overlap
     in the processor; each lane's arithmetic is that of one hole, whatever the number of
     lanes. The friction law's powers ``w**n`` of each RK4 stage are taken for the lanes
-    together, in the processor's vectors (:func:`~machining_envs.core.kernels.powers`).
+    together, in the processor's vectors (:func:`~machining_envs.core.compiled.kernels.powers`).
     (One function: the arrays are not passed on per lane.)
     """
     nb = k1 - k0

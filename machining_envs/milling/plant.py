@@ -48,7 +48,7 @@ import numba
 import numpy as np
 
 from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
-from machining_envs.core.kernels import copy_into, matvec, powers, read_only
+from machining_envs.core.compiled.kernels import copy_into, matvec, powers, read_only
 from machining_envs.core.lti import zoh, zoh_tf
 from machining_envs.core.workpieces import load_segments
 
@@ -56,6 +56,7 @@ __all__ = [
     "MillingParams",
     "MillingPlant",
     "MillingStep",
+    "CutModel",
     "FORCE_MODELS",
     "KGF",
     "SPINDLE_RPM_RANGE",
@@ -792,6 +793,25 @@ def start_lane(k, row, lag_s, segments, lag, z, buf, edges, d0, slope, nseg, seg
     finished[k] = False
 
 
+class CutModel(NamedTuple):
+    """One lane's torque model as a controller reads it (:meth:`MillingLanes.cut_model`):
+    the static torque of a feed velocity ``vf`` at depth ``d`` is
+    ``torque_gain d^depth_exponent (ft_per_vf vf)^feed_exponent``."""
+
+    command_max: float
+    """U_max, the servo's largest command, counts."""
+    ft_per_vf: float
+    """60 / (N P): feed per tooth per feed velocity, mm per (mm/s)."""
+    feed_exponent: float
+    """Exponent of the feed per tooth in the torque law (m, or 1)."""
+    torque_gain: float
+    """c of T = c d^l f_t^e, N·mm."""
+    depth_exponent: float
+    """l (1 for the average-force model)."""
+    t_s: float
+    """Time since the cut started, s."""
+
+
 class MillingLanes:
     """N independent cuts stepped together: the physics of every end-milling env.
 
@@ -854,6 +874,20 @@ class MillingLanes:
         self.out_finish = np.full(self.n, np.nan)
         #: Scratch space of the kernel (see :func:`step_lanes`).
         self.work = np.zeros((self.n, 4 * m + 3))
+
+    def cut_model(self, lane: int) -> CutModel:
+        """``lane``'s true torque model and clock as it stands (see :class:`CutModel`), for
+        model-based controllers and oracles that read the plant."""
+        lf = self.lane_f[lane]
+        c = {name: float(lf[i]) for i, name in enumerate(LANE_CONSTANTS)}
+        return CutModel(
+            command_max=c["command_max"],
+            ft_per_vf=c["ft_per_vf"],
+            feed_exponent=c["feed_exponent"],
+            torque_gain=c["torque_gain"],
+            depth_exponent=c["depth_exponent"] if c["power_law"] != 0.0 else 1.0,
+            t_s=c["t_s"],
+        )
 
     def start(self, lane: int, params: MillingParams, spindle_rpm: float, profile) -> None:
         """Start a new cut in ``lane``: tool at rest at the workpiece's start, no torque.

@@ -31,7 +31,7 @@ import numba
 import numpy as np
 
 from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
-from machining_envs.core.kernels import fma, matvec, powers, read_only, row_max, row_min
+from machining_envs.core.compiled.kernels import fma, matvec, powers, read_only, row_max, row_min
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
 from machining_envs.core.workpieces import load_segments
 
@@ -41,6 +41,7 @@ __all__ = [
     "TurningStep",
     "SPINDLE_RPM_RANGE",
     "sampled_model",
+    "unit_plant_coefficients",
     "spindle_drive",
     "cutting_power_W",
 ]
@@ -216,6 +217,17 @@ class TurningParams:
         """ZOH discretisation of :meth:`open_loop_tf` at ``sample_time_s`` (eq. 14), in z^-1."""
         num, den = self.open_loop_tf(spindle_rpm)
         return zoh_tf(num, den, self.sample_time_s)
+
+
+@functools.lru_cache(maxsize=512)
+def unit_plant_coefficients(params: TurningParams, spindle_rpm: float) -> np.ndarray:
+    """``[b1, b2, b3, a1, a2, a3]`` of the unit-gain discrete plant of eq. (14) at this
+    speed (:meth:`TurningParams.discrete_open_loop` padded to third order), for
+    controllers that adapt to it (read-only: cached)."""
+    numd, dend = params.discrete_open_loop(spindle_rpm)
+    numd = np.pad(numd, (0, 4 - numd.size))
+    dend = np.pad(dend, (0, 4 - dend.size))
+    return read_only(np.concatenate([numd[1:4], dend[1:4]]))
 
 
 #: How each field of :class:`TurningParams` is checked, in the order of the fields (rules
@@ -479,7 +491,7 @@ def _exp_row(a, b, dt, row, out):
     microsecond instead of some 60; elsewhere returns False and writes nothing."""
     n = a.shape[0]
     md = np.zeros((n + 1, n + 1))
-    for i in range(n):  # loops, not slices set from arrays (core.kernels.copy_into)
+    for i in range(n):  # loops, not slices set from arrays (core.compiled.kernels.copy_into)
         for j in range(n):
             md[i, j] = a[i, j] * dt
         md[i, n] = b[i, 0] * dt
@@ -647,7 +659,7 @@ def _sampled_rows(base, feed, lag, zk, m, y):
     the current pair with ``base``'s numbers and that group with ``feed``'s; one whose
     delayed instant lies in the current sample (``lag[j]`` 0) reads the current pair with
     ``feed``'s. The other groups are zero, and
-    :func:`~machining_envs.core.kernels.matvec`'s sums gain nothing from a zero group (a
+    :func:`~machining_envs.core.compiled.kernels.matvec`'s sums gain nothing from a zero group (a
     fused ``0 x + s`` is ``s`` for finite ``x``), so the rows here, summed in its order over
     the non-zero groups only, are its numbers for ``A @ zk`` (numpy's) to the last bit.
 
@@ -709,7 +721,7 @@ def _sampled_rows(base, feed, lag, zk, m, y):
 def _filter_pair(f, x, w, out):
     """``out[:2] = F @ x[:w]`` for the filter's step matrix ``F`` of two rows (a
     second-order filter; ``w`` values a row, row after row in ``f``), summed as
-    :func:`~machining_envs.core.kernels.matvec` sums two rows (two interleaved sums of
+    :func:`~machining_envs.core.compiled.kernels.matvec` sums two rows (two interleaved sums of
     rounded products over the columns in whole groups of four, added, and a last column
     fused on), so to the last bit numpy's product, the two rows in one loop (four
     independent sums, where one row after the other leaves two). False, writing nothing,

@@ -1,4 +1,4 @@
-"""ContouringFeed-v0's lanes started at once (``_FeedCore.start_lanes``): the same episodes
+"""ContouringFeed-v0's lanes started at once (``FeedCore.start_lanes``): the same episodes
 as lane by lane, for every scenario name, each lane's scenario built when read."""
 
 import math

@@ -1,4 +1,4 @@
-"""Blocks of lanes stepped on threads (``machining_envs.core.blocks``)."""
+"""Blocks of lanes stepped on threads (``machining_envs.core.compiled.blocks``)."""
 
 import gc
 import pickle
@@ -8,7 +8,7 @@ import numba
 import numpy as np
 import pytest
 
-from machining_envs.core.blocks import (
+from machining_envs.core.compiled.blocks import (
     ALIGN,
     MAX_THREADS,
     MIN_BLOCK,
@@ -18,7 +18,7 @@ from machining_envs.core.blocks import (
     check_num_threads,
     serve_one_table,
 )
-from machining_envs.core.packed import b1_1, f8_1, f8_2, i8_1
+from machining_envs.core.compiled.packed import b1_1, f8_1, f8_2, i8_1
 
 
 @pytest.mark.parametrize(
@@ -208,7 +208,7 @@ def test_workers_asleep_are_woken_for_the_next_block():
     cache line apart."""
     import time
 
-    from machining_envs.core.blocks import _AWAKE
+    from machining_envs.core.compiled.blocks import _AWAKE
 
     n = 512
     lanes, done = np.arange(n), np.zeros(n, dtype=np.bool_)

@@ -1,5 +1,5 @@
 """The shared compiled products, powers, sines, cosines and norms
-(``machining_envs.core.kernels``) against numpy's products and libm's ``pow``, ``sin``,
+(``machining_envs.core.compiled.kernels``) against numpy's products and libm's ``pow``, ``sin``,
 ``cos`` and ``hypot``."""
 
 import math
@@ -8,7 +8,7 @@ import numba
 import numpy as np
 import pytest
 
-from machining_envs.core.kernels import (
+from machining_envs.core.compiled.kernels import (
     add8,
     add_scaled8,
     fma,
@@ -386,7 +386,7 @@ def test_vector_hypot_is_libms_hypot_where_it_takes_the_values():
 def test_clip_unit_is_numpys_clip_and_linear_map_to_the_last_bit():
     """The vector envs' one-pass clip (and linear command) against the numpy expressions
     they replace, on strided outputs, the edges, -0.0 and values far outside."""
-    from machining_envs.core.kernels import clip_unit, clip_unit_linear
+    from machining_envs.core.compiled.kernels import clip_unit, clip_unit_linear
 
     rng = np.random.default_rng(3)
     a = np.concatenate([rng.uniform(-3.0, 3.0, 500), [-1.0, 1.0, -0.0, 0.0, 1e300, -1e300,

@@ -1,9 +1,9 @@
-"""``core.env.LaneNames``: the names array a step hands out never changes after, and a
+"""``core.lanes.LaneNames``: the names array a step hands out never changes after, and a
 reset that keeps a lane's name copies nothing."""
 
 import numpy as np
 
-from machining_envs.core.env import LaneNames
+from machining_envs.core.lanes import LaneNames
 
 
 def test_a_handed_out_array_keeps_its_names():

@@ -1,4 +1,4 @@
-"""``core.normals``: the standard normals compiled code draws from a numpy ``Generator``
+"""``core.compiled.normals``: the standard normals compiled code draws from a numpy ``Generator``
 are ``standard_normal()``'s, in order, and leave the generator where numpy's would."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import numba
 import numpy as np
 import pytest
 
-from machining_envs.core.normals import (
+from machining_envs.core.compiled.normals import (
     ROW,
     LaneGenerators,
     generator_row,

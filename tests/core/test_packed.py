@@ -1,4 +1,4 @@
-"""A kernel's arguments packed into one table (``machining_envs.core.packed``), and each
+"""A kernel's arguments packed into one table (``machining_envs.core.compiled.packed``), and each
 process's trampoline giving its kernel's numbers to the last bit."""
 
 import copy
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import machining_envs  # noqa: F401  (registers the ids)
-from machining_envs.contouring import env as contouring_env
-from machining_envs.contouring import feed_env
-from machining_envs.core.packed import (
+from machining_envs.contouring import feed_lanes as feed_env
+from machining_envs.contouring import lanes as contouring_env
+from machining_envs.core.compiled.packed import (
     SLOT,
     PackedArgs,
     as_float,
@@ -28,9 +28,9 @@ from machining_envs.core.packed import (
     i8_2,
     pack,
 )
-from machining_envs.drilling import env as drilling_env
-from machining_envs.milling import env as milling_env
-from machining_envs.turning import env as turning_env
+from machining_envs.drilling import lanes as drilling_env
+from machining_envs.milling import lanes as milling_env
+from machining_envs.turning import lanes as turning_env
 
 
 @numba.njit
@@ -205,7 +205,7 @@ def test_each_trampoline_steps_as_its_kernel_to_the_last_bit(env_id):
     direct = tuple(a.copy() if isinstance(a, np.ndarray) else a for a in state)
     packed = tuple(a.copy() if isinstance(a, np.ndarray) else a for a in state)
     table = pack(packed)
-    # both copies draw their noise from the lanes' generators (core.normals): each starts
+    # both copies draw their noise from the lanes' generators (core.compiled.normals): each starts
     # from the generators' state as it is now
     rngs = core.rngs.generators if hasattr(core, "rngs") else []
     generators = [g for g in rngs if g is not None]

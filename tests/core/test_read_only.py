@@ -1,10 +1,10 @@
-"""What a cache hands to every caller is read-only (``core.kernels.read_only``): a caller that
+"""What a cache hands to every caller is read-only (``core.compiled.kernels.read_only``): a caller that
 wrote to a cached discretisation or cutting model would change every env built on it."""
 
 import numpy as np
 import pytest
 
-from machining_envs.core.kernels import read_only
+from machining_envs.core.compiled.kernels import read_only
 
 
 def test_read_only_freezes_in_place_and_returns_what_it_was_given():

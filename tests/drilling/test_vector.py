@@ -182,7 +182,7 @@ def test_engagement_lookup_is_numpys_interp():
 
 def test_noise_is_drawn_from_np_random_five_normals_a_step():
     """The plant's normals come from ``np_random``, five a step, as the steps need them
-    (after the scenario, ``core.normals``): after 300 steps of a named hole (whose reset
+    (after the scenario, ``core.compiled.normals``): after 300 steps of a named hole (whose reset
     draws nothing) the generator stands where 1500 normals from the seed leave it, and an
     unseeded reset goes on from there."""
     env = gym.make(DRILLING, scenario="paper_0.8")

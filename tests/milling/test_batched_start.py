@@ -1,4 +1,4 @@
-"""Many lanes started at once (``_MillingCore.start_lanes``): the same episodes as lane by
+"""Many lanes started at once (``MillingCore.start_lanes``): the same episodes as lane by
 lane, for every scenario name and both torque laws, with each lane's scenario and truth
 built when read."""
 

@@ -1,11 +1,11 @@
-"""Many lanes started at once (``_TurningCore.start_lanes``): the same episodes as lane by
+"""Many lanes started at once (``TurningCore.start_lanes``): the same episodes as lane by
 lane, for every scenario name, with each lane's scenario and truth built when read."""
 
 import gymnasium as gym
 import numpy as np
 import pytest
 
-from machining_envs.core.env import LaneObjects
+from machining_envs.core.lanes import LaneObjects
 from machining_envs.turning.scenarios import TURNING_SCENARIOS
 from tests.helpers import TURNING, assert_cores_alike, started_together_and_one_by_one
 

@@ -258,9 +258,9 @@ def test_step_matrix_by_zoh_where_the_series_declines_it_agrees():
 @pytest.mark.parametrize("width", [5, 6, 9, 13, 53, 54, 101])
 def test_the_filters_two_rows_are_matvecs(width):
     """The second-order filter's step (``_filter_pair``, both rows in one loop) gives
-    ``core.kernels.matvec``'s numbers to the last bit, with inf and NaN too; widths matvec
+    ``core.compiled.kernels.matvec``'s numbers to the last bit, with inf and NaN too; widths matvec
     sums otherwise are left to it."""
-    from machining_envs.core.kernels import matvec
+    from machining_envs.core.compiled.kernels import matvec
     from machining_envs.turning.plant import _filter_pair
 
     rng = np.random.default_rng(width)

@@ -36,7 +36,7 @@ then sleeps until the next block; while an env is stepped without pause, its wor
 their cores busy.
 Anything else (a Python kernel, other trailing arguments) runs on the pool.
 
-This module imports numpy, numba, ``core.packed`` and the standard library only.
+This module imports numpy, numba, ``core.compiled.packed`` and the standard library only.
 """
 
 from __future__ import annotations
@@ -54,7 +54,8 @@ from numba.core import cgutils
 from numba.core.registry import CPUDispatcher
 from numba.extending import intrinsic
 
-from machining_envs.core.packed import pack
+from machining_envs.core.checks import is_integer
+from machining_envs.core.compiled.packed import pack
 
 __all__ = [
     "MAX_THREADS",
@@ -82,7 +83,7 @@ SCRATCH = "scratch"
 def check_num_threads(num_threads) -> int:
     """``num_threads`` as an int in ``[1, MAX_THREADS]`` (``TypeError`` / ``ValueError``
     naming it otherwise)."""
-    if isinstance(num_threads, bool) or not isinstance(num_threads, (int, np.integer)):
+    if not is_integer(num_threads):
         raise TypeError(
             f"num_threads must be an integer in [1, {MAX_THREADS}], got {num_threads!r}"
         )
@@ -189,7 +190,7 @@ def _serve(call, kernel, ctl, args, polls):
 
 @numba.njit(inline="always")
 def serve_one_table(kernel, ctl, table, polls):
-    """:func:`serve_loop` of a trampoline (``core.packed``) on its block's table.
+    """:func:`serve_loop` of a trampoline (``core.compiled.packed``) on its block's table.
 
     A process module defines its workers' loop with it, compiled with the module and cached
     on disk, so that the first step on several threads need not compile it::
@@ -334,7 +335,7 @@ class LaneBlocks:
         # The last argument tuple seen (by identity) and its blocks' arguments.
         self._source: tuple | None = None
         self._blocks: list[tuple] = []
-        # The blocks' arguments packed into tables (core.packed), for the blocks they were
+        # The blocks' arguments packed into tables (core.compiled.packed), for the blocks they were
         # packed from (by identity); None where a block's arrays cannot be packed.
         self._tables: list[tuple] | None = None
         self._tables_of: list[tuple] | None = None
@@ -395,8 +396,8 @@ class LaneBlocks:
         return self._blocks
 
     def _block_tables(self, blocks: list[tuple]) -> list[tuple] | None:
-        """Each block's arguments packed into one table (``core.packed``), as a one-argument
-        tuple; None where some array of a block does not pack (``core.packed.pack``: a
+        """Each block's arguments packed into one table (``core.compiled.packed``), as a one-argument
+        tuple; None where some array of a block does not pack (``core.compiled.packed.pack``: a
         view across the lanes' axis 1 packs only if it is 2-d float64)."""
         if self._tables_of is not blocks:
             try:
@@ -412,7 +413,7 @@ class LaneBlocks:
         more than one block; the kernel returns nothing. A kernel's error is raised once every
         block has finished.
 
-        ``packed``, the kernel's trampoline (``core.packed``), runs instead on each block's
+        ``packed``, the kernel's trampoline (``core.compiled.packed``), runs instead on each block's
         table where there are several blocks and every block's arrays pack: the same
         numbers, and for some kernels faster code (the trampoline's arrays have strides the
         compiler can see). On one block the kernel runs as it is: a caller stepping one

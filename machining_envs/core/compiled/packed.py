@@ -25,7 +25,7 @@ keeps its arrays alive. :class:`PackedArgs` keeps the tuple beside its table, pa
 when it is given another tuple, and packs nothing into a pickle or a copy (their arrays are
 elsewhere).
 
-This module imports numpy, numba and ``core.kernels`` only.
+This module imports numpy, numba and ``core.compiled.kernels`` only.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ import numpy as np
 from numba.core import types
 from numba.extending import intrinsic
 
-from machining_envs.core.kernels import bits_float
+from machining_envs.core.compiled.kernels import bits_float
 
 __all__ = [
     "SLOT",

@@ -1,0 +1,837 @@
+"""The engine of ``EndMilling-v0``: the reward weights, the lane tables and the compiled
+step, start and info of N milling machines, which :class:`EndMillingEnv` (one lane) and
+:class:`EndMillingVectorEnv` (N lanes) drive."""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from gymnasium import spaces
+
+from machining_envs.core.actions import (
+    ACTION_MAPS,
+    ActionMap,
+)
+from machining_envs.core.actuation import (
+    ActuationLanes,
+    configure_lane,
+    resolve_actuation,
+)
+from machining_envs.core.checks import check_below
+from machining_envs.core.compiled.blocks import LaneBlocks, serve_one_table_with_tail
+from machining_envs.core.compiled.kernels import copy_into
+from machining_envs.core.compiled.normals import LaneGenerators, lane_noise
+from machining_envs.core.compiled.packed import (
+    PackedArgs,
+    as_float,
+    as_int,
+    b1_1,
+    b1_2,
+    f4_2,
+    f8_1,
+    f8_2,
+    f8_2_rows,
+    i8_1,
+    i8_2,
+    spaced_rows,
+)
+from machining_envs.core.env import (
+    check_episode_time,
+    check_scenario_spec,
+    resolve_params,
+)
+from machining_envs.core.lanes import (
+    LaneCore,
+    LaneNames,
+    LaneObjects,
+    settle_batch,
+    split_batch,
+)
+from machining_envs.core.reward import LimitReward, resolve_reward
+from machining_envs.core.sensors import PowerSensorLanes, resolve_power_sensor
+from machining_envs.core.workpieces import lane_segments, traverse_time
+from machining_envs.milling.plant import (
+    KGF,
+    LANE_CONSTANTS,
+    SPINDLE_RPM_RANGE,
+    MillingLanes,
+    MillingParams,
+    check_depth,
+    start_lane,
+    step_lanes,
+)
+from machining_envs.milling.scenarios import (
+    MILLING_SCENARIOS,
+    MillingScenario,
+    _SplitFactory,
+    bound_coefficient,
+    cut_area_at,
+    machining_time_bound,
+    milling_scenario,
+)
+
+_HISTORY = 3
+#: Decades spanned by the command on the default logarithmic action map: the feeds that
+#: hold the torque on the test set span about two (the feed exponent m ~ 0.4 turns a 2x
+#: change of depth, Ks or reference into a ~5x change of feed), and one more keeps slow
+#: approach feeds resolvable.
+COMMAND_DECADES = 3.0
+_TORQUE_OBS = (-1.0, 10.0)
+#: The numeric step info computed by the compiled step, one row each (``MillingCore.info_f``).
+_INFO_F = (
+    "t_s",
+    "command",
+    "torque_Nmm",
+    "measured",
+    "measured_counts",
+    "peak_torque_Nmm",
+    "feed_mm_per_rev",
+    "mean_feed_mm_per_rev",
+    "feed_per_tooth_mm",
+    "feed_velocity_mm_s",
+    "position_mm",
+    "depth_mm",
+    "removed_volume_mm3",
+    "machining_time_s",
+    "cost",
+)
+#: Each episode's constants held after the signals, in the rows of ``MillingCore.info_f``
+#: (the core's arrays of these names are views of those rows).
+_INFO_LANE = ("torque_limit", "bound", "spindle", "length", "volume")
+_DEPTH_ROW = _INFO_F.index("depth_mm")
+_TIME_ROW = _INFO_F.index("machining_time_s")
+#: Columns of ``MillingLanes.lane_f`` a lane's start reads or writes.
+_RPM, _FEXP, _C1, _DEXP, _FT_PER_VF, _REV_PER_S, _WEAR = (
+    LANE_CONSTANTS.index(c)
+    for c in (
+        "spindle_rpm",
+        "feed_exponent",
+        "torque_gain",
+        "depth_exponent",
+        "ft_per_vf",
+        "rev_per_s",
+        "wear_per_mm",
+    )
+)
+
+
+#: The weights of the EndMilling reward (:class:`EndMillingEnv`, section Rewards): the
+#: regulation envs' one weights type.
+MillingReward = LimitReward
+
+
+@numba.njit(cache=True)
+def _clamp(x, lo, hi):
+    """``min(max(x, lo), hi)`` with Python's tie rules."""
+    if lo > x:
+        x = lo
+    if hi < x:
+        x = hi
+    return x
+
+
+@numba.njit(cache=True, nogil=True)
+def _step(actions, clipped, cmap, rng_table, noise_counts, commands, noise, big, lag,
+          z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, out, out_seg, out_finish, work,
+          ke, tr, brk, vmax, n_teeth, w_axial, cumulative, max_t, w, meas, prev_action,
+          tr_obs, rpm_obs, obs, reward, flags, n_clipped, info_f, stage):  # fmt: skip
+    """One step of every lane: the actions (clipped to the box, ``clipped[k]`` set to 1
+    where they were) and their commands, the sensor noise (``stage`` 1),
+    then the plant (:func:`step_lanes`) and each lane's reward, observation, episode flags
+    and info (``stage`` 2); ``stage`` 3 does both. Between the two, the CNC's actuation may
+    change ``commands`` (``machining_envs.core.actuation``).
+
+    ``cmap`` = ``[log, command_min, span, c, g, mid, half]`` of the action map
+    (:class:`machining_envs.core.env.ActionMap`): the command is
+    ``command_min + span expm1(c (a + 1)) / g`` on the log map, ``mid + half a`` on the
+    linear one. A lane with noise draws a normal from its generator (row ``rng_table[k]``,
+    ``core.compiled.normals``).
+    ``tr`` holds the torque limits; ``w`` = ``[tracking, overtorque, target, progress,
+    breakage]``; ``flags[k]`` = ``[diverged, breakage, finished, terminated, truncated,
+    over the limit]``;
+    ``info_f[:, k]`` gets the signals of ``_INFO_F``.
+    """
+    n = z.shape[0]
+    log_map = cmap[0] != 0.0
+    for k in range(n if stage & 1 else 0):  # stage 1: the commands
+        a = actions[k]
+        if a > 1.0:  # clipped to the box (np.clip's numbers; finite, checked before)
+            a = actions[k] = 1.0
+            clipped[k] = 1
+        elif a < -1.0:
+            a = actions[k] = -1.0
+            clipped[k] = 1
+        if log_map:
+            cmd = cmap[1] + cmap[2] * math.expm1(cmap[3] * (a + 1.0)) / cmap[4]
+        else:
+            cmd = cmap[5] + cmap[6] * a
+        commands[k] = cmd
+        info_f[1, k] = cmd
+        noise[k] = lane_noise(rng_table, k, noise_counts[k])
+        prev_action[k] = a
+        n_clipped[k] += clipped[k]
+    if not stage & 2:
+        return
+    step_lanes(big, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, commands,
+               noise, out, out_seg, out_finish, work)  # fmt: skip
+    lo, hi = _TORQUE_OBS
+    n_meas = meas.shape[1]
+    for k in range(n):
+        torque = out[k, 0]
+        peak = out[k, 1]
+        counts = out[k, 2]
+        vf = out[k, 3]
+        feed = out[k, 4]
+        mean_feed = out[k, 5]
+        pos = out[k, 6]
+        diverged = not (
+            np.isfinite(torque)
+            and np.isfinite(peak)
+            and np.isfinite(counts)
+            and np.isfinite(pos)
+            and np.isfinite(mean_feed)
+        )
+        if diverged:  # never seen; kept so that no NaN can reach an observation or a reward
+            torque = 0.0
+            peak = 0.0
+            counts = 0.0
+        measured = counts / ke
+        for i in range(n_meas - 1, 0, -1):
+            meas[k, i] = meas[k, i - 1]
+        meas[k, 0] = measured
+        t = lane_f[k, 8]
+        breakage = peak > brk[k]
+        finished_k = not np.isnan(out_finish[k])
+        terminated = diverged or breakage or finished_k
+        truncated = (not terminated) and t >= max_t - 1e-9
+        e = torque / tr[k]
+        over = e - 1.0
+        r = -w[0] * abs(e / w[2] - 1.0) - w[1] * (over if over > 0.0 else 0.0)
+        if w[3] != 0.0 and not diverged:
+            r += w[3] * vf / vmax[k]
+        if breakage or diverged:
+            r -= w[4]
+        reward[k] = r
+        flags[k, 0] = diverged
+        flags[k, 1] = breakage
+        flags[k, 2] = finished_k
+        flags[k, 3] = terminated
+        flags[k, 4] = truncated
+        flags[k, 5] = torque > tr[k]
+        if diverged:
+            feed = 0.0
+            mean_feed = 0.0
+            vf = 0.0
+            pos = 0.0
+        info_f[0, k] = t
+        info_f[2, k] = torque
+        info_f[3, k] = measured
+        info_f[4, k] = counts
+        info_f[5, k] = peak
+        info_f[6, k] = feed
+        info_f[7, k] = mean_feed
+        info_f[8, k] = feed / n_teeth[k]
+        info_f[9, k] = vf
+        info_f[10, k] = pos
+        info_f[11, k] = out[k, 7]
+        info_f[12, k] = w_axial[k] * cut_area_at(pos, edges, d0, slope, cumulative, k, nseg[k])
+        info_f[13, k] = out_finish[k]  # NaN unless the lane finished (flags[k, 2])
+        info_f[14, k] = 1.0 if flags[k, 5] else 0.0  # the cost
+        sc = tr[k]
+        obs[k, 0] = _clamp(measured / sc, lo, hi)
+        obs[k, 1] = tr_obs[k]
+        obs[k, 2] = prev_action[k]
+        obs[k, 3] = rpm_obs[k]
+        for i in range(1, n_meas):
+            obs[k, 3 + i] = _clamp(meas[k, i] / sc, lo, hi)
+
+
+@numba.njit(cache=True, nogil=True)
+def _step_packed(t, stage):
+    """:func:`_step` with its arguments in one table (``core.compiled.packed``): what every
+    step calls (one array to unbox, not one per argument). ``info_f`` holds the lanes on
+    axis 1, so a block's is a view of some of its columns (``f8_2_rows``)."""
+    _step(f8_1(t, 0), i8_1(t, 1), f8_1(t, 2), i8_2(t, 3), f8_1(t, 4), f8_1(t, 5),
+          f8_1(t, 6), f8_2(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), f8_2(t, 12),
+          f8_2(t, 13), f8_2(t, 14), i8_1(t, 15), i8_1(t, 16), b1_1(t, 17), as_int(t, 18),
+          f8_2(t, 19), i8_1(t, 20), f8_1(t, 21), f8_2(t, 22), as_float(t, 23), f8_1(t, 24),
+          f8_1(t, 25), f8_1(t, 26), f8_1(t, 27), f8_1(t, 28), f8_2(t, 29), as_float(t, 30),
+          f8_1(t, 31), f8_2(t, 32), f8_1(t, 33), f8_1(t, 34), f8_1(t, 35), f4_2(t, 36),
+          f8_1(t, 37), b1_2(t, 38), i8_1(t, 39), f8_2_rows(t, 40), stage)  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def _serve_step(ctl, table, polls):
+    """The lane blocks' worker loop for :func:`_step_packed` (``core.compiled.blocks``),
+    compiled with this module and cached, not at the first step on several threads."""
+    return serve_one_table_with_tail(_step_packed, ctl, table, polls)
+
+
+@numba.njit(cache=True)
+def _start(k, row, x, segments, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished,
+           out_seg, noise_counts, breakage, vmax, n_teeth, w_axial, cumulative,
+           meas, prev_action, tr_obs, rpm_obs, obs, flags, in_clipped, n_clipped, info_f):  # fmt: skip
+    """The arrays of lane ``k`` at the start of an episode (``MillingCore.start``): the
+    plant's (:func:`~machining_envs.milling.plant.start_lane`, from its constants ``row``),
+    then the env's, the tool at rest at the workpiece's start.
+
+    ``x`` = ``[torque limit, Vmax, breakage torque, noise (counts), teeth, axial depth,
+    limit's observation, score bound, process lag]`` of the cut (the bound NaN: computed
+    here, for a sharp tool, as
+    :func:`~machining_envs.milling.scenarios.machining_time_bound` does). ``info_f[:, k]``
+    gets the info of a cut not yet begun (what the info reports until the first step):
+    every signal zero but the depth and the machining time (NaN), then the episode's
+    constants (``_INFO_LANE``).
+    """
+    tr, vm, brk, noise, teeth, w, t_obs, b, lag_s = (x[0], x[1], x[2], x[3], x[4], x[5], x[6],
+                                                      x[7], x[8])  # fmt: skip
+    start_lane(k, row, lag_s, segments, lag, z, buf, edges, d0, slope, nseg, seg, lane_f,
+               finished)  # fmt: skip
+    rpm = row[_RPM]
+    ns = segments.shape[1] - 1
+    if b != b:  # machining_time_bound with no wear: traverse_time_s's closed form (left
+        # NaN, for machining_time_bound to refuse, where that refuses its numbers)
+        e = row[_FEXP]
+        c = bound_coefficient(row[_C1], e, tr, teeth, rpm)
+        q = row[_DEXP] / e
+        if c > 0.0 and q > 0.0 and vm > 0.0:
+            b = traverse_time(segments, c, q, vm)
+    # The area under the profile up to each edge (CutArea's cumulative sums).
+    area = 0.0
+    cumulative[k, 0] = 0.0
+    for i in range(ns):
+        wi = segments[0, i + 1] - segments[0, i]
+        area = area + wi * (segments[1, i] + 0.5 * segments[3, i] * wi)
+        cumulative[k, i + 1] = area
+    for i in range(ns + 1, cumulative.shape[1]):
+        cumulative[k, i] = area
+    for i in range(info_f.shape[0]):
+        info_f[i, k] = 0.0
+    info_f[_DEPTH_ROW, k] = segments[1, 0]
+    info_f[_TIME_ROW, k] = np.nan
+    nf = len(_INFO_F)
+    info_f[nf, k] = tr
+    info_f[nf + 1, k] = b
+    info_f[nf + 2, k] = rpm
+    info_f[nf + 3, k] = segments[0, ns]
+    info_f[nf + 4, k] = w * area
+    vmax[k] = vm
+    breakage[k] = brk
+    noise_counts[k] = noise
+    n_teeth[k] = teeth
+    w_axial[k] = w
+    meas[k, :] = 0.0
+    tr_obs[k] = t_obs
+    rpm_obs[k] = rpm / 1000.0
+    prev_action[k] = -1.0
+    n_clipped[k] = 0
+    o = obs[k]
+    o[:] = 0.0
+    o[1] = t_obs
+    o[2] = -1.0
+    o[3] = rpm / 1000.0
+    flags[k, :] = False  # no flag, no clipped action yet
+    in_clipped[k] = 0
+    out_seg[k] = 0
+
+
+@numba.njit(cache=True)
+def _start_packed(t, k, row, x, segments):
+    """:func:`_start` with the step's table ``t`` (:func:`_step_packed`'s)."""
+    _start(k, row, x, segments, f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), f8_2(t, 12),
+           f8_2(t, 13), f8_2(t, 14), i8_1(t, 15), i8_1(t, 16), b1_1(t, 17), i8_1(t, 20),
+           f8_1(t, 4), f8_1(t, 25), f8_1(t, 26), f8_1(t, 27), f8_1(t, 28),
+           f8_2(t, 29), f8_2(t, 32), f8_1(t, 33), f8_1(t, 34), f8_1(t, 35), f4_2(t, 36),
+           b1_2(t, 38), i8_1(t, 1), i8_1(t, 39), f8_2_rows(t, 40))  # fmt: skip
+
+
+#: What :func:`_start_drawn_lanes` reads of the nominal parameters and a split's ranges
+#: (:func:`_batch_numbers`), in this order after the nominal lane constants.
+_BATCH_NUMBERS = (
+    "spindle_rpm", "torque_limit_Nmm", "power_law", "feed_exponent", "torque_coefficient_kgfmm",
+    "tool_diameter_mm", "tangential_coefficient_N_mm2", "n_teeth", "axial_depth_mm",
+    "max_feed_velocity_mm_s", "breakage_torque_Nmm", "sensor_gain", "noise_std_Nmm",
+    "process_lag_rev", "rpm_low", "rpm_high", "ks_low", "ks_span", "m_low", "m_span",
+    "noise_low", "noise_span",
+)  # fmt: skip
+
+
+def _batch_numbers(params: MillingParams, factory: _SplitFactory) -> np.ndarray:
+    """The numbers :func:`_start_drawn_lanes` reads: ``params``'s lane constants
+    (:meth:`MillingLanes.lane_constants` at the nominal speed), then ``_BATCH_NUMBERS``."""
+    p = params
+    lows, spans = factory.lows, factory.spans
+    numbers = (
+        p.spindle_rpm, p.torque_limit_Nmm, p.force_model == "power_law", p.feed_exponent,
+        p.torque_coefficient_kgfmm, p.tool_diameter_mm, p.tangential_coefficient_N_mm2,
+        p.n_teeth, p.axial_depth_mm, p.max_feed_velocity_mm_s, p.breakage_torque_Nmm,
+        p.sensor_gain, p.noise_std_Nmm, p.process_lag_rev, *SPINDLE_RPM_RANGE, lows[2],
+        spans[2], lows[3], spans[3], lows[4], spans[4],
+    )  # fmt: skip
+    row = MillingLanes.lane_constants(p, p.spindle_rpm)
+    return np.concatenate((row, np.array(numbers, dtype=np.float64)))
+
+
+@numba.njit(cache=True)
+def _start_drawn_lanes(t, lanes, nominal, v, scales, segments, counts):
+    """:func:`_start_packed` for every lane ``lanes[i]`` of a split's batch: from its
+    uniforms ``v[i]`` (:meth:`_SplitFactory.draw_lanes`), its spindle and limit scales
+    ``scales[i]`` and its segments ``segments[i, :, : counts[i] + 1]``, the numbers
+    ``MillingScenario`` (``spindle_rpm``, ``torque_limit_Nmm``, ``true_params``) and
+    ``MillingCore.start`` work out, in their order of operations (the same bits), from
+    ``nominal`` (:func:`_batch_numbers`). Returns the first ``i`` whose speed falls
+    outside ``SPINDLE_RPM_RANGE`` (none is started from it on), or -1."""
+    nc = len(LANE_CONSTANTS)
+    (n_rpm, n_limit, power_law, fexp, ks, diam, kt, teeth, axial, vmax, brk, ke, noise_std,
+     lag_rev, rpm_lo, rpm_hi, ks_lo, ks_span, m_lo, m_span, nz_lo, nz_span) = nominal[nc:]  # fmt: skip
+    row = np.empty(nc)
+    x = np.empty(9)
+    for i in range(lanes.size):
+        rpm = n_rpm * scales[i, 0]
+        if not (rpm_lo <= rpm <= rpm_hi):
+            return i
+        limit = n_limit * scales[i, 1]
+        ks_scale = ks_lo + ks_span * v[i, 2]
+        copy_into(row, nominal[:nc])  # the columns the truth keeps
+        row[_FT_PER_VF] = 60.0 / (rpm * teeth)
+        if power_law != 0.0:
+            row[_FEXP] = fexp * (m_lo + m_span * v[i, 3])
+            row[_C1] = KGF * (ks * ks_scale) * diam
+        else:  # the average-force model's torque_gain(1.0)
+            row[_C1] = teeth * (kt * ks_scale) * axial * 1.0 / (2.0 * math.pi)
+        row[_RPM] = rpm
+        row[_REV_PER_S] = rpm / 60.0
+        row[_WEAR] = 0.0  # a sharp tool (the batch takes no wear)
+        x[0] = limit
+        x[1] = vmax
+        x[2] = brk
+        x[3] = ke * (noise_std * (nz_lo + nz_span * v[i, 4]))
+        x[4] = teeth
+        x[5] = axial
+        x[6] = min(limit / n_limit, 10.0)
+        x[7] = np.nan  # the score bound: worked out by _start
+        x[8] = 60.0 * lag_rev / rpm
+        _start_packed(t, lanes[i], row, x, lane_segments(segments, i, counts))
+    return -1
+
+
+def _info_table(n: int) -> np.ndarray:
+    """A zero ``MillingCore.info_f`` for ``n`` lanes, its rows spaced apart
+    (``core.compiled.packed.spaced_rows``: the kernel writes a lane's column at once; rows 8 kB apart
+    cost 7 % of the step at N = 1024)."""
+    table = spaced_rows(len(_INFO_F) + len(_INFO_LANE), n)
+    table[:] = 0.0
+    return table
+
+
+#: Where :func:`_step`'s arguments (``MillingCore._kernel_args``) hold the lanes: axis 0, axis
+#: 1 (``info_f``) or none (shared), for :class:`~machining_envs.core.compiled.blocks.LaneBlocks`.
+_STEP_AXES = (
+    0, 0, None, 0, 0, 0, 0, None, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, None, 0, 0, 0, 0, None,
+    0, 0, 0, 0, 0, 0, None, None, 0, 0, 0, 0, 0, 0, 0, 0, 1,
+)  # fmt: skip
+
+
+def _map_constants(command_map: ActionMap) -> np.ndarray:
+    """The action map's constants as the compiled step reads them (see :func:`_step`)."""
+    return command_map.constants()
+
+
+class MillingCore(LaneCore):
+    """The state and arithmetic of N end-milling episodes, shared by ``EndMillingEnv`` (one
+    lane) and ``EndMillingVectorEnv`` (N lanes): the plant (:class:`MillingLanes`) and the
+    command, noise, reward, observation, episode end and info computed for all lanes by one
+    compiled function, so that a lane of the vector env and the single env agree to the
+    last bit."""
+
+    #: What a scenario may be: an object of this class or one of these names.
+    scenario_types = (MillingScenario, MILLING_SCENARIOS)
+    VIEWS = frozenset({*_INFO_LANE, "_args"})
+
+    def __init__(self, owner, n, scenario, params, reward, max_episode_time_s, action_map,
+                 overrides, actuation=None, power_sensor=None):  # fmt: skip
+        self.params = resolve_params(
+            owner, params, MillingParams, MillingParams.park_yoon_1986, overrides
+        )
+        sensor = resolve_power_sensor(power_sensor)  # the spindle power as the load channel
+        self.power_sensor = sensor and PowerSensorLanes(sensor, n, self.params.sample_time_s)
+        self.actuation = resolve_actuation(actuation)
+        self.reward_weights = resolve_reward(reward, MillingReward)
+        w = self.reward_weights
+        self._w = w.weights()
+        self.max_episode_time_s = check_episode_time(max_episode_time_s)
+        check_scenario_spec(scenario, MillingScenario, MILLING_SCENARIOS)
+        if action_map not in ACTION_MAPS:
+            raise ValueError(
+                f"{owner}: action_map must be one of {list(ACTION_MAPS)}, got {action_map!r}"
+            )
+        self.command_map = ActionMap(
+            0.0, self.params.command_max, scale=action_map, decades=COMMAND_DECADES
+        )
+        self._cmap = _map_constants(self.command_map)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        t_lo, t_hi = _TORQUE_OBS
+        low = np.array([t_lo, 0.0, -1.0, 0.0] + [t_lo] * _HISTORY, dtype=np.float32)
+        high = np.array(
+            [t_hi, 10.0, 1.0, SPINDLE_RPM_RANGE[1] / 1000.0] + [t_hi] * _HISTORY, dtype=np.float32
+        )
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.n = n
+        # The CNC's actuation, made now if the option sets it (its checks fail here), else
+        # when a scenario first brings its own.
+        self.act_lanes = None if self.actuation is None else self.actuation_lanes()
+        self._ke = float(self.params.sensor_gain)
+        self.lanes = MillingLanes(self.params, n)
+        #: Each lane's scenario and true parameters (built when read after a batched start).
+        self.scenarios = LaneObjects(n)
+        self.truths = LaneObjects(n)
+        #: Whether a split factory's scenarios may start in one batch (:meth:`batches`),
+        #: and the numbers its batches read (:func:`_batch_numbers`).
+        self._batch_ok: dict = {}
+        self._batch_numbers: dict = {}
+        self.vmax = np.ones(n)
+        self.breakage_torque = np.ones(n)
+        self.noise_counts = np.zeros(n)
+        self.n_teeth = np.ones(n)
+        self.w_axial = np.zeros(n)
+        self.cumulative = np.zeros((n, 2))
+        self.meas = np.zeros((n, _HISTORY + 1))  # newest first, N·mm
+        self.tr_obs = np.zeros(n)
+        self.rpm_obs = np.zeros(n)
+        self.prev_action = np.full(n, -1.0)
+        self.n_clipped = np.zeros(n, dtype=np.int64)
+        self.obs = np.zeros((n, 4 + _HISTORY), dtype=np.float32)
+        self.reward = np.zeros(n)
+        self.flags = np.zeros((n, 6), dtype=np.bool_)
+        # One row per signal, then one per episode constant (info_arrays copies them at once)
+        self.info_f = _info_table(n)
+        self.bind_views()
+        self.torque_limit[:] = 1.0
+        self.bound[:] = np.nan
+        #: The generators the lanes draw their sensor noise from (their episodes').
+        self.rngs = LaneGenerators(n)
+        self.names = LaneNames(n)
+        self.in_action = np.zeros(n)
+        self.in_clipped = np.zeros(n, dtype=np.int64)
+        self.commands = np.zeros(n)
+        self.noise = np.zeros(n)
+        self._args: tuple | None = None
+        self._args_version = -1
+        self._packed = PackedArgs()  # the kernel's arguments in one table (core.compiled.packed)
+        #: The blocks of lanes the kernel steps at once (one thread unless a vector env
+        #: asks for more).
+        self.blocks = LaneBlocks(n)
+
+    def bind_views(self) -> None:
+        """Name the rows of ``info_f`` that hold the episode constants (``_INFO_LANE``)."""
+        for i, name in enumerate(_INFO_LANE):
+            setattr(self, name, self.info_f[len(_INFO_F) + i])
+
+    def __setstate__(self, state: dict) -> None:
+        info = state["info_f"]  # a pickle holds it as one block: spaced out again
+        state["info_f"] = _info_table(info.shape[1])
+        state["info_f"][:] = info
+        super().__setstate__(state)
+
+    def actuation_lanes(self) -> ActuationLanes:
+        """The CNC's actuation between the commands and the servo, every lane on the env's
+        option until its scenario says otherwise."""
+        p = self.params
+        return ActuationLanes(self.n, p.command_max, 0.0, p.sample_time_s, self.actuation)
+
+    def start(self, lane: int, spec, rng: np.random.Generator) -> None:
+        """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
+        first observation goes to ``obs[lane]``, its reset info is its :meth:`lane_info` (and
+        its column of :meth:`info_arrays`) until the first step."""
+        sc = milling_scenario(spec, rng)
+        self.rngs.bind(lane, rng)  # the episode's sensor noise comes from it too
+        nominal = self.params
+        rpm = sc.spindle_rpm(nominal)
+        truth = sc.true_params(nominal)
+        profile = sc.profile
+        check_depth(profile, truth)
+        tr = sc.torque_limit_Nmm(nominal)
+        if not tr < truth.breakage_torque_Nmm:  # the message is made only when it fails
+            check_below(
+                f"scenario {sc.name!r}: the torque limit (torque_limit_Nmm x torque_limit_scale)",
+                tr,
+                "the tool's breakage_torque_Nmm",
+                truth.breakage_torque_Nmm,
+                "the tool would break before the limit binds",
+            )
+        # (true_params changes no field of the servo, so the lane fits the batch.)
+        segments = profile.segment_copy()
+        self._fit(segments.shape[1] - 1)
+        # The score bound: computed by the kernel for a sharp tool, here with wear.
+        bound = math.nan if truth.wear_per_100mm == 0.0 else machining_time_bound(sc, truth, rpm)
+        row = self.lanes.lane_constants(truth, rpm)
+        x = np.array((tr, truth.max_feed_velocity_mm_s, truth.breakage_torque_Nmm,
+                      truth.sensor_gain * truth.noise_std_Nmm, truth.n_teeth,
+                      truth.axial_depth_mm, min(tr / nominal.torque_limit_Nmm, 10.0), bound,
+                      truth.process_lag_s(rpm)))  # fmt: skip
+        _start_packed(self._packed(self._kernel_args()), lane, row, x, segments)
+        if not self.bound[lane] == self.bound[lane]:  # refused by the kernel: let it say why
+            self.bound[lane] = machining_time_bound(sc, truth, rpm)
+        self.scenarios[lane] = sc
+        self.truths[lane] = truth
+        self.act_lanes = configure_lane(
+            self.act_lanes, lane, sc.actuation, self.actuation, self.actuation_lanes
+        )
+        self.names[lane] = sc.name
+        if self.power_sensor:
+            self._sense_power([lane])
+
+    def _fit(self, n_segments: int) -> None:
+        """Widen the lanes' workpiece tables (the plant's and the cumulative areas) to hold
+        ``n_segments`` segments."""
+        self.lanes.fit_segments(n_segments)
+        if n_segments + 1 > self.cumulative.shape[1]:
+            grow = n_segments + 1 - self.cumulative.shape[1]
+            self.cumulative = np.pad(self.cumulative, ((0, 0), (0, grow)), mode="edge")
+            self._args = None
+
+    def start_lanes(self, lanes: np.ndarray, spec, rngs) -> None:
+        """:meth:`start` for each lane ``k`` of ``lanes`` on the scenario ``spec``, drawn
+        with ``rngs[k]``: the same episodes, the same numbers. A split's scenarios (a name
+        such as ``"train"``) are drawn and started for all lanes in two compiled calls, and
+        a lane's scenario and true parameters are built only when read (``scenarios[k]``,
+        ``truths[k]``)."""
+        factory = split_batch(self, lanes, spec, rngs, MILLING_SCENARIOS)
+        if factory is None:
+            return
+        segments, counts, v = factory.draw_lanes(self.rngs.table, lanes)
+        p = self.params
+        # The spindle and limit scales (numpy's exp, as the factory's), then every number
+        # start() works out from them and the other uniforms, in one compiled call.
+        scales = np.exp(factory.log_lows + factory.log_spans * v[:, :2])
+        self._fit(int(counts.max()))
+        nominal = self._batch_numbers.get(factory)
+        if nominal is None:
+            nominal = self._batch_numbers[factory] = _batch_numbers(self.params, factory)
+        bad = _start_drawn_lanes(self._packed(self._kernel_args()), lanes, nominal, v, scales,
+                                 segments, counts)  # fmt: skip
+        if bad >= 0:  # a range's end rounded past SPINDLE_RPM_RANGE: the lane's check says so
+            sc = factory.build_lane(segments, counts, v, bad)
+            sc.spindle_rpm(p)
+            lo, hi = SPINDLE_RPM_RANGE
+            raise ValueError(
+                f"lane {int(lanes[bad])}: spindle_scale {sc.spindle_scale} gives "
+                f"{p.spindle_rpm * sc.spindle_scale:g} rpm, outside the spindle_rpm range "
+                f"[{lo}, {hi}]"
+            )
+        ks = settle_batch(self, lanes, factory.build_lane, (segments, counts, v),
+                          factory.actuation, factory.name)  # fmt: skip
+        for k in ks:
+            if not self.bound[k] == self.bound[k]:  # refused by the kernel: let it say why
+                self.bound[k] = machining_time_bound(
+                    self.scenarios[k], self.truths[k], float(self.spindle[k])
+                )
+        if self.power_sensor:
+            self._sense_power(lanes)
+
+    def batches(self, factory) -> bool:
+        """Whether :meth:`start_lanes` may start ``factory``'s scenarios in one batch: a
+        split's, without wear (whose score bound is integrated in Python), whose every
+        scenario passes the checks :meth:`start` makes (those of the ranges' two ends,
+        checked once: spindle speed, true parameters, radial depth, torque limit below the
+        breakage torque)."""
+        if not isinstance(factory, _SplitFactory) or factory.wear is not None:
+            return False
+        ok = self._batch_ok.get(factory)
+        if ok is None:
+            nominal = self.params
+            try:
+                for sc in factory.extremes:
+                    sc.spindle_rpm(nominal)
+                    truth = sc.true_params(nominal)
+                    ok = factory.depth[1] <= truth.tool_diameter_mm and (
+                        sc.torque_limit_Nmm(nominal) < truth.breakage_torque_Nmm
+                    )
+                    if not ok:
+                        break
+            except ValueError:
+                ok = False
+            self._batch_ok[factory] = ok
+        return ok
+
+    def _kernel_args(self) -> tuple:
+        """The arguments of :func:`_step`, in order (rebuilt when the lane arrays are)."""
+        lanes = self.lanes
+        if self._args is None or self._args_version != lanes.version:
+            self._args = (
+                self.in_action,
+                self.in_clipped,
+                self._cmap,
+                self.rngs.table,
+                self.noise_counts,
+                self.commands,
+                self.noise,
+                lanes.big,
+                lanes.lag,
+                lanes.z,
+                lanes.buf,
+                lanes.lane_f,
+                lanes.edges,
+                lanes.d0,
+                lanes.slope,
+                lanes.nseg,
+                lanes.seg,
+                lanes.finished,
+                lanes.m,
+                lanes.out,
+                lanes.out_segment,
+                lanes.out_finish,
+                lanes.work,
+                self._ke,
+                self.torque_limit,
+                self.breakage_torque,
+                self.vmax,
+                self.n_teeth,
+                self.w_axial,
+                self.cumulative,
+                self.max_episode_time_s,
+                self._w,
+                self.meas,
+                self.prev_action,
+                self.tr_obs,
+                self.rpm_obs,
+                self.obs,
+                self.reward,
+                self.flags,
+                self.n_clipped,
+                self.info_f,
+            )
+            self._args_version = lanes.version
+        return self._args
+
+    def set_action(self, lane: int, action: float, clipped: bool) -> None:
+        self.in_action[lane] = action
+        self.in_clipped[lane] = clipped
+
+    def set_actions(self, actions: np.ndarray) -> None:
+        self.in_action[:] = actions[:, 0]  # clipped to the box by the kernel, which marks
+        self.in_clipped.fill(0)  # the clipped ones here
+
+    def outcome(self, lane: int) -> tuple[float, bool, bool]:
+        flags = self.flags[lane]
+        return float(self.reward[lane]), bool(flags[3]), bool(flags[4])
+
+    def step_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.reward, self.flags[:, 3], self.flags[:, 4]
+
+    def clipped_count(self, lane: int) -> int:
+        return int(self.n_clipped[lane])
+
+    def step(self) -> None:
+        """Advance every lane with the actions in ``in_action`` (finite; clipped to the box
+        here, and marked 1 in ``in_clipped``, which may mark them clipped before), each
+        lane's sensor noise drawn from the generator its episode started with; with CNC
+        actuation on, the commands pass through it first (``machining_envs.core.actuation``)
+        and ``info["command"]`` is what the drives got."""
+        args = self._kernel_args()
+        if self.act_lanes is None:
+            self._run(args, 3)
+        else:
+            self._run(args, 1)
+            self.commands[:] = self.act_lanes.apply(self.commands)
+            self.info_f[1] = self.commands
+            self._run(args, 2)
+        if self.power_sensor:
+            self._sense_power()
+
+    def _sense_power(self, lanes=None) -> None:
+        """The drive's power reading into the observations (option ``power_sensor``,
+        ``machining_envs.core.sensors``): of ``lanes`` that start, else a step of all."""
+        i = self.info_arrays()
+        rpm = i["spindle_rpm"]
+        w = rpm * (math.pi / 30.0) * 1e-3  # angular speed, rad/s, per N·mm
+        self.power_sensor.update(
+            self.obs, lanes, i["torque_Nmm"] * w, rpm, i["torque_limit_Nmm"] * w
+        )
+
+    def _run(self, args: tuple, stage: int) -> None:
+        """:func:`_step` of ``stage`` over every lane (on the blocks of lanes, if several)."""
+        if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
+            _step_packed(self._packed(args), stage)
+        else:
+            self.blocks.run(_step, args, _STEP_AXES, stage, packed=_step_packed, serve=_serve_step)
+
+    def lane_info(self, k: int) -> dict:
+        """The step info of lane ``k`` (after :meth:`step`)."""
+        (t, command, torque, measured, counts, peak, feed, mean_feed, feed_tooth, vf, pos,
+         depth, removed, finish, cost,
+         limit, bound, rpm, length, volume) = self.info_f[:, k].tolist()  # fmt: skip
+        diverged, breakage, finished = self.flags[k, :3].tolist()
+        info = {
+            "t_s": t,
+            "command": command,
+            "action_clipped": bool(self.in_clipped[k]),
+            "n_action_clipped": int(self.n_clipped[k]),
+            "breakage": breakage,
+            "diverged": diverged,
+            "finished": finished,
+            "torque_Nmm": torque,
+            "torque_limit_Nmm": limit,
+            "cost": cost,
+            "score_bound": bound,
+            "measured": measured,
+            "measured_counts": counts,
+            "peak_torque_Nmm": peak,
+            "feed_mm_per_rev": feed,
+            "mean_feed_mm_per_rev": mean_feed,
+            "feed_per_tooth_mm": feed_tooth,
+            "feed_velocity_mm_s": vf,
+            "position_mm": pos,
+            "depth_mm": depth,
+            "segment": int(self.lanes.out_segment[k]),
+            "spindle_rpm": rpm,
+            "removed_volume_mm3": removed,
+            "workpiece_length_mm": length,
+            "workpiece_volume_mm3": volume,
+            "scenario": self.names[k],
+        }
+        if finished:
+            info["machining_time_s"] = finish
+        if self.power_sensor:
+            info.update(self.power_sensor.lane_info(k))
+        return info
+
+    def info_arrays(self) -> dict:
+        """The step info of every lane, as arrays (``machining_time_s`` with its mask): views
+        of one copy of the signals and constants and one of the flags, so that a step copies
+        a few blocks of memory."""
+        c = self.info_f.copy()
+        f = self.flags.copy()
+        return {
+            "t_s": c[0],
+            "command": c[1],
+            "action_clipped": self.in_clipped.astype(bool),
+            "n_action_clipped": self.n_clipped.copy(),
+            "breakage": f[:, 1],
+            "diverged": f[:, 0],
+            "finished": f[:, 2],
+            "torque_Nmm": c[2],
+            "torque_limit_Nmm": c[15],
+            "cost": c[14],
+            "score_bound": c[16],
+            "measured": c[3],
+            "measured_counts": c[4],
+            "peak_torque_Nmm": c[5],
+            "feed_mm_per_rev": c[6],
+            "mean_feed_mm_per_rev": c[7],
+            "feed_per_tooth_mm": c[8],
+            "feed_velocity_mm_s": c[9],
+            "position_mm": c[10],
+            "depth_mm": c[11],
+            "segment": self.lanes.out_segment.copy(),
+            "spindle_rpm": c[17],
+            "removed_volume_mm3": c[12],
+            "workpiece_length_mm": c[18],
+            "workpiece_volume_mm3": c[19],
+            "scenario": self.names.array(),
+            "machining_time_s": c[13],  # NaN where the lane did not finish
+            "_machining_time_s": self.flags[:, 2].copy(),
+            **(self.power_sensor.info_arrays() if self.power_sensor else {}),
+        }
