@@ -81,7 +81,7 @@ def test_a_drawn_speed_outside_the_range_stops_the_batch(monkeypatch):
     """The batch checks every drawn speed against ``SPINDLE_RPM_RANGE`` itself (a range's end
     may round past it): a lane outside raises ``ValueError`` naming the speed's range. Here
     the batch's range is narrowed below the train split's speeds (320-500 rpm)."""
-    import machining_envs.milling.env as milling_env
+    import machining_envs.milling.lanes as milling_env
 
     venv = gym.make_vec(MILLING, num_envs=4)
     monkeypatch.setattr(milling_env, "SPINDLE_RPM_RANGE", (20.0, 330.0))
