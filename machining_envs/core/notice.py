@@ -3,7 +3,7 @@
 The first use of an env on a machine (or after an upgrade) compiles its kernels, about
 30 s an env; numba then caches them in the package's ``__pycache__`` and every later
 process loads them in a fraction of a second. Without a word, those 30 s look like a hang,
-so :func:`announce_compiling` (installed by :mod:`machining_envs.core.kernels`, which every
+so :func:`announce_compiling` (installed by :mod:`machining_envs.core.compiled.kernels`, which every
 env imports) listens to numba's ``numba:compile`` events, which fire only where the cache
 has nothing, and prints one line the first time a function of the package compiles in a
 process (later ones compile without a word: the line has said what the wait is).

@@ -5,7 +5,7 @@ import sys
 
 COMPILES = """
 import numba
-import machining_envs.core.kernels  # installs the listener, as every env's import does
+import machining_envs.core.compiled.kernels  # installs the listener, as every env's import does
 
 def compiled(module):
     scope = {"__name__": module}
