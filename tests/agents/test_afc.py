@@ -7,7 +7,7 @@ from agents import AdaptiveFeedControl, ConstantFeed
 from agents.afc import AFC_LOG_FIELDS
 from agents.base import Agent
 from agents.eval.harness import evaluate
-from machining_envs.core.env import ActionMap
+from machining_envs.core.actions import ActionMap
 
 PROGRAMMED = 50.0  # the programmed command, counts of [0, 100]
 
