@@ -26,6 +26,9 @@ from machining_envs.milling.scenarios import PAPER_CONSTANT_FEED_MM_MIN
 __all__ = ["MillingIO", "FixedGainIntegral", "IntegralACC", "MillingConstantFeed"]
 
 _I = EndMillingEnv.OBS_INDEX
+#: The smallest observed torque limit, as a share of the nominal, that the controllers'
+#: model-based values use; below it (a broken reading) they use the nominal limit.
+MIN_LIMIT_SHARE = 1e-6
 
 
 @dataclass(frozen=True)
@@ -68,9 +71,11 @@ class MillingIO:
         return np.clip(1000.0 * obs[:, _I["spindle"]], *SPINDLE_RPM_RANGE)
 
     def limit_Nmm(self, obs: np.ndarray) -> np.ndarray:
-        """The torque limit, N·mm, from a batch of observations (the nominal if none)."""
+        """The torque limit, N·mm, from a batch of observations; the nominal where none is
+        usable (0, below it, or under ``MIN_LIMIT_SHARE`` of the nominal, where the
+        model's gain, which grows as the torque's power ``1 - 1/e``, would overflow)."""
         lim = self.torque_scale_Nmm * obs[:, _I["limit"]]
-        return np.where(lim > 0, lim, self.torque_scale_Nmm)
+        return np.where(lim > MIN_LIMIT_SHARE * self.torque_scale_Nmm, lim, self.torque_scale_Nmm)
 
     def action(self, command: np.ndarray) -> np.ndarray:
         """Actions (n, 1) for commands (n,) in counts."""

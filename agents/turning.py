@@ -30,6 +30,9 @@ __all__ = [
 ]
 
 _I = TurningEnv.OBS_INDEX
+#: The smallest observed force limit, as a share of the nominal, that the model-based
+#: initial values use; below it (a broken reading) they use the nominal limit.
+MIN_LIMIT_SHARE = 1e-6
 
 
 #: The turning controllers' settings are Python numbers, and (unlike the other processes')
@@ -179,8 +182,9 @@ class ConstantFeed(Agent):
     def _act(self, obs, state):
         p = self.io.params
         feed = self.feed_mm_per_rev
-        if feed is None:
-            feed = p.feed_for_force(self.setpoint * self.io.limit_N(obs), self.design_depth_mm)
+        if feed is None:  # (a limit observed below 0 asks for no feed, not a NaN one)
+            force_N = np.maximum(self.setpoint * self.io.limit_N(obs), 0.0)
+            feed = p.feed_for_force(force_N, self.design_depth_mm)
         u = feed * self.io.spindle_rpm(obs) / (60.0 * p.servo_gain * p.gear_ratio)
         return self.io.action(np.clip(u, 0.0, self.io.command_max))
 
@@ -264,7 +268,10 @@ class VariableGainPI(Agent):
         st = np.zeros((n, self.state_size))
         rpm = np.clip(self.io.spindle_rpm(obs), *SPINDLE_RPM_RANGE)
         fr_N = self.io.limit_N(obs) * self.setpoint
-        fr_N = np.where(fr_N > 0, fr_N, self.io.force_scale_N)
+        # No usable limit (0, below it, or so small that the model's gain, which grows as
+        # the force's power 1 - 1/p, overflows): the nominal one.
+        usable = fr_N > MIN_LIMIT_SHARE * self.io.force_scale_N
+        fr_N = np.where(usable, fr_N, self.io.force_scale_N)
         st[:, 1] = self.nominal_process_gain(rpm, fr_N)
         for i in range(n):  # the model at each env's spindle speed (cached per speed)
             st[i, 8:14] = unit_plant_coefficients(self.io.params, round(float(rpm[i]), 6))
@@ -279,9 +286,15 @@ class VariableGainPI(Agent):
         u_hist = state[:, 2:5]
         y_hist = state[:, 5:8]
         y = np.sum(state[:, 8:11] * u_hist, axis=1) - np.sum(state[:, 11:14] * y_hist, axis=1)
-        ok = (y >= self.min_command) & (fm >= self.min_force_fraction * fr)
-        kp_hat = np.where(ok, fm / np.where(ok, y, 1.0), state[:, 1])
-        kh = self._open_loop_gain(state) / kp_hat
+        ok = (y >= self.min_command) & (fm >= self.min_force_fraction * fr) & (fr > 0.0)
+        kp_new = fm / np.where(ok, y, 1.0)
+        gain = self._open_loop_gain(state)
+        # An estimate of 0 (a force of 0 at a limit of 0) or one so small that K / Kp_hat
+        # overflows is no estimate: the previous one is kept.
+        with np.errstate(divide="ignore", over="ignore"):
+            ok &= (kp_new > 0.0) & np.isfinite(gain / np.where(ok, kp_new, 1.0))
+        kp_hat = np.where(ok, kp_new, state[:, 1])
+        kh = gain / kp_hat
         e = fr - fm
         u = np.clip(u_hist[:, 0] + kh * (self.kgh * e - state[:, 0]), 0.0, self.io.command_max)
         state[:, 0] = e
