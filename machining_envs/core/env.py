@@ -182,10 +182,10 @@ class LaneEnv(gym.Env, abc.ABC):
 
     # ---- gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
         core = self._core
         spec = scenario_option(options, self.default_scenario)
         check_scenario_spec(spec, *core.scenario_types)  # refused: the episode goes on
+        super().reset(seed=seed)  # (after the checks: refused options keep the generator)
         self._started = False  # a start that raises part-way leaves nothing to step
         core.start(0, spec, self.np_random)
         self._started = True

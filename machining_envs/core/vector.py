@@ -224,18 +224,13 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             mask = self._reset_mask(options["reset_mask"])
             options = {k: v for k, v in options.items() if k != "reset_mask"} or None
         lanes = np.arange(self.num_envs) if mask is None else np.flatnonzero(mask)
-        if seed is not None:
-            if is_integer(seed):
-                seeds = [int(seed) + i for i in range(self.num_envs)]
-            elif isinstance(seed, (list, tuple)) and len(seed) == self.num_envs:
-                seeds = list(seed)
-            else:
-                raise ValueError(
-                    f"seed must be None, an int or a list of {self.num_envs} seeds, got {seed!r}"
-                )
-            for i in lanes.tolist():
-                if seeds[i] is not None:
-                    self.lane_rngs[i] = seeding.np_random(seeds[i])[0]
+        # Everything is checked before any lane's generator is replaced: a refused reset
+        # changes nothing, and the lanes' next autoresets draw what they would have.
+        rngs = self._seeded(seed, lanes)
+        if options is not None:
+            self._lane_scenarios(scenario_option(options, self.default_scenario), lanes)
+        for i, rng in rngs.items():
+            self.lane_rngs[i] = rng
         obs = self._reset_lanes(lanes, options)
         self._started = True
         self._ended[lanes] = False
@@ -246,6 +241,29 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
             for key in [k for k in info if k[0] == "_"]:
                 info[key] = info[key] & mask
         return obs, info
+
+    def _seeded(self, seed, lanes: np.ndarray) -> dict[int, np.random.Generator]:
+        """The new generators of ``lanes`` for ``reset(seed=...)``, by lane (none for a
+        lane whose seed is None); ``ValueError`` for a seed that is not one (no lane's
+        generator has been replaced)."""
+        if seed is None:
+            return {}
+        if is_integer(seed):
+            seeds = [int(seed) + i for i in range(self.num_envs)]
+        elif isinstance(seed, (list, tuple)) and len(seed) == self.num_envs:
+            seeds = list(seed)
+        else:
+            raise ValueError(
+                f"seed must be None, an int or a list of {self.num_envs} seeds, got {seed!r}"
+            )
+        rngs = {}
+        for i in lanes.tolist():
+            if seeds[i] is not None:
+                try:
+                    rngs[i] = seeding.np_random(seeds[i])[0]
+                except gym.error.Error as err:
+                    raise ValueError(f"{self.env_name} (vector): seed of lane {i}: {err}") from None
+        return rngs
 
     def _reset_mask(self, mask) -> np.ndarray:
         """Check ``options["reset_mask"]``: only in ``DISABLED`` mode, after a first full
@@ -390,7 +408,9 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         shape = (self.num_envs, *self.single_action_space.shape)
         a = real_actions(actions, f"{self.env_name} (vector)")
         if a.shape != shape:
-            if a.size == math.prod(shape):
+            # Only a batch that differs by dimensions of size 1 is reshaped ((N,) for
+            # (N, 1)); one whose entries would move, a (2, N) batch for (N, 2) say, is refused.
+            if [d for d in a.shape if d != 1] == [d for d in shape if d != 1]:
                 a = a.reshape(shape)
             else:
                 raise ValueError(
