@@ -353,6 +353,10 @@ def evaluate(
     extra_keys : iterable of str
         Info keys recorded beside the metrics' own (where those are declared).
     """
+    if not (hasattr(agent, "predict") or callable(agent)):
+        raise TypeError(
+            f"agent must have SB3's predict or be a factory env -> agent, got {agent!r:.60}"
+        )
     if not is_integer(n_episodes) or n_episodes < 1:
         raise ValueError(f"n_episodes must be an integer >= 1, got {n_episodes!r}")
     if not is_integer(seed) or seed < 0:
@@ -361,13 +365,26 @@ def evaluate(
         raise TypeError(f"env_kwargs must be a dict or None, got {type(env_kwargs).__name__}")
     if batched is not None and not isinstance(batched, (bool, np.bool_)):
         raise TypeError(f"batched must be True, False or None, got {batched!r}")
+    for flag, value in (("keep_trajectories", keep_trajectories), ("progress", progress)):
+        if not isinstance(value, (bool, np.bool_)):
+            raise TypeError(f"{flag} must be True or False, got {value!r}")
+    if metrics_fn is not None and not callable(metrics_fn):
+        raise TypeError(f"metrics_fn must be a function trajectory -> metrics, got {metrics_fn!r}")
+    if not isinstance(env_id, str) or env_id not in gym.registry:
+        raise ValueError(f"env_id must be a registered env id, got {env_id!r}")
     has_vector = gym.spec(env_id).vector_entry_point is not None
-    # One scenario (a name or an object) is a list of one.
+    # One scenario (a name or an object) is a list of one. None is not one: it would run
+    # the env's default scenario under the label 'None'.
     scenarios = (
         [scenarios] if isinstance(scenarios, str) or not _iterable(scenarios) else list(scenarios)
     )
     if not scenarios:
         raise ValueError("scenarios must hold at least one scenario name or object, got none")
+    if any(sc is None for sc in scenarios):
+        raise ValueError(
+            "scenarios must be scenario names or objects (such as ['validation']), got "
+            f"{scenarios!r:.80}"
+        )
     if batched is None:
         batched = has_vector and n_episodes * len(scenarios) > 1
     elif batched and not has_vector:
@@ -384,6 +401,8 @@ def evaluate(
         kept = None if keep_seeds is None else {int(s) for s in keep_seeds}
         if not hasattr(agent, "predict") and callable(agent):
             agent = agent(env)
+            if not hasattr(agent, "predict"):
+                raise TypeError(f"the agent factory returned {agent!r:.60}, which has no predict")
         name = agent_name(agent)
         ev = Evaluation()
         bar = None

@@ -467,7 +467,13 @@ def load_config(env_id: str, algo: str, path=None, overrides: dict | None = None
                 f"{where}: batch_size must be <= n_steps x n_envs = {rollout}, "
                 f"got {hyper['batch_size']}"
             )
+    aliases = sorted(getattr(algorithm_classes()[algo], "policy_aliases", {}))
+    if aliases and cfg.policy not in aliases:
+        raise ConfigError(f"{where}: policy must be one of {aliases}, got {cfg.policy!r}")
     if "policy_kwargs" in hyper:
         _check_type(where, "policy_kwargs", hyper["policy_kwargs"], (dict,))
+        bad = [k for k in hyper["policy_kwargs"] if not isinstance(k, str)]
+        if bad:
+            raise ConfigError(f"{where}: policy_kwargs keys must be names, got {bad[0]!r}")
     cfg.hyperparams = hyper
     return cfg

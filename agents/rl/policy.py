@@ -17,6 +17,9 @@ __all__ = [
     "PolicyAgent",
     "ExactActor",
     "load_policy",
+    "load_model",
+    "read_run_config",
+    "read_json_object",
     "pretrained",
     "pretrained_seeds",
     "PRETRAINED_DIR",
@@ -207,7 +210,169 @@ class ExactActor:
         return a[0] if one else a
 
 
-def load_policy(model_path, name: str | None = None, algo: str | None = None, stats=None):
+#: What a run's ``config.json`` holds that loading a policy reads: key -> allowed types.
+_RUN_FIELDS = {
+    "env_id": (str,),
+    "algo": (str,),
+    "seed": (int,),
+    "config": (dict,),
+    "action_increment": (dict, type(None)),
+    "residual": (dict, type(None)),
+}
+
+
+def read_json_object(path, what: str) -> dict:
+    """The JSON object in the file ``path``; ``ValueError`` naming the file and ``what`` it
+    should be when it is not UTF-8 text, not JSON, or not an object."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not a {what} (not UTF-8 text)") from None
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not a {what} ({exc})") from None
+    if not isinstance(data, dict):
+        raise ValueError(
+            f"{path}: not a {what} (a JSON object is expected, got {type(data).__name__})"
+        )
+    return data
+
+
+def read_run_config(path) -> dict:
+    """A run's ``config.json`` (what :func:`agents.rl.train` writes), checked: a JSON object
+    whose ``env_id`` and ``algo`` are strings (``algo`` one of ``ALGOS``), ``seed`` an
+    integer, ``config`` an object and ``action_increment`` / ``residual`` objects or null,
+    where present. ``ValueError`` naming the file and the field otherwise."""
+    meta = read_json_object(path, "run record (config.json)")
+    for key, types in _RUN_FIELDS.items():
+        if key in meta and (not isinstance(meta[key], types) or isinstance(meta[key], bool)):
+            names = " or ".join("null" if t is type(None) else t.__name__ for t in types)
+            raise ValueError(f"{path}: {key} must be {names}, got {meta[key]!r:.60}")
+    if "algo" in meta and meta["algo"] not in ALGOS:
+        raise ValueError(f"{path}: algo must be one of {list(ALGOS)}, got {meta['algo']!r}")
+    if meta.get("action_increment"):
+        from machining_envs.wrappers import ActionIncrement
+
+        try:
+            ActionIncrement(**meta["action_increment"]).check()
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{path}: action_increment: {exc}") from None
+    if meta.get("residual"):
+        from agents.rl.residual import ResidualSpec
+
+        try:
+            ResidualSpec(**meta["residual"]).checked()
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{path}: residual: {exc}") from None
+        if not isinstance(meta.get("env_id"), str):
+            raise ValueError(f"{path}: a residual run must name its env_id")
+    return meta
+
+
+def _normalises(meta: dict) -> bool | None:
+    """Whether the run of ``meta`` normalised its observations (None: it does not say)."""
+    config = meta.get("config")
+    if not isinstance(config, dict) or "normalize" not in config:
+        return None
+    norm = config["normalize"]
+    if isinstance(norm, dict):
+        return bool(norm.get("norm_obs", True))
+    return bool(norm)
+
+
+#: What an SB3 model archive holds that loading reads.
+_MODEL_MEMBERS = ("data", "policy.pth")
+_MODEL_DATA_KEYS = ("policy_class", "observation_space", "action_space")
+
+
+def load_model(algo: str, path, **kwargs):
+    """SB3's ``<ALGO>.load(path, device="cpu", **kwargs)``, with a damaged or foreign file
+    refused by a ``ValueError`` naming it: not a zip archive, without SB3's ``data`` or
+    ``policy.pth``, ``data`` that is not a JSON object naming the policy and its spaces,
+    or anything SB3 or torch fail on while reading it (checked here rather than by SB3's
+    ``assert``, which ``python -O`` skips)."""
+    import zipfile
+
+    path = Path(path)
+    label = f"{path}: not a {algo.upper()} model saved by Stable-Baselines3"
+    try:
+        with zipfile.ZipFile(path) as zf:
+            names = set(zf.namelist())
+            missing = [m for m in _MODEL_MEMBERS if m not in names]
+            if missing:
+                raise ValueError(f"{label} (the archive has no {' or '.join(missing)})")
+            data = json.loads(zf.read("data").decode("utf-8"))
+    except (zipfile.BadZipFile, OSError, EOFError) as exc:
+        raise ValueError(f"{label} ({type(exc).__name__}: {exc})") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{label} (its data is not JSON: {exc})") from None
+    if not isinstance(data, dict) or any(k not in data for k in _MODEL_DATA_KEYS):
+        raise ValueError(f"{label} (its data does not name {', '.join(_MODEL_DATA_KEYS)})")
+    try:
+        model = algorithm_classes()[algo].load(path, device="cpu", **kwargs)
+    except Exception as exc:  # noqa: BLE001 - whatever a damaged file makes SB3 or torch raise
+        raise ValueError(f"{label} ({type(exc).__name__}: {str(exc)[:200]})") from exc
+    from gymnasium import spaces
+
+    for which in ("observation_space", "action_space"):
+        if not isinstance(getattr(model, which, None), spaces.Box):
+            raise ValueError(f"{label} (its {which} is not a Box)")
+    return model
+
+
+def _env_id_and_spaces(env):
+    """``(id or None, observation space, action space)`` of ``env``: an id (made once to
+    read its spaces) or a gymnasium env."""
+    import gymnasium as gym
+
+    if isinstance(env, str):
+        if env not in gym.registry:
+            raise ValueError(f"env must be a registered env id or an env, got {env!r}")
+        made = gym.make(env)
+        try:
+            return env, made.observation_space, made.action_space
+        finally:
+            made.close()
+    spec = getattr(env, "spec", None) or getattr(getattr(env, "unwrapped", None), "spec", None)
+    if not hasattr(env, "observation_space") or not hasattr(env, "action_space"):
+        raise TypeError(f"env must be an env id or a gymnasium env, got {env!r:.60}")
+    return (spec.id if spec is not None else None), env.observation_space, env.action_space
+
+
+def _check_env(model_path: Path, meta: dict, model, residual, target, force: bool) -> None:
+    """``ValueError`` unless the policy of ``model_path`` fits the env ``target`` (what
+    :func:`_env_id_and_spaces` gives): the env the run's record names (unless ``force``),
+    and in every case the observation and action shapes the model was trained with."""
+    env_id, obs_space, act_space = target
+    trained_on = meta.get("env_id")
+    if env_id is not None and trained_on is not None and trained_on != env_id and not force:
+        raise ValueError(
+            f"{model_path} was trained on {trained_on}, not {env_id} (force=True to load it "
+            "for another env with the same spaces)"
+        )
+    shape = tuple(model.observation_space.shape)
+    if shape != tuple(obs_space.shape):
+        raise ValueError(
+            f"{model_path} takes observations of shape {shape}, but "
+            f"{env_id or 'the env'}'s are {tuple(obs_space.shape)}"
+        )
+    n_act = int(np.prod(act_space.shape, dtype=int))
+    want = (residual.action_dim(n_act),) if residual is not None else tuple(act_space.shape)
+    if tuple(model.action_space.shape) != want:
+        raise ValueError(
+            f"{model_path} gives actions of shape {tuple(model.action_space.shape)}, but "
+            f"{env_id or 'the env'} takes {want}"
+        )
+
+
+def load_policy(
+    model_path,
+    name: str | None = None,
+    algo: str | None = None,
+    stats=None,
+    env=None,
+    force: bool = False,
+):
     """Load ``*.zip`` and its VecNormalize statistics (``*_vecnormalize.json`` beside it,
     or ``stats``).
 
@@ -218,6 +383,14 @@ def load_policy(model_path, name: str | None = None, algo: str | None = None, st
     ``machining-bench convert-stats FILE.pkl``. SB3's ``.zip`` itself unpickles parts of its
     content: load models only from sources you trust.
 
+    Every file read is checked against what it is read for (``ValueError`` naming the file):
+    the model archive (:func:`load_model`), ``config.json`` (:func:`read_run_config`), and
+    the statistics against the model's observations (one finite mean and a variance > 0
+    per entry); a run whose ``config.json`` says it normalised its observations needs its
+    statistics file (``FileNotFoundError`` naming it). ``env`` (an env id or a gymnasium
+    env), where given, is the env the policy is loaded for: the run's record must name it
+    (``force=True`` skips this) and the model's observation and action shapes must be its.
+
     Returns a :class:`PolicyAgent`, or, for a run trained with ``SetpointResidual``
     (``residual`` in its ``config.json``), an ``agents.rl.residual.ResidualAgent``: the
     policy over the regulator whose setpoint it sets.
@@ -225,15 +398,22 @@ def load_policy(model_path, name: str | None = None, algo: str | None = None, st
     model_path = Path(model_path)
     if not model_path.is_file():
         raise FileNotFoundError(f"no model at {model_path}")
+    if not isinstance(force, (bool, np.bool_)):
+        raise TypeError(f"force must be True or False, got {force!r}")
+    target = _env_id_and_spaces(env) if env is not None else None
     meta_path = model_path.parent / "config.json"
-    meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+    meta = read_run_config(meta_path) if meta_path.is_file() else {}
     if algo is None:
         algo = meta.get("algo")
-    increment = None
+    increment = residual = None  # (both checked by read_run_config)
     if meta.get("action_increment"):
         from machining_envs.wrappers import ActionIncrement
 
-        increment = ActionIncrement(**meta["action_increment"]).check()
+        increment = ActionIncrement(**meta["action_increment"])
+    if meta.get("residual"):
+        from agents.rl.residual import ResidualSpec
+
+        residual = ResidualSpec(**meta["residual"])
     if algo is None:
         m = re.search(r"(ppo|sac|td3)", model_path.name.lower())
         if m is None:
@@ -251,6 +431,12 @@ def load_policy(model_path, name: str | None = None, algo: str | None = None, st
                 f"{pickled} is a pickle, which can run code when read: convert it once, if "
                 f"you trust it, with `machining-bench convert-stats {pickled}`"
             )
+        if not stats.is_file() and _normalises(meta):
+            raise FileNotFoundError(
+                f"no statistics file at {stats}, but {meta_path} says the run normalised "
+                "its observations: without them the policy sees other numbers than in "
+                "training (pass stats= the run's *_vecnormalize.json)"
+            )
     else:
         stats = Path(stats)
         if not stats.is_file():
@@ -258,14 +444,33 @@ def load_policy(model_path, name: str | None = None, algo: str | None = None, st
         if stats.suffix != ".json":
             raise ValueError(f"stats must be a .json statistics file, got {stats}")
     norm = read_stats(stats) if stats.is_file() else None
-    model = algorithm_classes()[algo].load(model_path, device="cpu")
+    model = load_model(algo, model_path)
     obs_rms, clip, eps = None, 10.0, 1e-8
     if norm is not None and norm.norm_obs:
+        shape = tuple(model.observation_space.shape)
+        if norm.obs_mean.shape != shape:
+            raise ValueError(
+                f"{stats}: statistics of observations of shape {norm.obs_mean.shape}, but "
+                f"the model {model_path} takes observations of shape {shape}"
+            )
+        if _normalises(meta) is False:
+            raise ValueError(
+                f"{stats}: statistics that normalise the observations, but {meta_path} says "
+                "the run did not normalise them"
+            )
         from stable_baselines3.common.running_mean_std import RunningMeanStd
 
         obs_rms = RunningMeanStd(shape=norm.obs_mean.shape)
         obs_rms.mean, obs_rms.var, obs_rms.count = norm.obs_mean, norm.obs_var, norm.obs_count
         clip, eps = norm.clip_obs, norm.epsilon
+    if increment is not None:
+        n_obs = int(np.prod(model.observation_space.shape, dtype=int))
+        try:
+            increment.check(n_obs)
+        except ValueError as exc:
+            raise ValueError(f"{meta_path}: action_increment: {exc}") from None
+    if target is not None:
+        _check_env(model_path, meta, model, residual, target, bool(force))
     agent = PolicyAgent(
         model,
         obs_rms,
@@ -274,18 +479,17 @@ def load_policy(model_path, name: str | None = None, algo: str | None = None, st
         name=name or f"{algo.upper()} ({model_path.parent.name})",
         increment=increment,
     )
-    if meta.get("residual"):  # the policy sets the setpoint of a classical regulator
+    if residual is not None:  # the policy sets the setpoint of a classical regulator
         import gymnasium as gym
 
-        from agents.rl.residual import ResidualAgent, ResidualSpec
+        from agents.rl.residual import ResidualAgent
 
-        spec = ResidualSpec(**meta["residual"])
-        env = gym.make(meta["env_id"])
+        made = gym.make(meta["env_id"])
         try:
-            base = spec.make_base(env, meta["env_id"])
+            base = residual.make_base(made, meta["env_id"])
         finally:
-            env.close()
-        return ResidualAgent(agent, spec, base, name=agent.name)
+            made.close()
+        return ResidualAgent(agent, residual, base, name=agent.name)
     return agent
 
 
@@ -302,7 +506,8 @@ def pretrained(name: str):
     path = PRETRAINED_DIR / name / "best_model.zip"
 
     def make(env=None) -> PolicyAgent:
-        return load_policy(path, name=f"{name} (pretrained)")
+        """The policy, checked against ``env`` (its id and spaces) where given."""
+        return load_policy(path, name=f"{name} (pretrained)", env=env)
 
     make.__name__ = f"pretrained_{name}"
     make.learned = True  # the benchmark gives learned agents their margin over the classical
@@ -318,8 +523,8 @@ def pretrained_seeds(name: str, root=None) -> list[tuple[int, Path]]:
     found = []
     if (folder / "best_model.zip").is_file():
         meta = folder / "config.json"
-        seed = json.loads(meta.read_text()).get("seed", 0) if meta.is_file() else 0
-        found.append((int(seed), folder / "best_model.zip"))
+        seed = read_run_config(meta).get("seed", 0) if meta.is_file() else 0
+        found.append((seed, folder / "best_model.zip"))
     for sub in sorted(folder.glob("seed_*/best_model.zip")):
         tail = sub.parent.name.removeprefix("seed_")
         if tail.isdigit():

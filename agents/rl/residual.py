@@ -26,6 +26,8 @@ from typing import NamedTuple
 import gymnasium as gym
 import numpy as np
 
+from agents.base import Agent
+
 __all__ = ["ResidualSpec", "SetpointResidual", "VecSetpointResidual", "ResidualAgent"]
 
 TUNED_FILE = Path(__file__).resolve().parents[1] / "bench" / "tuned.json"
@@ -222,11 +224,13 @@ class VecSetpointResidual(_vec_wrapper_base()):
         return obs, rewards, dones, infos
 
 
-class ResidualAgent:
+class ResidualAgent(Agent):
     """A trained residual policy over its regulator, behind the agent protocol.
 
     ``policy``: the trained policy (an ``agents.rl.PolicyAgent``); ``base``: the regulator
-    (built by ``ResidualSpec.make_base``). The state is the regulator's, one row per env.
+    (built by ``ResidualSpec.make_base``). The state is the regulator's, one row per env;
+    the observations and the state are checked as the regulator checks them, and a bad one
+    is named under this agent's name (the regulator is a part of it).
     """
 
     learned = True
@@ -234,18 +238,24 @@ class ResidualAgent:
     def __init__(self, policy, residual: ResidualSpec, base, name: str | None = None):
         self.policy, self.residual, self.base = policy, residual, base
         self.name = name or f"{policy.name} over {base.name}"
+        self.state_size = base.state_size
+        self.obs_dim = base.obs_dim
+        self.obs_index = base.obs_index
+
+    def initial_state(self, n: int, obs: np.ndarray) -> np.ndarray:
+        return self.base.initial_state(n, obs)
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        batch, single = self.base._observations(observation)
+        batch, single = self._observations(observation)
         n = batch.shape[0]
         if state is None:
-            st = self.base.initial_state(n, batch)
+            st = self.initial_state(n, batch)
         else:
-            st = self.base._state(state, n)
+            st = self._state(state, n)
             if episode_start is not None:
-                starts = self.base._starts(episode_start, n)
+                starts = self._starts(episode_start, n)
                 if starts.any():
-                    st[starts] = self.base.initial_state(int(starts.sum()), batch[starts])
+                    st[starts] = self.initial_state(int(starts.sum()), batch[starts])
         a, _ = self.policy.predict(batch, deterministic=deterministic)
         u = self.residual.act(self.base, batch, st, a)
         return (u[0] if single else u), st

@@ -90,10 +90,14 @@ def _number(path, key, value, lo=-math.inf, lo_open=False) -> float:
 
 def read_stats(path) -> NormStats:
     """Read statistics written by :func:`save_stats`; ``ValueError`` naming the file and the
-    field for anything else."""
+    field for anything else (a binary file, a mean or a variance that is not finite, a
+    variance that is not > 0). Whether they fit a model is the reader's check
+    (``agents.rl.load_policy``: their length against the model's observations)."""
     path = Path(path)
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not a statistics file (not UTF-8 text)") from None
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: not a statistics file ({exc})") from None
     if not isinstance(data, dict) or data.get("format") != FORMAT:
@@ -111,8 +115,9 @@ def read_stats(path) -> NormStats:
         vectors[key] = np.array([_number(path, f"{key}[{i}]", x) for i, x in enumerate(v)])
     if vectors["obs_mean"].shape != vectors["obs_var"].shape:
         raise ValueError(f"{path}: obs_mean and obs_var must have the same length")
-    if np.any(vectors["obs_var"] < 0):
-        raise ValueError(f"{path}: obs_var must be >= 0")
+    if not np.all(vectors["obs_var"] > 0):  # VecNormalize's start at 1 and stay > 0
+        i = int(np.flatnonzero(~(vectors["obs_var"] > 0))[0])
+        raise ValueError(f"{path}: obs_var must be > 0, got obs_var[{i}] = {vectors['obs_var'][i]}")
     return NormStats(
         **flags,
         clip_obs=_number(path, "clip_obs", data.get("clip_obs"), 0.0, lo_open=True),

@@ -23,7 +23,7 @@ from agents.rl.callbacks import (
     save_model,
 )
 from agents.rl.config import ConfigError, TrainConfig, load_config
-from agents.rl.policy import load_policy
+from agents.rl.policy import load_model, load_policy
 from agents.rl.stats import read_stats, restore_stats, save_stats, stats_path
 from machining_envs.core.checks import is_integer, is_seed
 from machining_envs.core.score import REGULATION_SCORE, PrimaryScore
@@ -194,6 +194,69 @@ def _resume_point(out: Path):
     return best, steps
 
 
+def _check_new_run_folder(out: Path) -> None:
+    """``out`` can become a new run's folder: it does not exist or is an empty folder, and
+    the nearest folder that exists above it is writable (``FileExistsError`` for a file in
+    the way, ``PermissionError`` for a folder that cannot be written), checked before any
+    work so that a refused run leaves nothing behind."""
+    import os
+
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"--out {out} is a file: choose a folder")
+    if out.is_dir() and any(out.iterdir()):
+        raise FileExistsError(f"{out} is not empty: choose another --out or pass --resume")
+    above = out
+    while not above.exists():
+        above = above.parent
+    if not above.is_dir():
+        raise FileExistsError(f"--out {out} lies under {above}, which is a file")
+    if not os.access(above, os.W_OK | os.X_OK):
+        raise PermissionError(f"--out {out}: {above} is not writable")
+
+
+def _new_model(cfg: TrainConfig, AlgoCls, venv, seed: int, out: Path):
+    """The untrained model of ``cfg`` on ``venv``; ``ConfigError`` naming ``policy`` and
+    ``policy_kwargs`` when SB3 cannot build its policy from them (an unknown policy, a
+    keyword the policy does not take, a layer size it cannot use)."""
+    try:
+        return AlgoCls(
+            cfg.policy,
+            venv,
+            seed=seed,
+            device="cpu",
+            tensorboard_log=str(out / "tb"),  # (made by learn(), not here)
+            verbose=0,
+            **_action_noise(cfg, venv),
+            **cfg.hyperparams,
+        )
+    except Exception as exc:  # noqa: BLE001 - SB3 and torch raise many kinds here
+        kwargs = cfg.hyperparams.get("policy_kwargs", {})
+        raise ConfigError(
+            f"{cfg.source}:{cfg.env_id}: cannot build the policy {cfg.policy!r} with "
+            f"policy_kwargs {kwargs!r}: {type(exc).__name__}: {str(exc)[:200]}"
+        ) from exc
+
+
+def _resumed_model(cfg: TrainConfig, ckpt: Path, venv, out: Path):
+    """The model of ``ckpt`` on ``venv``, with the statistics saved beside it restored;
+    ``ConfigError`` naming the file when one is damaged, does not fit the env, or (the
+    run normalises) the statistics are missing."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    stats = stats_path(ckpt)
+    try:
+        if isinstance(venv, VecNormalize):
+            if not stats.is_file():
+                raise ValueError(
+                    f"--resume: no statistics file at {stats}, but the run normalises its "
+                    "observations (resuming without them would start them afresh)"
+                )
+            restore_stats(venv, read_stats(stats))
+        return load_model(cfg.algo, ckpt, env=venv, tensorboard_log=str(out / "tb"))
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+
+
 def train(
     env_id: str,
     algo: str = "ppo",
@@ -245,34 +308,27 @@ def train(
             raise FileNotFoundError(
                 f"--resume: no checkpoint in {ckpt_dir} and no final_model.zip in {out}"
             )
-    elif out.exists() and any(out.iterdir()):
-        raise FileExistsError(f"{out} is not empty: choose another --out or pass --resume")
-    out.mkdir(parents=True, exist_ok=True)
+    else:
+        _check_new_run_folder(out)
     torch.set_num_threads(1)
     AlgoCls = algorithm_classes()[cfg.algo]
 
     # ``increment``: the wrapper's ActionIncrement, for evaluation and the run record.
     venv, increment = _make_vec(cfg, seed, vec_kind)
-    if resume:
-        stats = stats_path(ckpt)
-        if isinstance(venv, VecNormalize) and stats.is_file():
-            restore_stats(venv, read_stats(stats))
-        model = AlgoCls.load(ckpt, env=venv, device="cpu", tensorboard_log=str(out / "tb"))
-        remaining = max(0, cfg.n_timesteps - model.num_timesteps)
-        if verbose:
-            print(f"resuming {ckpt.name} at {model.num_timesteps} steps; {remaining} to go")
-    else:
-        model = AlgoCls(
-            cfg.policy,
-            venv,
-            seed=seed,
-            device="cpu",
-            tensorboard_log=str(out / "tb"),
-            verbose=0,
-            **_action_noise(cfg, venv),
-            **cfg.hyperparams,
-        )
-        remaining = cfg.n_timesteps
+    try:
+        if resume:
+            model = _resumed_model(cfg, ckpt, venv, out)
+            remaining = max(0, cfg.n_timesteps - model.num_timesteps)
+            if verbose:
+                print(f"resuming {ckpt.name} at {model.num_timesteps} steps; {remaining} to go")
+        else:
+            model = _new_model(cfg, AlgoCls, venv, seed, out)
+            remaining = cfg.n_timesteps
+    except BaseException:
+        venv.close()
+        raise
+    out.mkdir(parents=True, exist_ok=True)  # only now: a refused run leaves no folder
+    if not resume:
         meta = {
             "env_id": env_id,
             "algo": cfg.algo,
@@ -332,13 +388,18 @@ def evaluate_policy_file(
     algo: str | None = None,
     stats=None,
     progress: bool = False,
+    force: bool = False,
 ) -> tuple[Evaluation, dict, PrimaryScore]:
     """The harness on a saved policy (with its VecNormalize statistics: ``stats``, or the
     JSON beside the model), with the env's own metrics; returns the evaluation, its primary
-    score and the env's ``PrimaryScore``."""
+    score and the env's ``PrimaryScore``. The policy must have been trained on ``env_id``
+    (its ``config.json`` says), unless ``force``; its shapes must be the env's in any case
+    (``agents.rl.load_policy``)."""
+    if not isinstance(env_id, str) or env_id not in gym.registry:
+        raise ValueError(f"env_id must be a registered env id, got {env_id!r}")
     metrics_fn, score_fn, failed = evaluation_setup(env_id, {})
     ev = evaluate(
-        load_policy(model_path, algo=algo, stats=stats),
+        load_policy(model_path, algo=algo, stats=stats, env=env_id, force=force),
         env_id,
         scenarios,
         n_episodes=n_episodes,

@@ -238,7 +238,7 @@ def test_statistics_are_never_unpickled(tmp_path):
     data["obs_var"][2] = -1.0
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps(data))
-    with pytest.raises(ValueError, match="obs_var must be >= 0"):
+    with pytest.raises(ValueError, match=r"obs_var must be > 0, got obs_var\[2\] = -1.0"):
         read_stats(bad)
     data["obs_var"][2] = "nan"
     bad.write_text(json.dumps(data))
