@@ -780,11 +780,20 @@ class TurningRecordFit:
 
 
 def read_turning_record(path) -> dict[str, np.ndarray]:
-    """The columns of a turning record CSV (``TURNING_RECORD_COLUMNS``, header row first)."""
+    """The columns of a turning record CSV (``TURNING_RECORD_COLUMNS``, header row first).
+
+    :class:`IdentificationError` naming the file (and the row and column) for a file that is
+    not UTF-8 text or CSV, a missing column, a row short of a column, or a cell that is not
+    a number."""
     import csv
 
-    with open(path, newline="") as fh:
-        rows = list(csv.DictReader(fh))
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+    except UnicodeDecodeError:
+        raise IdentificationError(f"{path}: not a CSV record (not UTF-8 text)") from None
+    except csv.Error as exc:
+        raise IdentificationError(f"{path}: not a CSV record ({exc})") from None
     if not rows:
         raise IdentificationError(f"{path}: no rows")
     missing = [c for c in TURNING_RECORD_COLUMNS[:4] if c not in rows[0]]
@@ -793,10 +802,16 @@ def read_turning_record(path) -> dict[str, np.ndarray]:
             f"{path}: missing columns {missing}; a record has {list(TURNING_RECORD_COLUMNS)}"
         )
     cols = [c for c in TURNING_RECORD_COLUMNS if c in rows[0]]
-    try:
-        return {c: np.array([float(r[c]) for r in rows]) for c in cols}
-    except ValueError as exc:
-        raise IdentificationError(f"{path}: {exc}") from None
+    out = {c: np.empty(len(rows)) for c in cols}
+    for i, row in enumerate(rows):
+        for c in cols:
+            try:
+                out[c][i] = float(row[c])
+            except (TypeError, ValueError):  # (None: the row is short of the column)
+                raise IdentificationError(
+                    f"{path}: row {i + 2}, column {c}: not a number: {row[c]!r:.40}"
+                ) from None
+    return out
 
 
 def fit_turning_record(

@@ -11,6 +11,7 @@ import numpy as np
 
 from agents.base import check_observation
 from agents.rl.algos import ALGOS, algorithm_classes
+from agents.rl.files import read_json_object
 from agents.rl.stats import read_stats, stats_path
 
 __all__ = [
@@ -19,7 +20,6 @@ __all__ = [
     "load_policy",
     "load_model",
     "read_run_config",
-    "read_json_object",
     "pretrained",
     "pretrained_seeds",
     "PRETRAINED_DIR",
@@ -219,23 +219,6 @@ _RUN_FIELDS = {
     "action_increment": (dict, type(None)),
     "residual": (dict, type(None)),
 }
-
-
-def read_json_object(path, what: str) -> dict:
-    """The JSON object in the file ``path``; ``ValueError`` naming the file and ``what`` it
-    should be when it is not UTF-8 text, not JSON, or not an object."""
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError:
-        raise ValueError(f"{path}: not a {what} (not UTF-8 text)") from None
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not a {what} ({exc})") from None
-    if not isinstance(data, dict):
-        raise ValueError(
-            f"{path}: not a {what} (a JSON object is expected, got {type(data).__name__})"
-        )
-    return data
 
 
 def read_run_config(path) -> dict:

@@ -19,7 +19,6 @@ returns one for a run trained so).
 from __future__ import annotations
 
 import importlib
-import json
 from pathlib import Path
 from typing import NamedTuple
 
@@ -27,6 +26,7 @@ import gymnasium as gym
 import numpy as np
 
 from agents.base import Agent
+from agents.rl.files import read_json_object
 
 __all__ = ["ResidualSpec", "SetpointResidual", "VecSetpointResidual", "ResidualAgent"]
 
@@ -90,14 +90,22 @@ class ResidualSpec(NamedTuple):
         if isinstance(self.params, dict):
             return dict(self.params)
         name = self.base.rpartition(".")[2]
-        data = json.loads(TUNED_FILE.read_text()) if TUNED_FILE.is_file() else {}
-        entry = data.get("envs", {}).get(env_id, {}).get(name)
+        data = read_json_object(TUNED_FILE, "tuned settings file") if TUNED_FILE.is_file() else {}
+        envs = data.get("envs", {})
+        entry = envs.get(env_id, {}) if isinstance(envs, dict) else None
+        entry = entry.get(name) if isinstance(entry, dict) else None
         if entry is None:
             raise ValueError(
                 f"params='tuned': {TUNED_FILE} has no {name} entry for {env_id!r} "
                 "(run `machining-bench tune`, or give params)"
             )
-        return dict(entry["params"])
+        params = entry.get("params") if isinstance(entry, dict) else None
+        if not isinstance(params, dict) or not all(isinstance(k, str) for k in params):
+            raise ValueError(
+                f"{TUNED_FILE}: envs.{env_id}.{name}.params must be an object of settings, "
+                f"got {params!r:.60}"
+            )
+        return dict(params)
 
     def make_base(self, env, env_id: str | None = None):
         """The regulator for ``env`` (its id from ``env.spec`` unless given)."""
@@ -169,14 +177,30 @@ class SetpointResidual(gym.Wrapper):
     def step(self, action):
         if self._obs is None:
             raise RuntimeError("SetpointResidual: call reset() before step()")
-        if not np.all(np.isfinite(np.asarray(action, dtype=np.float64))):
-            raise ValueError(f"SetpointResidual: action must be finite, got {action!r}")
-        u = self.residual.act(self.base, self._obs, self._state, action)[0]
+        _check_actions("SetpointResidual", action, self.action_space.shape)
+        state = self._state.copy()  # kept only once the env has taken the step
+        u = self.residual.act(self.base, self._obs, state, action)[0]
         obs, reward, terminated, truncated, info = self.env.step(u)
+        self._state = state
         self._obs = np.asarray(obs, dtype=np.float64)[None, :]
         if self.residual.mode == "knob":
             info = {**info, "setpoint": float(self.residual.setpoints(self.base, action)[0])}
         return obs, reward, terminated, truncated, info
+
+
+def _check_actions(who: str, action, shape: tuple) -> None:
+    """``ValueError`` naming ``who`` unless ``action`` is finite real numbers of ``shape``
+    (size-1 dimensions aside), checked before the regulator's state is touched."""
+    try:
+        a = np.asarray(action)
+        if a.dtype.kind not in "iuf":  # no strings, booleans or complex numbers
+            raise TypeError
+    except (TypeError, ValueError):
+        raise ValueError(f"{who}: action must be real numbers, got {action!r:.60}") from None
+    if [d for d in a.shape if d != 1] != [d for d in shape if d != 1]:
+        raise ValueError(f"{who}: action must have shape {shape}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{who}: action must be finite, got {action!r:.60}")
 
 
 def vec_setpoint_residual(venv, residual: ResidualSpec, env_id: str, env_kwargs: dict):
@@ -205,6 +229,7 @@ class VecSetpointResidual(_vec_wrapper_base()):
         self.residual, self.base = residual, base
         self._obs = None
         self._state = None
+        self._pending = None
 
     def reset(self):
         obs = self.venv.reset()
@@ -213,11 +238,15 @@ class VecSetpointResidual(_vec_wrapper_base()):
         return obs
 
     def step_async(self, actions):
-        u = self.residual.act(self.base, self._obs, self._state, actions)
+        _check_actions("VecSetpointResidual", actions, (self.num_envs, *self.action_space.shape))
+        state = self._state.copy()  # kept only once the envs have taken the step
+        u = self.residual.act(self.base, self._obs, state, actions)
         self.venv.step_async(u)
+        self._pending = state
 
     def step_wait(self):
         obs, rewards, dones, infos = self.venv.step_wait()
+        self._state, self._pending = self._pending, None
         self._obs = np.asarray(obs, dtype=np.float64)
         if np.any(dones):
             self._state[dones] = self.base.initial_state(int(np.sum(dones)), self._obs[dones])

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.rl.files import read_json_object
+
 __all__ = [
     "NormStats",
     "save_stats",
@@ -94,13 +96,8 @@ def read_stats(path) -> NormStats:
     variance that is not > 0). Whether they fit a model is the reader's check
     (``agents.rl.load_policy``: their length against the model's observations)."""
     path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError:
-        raise ValueError(f"{path}: not a statistics file (not UTF-8 text)") from None
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not a statistics file ({exc})") from None
-    if not isinstance(data, dict) or data.get("format") != FORMAT:
+    data = read_json_object(path, "statistics file")
+    if data.get("format") != FORMAT:
         raise ValueError(f"{path}: not a statistics file (format must be {FORMAT!r})")
     flags = {}
     for key in ("norm_obs", "norm_reward"):

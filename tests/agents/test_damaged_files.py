@@ -295,3 +295,83 @@ def test_a_run_that_cannot_be_resumed_is_refused_naming_the_file(run, tmp_path):
     with pytest.raises(ConfigError, match="final_model.zip: not a PPO model"):
         train(TURNING, "ppo", folder, config_path=config, resume=True, progress_bar=False,
               verbose=False)  # fmt: skip
+
+
+# ---- other files read -----------------------------------------------------------------------
+def test_a_binary_training_config_is_refused_naming_the_file(tmp_path):
+    from agents.rl import load_config
+
+    config = tmp_path / "c.yml"
+    config.write_bytes(bytes(range(128, 256)))
+    with pytest.raises(ConfigError, match="c.yml: not a configuration file"):
+        load_config(TURNING, "ppo", config)
+
+
+@pytest.mark.parametrize(
+    "content,message",
+    [
+        (b'{"envs": ', "tuned.json: not a tuned settings file"),
+        (bytes(range(128, 256)), "tuned.json: not a tuned settings file .not UTF-8"),
+        (b"[]", "tuned.json: not a tuned settings file .a JSON object"),
+        (b'{"envs": {"machining_envs/Turning-v0": {"VariableGainPI": {}}}}', "params must be"),
+        (b'{"envs": {"machining_envs/Turning-v0": {"VariableGainPI": 3}}}', "params must be"),
+        (b'{"envs": []}', "has no VariableGainPI entry"),
+    ],
+)
+def test_a_damaged_tuned_file_is_refused_by_the_residual_spec(tmp_path, monkeypatch, content,
+                                                              message):  # fmt: skip
+    from agents.rl import residual
+
+    path = tmp_path / "tuned.json"
+    path.write_bytes(content)
+    monkeypatch.setattr(residual, "TUNED_FILE", path)
+    spec = residual.ResidualSpec("agents.turning.VariableGainPI")
+    with pytest.raises(ValueError, match=message):
+        spec.settings(TURNING)
+
+
+# ---- wrappers: a refused step leaves the regulator's state as it was ------------------------
+def _residual_env(**kwargs):
+    from agents.rl.residual import SetpointResidual
+
+    params = {"k": 0.3, "kgh": 1.9, "setpoint": 0.8}
+    return SetpointResidual(gym.make(TURNING, **kwargs), "agents.turning.VariableGainPI", params)
+
+
+def test_a_refused_residual_step_keeps_the_regulators_state():
+    env = _residual_env(max_episode_time_s=0.5)
+    env.reset(seed=0)
+    env.step(np.array([0.1], dtype=np.float32))
+    kept = env._state.copy()
+    for bad in ([0.1, 0.2], np.array([np.nan]), "0.3", [True]):
+        with pytest.raises(ValueError, match="SetpointResidual: action"):
+            env.step(bad)
+        np.testing.assert_array_equal(env._state, kept)
+    done = False
+    while not done:
+        _, _, term, trunc, _ = env.step(np.array([0.0], dtype=np.float32))
+        done = term or trunc
+    kept = env._state.copy()
+    with pytest.raises(RuntimeError, match="reset"):  # the env refuses: the episode ended
+        env.step(np.array([0.0], dtype=np.float32))
+    np.testing.assert_array_equal(env._state, kept)
+
+
+def test_a_refused_vector_residual_step_keeps_the_regulators_state():
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from agents.rl.residual import ResidualSpec, VecSetpointResidual
+
+    spec = ResidualSpec("agents.turning.VariableGainPI", {"k": 0.3, "kgh": 1.9, "setpoint": 0.8})
+    venv = make_vec_env(TURNING, n_envs=2, seed=0)
+    base = spec.make_base(gym.make(TURNING), TURNING)
+    wrapped = VecSetpointResidual(venv, spec, base)
+    wrapped.reset()
+    wrapped.step(np.zeros((2, 1), dtype=np.float32))
+    kept = wrapped._state.copy()
+    for bad in (np.zeros((2, 2)), np.array([[np.nan], [0.0]]), np.zeros(3), [["a"], ["b"]]):
+        with pytest.raises(ValueError, match="VecSetpointResidual: action"):
+            wrapped.step_async(bad)
+        np.testing.assert_array_equal(wrapped._state, kept)
+    wrapped.step(np.zeros((2, 1), dtype=np.float32))
+    assert not np.array_equal(wrapped._state, kept)
