@@ -295,6 +295,15 @@ class Evaluation:
             w.writerows(self.rows)
 
 
+def _scenario_label(sc) -> str:
+    """A row's scenario: a name as it is, an object by its ``name``; an env (the scenario
+    ``None`` ran its default) by its default scenario's label, else ``"default"``."""
+    if isinstance(sc, gym.Env):
+        default = getattr(sc.unwrapped, "default_scenario", None)
+        return "default" if default is None else _scenario_label(default)
+    return sc if isinstance(sc, str) else str(getattr(sc, "name", sc))
+
+
 def _iterable(v) -> bool:
     try:
         iter(v)
@@ -373,18 +382,17 @@ def evaluate(
     if not isinstance(env_id, str) or env_id not in gym.registry:
         raise ValueError(f"env_id must be a registered env id, got {env_id!r}")
     has_vector = gym.spec(env_id).vector_entry_point is not None
-    # One scenario (a name or an object) is a list of one. None is not one: it would run
-    # the env's default scenario under the label 'None'.
+    if scenarios is None:  # (not taken for the env's default: say so with [None])
+        raise ValueError(
+            "scenarios must be scenario names or objects (such as ['validation']), or [None] "
+            "for the env's default scenario; got None"
+        )
+    # One scenario (a name or an object) is a list of one.
     scenarios = (
         [scenarios] if isinstance(scenarios, str) or not _iterable(scenarios) else list(scenarios)
     )
     if not scenarios:
         raise ValueError("scenarios must hold at least one scenario name or object, got none")
-    if any(sc is None for sc in scenarios):
-        raise ValueError(
-            "scenarios must be scenario names or objects (such as ['validation']), got "
-            f"{scenarios!r:.80}"
-        )
     if batched is None:
         batched = has_vector and n_episodes * len(scenarios) > 1
     elif batched and not has_vector:
@@ -446,7 +454,7 @@ def evaluate(
             for i, traj in enumerate(trajs):
                 row = {
                     "agent": name,
-                    "scenario": sc if isinstance(sc, str) else getattr(sc, "name", str(sc)),
+                    "scenario": _scenario_label(env if sc is None else sc),
                     "episode": i,
                     "seed": seed + i,
                 }

@@ -214,10 +214,15 @@ def test_a_residual_agents_errors_name_itself_not_its_regulator():
 
 
 # ---- evaluate's arguments -------------------------------------------------------------------
-@pytest.mark.parametrize("scenarios", [None, [None], ["validation", None]])
-def test_evaluate_refuses_a_scenario_of_none(scenarios):
-    with pytest.raises(ValueError, match="scenarios must be scenario names"):
-        evaluate(ConstantFeed.from_env, TURNING, scenarios)
+def test_evaluate_refuses_scenarios_none_and_labels_the_default_by_its_name():
+    """``scenarios=None`` ran the default split under the label 'None'; ``[None]`` (the
+    env's default, asked for) is labelled by the scenario it ran."""
+    with pytest.raises(ValueError, match=r"scenarios must be .*\[None\] for the env's default"):
+        evaluate(ConstantFeed.from_env, TURNING, None)
+    ev = evaluate(ConstantFeed.from_env, TURNING, [None, "validation"], batched=False)
+    assert [r["scenario"] for r in ev.rows] == ["train", "validation"]
+    ev = evaluate(ConstantFeed.from_env, TURNING, [None], env_kwargs={"scenario": "paper_405"})
+    assert [r["scenario"] for r in ev.rows] == ["paper_405"]
 
 
 def test_evaluate_checks_its_other_arguments_first():
