@@ -23,6 +23,7 @@ from agents.rl import ConfigError, evaluate_policy_file, load_policy, pretrained
 from agents.rl.policy import PRETRAINED_DIR, pretrained_seeds, read_run_config
 from agents.rl.stats import read_stats
 from agents.turning import ConstantFeed
+from tests.agents.test_rl import TINY
 from tests.helpers import CONTOURING, MILLING, TURNING
 
 SHIPPED = PRETRAINED_DIR / "turning_ppo"
@@ -239,20 +240,6 @@ def test_evaluate_checks_its_other_arguments_first():
 
 
 # ---- training -------------------------------------------------------------------------------
-TINY = """
-machining_envs/Turning-v0:
-  n_timesteps: 256
-  n_envs: 2
-  normalize: true
-  env_kwargs: {scenario: train}
-  eval_freq: 128
-  eval_episodes: 1
-  eval_scenarios: [paper_700]
-  checkpoint_freq: 128
-  n_steps: 64
-  batch_size: 64
-  n_epochs: 1
-"""
 
 
 @pytest.mark.parametrize(
