@@ -320,12 +320,22 @@ class PeckDrilling(Agent):
         nominal feed (default 0.05).
     rapid_mm_s : float or None
         Retract and return speed, mm/s (default the stage's ``feed_speed_max_mm_s``).
+    feed_scale : float
+        The feed while cutting as a multiple of the nominal ``feed_velocity_mm_s`` (default
+        1, the programmed feed; at most the stage's top speed).
+
+    The drill retracts once the hole is ``peck_diameters`` x D deeper than where the current
+    peck began, with ``peck_diameters`` read at every step: a supervisor that lowers it
+    (``agents.rl.residual`` with ``knob="peck_diameters"``) triggers a peck at once, one
+    that raises it lets the drill cut on.
     """
 
-    # [phase (0 feed, 1 out, 2 back), depth at which to retract next (mm), started]
+    # [phase (0 feed, 1 out, 2 back), hole depth where the current peck began (mm), started]
     state_size = 3
     #: Free parameters and their search ranges (low, high, log scale) for tuning.
-    TUNABLE = {"peck_diameters": (0.25, 5.0, True)}
+    TUNABLE = {"peck_diameters": (0.25, 5.0, True), "feed_scale": (0.2, 4.0, True)}
+    #: The env keywords the agent needs (it commands the feed): tuning makes its env so.
+    ENV_KWARGS = {"control": "feed"}
     obs_dim = _OBS_DIM
     obs_index = _I
 
@@ -336,6 +346,7 @@ class PeckDrilling(Agent):
         clearance_mm: float = 0.1,
         approach_gap_mm: float = 0.05,
         rapid_mm_s: float | None = None,
+        feed_scale: float = 1.0,
     ):
         io.require("feed", "PeckDrilling")
         self.io = io
@@ -346,7 +357,12 @@ class PeckDrilling(Agent):
         rapid = p.feed_speed_max_mm_s if rapid_mm_s is None else rapid_mm_s
         self.rapid_mm_s = _in_range("rapid_mm_s", rapid, 1e-3, p.feed_speed_max_mm_s)
         self.feed_mm_s = p.feed_velocity_mm_s
-        self.name = f"peck q={peck_diameters:g}D"
+        self.feed_scale = _in_range(
+            "feed_scale", feed_scale, 1e-3, p.feed_speed_max_mm_s / p.feed_velocity_mm_s
+        )
+        self.name = f"peck q={peck_diameters:g}D" + (
+            f", {feed_scale:g}x feed" if feed_scale != 1.0 else ""
+        )
 
     @classmethod
     def from_env(cls, env, **kwargs) -> PeckDrilling:
@@ -358,21 +374,21 @@ class PeckDrilling(Agent):
         pos, depth, _ = io.lengths_mm(obs)
         q = self.peck_diameters * io.diameter_mm(obs)
         first = state[:, 2] == 0.0
-        state[:, 1] = np.where(first, depth + q, state[:, 1])
+        state[:, 1] = np.where(first, depth, state[:, 1])
         phase = np.where(first, _FEED, state[:, 0])
         # Transitions, then the command of the phase.
-        to_out = (phase == _FEED) & (depth >= state[:, 1] - 1e-9)
+        to_out = (phase == _FEED) & (depth >= state[:, 1] + q - 1e-9)
         phase = np.where(to_out, _OUT, phase)
         to_back = (phase == _OUT) & (pos <= -self.clearance_mm + 1e-9)
         phase = np.where(to_back, _BACK, phase)
-        state[:, 1] = np.where(to_back, depth + q, state[:, 1])
+        state[:, 1] = np.where(to_back, depth, state[:, 1])
         stop = depth - self.approach_gap_mm
         to_feed = (phase == _BACK) & (pos >= stop - 1e-9)
         phase = np.where(to_feed, _FEED, phase)
         back = np.minimum(self.rapid_mm_s, np.maximum((stop - pos) / ts, self.feed_mm_s))
         v = np.where(
             phase == _FEED,
-            self.feed_mm_s,
+            self.feed_mm_s * self.feed_scale,
             np.where(
                 phase == _OUT,
                 -np.minimum(self.rapid_mm_s, (pos + self.clearance_mm) / ts + 1e-3),

@@ -109,7 +109,8 @@ def tune_agent(
     import optuna
 
     budget = budget or TuningBudget()
-    env_kwargs = dict(env_kwargs or {})
+    # The keywords the agent itself needs (``ENV_KWARGS``: PeckDrilling commands the feed).
+    env_kwargs = {**dict(env_kwargs or {}), **getattr(cls, "ENV_KWARGS", {})}
     check_not_held_out([env_kwargs.get("scenario", "train")], "tuning (env_kwargs.scenario)")
     space = cls.TUNABLE
     env = gym.make(env_id, **env_kwargs)
@@ -147,6 +148,8 @@ def tune_agent(
         "paper_validation_score": run(cls, paper, split="validation"),
         "wall_s": round(time.perf_counter() - t0, 1),
     }
+    if getattr(cls, "ENV_KWARGS", None):
+        entry["env_kwargs"] = dict(cls.ENV_KWARGS)
     if verbose:
         print(
             f"  {cls.__name__}: train {entry['paper_train_score']:.4g} -> {entry['train_score']:.4g}, "
@@ -189,10 +192,9 @@ def tune_all(
         kwargs = dict(spec.env_kwargs)
         if machine is not None:
             kwargs.update(machine.env_kwargs(spec.env_id))
-        envs[spec.env_id] = {
-            cls.__name__: tune_agent(cls, spec.env_id, budget, kwargs, verbose)
-            for cls in spec.tuned
-        }
+        entries = envs.setdefault(spec.env_id, {})  # other agents' entries kept
+        for cls in spec.tuned:
+            entries[cls.__name__] = tune_agent(cls, spec.env_id, budget, kwargs, verbose)
         path.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
     return data
 

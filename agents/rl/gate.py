@@ -245,15 +245,18 @@ def gate_policy(
     beside it, as ``agents.rl.load_policy`` reads it)."""
     from agents.eval import evaluate
     from agents.rl.callbacks import evaluation_setup
-    from agents.rl.policy import load_policy
+    from agents.rl.policy import load_policy, run_env_kwargs
 
-    metrics_fn, score, _ = evaluation_setup(env_id, {})
+    meta = Path(model_path).parent / "config.json"
+    env_kwargs = run_env_kwargs(json.loads(meta.read_text())) if meta.is_file() else {}
+    metrics_fn, score, _ = evaluation_setup(env_id, env_kwargs)
     agent = load_policy(model_path, algo=algo)
     rows, labels = [], []
     for label, scenarios, seed, n_episodes in gate_scenarios(env_id, n_validation, per_edge):
         ev = evaluate(
-            agent, env_id, scenarios, n_episodes=n_episodes, seed=int(seed), metrics_fn=metrics_fn
-        )
+            agent, env_id, scenarios, n_episodes=n_episodes, seed=int(seed),
+            env_kwargs=env_kwargs, metrics_fn=metrics_fn,
+        )  # fmt: skip
         rows += ev.rows
         labels += [label] * len(ev.rows)
     return gate_verdict(rows, score, share, labels)

@@ -467,13 +467,21 @@ def load_policy(
 
         from agents.rl.residual import ResidualAgent
 
-        made = gym.make(meta["env_id"])
+        # the env as trained (MicroDrilling-v0's peck cycle needs its control="feed")
+        made = gym.make(meta["env_id"], **run_env_kwargs(meta))
         try:
             base = residual.make_base(made, meta["env_id"])
         finally:
             made.close()
         return ResidualAgent(agent, residual, base, name=agent.name)
     return agent
+
+
+def run_env_kwargs(meta: dict) -> dict:
+    """The ``gym.make`` keywords a run's policy needs to act (its ``config.json``'s
+    ``env_kwargs`` without the training ``scenario`` and ``reward``): e.g. ``control``."""
+    kwargs = dict(meta.get("config", {}).get("env_kwargs", {}) or {})
+    return {k: v for k, v in kwargs.items() if k not in ("scenario", "reward")}
 
 
 PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
