@@ -313,6 +313,57 @@ def gated_seeds(
     }
 
 
+def gated_sweep(
+    settings,
+    out,
+    n_validation: int = 20,
+    per_edge: int = 5,
+    max_replacements: int | None = None,
+    verbose: bool = True,
+) -> dict:
+    """Multi-seed training under the gate: ``agents.rl.sweep.sweep`` of ``settings.seeds``
+    into ``out/round_0``, every trial gated, the failures replaced by the next seeds in
+    ``out/round_1``, ... (:func:`gated_seeds`). Writes and returns ``out/gate.json``:
+    the seeds asked for, passed, failed and added, each verdict, and the model path of
+    every seed that passed (the ones to ship)."""
+    from agents.rl.sweep import sweep
+
+    if settings.n_search:
+        raise ValueError("gated_sweep trains seeds: give n_search=0 (a search picks no seed)")
+    out = Path(out)
+    paths: dict[int, str] = {}
+    rounds: list[Path] = []
+
+    def train_many(seeds):
+        folder = out / f"round_{len(rounds)}"
+        rounds.append(folder)
+        sweep(dataclasses.replace(settings, seeds=list(seeds)), folder, verbose=verbose)
+        models = {}
+        for trial in sorted((folder / "trials").iterdir()):
+            meta = trial / "config.json"
+            if meta.is_file() and (trial / "best_model.zip").is_file():
+                models[int(json.loads(meta.read_text())["seed"])] = trial / "best_model.zip"
+        paths.update({s: str(m) for s, m in models.items()})
+        return models
+
+    def gate(model):
+        v = gate_policy(model, settings.env_id, n_validation, per_edge)
+        if verbose:
+            print(f"gate {model}: {'PASS' if v.passed else 'FAIL'} {v.counting}/{v.n} count, "
+                  f"{v.overloaded} overloaded", flush=True)  # fmt: skip
+        return v
+
+    result = gated_seeds(settings.seeds, train_many, gate, max_replacements)
+    result["models"] = {s: paths[s] for s in result["passed"]}
+    result["rule"] = (
+        f">= {GATE_SHARE:.0%} of {n_validation} validation + {per_edge} per train-range edge "
+        "episodes count, none overloads; a failing seed is replaced by the next unused seed"
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "gate.json").write_text(json.dumps(result, indent=2, default=str))
+    return result
+
+
 def _models(path: Path) -> list[tuple[str, Path]]:
     """The policies under ``path``: ``(name, best_model.zip)``."""
     if path.is_file():
@@ -334,11 +385,31 @@ def main(argv=None) -> int:
         prog="python -m agents.rl.gate", description=__doc__.split("\n")[0]
     )
     ap.add_argument("env_id")
-    ap.add_argument("paths", nargs="+", type=Path)
+    ap.add_argument("paths", nargs="*", type=Path, help="policies to gate")
     ap.add_argument("--n-validation", type=int, default=20)
     ap.add_argument("--per-edge", type=int, default=5)
     ap.add_argument("--out", type=Path, default=None, help="write the verdicts here (JSON)")
+    ap.add_argument("--sweep", type=Path, default=None, metavar="FOLDER",
+                    help="train --seeds under the gate into FOLDER (gated_sweep)")  # fmt: skip
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
+    ap.add_argument("--algo", default="ppo")
+    ap.add_argument("--config", default=None)
+    ap.add_argument("--n-timesteps", type=int, default=None)
+    ap.add_argument("--workers", type=int, default=2)
     a = ap.parse_args(argv)
+    if a.sweep is not None:
+        from agents.rl.sweep import SweepSettings
+
+        settings = SweepSettings(
+            a.env_id, a.algo, seeds=a.seeds, n_timesteps=a.n_timesteps,
+            config_path=a.config, workers=a.workers,
+        )  # fmt: skip
+        result = gated_sweep(settings, a.sweep, a.n_validation, a.per_edge)
+        print(f"passed {result['passed']}, failed {result['failed']}, "
+              f"replacements {result['replacements']}; {a.sweep / 'gate.json'}")  # fmt: skip
+        return 0 if result["complete"] else 1
+    if not a.paths:
+        ap.error("give the policies to gate, or --sweep FOLDER")
     out, failed = {}, 0
     for path in a.paths:
         for name, model in _models(path):

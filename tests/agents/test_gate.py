@@ -132,3 +132,24 @@ def test_train_ranges_are_the_scenario_modules():
     assert lo < hi and math.isfinite(hi)
     with pytest.raises(ValueError, match="field"):
         train_range("machining_envs/MicroDrilling-v0", "spindle_rpm")
+
+
+@pytest.mark.slow
+def test_a_gated_sweep_trains_gates_and_records_its_seeds(tmp_path):
+    """Two seeds of a tiny Turning-v0 training: each gated on 2 validation and 1 episode
+    per edge; gate.json records every verdict and the rule."""
+    pytest.importorskip("ray")
+    import json
+
+    from agents.rl.gate import gated_sweep
+    from agents.rl.sweep import SweepSettings
+
+    settings = SweepSettings("machining_envs/Turning-v0", seeds=[0, 1], n_timesteps=512, workers=2)
+    out = gated_sweep(settings, tmp_path / "s", n_validation=2, per_edge=1, max_replacements=1,
+                      verbose=False)  # fmt: skip
+    saved = json.loads((tmp_path / "s" / "gate.json").read_text())
+    assert saved["asked"] == [0, 1] and set(saved["verdicts"]) >= {"0", "1"}
+    assert sorted(out["passed"] + out["failed"]) == sorted(int(s) for s in saved["verdicts"])
+    assert len(out["replacements"]) <= 1
+    for v in out["verdicts"].values():
+        assert v["n"] == 2 + len(EDGES["machining_envs/Turning-v0"])
