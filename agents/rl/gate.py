@@ -247,6 +247,11 @@ def gate_policy(
     from agents.rl.callbacks import evaluation_setup
     from agents.rl.policy import load_policy, run_env_kwargs
 
+    import torch
+
+    # One thread: torch's default pool spins against a loaded machine (25x the CPU time
+    # of one thread for the milling policy's batched inference on 2 busy cores).
+    torch.set_num_threads(1)
     meta = Path(model_path).parent / "config.json"
     env_kwargs = run_env_kwargs(json.loads(meta.read_text())) if meta.is_file() else {}
     metrics_fn, score, _ = evaluation_setup(env_id, env_kwargs)
