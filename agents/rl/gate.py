@@ -43,6 +43,7 @@ __all__ = [
     "gate_verdict",
     "train_range",
     "gate_scenarios",
+    "gate_agent",
     "gate_policy",
     "next_seeds",
     "gated_seeds",
@@ -233,29 +234,21 @@ def gate_verdict(
     return GateResult(bool(passed), n, c, o, float(share), by_group)
 
 
-def gate_policy(
-    model_path,
+def gate_agent(
+    agent,
     env_id: str,
+    env_kwargs: dict | None = None,
     n_validation: int = 20,
     per_edge: int = 5,
     share: float = GATE_SHARE,
-    algo: str | None = None,
 ) -> GateResult:
-    """Gate one saved policy (``best_model.zip`` with its statistics and ``config.json``
-    beside it, as ``agents.rl.load_policy`` reads it)."""
+    """The gate's episodes and rule on any agent (or factory ``env -> agent``) on
+    ``gym.make(env_id, **env_kwargs)``: a classical agent meets the same bar as a policy."""
     from agents.eval import evaluate
     from agents.rl.callbacks import evaluation_setup
-    from agents.rl.policy import load_policy, run_env_kwargs
 
-    import torch
-
-    # One thread: torch's default pool spins against a loaded machine (25x the CPU time
-    # of one thread for the milling policy's batched inference on 2 busy cores).
-    torch.set_num_threads(1)
-    meta = Path(model_path).parent / "config.json"
-    env_kwargs = run_env_kwargs(json.loads(meta.read_text())) if meta.is_file() else {}
+    env_kwargs = dict(env_kwargs or {})
     metrics_fn, score, _ = evaluation_setup(env_id, env_kwargs)
-    agent = load_policy(model_path, algo=algo)
     rows, labels = [], []
     for label, scenarios, seed, n_episodes in gate_scenarios(env_id, n_validation, per_edge):
         ev = evaluate(
@@ -265,6 +258,30 @@ def gate_policy(
         rows += ev.rows
         labels += [label] * len(ev.rows)
     return gate_verdict(rows, score, share, labels)
+
+
+def gate_policy(
+    model_path,
+    env_id: str,
+    n_validation: int = 20,
+    per_edge: int = 5,
+    share: float = GATE_SHARE,
+    algo: str | None = None,
+) -> GateResult:
+    """Gate one saved policy (``best_model.zip`` with its statistics and ``config.json``
+    beside it, as ``agents.rl.load_policy`` reads it), on the env as it was trained
+    (``control="feed"`` for the pecking policy)."""
+    import torch
+
+    from agents.rl.policy import load_policy, run_env_kwargs
+
+    # One thread: torch's default pool spins against a loaded machine (25x the CPU time
+    # of one thread for the milling policy's batched inference on 2 busy cores).
+    torch.set_num_threads(1)
+    meta = Path(model_path).parent / "config.json"
+    env_kwargs = run_env_kwargs(json.loads(meta.read_text())) if meta.is_file() else {}
+    agent = load_policy(model_path, algo=algo)
+    return gate_agent(agent, env_id, env_kwargs, n_validation, per_edge, share)
 
 
 def next_seeds(tried: Iterable[int], k: int) -> list[int]:

@@ -153,3 +153,17 @@ def test_a_gated_sweep_trains_gates_and_records_its_seeds(tmp_path):
     assert len(out["replacements"]) <= 1
     for v in out["verdicts"].values():
         assert v["n"] == 2 + len(EDGES["machining_envs/Turning-v0"])
+
+
+def test_a_classical_agent_meets_the_same_gate_on_its_own_env():
+    """``gate_agent`` runs the gate's episodes (validation first, then each edge) with the
+    env's own score; PeckDrilling on its feed-controlled env."""
+    from agents.bench.tune import tuned_factory
+    from agents.drilling import PeckDrilling
+    from agents.rl.gate import gate_agent
+
+    env_id = "machining_envs/MicroDrilling-v0"
+    v = gate_agent(tuned_factory(PeckDrilling, env_id), env_id, {"control": "feed"}, 2, 1)
+    assert v.n == 2 + len(EDGES[env_id])
+    assert list(v.by_group) == ["validation"] + [e.label for e in EDGES[env_id]]
+    assert 0 <= v.counting <= v.n and v.passed == (v.counting >= 0.9 * v.n and not v.overloaded)
