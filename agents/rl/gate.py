@@ -210,17 +210,20 @@ def gate_verdict(
     score,
     share: float = GATE_SHARE,
     labels: Sequence[str] | None = None,
+    allowance: float | None = None,
 ) -> GateResult:
     """The gate's rule on episode rows: passes if at least ``share`` of them count under
-    ``score`` (a ``PrimaryScore``) and none is ``overloaded``. ``labels`` (one per row)
-    groups the counts in ``by_group``."""
+    ``score`` (a ``PrimaryScore``; at its ``allowance`` of steps over the limit, default
+    the benchmark's 2 %) and none is ``overloaded``. ``labels`` (one per row) groups the
+    counts in ``by_group``."""
     if not rows:
         raise ValueError("rows must hold at least one episode")
     if not (isinstance(share, (int, float)) and 0.0 < share <= 1.0):
         raise ValueError(f"share must be a number in (0, 1], got {share!r}")
     if labels is not None and len(labels) != len(rows):
         raise ValueError(f"labels must give one label per row ({len(rows)}), got {len(labels)}")
-    counts = [bool(score.counts(r)) for r in rows]
+    kw = {} if allowance is None else {"allowance": float(allowance)}
+    counts = [bool(score.counts(r, **kw)) for r in rows]
     over = [float(r.get("overloaded", 0.0) or 0.0) != 0.0 for r in rows]
     by_group: dict = {}
     for i, lab in enumerate(labels or ["all"] * len(rows)):

@@ -167,3 +167,9 @@ def test_a_classical_agent_meets_the_same_gate_on_its_own_env():
     assert v.n == 2 + len(EDGES[env_id])
     assert list(v.by_group) == ["validation"] + [e.label for e in EDGES[env_id]]
     assert 0 <= v.counting <= v.n and v.passed == (v.counting >= 0.9 * v.n and not v.overloaded)
+
+
+def test_the_gate_takes_the_verdict_rules_allowances():
+    rows = [_row()] * 9 + [_row(over=0.01)]  # one episode 1 % of its steps over the limit
+    assert gate_verdict(rows, REGULATION_SCORE).counting == 10
+    assert gate_verdict(rows, REGULATION_SCORE, allowance=0.005).counting == 9
