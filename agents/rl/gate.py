@@ -224,7 +224,10 @@ def gate_verdict(
         raise ValueError(f"labels must give one label per row ({len(rows)}), got {len(labels)}")
     kw = {} if allowance is None else {"allowance": float(allowance)}
     counts = [bool(score.counts(r, **kw)) for r in rows]
-    over = [float(r.get("overloaded", 0.0) or 0.0) != 0.0 for r in rows]
+    # The ceiling binds where the score has a share over the limit (Contouring-v0 scores
+    # the error itself, with neither).
+    ceiling = getattr(score, "over_key", None) is not None
+    over = [ceiling and float(r.get("overloaded", 0.0) or 0.0) != 0.0 for r in rows]
     by_group: dict = {}
     for i, lab in enumerate(labels or ["all"] * len(rows)):
         g = by_group.setdefault(lab, {"n": 0, "counting": 0, "overloaded": 0})

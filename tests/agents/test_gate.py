@@ -173,3 +173,13 @@ def test_the_gate_takes_the_verdict_rules_allowances():
     rows = [_row()] * 9 + [_row(over=0.01)]  # one episode 1 % of its steps over the limit
     assert gate_verdict(rows, REGULATION_SCORE).counting == 10
     assert gate_verdict(rows, REGULATION_SCORE, allowance=0.005).counting == 9
+
+
+def test_a_score_without_a_share_over_the_limit_has_no_ceiling():
+    """Contouring-v0 scores the largest error itself: its rows may carry ``overloaded``,
+    but neither the score nor the gate counts it."""
+    import dataclasses
+
+    error_score = dataclasses.replace(REGULATION_SCORE, over_key=None)
+    v = gate_verdict([_row(overloaded=1.0)] * 10, error_score)
+    assert v.passed and v.overloaded == 0 and v.counting == 10
