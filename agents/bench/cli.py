@@ -543,7 +543,7 @@ def _evaluate(args, command):
 
     ev, s, score = evaluate_policy_file(
         Path(args.model), args.env, args.scenarios, args.episodes, args.seed, algo=args.algo,
-        stats=args.stats, progress=True,
+        stats=args.stats, progress=True, force=args.force,
     )  # fmt: skip
     from agents.bench.declarations import benchmark_spec
 

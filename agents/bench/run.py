@@ -109,7 +109,7 @@ def jobs_of(spec: BenchmarkSpec, tuned: dict, verbose: bool, one_seed: bool = Fa
                 for seed, path in pretrained_seeds(name)[: 1 if one_seed else None]:
 
                     def make(env, path=path, name=name):
-                        return load_policy(path, name=f"{name}")
+                        return load_policy(path, name=f"{name}", env=env)
 
                     out.append(Job("learned", make, seed))
     return out

@@ -154,3 +154,12 @@ assert plt.get_fignums() == []
         assert text in report, text
     assert (tmp_path / "Turning-v0_allowances.png").stat().st_size > 0
     assert "| verdict |" in (tmp_path / "results.md").read_text()
+
+
+def test_evaluate_force_runs_a_model_on_another_env_of_the_same_spaces(capsys):
+    """--force is passed down to the loader (which refuses a model of another env without it)."""
+    model = "agents/rl/pretrained/turning_ppo/best_model.zip"
+    args = ["evaluate", "--model", model, "--env", "machining_envs/EndMilling-v0", "--force",
+            "--episodes", "1"]  # fmt: skip
+    assert main(args) == 0
+    assert "primary score" in capsys.readouterr().out
