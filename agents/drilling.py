@@ -307,6 +307,11 @@ _FEED, _OUT, _BACK = 0.0, 1.0, 2.0
 class PeckDrilling(Agent):
     """Peck drilling on ``control="feed"``: feed ``q`` mm, retract out of the hole, return.
 
+    The drill retracts once the hole is ``peck_diameters`` x D deeper than where the current
+    peck began, with ``peck_diameters`` read at every step: a supervisor that lowers it
+    (``agents.rl.residual`` with ``knob="peck_diameters"``) triggers a peck at once, one
+    that raises it lets the drill cut on.
+
     Parameters
     ----------
     io : DrillingIO
@@ -323,11 +328,6 @@ class PeckDrilling(Agent):
     feed_scale : float
         The feed while cutting as a multiple of the nominal ``feed_velocity_mm_s`` (default
         1, the programmed feed; at most the stage's top speed).
-
-    The drill retracts once the hole is ``peck_diameters`` x D deeper than where the current
-    peck began, with ``peck_diameters`` read at every step: a supervisor that lowers it
-    (``agents.rl.residual`` with ``knob="peck_diameters"``) triggers a peck at once, one
-    that raises it lets the drill cut on.
     """
 
     # [phase (0 feed, 1 out, 2 back), hole depth where the current peck began (mm), started]

@@ -238,3 +238,22 @@ def test_the_pages_name_no_missing_file():
             if "grinding" in path:  # the architecture page's example of a new process
                 continue
             assert (ROOT / path).exists() or any(ROOT.glob(path)), f"{page.name}: {path}"
+
+
+def test_the_machine_files_load(tmp_path):
+    """Every ```yaml block of the pages that describes a machine (it starts with its
+    ``name:``) is one ``machining_envs.core.machine.load_machine`` reads (the files users
+    copy for ``tune --machine`` / ``train --machine``), as is the shipped docs/my_cnc.yml."""
+    from machining_envs.core.machine import load_machine
+
+    found = [ROOT / "docs" / "my_cnc.yml"]
+    for page in PAGES:
+        machines = (x for x in blocks(page) if x.lang == "yaml" and x.code.startswith("name:"))
+        for i, b in enumerate(machines):
+            path = tmp_path / f"{page.stem}_{i}.yml"
+            path.write_text(b.code)
+            found.append(path)
+    assert len(found) > 1  # the README's example at least
+    for path in found:
+        machine = load_machine(path)
+        assert machine.actuation is not None, path
