@@ -134,6 +134,7 @@ class AdaptiveFeedControl(Agent):
         sample_time_s: float,
         programmed_obs=None,
         load_unit: str = "",
+        *,
         reference: float = 0.9,
         teach_in_s: float = 0.0,
         fmin: float = 0.7,
