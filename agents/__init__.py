@@ -20,6 +20,7 @@ _EXPORTS = {
     "ConstantFeed": "agents.turning",
     "FixedGainPI": "agents.turning",
     "VariableGainPI": "agents.turning",
+    "DelayAwarePI": "agents.turning",
     "FixedGainIntegral": "agents.milling",
     "IntegralACC": "agents.milling",
     "MillingConstantFeed": "agents.milling",

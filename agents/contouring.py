@@ -10,13 +10,13 @@ difference).
 
 **H-infinity 2-DOF.** The design (``machining_envs.contouring.servo.hinf_2dof_design``)
 comes out of python-control's ``hinfsyn`` at the optimal gamma, whose result depends on the
-BLAS and LAPACK kernels of the machine. So the designs the benchmark runs (the paper's rho
-and the tuned one, on the env's default axes) are computed once and stored as data,
-``agents/hinf_designs.json`` (the matrices and the gamma reached, every float exact), and
-:meth:`HInf2DOF.from_env` loads them: the same controller, and the same actions, on every
-machine. Another axis model or rho is synthesised on the spot (``agent.stored`` says
-which). ``machining-bench synthesize`` re-synthesises the stored designs
-(:func:`synthesize_stored_designs`) and says where it writes. ``predict`` only runs the
+BLAS and LAPACK kernels of the machine. So the designs the envs and the benchmark run (the
+paper's rho and the tuned one, on the env's default axes) are computed once and stored as
+data (``machining_envs/contouring/hinf_designs.json``: the matrices and the gamma
+reached, every float exact), and the design function reads them: the same controller, and
+the same actions, on every machine. Another axis model or rho is synthesised on the spot
+(``agent.stored`` says which). ``machining-bench synthesize`` re-synthesises the stored
+designs (``synthesize_stored_designs``) and says where it writes. ``predict`` only runs the
 difference equations (``agents.contouring.LinearServoAgent``).
 
 **Constant feed override.** A process planner's choice: one override for every path, the largest that keeps the contour
@@ -42,7 +42,13 @@ from machining_envs.contouring.feed_env import (
     ContouringFeedEnv,
 )
 from machining_envs.contouring.plant import AXES, ContouringParams, vecmat_rows
-from machining_envs.contouring.servo import HINF_RHO, ServoDesign, hinf_2dof_design, pi_design
+from machining_envs.contouring.servo import (
+    HINF_RHO,
+    ServoDesign,
+    hinf_2dof_design,
+    pi_design,
+    stored_hinf_design,
+)
 
 __all__ = [
     "LinearServoAgent",
@@ -242,118 +248,20 @@ class HInf2DOF(LinearServoAgent):
     @classmethod
     def from_env(cls, env, rho: float = HINF_RHO) -> HInf2DOF:
         """The controller for ``env``'s axes at ``rho``: the stored design
-        (``agents/hinf_designs.json``) where one matches exactly, else synthesised."""
+        (``machining_envs/contouring/hinf_designs.json``) where one matches exactly, else
+        synthesised."""
         p = contouring_params(env)
         rho = check_positive("rho", rho, 100.0)
-        stored = [stored_hinf_design(p, ax, rho) for ax in AXES]
-        designs = tuple(
-            d if d is not None else hinf_2dof_design(p, ax, rho=rho)
-            for d, ax in zip(stored, AXES, strict=True)
-        )
+        designs = tuple(hinf_2dof_design(p, ax, rho=rho) for ax in AXES)
         agent = cls(designs, p.command_max_mm_s, "H-inf 2-DOF")
         agent.rho = rho
-        agent.stored = all(d is not None for d in stored)
+        agent.stored = all(stored_hinf_design(p, ax, rho) is not None for ax in AXES)
         return agent
 
     @property
     def gammas(self) -> tuple[float, float]:
         """Achieved gamma of the X and Y designs."""
         return tuple(float(d.gamma) for d in self.designs)
-
-
-# ---- stored H-infinity designs -------------------------------------------------------------
-
-
-#: The stored H-infinity designs (package data; ``machining-bench synthesize`` writes it).
-def hinf_designs_file():
-    from pathlib import Path
-
-    return Path(__file__).resolve().parent / "hinf_designs.json"
-
-
-def _design_key(params: ContouringParams, axis: str, rho: float) -> str:
-    """What a stored design was made from, exactly: the axis's velocity pole, the sample
-    time, rho and the paper's fixed model pole and weight (``repr`` of each float)."""
-    from machining_envs.contouring.servo import (
-        HINF_MODEL_POLE,
-        HINF_WEIGHT_GAIN,
-        HINF_WEIGHT_POLE,
-    )
-
-    nums = (params.velocity_pole(axis), params.sample_time_s, rho, HINF_MODEL_POLE,
-            HINF_WEIGHT_GAIN, HINF_WEIGHT_POLE)  # fmt: skip
-    return f"{axis}|" + "|".join(repr(float(v)) for v in nums)
-
-
-@functools.lru_cache(maxsize=1)
-def _stored_designs() -> dict:
-    import json
-
-    path = hinf_designs_file()
-    return json.loads(path.read_text())["designs"] if path.is_file() else {}
-
-
-def stored_hinf_design(params: ContouringParams, axis: str, rho: float) -> ServoDesign | None:
-    """The stored design of ``axis`` at ``rho`` for ``params`` (exactly those numbers), or
-    None."""
-    entry = _stored_designs().get(_design_key(params, axis, float(rho)))
-    if entry is None:
-        return None
-    arr = [np.array(entry[k], dtype=np.float64).reshape(entry[k + "_shape"]) for k in "abcd"]
-    cont = [
-        np.array(entry["continuous"][i], dtype=np.float64).reshape(entry["continuous_shapes"][i])
-        for i in range(4)
-    ]
-    for x in (*arr, *cont):
-        x.setflags(write=False)
-    return ServoDesign(
-        "hinf", axis, float(entry["sample_time_s"]), *arr, continuous=tuple(cont),
-        gamma=float(entry["gamma"]), details=dict(entry["details"]),
-    )  # fmt: skip
-
-
-def _design_entry(d: ServoDesign) -> dict:
-    def plain(v):
-        return v.item() if isinstance(v, np.generic) else v
-
-    out = {"sample_time_s": float(d.sample_time_s), "gamma": float(d.gamma)}
-    for k in "abcd":
-        m = np.asarray(getattr(d, k), dtype=np.float64)
-        out[k], out[k + "_shape"] = m.ravel().tolist(), list(m.shape)
-    out["continuous"] = [np.asarray(m, dtype=np.float64).ravel().tolist() for m in d.continuous]
-    out["continuous_shapes"] = [list(np.shape(m)) for m in d.continuous]
-    out["details"] = {k: plain(v) for k, v in d.details.items()}
-    return out
-
-
-def synthesize_stored_designs(rhos, path=None, params: ContouringParams | None = None):
-    """Synthesise the H-infinity design of both axes at each of ``rhos`` on ``params`` (the
-    env's defaults) on this machine and write them to ``path`` (default: the package's
-    ``agents/hinf_designs.json``); returns the path written."""
-    import json
-    from pathlib import Path
-
-    import machining_envs.contouring.servo as servo
-
-    params = params or ContouringParams()
-    servo._hinf.cache_clear()  # synthesise now, not from this process's cache
-    designs = {}
-    for rho in sorted({float(r) for r in rhos}):
-        for ax in AXES:
-            designs[_design_key(params, ax, rho)] = _design_entry(
-                hinf_2dof_design(params, ax, rho=rho)
-            )
-    path = Path(path) if path is not None else hinf_designs_file()
-    doc = {
-        "about": "H-infinity 2-DOF designs of agents.contouring.HInf2DOF, synthesised once "
-        "(python-control hinfsyn) and stored so that every machine runs the same controller; "
-        "key: axis|velocity pole|sample time|rho|model pole|weight gain|weight pole. "
-        "Written by `machining-bench synthesize`.",
-        "designs": designs,
-    }
-    path.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
-    _stored_designs.cache_clear()
-    return path
 
 
 #: Training paths the baseline is calibrated on: ``train`` scenarios drawn with these seeds.

@@ -122,7 +122,8 @@ assert "scipy.signal" not in sys.modules and "agents.contouring" not in sys.modu
 assert sorted(agents.__all__) == sorted(
     ["Agent", "ConstantFeed", "FixedGainPI", "VariableGainPI", "FixedGainIntegral",
      "IntegralACC", "MillingConstantFeed", "ConstantOverride", "LookAheadFeed", "HInf2DOF",
-     "PIPosition", "NoControl", "PD", "PeckDrilling", "SlidingMode"])
+     "PIPosition", "NoControl", "PD", "PeckDrilling", "SlidingMode", "AdaptiveFeedControl",
+     "DelayAwarePI"])
 for name in agents.__all__:
     getattr(agents, name)
 """

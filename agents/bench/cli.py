@@ -1,7 +1,7 @@
 """machining-bench: benchmark controllers, reproduce the papers, train and evaluate policies.
 
 machining-bench benchmark [--quick] [--out results] [--env ID ...]
-machining-bench synthesize [--out agents/hinf_designs.json]
+machining-bench synthesize [--out machining_envs/contouring/hinf_designs.json]
 machining-bench tune [--env ID] [--trials 30] [--episodes 16] [--machine my_cnc.yml]
 machining-bench reproduce {turning,milling,drilling,contouring} [--out results]
 machining-bench train --env ID --out runs/x [--algo ppo] [--resume] [--machine my_cnc.yml]
@@ -300,10 +300,10 @@ def _synthesize_check(args):
 
 def _synthesize(args, command):
     from agents.bench.tune import stored_design_rhos
-    from agents.contouring import hinf_designs_file, synthesize_stored_designs
+    from machining_envs.contouring.servo import HINF_DESIGNS_FILE, synthesize_stored_designs
 
     rhos = stored_design_rhos()
-    target = args.out or hinf_designs_file()
+    target = args.out or HINF_DESIGNS_FILE
     print(f"synthesising H-infinity designs at rho {rhos}; writing {target}")
     print(f"wrote {synthesize_stored_designs(rhos, target)}")
     return 0
@@ -705,8 +705,9 @@ COMMANDS: dict[str, Command] = {
             "re-synthesise the stored H-infinity designs; says where it writes",
             "Synthesise the H-infinity 2-DOF designs the benchmark runs (both axes at the "
             "paper's rho, the tuned rho and the residual policies' base rho) on this machine "
-            "and write them, matrices and gamma, to the package's agents/hinf_designs.json (or "
-            "--out). HInf2DOF loads them from there, so every machine runs the same controller. "
+            "and write them, matrices and gamma, to the package's "
+            "machining_envs/contouring/hinf_designs.json (or --out). The envs' servo and "
+            "HInf2DOF load them from there, so every machine runs the same controllers. "
             "Needs the rl extra (the residual policies' base rho).",
             _synthesize_arguments, _synthesize, _rl, _synthesize_check,
         ),

@@ -30,8 +30,10 @@ python-control and slycot are imported only inside the H-infinity design.
 from __future__ import annotations
 
 import functools
+import json
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numba
 import numpy as np
@@ -59,6 +61,9 @@ __all__ = [
     "ServoDesign",
     "pi_design",
     "hinf_2dof_design",
+    "stored_hinf_design",
+    "synthesize_stored_designs",
+    "HINF_DESIGNS_FILE",
     "closed_loop",
     "ServoLoop",
     "ServoLanes",
@@ -370,10 +375,19 @@ def hinf_2dof_design(
        Tustin at ``sample_time_s`` and scale the reference input by the constant prefilter
        that makes the closed loop's steady-state gain exactly 1 (S&P eq. 9.90).
 
-    The achieved ``gamma`` is in ``.gamma`` (about 5.8 on X, 6.0 on Y). A design is
-    computed once per distinct axis model and cached; raises ``RuntimeError`` if the
-    discretised loop is unstable.
+    The achieved ``gamma`` is in ``.gamma`` (about 5.8 on X, 6.0 on Y). The envs' default
+    designs (and the benchmark's tuned rho) are read from the stored file
+    (:data:`HINF_DESIGNS_FILE`), so that every machine runs the same servo whatever its
+    BLAS; another design is synthesised once per distinct axis model and cached. Raises
+    ``RuntimeError`` if the discretised loop is unstable.
     """
+    args = _hinf_args(params, axis, rho, model_pole, weight_gain, weight_pole)
+    stored = _stored_design(args)
+    return stored if stored is not None else _hinf(*args)
+
+
+def _hinf_args(params, axis, rho, model_pole, weight_gain, weight_pole) -> tuple:
+    """The arguments of :func:`_hinf` for ``params``'s ``axis`` (the settings checked)."""
     for name, v, lo, hi in (
         ("rho", rho, 1e-3, 1e3),
         ("model_pole", model_pole, 1e-3, 1e6),
@@ -381,15 +395,91 @@ def hinf_2dof_design(
         ("weight_pole", weight_pole, 0.0, 1e6),
     ):
         check_range(name, v, lo, hi, types=PY_NUMBER_TYPES)
-    return _hinf(
-        params.velocity_pole(axis),
-        params.sample_time_s,
-        axis,
-        float(rho),
-        float(model_pole),
-        float(weight_gain),
-        float(weight_pole),
+    return (params.velocity_pole(axis), params.sample_time_s, axis, float(rho),
+            float(model_pole), float(weight_gain), float(weight_pole))  # fmt: skip
+
+
+# ---- stored H-infinity designs -------------------------------------------------------------
+#
+# hinfsyn's result depends on the BLAS and LAPACK kernels the machine picks (the matrices'
+# last digits, and from them every trajectory). The designs the envs and the agents use by
+# default are synthesised once and stored as package data, every float exact, so that every
+# machine runs the same servo; a design of other numbers (another machine's identified axes,
+# another rho) is synthesised on the spot. ``machining-bench synthesize`` writes the file
+# again and says where.
+
+#: The stored designs (package data).
+HINF_DESIGNS_FILE = Path(__file__).resolve().with_name("hinf_designs.json")
+
+
+def _design_key(args: tuple) -> str:
+    """What a stored design was made from, exactly: ``axis|`` and the ``repr`` of the
+    velocity pole, sample time, rho, model pole, weight gain and weight pole."""
+    a_pole, ts, axis, *rest = args
+    return f"{axis}|" + "|".join(repr(float(v)) for v in (a_pole, ts, *rest))
+
+
+@functools.lru_cache(maxsize=1)
+def _stored_designs() -> dict:
+    path = HINF_DESIGNS_FILE
+    return json.loads(path.read_text())["designs"] if path.is_file() else {}
+
+
+def _stored_design(args: tuple) -> ServoDesign | None:
+    entry = _stored_designs().get(_design_key(args))
+    if entry is None:
+        return None
+    arr = _frozen(*(np.reshape(entry[k], entry[k + "_shape"]) for k in "abcd"))
+    cont = _frozen(*(np.reshape(m, s) for m, s in
+                     zip(entry["continuous"], entry["continuous_shapes"], strict=True)))  # fmt: skip
+    return ServoDesign("hinf", args[2], float(entry["sample_time_s"]), *arr, continuous=cont,
+                       gamma=float(entry["gamma"]), details=dict(entry["details"]))  # fmt: skip
+
+
+def stored_hinf_design(params: ContouringParams, axis: str, rho: float = HINF_RHO):
+    """The stored design of ``params``'s ``axis`` at ``rho`` (exactly those numbers, the
+    paper's model pole and weight), or None where none is stored."""
+    return _stored_design(
+        _hinf_args(params, axis, rho, HINF_MODEL_POLE, HINF_WEIGHT_GAIN, HINF_WEIGHT_POLE)
     )
+
+
+def _design_entry(d: ServoDesign) -> dict:
+    def plain(v):
+        return v.item() if isinstance(v, np.generic) else v
+
+    out = {"sample_time_s": float(d.sample_time_s), "gamma": float(d.gamma)}
+    for k in "abcd":
+        m = np.asarray(getattr(d, k), dtype=np.float64)
+        out[k], out[k + "_shape"] = m.ravel().tolist(), list(m.shape)
+    out["continuous"] = [np.asarray(m, dtype=np.float64).ravel().tolist() for m in d.continuous]
+    out["continuous_shapes"] = [list(np.shape(m)) for m in d.continuous]
+    out["details"] = {k: plain(v) for k, v in d.details.items()}
+    return out
+
+
+def synthesize_stored_designs(rhos, path=None, params: ContouringParams | None = None) -> Path:
+    """Synthesise the H-infinity design of both axes at each of ``rhos`` on ``params`` (the
+    envs' defaults) on this machine and write them to ``path`` (default: the package's
+    :data:`HINF_DESIGNS_FILE`); returns the path written."""
+    params = params or ContouringParams()
+    designs = {}
+    for rho in sorted({float(r) for r in rhos}):
+        for ax in AXES:
+            args = _hinf_args(params, ax, rho, HINF_MODEL_POLE, HINF_WEIGHT_GAIN,
+                              HINF_WEIGHT_POLE)  # fmt: skip
+            designs[_design_key(args)] = _design_entry(_hinf.__wrapped__(*args))
+    path = Path(path) if path is not None else HINF_DESIGNS_FILE
+    doc = {
+        "about": "H-infinity 2-DOF designs (machining_envs.contouring.servo.hinf_2dof_design), "
+        "synthesised once (python-control hinfsyn) and stored so that every machine runs the "
+        "same servo and the same agents; key: axis|velocity pole|sample time|rho|model "
+        "pole|weight gain|weight pole. Written by `machining-bench synthesize`.",
+        "designs": designs,
+    }
+    path.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
+    _stored_designs.cache_clear()
+    return path
 
 
 #: Servo kinds the contouring envs and agents know, by name.

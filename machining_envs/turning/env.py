@@ -9,12 +9,12 @@ from machining_envs.core.actuation import (
     Actuation,
 )
 from machining_envs.core.env import LaneEnv
-from machining_envs.core.sensors import PowerSensor
 from machining_envs.core.rendering import (
     present_frame,
     ready_to_render,
     render_signals,
 )
+from machining_envs.core.sensors import PowerSensor
 from machining_envs.core.vector import (
     LaneVectorEnv,
     check_num_envs,

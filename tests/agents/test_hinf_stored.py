@@ -1,5 +1,6 @@
-"""The H-infinity agents run stored designs (agents/hinf_designs.json): the same actions on
-a recorded trajectory whatever OpenBLAS kernel the machine picks."""
+"""The H-infinity designs are stored (machining_envs/contouring/hinf_designs.json): the agents'
+actions on a recorded trajectory, and ContouringFeed-v0's servo, are the same whatever
+OpenBLAS kernel the machine picks."""
 
 import os
 import subprocess
@@ -12,8 +13,9 @@ import pytest
 
 import machining_envs  # noqa: F401
 from agents.bench.tune import stored_design_rhos
-from agents.contouring import HInf2DOF, contouring_params, stored_hinf_design
+from agents.contouring import HInf2DOF, contouring_params
 from agents.eval import rollout
+from machining_envs.contouring.servo import stored_hinf_design
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = "machining_envs/Contouring-v0"
@@ -91,3 +93,25 @@ def test_the_stored_designs_are_what_the_synthesis_gives():
     for ax in ("x", "y"):
         fresh = hinf_2dof_design(p, ax, rho=1.0)
         assert fresh.gamma == pytest.approx(stored_hinf_design(p, ax, 1.0).gamma, rel=1e-6)
+
+
+def test_contouring_feed_servo_runs_the_stored_design_without_a_synthesis(monkeypatch):
+    """ContouringFeed-v0's default servo (servo="hinf") and HInf2DOF at the stored rhos are
+    built from the stored file: no hinfsyn runs, so no BLAS kernel can move their digits."""
+    import machining_envs.contouring.servo as servo
+
+    def no_synthesis(*args):
+        raise AssertionError(f"synthesised {args}: the design should come from the store")
+
+    monkeypatch.setattr(servo, "_hinf", no_synthesis)
+    env = gym.make("machining_envs/ContouringFeed-v0")
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
+    p = servo.ContouringParams()
+    for ax in ("x", "y"):
+        d = servo.hinf_2dof_design(p, ax)
+        assert d is not None and not d.a.flags.writeable and d.gamma > 1.0
+    for rho in stored_design_rhos():
+        assert HInf2DOF.from_env(gym.make(ENV), rho=rho).stored
+    with pytest.raises(AssertionError, match="synthesised"):
+        servo.hinf_2dof_design(p, "x", rho=0.77)  # not stored: it would synthesise

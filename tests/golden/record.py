@@ -157,18 +157,16 @@ def hinf_designs(designs: list | None = None):
         seen.append((args, design))
         return design
 
-    # The agents' own stored designs (agents/hinf_designs.json) step aside: a case runs
-    # on the designs it recorded, through ``servo._hinf``.
-    import agents.contouring as contouring_agents
-
-    shipped = contouring_agents._stored_designs
+    # The package's stored designs (machining_envs/contouring/hinf_designs.json) step
+    # aside: a case runs on the designs it recorded, through ``servo._hinf``.
+    shipped = servo._stored_designs
     servo._hinf = lookup
-    contouring_agents._stored_designs = dict
+    servo._stored_designs = dict
     try:
         yield seen
     finally:
         servo._hinf = synthesise
-        contouring_agents._stored_designs = shipped
+        servo._stored_designs = shipped
 
 
 def pack_designs(designs: list) -> dict:
