@@ -175,6 +175,7 @@ class ContouringEnv(LaneEnv):
 
     ## Example
     >>> import gymnasium as gym
+    >>> import numpy as np
     >>> import machining_envs
     >>> env = gym.make("machining_envs/Contouring-v0", scenario="paper_circle")
     >>> obs, info = env.reset(seed=0)

@@ -141,6 +141,7 @@ class ContouringFeedEnv(LaneEnv):
 
     ## Example
     >>> import gymnasium as gym
+    >>> import numpy as np
     >>> import machining_envs
     >>> env = gym.make("machining_envs/ContouringFeed-v0", scenario="paper_circle")
     >>> obs, info = env.reset(seed=0)

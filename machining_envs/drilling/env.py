@@ -166,6 +166,7 @@ class MicroDrillingEnv(LaneEnv):
 
     ## Example
     >>> import gymnasium as gym
+    >>> import numpy as np
     >>> import machining_envs
     >>> env = gym.make("machining_envs/MicroDrilling-v0", scenario="paper_0.8")
     >>> obs, info = env.reset(seed=0)

@@ -168,6 +168,7 @@ class EndMillingEnv(LaneEnv):
 
     ## Example
     >>> import gymnasium as gym
+    >>> import numpy as np
     >>> import machining_envs
     >>> env = gym.make("machining_envs/EndMilling-v0", scenario="paper_step")
     >>> obs, info = env.reset(seed=0)

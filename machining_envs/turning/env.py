@@ -155,6 +155,7 @@ class TurningEnv(LaneEnv):
 
     ## Example
     >>> import gymnasium as gym
+    >>> import numpy as np
     >>> import machining_envs
     >>> env = gym.make("machining_envs/Turning-v0", scenario="paper_405")
     >>> obs, info = env.reset(seed=0)

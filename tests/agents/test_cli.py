@@ -20,7 +20,8 @@ def test_cli_benchmark_quick_writes_report(tmp_path):
     )
     assert "| agent | kind |" in out.stdout
     assert "| physical bound | bound |" in out.stdout
-    assert "| tuned |" in out.stdout and "better than" in out.stdout
+    assert "| tuned |" in out.stdout and "| reference |" in out.stdout  # the verdict column
+    assert "Δ at 0.5 %" in out.stdout and "| worse |" in out.stdout
     assert "time: " in out.stdout and "total" in out.stdout  # the run prints its times
     for env in ("Turning-v0", "EndMilling-v0", "MicroDrilling-v0", "ContouringFeed-v0"):
         assert f"{env}: 100%" in out.stderr, env  # a progress bar per env, run to its end

@@ -50,10 +50,10 @@ def test_every_experiment_matches_and_the_figure_is_written(repro):
     assert all(1.0 < v < 20.0 for v in g)
 
 
-def test_cli_registry_names_the_reproduction():
+def test_cli_registry_names_the_reproduction(capsys):
     assert process("contouring").reproduce is reproduce_contouring
-    with pytest.raises(SystemExit):
-        main(["reproduce", "contouring", "--sensor-gain", "15"])
+    assert main(["reproduce", "contouring", "--sensor-gain", "15"]) == 2  # a usage error
+    assert "--sensor-gain applies to 'reproduce turning' only" in capsys.readouterr().err
 
 
 def test_pi_circle_matches_the_papers_ellipse_formula(repro):

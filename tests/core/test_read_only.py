@@ -44,10 +44,9 @@ def _contouring():
 
 
 def _turning_agents():
-    from agents.turning import _unit_plant
-    from machining_envs.turning.plant import TurningParams
+    from machining_envs.turning.plant import TurningParams, unit_plant_coefficients
 
-    return [_unit_plant(TurningParams(), 405.0)]
+    return [unit_plant_coefficients(TurningParams(), 405.0)]
 
 
 @pytest.mark.parametrize("tables", [_milling, _drilling, _contouring, _turning_agents])
