@@ -43,7 +43,10 @@ class LaneCore(abc.ABC):
     (a :class:`LaneObjects` of every lane's scenario), ``names`` (:class:`LaneNames`),
     ``rngs`` (the lanes' noise generators) and ``blocks`` (the
     :class:`~machining_envs.core.compiled.blocks.LaneBlocks` the kernel steps). The class
-    attribute ``scenario_types`` is ``(scenario class, scenario names)``.
+    attribute ``scenario_types`` is ``(scenario class, scenario names)``. A core with CNC
+    actuation (``machining_envs.core.actuation``) also has ``actuation`` (the env's option),
+    ``act_lanes`` and ``actuation_lanes()``, which makes its
+    :class:`~machining_envs.core.actuation.ActuationLanes` (what :func:`settle_batch` uses).
 
     One step
     --------
@@ -77,11 +80,6 @@ class LaneCore(abc.ABC):
         """Whether :meth:`start_lanes` may start the scenarios of the split ``factory``
         together (:func:`split_batch`); by default never."""
         return False
-
-    def actuation_lanes(self):
-        """The CNC actuation between the lanes' commands and their drives
-        (:class:`~machining_envs.core.actuation.ActuationLanes`), for a core that has one."""
-        raise NotImplementedError(f"{type(self).__name__} has no CNC actuation")
 
     # ---- one step ------------------------------------------------------------------------
     @abc.abstractmethod
