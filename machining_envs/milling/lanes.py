@@ -744,12 +744,10 @@ class MillingCore(LaneCore):
     def _sense_power(self, lanes=None) -> None:
         """The drive's power reading into the observations (option ``power_sensor``,
         ``machining_envs.core.sensors``): of ``lanes`` that start, else a step of all."""
-        i = self.info_arrays()
-        rpm = i["spindle_rpm"]
+        c = self.info_f  # the step's signals (info_arrays' rows), read without a copy
+        rpm = c[17]
         w = rpm * (math.pi / 30.0) * 1e-3  # angular speed, rad/s, per N·mm
-        self.power_sensor.update(
-            self.obs, lanes, i["torque_Nmm"] * w, rpm, i["torque_limit_Nmm"] * w
-        )
+        self.power_sensor.update(self.obs, lanes, c[2] * w, rpm, c[15] * w)
 
     def _run(self, args: tuple, stage: int) -> None:
         """:func:`_step` of ``stage`` over every lane (on the blocks of lanes, if several)."""

@@ -735,10 +735,18 @@ class TurningCore(LaneCore):
     def _sense_power(self, lanes=None) -> None:
         """The drive's power reading into the observations (option ``power_sensor``,
         ``machining_envs.core.sensors``): of ``lanes`` that start, else a step of all."""
-        i = self.info_arrays()
-        rpm = i["spindle_rpm"]
+        # info's spindle_rpm, cutting_power_W and force_limit_N, from the lanes' tables (the
+        # arithmetic of _info_rows, in its order), without building the whole info
+        rpm = self.spindle
         v = rpm * (math.pi / 30.0) * self.diameter * 0.0005  # cutting speed, m/s
-        self.power_sensor.update(self.obs, lanes, i["cutting_power_W"], rpm, i["force_limit_N"] * v)
+        cutting = (
+            np.maximum(self.lanes.out[:, 0], 0.0)
+            * (rpm * (math.pi / 30.0))
+            * (self.diameter * 0.0005)
+        )
+        for k in self.power_lanes:  # a power-limited spindle's own
+            cutting[k] = self.power[k, 1]
+        self.power_sensor.update(self.obs, lanes, cutting, rpm, self.ef[:, _EF_FORCE_LIMIT] * v)
 
     def _run_blocks(self, op: int) -> None:
         """:func:`_step_packed`'s ``op`` on every block of lanes, on the blocks' threads
