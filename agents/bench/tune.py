@@ -200,11 +200,13 @@ def tune_all(
 
 
 def load_tuned(path=TUNED_FILE) -> dict:
-    """The tuned settings file (``{}`` if absent)."""
+    """The tuned settings file (``{}`` if absent; a damaged one is refused naming it)."""
+    from agents.rl.files import read_json_object
+
     path = Path(path)
     if not path.is_file():
         return {}
-    return json.loads(path.read_text())
+    return read_json_object(path, "tuned settings file")
 
 
 def tuned_factory(cls, env_id: str, tuned: dict | None = None):
@@ -230,7 +232,6 @@ def stored_design_rhos() -> list[float]:
     """The rho of every H-infinity design the benchmark runs, whose designs are stored
     (``machining-bench synthesize``): the paper's, the tuned one (``tuned.json``) and the
     base of each shipped residual policy over ``HInf2DOF``."""
-    import json
 
     from machining_envs.contouring.servo import HINF_RHO
 
@@ -238,10 +239,10 @@ def stored_design_rhos() -> list[float]:
     for entries in load_tuned().get("envs", {}).values():
         if "HInf2DOF" in entries:
             rhos.add(float(entries["HInf2DOF"]["params"]["rho"]))
-    from agents.rl.policy import PRETRAINED_DIR
+    from agents.rl.policy import PRETRAINED_DIR, read_run_config
 
     for cfg in PRETRAINED_DIR.glob("**/config.json"):
-        res = json.loads(cfg.read_text()).get("residual") or {}
+        res = read_run_config(cfg).get("residual") or {}
         if res.get("base") == "agents.contouring.HInf2DOF" and "rho" in res.get("params", {}):
             rhos.add(float(res["params"]["rho"]))
     return sorted(rhos)

@@ -279,13 +279,13 @@ def gate_policy(
     (``control="feed"`` for the pecking policy)."""
     import torch
 
-    from agents.rl.policy import load_policy, run_env_kwargs
+    from agents.rl.policy import load_policy, read_run_config, run_env_kwargs
 
     # One thread: torch's default pool spins against a loaded machine (25x the CPU time
     # of one thread for the milling policy's batched inference on 2 busy cores).
     torch.set_num_threads(1)
     meta = Path(model_path).parent / "config.json"
-    env_kwargs = run_env_kwargs(json.loads(meta.read_text())) if meta.is_file() else {}
+    env_kwargs = run_env_kwargs(read_run_config(meta)) if meta.is_file() else {}
     agent = load_policy(model_path, algo=algo)
     return gate_agent(agent, env_id, env_kwargs, n_validation, per_edge, share)
 
@@ -354,6 +354,7 @@ def gated_sweep(
     ``out/round_1``, ... (:func:`gated_seeds`). Writes and returns ``out/gate.json``:
     the seeds asked for, passed, failed and added, each verdict, and the model path of
     every seed that passed (the ones to ship)."""
+    from agents.rl.policy import read_run_config
     from agents.rl.sweep import sweep
 
     if settings.n_search:
@@ -370,7 +371,7 @@ def gated_sweep(
         for trial in sorted((folder / "trials").iterdir()):
             meta = trial / "config.json"
             if meta.is_file() and (trial / "best_model.zip").is_file():
-                models[int(json.loads(meta.read_text())["seed"])] = trial / "best_model.zip"
+                models[int(read_run_config(meta)["seed"])] = trial / "best_model.zip"
         paths.update({s: str(m) for s, m in models.items()})
         return models
 
