@@ -30,7 +30,7 @@ from agents.bench import tune
 from agents.bench.declarations import BENCHMARKS, PROCESSES
 from agents.bench.report import env_section
 from agents.bench.run import installed as _installed  # noqa: F401  (tests and users import it here)
-from agents.bench.run import run_env
+from agents.bench.run import one_thread, run_env
 from agents.bench.tune import load_tuned
 from agents.eval import Evaluation
 from machining_envs.core.checks import is_seed
@@ -56,31 +56,20 @@ def _tuned_settings() -> dict:
     return load_tuned(tune.TUNED_FILE)
 
 
-def _env_section(env_id, n_test, n_ood, n_oracle, quick, seed, out, verbose, t0):
+def _env_section(env_id, n_test, n_ood, n_oracle, quick, seed, out, verbose, t0, apart=False):
     """One env's part of the benchmark: its section (``agents.bench.report.env_section``)
     with the episode rows and seconds added. Takes and returns plain data, so that it can
-    run in another process."""
+    run in another process. ``apart``: the oracle runs in a process of its own."""
     spec = next(s for s in BENCHMARKS if s.env_id == env_id)
     tuned = _tuned_settings()
     t_env = time.perf_counter()
-    run = run_env(spec, n_test, n_ood, n_oracle, tuned, verbose, t0, one_seed=quick)
+    run = run_env(
+        spec, n_test, n_ood, n_oracle, tuned, verbose, t0, one_seed=quick, oracle_apart=apart
+    )
     section = env_section(run, tuned, n_test, n_ood, quick, seed, Path(out))
     section["rows"] = run.all_rows()
     section["seconds"] = time.perf_counter() - t_env
     return section
-
-
-def _one_thread() -> None:
-    """A worker process computes on one core: BLAS and torch each get one thread, so that
-    ``jobs`` processes do not oversubscribe the machine."""
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(1)
-    try:
-        import torch
-    except ImportError:
-        return
-    torch.set_num_threads(1)
 
 
 def _show(section, verbose: bool) -> None:
@@ -110,8 +99,9 @@ def run_benchmark(
     episode for the oracles that are fast enough (``oracle_in_quick``), each learned row's
     first training seed only, no robustness grid, learning curves or loop margins. ``seed``
     seeds the bootstrap only: the episodes are the splits' fixed ones. ``jobs``: envs run at
-    once, each in its own process (default 1; on 2 cores it does not pay, since the
-    contouring envs already use both); the numbers do not depend on it.
+    once, each in its own process, with each env's MPC oracle in a process of its own beside
+    the env's other rows (default 1: everything in this process, one env after another);
+    the numbers do not depend on it.
     """
     envs = check_env_ids(envs)
     if not is_seed(seed):
@@ -155,8 +145,8 @@ def run_benchmark(
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
         ctx = multiprocessing.get_context("spawn")  # no fork of torch's or numba's threads
-        with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_one_thread) as pool:
-            futures = {pool.submit(_env_section, e, *args): e for e in reversed(chosen)}
+        with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=one_thread) as pool:
+            futures = {pool.submit(_env_section, e, *args, True): e for e in reversed(chosen)}
             for f in as_completed(futures):
                 sections[futures[f]] = f.result()
                 _show(sections[futures[f]], verbose)

@@ -20,10 +20,18 @@ import gymnasium as gym
 
 from agents.bench.spec import BenchmarkSpec
 from agents.bench.tune import tuned_factory
-from agents.eval import evaluate
+from agents.eval import Evaluation, evaluate
 from machining_envs.core.splits import split_seeds
 
-__all__ = ["EnvRun", "Job", "jobs_of", "run_env", "representative_seed", "installed"]
+__all__ = [
+    "EnvRun",
+    "Job",
+    "jobs_of",
+    "run_env",
+    "oracle_episodes",
+    "representative_seed",
+    "installed",
+]
 
 
 def installed(module: str) -> bool:
@@ -180,10 +188,12 @@ def _plot_keys(spec: BenchmarkSpec) -> set[str]:
 
 
 def run_env(spec: BenchmarkSpec, n_test, n_ood, n_oracle, tuned: dict, verbose: bool, t0,
-            one_seed: bool = False) -> EnvRun:  # fmt: skip
+            one_seed: bool = False, oracle_apart: bool = False) -> EnvRun:  # fmt: skip
     """Run every row of ``spec`` (see the module docstring): ``n_test`` test episodes,
     ``n_ood`` of ``ood`` and of each extra split, and the oracle on the first
-    ``min(n_oracle, spec.oracle_episodes)`` test episodes."""
+    ``min(n_oracle, spec.oracle_episodes)`` test episodes. ``oracle_apart``: the oracle runs
+    in a process of its own beside the other rows (the same episodes, the same numbers; it
+    is the slowest row, so the env takes about the longer of the two instead of their sum)."""
     run = EnvRun(spec)
     env_name = spec.env_id.split("/")[-1]
     jobs = jobs_of(spec, tuned, verbose, one_seed)
@@ -202,6 +212,10 @@ def run_env(spec: BenchmarkSpec, n_test, n_ood, n_oracle, tuned: dict, verbose: 
     run.plot_seed = representative_seed(spec, test_seeds[: n_oracle_run or None])
     plot_keys = _plot_keys(spec)
     progress = _Progress(env_name, len(jobs) * len(splits) + n_oracle_run, verbose, t0)
+    oracle_args = (spec.env_id, n_oracle_run, test_seeds[0], run.plot_seed, plot_keys)
+    apart = None
+    if oracle_apart and n_oracle_run > 0:
+        apart = _start_apart(oracle_episodes, *oracle_args)
     try:
         for k, job in enumerate(jobs):
             tag = f" seed {job.policy_seed}" if job.policy_seed is not None else ""
@@ -232,17 +246,13 @@ def run_env(spec: BenchmarkSpec, n_test, n_ood, n_oracle, tuned: dict, verbose: 
             progress.note(oracle_skipped)
         elif spec.oracle is not None:
             progress.working_on(f"oracle, {n_oracle_run} test episodes")
-            ev = evaluate(
-                spec.oracle,
-                spec.env_id,
-                ["test"],
-                n_episodes=n_oracle_run,
-                seed=test_seeds[0],
-                env_kwargs=spec.env_kwargs,
-                batched=False,
-                keep_seeds=[run.plot_seed] if run.plot_seed is not None else [],
-                extra_keys=plot_keys,
-            )
+            if apart is None:
+                ev = oracle_episodes(*oracle_args)
+            else:
+                pool, future = apart
+                ev = future.result()
+                pool.shutdown()
+                apart = None
             name = ev.rows[0]["agent"]
             _keep_plotted(run, name, ev)
             run.factory.setdefault(name, spec.oracle)
@@ -250,7 +260,56 @@ def run_env(spec: BenchmarkSpec, n_test, n_ood, n_oracle, tuned: dict, verbose: 
             progress.done(f"oracle {name}, {n_oracle_run} test episodes", n_oracle_run)
     finally:
         progress.close()
+        if apart is not None:  # an error in the other rows: do not wait for the oracle
+            apart[0].shutdown(wait=False, cancel_futures=True)
     return run
+
+
+def _spec(env_id: str) -> BenchmarkSpec:
+    from agents.bench.declarations import BENCHMARKS
+
+    return next(s for s in BENCHMARKS if s.env_id == env_id)
+
+
+def oracle_episodes(env_id: str, n: int, seed: int, plot_seed, plot_keys) -> Evaluation:
+    """The oracle of ``env_id``'s benchmark on ``n`` test episodes from ``seed``, one at a
+    time, keeping the trajectory of ``plot_seed``."""
+    spec = _spec(env_id)
+    return evaluate(
+        spec.oracle,
+        spec.env_id,
+        ["test"],
+        n_episodes=n,
+        seed=seed,
+        env_kwargs=spec.env_kwargs,
+        batched=False,
+        keep_seeds=[plot_seed] if plot_seed is not None else [],
+        extra_keys=plot_keys,
+    )
+
+
+def one_thread() -> None:
+    """A worker process computes on one core: BLAS and torch each get one thread, so that
+    ``jobs`` processes do not oversubscribe the machine."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1)
+    try:
+        import torch
+    except ImportError:
+        return
+    torch.set_num_threads(1)
+
+
+def _start_apart(fn, *args):
+    """``fn(*args)`` started in a new process (spawned, one thread): ``(pool, future)``."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    pool = ProcessPoolExecutor(
+        1, mp_context=multiprocessing.get_context("spawn"), initializer=one_thread
+    )
+    return pool, pool.submit(fn, *args)
 
 
 def _keep_plotted(run: EnvRun, name: str, ev) -> None:
