@@ -165,12 +165,14 @@ class AdaptiveFeedControl(Agent):
         self.pout = check_setting("pout", pout, 0.01, 0.5)
         self.gain = check_positive("gain", gain, 2.0)
         self.overload_s = check_positive("overload_s", overload_s, 100.0)
-        self.wear_margin = None if wear_margin is None else check_positive(
-            "wear_margin", wear_margin, 5.0
-        )  # fmt: skip
-        self.breakage_margin = None if breakage_margin is None else check_positive(
-            "breakage_margin", breakage_margin, 5.0
-        )  # fmt: skip
+        self.wear_margin = (
+            None if wear_margin is None else check_positive("wear_margin", wear_margin, 5.0)
+        )
+        self.breakage_margin = (
+            None
+            if breakage_margin is None
+            else check_positive("breakage_margin", breakage_margin, 5.0)
+        )
         ref = f"teach-in {self.teach_in_s:g} s" if self.teach_in_s else f"ref {reference:.2g}"
         self.name = f"AFC {ref}, {self.fmin:.0%}-{self.fmax:.0%}"
 
@@ -227,8 +229,15 @@ class AdaptiveFeedControl(Agent):
                 return o
 
             unit = "W"
-        return cls(programmed, base.command_map, load_units, float(base.params.sample_time_s),
-                   programmed_obs, unit, **kwargs)  # fmt: skip
+        return cls(
+            programmed,
+            base.command_map,
+            load_units,
+            float(base.params.sample_time_s),
+            programmed_obs,
+            unit,
+            **kwargs,
+        )
 
     # -- the controller ---------------------------------------------------------------
 

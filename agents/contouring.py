@@ -435,8 +435,13 @@ class LookAheadFeed(Agent):
         self.name = "look-ahead feed"
 
     @classmethod
-    def from_env(cls, env, centripetal_mm_s2: float = 1000.0, tangential_mm_s2: float = 1000.0,
-                 override_cap: float = 1.0) -> LookAheadFeed:  # fmt: skip
+    def from_env(
+        cls,
+        env,
+        centripetal_mm_s2: float = 1000.0,
+        tangential_mm_s2: float = 1000.0,
+        override_cap: float = 1.0,
+    ) -> LookAheadFeed:
         base = unwrap_as(env, ContouringFeedEnv, "LookAheadFeed")
         return cls(base.override_max, centripetal_mm_s2, tangential_mm_s2, override_cap)
 

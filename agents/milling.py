@@ -212,9 +212,14 @@ class IntegralACC(Agent):
 
     @classmethod
     def from_env(
-        cls, env, k: float | None = None, kc_design: float = 0.2, c1: float = 1e-3,
-        setpoint: float = 1.0, **kwargs,
-    ) -> IntegralACC:  # fmt: skip
+        cls,
+        env,
+        k: float | None = None,
+        kc_design: float = 0.2,
+        c1: float = 1e-3,
+        setpoint: float = 1.0,
+        **kwargs,
+    ) -> IntegralACC:
         return cls(
             MillingIO.from_env(env), k, c1=c1, kc_design=kc_design, setpoint=setpoint, **kwargs
         )

@@ -147,10 +147,15 @@ class TurningMPCOracle(Agent):
         opti.subject_to(opti.bounded(0.0, u, umax))
         opti.subject_to(slack >= 0)
         ipopt = {
-            "print_level": 0, "sb": "yes", "max_iter": 200, "tol": 1e-6,
-            "warm_start_init_point": "yes", "mu_init": 1e-4,
-            "warm_start_bound_push": 1e-6, "warm_start_mult_bound_push": 1e-6,
-        }  # fmt: skip
+            "print_level": 0,
+            "sb": "yes",
+            "max_iter": 200,
+            "tol": 1e-6,
+            "warm_start_init_point": "yes",
+            "mu_init": 1e-4,
+            "warm_start_bound_push": 1e-6,
+            "warm_start_mult_bound_push": 1e-6,
+        }
         # IPOPT's last iterate where it does not converge (no exception): _solve checks it.
         opti.solver("ipopt", {"print_time": False, "error_on_fail": False}, ipopt)
         self._fn = opti.to_function("mpc", [values, u, slack, opti.lam_g], [u, slack, opti.lam_g])

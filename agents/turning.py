@@ -307,8 +307,14 @@ class VariableGainPI(Agent):
 
 
 @functools.lru_cache(maxsize=256)
-def delay_aware_gain(params: TurningParams, spindle_rpm: float, kgh: float, delay_steps: int,
-                     phase_margin_deg: float, k_max: float = 0.8) -> float:  # fmt: skip
+def delay_aware_gain(
+    params: TurningParams,
+    spindle_rpm: float,
+    kgh: float,
+    delay_steps: int,
+    phase_margin_deg: float,
+    k_max: float = 0.8,
+) -> float:
     r"""The open-loop gain ``K`` of the adaptive PI that leaves ``phase_margin_deg`` of phase
     margin on a machine that delays the command by ``delay_steps`` periods.
 
@@ -383,8 +389,15 @@ class DelayAwarePI(VariableGainPI):
         "setpoint": (0.5, 1.0, False),
     }
 
-    def __init__(self, io: TurningIO, delay_steps: int = 2, phase_margin_deg: float = 45.0,
-                 kgh: float = 1.9, setpoint: float = 1.0, **kwargs):  # fmt: skip
+    def __init__(
+        self,
+        io: TurningIO,
+        delay_steps: int = 2,
+        phase_margin_deg: float = 45.0,
+        kgh: float = 1.9,
+        setpoint: float = 1.0,
+        **kwargs,
+    ):
         from machining_envs.core.checks import check_integer, check_range
 
         super().__init__(io, 0.5, kgh, setpoint=setpoint, **kwargs)
@@ -395,8 +408,15 @@ class DelayAwarePI(VariableGainPI):
         self.state_size = VariableGainPI.state_size + 1
 
     @classmethod
-    def from_env(cls, env, delay_steps: int | None = None, phase_margin_deg: float = 45.0,
-                 kgh: float = 1.9, setpoint: float = 1.0, **kwargs) -> DelayAwarePI:  # fmt: skip
+    def from_env(
+        cls,
+        env,
+        delay_steps: int | None = None,
+        phase_margin_deg: float = 45.0,
+        kgh: float = 1.9,
+        setpoint: float = 1.0,
+        **kwargs,
+    ) -> DelayAwarePI:
         """The design for ``env``; ``delay_steps`` by default the delay of the env's
         ``actuation`` option (0 without one)."""
         base = unwrap_as(env, TurningEnv, "a turning controller")
@@ -408,8 +428,9 @@ class DelayAwarePI(VariableGainPI):
     def gain_at(self, spindle_rpm: float) -> float:
         """The open-loop gain K designed for ``spindle_rpm``."""
         rpm = float(np.clip(spindle_rpm, *SPINDLE_RPM_RANGE))
-        return delay_aware_gain(self.io.params, round(rpm, 3), self.kgh, self.delay_steps,
-                                self.phase_margin_deg)  # fmt: skip
+        return delay_aware_gain(
+            self.io.params, round(rpm, 3), self.kgh, self.delay_steps, self.phase_margin_deg
+        )
 
     def initial_state(self, n, obs):
         st = super().initial_state(n, obs)  # state_size wide: the last column is K

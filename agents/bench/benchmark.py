@@ -90,9 +90,14 @@ def check_env_ids(envs: str | list[str] | None) -> list[str] | None:
 
 
 def run_benchmark(
-    out_dir="results", quick: bool = False, seed: int = 0, verbose: bool = True,
-    envs: list[str] | None = None, reproductions: bool = True, jobs: int | None = None,
-) -> Evaluation:  # fmt: skip
+    out_dir="results",
+    quick: bool = False,
+    seed: int = 0,
+    verbose: bool = True,
+    envs: list[str] | None = None,
+    reproductions: bool = True,
+    jobs: int | None = None,
+) -> Evaluation:
     """Run every env's benchmark (or those in ``envs``); return all episode rows.
 
     ``quick``: 8 test episodes per agent instead of 100, no ood (25 in the full run), one
@@ -175,8 +180,12 @@ def run_benchmark(
     allev = Evaluation(rows=all_rows)
     allev.to_csv(out / "benchmark.csv")
     if flags:
-        compact += ["Training seeds under 80 % of counting workpieces:", "",
-                    *[f"- {f}" for f in flags], ""]  # fmt: skip
+        compact += [
+            "Training seeds under 80 % of counting workpieces:",
+            "",
+            *[f"- {f}" for f in flags],
+            "",
+        ]
     if reproductions:
         for process in PROCESSES:
             if verbose:

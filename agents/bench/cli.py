@@ -257,16 +257,21 @@ class Command:
 
 def _benchmark_arguments(b):
     b.add_argument(
-        "--quick", action="store_true",
+        "--quick",
+        action="store_true",
         help="8 test episodes per agent instead of 100, no ood (25 in the full run), the fast "
         "oracles on one episode, no robustness grid",
-    )  # fmt: skip
+    )
     b.add_argument("--out", default="results", help="output folder (default: results)")
     b.add_argument("--env", nargs="+", default=None, help="only these env ids (default: all)")
     b.add_argument("--no-reproductions", action="store_true", help="skip the paper reproductions")
     b.add_argument("--seed", type=_seed, default=0, help="seed of the bootstrap intervals")
-    b.add_argument("--jobs", type=_positive_int, default=None,
-                   help="envs run at once, one process each (default: 1)")  # fmt: skip
+    b.add_argument(
+        "--jobs",
+        type=_positive_int,
+        default=None,
+        help="envs run at once, one process each (default: 1)",
+    )
 
 
 def _benchmark_check(args):
@@ -283,9 +288,13 @@ def _benchmark(args, command):
     from agents.bench.benchmark import run_benchmark
 
     run_benchmark(
-        args.out, quick=args.quick, seed=args.seed, envs=args.env,
-        reproductions=not args.no_reproductions, jobs=args.jobs,
-    )  # fmt: skip
+        args.out,
+        quick=args.quick,
+        seed=args.seed,
+        envs=args.env,
+        reproductions=not args.no_reproductions,
+        jobs=args.jobs,
+    )
     return 0
 
 
@@ -313,12 +322,19 @@ def _tune_arguments(tu):
     tu.add_argument("--env", default=None, help="only this env id (default: all)")
     tu.add_argument("--trials", type=_positive_int, default=30, help="trials per agent")
     tu.add_argument("--episodes", type=_positive_int, default=16, help="train episodes per trial")
-    tu.add_argument("--out", default=None,
-                    help="file to write (default: agents/bench/tuned.json; with --machine, "
-                    "tuned_<machine name>.json here)")  # fmt: skip
-    tu.add_argument("--machine", default=None, metavar="YAML",
-                    help="tune for this machine (docs/shopfloor.md): every env made with its "
-                    "actuation, spindle power and power sensor")  # fmt: skip
+    tu.add_argument(
+        "--out",
+        default=None,
+        help="file to write (default: agents/bench/tuned.json; with --machine, "
+        "tuned_<machine name>.json here)",
+    )
+    tu.add_argument(
+        "--machine",
+        default=None,
+        metavar="YAML",
+        help="tune for this machine (docs/shopfloor.md): every env made with its "
+        "actuation, spindle power and power sensor",
+    )
 
 
 def _machine(args):
@@ -365,8 +381,14 @@ def _tune(args, command):
     from agents.bench.declarations import BENCHMARKS
     from agents.bench.tune import TuningBudget, tune_all
 
-    tune_all(BENCHMARKS, TuningBudget(args.trials, args.episodes), _tune_out(args), only=args.env,
-             machine=_machine(args), machine_file=args.machine)  # fmt: skip
+    tune_all(
+        BENCHMARKS,
+        TuningBudget(args.trials, args.episodes),
+        _tune_out(args),
+        only=args.env,
+        machine=_machine(args),
+        machine_file=args.machine,
+    )
     return 0
 
 
@@ -403,8 +425,9 @@ def _training_arguments(p: argparse.ArgumentParser, out_help: str) -> None:
     p.add_argument("--env", required=True, help="env id, e.g. machining_envs/Turning-v0")
     p.add_argument("--algo", default="ppo", choices=ALGO_CHOICES)
     p.add_argument("--out", required=True, help=out_help)
-    p.add_argument("--timesteps", type=_positive_int, default=None,
-                   help="override n_timesteps of the config")  # fmt: skip
+    p.add_argument(
+        "--timesteps", type=_positive_int, default=None, help="override n_timesteps of the config"
+    )
     p.add_argument(
         "--config", default=None, help="YAML file (default agents/rl/configs/<algo>.yml)"
     )
@@ -429,9 +452,13 @@ def _train_arguments(t):
     t.add_argument("--seed", type=_seed, default=0)
     t.add_argument("--resume", action="store_true", help="continue from the run's last checkpoint")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
-    t.add_argument("--machine", default=None, metavar="YAML",
-                   help="train for this machine (docs/shopfloor.md): its env options join the "
-                   "config's env_kwargs")  # fmt: skip
+    t.add_argument(
+        "--machine",
+        default=None,
+        metavar="YAML",
+        help="train for this machine (docs/shopfloor.md): its env options join the "
+        "config's env_kwargs",
+    )
 
 
 def _train(args, command):
@@ -461,15 +488,32 @@ def _train(args, command):
 
 def _sweep_arguments(w):
     _training_arguments(w, "results folder (must be new unless --resume)")
-    w.add_argument("--search", type=_int_at_least(0), default=0, metavar="N",
-                   help="trials of the hyperparameter search (0: train --seeds as configured)")  # fmt: skip
-    w.add_argument("--seeds", type=_seed, nargs="+", default=[0],
-                   help="training seeds, one trial each (a search uses one)")  # fmt: skip
-    w.add_argument("--workers", type=_positive_int, default=2,
-                   help="trials at once (CPUs of the local Ray instance)")  # fmt: skip
-    w.add_argument("--address", default=None,
-                   help="a running Ray cluster ('auto', 'ray://host:10001'); default: start "
-                   "Ray on this machine")  # fmt: skip
+    w.add_argument(
+        "--search",
+        type=_int_at_least(0),
+        default=0,
+        metavar="N",
+        help="trials of the hyperparameter search (0: train --seeds as configured)",
+    )
+    w.add_argument(
+        "--seeds",
+        type=_seed,
+        nargs="+",
+        default=[0],
+        help="training seeds, one trial each (a search uses one)",
+    )
+    w.add_argument(
+        "--workers",
+        type=_positive_int,
+        default=2,
+        help="trials at once (CPUs of the local Ray instance)",
+    )
+    w.add_argument(
+        "--address",
+        default=None,
+        help="a running Ray cluster ('auto', 'ray://host:10001'); default: start "
+        "Ray on this machine",
+    )
     w.add_argument("--resume", action="store_true", help="continue an interrupted sweep")
     w.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -509,9 +553,12 @@ def _sweep(args, command):
     from agents.rl.sweep import sweep
 
     sweep(
-        _sweep_settings(args), args.out, resume=args.resume, command=command,
+        _sweep_settings(args),
+        args.out,
+        resume=args.resume,
+        command=command,
         progress=not args.no_progress,
-    )  # fmt: skip
+    )
     return 0
 
 
@@ -521,13 +568,22 @@ def _evaluate_arguments(e):
     e.add_argument("--scenarios", nargs="+", default=["validation"], help="scenario names")
     e.add_argument("--episodes", type=_positive_int, default=20, help="episodes per scenario")
     e.add_argument("--seed", type=_seed, default=5000, help="first episode seed (validation's)")
-    e.add_argument("--algo", choices=ALGO_CHOICES, default=None,
-                   help="the model's algorithm (default: from config.json or the file name)")  # fmt: skip
-    e.add_argument("--stats", default=None,
-                   help="VecNormalize statistics (.json; default: *_vecnormalize.json beside "
-                   "the model)")  # fmt: skip
-    e.add_argument("--force", action="store_true",
-                   help="evaluate on --env although config.json names another env")  # fmt: skip
+    e.add_argument(
+        "--algo",
+        choices=ALGO_CHOICES,
+        default=None,
+        help="the model's algorithm (default: from config.json or the file name)",
+    )
+    e.add_argument(
+        "--stats",
+        default=None,
+        help="VecNormalize statistics (.json; default: *_vecnormalize.json beside the model)",
+    )
+    e.add_argument(
+        "--force",
+        action="store_true",
+        help="evaluate on --env although config.json names another env",
+    )
 
 
 def _evaluate_check(args):
@@ -542,9 +598,16 @@ def _evaluate(args, command):
     from agents.rl import evaluate_policy_file
 
     ev, s, score = evaluate_policy_file(
-        Path(args.model), args.env, args.scenarios, args.episodes, args.seed, algo=args.algo,
-        stats=args.stats, progress=True, force=args.force,
-    )  # fmt: skip
+        Path(args.model),
+        args.env,
+        args.scenarios,
+        args.episodes,
+        args.seed,
+        algo=args.algo,
+        stats=args.stats,
+        progress=True,
+        force=args.force,
+    )
     from agents.bench.declarations import benchmark_spec
 
     spec = benchmark_spec(args.env)
@@ -562,14 +625,25 @@ def _export_arguments(x):
     form.add_argument("--zoo", action="store_true", help="write an rl-zoo3 folder")
     x.add_argument("--model", required=True, help="a saved model .zip")
     x.add_argument("--env", default=None, help="env id (default: from config.json)")
-    x.add_argument("--out", default=None,
-                   help="the .onnx file or the rl-zoo3 folder (default: beside the model)")  # fmt: skip
-    x.add_argument("--algo", choices=ALGO_CHOICES, default=None,
-                   help="the model's algorithm (default: from config.json or the file name)")  # fmt: skip
-    x.add_argument("--stats", default=None,
-                   help="VecNormalize statistics (.json; default: beside the model)")  # fmt: skip
-    x.add_argument("--force", action="store_true",
-                   help="--onnx: check on --env although config.json names another env")  # fmt: skip
+    x.add_argument(
+        "--out",
+        default=None,
+        help="the .onnx file or the rl-zoo3 folder (default: beside the model)",
+    )
+    x.add_argument(
+        "--algo",
+        choices=ALGO_CHOICES,
+        default=None,
+        help="the model's algorithm (default: from config.json or the file name)",
+    )
+    x.add_argument(
+        "--stats", default=None, help="VecNormalize statistics (.json; default: beside the model)"
+    )
+    x.add_argument(
+        "--force",
+        action="store_true",
+        help="--onnx: check on --env although config.json names another env",
+    )
 
 
 def _export_check(args):
@@ -578,8 +652,10 @@ def _export_check(args):
         from agents.rl.zoo import check_zoo_export
 
         if args.env is not None or args.algo is not None or args.stats is not None:
-            raise UsageError("--zoo takes the env, algorithm and statistics of the run's "
-                             "config.json: drop --env, --algo and --stats")  # fmt: skip
+            raise UsageError(
+                "--zoo takes the env, algorithm and statistics of the run's "
+                "config.json: drop --env, --algo and --stats"
+            )
         try:
             check_zoo_export(model, args.out)
         except (FileNotFoundError, FileExistsError, ValueError) as exc:
@@ -603,9 +679,11 @@ def _export(args, command):
 
         exp = write_zoo_folder(args.model, args.out)
         algo, env_id = exp.parent.name, _run_config(Path(args.model))["env_id"]
-        print(f"wrote {exp}; run it with:\n  python -m rl_zoo3.enjoy --algo {algo} --env {env_id} "
-              f"-f {exp.parent.parent} --gym-packages machining_envs --exp-id 1 --load-best "
-              "--no-render")  # fmt: skip
+        print(
+            f"wrote {exp}; run it with:\n  python -m rl_zoo3.enjoy --algo {algo} --env {env_id} "
+            f"-f {exp.parent.parent} --gym-packages machining_envs --exp-id 1 --load-best "
+            "--no-render"
+        )
         return 0
     from agents.rl.export import export_onnx
 
@@ -698,7 +776,10 @@ COMMANDS: dict[str, Command] = {
             "the tuned ones and the shipped policies) on every env's fixed test and ood "
             "episodes; print the score tables and write CSV, report and plots. Needs the "
             "bench extra (and the rl extra for the shipped policies' rows).",
-            _benchmark_arguments, _benchmark, lambda a: ("bench",), _benchmark_check,
+            _benchmark_arguments,
+            _benchmark,
+            lambda a: ("bench",),
+            _benchmark_check,
         ),
         Command(
             "synthesize",
@@ -709,7 +790,10 @@ COMMANDS: dict[str, Command] = {
             "machining_envs/contouring/hinf_designs.json (or --out). The envs' servo and "
             "HInf2DOF load them from there, so every machine runs the same controllers. "
             "Needs the rl extra (the residual policies' base rho).",
-            _synthesize_arguments, _synthesize, _rl, _synthesize_check,
+            _synthesize_arguments,
+            _synthesize,
+            _rl,
+            _synthesize_check,
         ),
         Command(
             "tune",
@@ -718,14 +802,19 @@ COMMANDS: dict[str, Command] = {
             "with Optuna's TPE sampler, check the result on validation episodes, and write "
             "agents/bench/tuned.json (or --out). The same budget for every agent. Needs the "
             "bench extra.",
-            _tune_arguments, _tune, lambda a: ("bench",), _tune_check,
+            _tune_arguments,
+            _tune,
+            lambda a: ("bench",),
+            _tune_check,
         ),
         Command(
             "reproduce",
             "run a paper's experiments; paper vs ours",
             "Run the experiments of one source paper on the simulated plant and print the "
             "paper's numbers beside ours, row by row (exit 1 if a row does not match).",
-            _reproduce_arguments, _reproduce, check=_reproduce_check,
+            _reproduce_arguments,
+            _reproduce,
+            check=_reproduce_check,
         ),
         Command(
             "train",
@@ -734,7 +823,10 @@ COMMANDS: dict[str, Command] = {
             "agents/rl/configs/<algo>.yml (or --config); the run folder keeps the model, its "
             "normalisation statistics, checkpoints and its evaluations on the validation "
             "split. Needs the rl extra.",
-            _train_arguments, _train, _rl, _training_check,
+            _train_arguments,
+            _train,
+            _rl,
+            _training_check,
         ),
         Command(
             "sweep",
@@ -745,7 +837,10 @@ COMMANDS: dict[str, Command] = {
             "is. Ray starts on this machine unless --address names a cluster. The results "
             "folder keeps every trial's run, results.csv, curves.csv (learning curves) and "
             "the best model in best/. Needs the rl and ray extras.",
-            _sweep_arguments, _sweep, lambda a: ("rl", "ray"), _sweep_check,
+            _sweep_arguments,
+            _sweep,
+            lambda a: ("rl", "ray"),
+            _sweep_check,
         ),
         Command(
             "evaluate",
@@ -754,7 +849,10 @@ COMMANDS: dict[str, Command] = {
             "primary score. The model's run folder (config.json beside it) gives its "
             "algorithm and the env it was trained on; for a model trained elsewhere give "
             "--algo (and --stats). Needs the rl extra.",
-            _evaluate_arguments, _evaluate, _rl, _evaluate_check,
+            _evaluate_arguments,
+            _evaluate,
+            _rl,
+            _evaluate_check,
         ),
         Command(
             "export",
@@ -766,8 +864,10 @@ COMMANDS: dict[str, Command] = {
             "rl and onnx extras. --zoo: write the policy of a run (its config.json beside "
             "the model) in rl-zoo3's layout, for `python -m rl_zoo3.enjoy` (default: "
             "<run>/zoo). Needs the rl extra.",
-            _export_arguments, _export,
-            lambda a: ("rl", "onnx") if a.onnx else ("rl",), _export_check,
+            _export_arguments,
+            _export,
+            lambda a: ("rl", "onnx") if a.onnx else ("rl",),
+            _export_check,
         ),
         Command(
             "convert-stats",
@@ -775,7 +875,10 @@ COMMANDS: dict[str, Command] = {
             "Read FILE_vecnormalize.pkl (written by SB3's VecNormalize.save) and write its "
             "statistics as FILE_vecnormalize.json beside it. Reading a pickle runs any code "
             "it names: convert only files you trust. Needs the rl extra.",
-            _convert_arguments, _convert, _rl, _convert_check,
+            _convert_arguments,
+            _convert,
+            _rl,
+            _convert_check,
         ),
         Command(
             "warmup",
@@ -784,16 +887,24 @@ COMMANDS: dict[str, Command] = {
             "compiles its kernels now, with a progress bar, instead of at the first use "
             "(about 30 s an env; the cache in the package's __pycache__ serves every later "
             "process).",
-            _warmup_arguments, _warmup, check=_warmup_check,
+            _warmup_arguments,
+            _warmup,
+            check=_warmup_check,
         ),
     )
-}  # fmt: skip
+}
 
 #: What a command may fail with as a user's error (one line, exit 2) once it runs.
 USER_ERRORS = (
-    ValueError, FileExistsError, FileNotFoundError, NotADirectoryError, IsADirectoryError,
-    PermissionError, ImportError, RuntimeError,
-)  # fmt: skip
+    ValueError,
+    FileExistsError,
+    FileNotFoundError,
+    NotADirectoryError,
+    IsADirectoryError,
+    PermissionError,
+    ImportError,
+    RuntimeError,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

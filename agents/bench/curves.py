@@ -80,9 +80,15 @@ def _read_eval(folder: Path) -> list[dict]:
 
 
 def learning_curve(
-    name: str, seeds: list[tuple[int, Path]], env_id: str, env_kwargs: dict, score, failed,
-    reference: tuple[str, object] | None, seed: int = 0,
-) -> LearningCurve | None:  # fmt: skip
+    name: str,
+    seeds: list[tuple[int, Path]],
+    env_id: str,
+    env_kwargs: dict,
+    score,
+    failed,
+    reference: tuple[str, object] | None,
+    seed: int = 0,
+) -> LearningCurve | None:
     """The curve of the policies ``seeds`` (``(seed, model path)``, their ``eval.csv`` beside
     each model) and the reference ``(name, agent factory)`` scored on the same validation
     episodes; None when no seed has an ``eval.csv``."""
@@ -140,8 +146,13 @@ def plot_learning_curves(
             ax.plot(c.steps[c.first_match], c.iqm[c.first_match] * scale, "o", color=colour)
     ref = next((c for c in curves if c.reference is not None), None)
     if ref is not None and math.isfinite(ref.reference_score):
-        ax.axhline(ref.reference_score * scale, color="C2", ls="--", lw=1.2,
-                   label=f"{ref.reference}, same episodes")  # fmt: skip
+        ax.axhline(
+            ref.reference_score * scale,
+            color="C2",
+            ls="--",
+            lw=1.2,
+            label=f"{ref.reference}, same episodes",
+        )
     top = max(np.nanpercentile(c.scores * scale, 95) for c in curves)
     if ref is not None and math.isfinite(ref.reference_score):
         top = max(top, ref.reference_score * scale * 1.5)

@@ -361,7 +361,7 @@ PROCESS = Process(
                 "hole depth / diameter",
                 (6.0, 8.0, 10.0, 12.0),
                 _grid_hole,
-            ),  # fmt: skip
+            ),
             table_metrics=(
                 "drilling_time_s",
                 "torque_mean_rel",

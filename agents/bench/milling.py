@@ -440,7 +440,7 @@ PROCESS = Process(
                 "radial depth (mm)",
                 (0.5, 1.0, 2.0, 3.0),
                 _grid_cut,
-            ),  # fmt: skip
+            ),
             table_metrics=(
                 "machining_time_min",
                 "mrr_mm3_per_min",

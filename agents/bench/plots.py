@@ -44,8 +44,7 @@ def _kind_legend(fig, kinds) -> None:
     from matplotlib.lines import Line2D
 
     handles = [Line2D([], [], color=KIND_COLOUR[k], lw=3) for k in kinds]
-    fig.legend(handles, list(kinds), loc="lower center", ncol=len(kinds), fontsize=8,
-               frameon=False)  # fmt: skip
+    fig.legend(handles, list(kinds), loc="lower center", ncol=len(kinds), fontsize=8, frameon=False)
 
 
 def plot_scores(run: EnvRun, stats: dict, path: Path) -> Path:
@@ -64,8 +63,14 @@ def plot_scores(run: EnvRun, stats: dict, path: Path) -> Path:
     bounds = np.array([r.get("score_bound", math.nan) for r in rows]) * k
     if np.all(np.isfinite(bounds)):
         ax.axvline(float(iqm(bounds)), color="0.3", ls="--", lw=1)
-        ax.text(float(iqm(bounds)), len(names) - 0.4, " physical bound (IQM)", fontsize=7,
-                color="0.3", va="bottom")  # fmt: skip
+        ax.text(
+            float(iqm(bounds)),
+            len(names) - 0.4,
+            " physical bound (IQM)",
+            fontsize=7,
+            color="0.3",
+            va="bottom",
+        )
     ax.set_yticks(range(len(names)), names, fontsize=8)
     ax.set_ylim(-0.6, len(names))
     ax.set_xlabel(f"{run.score.label}: IQM, 95 % CI (lower is better)")
@@ -153,8 +158,9 @@ def plot_allowances(run: EnvRun, path: Path) -> Path | None:
         ax.axvline(100.0 * a, color="0.8", lw=0.8, zorder=0)
     ax.set_xlabel("allowance: share of steps over the limit that still counts (%)")
     ax.set_ylabel(f"{run.score.label}, IQM (lower is better)")
-    ax.set_title(f"{run.spec.env_id}: score against the allowance (test; grey: the verdict's)",
-                 fontsize=10)  # fmt: skip
+    ax.set_title(
+        f"{run.spec.env_id}: score against the allowance (test; grey: the verdict's)", fontsize=10
+    )
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
@@ -240,8 +246,15 @@ def plot_robustness(run: EnvRun, ref: str | None, path: Path) -> Path | None:
             im = ax.imshow(eff, origin="lower", vmin=0.0, vmax=1.0, cmap="viridis", aspect="auto")
             for iy in range(eff.shape[0]):
                 for ix in range(eff.shape[1]):
-                    ax.text(ix, iy, f"{eff[iy, ix]:.2f}", ha="center", va="center", fontsize=7,
-                            color="w" if eff[iy, ix] < 0.6 else "k")  # fmt: skip
+                    ax.text(
+                        ix,
+                        iy,
+                        f"{eff[iy, ix]:.2f}",
+                        ha="center",
+                        va="center",
+                        fontsize=7,
+                        color="w" if eff[iy, ix] < 0.6 else "k",
+                    )
             ax.set_xticks(range(len(grid.x_values)), [f"{v:g}" for v in grid.x_values])
             ax.set_yticks(range(len(grid.y_values)), [f"{v:g}" for v in grid.y_values])
             ax.set_xlabel(grid.x_label)

@@ -38,8 +38,9 @@ SPLIT_NOTES = {
 }
 
 
-def env_section(run: EnvRun, tuned: dict, n_test: int, n_ood: int, quick: bool, seed: int,
-                out: Path) -> dict:  # fmt: skip
+def env_section(
+    run: EnvRun, tuned: dict, n_test: int, n_ood: int, quick: bool, seed: int, out: Path
+) -> dict:
     """The env's report lines, printed text and compact table (see the module docstring)."""
     spec = run.spec
     env_name = spec.env_id.split("/")[-1]
@@ -49,12 +50,13 @@ def env_section(run: EnvRun, tuned: dict, n_test: int, n_ood: int, quick: bool, 
     tables = {sr.split: markdown_table(run, sr) for sr in results}
     test = results[0]
     pngs = [
-        plots.plot_scores(run, {n: r.stats for n, r in test.agents.items()},
-                          out / f"{env_name}_scores.png"),
+        plots.plot_scores(
+            run, {n: r.stats for n, r in test.agents.items()}, out / f"{env_name}_scores.png"
+        ),
         plots.plot_profiles(run, out / f"{env_name}_profiles.png"),
         plots.plot_allowances(run, out / f"{env_name}_allowances.png"),
         plots.plot_trajectories(run, out / f"{env_name}_trajectories.png"),
-    ]  # fmt: skip
+    ]
     if spec.robustness is not None and not quick:
         pngs.append(plots.plot_robustness(run, ref, out / f"{env_name}_robustness.png"))
     curve_lines = []
@@ -63,10 +65,15 @@ def env_section(run: EnvRun, tuned: dict, n_test: int, n_ood: int, quick: bool, 
         curve_lines += _margin_table(run)
     flags = flagged_seeds(results)
     flag_lines = (
-        [f"Training seeds that keep fewer than {SEED_FLOOR:.0%} of the workpieces:", "",
-         *[f"- **{f}**" for f in flags], ""]
-        if flags else []
-    )  # fmt: skip
+        [
+            f"Training seeds that keep fewer than {SEED_FLOOR:.0%} of the workpieces:",
+            "",
+            *[f"- **{f}**" for f in flags],
+            "",
+        ]
+        if flags
+        else []
+    )
     split_lines = []
     for sr in results[1:]:
         note = SPLIT_NOTES.get(sr.split)
@@ -91,8 +98,14 @@ def env_section(run: EnvRun, tuned: dict, n_test: int, n_ood: int, quick: bool, 
     text += [f"`{sr.split}`:\n\n{tables[sr.split]}\n" for sr in results[1:]]
     text += [line for line in flag_lines if line]
     text += curve_lines[2:-1]
-    compact = [f"### {env_name}", "", f"`test`, {n_test} episodes:", "",
-               compact_table(run, test), ""]  # fmt: skip
+    compact = [
+        f"### {env_name}",
+        "",
+        f"`test`, {n_test} episodes:",
+        "",
+        compact_table(run, test),
+        "",
+    ]
     return {
         "name": env_name,
         "lines": lines,
@@ -117,9 +130,15 @@ def _learning_curves(run: EnvRun, ref: str | None, path: Path, pngs: list, seed:
     curves = []
     for name in learned:
         c = learning_curve(
-            name, pretrained_seeds(name), run.spec.env_id, run.spec.env_kwargs, run.score,
-            run.failed, reference_row, seed,
-        )  # fmt: skip
+            name,
+            pretrained_seeds(name),
+            run.spec.env_id,
+            run.spec.env_kwargs,
+            run.score,
+            run.failed,
+            reference_row,
+            seed,
+        )
         if c is not None:
             curves.append(c)
     if not curves:

@@ -157,9 +157,15 @@ def markdown_table(run: EnvRun, sr: SplitResults) -> str:
     seed's counting share."""
     k = run.score.scale
     head = [
-        "agent", "kind", f"{run.score.label}: IQM [95 % CI]", "counts", "efficiency",
-        *allowance_header(), f"verdict vs {sr.reference or 'best tuned'}", "worst seed counts",
-    ]  # fmt: skip
+        "agent",
+        "kind",
+        f"{run.score.label}: IQM [95 % CI]",
+        "counts",
+        "efficiency",
+        *allowance_header(),
+        f"verdict vs {sr.reference or 'best tuned'}",
+        "worst seed counts",
+    ]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     if sr.bound_iqm is not None:
         lines.append(
@@ -199,14 +205,23 @@ def compact_table(run: EnvRun, sr: SplitResults) -> str:
     """The split's table with one number a cell (docs/results.md): IQM, counts,
     efficiency, the paired difference at each allowance, the verdict, the worst seed."""
     k = run.score.scale
-    head = ["agent", "kind", f"{run.score.label} IQM", "counts", "efficiency",
-            *allowance_header(), "verdict", "worst seed counts"]  # fmt: skip
+    head = [
+        "agent",
+        "kind",
+        f"{run.score.label} IQM",
+        "counts",
+        "efficiency",
+        *allowance_header(),
+        "verdict",
+        "worst seed counts",
+    ]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     if sr.bound_iqm is not None:
         lines.append(
             f"| physical bound | bound | {fmt(sr.bound_iqm * k)} | – | 1 | "
-            + "– | " * len(ALLOWANCES) + "– | – |"
-        )  # fmt: skip
+            + "– | " * len(ALLOWANCES)
+            + "– | – |"
+        )
     for name, res in sr.agents.items():
         s = res.stats
         eff = "–" if not math.isfinite(s.efficiency) else f"{s.efficiency:.2f}"

@@ -187,8 +187,17 @@ def _plot_keys(spec: BenchmarkSpec) -> set[str]:
     return keys
 
 
-def run_env(spec: BenchmarkSpec, n_test, n_ood, n_oracle, tuned: dict, verbose: bool, t0,
-            one_seed: bool = False, oracle_apart: bool = False) -> EnvRun:  # fmt: skip
+def run_env(
+    spec: BenchmarkSpec,
+    n_test,
+    n_ood,
+    n_oracle,
+    tuned: dict,
+    verbose: bool,
+    t0,
+    one_seed: bool = False,
+    oracle_apart: bool = False,
+) -> EnvRun:
     """Run every row of ``spec`` (see the module docstring): ``n_test`` test episodes,
     ``n_ood`` of ``ood`` and of each extra split, and the oracle on the first
     ``min(n_oracle, spec.oracle_episodes)`` test episodes. ``oracle_apart``: the oracle runs

@@ -85,8 +85,16 @@ def paper_settings(cls, env) -> dict:
         ) from None
 
 
-def _score(cls, params: dict, env_id: str, split: str, episodes: int, env_kwargs: dict,
-           score, failed: float) -> float:  # fmt: skip
+def _score(
+    cls,
+    params: dict,
+    env_id: str,
+    split: str,
+    episodes: int,
+    env_kwargs: dict,
+    score,
+    failed: float,
+) -> float:
     """The env's primary score of ``cls`` with ``params`` on the split's first episodes."""
     check_not_held_out([split], "tuning")
     factory = functools.partial(cls.from_env, **params)
@@ -102,9 +110,12 @@ def _score(cls, params: dict, env_id: str, split: str, episodes: int, env_kwargs
 
 
 def tune_agent(
-    cls, env_id: str, budget: TuningBudget | None = None, env_kwargs: dict | None = None,
+    cls,
+    env_id: str,
+    budget: TuningBudget | None = None,
+    env_kwargs: dict | None = None,
     verbose: bool = False,
-) -> dict:  # fmt: skip
+) -> dict:
     """Tune one agent class on one env by the protocol above; returns its ``tuned.json`` entry."""
     import optuna
 
@@ -120,8 +131,14 @@ def tune_agent(
         failed = score.failed_value(env)
     finally:
         env.close()
-    run = functools.partial(_score, env_id=env_id, episodes=budget.episodes,
-                            env_kwargs=env_kwargs, score=score, failed=failed)  # fmt: skip
+    run = functools.partial(
+        _score,
+        env_id=env_id,
+        episodes=budget.episodes,
+        env_kwargs=env_kwargs,
+        score=score,
+        failed=failed,
+    )
     if not space:
         raise ValueError(f"{cls.__name__} has no free parameters to tune (TUNABLE is empty)")
     t0 = time.perf_counter()
@@ -160,9 +177,14 @@ def tune_agent(
 
 
 def tune_all(
-    specs, budget: TuningBudget | None = None, path=TUNED_FILE, verbose: bool = True,
-    only: str | None = None, machine=None, machine_file: str | None = None,
-) -> dict:  # fmt: skip
+    specs,
+    budget: TuningBudget | None = None,
+    path=TUNED_FILE,
+    verbose: bool = True,
+    only: str | None = None,
+    machine=None,
+    machine_file: str | None = None,
+) -> dict:
     """Tune every ``spec.tuned`` agent class of every benchmark spec; write ``path``.
 
     ``only``: an env id; the entries of other envs already in ``path`` are kept.
@@ -187,8 +209,10 @@ def tune_all(
         if not spec.tuned:
             continue
         if verbose:
-            print(f"[{spec.env_id}] tuning {len(spec.tuned)} agents, {budget.trials} trials x "
-                  f"{budget.episodes} train episodes each")  # fmt: skip
+            print(
+                f"[{spec.env_id}] tuning {len(spec.tuned)} agents, {budget.trials} trials x "
+                f"{budget.episodes} train episodes each"
+            )
         kwargs = dict(spec.env_kwargs)
         if machine is not None:
             kwargs.update(machine.env_kwargs(spec.env_id))

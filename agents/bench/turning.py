@@ -267,7 +267,7 @@ PROCESS = Process(
                 "depth of cut (mm)",
                 (0.5, 1.0, 2.0, 3.0),
                 _grid_cut,
-            ),  # fmt: skip
+            ),
         ),
     ),
     reproduce=reproduce_turning,

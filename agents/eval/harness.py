@@ -428,9 +428,11 @@ def evaluate(
                     if venv is not None:
                         venv.close()
                     venv = gym.make_vec(
-                        env_id, num_envs=len(batch), autoreset_mode="SAME_STEP",
+                        env_id,
+                        num_envs=len(batch),
+                        autoreset_mode="SAME_STEP",
                         **(env_kwargs or {}),
-                    )  # fmt: skip
+                    )
                 trajs = rollout_batch(
                     agent,
                     venv,

@@ -63,9 +63,12 @@ class OperatingPoint:
     def scenario(self) -> TurningScenario:
         profile = DepthProfile.steps((self.depth_mm,), 2000.0, name=f"{self.depth_mm} mm")
         return TurningScenario(
-            f"{self.spindle_rpm:.0f} rpm, {self.depth_mm:g} mm", profile, self.spindle_rpm,
-            self.force_limit_N, noise_scale=0.0,
-        )  # fmt: skip
+            f"{self.spindle_rpm:.0f} rpm, {self.depth_mm:g} mm",
+            profile,
+            self.spindle_rpm,
+            self.force_limit_N,
+            noise_scale=0.0,
+        )
 
 
 @dataclass(frozen=True)
@@ -80,8 +83,9 @@ class Margins:
     inf without a gain crossover)."""
 
 
-def settle(agent, point: OperatingPoint, env_id: str = "machining_envs/Turning-v0",
-           delay_steps: int = 0):  # fmt: skip
+def settle(
+    agent, point: OperatingPoint, env_id: str = "machining_envs/Turning-v0", delay_steps: int = 0
+):
     """Run ``agent`` at ``point`` until it settles; ``(env, obs, state, action)`` at the end.
     ``ValueError`` if the episode ends first or the force has not settled (within 0.1 %).
     ``delay_steps``: control periods the CNC delays the command by (0: none)."""

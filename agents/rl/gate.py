@@ -258,9 +258,14 @@ def gate_agent(
     rows, labels = [], []
     for label, scenarios, seed, n_episodes in gate_scenarios(env_id, n_validation, per_edge):
         ev = evaluate(
-            agent, env_id, scenarios, n_episodes=n_episodes, seed=int(seed),
-            env_kwargs=env_kwargs, metrics_fn=metrics_fn,
-        )  # fmt: skip
+            agent,
+            env_id,
+            scenarios,
+            n_episodes=n_episodes,
+            seed=int(seed),
+            env_kwargs=env_kwargs,
+            metrics_fn=metrics_fn,
+        )
         rows += ev.rows
         labels += [label] * len(ev.rows)
     return gate_verdict(rows, score, share, labels)
@@ -378,8 +383,11 @@ def gated_sweep(
     def gate(model):
         v = gate_policy(model, settings.env_id, n_validation, per_edge)
         if verbose:
-            print(f"gate {model}: {'PASS' if v.passed else 'FAIL'} {v.counting}/{v.n} count, "
-                  f"{v.overloaded} overloaded", flush=True)  # fmt: skip
+            print(
+                f"gate {model}: {'PASS' if v.passed else 'FAIL'} {v.counting}/{v.n} count, "
+                f"{v.overloaded} overloaded",
+                flush=True,
+            )
         return v
 
     result = gated_seeds(settings.seeds, train_many, gate, max_replacements)
@@ -418,8 +426,13 @@ def main(argv=None) -> int:
     ap.add_argument("--n-validation", type=int, default=20)
     ap.add_argument("--per-edge", type=int, default=5)
     ap.add_argument("--out", type=Path, default=None, help="write the verdicts here (JSON)")
-    ap.add_argument("--sweep", type=Path, default=None, metavar="FOLDER",
-                    help="train --seeds under the gate into FOLDER (gated_sweep)")  # fmt: skip
+    ap.add_argument(
+        "--sweep",
+        type=Path,
+        default=None,
+        metavar="FOLDER",
+        help="train --seeds under the gate into FOLDER (gated_sweep)",
+    )
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     ap.add_argument("--algo", default="ppo")
     ap.add_argument("--config", default=None)
@@ -430,12 +443,18 @@ def main(argv=None) -> int:
         from agents.rl.sweep import SweepSettings
 
         settings = SweepSettings(
-            a.env_id, a.algo, seeds=a.seeds, n_timesteps=a.n_timesteps,
-            config_path=a.config, workers=a.workers,
-        )  # fmt: skip
+            a.env_id,
+            a.algo,
+            seeds=a.seeds,
+            n_timesteps=a.n_timesteps,
+            config_path=a.config,
+            workers=a.workers,
+        )
         result = gated_sweep(settings, a.sweep, a.n_validation, a.per_edge)
-        print(f"passed {result['passed']}, failed {result['failed']}, "
-              f"replacements {result['replacements']}; {a.sweep / 'gate.json'}")  # fmt: skip
+        print(
+            f"passed {result['passed']}, failed {result['failed']}, "
+            f"replacements {result['replacements']}; {a.sweep / 'gate.json'}"
+        )
         return 0 if result["complete"] else 1
     if not a.paths:
         ap.error("give the policies to gate, or --sweep FOLDER")

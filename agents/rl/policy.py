@@ -172,8 +172,13 @@ class ExactActor:
                 return None
         pol.set_training_mode(False)
         space = pol.action_space
-        return cls([tuple(x) for x in layers], pol.observation_space.shape,
-                   space.low.astype(np.float64), space.high.astype(np.float64), squash)  # fmt: skip
+        return cls(
+            [tuple(x) for x in layers],
+            pol.observation_space.shape,
+            space.low.astype(np.float64),
+            space.high.astype(np.float64),
+            squash,
+        )
 
     @staticmethod
     def _modules_of(pol):

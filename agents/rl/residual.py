@@ -159,8 +159,9 @@ class SetpointResidual(gym.Wrapper):
     Parameters are :class:`ResidualSpec`'s. ``info["setpoint"]`` is the knob's value used.
     """
 
-    def __init__(self, env, base: str, params="tuned", span=0.2, lo=0.3, hi=1.0,
-                 knob="setpoint", mode="knob"):  # fmt: skip
+    def __init__(
+        self, env, base: str, params="tuned", span=0.2, lo=0.3, hi=1.0, knob="setpoint", mode="knob"
+    ):
         super().__init__(env)
         self.residual = ResidualSpec(base, params, span, lo, hi, knob, mode).checked()
         self.base = self.residual.make_base(env)

@@ -205,9 +205,16 @@ class ContouringEnv(LaneEnv):
         **overrides,
     ):
         self._core = core = ContouringCore(
-            type(self).__name__, 1, scenario, params, reward, max_episode_time_s,
-            in_position_mm, divergence_mm, overrides,
-        )  # fmt: skip
+            type(self).__name__,
+            1,
+            scenario,
+            params,
+            reward,
+            max_episode_time_s,
+            in_position_mm,
+            divergence_mm,
+            overrides,
+        )
         self._adopt(core, scenario, render_mode)
         self.in_position_mm = core.in_position_mm
         self.divergence_mm = core.divergence_mm
@@ -262,9 +269,16 @@ class ContouringVectorEnv(LaneVectorEnv):
     ):
         check_vector_args(self.env_name, num_threads, overrides)
         core = ContouringCore(
-            type(self).__name__, check_num_envs(num_envs), first_scenario(scenario), params, reward,
-            max_episode_time_s, in_position_mm, divergence_mm, overrides,
-        )  # fmt: skip
+            type(self).__name__,
+            check_num_envs(num_envs),
+            first_scenario(scenario),
+            params,
+            reward,
+            max_episode_time_s,
+            in_position_mm,
+            divergence_mm,
+            overrides,
+        )
         super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
 
 

@@ -174,10 +174,21 @@ class ContouringFeedEnv(LaneEnv):
         **overrides,
     ):
         self._core = core = FeedCore(
-            type(self).__name__, 1, scenario, params, servo, tolerance_mm, reward,
-            decision_interval_s, override_max, max_episode_time_s, in_position_mm,
-            divergence_mm, overrides, actuation,
-        )  # fmt: skip
+            type(self).__name__,
+            1,
+            scenario,
+            params,
+            servo,
+            tolerance_mm,
+            reward,
+            decision_interval_s,
+            override_max,
+            max_episode_time_s,
+            in_position_mm,
+            divergence_mm,
+            overrides,
+            actuation,
+        )
         self._adopt(core, scenario, render_mode)
         self.servo = core.servo
         self.tolerance_mm = core.tolerance_mm
@@ -246,10 +257,21 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
     ):
         check_vector_args(self.env_name, num_threads, overrides)
         core = FeedCore(
-            type(self).__name__, check_num_envs(num_envs), first_scenario(scenario), params, servo,
-            tolerance_mm, reward, decision_interval_s, override_max, max_episode_time_s,
-            in_position_mm, divergence_mm, overrides, actuation,
-        )  # fmt: skip
+            type(self).__name__,
+            check_num_envs(num_envs),
+            first_scenario(scenario),
+            params,
+            servo,
+            tolerance_mm,
+            reward,
+            decision_interval_s,
+            override_max,
+            max_episode_time_s,
+            in_position_mm,
+            divergence_mm,
+            overrides,
+            actuation,
+        )
         super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
         self.servo = core.servo
         self.tolerance_mm = core.tolerance_mm

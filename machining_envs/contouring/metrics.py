@@ -70,12 +70,29 @@ def circle_radius_errors(traj: dict, steady_fraction: float = STEADY_FRACTION):
 
 
 @reads_info(
-    "t_s", "contour_error_mm", "peak_contour_error_mm", "tracking_error_mm",
-    "circle_radius_mm", "circle_cx_mm", "circle_cy_mm", "path_s_mm", "path_length_mm",
-    "x_mm", "y_mm", "finished", "machining_time_s", "torque_sq_Nm2", "command_x_mm_s",
-    "command_y_mm_s", "cost", "score_bound", "time_limit_s", "diverged",
-    "contour_tolerance_mm", "overload_ratio",
-)  # fmt: skip
+    "t_s",
+    "contour_error_mm",
+    "peak_contour_error_mm",
+    "tracking_error_mm",
+    "circle_radius_mm",
+    "circle_cx_mm",
+    "circle_cy_mm",
+    "path_s_mm",
+    "path_length_mm",
+    "x_mm",
+    "y_mm",
+    "finished",
+    "machining_time_s",
+    "torque_sq_Nm2",
+    "command_x_mm_s",
+    "command_y_mm_s",
+    "cost",
+    "score_bound",
+    "time_limit_s",
+    "diverged",
+    "contour_tolerance_mm",
+    "overload_ratio",
+)
 def contouring_metrics(traj: dict) -> dict[str, float]:
     """Metrics of one contouring episode.
 

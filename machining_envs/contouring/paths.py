@@ -88,8 +88,7 @@ class Line:
 
     def _row(self) -> list[float]:
         """The segment's row of :meth:`Path.table` (its place in the path left at zero)."""
-        return [_LINE, 0.0, 0.0, 0.0, 0.0, 0.0, *self.start, *self._u, self.length,
-                0.0, 0.0, 0.0, 0.0, 0.0]  # fmt: skip
+        return _segment_row(_LINE, *self.start, *self._u, self.length)
 
     def points(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return self.start[0] + self._u[0] * s, self.start[1] + self._u[1] * s
@@ -196,8 +195,16 @@ class Arc:
 
     def _row(self) -> list[float]:
         """The segment's row of :meth:`Path.table` (its place in the path left at zero)."""
-        return [_ARC, 0.0, 0.0, 0.0, 0.0, 0.0, *self.center, self.radius, self.start_angle,
-                self.sign, abs(self.sweep), *self.start, *self.end]  # fmt: skip
+        return _segment_row(
+            _ARC,
+            *self.center,
+            self.radius,
+            self.start_angle,
+            self.sign,
+            abs(self.sweep),
+            *self.start,
+            *self.end,
+        )
 
     def closest(self, px: float, py: float) -> tuple[float, float, float]:
         cx, cy = self.center
@@ -317,9 +324,16 @@ class Involute:
 
     def _row(self) -> list[float]:
         """The segment's row of :meth:`Path.table` (its place in the path left at zero)."""
-        return [_INVOLUTE, 0.0, 0.0, 0.0, 0.0, 0.0, *self.center, self.radius, self.theta1,
-                self.theta_start, self.theta_end, self.theta_start**2, float(self._k_span),
-                0.0, 0.0]  # fmt: skip
+        return _segment_row(
+            _INVOLUTE,
+            *self.center,
+            self.radius,
+            self.theta1,
+            self.theta_start,
+            self.theta_end,
+            self.theta_start**2,
+            float(self._k_span),
+        )
 
     def _feet(self, px: float, py: float) -> list[float]:
         """Parameters of the feet of the normals from ``p`` that lie on the segment."""
@@ -708,12 +722,22 @@ class Path:
         draws = rng.random((5, n)).tolist()  # kind, length/radius, sweep, direction, spare
         heading = float(rng.uniform(-math.pi, math.pi))
         p = _point("start", start)
-        return cls._smooth(draws, heading, line_mm, radius_mm, sweep_deg, line_probability, p,
-                           str(name))  # fmt: skip
+        return cls._smooth(
+            draws, heading, line_mm, radius_mm, sweep_deg, line_probability, p, str(name)
+        )
 
     @classmethod
-    def _smooth(cls, draws, heading: float, line_mm, radius_mm, sweep_deg,
-                line_probability: float, p: tuple[float, float], name: str) -> Path:  # fmt: skip
+    def _smooth(
+        cls,
+        draws,
+        heading: float,
+        line_mm,
+        radius_mm,
+        sweep_deg,
+        line_probability: float,
+        p: tuple[float, float],
+        name: str,
+    ) -> Path:
         """:meth:`random_smooth`'s path from its drawn numbers (``draws``: five lists of
         one number per segment; ``heading``: the first heading; ``p``: the start), its
         ranges checked; :func:`smooth_table` computes the same path's table."""
@@ -915,6 +939,13 @@ class Path:
 #: Columns of a row of :meth:`Path.table`.
 SEGMENT_COLUMNS = 16
 _LINE, _ARC, _INVOLUTE = 0.0, 1.0, 2.0
+
+
+def _segment_row(kind: float, *numbers: float) -> list[float]:
+    """A row of :meth:`Path.table`: the segment's ``kind``, its place in the path left at
+    zero (columns 1-5, filled by :class:`Path`), its own ``numbers`` from column 6, zeros
+    after them."""
+    return [kind, 0.0, 0.0, 0.0, 0.0, 0.0, *numbers] + [0.0] * (SEGMENT_COLUMNS - 6 - len(numbers))
 
 
 @numba.njit(cache=True)
@@ -1216,8 +1247,15 @@ def _arc_wedge(row):
     r = row[8]
     sized = r >= 1e-5 * (abs(cx) + abs(cy) + 1.0)
     half = row[11] < math.pi
-    return (row[10], half and sized, (not half) and sized, (row[12] - cx) / r,
-            (row[13] - cy) / r, (row[14] - cx) / r, (row[15] - cy) / r)  # fmt: skip
+    return (
+        row[10],
+        half and sized,
+        (not half) and sized,
+        (row[12] - cx) / r,
+        (row[13] - cy) / r,
+        (row[14] - cx) / r,
+        (row[15] - cy) / r,
+    )
 
 
 @numba.njit(cache=True)

@@ -212,8 +212,9 @@ def _paper(name: str, path: Callable[[], Path], feed: float, loads=()):
 #: decisions (20 ms) of delay. Chosen, not measured: a CNC applies the override through its
 #: feed planner, which limits how fast the path speed may change; these limits bind on the
 #: paths' corners, where an ideal override would brake within one decision.
-SHOPFLOOR_OVERRIDE = Actuation(quantum=0.005, max_rate_per_s=2.5, delay_steps=2,
-                               max_accel_per_s2=60.0)  # fmt: skip
+SHOPFLOOR_OVERRIDE = Actuation(
+    quantum=0.005, max_rate_per_s=2.5, delay_steps=2, max_accel_per_s2=60.0
+)
 
 
 class _RandomPaths:
@@ -244,10 +245,17 @@ class _RandomPaths:
         self.log_inertia = (float(np.log(inertia[0])), float(np.log(inertia[1])))
         # What draw_lanes hands its compiled draw besides the generators and lanes, made once.
         self._draw_args = (
-            _split_key(name), segments[0], segments[1], np.array(line), np.array(radius),
-            np.array(sweep), _LINE_PROBABILITY, np.array(self.log_feed),
-            np.array(self.log_inertia), float(load_max),
-        )  # fmt: skip
+            _split_key(name),
+            segments[0],
+            segments[1],
+            np.array(line),
+            np.array(radius),
+            np.array(sweep),
+            _LINE_PROBABILITY,
+            np.array(self.log_feed),
+            np.array(self.log_inertia),
+            float(load_max),
+        )
         # Every drawn field lies between these two scenarios' (checked here, once): the
         # factory builds its scenarios without checking them again.
         self.extremes = tuple(
@@ -258,7 +266,7 @@ class _RandomPaths:
                 ((0.0, load_max, -load_max),),
                 (inertia[end], inertia[end]),
                 actuation=actuation,
-            )  # fmt: skip
+            )
             for end in (0, 1)
         )
 
@@ -309,9 +317,15 @@ class _RandomPaths:
         """The scenario of lane ``i`` of the lanes' numbers from :meth:`draw_lanes`."""
         n = int(drawn.ints[i, 0])
         path = Path._smooth(
-            drawn.draws[i, :, :n].tolist(), float(drawn.floats[i, _D_HEADING]), self.line,
-            self.radius, self.sweep, _LINE_PROBABILITY, (0.0, 0.0), f"{self.name} path",
-        )  # fmt: skip
+            drawn.draws[i, :, :n].tolist(),
+            float(drawn.floats[i, _D_HEADING]),
+            self.line,
+            self.radius,
+            self.sweep,
+            _LINE_PROBABILITY,
+            (0.0, 0.0),
+            f"{self.name} path",
+        )
         loads = ()
         if drawn.ints[i, 1]:
             length, u, a, b = drawn.floats[i, [_D_LENGTH, _D_T, _D_A, _D_B]].tolist()
@@ -352,8 +366,20 @@ def load_time(length, feed, u):
 
 
 @numba.njit(cache=True)
-def _draw_smooth_lanes(table, lanes, key, seg_lo, seg_hi, line, radius, sweep, line_probability,
-                       log_feed, log_inertia, load_max):  # fmt: skip
+def _draw_smooth_lanes(
+    table,
+    lanes,
+    key,
+    seg_lo,
+    seg_hi,
+    line,
+    radius,
+    sweep,
+    line_probability,
+    log_feed,
+    log_inertia,
+    load_max,
+):
     """:meth:`_RandomPaths.draw_lanes`' compiled part: each lane's stream
     (``lane_split_state``) and, in :meth:`_RandomPaths.__call__`'s order, the draws of
     ``random_smooth`` (the number of segments, their uniforms, the first heading), of the

@@ -71,10 +71,17 @@ class ActionMap:
         k ln(10) / 2, 10^k - 1, mid, half]`` (``k`` the decades): the linear map is
         ``mid + half a``, the log map ``command_min + range expm1(c (a + 1)) / g``."""
         return np.array(
-            [self.scale == "log", self.command_min, self._span, self._c, self._g, self._mid,
-             self._half],
+            [
+                self.scale == "log",
+                self.command_min,
+                self._span,
+                self._c,
+                self._g,
+                self._mid,
+                self._half,
+            ],
             dtype=np.float64,
-        )  # fmt: skip
+        )
 
     def action_to_command(self, action):
         """Physical command for an action in [-1, 1] (array or scalar)."""

@@ -80,8 +80,9 @@ class Actuation:
 #: (0.25 s from rest to full rate), two control periods (0.2 s at both envs' 10 Hz) of
 #: interpolator delay. Chosen, not measured: of the order of a production control's override
 #: handling, strict enough that a design for an ideal actuator notices.
-SHOPFLOOR_ACTUATION = Actuation(quantum=0.01, max_rate_per_s=0.5, delay_steps=2,
-                                max_accel_per_s2=2.0)  # fmt: skip
+SHOPFLOOR_ACTUATION = Actuation(
+    quantum=0.01, max_rate_per_s=0.5, delay_steps=2, max_accel_per_s2=2.0
+)
 
 
 def resolve_actuation(actuation) -> Actuation | None:
@@ -125,8 +126,14 @@ class ActuationLanes:
         The settings every lane starts with (None: ideal, the command passes unchanged).
     """
 
-    def __init__(self, n: int, command_range: float, low: float, sample_time_s: float,
-                 actuation: Actuation | None = None):  # fmt: skip
+    def __init__(
+        self,
+        n: int,
+        command_range: float,
+        low: float,
+        sample_time_s: float,
+        actuation: Actuation | None = None,
+    ):
         self.range = float(command_range)
         self.low = float(low)
         self.ts = float(sample_time_s)

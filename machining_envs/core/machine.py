@@ -100,8 +100,9 @@ class Machine:
                 d = max(0, a.delay_steps + dd)
                 rate = a.max_rate_per_s * f if math.isfinite(a.max_rate_per_s) else math.inf
                 acc = a.max_accel_per_s2 * f if math.isfinite(a.max_accel_per_s2) else math.inf
-                out.append(dataclasses.replace(a, delay_steps=d, max_rate_per_s=rate,
-                                               max_accel_per_s2=acc))  # fmt: skip
+                out.append(
+                    dataclasses.replace(a, delay_steps=d, max_rate_per_s=rate, max_accel_per_s2=acc)
+                )
         return out
 
 

@@ -170,9 +170,19 @@ def score_bound(traj: dict) -> float:
 
 
 @reads_info(
-    "t_s", "force_N", "force_limit_N", "cost", "depth_mm", "segment", "score_bound",
-    "finished", "machining_time_s", "breakage", "diverged", "overload_ratio",
-)  # fmt: skip
+    "t_s",
+    "force_N",
+    "force_limit_N",
+    "cost",
+    "depth_mm",
+    "segment",
+    "score_bound",
+    "finished",
+    "machining_time_s",
+    "breakage",
+    "diverged",
+    "overload_ratio",
+)
 def regulation_metrics(
     traj: dict, signal: str = "force_N", limit: str = "force_limit_N"
 ) -> dict[str, float]:

@@ -91,8 +91,9 @@ class PowerSensor:
         """The drive's power with the tool in air at ``spindle_rpm``, W."""
         return self.idle_W + self.idle_W_per_rpm * np.asarray(spindle_rpm, dtype=np.float64)
 
-    def error_bound_W(self, max_rate_W_per_s: float, initial_error_W: float = 0.0,
-                      t_s: float = math.inf) -> float:  # fmt: skip
+    def error_bound_W(
+        self, max_rate_W_per_s: float, initial_error_W: float = 0.0, t_s: float = math.inf
+    ) -> float:
         """The largest difference between the reading and the drive power at time ``t_s``
         after the start, for a drive power changing by at most ``max_rate_W_per_s`` and an
         initial difference ``initial_error_W`` (see the module docstring)."""
@@ -167,8 +168,9 @@ class PowerSensorLanes:
         self.y[lanes] = u
         self.reading[lanes] = self._quantise(u)[:, None]
         self.count[lanes] = 0
-        self.limit[lanes] = self._limit(np.asarray(limit_cut_W, dtype=np.float64),
-                                        np.asarray(rpm, dtype=np.float64))[lanes]  # fmt: skip
+        self.limit[lanes] = self._limit(
+            np.asarray(limit_cut_W, dtype=np.float64), np.asarray(rpm, dtype=np.float64)
+        )[lanes]
         self._write(obs, lanes)
 
     def update(self, obs: np.ndarray, lanes, cutting_W, rpm, limit_cut_W) -> None:
@@ -191,8 +193,9 @@ class PowerSensorLanes:
         r = self.reading
         r[:, 1:] = r[:, :-1].copy()
         r[:, 0] = np.where(read, self._quantise(self.y), r[:, 0])
-        self.limit = self._limit(np.asarray(limit_cut_W, dtype=np.float64),
-                                 np.asarray(rpm, dtype=np.float64))  # fmt: skip
+        self.limit = self._limit(
+            np.asarray(limit_cut_W, dtype=np.float64), np.asarray(rpm, dtype=np.float64)
+        )
         self._write(obs, slice(None))
 
     def _drive(self, cutting_W, rpm) -> np.ndarray:

@@ -187,8 +187,9 @@ class SplitStream:
         """One integer in [low, high) (``int64``)."""
         low, high = int(low), int(high)
         if not -(2**63) <= low < high <= 2**63 or high - low > 2**32:
-            raise ValueError(f"integers: need low < high within 2**32 of each other, got "
-                             f"{low}, {high}")  # fmt: skip
+            raise ValueError(
+                f"integers: need low < high within 2**32 of each other, got {low}, {high}"
+            )
         return np.int64(low + stream_bounded(self._state, high - low - 1))
 
 

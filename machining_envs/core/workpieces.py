@@ -194,9 +194,14 @@ class DepthProfile:
             raise ValueError(f"n_segments must be a range of integers >= 1, got {n_segments!r}")
         # lengths, start depths, taper?, end depths: one row of n draws each
         table = _random_segments(
-            rng.random((4, n)), float(lo), float(hi), s_lo, s_hi, float(taper_probability),
+            rng.random((4, n)),
+            float(lo),
+            float(hi),
+            s_lo,
+            s_hi,
+            float(taper_probability),
             float(max_jump_ratio),
-        )  # fmt: skip
+        )
         table.flags.writeable = False
         # Built from checked ranges: every edge grows by at least s_lo > 0, every depth
         # lies in [lo, hi] within DEPTH_RANGE_MM.
@@ -221,8 +226,9 @@ class DepthProfile:
         return lo, hi, s_lo, s_hi
 
     @classmethod
-    def check_random_ranges(cls, depth_range_mm, n_segments, segment_mm,
-                            max_jump_ratio: float = 2.5) -> None:  # fmt: skip
+    def check_random_ranges(
+        cls, depth_range_mm, n_segments, segment_mm, max_jump_ratio: float = 2.5
+    ) -> None:
         """``ValueError`` unless :meth:`random` accepts these ranges for every draw: what a
         scenario factory checks once before it draws through :func:`drawn_profile`."""
         cls._check_ranges(depth_range_mm, segment_mm, max_jump_ratio)
@@ -311,10 +317,14 @@ class DepthProfile:
         if wear_per_mm == 0.0:
             return self.traverse_time_s(c, q, v_max)
         length = self.length_mm
-        x = np.unique(np.concatenate([
-            np.linspace(0.0, length, 20001),
-            *[[e - 1e-4 * length, e] for e in self.change_positions_mm()],
-        ]))  # fmt: skip
+        x = np.unique(
+            np.concatenate(
+                [
+                    np.linspace(0.0, length, 20001),
+                    *[[e - 1e-4 * length, e] for e in self.change_positions_mm()],
+                ]
+            )
+        )
         x = x[(x >= 0.0) & (x <= length)]
         a = self(x)
         with np.errstate(divide="ignore"):
@@ -322,8 +332,17 @@ class DepthProfile:
         return float(trapezoid(np.maximum(slowness, 1.0 / v_max), x))
 
 
-def drawn_profile(state, before: int, depth_range_mm, n_segments, segment_mm,
-                  taper_probability: float, max_jump_ratio: float, after: int, name: str):  # fmt: skip
+def drawn_profile(
+    state,
+    before: int,
+    depth_range_mm,
+    n_segments,
+    segment_mm,
+    taper_probability: float,
+    max_jump_ratio: float,
+    after: int,
+    name: str,
+):
     """A random workpiece drawn from a split's compiled stream (``state``:
     :func:`~machining_envs.core.splits.split_state`) between ``before`` and ``after``
     uniform numbers, in one compiled call: ``(the uniforms before, the profile, the
@@ -331,8 +350,7 @@ def drawn_profile(state, before: int, depth_range_mm, n_segments, segment_mm,
     :meth:`DepthProfile.random` ``(rng, ...)`` and ``rng.random(after)`` give from the
     split's generator. For scenario factories, which check their ranges once: these are
     not checked again."""
-    ranges = _cut_ranges(depth_range_mm, n_segments, segment_mm, taper_probability,
-                         max_jump_ratio)  # fmt: skip
+    ranges = _cut_ranges(depth_range_mm, n_segments, segment_mm, taper_probability, max_jump_ratio)
     b, table, a = _draw_cut(state, before, *ranges, after)
     return b, _drawn(table, name), a
 
@@ -349,9 +367,18 @@ def _drawn(table: np.ndarray, name: str) -> DepthProfile:
     return DepthProfile._built(table, name)
 
 
-def drawn_lane_cuts(table, lanes: np.ndarray, split: str, before: int, depth_range_mm,
-                    n_segments, segment_mm, taper_probability: float, max_jump_ratio: float,
-                    after: int):  # fmt: skip
+def drawn_lane_cuts(
+    table,
+    lanes: np.ndarray,
+    split: str,
+    before: int,
+    depth_range_mm,
+    n_segments,
+    segment_mm,
+    taper_probability: float,
+    max_jump_ratio: float,
+    after: int,
+):
     """:func:`drawn_profile`'s numbers for many lanes in one compiled call, each from the
     ``split``'s stream of its own generator (row ``lanes[i]`` of ``table``, a
     :class:`~machining_envs.core.compiled.normals.LaneGenerators` table): what ``drawn_profile(
@@ -360,8 +387,7 @@ def drawn_lane_cuts(table, lanes: np.ndarray, split: str, before: int, depth_ran
     shape ``(L, before)``; every lane's segments (:meth:`DepthProfile.segment_array`'s
     rows), lane ``i``'s in ``segments[i, :, : counts[i] + 1]``; the uniforms after,
     ``(L, after)``."""
-    ranges = _cut_ranges(depth_range_mm, n_segments, segment_mm, taper_probability,
-                         max_jump_ratio)  # fmt: skip
+    ranges = _cut_ranges(depth_range_mm, n_segments, segment_mm, taper_probability, max_jump_ratio)
     return _draw_lane_cuts(table, lanes, _split_key(split), before, *ranges, after)
 
 
@@ -369,13 +395,34 @@ def _cut_ranges(depth_range_mm, n_segments, segment_mm, taper_probability, max_j
     """The workpiece's ranges as :func:`_draw_cut` takes them (floats and ints, in order)."""
     lo, hi = depth_range_mm
     s_lo, s_hi = segment_mm
-    return (float(lo), float(hi), int(n_segments[0]), int(n_segments[1]), float(s_lo),
-            float(s_hi), float(taper_probability), float(max_jump_ratio))  # fmt: skip
+    return (
+        float(lo),
+        float(hi),
+        int(n_segments[0]),
+        int(n_segments[1]),
+        float(s_lo),
+        float(s_hi),
+        float(taper_probability),
+        float(max_jump_ratio),
+    )
 
 
 @numba.njit(cache=True)
-def _draw_lane_cuts(table, lanes, key, before, lo, hi, n_lo, n_hi, s_lo, s_hi,
-                    taper_probability, max_jump_ratio, after):  # fmt: skip
+def _draw_lane_cuts(
+    table,
+    lanes,
+    key,
+    before,
+    lo,
+    hi,
+    n_lo,
+    n_hi,
+    s_lo,
+    s_hi,
+    taper_probability,
+    max_jump_ratio,
+    after,
+):
     """:func:`drawn_lane_cuts`' numbers."""
     n_lanes = lanes.size
     b = np.empty((n_lanes, before))
@@ -385,8 +432,9 @@ def _draw_lane_cuts(table, lanes, key, before, lo, hi, n_lo, n_hi, s_lo, s_hi,
     state = np.empty(6, dtype=np.uint64)
     for i in range(n_lanes):
         lane_split_state(table, lanes[i], key, state)
-        bi, cut, ai = _draw_cut(state, before, lo, hi, n_lo, n_hi, s_lo, s_hi,
-                                taper_probability, max_jump_ratio, after)  # fmt: skip
+        bi, cut, ai = _draw_cut(
+            state, before, lo, hi, n_lo, n_hi, s_lo, s_hi, taper_probability, max_jump_ratio, after
+        )
         copy_into(b[i], bi)
         copy_into(a[i], ai)
         n = cut.shape[1] - 1
@@ -397,8 +445,9 @@ def _draw_lane_cuts(table, lanes, key, before, lo, hi, n_lo, n_hi, s_lo, s_hi,
 
 
 @numba.njit(cache=True)
-def _draw_cut(state, before, lo, hi, n_lo, n_hi, s_lo, s_hi, taper_probability, max_jump_ratio,
-              after):  # fmt: skip
+def _draw_cut(
+    state, before, lo, hi, n_lo, n_hi, s_lo, s_hi, taper_probability, max_jump_ratio, after
+):
     """:func:`drawn_profile`'s numbers: ``before`` uniforms, the number of segments
     (``integers(n_lo, n_hi + 1)``), a ``(4, n)`` block of uniforms (:meth:`DepthProfile.
     random`'s), its segments (:func:`_random_segments`), ``after`` uniforms."""

@@ -35,10 +35,25 @@ def drilling_mask(traj: dict) -> np.ndarray:
 
 
 @reads_info(
-    "t_s", "cutting", "engagement", "torque_Nmm", "thrust_N", "torque_limit_Nmm", "cost",
-    "spindle_hz", "peak_torque_Nmm", "breakage_torque_Nmm", "finished", "drilling_time_s",
-    "position_mm", "depth_mm", "score_bound", "breakage", "diverged", "overload_ratio",
-)  # fmt: skip
+    "t_s",
+    "cutting",
+    "engagement",
+    "torque_Nmm",
+    "thrust_N",
+    "torque_limit_Nmm",
+    "cost",
+    "spindle_hz",
+    "peak_torque_Nmm",
+    "breakage_torque_Nmm",
+    "finished",
+    "drilling_time_s",
+    "position_mm",
+    "depth_mm",
+    "score_bound",
+    "breakage",
+    "diverged",
+    "overload_ratio",
+)
 def drilling_metrics(traj: dict) -> dict[str, float]:
     """Metrics of one micro-drilling episode.
 

@@ -163,9 +163,17 @@ def _random(
     # builds its scenarios without checking them again.
     for end in (0, 1):
         DrillingScenario(
-            name, 0.5 + 0.3 * end, aspect[end], None, cutting[end], chips[end], fluct[end],
-            noise[end], torque_limit_scale=limit[end], wear_per_mm=wear[end] if wear else 0.0,
-        )  # fmt: skip
+            name,
+            0.5 + 0.3 * end,
+            aspect[end],
+            None,
+            cutting[end],
+            chips[end],
+            fluct[end],
+            noise[end],
+            torque_limit_scale=limit[end],
+            wear_per_mm=wear[end] if wear else 0.0,
+        )
 
     def make(env_rng: np.random.Generator) -> DrillingScenario:
         rng = split_stream(env_rng, name)

@@ -39,9 +39,14 @@ def machining_time_eq20_min(traj: dict) -> float:
 
 @reads_info(
     *(regulation_metrics.info_keys - {"force_N", "force_limit_N"}),
-    "torque_Nmm", "torque_limit_Nmm", "position_mm", "mean_feed_mm_per_rev", "spindle_rpm",
-    "workpiece_length_mm", "removed_volume_mm3",
-)  # fmt: skip
+    "torque_Nmm",
+    "torque_limit_Nmm",
+    "position_mm",
+    "mean_feed_mm_per_rev",
+    "spindle_rpm",
+    "workpiece_length_mm",
+    "removed_volume_mm3",
+)
 def milling_metrics(traj: dict) -> dict[str, float]:
     """Regulation metrics of the torque (see ``regulation_metrics``) plus:
 

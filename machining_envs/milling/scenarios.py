@@ -286,9 +286,12 @@ class _SplitFactory:
         # The numbers of DepthProfile.random(rng, ...) and one rng.uniform per range, from
         # the split's stream in one compiled call.
         _, prof, v = drawn_profile(
-            split_state(env_rng, self.name), 0, *self._cut_ranges, len(self.lows),
+            split_state(env_rng, self.name),
+            0,
+            *self._cut_ranges,
+            len(self.lows),
             self.profile_name,
-        )  # fmt: skip
+        )
         return self._scenario(prof, v.tolist())
 
     @property
@@ -388,9 +391,12 @@ def machining_time_bound(
     e = truth.torque_feed_exponent
     l_exp = truth.depth_exponent if truth.force_model == "power_law" else 1.0
     c = bound_coefficient(
-        float(truth.torque_gain(1.0)), float(e), float(scenario.torque_limit_Nmm(truth)),
-        float(truth.n_teeth), float(spindle_rpm),
-    )  # fmt: skip
+        float(truth.torque_gain(1.0)),
+        float(e),
+        float(scenario.torque_limit_Nmm(truth)),
+        float(truth.n_teeth),
+        float(spindle_rpm),
+    )
     # With wear, c (1 + w x) in f_t*: the integrand gains (1 + w x)^(1/e).
     return scenario.profile.worn_traverse_time_s(
         c, l_exp / e, truth.max_feed_velocity_mm_s, truth.wear_per_100mm / 100.0, 1.0 / e

@@ -220,9 +220,12 @@ class _SplitFactory:
         # The numbers of rng.random(), DepthProfile.random(rng, ...) and one rng.uniform
         # per range, from the split's stream in one compiled call.
         r, prof, v = drawn_profile(
-            split_state(env_rng, self.name), 1, *self._cut_ranges, len(self.lows),
+            split_state(env_rng, self.name),
+            1,
+            *self._cut_ranges,
+            len(self.lows),
             self.profile_name,
-        )  # fmt: skip
+        )
         spindle = float(np.exp(self.log_rpm + self.log_span * float(r[0])))
         return self._scenario(spindle, prof, v.tolist())
 
@@ -242,8 +245,9 @@ class _SplitFactory:
         )
         return np.exp(self.log_rpm + self.log_span * r[:, 0]), segments, counts, v
 
-    def build_lane(self, spindle: np.ndarray, segments: np.ndarray, counts: np.ndarray,
-                   v: np.ndarray, i: int):  # fmt: skip
+    def build_lane(
+        self, spindle: np.ndarray, segments: np.ndarray, counts: np.ndarray, v: np.ndarray, i: int
+    ):
         """The scenario of lane ``i`` of the lanes' numbers from :meth:`draw_lanes` (their
         speeds, segments, segment counts and uniforms)."""
         profile = drawn_lane_profile(segments, i, int(counts[i]), self.profile_name)
@@ -323,10 +327,13 @@ def machining_time_bound(scenario: TurningScenario, truth: TurningParams) -> flo
     """
     p = truth.feed_exponent
     c = bound_coefficient(
-        float(truth.force_coefficient), float(p), float(scenario.force_limit_N),
-        float(truth.spindle_power_W), float(truth.workpiece_diameter_mm),
+        float(truth.force_coefficient),
+        float(p),
+        float(scenario.force_limit_N),
+        float(truth.spindle_power_W),
+        float(truth.workpiece_diameter_mm),
         float(scenario.spindle_rpm),
-    )  # fmt: skip
+    )
     # Kf (1 + w x) in f*(x): with wear the integrand gains (1 + w x)^(1/p).
     return scenario.profile.worn_traverse_time_s(
         c, 1.0 / p, truth.max_feed_velocity_mm_s, truth.wear_per_100mm / 100.0, 1.0 / p
