@@ -144,19 +144,28 @@ class Agent:
             ``state`` / ``episode_start`` do not fit the observations or ``state`` is not
             finite.
         """
-        batch, single = self._observations(observation)
-        n = batch.shape[0]
-        if state is None:
-            st = self.initial_state(n, batch)
-        else:
-            st = self._state(state, n)
-            if episode_start is not None:
-                starts = self._starts(episode_start, n)
-                if starts.any():
-                    st[starts] = self.initial_state(int(starts.sum()), batch[starts])
+        batch, single, st = self._checked_step(observation, state, episode_start)
         # np.clip's numbers without its wrapper (a few microseconds a call)
         action = np.minimum(np.maximum(self._act(batch, st), -1.0), 1.0).astype(np.float32)
         return (action[0] if single else action), st
+
+    def _checked_step(
+        self, observation, state, episode_start
+    ) -> tuple[np.ndarray, bool, np.ndarray]:
+        """What :meth:`predict` acts on: the observations as a checked float batch
+        ``(n, obs_dim)``, whether one env's observation was given, and the state (a new
+        array: ``initial_state`` where ``state`` is None, else ``state`` checked, with the
+        rows of the envs whose ``episode_start`` is set started again)."""
+        batch, single = self._observations(observation)
+        n = batch.shape[0]
+        if state is None:
+            return batch, single, self.initial_state(n, batch)
+        st = self._state(state, n)
+        if episode_start is not None:
+            starts = self._starts(episode_start, n)
+            if starts.any():
+                st[starts] = self.initial_state(int(starts.sum()), batch[starts])
+        return batch, single, st
 
     def _observations(self, observation) -> tuple[np.ndarray, bool]:
         """The observations as a float batch ``(n, obs_dim)``, checked, and whether one env's

@@ -276,16 +276,7 @@ class ResidualAgent(Agent):
         return self.base.initial_state(n, obs)
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        batch, single = self._observations(observation)
-        n = batch.shape[0]
-        if state is None:
-            st = self.initial_state(n, batch)
-        else:
-            st = self._state(state, n)
-            if episode_start is not None:
-                starts = self._starts(episode_start, n)
-                if starts.any():
-                    st[starts] = self.initial_state(int(starts.sum()), batch[starts])
+        batch, single, st = self._checked_step(observation, state, episode_start)
         a, _ = self.policy.predict(batch, deterministic=deterministic)
         u = self.residual.act(self.base, batch, st, a)
         return (u[0] if single else u), st
