@@ -151,28 +151,44 @@ def allowance_header() -> list[str]:
     return [f"Δ at {a * 100:g} %" for a in ALLOWANCES]
 
 
+def _bound_row(label: str, value: float) -> str:
+    """A table row of the physical bound, ``value`` in the score's unit."""
+    return f"| {label} | bound | {fmt(value)} | – | 1 | " + "– | " * len(ALLOWANCES) + "– | – |"
+
+
+def _oracle_bound_row(n_episodes: int, value: float) -> str:
+    """The bound's row on the oracle's episodes (fewer than the split's)."""
+    return _bound_row(f"physical bound, on the oracle's {n_episodes} ep.", value)
+
+
+def _table_start(run: EnvRun, sr: SplitResults, score_head: str, verdict_head: str) -> list[str]:
+    """The lines a split's table starts with: its head (``score_head`` and
+    ``verdict_head`` name the score's and the verdict's columns) and the physical bound's
+    row, where the split has one."""
+    head = [
+        "agent",
+        "kind",
+        score_head,
+        "counts",
+        "efficiency",
+        *allowance_header(),
+        verdict_head,
+        "worst seed counts",
+    ]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    if sr.bound_iqm is not None:
+        lines.append(_bound_row("physical bound", sr.bound_iqm * run.score.scale))
+    return lines
+
+
 def markdown_table(run: EnvRun, sr: SplitResults) -> str:
     """The split's table: per agent its IQM [95 % CI], counts, efficiency, the paired
     difference at each allowance [95 % CI], the verdict and (learned rows) the worst
     seed's counting share."""
     k = run.score.scale
-    head = [
-        "agent",
-        "kind",
-        f"{run.score.label}: IQM [95 % CI]",
-        "counts",
-        "efficiency",
-        *allowance_header(),
-        f"verdict vs {sr.reference or 'best tuned'}",
-        "worst seed counts",
-    ]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    if sr.bound_iqm is not None:
-        lines.append(
-            f"| physical bound | bound | {fmt(sr.bound_iqm * k)} | – | 1 | "
-            + "– | " * len(ALLOWANCES)
-            + "– | – |"
-        )
+    lines = _table_start(
+        run, sr, f"{run.score.label}: IQM [95 % CI]", f"verdict vs {sr.reference or 'best tuned'}"
+    )
     for name, res in sr.agents.items():
         s = res.stats
         kind = res.kind
@@ -184,10 +200,7 @@ def markdown_table(run: EnvRun, sr: SplitResults) -> str:
             kind = f"oracle, {s.n_episodes} ep."
             eff = f"{e:.2f} [{lo:.2f}, {hi:.2f}]"
         if res.bound_iqm is not None and res.stats.n_episodes != sr.n_episodes:
-            lines.append(
-                f"| physical bound, on the oracle's {s.n_episodes} ep. | bound | "
-                f"{fmt(res.bound_iqm * k)} | – | 1 | " + "– | " * len(ALLOWANCES) + "– | – |"
-            )
+            lines.append(_oracle_bound_row(s.n_episodes, res.bound_iqm * k))
         cells = [
             f"{d['diff'] * k:+.3g} [{fmt(d['low'] * k)}, {fmt(d['high'] * k)}]" for d in res.diffs
         ] or ["–"] * len(ALLOWANCES)
@@ -205,23 +218,7 @@ def compact_table(run: EnvRun, sr: SplitResults) -> str:
     """The split's table with one number a cell (docs/results.md): IQM, counts,
     efficiency, the paired difference at each allowance, the verdict, the worst seed."""
     k = run.score.scale
-    head = [
-        "agent",
-        "kind",
-        f"{run.score.label} IQM",
-        "counts",
-        "efficiency",
-        *allowance_header(),
-        "verdict",
-        "worst seed counts",
-    ]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    if sr.bound_iqm is not None:
-        lines.append(
-            f"| physical bound | bound | {fmt(sr.bound_iqm * k)} | – | 1 | "
-            + "– | " * len(ALLOWANCES)
-            + "– | – |"
-        )
+    lines = _table_start(run, sr, f"{run.score.label} IQM", "verdict")
     for name, res in sr.agents.items():
         s = res.stats
         eff = "–" if not math.isfinite(s.efficiency) else f"{s.efficiency:.2f}"
@@ -230,10 +227,7 @@ def compact_table(run: EnvRun, sr: SplitResults) -> str:
             eff = f"{res.efficiency_iqm[0]:.2f}"
             kind = f"oracle ({s.n_episodes} ep.)"
             if res.bound_iqm is not None and s.n_episodes != sr.n_episodes:
-                lines.append(
-                    f"| physical bound, on the oracle's {s.n_episodes} ep. | bound | "
-                    f"{fmt(res.bound_iqm * k)} | – | 1 | " + "– | " * len(ALLOWANCES) + "– | – |"
-                )
+                lines.append(_oracle_bound_row(s.n_episodes, res.bound_iqm * k))
         cells = [f"{d['diff'] * k:+.3g}" for d in res.diffs] or ["–"] * len(ALLOWANCES)
         worst = res.worst_seed
         lines.append(
