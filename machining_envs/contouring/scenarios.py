@@ -28,6 +28,8 @@ from machining_envs.core.actuation import Actuation
 from machining_envs.core.checks import (
     PY_NUMBER_TYPES,
     check_below,
+    check_instance,
+    check_overload_ratio,
     check_range,
     drawn_instance,
     is_real,
@@ -116,12 +118,8 @@ class ContouringScenario:
     overload_ratio: float = OVERLOAD_RATIO
 
     def __post_init__(self) -> None:
-        if not (
-            isinstance(self.overload_ratio, (int, float)) and 1.0 < self.overload_ratio <= 10.0
-        ):
-            raise ValueError(f"overload_ratio must be in (1, 10], got {self.overload_ratio!r}")
-        if not isinstance(self.path, Path):
-            raise ValueError(f"path must be a Path, got {type(self.path).__name__}")
+        check_overload_ratio(self.overload_ratio)
+        check_instance("path", self.path, Path)
         if not (is_real(self.feed_mm_s, PY_NUMBER_TYPES) and self.feed_mm_s == math.inf):
             check_range("feed_mm_s", self.feed_mm_s, *FEED_RANGE_MM_S)
         try:
@@ -154,10 +152,7 @@ class ContouringScenario:
             ),
         )
         check_range("dwell_s", self.dwell_s, 0.0, 10.0)
-        if self.actuation is not None and not isinstance(self.actuation, Actuation):
-            raise ValueError(
-                f"actuation must be an Actuation or None, got {type(self.actuation).__name__}"
-            )
+        check_instance("actuation", self.actuation, Actuation, optional=True)
 
     @property
     def is_step(self) -> bool:

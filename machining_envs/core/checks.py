@@ -29,6 +29,8 @@ __all__ = [
     "check_range",
     "check_integer",
     "check_below",
+    "check_overload_ratio",
+    "check_instance",
     "resolve_settings",
 ]
 
@@ -161,6 +163,36 @@ def check_below(
         return
     word = "below" if strict else "at most"
     raise ValueError(f"{name} ({value:.6g}) must be {word} {bound_name} ({bound:.6g}): {why}")
+
+
+def check_overload_ratio(value) -> None:
+    """``ValueError`` unless ``value`` (a scenario's ``overload_ratio``, a multiple of its
+    limit) is a Python number in ``(1, 10]``.
+
+    >>> check_overload_ratio(1.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: overload_ratio must be in (1, 10], got 1.0
+    """
+    check_range(
+        "overload_ratio", value, 1.0, 10.0, lo_open=True, types=PY_NUMBER_TYPES, bound_format="g"
+    )
+
+
+def check_instance(name: str, value, cls: type, *, optional: bool = False) -> None:
+    """``ValueError`` unless ``value`` is a ``cls`` (or None, where ``optional``):
+    ``"{name} must be a {cls} [or None], got {its type}"``.
+
+    >>> check_instance("profile", 1.0, dict)
+    Traceback (most recent call last):
+    ...
+    ValueError: profile must be a dict, got float
+    """
+    if isinstance(value, cls) or (optional and value is None):
+        return
+    article = "an" if cls.__name__[0] in "AEIOU" else "a"
+    either = " or None" if optional else ""
+    raise ValueError(f"{name} must be {article} {cls.__name__}{either}, got {type(value).__name__}")
 
 
 def check_field(name: str, value, rule: tuple) -> None:

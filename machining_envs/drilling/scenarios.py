@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from machining_envs.core.checks import check_range, drawn_instance
+from machining_envs.core.checks import check_overload_ratio, check_range, drawn_instance
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.splits import split_stream
 from machining_envs.drilling.plant import DIAMETER_RANGE_MM, DrillingParams
@@ -97,10 +97,7 @@ class DrillingScenario:
     overload_ratio: float = OVERLOAD_RATIO
 
     def __post_init__(self) -> None:
-        if not (
-            isinstance(self.overload_ratio, (int, float)) and 1.0 < self.overload_ratio <= 10.0
-        ):
-            raise ValueError(f"overload_ratio must be in (1, 10], got {self.overload_ratio!r}")
+        check_overload_ratio(self.overload_ratio)
         check_range("diameter_mm", self.diameter_mm, *DIAMETER_RANGE_MM)
         check_range("aspect_ratio", self.aspect_ratio, 1.0, 20.0)
         if self.torque_limit_Nmm is not None:

@@ -21,7 +21,12 @@ import numba
 import numpy as np
 
 from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
-from machining_envs.core.checks import check_range, drawn_instance
+from machining_envs.core.checks import (
+    check_instance,
+    check_overload_ratio,
+    check_range,
+    drawn_instance,
+)
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.splits import split_state
 from machining_envs.core.workpieces import (
@@ -116,22 +121,15 @@ class MillingScenario:
     overload_ratio: float = OVERLOAD_RATIO
 
     def __post_init__(self) -> None:
-        if not (
-            isinstance(self.overload_ratio, (int, float)) and 1.0 < self.overload_ratio <= 10.0
-        ):
-            raise ValueError(f"overload_ratio must be in (1, 10], got {self.overload_ratio!r}")
-        if not isinstance(self.profile, DepthProfile):
-            raise ValueError(f"profile must be a DepthProfile, got {type(self.profile).__name__}")
+        check_overload_ratio(self.overload_ratio)
+        check_instance("profile", self.profile, DepthProfile)
         check_range("spindle_scale", self.spindle_scale, 0.25, 4.0)
         check_range("torque_limit_scale", self.torque_limit_scale, 0.25, 4.0)
         check_range("torque_coefficient_scale", self.torque_coefficient_scale, 0.5, 2.0)
         check_range("feed_exponent_scale", self.feed_exponent_scale, 0.5, 2.0)
         check_range("noise_scale", self.noise_scale, 0.0, 10.0)
         check_range("wear_per_100mm", self.wear_per_100mm, 0.0, 10.0)
-        if self.actuation is not None and not isinstance(self.actuation, Actuation):
-            raise ValueError(
-                f"actuation must be an Actuation or None, got {type(self.actuation).__name__}"
-            )
+        check_instance("actuation", self.actuation, Actuation, optional=True)
 
     def spindle_rpm(self, nominal: MillingParams) -> float:
         """Spindle speed of this cut, rpm (``ValueError`` outside ``SPINDLE_RPM_RANGE``)."""

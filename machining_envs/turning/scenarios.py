@@ -24,7 +24,7 @@ import numba
 import numpy as np
 
 from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
-from machining_envs.core.checks import drawn_instance
+from machining_envs.core.checks import check_instance, check_overload_ratio, drawn_instance
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.splits import split_state
 from machining_envs.core.workpieces import (
@@ -105,12 +105,8 @@ class TurningScenario:
     overload_ratio: float = OVERLOAD_RATIO
 
     def __post_init__(self) -> None:
-        if not (
-            isinstance(self.overload_ratio, (int, float)) and 1.0 < self.overload_ratio <= 10.0
-        ):
-            raise ValueError(f"overload_ratio must be in (1, 10], got {self.overload_ratio!r}")
-        if not isinstance(self.profile, DepthProfile):
-            raise ValueError(f"profile must be a DepthProfile, got {type(self.profile).__name__}")
+        check_overload_ratio(self.overload_ratio)
+        check_instance("profile", self.profile, DepthProfile)
         _check("spindle_rpm", self.spindle_rpm, *SPINDLE_RPM_RANGE)
         _check("force_limit_N", self.force_limit_N, 1.0, 1e5)
         _check("force_coefficient_scale", self.force_coefficient_scale, 0.5, 2.0)
@@ -119,10 +115,7 @@ class TurningScenario:
         _check("wear_per_100mm", self.wear_per_100mm, 0.0, 10.0)
         if self.spindle_power_W != math.inf:
             _check("spindle_power_W", self.spindle_power_W, 0.0, 1e7, lo_open=True)
-        if self.actuation is not None and not isinstance(self.actuation, Actuation):
-            raise ValueError(
-                f"actuation must be an Actuation or None, got {type(self.actuation).__name__}"
-            )
+        check_instance("actuation", self.actuation, Actuation, optional=True)
 
     def true_params(self, nominal: TurningParams) -> TurningParams:
         """The plant parameters this cut really has (hidden from controllers)."""
