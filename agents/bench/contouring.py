@@ -20,11 +20,11 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from pathlib import Path as FilePath
 
 import gymnasium as gym
 import numpy as np
 
+from agents.bench.figures import reproduction_figure, save_figure
 from agents.bench.spec import BenchmarkSpec, Process
 from agents.contouring import ConstantOverride, HInf2DOF, LookAheadFeed, PIPosition
 from agents.eval import rollout
@@ -160,11 +160,12 @@ def reproduce_contouring(out_dir=None, seed: int = 0, verbose: bool = True):
         env.close()
     if verbose:
         _print(results, dt)
-    if out_dir is not None:
-        path = FilePath(out_dir) / "reproduce_contouring.png"
-        plot_contouring_reproduction(results, path)
-        if verbose:
-            print(f"figure: {path}")
+    reproduction_figure(
+        out_dir,
+        "reproduce_contouring.png",
+        lambda path: plot_contouring_reproduction(results, path),
+        verbose,
+    )
     return results
 
 
@@ -317,8 +318,7 @@ def plot_contouring_reproduction(results, path) -> None:
         fontsize=11,
     )
     fig.tight_layout()
-    FilePath(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path)
 
 
 # --- The declaration: what the benchmark, the CLI and the docs know of contouring -------------

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.bench.figures import save_figure
 from agents.eval import evaluate
 from agents.eval.stats import iqm_interval
 from machining_envs.core.splits import split_seeds
@@ -162,5 +163,5 @@ def plot_learning_curves(
     ax.set_title(f"{env_id}: learning curves (thin: single seeds)", fontsize=10)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path)
     return path

@@ -22,11 +22,10 @@ several seeds (the chips' fluctuation and the sensor noise differ by seed), and 
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import gymnasium as gym
 import numpy as np
 
+from agents.bench.figures import reproduction_figure, save_figure
 from agents.bench.spec import BenchmarkSpec, Process, Robustness
 from agents.drilling import PD, NoControl, PeckDrilling, SlidingMode
 from agents.eval import rollout
@@ -233,11 +232,12 @@ def reproduce_drilling(out_dir=None, seed: int = 0, verbose: bool = True, n_seed
             print(f"{'':8s}   ours:  {r['ours']}  -> {'yes' if r['match'] else 'NO'}")
         n = sum(r["match"] for r in results)
         print(f"\n{n}/{len(results)} checks show the paper's behaviour")
-    if out_dir is not None:
-        path = Path(out_dir) / "reproduce_drilling.png"
-        plot_drilling_reproduction(comp, tr12, path, p)
-        if verbose:
-            print(f"figure: {path}")
+    reproduction_figure(
+        out_dir,
+        "reproduce_drilling.png",
+        lambda path: plot_drilling_reproduction(comp, tr12, path, p),
+        verbose,
+    )
     return results
 
 
@@ -330,8 +330,7 @@ def plot_drilling_reproduction(
     ax2.plot(f8["t_s"], f8["spindle_hz"], "C2-", lw=0.9)
     ax2.set_ylabel("spindle (Hz)", color="C2")
     fig.tight_layout()
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path)
 
 
 # --- The declaration: what the benchmark, the CLI and the docs know of drilling -------------

@@ -28,11 +28,11 @@ loses stability.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
+from agents.bench.figures import reproduction_figure, save_figure
 from agents.bench.spec import BenchmarkSpec, Process, Robustness
 from agents.eval import rollout
 from agents.milling import FixedGainIntegral, IntegralACC, MillingConstantFeed
@@ -294,12 +294,12 @@ def reproduce_milling(out_dir=None, seed: int = 0, verbose: bool = True) -> list
 
     if verbose:
         _print(results)
-    if out_dir is not None:
-        path = Path(out_dir) / "reproduce_milling.png"
+
+    def draw(path):
         gains = {wp: _acc_gains(runs[wp]["ac"], {}, seed, wp) for wp in runs}
         plot_milling_reproduction(runs, fig5, gains, path)
-        if verbose:
-            print(f"figure: {path}")
+
+    reproduction_figure(out_dir, "reproduce_milling.png", draw, verbose)
     return results
 
 
@@ -399,8 +399,7 @@ def plot_milling_reproduction(runs: dict, fig5: dict, gains: dict, path) -> None
         ax2.set_ylim(0, 4)
     axes[2, 2].set_xlabel("sample number (Ts = 0.1 s)")
     fig.tight_layout()
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path)
 
 
 # --- The declaration: what the benchmark, the CLI and the docs know of milling -------------

@@ -20,6 +20,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+from agents.bench.figures import save_figure
 from agents.bench.run import EnvRun
 from agents.eval import rollout
 from agents.eval.stats import BOOTSTRAP_REPS, iqm, rliable_seed, score_matrix
@@ -77,7 +78,7 @@ def plot_scores(run: EnvRun, stats: dict, path: Path) -> Path:
     ax.set_title(f"{run.spec.env_id}: test split", fontsize=10)
     _kind_legend(fig, dict.fromkeys(run.kind[n] for n in names))
     fig.tight_layout(rect=(0, 0.06, 1, 1))
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path)
     return path
 
 
@@ -122,7 +123,7 @@ def plot_profiles(run: EnvRun, path: Path) -> Path:
     ax.set_title(f"{run.spec.env_id}: performance profiles (test)", fontsize=10)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path)
     return path
 
 
@@ -163,7 +164,7 @@ def plot_allowances(run: EnvRun, path: Path) -> Path | None:
     )
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path)
     return path
 
 
@@ -217,7 +218,7 @@ def plot_trajectories(run: EnvRun, path: Path) -> Path | None:
         fontsize=9,
     )
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path)
     return path
 
 
@@ -264,5 +265,5 @@ def plot_robustness(run: EnvRun, ref: str | None, path: Path) -> Path | None:
     finally:
         env.close()
     fig.suptitle(f"{run.spec.env_id}: robustness", fontsize=10)
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path)
     return path

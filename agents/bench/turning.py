@@ -18,12 +18,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
 from agents.afc import AdaptiveFeedControl
+from agents.bench.figures import reproduction_figure, save_figure
 from agents.bench.spec import BenchmarkSpec, Process, Robustness
 from agents.eval import rollout
 from agents.eval.margins import OperatingPoint
@@ -194,11 +194,12 @@ def reproduce_turning(
             f"(unstable: oscillation > {UNSTABLE_OSCILLATION:.0%} of Fr or breakage; "
             f"slow: first within 5 % later than {SLOW_RESPONSE_S:g} s)"
         )
-    if out_dir is not None:
-        path = Path(out_dir) / "reproduce_turning.png"
-        plot_turning_reproduction(results, path)
-        if verbose:
-            print(f"figure: {path}")
+    reproduction_figure(
+        out_dir,
+        "reproduce_turning.png",
+        lambda path: plot_turning_reproduction(results, path),
+        verbose,
+    )
     return results
 
 
@@ -227,8 +228,7 @@ def plot_turning_reproduction(results, path) -> None:
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
     fig.tight_layout()
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path)
 
 
 # --- The declaration: what the benchmark, the CLI and the docs know of turning -------------
