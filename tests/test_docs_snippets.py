@@ -26,6 +26,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from agents.bench.run import installed
+
 tomllib = pytest.importorskip("tomllib")  # Python >= 3.11
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -115,7 +117,7 @@ def test_the_python_examples_run(page, tmp_path, monkeypatch):
                 kind, what = block.marker
                 if kind == "skip":
                     continue
-                missing = [m for m in what.replace(",", " ").split() if not _imports(m)]
+                missing = [m for m in what.replace(",", " ").split() if not installed(m)]
                 if missing:
                     continue
             with contextlib.redirect_stdout(out):
@@ -135,14 +137,6 @@ def test_the_python_examples_run(page, tmp_path, monkeypatch):
         assert expected in text, f"{page.name} should print {expected!r}; it printed:\n{text}"
     if name in CHECKS:
         CHECKS[name](namespace, text)
-
-
-def _imports(module: str) -> bool:
-    try:
-        __import__(module)
-    except ImportError:
-        return False
-    return True
 
 
 def test_every_opt_out_says_why_and_marks_a_block():

@@ -21,15 +21,23 @@ pytest.importorskip("rl_zoo3")
 ENDMILLING = "machining_envs/EndMilling-v0"
 
 
+def _run_module(args: list[str], timeout: int) -> subprocess.CompletedProcess:
+    """``python -m args...`` in a fresh interpreter, which must succeed (its stderr's tail
+    is the failure message)."""
+    out = subprocess.run(
+        [sys.executable, "-m", *args], capture_output=True, text=True, timeout=timeout
+    )
+    assert out.returncode == 0, out.stderr[-3000:]
+    return out
+
+
 @pytest.mark.parametrize("env_id", [TURNING, ENDMILLING])
 def test_rl_zoo3_trains_on_our_shipped_config(tmp_path, env_id):
     """``python -m rl_zoo3.train --conf-file agents/rl/configs/ppo.yml`` as it is: the env
     keywords, the IncrementalAction wrapper (EndMilling) and our ValidationCallback run
     under rl-zoo3 (a short run: the rollout shortened on the command line, not in the file)."""
-    out = subprocess.run(
+    out = _run_module(
         [
-            sys.executable,
-            "-m",
             "rl_zoo3.train",
             "--algo",
             "ppo",
@@ -53,12 +61,9 @@ def test_rl_zoo3_trains_on_our_shipped_config(tmp_path, env_id):
             "n_steps:64",
             "batch_size:64",
             "n_epochs:1",
-        ],  # fmt: skip
-        capture_output=True,
-        text=True,
+        ],
         timeout=600,
     )
-    assert out.returncode == 0, out.stderr[-3000:]
     assert out.stdout.count("validation at 256 steps: score") == 1  # once, at the end
     name = env_id.replace("/", "-")
     assert (tmp_path / "ppo" / f"{name}_1" / f"{name}.zip").is_file()
@@ -161,10 +166,8 @@ def test_a_policy_of_ours_opens_with_rl_zoo3_enjoy(tmp_path, capsys):
         assert done[0] == (terminated or truncated)
         if done[0]:
             break
-    out = subprocess.run(
+    out = _run_module(
         [
-            sys.executable,
-            "-m",
             "rl_zoo3.enjoy",
             "--algo",
             "ppo",
@@ -180,11 +183,8 @@ def test_a_policy_of_ours_opens_with_rl_zoo3_enjoy(tmp_path, capsys):
             "--no-render",
             "-n",
             "200",
-        ],  # fmt: skip
-        capture_output=True,
-        text=True,
+        ],
         timeout=300,
     )
-    assert out.returncode == 0, out.stderr[-3000:]
     assert "Loading running average" in out.stdout
     assert np.isfinite(info["torque_Nmm"])
