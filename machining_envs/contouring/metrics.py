@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from machining_envs.core.metrics import (
+    episode_end,
     episode_flag,
     excess_ratio,
     finish_time,
@@ -146,9 +147,7 @@ def contouring_metrics(traj: dict) -> dict[str, float]:
     out["score_bound"] = score_bound(traj)
     if "time_limit_s" in traj:
         out["time_limit_s"] = float(np.asarray(traj["time_limit_s"], dtype=np.float64)[0])
-    out["finished"] = float(finished)
-    out["diverged"] = float(episode_flag(traj, "diverged"))
-    out["n_steps"] = float(t.size - 1)
+    out.update(episode_end(traj, finished, t, flags=("diverged",)))
     return out
 
 

@@ -26,6 +26,7 @@ __all__ = [
     "segment_bounds",
     "oscillation_amplitude",
     "episode_flag",
+    "episode_end",
     "finish_time",
     "score_bound",
     "overload_ratio",
@@ -112,6 +113,19 @@ def episode_flag(traj: dict, key: str) -> bool:
     """Whether the boolean ``info[key]`` (``finished``, ``breakage``, ...) was set at any
     sample of the trajectory."""
     return bool(np.any(np.asarray(traj[key], dtype=bool)))
+
+
+def episode_end(
+    traj: dict, finished: bool, t: np.ndarray, flags: tuple[str, ...] = ("breakage", "diverged")
+) -> dict[str, float]:
+    """The metrics an episode's dict ends with, in this order: ``finished`` and each of
+    the boolean ``flags`` (1.0 / 0.0, :func:`episode_flag`), and ``n_steps``, the samples
+    of ``t`` after the first."""
+    out = {"finished": float(finished)}
+    for key in flags:
+        out[key] = float(episode_flag(traj, key))
+    out["n_steps"] = float(t.size - 1)
+    return out
 
 
 def finish_time(traj: dict, key: str, finished: bool, t: np.ndarray) -> float:
@@ -257,8 +271,5 @@ def regulation_metrics(
     out["score_bound"] = score_bound(traj)
     finished = episode_flag(traj, "finished")
     out["machining_time_s"] = finish_time(traj, "machining_time_s", finished, t)
-    out["finished"] = float(finished)
-    out["breakage"] = float(episode_flag(traj, "breakage"))
-    out["diverged"] = float(episode_flag(traj, "diverged"))
-    out["n_steps"] = float(t.size - 1)
+    out.update(episode_end(traj, finished, t))
     return out

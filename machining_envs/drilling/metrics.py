@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from machining_envs.core.metrics import (
+    episode_end,
     episode_flag,
     excess_ratio,
     finish_time,
@@ -125,10 +126,7 @@ def drilling_metrics(traj: dict) -> dict[str, float]:
     out_of_hole = (pos < 0.0) & (depth > 0.0)
     out["n_retracts"] = float(np.sum(out_of_hole[1:] & ~out_of_hole[:-1]))
     out["score_bound"] = score_bound(traj)
-    out["finished"] = float(finished)
-    out["breakage"] = float(episode_flag(traj, "breakage"))
-    out["diverged"] = float(episode_flag(traj, "diverged"))
-    out["n_steps"] = float(t.size - 1)
+    out.update(episode_end(traj, finished, t))
     return out
 
 
