@@ -195,16 +195,8 @@ class Arc:
 
     def _row(self) -> list[float]:
         """The segment's row of :meth:`Path.table` (its place in the path left at zero)."""
-        return _segment_row(
-            _ARC,
-            *self.center,
-            self.radius,
-            self.start_angle,
-            self.sign,
-            abs(self.sweep),
-            *self.start,
-            *self.end,
-        )
+        turn = (self.start_angle, self.sign, abs(self.sweep))
+        return _segment_row(_ARC, *self.center, self.radius, *turn, *self.start, *self.end)
 
     def closest(self, px: float, py: float) -> tuple[float, float, float]:
         cx, cy = self.center
@@ -324,16 +316,8 @@ class Involute:
 
     def _row(self) -> list[float]:
         """The segment's row of :meth:`Path.table` (its place in the path left at zero)."""
-        return _segment_row(
-            _INVOLUTE,
-            *self.center,
-            self.radius,
-            self.theta1,
-            self.theta_start,
-            self.theta_end,
-            self.theta_start**2,
-            float(self._k_span),
-        )
+        angles = (self.theta1, self.theta_start, self.theta_end, self.theta_start**2)
+        return _segment_row(_INVOLUTE, *self.center, self.radius, *angles, float(self._k_span))
 
     def _feet(self, px: float, py: float) -> list[float]:
         """Parameters of the feet of the normals from ``p`` that lie on the segment."""
