@@ -218,6 +218,23 @@ def _print(results, dt: float) -> None:
     )
 
 
+def _plot_both(ax, r: dict, style: dict, xy, lw: float = 1.2, plot: str = "plot") -> None:
+    """One curve per controller of the experiment's result ``r``: ``xy(trajectory)``
+    gives its x and y, drawn by ``ax.<plot>`` in the controller's ``style`` (colour,
+    label)."""
+    for k, (c, label) in style.items():
+        x, y = xy(r["traj"][k])
+        getattr(ax, plot)(x, y, color=c, lw=lw, label=label)
+
+
+def _label_panel(ax, xlabel: str, ylabel: str, title: str) -> None:
+    """A reproduction panel's axis labels, title and legend."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=8)
+
+
 def plot_contouring_reproduction(results, path) -> None:
     """Six panels: Fig. 4-8 for both controllers and the largest contour errors."""
     from matplotlib.figure import Figure
@@ -228,77 +245,68 @@ def plot_contouring_reproduction(results, path) -> None:
     axes = fig.subplots(2, 3)
     ax = axes[0, 0]
     r = by["paper_step"]
-    for k, (c, label) in style.items():
-        tr = r["traj"][k]
-        ax.plot(1000 * tr["t_s"], tr["x_mm"] / PAPER_STEP_MM, color=c, lw=1.2, label=label)
+    _plot_both(ax, r, style, lambda tr: (1000 * tr["t_s"], tr["x_mm"] / PAPER_STEP_MM))
     t = r["traj"]["pi"]["t_s"]
     ax.plot(1000 * t, 1 - np.exp(-HINF_MODEL_POLE * t), "k--", lw=0.8, label="M0")
     ax.set_xlim(0, 100)
-    ax.set_xlabel("time (ms)")
-    ax.set_ylabel("x / step")
-    ax.set_title("Fig. 4: unit step (normalised)", fontsize=10)
-    ax.legend(fontsize=8)
+    _label_panel(ax, "time (ms)", "x / step", "Fig. 4: unit step (normalised)")
 
     ax = axes[0, 1]
-    r = by["paper_step_load"]
-    for k, (c, label) in style.items():
-        tr = r["traj"][k]
-        ax.plot(1000 * tr["t_s"], 1000 * (tr["x_mm"] - PAPER_STEP_MM), color=c, lw=1.2, label=label)
+    _plot_both(
+        ax,
+        by["paper_step_load"],
+        style,
+        lambda tr: (1000 * tr["t_s"], 1000 * (tr["x_mm"] - PAPER_STEP_MM)),
+    )
     ax.axvline(1000 * PAPER_LOAD_TIME_S, color="0.5", ls=":", lw=0.8)
     ax.set_xlim(1000 * PAPER_LOAD_TIME_S - 20, None)
     ax.set_ylim(-20, 20)
-    ax.set_xlabel("time (ms)")
-    ax.set_ylabel("x - set point (µm)")
-    ax.set_title("Fig. 5: load torque 1 N m from 0.15 s", fontsize=10)
-    ax.legend(fontsize=8)
+    _label_panel(ax, "time (ms)", "x - set point (µm)", "Fig. 5: load torque 1 N m from 0.15 s")
 
     ax = axes[0, 2]
-    r = by["paper_corner"]
     corner = Path.paper_corner()
     cx, cy = corner.segments[0].end
     s = np.linspace(0.0, corner.length, 4001)
     px, py = corner.points(s)
     ax.plot(px, py, "k--", lw=0.8, label="path")
-    for k, (c, label) in style.items():
-        tr = r["traj"][k]
+
+    def near_corner(tr):
         near = np.hypot(tr["x_mm"] - cx, tr["y_mm"] - cy) < 0.5
-        ax.plot(tr["x_mm"][near], tr["y_mm"][near], color=c, lw=1.2, label=label)
+        return tr["x_mm"][near], tr["y_mm"][near]
+
+    _plot_both(ax, by["paper_corner"], style, near_corner)
     ax.set_xlim(cx - 0.3, cx + 0.3)
     ax.set_ylim(cy - 0.35, cy + 0.05)
     ax.set_aspect("equal")
-    ax.set_xlabel("X (mm)")
-    ax.set_ylabel("Y (mm)")
-    ax.set_title("Fig. 6: corner at 5 mm/s (zoom)", fontsize=10)
-    ax.legend(fontsize=8)
+    _label_panel(ax, "X (mm)", "Y (mm)", "Fig. 6: corner at 5 mm/s (zoom)")
 
     ax = axes[1, 0]
-    r = by["paper_circle"]
-    for k, (c, label) in style.items():
-        tr = r["traj"][k]
+
+    def radius_error(tr):
         ang = np.degrees(np.unwrap(np.arctan2(tr["y_mm"], tr["x_mm"])))
-        rho = np.hypot(tr["x_mm"], tr["y_mm"])
-        ax.plot(ang, 1000 * (rho - 10.0), color=c, lw=1.2, label=label)
+        return ang, 1000 * (np.hypot(tr["x_mm"], tr["y_mm"]) - 10.0)
+
+    _plot_both(ax, by["paper_circle"], style, radius_error)
     ax.axhline(0.0, color="k", ls="--", lw=0.8)
-    ax.set_xlabel("angle on the circle (deg)")
-    ax.set_ylabel("radius - R (µm)")
-    ax.set_title("Fig. 7: circle R 10 mm at 50 mm/s", fontsize=10)
-    ax.legend(fontsize=8)
+    _label_panel(
+        ax, "angle on the circle (deg)", "radius - R (µm)", "Fig. 7: circle R 10 mm at 50 mm/s"
+    )
 
     ax = axes[1, 1]
-    r = by["paper_involute"]
-    for k, (c, label) in style.items():
-        tr = r["traj"][k]
-        ax.semilogy(
-            tr["path_s_mm"][1:],
-            1000 * np.maximum(tr["contour_error_mm"][1:], 1e-6),
-            color=c,
-            lw=1.0,
-            label=label,
-        )
-    ax.set_xlabel("set point along the involute (mm)")
-    ax.set_ylabel("contour error (µm)")
-    ax.set_title("Fig. 8: involute R 50 mm at 50 mm/s", fontsize=10)
-    ax.legend(fontsize=8)
+    _plot_both(
+        ax,
+        by["paper_involute"],
+        style,
+        lambda tr: (tr["path_s_mm"][1:], 1000 * np.maximum(tr["contour_error_mm"][1:], 1e-6)),
+        lw=1.0,
+        plot="semilogy",
+    )
+    _label_panel(
+        ax,
+        "set point along the involute (mm)",
+        "contour error (µm)",
+        "Fig. 8: involute R 50 mm at 50 mm/s",
+    )
 
     ax = axes[1, 2]
     names = ["paper_corner", "paper_circle", "paper_involute"]
