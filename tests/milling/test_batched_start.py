@@ -53,20 +53,6 @@ def _assert_same(one, many):
     assert_cores_alike(one, many)
 
 
-def test_a_scenario_the_batch_would_let_through_unchecked_goes_lane_by_lane():
-    """Nominal parameters for which a split's ends would break the tool (the torque limit
-    at or above ``breakage_torque_Nmm``): the batch is not taken and the lane's own check
-    names the problem, as a single env's reset does."""
-    venv = gym.make_vec(MILLING, num_envs=2, breakage_torque_Nmm=4600.0)
-    with pytest.raises(ValueError, match="breakage_torque_Nmm"):
-        venv.reset(seed=0, options={"scenario": "ood"})
-        for _ in range(50):  # ood draws limits up to 1.4 x 3600 N·mm
-            venv.reset(options={"scenario": "ood"})
-    venv.reset(seed=0)  # train's limits reach 1.25 x 3600 = 4500 N·mm, below it: batched
-    checked = {f.name: ok for f, ok in venv.unwrapped._core._batch_ok.items()}
-    assert checked == {"train": True, "ood": False}
-
-
 def test_a_spindle_range_the_nominal_speed_pushes_out_goes_lane_by_lane():
     """A nominal speed whose split range reaches past ``SPINDLE_RPM_RANGE``: the lane's
     own check refuses it."""

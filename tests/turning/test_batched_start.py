@@ -1,7 +1,6 @@
 """Many lanes started at once (``TurningCore.start_lanes``): the same episodes as lane by
 lane, for every scenario name, with each lane's scenario and truth built when read."""
 
-import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -30,20 +29,6 @@ def test_lanes_started_together_start_as_one_by_one(spec):
             assert many.episode_info[k] is None
         one.lane_info(k), many.lane_info(k)
         assert repr(one.episode_info[k]) == repr(many.episode_info[k]), k
-
-
-def test_a_scenario_the_batch_would_let_through_unchecked_goes_lane_by_lane():
-    """Nominal parameters for which a split's ends would break the tool (the force limit
-    at or above ``breakage_force_N``): the batch is not taken and the lane's own check
-    names the problem, as a single env's reset does."""
-    venv = gym.make_vec(TURNING, num_envs=2, breakage_force_N=1100.0)
-    with pytest.raises(ValueError, match="breakage_force_N"):
-        venv.reset(seed=0, options={"scenario": "ood"})
-        for _ in range(50):  # ood draws limits up to 1300 N
-            venv.reset(options={"scenario": "ood"})
-    venv.reset(seed=0)  # train's 1000 N limit is below it: batched
-    checked = {f.name: ok for f, ok in venv.unwrapped._core._batch_ok.items()}
-    assert checked == {"train": True, "ood": False}
 
 
 def test_lane_objects_build_once_and_setting_wins():
