@@ -17,7 +17,13 @@ import numpy as np
 
 from machining_envs.core.checks import PY_NUMBER_TYPES, is_real
 from machining_envs.core.compiled.kernels import copy_into
-from machining_envs.core.splits import _split_key, lane_split_state, stream_bounded, stream_fill
+from machining_envs.core.splits import (
+    _split_key,
+    lane_split_state,
+    split_state,
+    stream_bounded,
+    stream_fill,
+)
 
 __all__ = [
     "DepthProfile",
@@ -25,6 +31,7 @@ __all__ = [
     "drawn_profile",
     "drawn_lane_cuts",
     "drawn_lane_profile",
+    "SplitCuts",
     "lane_segments",
     "load_segments",
     "traverse_time",
@@ -359,6 +366,76 @@ def drawn_lane_profile(segments: np.ndarray, i: int, count: int, name: str) -> D
     """Lane ``i``'s workpiece from :func:`drawn_lane_cuts`' ``segments`` (``count`` of its
     own), named ``name``: the profile :func:`drawn_profile` makes of the same numbers."""
     return _drawn(segments[i, :, : count + 1].copy(), name)
+
+
+class SplitCuts:
+    """The base of a cutting process's split factories (Turning-v0, EndMilling-v0): a
+    scenario is ``before`` uniforms, a random workpiece (:meth:`DepthProfile.random` with
+    ``depth``, ``segments`` and ``segment_mm``, tapers at 0.3, jumps at most 2.5x) and one
+    uniform per range ``[lows[k], lows[k] + spans[k])``, the wear rate's last (where the
+    split has ``wear``), all from the split's stream of the env's generator in one compiled
+    call. A vector env draws the numbers of many lanes at once (:meth:`lanes_drawn`), and
+    builds a lane's workpiece from them only when asked for (:meth:`lane_profile`).
+
+    ``lows`` and ``highs`` are the process's ranges before the wear rate's.
+    """
+
+    #: Uniforms the process draws before the workpiece.
+    before = 0
+
+    def __init__(
+        self,
+        name: str,
+        depth: tuple[float, float],
+        segments: tuple[int, int],
+        segment_mm: tuple[float, float],
+        lows: list[float],
+        highs: list[float],
+        wear: tuple[float, float] | None,
+    ) -> None:
+        self.name = name
+        self.profile_name = f"{name} profile"
+        self.wear = wear
+        lows, highs = list(lows), list(highs)
+        if wear is not None:  # drawn last: the same cuts as without wear
+            lows.append(float(wear[0]))
+            highs.append(float(wear[1]))
+        self.lows = lows
+        self.spans = [hi - lo for lo, hi in zip(lows, highs, strict=True)]
+        self.depth, self.segments = depth, segments
+        # Checked here, once: the factory builds its workpieces without checking again.
+        DepthProfile.check_random_ranges(depth, segments, segment_mm, 2.5)
+        self._cut_ranges = (depth, segments, segment_mm, 0.3, 2.5)
+
+    def drawn(self, env_rng: np.random.Generator) -> tuple[np.ndarray, DepthProfile, list[float]]:
+        """One scenario's numbers from the env's generator: the uniforms before, the
+        workpiece, and the ranges' uniforms (:func:`drawn_profile`)."""
+        b, profile, v = drawn_profile(
+            split_state(env_rng, self.name),
+            self.before,
+            *self._cut_ranges,
+            len(self.lows),
+            self.profile_name,
+        )
+        return b, profile, v.tolist()
+
+    def lanes_drawn(self, table, lanes: np.ndarray) -> tuple:
+        """The numbers of :meth:`drawn` for every lane in ``lanes``, each from its
+        generator in ``table`` (``LaneGenerators.table``): ``(uniforms before, segments,
+        segment counts, uniforms)`` of shapes ``(L, before)``, ``(L, 4, S + 1)``, ``(L,)``
+        and ``(L, len(lows))`` (:func:`drawn_lane_cuts`)."""
+        return drawn_lane_cuts(
+            table, lanes, self.name, self.before, *self._cut_ranges, len(self.lows)
+        )
+
+    def lane_profile(self, segments: np.ndarray, counts: np.ndarray, i: int) -> DepthProfile:
+        """Lane ``i``'s workpiece from :meth:`lanes_drawn`' segments and counts."""
+        return drawn_lane_profile(segments, i, int(counts[i]), self.profile_name)
+
+    def in_ranges(self, v: list[float]) -> list[float]:
+        """The ranges' values for their uniforms ``v``: ``low + span u`` each (what
+        ``rng.uniform(low, high)`` gives)."""
+        return [lo + span * x for lo, span, x in zip(self.lows, self.spans, v, strict=True)]
 
 
 def _drawn(table: np.ndarray, name: str) -> DepthProfile:

@@ -28,12 +28,9 @@ from machining_envs.core.checks import (
     drawn_instance,
 )
 from machining_envs.core.env import resolve_scenario
-from machining_envs.core.splits import split_state
 from machining_envs.core.workpieces import (
     DepthProfile,
-    drawn_lane_cuts,
-    drawn_lane_profile,
-    drawn_profile,
+    SplitCuts,
 )
 from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams, bisect_right
 
@@ -228,13 +225,12 @@ def _fixed(name: str, profile: Callable[[], DepthProfile]):
     return make
 
 
-class _SplitFactory:
+class _SplitFactory(SplitCuts):
     """The factory of a split's scenarios: ``factory(rng)`` draws one from the env's
-    generator. The workpiece, then uniform in ``[low, high)`` each, ``low + (high - low) u``
-    (what ``rng.uniform(low, high)`` gives) in order: the log spindle and limit scales, Ks,
-    m, the noise scale and (with wear) the wear rate. A vector env draws the numbers of
-    many lanes at once (:meth:`draw_lanes`) and builds a lane's scenario from them only when
-    it is asked for (:meth:`build_lane`): the same object ``factory(rng)`` gives."""
+    generator. The workpiece, then uniform in ``[low, high)`` each in order: the log
+    spindle and limit scales, Ks, m, the noise scale and (with wear) the wear rate;
+    :class:`~machining_envs.core.workpieces.SplitCuts` draws them. :meth:`draw_lanes` and
+    :meth:`build_lane` give a vector env's lanes the same objects ``factory(rng)`` gives."""
 
     def __init__(
         self,
@@ -247,23 +243,14 @@ class _SplitFactory:
         wear: tuple[float, float] | None = None,
         actuation: Actuation | None = None,
     ) -> None:
-        self.name = name
         lows = [float(np.log(spindle[0])), float(np.log(ref[0])), 1.0 - truth, 1.0 - truth, 0.5]
         highs = [float(np.log(spindle[1])), float(np.log(ref[1])), 1.0 + truth, 1.0 + truth, 2.0]
-        self.wear = wear
-        if wear is not None:
-            lows.append(float(wear[0]))
-            highs.append(float(wear[1]))
-        self.lows = lows
-        self.spans = [hi - lo for lo, hi in zip(lows, highs, strict=True)]
+        super().__init__(name, depth, segments, (5.0, 12.0), lows, highs, wear)
         #: The log spindle and limit scales' ranges, as arrays (``draw_lanes``'s users).
-        self.log_lows, self.log_spans = np.array(lows[:2]), np.array(self.spans[:2])
+        self.log_lows, self.log_spans = np.array(self.lows[:2]), np.array(self.spans[:2])
         self.actuation = actuation
-        self.depth, self.segments = depth, segments
         # Every drawn field lies between these two scenarios' (checked here, once): the
         # factory builds its scenarios without checking them again.
-        self.profile_name = f"{name} profile"
-        DepthProfile.check_random_ranges(depth, segments, (5.0, 12.0), 2.5)
         prof = DepthProfile.steps((depth[0],), 1.0)
         self.extremes = tuple(
             MillingScenario(
@@ -281,40 +268,23 @@ class _SplitFactory:
         )
 
     def __call__(self, env_rng: np.random.Generator) -> MillingScenario:
-        # The numbers of DepthProfile.random(rng, ...) and one rng.uniform per range, from
-        # the split's stream in one compiled call.
-        _, prof, v = drawn_profile(
-            split_state(env_rng, self.name),
-            0,
-            *self._cut_ranges,
-            len(self.lows),
-            self.profile_name,
-        )
-        return self._scenario(prof, v.tolist())
-
-    @property
-    def _cut_ranges(self) -> tuple:
-        return self.depth, self.segments, (5.0, 12.0), 0.3, 2.5
+        _, prof, v = self.drawn(env_rng)
+        return self._scenario(prof, v)
 
     def draw_lanes(self, table, lanes: np.ndarray) -> tuple:
-        """The numbers of :meth:`__call__` for every lane in ``lanes``, each drawn with its
-        generator in ``table`` (``LaneGenerators.table``), in one compiled call:
-        ``(segments, segment counts, uniforms)`` of shapes ``(L, 4, S + 1)``, ``(L,)`` and
-        ``(L, len(lows))`` (see :func:`~machining_envs.core.workpieces.drawn_lane_cuts`);
-        :meth:`build_lane` turns a lane's into its scenario."""
-        _, segments, counts, v = drawn_lane_cuts(
-            table, lanes, self.name, 0, *self._cut_ranges, len(self.lows)
-        )
+        """The numbers of :meth:`__call__` for every lane in ``lanes`` in one compiled call
+        (:meth:`lanes_drawn`): ``(segments, segment counts, uniforms)``; :meth:`build_lane`
+        turns a lane's into its scenario."""
+        _, segments, counts, v = self.lanes_drawn(table, lanes)
         return segments, counts, v
 
     def build_lane(self, segments: np.ndarray, counts: np.ndarray, v: np.ndarray, i: int):
         """The scenario of lane ``i`` of the lanes' numbers from :meth:`draw_lanes` (their
         segments, segment counts and uniforms)."""
-        profile = drawn_lane_profile(segments, i, int(counts[i]), self.profile_name)
-        return self._scenario(profile, v[i].tolist())
+        return self._scenario(self.lane_profile(segments, counts, i), v[i].tolist())
 
     def _scenario(self, profile: DepthProfile, v: list[float]) -> MillingScenario:
-        u = [lo + span * x for lo, span, x in zip(self.lows, self.spans, v, strict=True)]
+        u = self.in_ranges(v)
         return drawn_instance(
             MillingScenario,
             {

@@ -26,12 +26,9 @@ import numpy as np
 from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
 from machining_envs.core.checks import check_instance, check_overload_ratio, drawn_instance
 from machining_envs.core.env import resolve_scenario
-from machining_envs.core.splits import split_state
 from machining_envs.core.workpieces import (
     DepthProfile,
-    drawn_lane_cuts,
-    drawn_lane_profile,
-    drawn_profile,
+    SplitCuts,
 )
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams, _check
 
@@ -150,14 +147,15 @@ def _step_range(rng: np.random.Generator) -> TurningScenario:
     return TurningScenario("step_range", prof, float(np.exp(rng.uniform(np.log(245), np.log(700)))))
 
 
-class _SplitFactory:
+class _SplitFactory(SplitCuts):
     """The factory of a split's scenarios: ``factory(rng)`` draws one from the env's
     generator. The spindle speed log-uniform, then the workpiece, then uniform in
-    ``[low, high)`` each, ``low + (high - low) u`` (what ``rng.uniform(low, high)`` gives)
-    in order: Kf, p, the noise scale, the force limit (where it varies) and the wear rate
-    (with wear). A vector env draws the numbers of many lanes at once
-    (:meth:`draw_lanes`) and builds a lane's scenario from them only when it is asked for
-    (:meth:`build_lane`): the same object ``factory(rng)`` gives."""
+    ``[low, high)`` each in order: Kf, p, the noise scale, the force limit (where it
+    varies) and the wear rate (with wear); :class:`~machining_envs.core.workpieces.
+    SplitCuts` draws them. :meth:`draw_lanes` and :meth:`build_lane` give a vector env's
+    lanes the same objects ``factory(rng)`` gives."""
+
+    before = 1  # the spindle speed's uniform
 
     def __init__(
         self,
@@ -169,7 +167,6 @@ class _SplitFactory:
         wear: tuple[float, float] | None = None,
         shopfloor: bool = False,
     ) -> None:
-        self.name = name
         self.log_rpm = float(np.log(rpm[0]))
         self.log_span = float(np.log(rpm[1])) - self.log_rpm
         lows = [0.8, 0.8, 0.5]
@@ -178,23 +175,15 @@ class _SplitFactory:
         if self.limit_varies:
             lows.append(float(limit_N[0]))
             highs.append(float(limit_N[1]))
-        self.wear = wear
-        if wear is not None:  # drawn last: the same cuts as without wear
-            lows.append(float(wear[0]))
-            highs.append(float(wear[1]))
-        self.lows = lows
-        self.spans = [hi - lo for lo, hi in zip(lows, highs, strict=True)]
+        super().__init__(name, depth, segments, (4.0, 12.0), lows, highs, wear)
         self.limit_N = limit_N
         self.shop = (
             {"spindle_power_W": SHOPFLOOR_SPINDLE_POWER_W, "actuation": SHOPFLOOR_ACTUATION}
             if shopfloor
             else {"spindle_power_W": math.inf, "actuation": None}
         )
-        self.depth, self.segments = depth, segments
         # Every drawn field lies between these two scenarios' (checked here, once): the
         # factory builds its scenarios without checking them again.
-        self.profile_name = f"{name} profile"
-        DepthProfile.check_random_ranges(depth, segments, (4.0, 12.0), 2.5)
         prof = DepthProfile.steps((depth[0],), 1.0)
         self.extremes = tuple(
             TurningScenario(
@@ -210,32 +199,15 @@ class _SplitFactory:
         )
 
     def __call__(self, env_rng: np.random.Generator) -> TurningScenario:
-        # The numbers of rng.random(), DepthProfile.random(rng, ...) and one rng.uniform
-        # per range, from the split's stream in one compiled call.
-        r, prof, v = drawn_profile(
-            split_state(env_rng, self.name),
-            1,
-            *self._cut_ranges,
-            len(self.lows),
-            self.profile_name,
-        )
+        r, prof, v = self.drawn(env_rng)
         spindle = float(np.exp(self.log_rpm + self.log_span * float(r[0])))
-        return self._scenario(spindle, prof, v.tolist())
-
-    @property
-    def _cut_ranges(self) -> tuple:
-        return self.depth, self.segments, (4.0, 12.0), 0.3, 2.5
+        return self._scenario(spindle, prof, v)
 
     def draw_lanes(self, table, lanes: np.ndarray) -> tuple:
-        """The numbers of :meth:`__call__` for every lane in ``lanes``, each drawn with its
-        generator in ``table`` (``LaneGenerators.table``), in one compiled call:
-        ``(spindle rpm, segments, segment counts, uniforms)`` of shapes ``(L,)``, ``(L, 4,
-        S + 1)``, ``(L,)`` and ``(L, len(lows))`` (see
-        :func:`~machining_envs.core.workpieces.drawn_lane_cuts`); :meth:`build_lane` turns a
-        lane's into its scenario."""
-        r, segments, counts, v = drawn_lane_cuts(
-            table, lanes, self.name, 1, *self._cut_ranges, len(self.lows)
-        )
+        """The numbers of :meth:`__call__` for every lane in ``lanes`` in one compiled call
+        (:meth:`lanes_drawn`): ``(spindle rpm, segments, segment counts, uniforms)``;
+        :meth:`build_lane` turns a lane's into its scenario."""
+        r, segments, counts, v = self.lanes_drawn(table, lanes)
         return np.exp(self.log_rpm + self.log_span * r[:, 0]), segments, counts, v
 
     def build_lane(
@@ -243,11 +215,11 @@ class _SplitFactory:
     ):
         """The scenario of lane ``i`` of the lanes' numbers from :meth:`draw_lanes` (their
         speeds, segments, segment counts and uniforms)."""
-        profile = drawn_lane_profile(segments, i, int(counts[i]), self.profile_name)
+        profile = self.lane_profile(segments, counts, i)
         return self._scenario(float(spindle[i]), profile, v[i].tolist())
 
     def _scenario(self, spindle: float, profile: DepthProfile, v: list[float]):
-        u = [lo + span * x for lo, span, x in zip(self.lows, self.spans, v, strict=True)]
+        u = self.in_ranges(v)
         return drawn_instance(
             TurningScenario,
             {
