@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from agents.rl.algos import ALGOS, algorithm_classes
+from agents.rl.files import read_utf8
 
 __all__ = ["ALGOS", "CONFIG_DIR", "ConfigError", "TrainConfig", "load_config", "source_label"]
 
@@ -357,10 +358,9 @@ def load_config(env_id: str, algo: str, path=None, overrides: dict | None = None
     path = Path(path) if path is not None else CONFIG_DIR / f"{algo}.yml"
     if not path.is_file():
         raise ConfigError(f"config file not found: {path}")
+    text = read_utf8(path, "configuration file", ConfigError)
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError:
-        raise ConfigError(f"{path}: not a configuration file (not UTF-8 text)") from None
+        data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         raise ConfigError(f"{path}: not valid YAML: {exc}") from None
     if not isinstance(data, dict) or env_id not in data:
