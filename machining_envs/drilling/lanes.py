@@ -5,6 +5,8 @@ compiled step, start and info of N drills, which :class:`MicroDrillingEnv` (one 
 from __future__ import annotations
 
 import math
+from enum import IntEnum
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -34,13 +36,12 @@ from machining_envs.core.reward import LimitReward, resolve_reward
 from machining_envs.drilling.plant import (
     _N_IN,
     _N_TMP,
-    _P_BREAK,
-    _P_D,
-    _P_TARGET,
-    _S_T,
+    _P,
+    _S,
     LANE_BLOCK,
     DrillingLanes,
     DrillingParams,
+    _Out,
     _pymax,
     _pymin,
     advance,
@@ -67,17 +68,51 @@ CONTROL_MODES = ("voltage", "feed")
 DrillingReward = LimitReward
 
 
+# The lane tables' columns, each declared once by name; the kernels index by these names
+# (an IntEnum's members are constants to the compiler).
 #: Columns of ``DrillingCore.ev`` (floats of the env per lane).
-(_E_ACTION, _E_TR, _E_THRUST_MEAS, _E_SPEED_MEAS, _E_COMMAND, _E_VOLTAGE, _E_REWARD, _E_MEAS,
- _N_EV) = range(9)  # fmt: skip
+_Ev = IntEnum("_Ev", "ACTION TR THRUST_MEAS SPEED_MEAS COMMAND VOLTAGE REWARD MEAS", start=0)
 #: Columns of ``DrillingCore.flags``.
-(_F_IN_CLIPPED, _F_CLIPPED, _F_DIVERGED, _F_BREAKAGE, _F_FINISHED, _F_TERMINATED,
- _F_TRUNCATED, _F_OVER, _N_FLAGS) = range(9)  # fmt: skip
+_Flag = IntEnum(
+    "_Flag",
+    "IN_CLIPPED CLIPPED DIVERGED BREAKAGE FINISHED TERMINATED TRUNCATED OVER",
+    start=0,
+)
 #: Columns of ``DrillingCore.counts``.
-_C_N_CLIPPED, _C_SEGMENT = 0, 1
-#: Entries of ``DrillingCore.consts``.
-(_K_MID, _K_HALF, _K_FEED_MODE, _K_V0, _K_U0, _K_MAX_T, _K_TORQUE_SCALE, _K_THRUST_SCALE,
- _K_SPEED_SCALE, _K_LENGTH_SCALE, _K_W) = range(11)  # fmt: skip
+_Count = IntEnum("_Count", "N_CLIPPED SEGMENT", start=0)
+#: Entries of ``DrillingCore.consts`` (the reward weights from ``W`` on).
+_K = IntEnum(
+    "_K",
+    "MID HALF FEED_MODE V0 U0 MAX_T TORQUE_SCALE THRUST_SCALE SPEED_SCALE LENGTH_SCALE W",
+    start=0,
+)
+
+
+class _Tables(NamedTuple):
+    """The lane tables a start writes (:func:`_start`), views of the step's table."""
+
+    par: np.ndarray
+    eng: np.ndarray
+    state: np.ndarray
+    out: np.ndarray
+    consts: np.ndarray
+    ev: np.ndarray
+    flags: np.ndarray
+    counts: np.ndarray
+    obs: np.ndarray
+    bound: np.ndarray
+
+
+class _Drill(NamedTuple):
+    """A hole's drill for :func:`_start`: its ``par`` row and engagement tables, and ``x``
+    = ``[voltage, valve x1, spindle speed (rad/s), start position, torque limit, feed of
+    the bound, initial action, its command]``."""
+
+    row: np.ndarray
+    eng_depth: np.ndarray
+    eng_torque: np.ndarray
+    eng_thrust: np.ndarray
+    x: np.ndarray
 
 
 @numba.njit(cache=True)
@@ -85,15 +120,19 @@ def _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs):
     """Episode flags, reward and observation of lanes ``k0 .. k1 - 1`` from the plant's
     signals ``out[k]`` (those that are not finite after a divergence are set to zero there)."""
     for k in range(k0, k1):
-        torque, peak, meas = out[k, 0], out[k, 1], out[k, 3]
+        torque, peak, meas = (
+            out[k, _Out.torque_Nmm],
+            out[k, _Out.peak_torque_Nmm],
+            out[k, _Out.measured_torque_Nmm],
+        )
         diverged = not (
             np.isfinite(torque)
             and np.isfinite(peak)
             and np.isfinite(meas)
-            and np.isfinite(out[k, 2])
-            and np.isfinite(out[k, 4])
-            and np.isfinite(out[k, 6])
-            and np.isfinite(out[k, 5])
+            and np.isfinite(out[k, _Out.thrust_N])
+            and np.isfinite(out[k, _Out.measured_thrust_N])
+            and np.isfinite(out[k, _Out.speed_hz])
+            and np.isfinite(out[k, _Out.measured_speed_hz])
         )
         if diverged:  # never seen; kept so that no NaN can reach an observation or a reward
             torque = 0.0
@@ -101,54 +140,54 @@ def _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs):
             meas = 0.0
             for i in (0, 1, 2, 3, 4, 5, 6, 10):  # torques, thrusts, speeds, feed per rev
                 out[k, i] = 0.0
-        ev[k, _E_MEAS] = meas
-        ev[k, _E_THRUST_MEAS] = out[k, 4]
-        ev[k, _E_SPEED_MEAS] = out[k, 5]
-        if out[k, 15] != 0.0:
-            counts[k, _C_SEGMENT] = 1
-        breakage = peak > par[k, _P_BREAK]
-        finished = not np.isnan(out[k, 17])
+        ev[k, _Ev.MEAS] = meas
+        ev[k, _Ev.THRUST_MEAS] = out[k, _Out.measured_thrust_N]
+        ev[k, _Ev.SPEED_MEAS] = out[k, _Out.measured_speed_hz]
+        if out[k, _Out.cutting] != 0.0:
+            counts[k, _Count.SEGMENT] = 1
+        breakage = peak > par[k, _P.BREAK]
+        finished = not np.isnan(out[k, _Out.finish_time_s])
         terminated = diverged or breakage or finished
-        t = state[k, _S_T]
-        truncated = (not terminated) and t >= c[_K_MAX_T] - 1e-9
-        e = torque / ev[k, _E_TR]
-        reward = -c[_K_W + 0] * abs(e / c[_K_W + 2] - 1.0) - c[_K_W + 1] * _pymax(0.0, e - 1.0)
-        if c[_K_W + 3] != 0.0:
-            reward += c[_K_W + 3] * out[k, 9] / c[_K_V0]
+        t = state[k, _S.T]
+        truncated = (not terminated) and t >= c[_K.MAX_T] - 1e-9
+        e = torque / ev[k, _Ev.TR]
+        reward = -c[_K.W + 0] * abs(e / c[_K.W + 2] - 1.0) - c[_K.W + 1] * _pymax(0.0, e - 1.0)
+        if c[_K.W + 3] != 0.0:
+            reward += c[_K.W + 3] * out[k, _Out.cutting_feed_mm_s] / c[_K.V0]
         if breakage or diverged:
-            reward -= c[_K_W + 4]
-        ev[k, _E_REWARD] = reward
-        flags[k, _F_DIVERGED] = diverged
-        flags[k, _F_BREAKAGE] = breakage
-        flags[k, _F_FINISHED] = finished
-        flags[k, _F_TERMINATED] = terminated
-        flags[k, _F_TRUNCATED] = truncated
-        flags[k, _F_OVER] = out[k, 15] != 0.0 and torque > ev[k, _E_TR]
+            reward -= c[_K.W + 4]
+        ev[k, _Ev.REWARD] = reward
+        flags[k, _Flag.DIVERGED] = diverged
+        flags[k, _Flag.BREAKAGE] = breakage
+        flags[k, _Flag.FINISHED] = finished
+        flags[k, _Flag.TERMINATED] = terminated
+        flags[k, _Flag.TRUNCATED] = truncated
+        flags[k, _Flag.OVER] = out[k, _Out.cutting] != 0.0 and torque > ev[k, _Ev.TR]
         lo, hi = _TORQUE_OBS
-        ts = c[_K_TORQUE_SCALE]
-        ls = c[_K_LENGTH_SCALE]
+        ts = c[_K.TORQUE_SCALE]
+        ls = c[_K.LENGTH_SCALE]
         # The torque history: the measured torques of the last steps, as they were observed.
         for i in range(8 + _HISTORY, 9, -1):
             obs[k, i] = obs[k, i - 1]
         obs[k, 9] = obs[k, 0]
         obs[k, 0] = _pymin(_pymax(meas / ts, lo), hi)
-        obs[k, 2] = _pymin(_pymax(ev[k, _E_THRUST_MEAS] / c[_K_THRUST_SCALE], lo), hi)
-        obs[k, 3] = _pymin(_pymax(ev[k, _E_SPEED_MEAS] / c[_K_SPEED_SCALE], 0.0), 3.0)
-        obs[k, 4] = ev[k, _E_ACTION]
-        obs[k, 5] = _pymin(_pymax(out[k, 11] / ls, -1.0), 2.0)
-        obs[k, 6] = _pymin(out[k, 12] / ls, 2.0)
+        obs[k, 2] = _pymin(_pymax(ev[k, _Ev.THRUST_MEAS] / c[_K.THRUST_SCALE], lo), hi)
+        obs[k, 3] = _pymin(_pymax(ev[k, _Ev.SPEED_MEAS] / c[_K.SPEED_SCALE], 0.0), 3.0)
+        obs[k, 4] = ev[k, _Ev.ACTION]
+        obs[k, 5] = _pymin(_pymax(out[k, _Out.position_mm] / ls, -1.0), 2.0)
+        obs[k, 6] = _pymin(out[k, _Out.depth_mm] / ls, 2.0)
 
 
 @numba.njit(cache=True, nogil=True)
 def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, rng_table):
     """One step of every lane: the action's command, the plant, the env's outputs.
 
-    Lane ``k`` applies ``ev[k, _E_ACTION]``, clipped to the box here (and counted as clipped,
-    as it is when ``flags[k, _F_IN_CLIPPED]`` says it was clipped before), and draws five
+    Lane ``k`` applies ``ev[k, _Ev.ACTION]``, clipped to the box here (and counted as clipped,
+    as it is when ``flags[k, _Flag.IN_CLIPPED]`` says it was clipped before), and draws five
     standard normals from its generator (row ``rng_table[k]``, ``core.compiled.normals``). The plant
     advances ``LANE_BLOCK`` lanes at a time.
     """
-    feed_mode = c[_K_FEED_MODE] != 0.0
+    feed_mode = c[_K.FEED_MODE] != 0.0
     n = state.shape[0]
     inputs = np.empty((LANE_BLOCK, _N_IN))
     tmp = np.empty((LANE_BLOCK, _N_TMP))
@@ -156,24 +195,24 @@ def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, rng_table):
     for k0 in range(0, n, LANE_BLOCK):
         k1 = min(k0 + LANE_BLOCK, n)
         for k in range(k0, k1):
-            a = ev[k, _E_ACTION]
-            clipped = flags[k, _F_IN_CLIPPED]
+            a = ev[k, _Ev.ACTION]
+            clipped = flags[k, _Flag.IN_CLIPPED]
             if a > 1.0:
                 a = 1.0
                 clipped = True
             elif a < -1.0:
                 a = -1.0
                 clipped = True
-            ev[k, _E_ACTION] = a
-            flags[k, _F_CLIPPED] = clipped
-            counts[k, _C_N_CLIPPED] += clipped
-            command = c[_K_MID] + c[_K_HALF] * a
+            ev[k, _Ev.ACTION] = a
+            flags[k, _Flag.CLIPPED] = clipped
+            counts[k, _Count.N_CLIPPED] += clipped
+            command = c[_K.MID] + c[_K.HALF] * a
             if feed_mode:
-                voltage, feed = c[_K_U0], command
+                voltage, feed = c[_K.U0], command
             else:
-                voltage, feed = command, c[_K_V0]
-            ev[k, _E_COMMAND] = command
-            ev[k, _E_VOLTAGE] = voltage
+                voltage, feed = command, c[_K.V0]
+            ev[k, _Ev.COMMAND] = command
+            ev[k, _Ev.VOLTAGE] = voltage
             inputs[k - k0, 0] = voltage
             inputs[k - k0, 1] = feed
             for q in range(5):
@@ -186,8 +225,16 @@ def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, rng_table):
 def _step_packed(t):
     """:func:`_step` with its arguments in one table (``core.compiled.packed``): what every
     step calls (one array to unbox, not one per argument)."""
-    _step(as_int(t, 0), f8_1(t, 1), f8_2(t, 2), f8_3(t, 3), f8_2(t, 4), f8_2(t, 5), f8_1(t, 6),
-          f8_2(t, 7), b1_2(t, 8), i8_2(t, 9), f4_2(t, 10), i8_2(t, 11))  # fmt: skip
+    _step(*_step_args(t))
+
+
+@numba.njit(cache=True, inline="always")
+def _step_args(t):
+    """:func:`_step`'s arguments from its table ``t`` (``DrillingCore._args``): the plant's
+    tables, then the env's."""
+    plant = (as_int(t, 0), f8_1(t, 1), f8_2(t, 2), f8_3(t, 3), f8_2(t, 4), f8_2(t, 5))
+    env = (f8_1(t, 6), f8_2(t, 7), b1_2(t, 8), i8_2(t, 9), f4_2(t, 10), i8_2(t, 11))
+    return plant + env
 
 
 @numba.njit(cache=True, nogil=True)
@@ -198,38 +245,39 @@ def _serve_step(ctl, table, polls):
 
 
 @numba.njit(cache=True)
-def _start(k, row, eng_depth, eng_torque, eng_thrust, x, par, eng, state, out, consts, ev, flags,
-           counts, obs, bound):  # fmt: skip
-    """The arrays of lane ``k`` at the start of a hole (``DrillingCore.start``): the
-    plant's (:func:`~machining_envs.drilling.plant.start_lane` with the ``par`` row ``row``
-    and the engagement tables, :func:`~machining_envs.drilling.plant.restart_lane`), then
-    the env's: the score bound, the first observation, and the signals of a hole not yet
-    begun, where ``lane_info`` and ``info_arrays`` read them until the first step (which
-    writes every one before it reads it): the drill at rest at its start position, the
-    spindle at its initial speed, the valve and the voltage as the plant starts, the command
-    of the initial action. ``x`` = ``[voltage, valve x1, spindle speed (rad/s), start
-    position, torque limit, feed of the bound, initial action, its command]``.
+def _start(k, drill, t):
+    """The arrays of lane ``k`` at the start of a hole (``DrillingCore.start``) in the
+    tables ``t`` (:class:`_Tables`): the plant's
+    (:func:`~machining_envs.drilling.plant.start_lane` with the drill's ``par`` row and
+    engagement tables, ``drill``, a :class:`_Drill`;
+    :func:`~machining_envs.drilling.plant.restart_lane`), then the env's: the score bound,
+    the first observation, and the signals of a hole not yet begun, where ``lane_info`` and
+    ``info_arrays`` read them until the first step (which writes every one before it reads
+    it): the drill at rest at its start position, the spindle at its initial speed, the
+    valve and the voltage as the plant starts, the command of the initial action.
     """
+    x, row = drill.x, drill.row
     volt, x1, omega, position, tr, v, a0, c0 = x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7]
-    start_lane(k, row, eng_depth, eng_torque, eng_thrust, par, eng)
-    restart_lane(k, volt, x1, omega, position, state)
+    start_lane(k, row, drill.eng_depth, drill.eng_torque, drill.eng_thrust, t.par, t.eng)
+    restart_lane(k, volt, x1, omega, position, t.state)
     hz = omega / (2.0 * math.pi)
-    target = row[_P_TARGET]
-    bound[k] = (target - position) / v
-    e = ev[k]
+    target = row[_P.TARGET]
+    t.bound[k] = (target - position) / v
+    e = t.ev[k]
     e[:] = 0.0
-    e[_E_ACTION] = a0
-    e[_E_TR] = tr
-    e[_E_SPEED_MEAS] = hz
-    e[_E_COMMAND] = c0
-    e[_E_VOLTAGE] = volt
-    flags[k, :] = False
-    counts[k, _C_N_CLIPPED] = 0
-    counts[k, _C_SEGMENT] = 0
+    e[_Ev.ACTION] = a0
+    e[_Ev.TR] = tr
+    e[_Ev.SPEED_MEAS] = hz
+    e[_Ev.COMMAND] = c0
+    e[_Ev.VOLTAGE] = volt
+    t.flags[k, :] = False
+    t.counts[k, _Count.N_CLIPPED] = 0
+    t.counts[k, _Count.SEGMENT] = 0
     lo, hi = _TORQUE_OBS
-    ts, hs, ss, ls = consts[6], consts[7], consts[8], consts[9]  # the observation's scales
+    c = t.consts  # the observation's scales
+    ts, hs, ss, ls = c[_K.TORQUE_SCALE], c[_K.THRUST_SCALE], c[_K.SPEED_SCALE], c[_K.LENGTH_SCALE]
     # (the observation as Python's min and max make it)
-    o = obs[k]
+    o = t.obs[k]
     o[0] = _pymin(_pymax(0.0 / ts, lo), hi)
     o[1] = _pymin(tr / ts, 10.0)
     o[2] = _pymin(_pymax(0.0 / hs, lo), hi)
@@ -238,23 +286,23 @@ def _start(k, row, eng_depth, eng_torque, eng_thrust, x, par, eng, state, out, c
     o[5] = _pymin(_pymax(position / ls, -1.0), 2.0)
     o[6] = _pymin(0.0 / ls, 2.0)
     o[7] = _pymin(target / ls, 2.0)
-    o[8] = row[_P_D]
+    o[8] = row[_P.D]
     for i in range(_HISTORY):
         o[9 + i] = _pymin(_pymax(0.0 / ts, lo), hi)
-    q = out[k]
+    q = t.out[k]
     q[:] = 0.0
-    q[5] = hz
-    q[6] = hz
-    q[7] = x1
-    q[11] = position
-    q[17] = np.nan
+    q[_Out.measured_speed_hz] = hz
+    q[_Out.speed_hz] = hz
+    q[_Out.valve_opening] = x1
+    q[_Out.position_mm] = position
+    q[_Out.finish_time_s] = np.nan
 
 
 @numba.njit(cache=True)
-def _start_packed(t, k, row, eng_depth, eng_torque, eng_thrust, x, bound):
+def _start_packed(t, k, drill, bound):
     """:func:`_start` with the step's table ``t`` (:func:`_step_packed`'s)."""
-    _start(k, row, eng_depth, eng_torque, eng_thrust, x, f8_2(t, 2), f8_3(t, 3), f8_2(t, 4),
-           f8_2(t, 5), f8_1(t, 6), f8_2(t, 7), b1_2(t, 8), i8_2(t, 9), f4_2(t, 10), bound)  # fmt: skip
+    _, _, par, eng, state, out, consts, ev, flags, counts, obs, _ = _step_args(t)
+    _start(k, drill, _Tables(par, eng, state, out, consts, ev, flags, counts, obs, bound))
 
 
 #: Where :func:`_step`'s arguments (``DrillingCore._args``) hold the lanes: axis 0 or none
@@ -276,8 +324,7 @@ class DrillingCore(LaneCore):
     #: What a scenario may be: an object of this class or one of these names.
     scenario_types = (DrillingScenario, DRILLING_SCENARIOS)
 
-    def __init__(self, owner, n, scenario, control, params, reward, max_episode_time_s,
-                 overrides):  # fmt: skip
+    def __init__(self, owner, n, scenario, control, params, reward, max_episode_time_s, overrides):
         self.params = resolve_params(
             owner, params, DrillingParams, DrillingParams.cheong_cho, overrides
         )
@@ -308,28 +355,47 @@ class DrillingCore(LaneCore):
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         w = self.reward_weights
         m = self.command_map
-        self.consts = np.array([
-            m.mid, m.half, float(control == "feed"), p.feed_velocity_mm_s, p.nominal_voltage,
-            self.max_episode_time_s, p.torque_scale_Nmm, p.thrust_scale_N,
-            SPEED_SCALE_HZ, LENGTH_SCALE_MM,
-            *w.weights(),
-        ])  # fmt: skip
+        self.consts = np.array(
+            [
+                m.mid,
+                m.half,
+                float(control == "feed"),
+                p.feed_velocity_mm_s,
+                p.nominal_voltage,
+                self.max_episode_time_s,
+                p.torque_scale_Nmm,
+                p.thrust_scale_N,
+                SPEED_SCALE_HZ,
+                LENGTH_SCALE_MM,
+                *w.weights(),
+            ]
+        )
         self.n = n
         self.lanes = DrillingLanes(p, n)
         self.scenarios: list[DrillingScenario | None] = [None] * n
         self.names = LaneNames(n)
-        self.ev = np.zeros((n, _N_EV))
-        self.flags = np.zeros((n, _N_FLAGS), dtype=np.bool_)
-        self.counts = np.zeros((n, 2), dtype=np.int64)
+        self.ev = np.zeros((n, len(_Ev)))
+        self.flags = np.zeros((n, len(_Flag)), dtype=np.bool_)
+        self.counts = np.zeros((n, len(_Count)), dtype=np.int64)
         self.bound = np.full(n, np.nan)
         self.obs = np.zeros((n, 9 + _HISTORY), dtype=np.float32)
         #: The generators the lanes draw their noise from (their episodes').
         self.rngs = LaneGenerators(n)
         lanes = self.lanes
         self._args = (
-            lanes.m, lanes.shared, lanes.par, lanes.eng, lanes.state, lanes.out,
-            self.consts, self.ev, self.flags, self.counts, self.obs, self.rngs.table,
-        )  # fmt: skip
+            lanes.m,
+            lanes.shared,
+            lanes.par,
+            lanes.eng,
+            lanes.state,
+            lanes.out,
+            self.consts,
+            self.ev,
+            self.flags,
+            self.counts,
+            self.obs,
+            self.rngs.table,
+        )
         self._packed = PackedArgs()  # the kernel's arguments in one table (core.compiled.packed)
         #: The blocks of lanes the kernel steps at once (one thread unless a vector env
         #: asks for more).
@@ -355,13 +421,17 @@ class DrillingCore(LaneCore):
         # The floor of the drilling time: the whole travel at the programmed feed (voltage
         # control) or at the stage's top speed (feed control).
         v = p.feed_velocity_mm_s if self.control == "voltage" else p.feed_speed_max_mm_s
-        x = np.array((u, truth.valve_static_gain_per_V * u, truth.free_speed_rad_s(u), 0.0, tr,
-                      v, self._a0, self._c0))  # fmt: skip
-        _start_packed(self._packed(self._args), lane,
-                      self.lanes.lane_row(truth, c, d, target), c.engage_depth_mm,
-                      c.engage_torque, c.engage_thrust, x, self.bound)  # fmt: skip
+        x = (u, truth.valve_static_gain_per_V * u, truth.free_speed_rad_s(u), 0.0, tr, v)
+        drill = _Drill(
+            self.lanes.lane_row(truth, c, d, target),
+            c.engage_depth_mm,
+            c.engage_torque,
+            c.engage_thrust,
+            np.array((*x, self._a0, self._c0)),
+        )
+        _start_packed(self._packed(self._args), lane, drill, self.bound)
         self.rngs.bind(lane, rng)  # the hole's noise comes from it too
-        breakage = float(self.lanes.par[lane, _P_BREAK])
+        breakage = float(self.lanes.par[lane, _P.BREAK])
         if not tr < breakage:  # the message is made only when it fails
             check_below(
                 f"scenario {sc.name!r}: the torque limit (torque_limit_Nmm x torque_limit_scale)",
@@ -372,25 +442,29 @@ class DrillingCore(LaneCore):
             )
 
     def set_action(self, lane: int, action: float, clipped: bool) -> None:
-        self.ev[lane, _E_ACTION] = action
-        self.flags[lane, _F_IN_CLIPPED] = clipped
+        self.ev[lane, _Ev.ACTION] = action
+        self.flags[lane, _Flag.IN_CLIPPED] = clipped
 
     def set_actions(self, actions: np.ndarray) -> None:
-        self.ev[:, _E_ACTION] = actions[:, 0]  # clipped to the box by the kernel
+        self.ev[:, _Ev.ACTION] = actions[:, 0]  # clipped to the box by the kernel
 
     def outcome(self, lane: int) -> tuple[float, bool, bool]:
         f = self.flags[lane]
-        return float(self.ev[lane, _E_REWARD]), bool(f[_F_TERMINATED]), bool(f[_F_TRUNCATED])
+        return float(self.ev[lane, _Ev.REWARD]), bool(f[_Flag.TERMINATED]), bool(f[_Flag.TRUNCATED])
 
     def step_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return self.ev[:, _E_REWARD], self.flags[:, _F_TERMINATED], self.flags[:, _F_TRUNCATED]
+        return (
+            self.ev[:, _Ev.REWARD],
+            self.flags[:, _Flag.TERMINATED],
+            self.flags[:, _Flag.TRUNCATED],
+        )
 
     def clipped_count(self, lane: int) -> int:
-        return int(self.counts[lane, _C_N_CLIPPED])
+        return int(self.counts[lane, _Count.N_CLIPPED])
 
     def step(self) -> None:
-        """Advance every lane with its action ``ev[:, _E_ACTION]`` (finite; clipped to the
-        box, ``flags[:, _F_IN_CLIPPED]`` saying whether it was clipped already)."""
+        """Advance every lane with its action ``ev[:, _Ev.ACTION]`` (finite; clipped to the
+        box, ``flags[:, _Flag.IN_CLIPPED]`` saying whether it was clipped already)."""
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
             _step_packed(self._packed(self._args))
         else:
@@ -398,34 +472,54 @@ class DrillingCore(LaneCore):
 
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""
-        (torque, peak, thrust, _, meas_thrust, meas_speed, speed, valve, feed, _, per_rev,
-         position, depth, packed, chip, cutting, engagement, finish) = self.lanes.out[k].tolist()  # fmt: skip
+        (
+            torque,
+            peak,
+            thrust,
+            _,
+            meas_thrust,
+            meas_speed,
+            speed,
+            valve,
+            feed,
+            _,
+            per_rev,
+            position,
+            depth,
+            packed,
+            chip,
+            cutting,
+            engagement,
+            finish,
+        ) = self.lanes.out[k].tolist()
         e = self.ev[k].tolist()
-        clipped, diverged, breakage, finished = self.flags[k, _F_CLIPPED:_F_TERMINATED].tolist()
+        clipped, diverged, breakage, finished = self.flags[
+            k, _Flag.CLIPPED : _Flag.TERMINATED
+        ].tolist()
         n_clipped, segment = self.counts[k].tolist()
         p = self.lanes.par[k]
         sc = self.scenarios[k]
         info = {
-            "t_s": float(self.lanes.state[k, _S_T]),
-            "command": e[_E_COMMAND],
+            "t_s": float(self.lanes.state[k, _S.T]),
+            "command": e[_Ev.COMMAND],
             "action_clipped": clipped,
             "n_action_clipped": n_clipped,
             "breakage": breakage,
             "diverged": diverged,
             "finished": finished,
             "torque_Nmm": torque,
-            "torque_limit_Nmm": e[_E_TR],
-            "cost": 1.0 if self.flags[k, _F_OVER] else 0.0,
+            "torque_limit_Nmm": e[_Ev.TR],
+            "cost": 1.0 if self.flags[k, _Flag.OVER] else 0.0,
             "score_bound": float(self.bound[k]),
-            "measured": e[_E_MEAS],
+            "measured": e[_Ev.MEAS],
             "peak_torque_Nmm": peak,
-            "breakage_torque_Nmm": float(p[_P_BREAK]),
+            "breakage_torque_Nmm": float(p[_P.BREAK]),
             "thrust_N": thrust,
             "measured_thrust_N": meas_thrust,
             "spindle_hz": speed,
             "measured_spindle_hz": meas_speed,
             "spindle_rpm": 60.0 * speed,
-            "voltage_V": e[_E_VOLTAGE],
+            "voltage_V": e[_Ev.VOLTAGE],
             "valve_opening": valve,
             "feed_velocity_mm_s": feed,
             "feed_mm_per_rev": per_rev,
@@ -452,42 +546,42 @@ class DrillingCore(LaneCore):
         e = self.ev.copy()
         f = self.flags.copy()
         c = self.counts.copy()
-        lane = self.lanes.par[:, [_P_BREAK, _P_TARGET, _P_D]]
-        done = f[:, _F_FINISHED]
-        finish = o[:, 17]  # NaN unless the hole was finished in this step
+        lane = self.lanes.par[:, [_P.BREAK, _P.TARGET, _P.D]]
+        done = f[:, _Flag.FINISHED]
+        finish = o[:, _Out.finish_time_s]  # NaN unless the hole was finished in this step
         return {
-            "t_s": self.lanes.state[:, _S_T].copy(),
-            "command": e[:, _E_COMMAND],
-            "action_clipped": f[:, _F_CLIPPED],
-            "n_action_clipped": c[:, _C_N_CLIPPED],
-            "breakage": f[:, _F_BREAKAGE],
-            "diverged": f[:, _F_DIVERGED],
+            "t_s": self.lanes.state[:, _S.T].copy(),
+            "command": e[:, _Ev.COMMAND],
+            "action_clipped": f[:, _Flag.CLIPPED],
+            "n_action_clipped": c[:, _Count.N_CLIPPED],
+            "breakage": f[:, _Flag.BREAKAGE],
+            "diverged": f[:, _Flag.DIVERGED],
             "finished": done,
-            "torque_Nmm": o[:, 0],
-            "torque_limit_Nmm": e[:, _E_TR],
-            "cost": f[:, _F_OVER].astype(np.float64),
+            "torque_Nmm": o[:, _Out.torque_Nmm],
+            "torque_limit_Nmm": e[:, _Ev.TR],
+            "cost": f[:, _Flag.OVER].astype(np.float64),
             "score_bound": self.bound.copy(),
-            "measured": e[:, _E_MEAS],
-            "peak_torque_Nmm": o[:, 1],
+            "measured": e[:, _Ev.MEAS],
+            "peak_torque_Nmm": o[:, _Out.peak_torque_Nmm],
             "breakage_torque_Nmm": lane[:, 0],
-            "thrust_N": o[:, 2],
-            "measured_thrust_N": o[:, 4],
-            "spindle_hz": o[:, 6],
-            "measured_spindle_hz": o[:, 5],
-            "spindle_rpm": 60.0 * o[:, 6],
-            "voltage_V": e[:, _E_VOLTAGE],
-            "valve_opening": o[:, 7],
-            "feed_velocity_mm_s": o[:, 8],
-            "feed_mm_per_rev": o[:, 10],
-            "cutting": o[:, 15] != 0.0,
-            "engagement": o[:, 16],
-            "position_mm": o[:, 11],
-            "depth_mm": o[:, 12],
+            "thrust_N": o[:, _Out.thrust_N],
+            "measured_thrust_N": o[:, _Out.measured_thrust_N],
+            "spindle_hz": o[:, _Out.speed_hz],
+            "measured_spindle_hz": o[:, _Out.measured_speed_hz],
+            "spindle_rpm": 60.0 * o[:, _Out.speed_hz],
+            "voltage_V": e[:, _Ev.VOLTAGE],
+            "valve_opening": o[:, _Out.valve_opening],
+            "feed_velocity_mm_s": o[:, _Out.feed_velocity_mm_s],
+            "feed_mm_per_rev": o[:, _Out.feed_mm_per_rev],
+            "cutting": o[:, _Out.cutting] != 0.0,
+            "engagement": o[:, _Out.engagement],
+            "position_mm": o[:, _Out.position_mm],
+            "depth_mm": o[:, _Out.depth_mm],
             "target_depth_mm": lane[:, 1],
-            "packed_chip_mm": o[:, 13],
-            "chip_ratio": o[:, 14],
+            "packed_chip_mm": o[:, _Out.packed_mm],
+            "chip_ratio": o[:, _Out.chip_ratio],
             "diameter_mm": lane[:, 2],
-            "segment": c[:, _C_SEGMENT],
+            "segment": c[:, _Count.SEGMENT],
             "scenario": self.names.array(),
             "drilling_time_s": finish,
             "_drilling_time_s": done.copy(),

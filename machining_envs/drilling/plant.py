@@ -47,6 +47,7 @@ import dataclasses
 import functools
 import math
 from dataclasses import dataclass
+from enum import IntEnum
 from typing import NamedTuple
 
 import numba
@@ -596,30 +597,82 @@ def _cutting_geometry(shape: tuple, diameter_mm: float) -> _Geometry:
     lips = np.empty((6, _N_LIP))
     chisel = np.empty((6, _N_CHISEL))
     depth = np.empty(_N_LIP + 2)
-    _geometry_arrays(
-        w, dr, sk, ck, radius, math.tan(math.radians(helix)), beta, math.sin(beta),
-        math.sin(beta) ** 2, r_ind, dc, _TWO_PI * n_rev, v_f, math.radians(chisel_rake),
-        math.tan(k), _LIP_MID, _CHISEL_MID, _LIP_EDGES, lips, chisel, depth,
-    )  # fmt: skip
+    tan_helix = math.tan(math.radians(helix))
+    sin_beta = math.sin(beta)
+    x = _Elements(
+        w,
+        dr,
+        sk,
+        ck,
+        radius,
+        tan_helix,
+        beta,
+        sin_beta,
+        sin_beta**2,
+        r_ind,
+        dc,
+        _TWO_PI * n_rev,
+        v_f,
+        math.radians(chisel_rake),
+        math.tan(k),
+    )
+    _geometry_arrays(x, lips, chisel, depth)
     r, sin_phi, fp_angle, fq_den, fq_angle, q = read_only(*lips)
     rc, cos_a, neg_sin_a, cos_b, sin_b, den = read_only(*chisel)
     read_only(depth)
     return _Geometry(
-        sk, bt, r, sin_phi, fp_angle, fq_den, fq_angle, q, dc, rc, cos_a, neg_sin_a, cos_b,
-        sin_b, den, indent, depth,
-    )  # fmt: skip
+        sk,
+        bt,
+        r,
+        sin_phi,
+        fp_angle,
+        fq_den,
+        fq_angle,
+        q,
+        dc,
+        rc,
+        cos_a,
+        neg_sin_a,
+        cos_b,
+        sin_b,
+        den,
+        indent,
+        depth,
+    )
+
+
+class _Elements(NamedTuple):
+    """The scalars of one drill's element arrays (:func:`_geometry_arrays`)."""
+
+    w: float
+    dr: float
+    sk: float
+    ck: float
+    radius: float
+    tan_helix: float
+    beta: float
+    sin_beta: float
+    sin_beta_sq: float
+    r_ind: float
+    dc: float
+    two_pi_n: float
+    v_f: float
+    chisel_rake: float
+    tan_k: float
 
 
 @numba.njit(cache=True)
-def _geometry_arrays(w, dr, sk, ck, radius, tan_helix, beta, sin_beta, sin_beta_sq, r_ind, dc,
-                     two_pi_n, v_f, chisel_rake, tan_k, lip_mid, chisel_mid, lip_edges, lips,
-                     chisel, depth):  # fmt: skip
-    """The element arrays of :func:`_cutting_geometry`, element by element: each value is
+def _geometry_arrays(x, lips, chisel, depth):
+    """The element arrays of :func:`_cutting_geometry` from its scalars ``x``
+    (:class:`_Elements`), element by element: each value is
     computed by the operations, in the order, that numpy's array expressions of the model
     used, with libm's functions (numpy's own on processors without AVX-512), so that the
     numbers are the same. ``lips`` gets ``r, sin_phi, fp_angle, fq_den, fq_angle, q``,
     ``chisel`` ``rc, cos_a, neg_sin_a, cos_b, sin_b, den``, ``depth`` the point depths
     of the engagement table."""
+    w, dr, sk, ck, radius, tan_helix, beta, sin_beta, sin_beta_sq, r_ind, dc = x[:11]
+    two_pi_n, v_f, chisel_rake, tan_k = x[11:]
+    lip_mid, chisel_mid, lip_edges = _LIP_MID, _CHISEL_MID, _LIP_EDGES
     phi_min = math.radians(5.0)
     for i in range(lip_mid.size):
         r = w + dr * lip_mid[i]
@@ -690,14 +743,24 @@ def _sum(a):
 
 
 @numba.njit(cache=True)
-def _forces(tau, bt, r, sin_phi, fp_angle, fq_den, fq_angle, q, sk, dc, rc, cos_a, neg_sin_a,
-            cos_b, sin_b, den, sums, cum_t, cum_h):  # fmt: skip
-    """The shear-stress part of the cutting model (eq. 6-13) of one drill: the torque and
-    thrust of every lip and chisel element per unit feed, summed as numpy sums.
+def _forces(tau, g, sums, cum_t, cum_h):
+    """The shear-stress part of the cutting model (eq. 6-13) of one drill (its
+    :class:`_Geometry` ``g``): the torque and thrust of every lip and chisel element per
+    unit feed, summed as numpy sums.
 
     ``sums`` gets ``[lip torque, lip thrust, chisel torque, chisel thrust]``; ``cum_t`` and
     ``cum_h`` (``2 + r.size``) the torque and thrust cut out to each engagement radius.
     """
+    r, sin_phi, fp_angle, fq_den, fq_angle, q = (
+        g.r,
+        g.sin_phi,
+        g.fp_angle,
+        g.fq_den,
+        g.fq_angle,
+        g.q,
+    )
+    rc, cos_a, neg_sin_a, cos_b, sin_b, den = g.rc, g.cos_a, g.neg_sin_a, g.cos_b, g.sin_b, g.den
+    bt, sk, dc = g.bt, g.sk, g.dc
     n_lip, n_ch = r.size, rc.size
     lip_t = np.empty(n_lip)
     lip_h = np.empty(n_lip)
@@ -739,8 +802,7 @@ def _cutting_forces(g: _Geometry, tau: float) -> CuttingCoefficients:
     sums = np.empty(4)
     cum_t = np.empty(2 + g.r.size)
     cum_h = np.empty(2 + g.r.size)
-    _forces(float(tau), g.bt, g.r, g.sin_phi, g.fp_angle, g.fq_den, g.fq_angle, g.q, g.sk, g.dc,
-            g.rc, g.cos_a, g.neg_sin_a, g.cos_b, g.sin_b, g.den, sums, cum_t, cum_h)  # fmt: skip
+    _forces(float(tau), g, sums, cum_t, cum_h)
     lip_t, lip_h, ch_t, ch_h = sums.tolist()
     return CuttingCoefficients(
         torque_per_feed=float(cum_t[-1]),
@@ -837,21 +899,32 @@ class DrillingStep:
 # ---- the batched physics: N holes stepped as arrays, one kernel for one lane or many --------
 
 #: Entries of ``DrillingLanes.shared`` (the batch's constants). The valve's transition rows
-#: (``_G_HALF``: 2m+1 rows of 3, then 2 rows of 3) and the filter weights (m+1) follow the
+#: (``_G.HALF``: 2m+1 rows of 3, then 2 rows of 3) and the filter weights (m+1) follow the
 #: scalars.
-(_G_TS, _G_UMAX, _G_VMAX, _G_RETRACT, _G_K2, _G_K3, _G_N, _G_INERTIA, _G_OU_C, _G_OU_C_IN,
- _G_OU_0, _G_OU_0_IN, _G_FA, _G_CHIP_LEN, _G_SQUARE, _G_H, _G_H2, _G_H6,
- _G_HALF) = range(19)  # fmt: skip
+_G = IntEnum(
+    "_G",
+    "TS UMAX VMAX RETRACT K2 K3 N INERTIA OU_C OU_C_IN OU_0 OU_0_IN FA CHIP_LEN SQUARE H H2 H6"
+    " HALF",
+    start=0,
+)
 #: Columns of ``DrillingLanes.par`` (one row of parameters per lane).
-(_P_G0, _P_SIG_C, _P_SIG_0, _P_KT, _P_KH, _P_KH2, _P_FULL, _P_D, _P_TARGET, _P_NOISE_T,
- _P_NOISE_H, _P_NOISE_S, _P_BREAK, _P_WEAR, _N_PAR) = range(15)  # fmt: skip
+_P = IntEnum(
+    "_P",
+    "G0 SIG_C SIG_0 KT KH KH2 FULL D TARGET NOISE_T NOISE_H NOISE_S BREAK WEAR",
+    start=0,
+)
 #: Columns of ``DrillingLanes.state``.
-(_S_X1, _S_X2, _S_OMEGA, _S_T, _S_POS, _S_DEPTH, _S_PACKED, _S_XI_CHIP, _S_XI_CUT, _S_TQ_F,
- _S_TH_F, _S_TQ, _S_TH, _S_VOLT, _S_FINISHED, _N_STATE) = range(16)  # fmt: skip
+_S = IntEnum(
+    "_S",
+    "X1 X2 OMEGA T POS DEPTH PACKED XI_CHIP XI_CUT TQ_F TH_F TQ TH VOLT FINISHED",
+    start=0,
+)
 #: Fields of ``DrillingLanes.out`` (one row per lane after each step), in the order of
 #: :class:`DrillingStep`; ``cutting`` is 0 or 1 and ``finish_time_s`` NaN until the hole ends.
 LANE_SIGNALS = tuple(f.name for f in dataclasses.fields(DrillingStep))
 _N_OUT = len(LANE_SIGNALS)
+#: The same fields as columns of ``DrillingLanes.out``.
+_Out = IntEnum("_Out", LANE_SIGNALS, start=0)
 #: Entries of each engagement table (``DrillingLanes.eng[k]``: point depth, torque share,
 #: thrust share).
 _N_ENG = _N_LIP + 2
@@ -984,8 +1057,22 @@ def _engagement(eng, k, full, depth_mm):
 
 
 #: Columns of the step kernel's scratch: what a lane carries between the stages of its step.
-(_T_U, _T_BOTTOM, _T_CUT, _T_K4, _T_KH, _T_KH2, _T_LOAD, _T_W, _T_WB, _T_F1, _T_F2, _T_F3,
- _T_XB, _T_XC, _T_TQ_F, _T_TH_F, _T_PEAK, _T_TQ, _T_TH, _N_TMP) = range(20)  # fmt: skip
+_T = IntEnum(
+    "_T",
+    "U BOTTOM CUT K4 KH KH2 LOAD W WB F1 F2 F3 XB XC TQ_F TH_F PEAK TQ TH",
+    start=0,
+)
+_N_TMP = len(_T)
+
+
+@numba.njit(cache=True, inline="always")
+def _accel(g, xv, friction, load, w):
+    """The spindle's acceleration (RK4's stage) at the valve position ``xv``, with the
+    friction term ``friction`` and the load ``load`` (k4 over the inertia) at the speed
+    ``w`` (held above the floor where the torque law is not evaluated)."""
+    return g[_G.K2] * xv - g[_G.K3] * friction - load / (w if w > _W_FLOOR else _W_FLOOR)
+
+
 #: Lanes whose step advances together, stage by stage (see :func:`advance`).
 LANE_BLOCK = 16
 
@@ -1012,37 +1099,37 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp, rows):
     for k in range(k0, k1):
         voltage = inputs[k - k0, 0]
         feed = inputs[k - k0, 1]
-        ts = g[_G_TS]
-        u = _pymin(_pymax(voltage, 0.0), g[_G_UMAX])
-        vmax = g[_G_VMAX]
+        ts = g[_G.TS]
+        u = _pymin(_pymax(voltage, 0.0), g[_G.UMAX])
+        vmax = g[_G.VMAX]
         v = _pymin(_pymax(feed, -vmax), vmax)
-        state[k, _S_VOLT] = u
+        state[k, _S.VOLT] = u
 
         # Fluctuations (Ornstein-Uhlenbeck, unit variance), then the hole over this period.
-        xi_chip = g[_G_OU_C] * state[k, _S_XI_CHIP] + g[_G_OU_C_IN] * inputs[k - k0, 2]
-        xi_cut = g[_G_OU_0] * state[k, _S_XI_CUT] + g[_G_OU_0_IN] * inputs[k - k0, 3]
-        state[k, _S_XI_CHIP] = xi_chip
-        state[k, _S_XI_CUT] = xi_cut
-        z0 = state[k, _S_POS]
+        xi_chip = g[_G.OU_C] * state[k, _S.XI_CHIP] + g[_G.OU_C_IN] * inputs[k - k0, 2]
+        xi_cut = g[_G.OU_0] * state[k, _S.XI_CUT] + g[_G.OU_0_IN] * inputs[k - k0, 3]
+        state[k, _S.XI_CHIP] = xi_chip
+        state[k, _S.XI_CUT] = xi_cut
+        z0 = state[k, _S.POS]
         z1 = z0 + v * ts
-        if z1 < -g[_G_RETRACT]:
-            z1 = -g[_G_RETRACT]
-        bottom = state[k, _S_DEPTH]
+        if z1 < -g[_G.RETRACT]:
+            z1 = -g[_G.RETRACT]
+        bottom = state[k, _S.DEPTH]
         cut_len = z1 - bottom if (v > 0.0 and z1 > bottom) else 0.0
         cutting = cut_len > 0.0
-        d = par[k, _P_D]
+        d = par[k, _P.D]
         if cutting:
             v_cut = cut_len / ts
             mid = bottom + 0.5 * cut_len
-            eng_t, eng_h = _engagement(eng, k, par[k, _P_FULL], mid)
-            packed = state[k, _S_PACKED] + 0.5 * cut_len
-            ratio = par[k, _P_G0] * (math.exp(packed / (g[_G_CHIP_LEN] * d)) - 1.0)
-            ratio *= _pymax(0.0, 1.0 + par[k, _P_SIG_C] * xi_chip)
-            wear = 1.0 + par[k, _P_WEAR] * mid  # the edge dulls with the depth drilled
-            load = (wear + ratio) * _pymax(0.0, 1.0 + par[k, _P_SIG_0] * xi_cut)
-            k4 = par[k, _P_KT] * v_cut * eng_t * load
-            kh = par[k, _P_KH] * v_cut * eng_h * load
-            kh2 = par[k, _P_KH2] * py_square(v_cut * eng_h, g[_G_SQUARE])
+            eng_t, eng_h = _engagement(eng, k, par[k, _P.FULL], mid)
+            packed = state[k, _S.PACKED] + 0.5 * cut_len
+            ratio = par[k, _P.G0] * (math.exp(packed / (g[_G.CHIP_LEN] * d)) - 1.0)
+            ratio *= _pymax(0.0, 1.0 + par[k, _P.SIG_C] * xi_chip)
+            wear = 1.0 + par[k, _P.WEAR] * mid  # the edge dulls with the depth drilled
+            load = (wear + ratio) * _pymax(0.0, 1.0 + par[k, _P.SIG_0] * xi_cut)
+            k4 = par[k, _P.KT] * v_cut * eng_t * load
+            kh = par[k, _P.KH] * v_cut * eng_h * load
+            kh2 = par[k, _P.KH2] * py_square(v_cut * eng_h, g[_G.SQUARE])
         else:
             v_cut = 0.0
             ratio = 0.0
@@ -1050,159 +1137,138 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp, rows):
             k4 = 0.0
             kh = 0.0
             kh2 = 0.0
-        out[k, 8] = v
-        out[k, 9] = v_cut
-        out[k, 11] = z1
-        out[k, 14] = ratio
-        out[k, 15] = 1.0 if cutting else 0.0
-        out[k, 16] = eng_t
-        tmp[k - k0, _T_U] = u
-        tmp[k - k0, _T_BOTTOM] = bottom
-        tmp[k - k0, _T_CUT] = cut_len
-        tmp[k - k0, _T_K4] = k4
-        tmp[k - k0, _T_KH] = kh
-        tmp[k - k0, _T_KH2] = kh2
-        tmp[k - k0, _T_LOAD] = k4 / g[_G_INERTIA]
+        out[k, _Out.feed_velocity_mm_s] = v
+        out[k, _Out.cutting_feed_mm_s] = v_cut
+        out[k, _Out.position_mm] = z1
+        out[k, _Out.chip_ratio] = ratio
+        out[k, _Out.cutting] = 1.0 if cutting else 0.0
+        out[k, _Out.engagement] = eng_t
+        tmp[k - k0, _T.U] = u
+        tmp[k - k0, _T.BOTTOM] = bottom
+        tmp[k - k0, _T.CUT] = cut_len
+        tmp[k - k0, _T.K4] = k4
+        tmp[k - k0, _T.KH] = kh
+        tmp[k - k0, _T.KH2] = kh2
+        tmp[k - k0, _T.LOAD] = k4 / g[_G.INERTIA]
 
         # Torque and thrust at the sub-step instants (j = 0..m); the sensors filter them.
-        w = state[k, _S_OMEGA]
-        fw = _G_HALF + 3 * (2 * m + 1) + 6
-        fa = g[_G_FA]
+        w = state[k, _S.OMEGA]
+        fw = _G.HALF + 3 * (2 * m + 1) + 6
+        fa = g[_G.FA]
         wj = w if w > _W_FLOOR else _W_FLOOR
         tq = k4 / wj
         th = kh / wj + kh2 / (wj * wj)
-        tmp[k - k0, _T_TQ_F] = state[k, _S_TQ_F] * fa + g[fw] * tq
-        tmp[k - k0, _T_TH_F] = state[k, _S_TH_F] * fa + g[fw] * th
-        tmp[k - k0, _T_PEAK] = tq if tq > 0.0 else 0.0
-        tmp[k - k0, _T_TQ] = tq
-        tmp[k - k0, _T_TH] = th
-        tmp[k - k0, _T_W] = w
+        tmp[k - k0, _T.TQ_F] = state[k, _S.TQ_F] * fa + g[fw] * tq
+        tmp[k - k0, _T.TH_F] = state[k, _S.TH_F] * fa + g[fw] * th
+        tmp[k - k0, _T.PEAK] = tq if tq > 0.0 else 0.0
+        tmp[k - k0, _T.TQ] = tq
+        tmp[k - k0, _T.TH] = th
+        tmp[k - k0, _T.W] = w
         # The valve's exact position at the start of the period.
-        tmp[k - k0, _T_XC] = (
-            g[_G_HALF] * state[k, _S_X1] + g[_G_HALF + 1] * state[k, _S_X2] + g[_G_HALF + 2] * u
+        tmp[k - k0, _T.XC] = (
+            g[_G.HALF] * state[k, _S.X1] + g[_G.HALF + 1] * state[k, _S.X2] + g[_G.HALF + 2] * u
         )
     # The spindle by RK4 with the valve exactly at every half sub-step and the load
     # k4 / omega; the torque and thrust at the end of every sub-step.
-    fw = _G_HALF + 3 * (2 * m + 1) + 6
+    fw = _G.HALF + 3 * (2 * m + 1) + 6
     for j in range(m):
-        r = _G_HALF + 6 * j
+        r = _G.HALF + 6 * j
         for k in range(k0, k1):
-            w = tmp[k - k0, _T_W]
+            w = tmp[k - k0, _T.W]
             speeds[k - k0] = w if w > 0.0 else 0.0
-        powers(speeds, 0, friction, 0, nb, g[_G_N])
+        powers(speeds, 0, friction, 0, nb, g[_G.N])
         for k in range(k0, k1):
-            u = tmp[k - k0, _T_U]
-            x1 = state[k, _S_X1]
-            x2 = state[k, _S_X2]
-            xa = tmp[k - k0, _T_XC]
-            tmp[k - k0, _T_XB] = g[r + 3] * x1 + g[r + 4] * x2 + g[r + 5] * u
-            tmp[k - k0, _T_XC] = g[r + 6] * x1 + g[r + 7] * x2 + g[r + 8] * u
-            w = tmp[k - k0, _T_W]
+            u = tmp[k - k0, _T.U]
+            x1 = state[k, _S.X1]
+            x2 = state[k, _S.X2]
+            xa = tmp[k - k0, _T.XC]
+            tmp[k - k0, _T.XB] = g[r + 3] * x1 + g[r + 4] * x2 + g[r + 5] * u
+            tmp[k - k0, _T.XC] = g[r + 6] * x1 + g[r + 7] * x2 + g[r + 8] * u
+            w = tmp[k - k0, _T.W]
             wa = w if w > 0.0 else 0.0
-            f = (
-                g[_G_K2] * xa
-                - g[_G_K3] * friction[k - k0]
-                - tmp[k - k0, _T_LOAD] / (wa if wa > _W_FLOOR else _W_FLOOR)
-            )
-            tmp[k - k0, _T_F1] = f
-            wb = w + g[_G_H2] * f
-            tmp[k - k0, _T_WB] = wb if wb > 0.0 else 0.0
-            speeds[k - k0] = tmp[k - k0, _T_WB]
-        powers(speeds, 0, friction, 0, nb, g[_G_N])
+            f = _accel(g, xa, friction[k - k0], tmp[k - k0, _T.LOAD], wa)
+            tmp[k - k0, _T.F1] = f
+            wb = w + g[_G.H2] * f
+            tmp[k - k0, _T.WB] = wb if wb > 0.0 else 0.0
+            speeds[k - k0] = tmp[k - k0, _T.WB]
+        powers(speeds, 0, friction, 0, nb, g[_G.N])
+        for stage in range(2):  # the second and third stages (f2, f3): the speed at the
+            # midpoint from f2, at the end from f3
+            h = g[_G.H2] if stage == 0 else g[_G.H]
+            for k in range(k0, k1):
+                wb = tmp[k - k0, _T.WB]
+                f = _accel(g, tmp[k - k0, _T.XB], friction[k - k0], tmp[k - k0, _T.LOAD], wb)
+                tmp[k - k0, _T.F2 + stage] = f
+                wb = tmp[k - k0, _T.W] + h * f
+                tmp[k - k0, _T.WB] = wb if wb > 0.0 else 0.0
+                speeds[k - k0] = tmp[k - k0, _T.WB]
+            powers(speeds, 0, friction, 0, nb, g[_G.N])
         for k in range(k0, k1):
-            wb = tmp[k - k0, _T_WB]
-            f = (
-                g[_G_K2] * tmp[k - k0, _T_XB]
-                - g[_G_K3] * friction[k - k0]
-                - tmp[k - k0, _T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
-            )
-            tmp[k - k0, _T_F2] = f
-            wb = tmp[k - k0, _T_W] + g[_G_H2] * f
-            tmp[k - k0, _T_WB] = wb if wb > 0.0 else 0.0
-            speeds[k - k0] = tmp[k - k0, _T_WB]
-        powers(speeds, 0, friction, 0, nb, g[_G_N])
-        for k in range(k0, k1):
-            wb = tmp[k - k0, _T_WB]
-            f = (
-                g[_G_K2] * tmp[k - k0, _T_XB]
-                - g[_G_K3] * friction[k - k0]
-                - tmp[k - k0, _T_LOAD] / (wb if wb > _W_FLOOR else _W_FLOOR)
-            )
-            tmp[k - k0, _T_F3] = f
-            wc = tmp[k - k0, _T_W] + g[_G_H] * f
-            tmp[k - k0, _T_WB] = wc if wc > 0.0 else 0.0
-            speeds[k - k0] = tmp[k - k0, _T_WB]
-        powers(speeds, 0, friction, 0, nb, g[_G_N])
-        for k in range(k0, k1):
-            wc = tmp[k - k0, _T_WB]
-            f4 = (
-                g[_G_K2] * tmp[k - k0, _T_XC]
-                - g[_G_K3] * friction[k - k0]
-                - tmp[k - k0, _T_LOAD] / (wc if wc > _W_FLOOR else _W_FLOOR)
-            )
-            w = tmp[k - k0, _T_W] + g[_G_H6] * (
-                tmp[k - k0, _T_F1] + 2.0 * tmp[k - k0, _T_F2] + 2.0 * tmp[k - k0, _T_F3] + f4
+            wc = tmp[k - k0, _T.WB]
+            f4 = _accel(g, tmp[k - k0, _T.XC], friction[k - k0], tmp[k - k0, _T.LOAD], wc)
+            w = tmp[k - k0, _T.W] + g[_G.H6] * (
+                tmp[k - k0, _T.F1] + 2.0 * tmp[k - k0, _T.F2] + 2.0 * tmp[k - k0, _T.F3] + f4
             )
             if w < 0.0:
                 w = 0.0
-            tmp[k - k0, _T_W] = w
+            tmp[k - k0, _T.W] = w
             wj = w if w > _W_FLOOR else _W_FLOOR
-            tq = tmp[k - k0, _T_K4] / wj
-            th = tmp[k - k0, _T_KH] / wj + tmp[k - k0, _T_KH2] / (wj * wj)
-            if tq > tmp[k - k0, _T_PEAK]:
-                tmp[k - k0, _T_PEAK] = tq
-            tmp[k - k0, _T_TQ_F] += g[fw + j + 1] * tq
-            tmp[k - k0, _T_TH_F] += g[fw + j + 1] * th
-            tmp[k - k0, _T_TQ] = tq
-            tmp[k - k0, _T_TH] = th
+            tq = tmp[k - k0, _T.K4] / wj
+            th = tmp[k - k0, _T.KH] / wj + tmp[k - k0, _T.KH2] / (wj * wj)
+            if tq > tmp[k - k0, _T.PEAK]:
+                tmp[k - k0, _T.PEAK] = tq
+            tmp[k - k0, _T.TQ_F] += g[fw + j + 1] * tq
+            tmp[k - k0, _T.TH_F] += g[fw + j + 1] * th
+            tmp[k - k0, _T.TQ] = tq
+            tmp[k - k0, _T.TH] = th
     for k in range(k0, k1):
-        ts = g[_G_TS]
-        u = tmp[k - k0, _T_U]
-        x1 = state[k, _S_X1]
-        x2 = state[k, _S_X2]
-        r = _G_HALF + 3 * (2 * m + 1)
-        state[k, _S_X1] = g[r] * x1 + g[r + 1] * x2 + g[r + 2] * u
-        state[k, _S_X2] = g[r + 3] * x1 + g[r + 4] * x2 + g[r + 5] * u
-        w = tmp[k - k0, _T_W]
-        state[k, _S_OMEGA] = w
-        tq_f = tmp[k - k0, _T_TQ_F]
-        th_f = tmp[k - k0, _T_TH_F]
-        state[k, _S_TQ_F] = tq_f
-        state[k, _S_TH_F] = th_f
-        state[k, _S_TQ] = tmp[k - k0, _T_TQ]
-        state[k, _S_TH] = tmp[k - k0, _T_TH]
+        ts = g[_G.TS]
+        u = tmp[k - k0, _T.U]
+        x1 = state[k, _S.X1]
+        x2 = state[k, _S.X2]
+        r = _G.HALF + 3 * (2 * m + 1)
+        state[k, _S.X1] = g[r] * x1 + g[r + 1] * x2 + g[r + 2] * u
+        state[k, _S.X2] = g[r + 3] * x1 + g[r + 4] * x2 + g[r + 5] * u
+        w = tmp[k - k0, _T.W]
+        state[k, _S.OMEGA] = w
+        tq_f = tmp[k - k0, _T.TQ_F]
+        th_f = tmp[k - k0, _T.TH_F]
+        state[k, _S.TQ_F] = tq_f
+        state[k, _S.TH_F] = th_f
+        state[k, _S.TQ] = tmp[k - k0, _T.TQ]
+        state[k, _S.TH] = tmp[k - k0, _T.TH]
 
         # The drill point and the chips.
-        z1 = out[k, 11]
-        cut_len = tmp[k - k0, _T_CUT]
-        bottom = tmp[k - k0, _T_BOTTOM]
-        state[k, _S_POS] = z1
+        z1 = out[k, _Out.position_mm]
+        cut_len = tmp[k - k0, _T.CUT]
+        bottom = tmp[k - k0, _T.BOTTOM]
+        state[k, _S.POS] = z1
         if cut_len > 0.0:
-            state[k, _S_DEPTH] = z1
-            state[k, _S_PACKED] += cut_len
+            state[k, _S.DEPTH] = z1
+            state[k, _S.PACKED] += cut_len
         if z1 < 0.0:
-            state[k, _S_PACKED] = 0.0  # the point left the hole: the flutes are cleared
-        time = state[k, _S_T]
+            state[k, _S.PACKED] = 0.0  # the point left the hole: the flutes are cleared
+        time = state[k, _S.T]
         finish = np.nan
-        if state[k, _S_FINISHED] == 0.0 and state[k, _S_DEPTH] >= par[k, _P_TARGET]:
-            frac = (par[k, _P_TARGET] - bottom) / cut_len if cut_len > 0 else 1.0
+        if state[k, _S.FINISHED] == 0.0 and state[k, _S.DEPTH] >= par[k, _P.TARGET]:
+            frac = (par[k, _P.TARGET] - bottom) / cut_len if cut_len > 0 else 1.0
             finish = time + _pymin(_pymax(frac, 0.0), 1.0) * ts
-            state[k, _S_FINISHED] = 1.0
-        state[k, _S_T] = time + ts
+            state[k, _S.FINISHED] = 1.0
+        state[k, _S.T] = time + ts
         speed_hz = w / (2.0 * math.pi)
-        v_cut = out[k, 9]
-        out[k, 0] = tmp[k - k0, _T_TQ]
-        out[k, 1] = tmp[k - k0, _T_PEAK]
-        out[k, 2] = tmp[k - k0, _T_TH]
-        out[k, 3] = tq_f + par[k, _P_NOISE_T] * inputs[k - k0, 4]
-        out[k, 4] = th_f + par[k, _P_NOISE_H] * inputs[k - k0, 5]
-        out[k, 5] = speed_hz + par[k, _P_NOISE_S] * inputs[k - k0, 6]
-        out[k, 6] = speed_hz
-        out[k, 7] = state[k, _S_X1]
-        out[k, 10] = (v_cut / speed_hz) if speed_hz > 1.0 else 0.0
-        out[k, 12] = state[k, _S_DEPTH]
-        out[k, 13] = state[k, _S_PACKED]
-        out[k, 17] = finish
+        v_cut = out[k, _Out.cutting_feed_mm_s]
+        out[k, _Out.torque_Nmm] = tmp[k - k0, _T.TQ]
+        out[k, _Out.peak_torque_Nmm] = tmp[k - k0, _T.PEAK]
+        out[k, _Out.thrust_N] = tmp[k - k0, _T.TH]
+        out[k, _Out.measured_torque_Nmm] = tq_f + par[k, _P.NOISE_T] * inputs[k - k0, 4]
+        out[k, _Out.measured_thrust_N] = th_f + par[k, _P.NOISE_H] * inputs[k - k0, 5]
+        out[k, _Out.measured_speed_hz] = speed_hz + par[k, _P.NOISE_S] * inputs[k - k0, 6]
+        out[k, _Out.speed_hz] = speed_hz
+        out[k, _Out.valve_opening] = state[k, _S.X1]
+        out[k, _Out.feed_mm_per_rev] = (v_cut / speed_hz) if speed_hz > 1.0 else 0.0
+        out[k, _Out.depth_mm] = state[k, _S.DEPTH]
+        out[k, _Out.packed_mm] = state[k, _S.PACKED]
+        out[k, _Out.finish_time_s] = finish
 
 
 @numba.njit(cache=True)
@@ -1235,10 +1301,10 @@ def restart_lane(k, voltage, x1, omega, position_mm, state):
     ``position_mm``, every other state zero."""
     s = state[k]
     s[:] = 0.0
-    s[_S_VOLT] = voltage
-    s[_S_X1] = x1
-    s[_S_OMEGA] = omega
-    s[_S_POS] = position_mm
+    s[_S.VOLT] = voltage
+    s[_S.X1] = x1
+    s[_S.OMEGA] = omega
+    s[_S.POS] = position_mm
 
 
 class DrillingLanes:
@@ -1276,9 +1342,9 @@ class DrillingLanes:
         self._key = _shared_key(params)
         #: The batch's constants: valve, spindle, filter, fluctuation times, sample time.
         self.shared = _shared_constants(params)
-        self.par = np.zeros((self.n, _N_PAR))
+        self.par = np.zeros((self.n, len(_P)))
         self.eng = np.zeros((self.n, 3, _N_ENG))
-        self.state = np.zeros((self.n, _N_STATE))
+        self.state = np.zeros((self.n, len(_S)))
         #: Signals of the last step, one row per lane (columns: ``LANE_SIGNALS``).
         self.out = np.zeros((self.n, _N_OUT))
         self.out[:, -1] = np.nan
@@ -1309,32 +1375,45 @@ class DrillingLanes:
                 f"({', '.join(f'{f}={batch[f]!r}' for f in diff)}), got {diff}"
             )
         c = p.coefficients(diameter_mm) if coefficients is None else coefficients
-        start_lane(lane, self.lane_row(p, c, diameter_mm, target_depth_mm), c.engage_depth_mm,
-                   c.engage_torque, c.engage_thrust, self.par, self.eng)  # fmt: skip
+        start_lane(
+            lane,
+            self.lane_row(p, c, diameter_mm, target_depth_mm),
+            c.engage_depth_mm,
+            c.engage_torque,
+            c.engage_thrust,
+            self.par,
+            self.eng,
+        )
         self.restart(lane, p, start_position_mm)
 
     @staticmethod
-    def lane_row(params: DrillingParams, coefficients: CuttingCoefficients,
-                 diameter_mm: float, target_depth_mm: float) -> np.ndarray:  # fmt: skip
+    def lane_row(
+        params: DrillingParams,
+        coefficients: CuttingCoefficients,
+        diameter_mm: float,
+        target_depth_mm: float,
+    ) -> np.ndarray:
         """A lane's row of ``par`` (``_P_*``): its parameters and its drill's cutting
         constants (``coefficients``, of ``params`` at ``diameter_mm``)."""
         p, c = params, coefficients
-        return np.array((
-            p.chip_friction,
-            p.chip_fluctuation,
-            p.cutting_fluctuation,
-            _TWO_PI * c.torque_per_feed,
-            _TWO_PI * c.thrust_per_feed,
-            _TWO_PI**2 * c.indentation_per_feed2,
-            c.full_engagement_mm,
-            float(diameter_mm),
-            float(target_depth_mm),
-            p.torque_noise_Nmm,
-            p.thrust_noise_N,
-            p.speed_noise_hz,
-            p.breakage_torque_Nmm(diameter_mm),
-            p.wear_per_mm,
-        ))  # fmt: skip
+        return np.array(
+            (
+                p.chip_friction,
+                p.chip_fluctuation,
+                p.cutting_fluctuation,
+                _TWO_PI * c.torque_per_feed,
+                _TWO_PI * c.thrust_per_feed,
+                _TWO_PI**2 * c.indentation_per_feed2,
+                c.full_engagement_mm,
+                float(diameter_mm),
+                float(target_depth_mm),
+                p.torque_noise_Nmm,
+                p.thrust_noise_N,
+                p.speed_noise_hz,
+                p.breakage_torque_Nmm(diameter_mm),
+                p.wear_per_mm,
+            )
+        )
 
     def restart(
         self,
@@ -1410,34 +1489,34 @@ class DrillingPlant:
         """Spindle running free at ``voltage`` (default nominal), valve settled, drill at start."""
         self._lanes.restart(0, self.params, self.start_position_mm, speed_hz, voltage)
 
-    x1 = _state_property(_S_X1, "Spool opening x_v.")
-    x2 = _state_property(_S_X2, "Spool velocity dx_v/dt, 1/s.")
-    omega = _state_property(_S_OMEGA, "Spindle speed, rad/s.")
-    t_s = _state_property(_S_T, "Time since the hole started, s.")
-    position_mm = _state_property(_S_POS, "Drill point below the surface, mm.")
-    depth_mm = _state_property(_S_DEPTH, "Hole depth, mm.")
-    packed_mm = _state_property(_S_PACKED, "Length drilled since the chips were cleared, mm.")
-    xi_chip = _state_property(_S_XI_CHIP, "Chip-friction fluctuation (unit OU process).")
-    xi_cut = _state_property(_S_XI_CUT, "Cutting fluctuation (unit OU process).")
-    torque_filt = _state_property(_S_TQ_F, "Torque sensor filter output, N·mm.")
-    thrust_filt = _state_property(_S_TH_F, "Thrust sensor filter output, N.")
-    torque_Nmm = _state_property(_S_TQ, "Torque at the last sample instant, N·mm.")
-    thrust_N = _state_property(_S_TH, "Thrust at the last sample instant, N.")
-    voltage = _state_property(_S_VOLT, "Valve voltage now applied, V.")
+    x1 = _state_property(_S.X1, "Spool opening x_v.")
+    x2 = _state_property(_S.X2, "Spool velocity dx_v/dt, 1/s.")
+    omega = _state_property(_S.OMEGA, "Spindle speed, rad/s.")
+    t_s = _state_property(_S.T, "Time since the hole started, s.")
+    position_mm = _state_property(_S.POS, "Drill point below the surface, mm.")
+    depth_mm = _state_property(_S.DEPTH, "Hole depth, mm.")
+    packed_mm = _state_property(_S.PACKED, "Length drilled since the chips were cleared, mm.")
+    xi_chip = _state_property(_S.XI_CHIP, "Chip-friction fluctuation (unit OU process).")
+    xi_cut = _state_property(_S.XI_CUT, "Cutting fluctuation (unit OU process).")
+    torque_filt = _state_property(_S.TQ_F, "Torque sensor filter output, N·mm.")
+    thrust_filt = _state_property(_S.TH_F, "Thrust sensor filter output, N.")
+    torque_Nmm = _state_property(_S.TQ, "Torque at the last sample instant, N·mm.")
+    thrust_N = _state_property(_S.TH, "Thrust at the last sample instant, N.")
+    voltage = _state_property(_S.VOLT, "Valve voltage now applied, V.")
 
     @property
     def finished(self) -> bool:
         """Whether the hole has reached its target depth."""
-        return bool(self._lanes.state[0, _S_FINISHED])
+        return bool(self._lanes.state[0, _S.FINISHED])
 
     @property
     def state(self) -> np.ndarray:
         """``[x_v, dx_v/dt, omega (rad/s)]``: the paper's x1, x2, x3 (eq. 18-19)."""
-        return self._lanes.state[0, [_S_X1, _S_X2, _S_OMEGA]].copy()
+        return self._lanes.state[0, [_S.X1, _S.X2, _S.OMEGA]].copy()
 
     def engagement(self, depth_mm: float) -> tuple[float, float]:
         """Engaged share of torque and thrust with the point ``depth_mm`` below the surface."""
-        return _engagement(self._lanes.eng, 0, self._lanes.par[0, _P_FULL], float(depth_mm))
+        return _engagement(self._lanes.eng, 0, self._lanes.par[0, _P.FULL], float(depth_mm))
 
     def step(
         self,

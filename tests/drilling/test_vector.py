@@ -11,7 +11,7 @@ import pytest
 
 from machining_envs import DrillingScenario
 from machining_envs.drilling.plant import (
-    _P_FULL,
+    _P,
     DrillingLanes,
     DrillingParams,
     DrillingPlant,
@@ -164,7 +164,7 @@ def test_engagement_lookup_is_numpys_interp():
             lanes = DrillingLanes(p, 1)
             lanes.start(0, p, d, 5.0)
             xp = c.engage_depth_mm
-            full = lanes.par[0, _P_FULL]
+            full = lanes.par[0, _P.FULL]
             xs = np.concatenate(
                 [rng.uniform(-0.01, 1.01 * xp[-1], 300), xp, np.nextafter(xp, 0.0), [0.0]]
             )
