@@ -136,7 +136,9 @@ def _pairwise_block(a, lo, n):
 
 
 # numpy's pairwise_sum halves (at a multiple of 8) every run of more than 128 numbers and
-# adds the halves' sums; each function below takes runs of up to 2**k * 128 (no recursion
+# adds the halves' sums. A compiled function cannot call itself here (numba's cache of a
+# recursive function crashes when loaded), so each level is its own function, made by
+# :func:`_wider` from the one below it: level k takes runs of up to 2**k * 128 (no recursion
 # and no allocation, so that code without a runtime can use them).
 
 
@@ -156,67 +158,23 @@ def _halves(part, a, lo, n, n2):
     return left + right
 
 
-@numba.njit(cache=True)
-def _pairwise1(a, lo, n):
-    if n <= 128:
-        return _pairwise_block(a, lo, n)
-    n2 = n // 2
-    n2 -= n2 % 8
-    return _halves(_pairwise_block, a, lo, n, n2)
+def _wider(part):
+    """The pairwise sum one level up from ``part``: runs of up to twice ``part``'s length."""
+
+    @numba.njit(cache=True)
+    def level(a, lo, n):
+        if n <= 128:
+            return _pairwise_block(a, lo, n)
+        n2 = n // 2
+        n2 -= n2 % 8
+        return _halves(part, a, lo, n, n2)
+
+    return level
 
 
-@numba.njit(cache=True)
-def _pairwise2(a, lo, n):
-    if n <= 128:
-        return _pairwise_block(a, lo, n)
-    n2 = n // 2
-    n2 -= n2 % 8
-    return _halves(_pairwise1, a, lo, n, n2)
-
-
-@numba.njit(cache=True)
-def _pairwise3(a, lo, n):
-    if n <= 128:
-        return _pairwise_block(a, lo, n)
-    n2 = n // 2
-    n2 -= n2 % 8
-    return _halves(_pairwise2, a, lo, n, n2)
-
-
-@numba.njit(cache=True)
-def _pairwise4(a, lo, n):
-    if n <= 128:
-        return _pairwise_block(a, lo, n)
-    n2 = n // 2
-    n2 -= n2 % 8
-    return _halves(_pairwise3, a, lo, n, n2)
-
-
-@numba.njit(cache=True)
-def _pairwise5(a, lo, n):
-    if n <= 128:
-        return _pairwise_block(a, lo, n)
-    n2 = n // 2
-    n2 -= n2 % 8
-    return _halves(_pairwise4, a, lo, n, n2)
-
-
-@numba.njit(cache=True)
-def _pairwise6(a, lo, n):
-    if n <= 128:
-        return _pairwise_block(a, lo, n)
-    n2 = n // 2
-    n2 -= n2 % 8
-    return _halves(_pairwise5, a, lo, n, n2)
-
-
-@numba.njit(cache=True)
-def _pairwise7(a, lo, n):
-    if n <= 128:
-        return _pairwise_block(a, lo, n)
-    n2 = n // 2
-    n2 -= n2 % 8
-    return _halves(_pairwise6, a, lo, n, n2)
+_pairwise7 = _pairwise_block
+for _ in range(7):
+    _pairwise7 = _wider(_pairwise7)
 
 
 @numba.njit(cache=True)
