@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import IntEnum
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -51,6 +53,7 @@ from machining_envs.contouring.servo import (
     NOMINAL_LOOP_NUMBERS,
     SCRATCH_SIZE,
     SERVO_KINDS,
+    ServoBlock,
     ServoLanes,
     gather_states,
     lane_loops,
@@ -141,47 +144,110 @@ class FeedReward:
 
 
 # ---- the compiled step of every lane ------------------------------------------------------
+# Each lane table's columns are declared once by name (an IntEnum: its members are
+# constants to the compiler, ``lf[k, _LF.s]``); the kernels take the tables as one record
+# (:class:`_Feed`).
 
-#: Columns of ``FeedCore.pf`` (per-lane path and run constants).
-_PF = ("length", "x0", "y0", "x_end", "y_end", "feed", "programmed_time", "time_limit")
+#: Columns of ``FeedCore.lf``: per-lane floats, then the path's and run's constants (from
+#: ``length`` on, also named ``FeedCore.pf``).
+_LF = IntEnum(
+    "_LF",
+    "in_action applied s override prev_action reward"
+    " length x0 y0 x_end y_end feed programmed_time time_limit",
+    start=0,
+)
+#: Columns of ``FeedCore.li`` (per-lane integers; ``lane``: each lane's index, which a
+#: block of lanes reads for its first).
+_LI = IntEnum("_LI", "in_clipped nseg n_load k n_clipped segment lane", start=0)
 #: Columns of ``FeedCore.out`` (the step's signals, read into ``info``).
-_OUT = ("t_s", "command_x_mm_s", "command_y_mm_s", "x_mm", "y_mm", "x_ref_mm", "y_ref_mm",
-        "contour_error_mm", "peak_contour_error_mm", "tracking_error_mm", "vx_mm_s",
-        "vy_mm_s", "torque_x_Nm", "torque_y_Nm", "torque_sq_Nm2", "load_x_Nm", "load_y_Nm",
-        "feed_override", "path_speed_mm_s", "path_s_mm", "machining_time_s")  # fmt: skip
-_O = {name: i for i, name in enumerate(_OUT)}
+_Out = IntEnum(
+    "_Out",
+    "t_s command_x_mm_s command_y_mm_s x_mm y_mm x_ref_mm y_ref_mm contour_error_mm"
+    " peak_contour_error_mm tracking_error_mm vx_mm_s vy_mm_s torque_x_Nm torque_y_Nm"
+    " torque_sq_Nm2 load_x_Nm load_y_Nm feed_override path_speed_mm_s path_s_mm"
+    " machining_time_s",
+    start=0,
+)
+#: Columns of ``FeedCore.flags``.
+_Flag = IntEnum("_Flag", "diverged finished terminated truncated", start=0)
+_N_OBS = len(_LIMS)
+_N_LOOK = len(LOOKAHEAD_MM)
+
+
+class _C(IntEnum):
+    """Entries of ``FeedCore.consts``: the servo periods of a step, their period, the
+    contour tolerance, the in-position and divergence distances, the override's middle and
+    half range, whether the CNC's actuation makes the override (``applied``); then where
+    the reward weights, the lookahead distances and the observation's lower and upper
+    bounds start."""
+
+    N_SUB = 0
+    TS = 1
+    TOL = 2
+    IN_POSITION = 3
+    DIVERGENCE = 4
+    MID = 5
+    HALF = 6
+    ACTUATED = 7
+    W = 8
+    LOOK = W + 4
+    LO = LOOK + _N_LOOK
+    HI = LO + _N_OBS
+
+
+class _Feed(NamedTuple):
+    """The lane tables of the step (views of the kernel's table; a block's rows)."""
+
+    lf: np.ndarray
+    li: np.ndarray
+    tabs: np.ndarray
+    load_t: np.ndarray
+    load_v: np.ndarray
+    state: np.ndarray
+    consts: np.ndarray
+    obs: np.ndarray
+    flags: np.ndarray
+    out: np.ndarray
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
-def _feed_obs(k, tab, pf, s, override, prev_action, eps, peak, ex, ey, vx, vy, tol, look,
-              lo, hi, obs):  # fmt: skip
-    """Observation of lane ``k`` (``ContouringFeedEnv``'s table) into ``obs[k]``. It
-    allocates nothing, so it keeps no reference counts (``_nrt=False``: its views of the
-    lane's rows cost none), and divides as numpy does (``error_model="numpy"``: no test of
-    each divisor, a path's length, the tolerance, pi, all positive)."""
-    length = pf[k, 0]
-    sk = s[k]
-    o = obs[k]
-    _bound(o, 0, eps / tol, lo, hi)
-    _bound(o, 1, peak / tol, lo, hi)
-    _bound(o, 2, ex / ERROR_SCALE_MM, lo, hi)
-    _bound(o, 3, ey / ERROR_SCALE_MM, lo, hi)
-    _bound(o, 4, override[k] if sk < length else 0.0, lo, hi)
-    _bound(o, 5, sk / length, lo, hi)
-    _bound(o, 6, (length - sk) / 100.0, lo, hi)
+def _feed_obs(k, tab, f, sig):
+    """Observation of lane ``k`` (``ContouringFeedEnv``'s table) into ``f.obs[k]``, from
+    its path's table ``tab`` and the signals ``sig`` = ``(contour error, peak contour
+    error, x and y errors at the set point, vx, vy)``. It allocates nothing, so it keeps no
+    reference counts (``_nrt=False``: its views of the lane's rows cost none), and divides
+    as numpy does (``error_model="numpy"``: no test of each divisor, a path's length, the
+    tolerance, pi, all positive)."""
+    eps, peak, ex, ey, vx, vy = sig
+    lf = f.lf
+    c = f.consts
+    tol = c[_C.TOL]
+    length = lf[k, _LF.length]
+    sk = lf[k, _LF.s]
+    o = f.obs[k]
+    _bound(o, 0, eps / tol, c)
+    _bound(o, 1, peak / tol, c)
+    _bound(o, 2, ex / ERROR_SCALE_MM, c)
+    _bound(o, 3, ey / ERROR_SCALE_MM, c)
+    _bound(o, 4, lf[k, _LF.override] if sk < length else 0.0, c)
+    _bound(o, 5, sk / length, c)
+    _bound(o, 6, (length - sk) / 100.0, c)
     h0 = path_heading(tab, length, sk)
-    for i in range(look.size):
-        _bound(o, 7 + i, (path_heading(tab, length, sk + look[i]) - h0) / math.pi, lo, hi)
-    _bound(o, 12, pf[k, 5] / 100.0, lo, hi)
-    _bound(o, 13, vx / VELOCITY_SCALE_MM_S, lo, hi)
-    _bound(o, 14, vy / VELOCITY_SCALE_MM_S, lo, hi)
-    _bound(o, 15, prev_action[k], lo, hi)
+    for i in range(_N_LOOK):
+        turn = (path_heading(tab, length, sk + c[_C.LOOK + i]) - h0) / math.pi
+        _bound(o, 7 + i, turn, c)
+    _bound(o, 12, lf[k, _LF.feed] / 100.0, c)
+    _bound(o, 13, vx / VELOCITY_SCALE_MM_S, c)
+    _bound(o, 14, vy / VELOCITY_SCALE_MM_S, c)
+    _bound(o, 15, lf[k, _LF.prev_action], c)
 
 
 @numba.njit(cache=True, inline="always")
-def _bound(o, i, x, lo, hi):
-    """``o[i]`` = ``x`` held within ``[lo[i], hi[i]]`` (as float32)."""
-    o[i] = lo[i] if x < lo[i] else (hi[i] if x > hi[i] else x)
+def _bound(o, i, x, c):
+    """``o[i]`` = ``x`` held within the observation's bounds ``i`` (``c``: the consts)."""
+    lo = c[_C.LO + i]
+    hi = c[_C.HI + i]
+    o[i] = lo if x < lo else (hi if x > hi else x)
 
 
 def _scratch_size(nb: int, n_seg: int, lanes: bool) -> int:
@@ -263,40 +329,34 @@ def _carve_lanes(sc, nb, n_seg):
     return st, rx, ry, z, nan, ref, load, pos, cmd, torque, vel
 
 
-#: Columns of ``FeedCore.lf`` (per-lane floats) and ``FeedCore.li`` (per-lane integers).
-_LF = ("in_action", "applied", "s", "override", "prev_action", "reward")
-_LI = ("in_clipped", "nseg", "n_load", "k", "n_clipped", "segment")
-#: ``FeedCore.consts``: ``c`` (see :func:`_feed_step`), the reward weights, the lookahead
-#: distances, the observation's lower and upper bounds; where each starts.
-_C_W = 8
-_C_LOOK = _C_W + 4
-_C_LO = _C_LOOK + len(LOOKAHEAD_MM)
-_C_HI = _C_LO + len(_LIMS)
-_N_OBS = len(_LIMS)
-
-
 @numba.njit(cache=True, inline="always")
-def _override(k, actions, applied, c):
+def _override(k, f):
     """Lane ``k``'s feed override this step: what the CNC's actuation made of its action
-    where ``c[7]`` (actuated) is set, else the action's own."""
-    return applied[k] if c[7] != 0.0 else c[5] + c[6] * actions[k]
+    where ``ACTUATED`` is set, else the action's own."""
+    c = f.consts
+    if c[_C.ACTUATED] != 0.0:
+        return f.lf[k, _LF.applied]
+    return c[_C.MID] + c[_C.HALF] * f.lf[k, _LF.in_action]
 
 
 @numba.njit(cache=True, inline="always")
-def _lane_inputs(k, tabs, nseg, pf, actions, applied, clipped, n_clipped, c, s, kk, n_load,
-                 load_t, load_v, n, ts, st, rx, ry, ref, load, pts):  # fmt: skip
+def _lane_inputs(k, f, path, ref, load, pts):
     """The first part of lane ``k``'s step (:func:`_feed_step`): the set point's path
-    positions ``st`` over the block and its points ``rx``, ``ry``, the references ``ref``
-    and load torques ``load`` of the servo periods."""
-    tab = tabs[k, : nseg[k]]
-    length = pf[k, 0]
-    x0 = pf[k, 1]
-    y0 = pf[k, 2]
-    n_clipped[k] += clipped[k]
-    ov = _override(k, actions, applied, c)
-    v = pf[k, 5] * ov
+    positions ``st`` over the block and its points ``rx``, ``ry`` (``path`` = ``(st, rx,
+    ry)``), the references ``ref`` and load torques ``load`` of the servo periods."""
+    st, rx, ry = path
+    lf, li, load_t, load_v = f.lf, f.li, f.load_t, f.load_v
+    n = int(f.consts[_C.N_SUB])
+    ts = f.consts[_C.TS]
+    tab = f.tabs[k, : li[k, _LI.nseg]]
+    length = lf[k, _LF.length]
+    x0 = lf[k, _LF.x0]
+    y0 = lf[k, _LF.y0]
+    li[k, _LI.n_clipped] += li[k, _LI.in_clipped]
+    ov = _override(k, f)
+    v = lf[k, _LF.feed] * ov
     vts = v * ts
-    s0 = s[k]
+    s0 = lf[k, _LF.s]
     for j in range(n + 1):
         st[j] = min(s0 + vts * float(j), length)
     path_points(tab, length, st, n, rx, ry, pts)
@@ -306,8 +366,8 @@ def _lane_inputs(k, tabs, nseg, pf, actions, applied, clipped, n_clipped, c, s, 
     # The load torque of each period: the last step of the lane's load at or before its
     # instant. The instants rise, so each search goes on from the last one's step, and a
     # block whose last instant comes before the next step holds the first period's load.
-    nl = n_load[k]
-    k0 = kk[k]
+    nl = li[k, _LI.n_load]
+    k0 = li[k, _LI.k]
     i = 0
     t = float(k0) * ts + 1e-12
     while i < nl and load_t[k, i] <= t:
@@ -328,27 +388,28 @@ def _lane_inputs(k, tabs, nseg, pf, actions, applied, clipped, n_clipped, c, s, 
 
 
 @numba.njit(cache=True, inline="always")
-def _lane_outputs(k, tabs, nseg, pf, actions, applied, c, w, look, lo, hi, tol, s, kk,
-                  override, prev_action, reward, segment, state, flags, out, obs, n, ts, path,
-                  work, block, unfinite):  # fmt: skip
+def _lane_outputs(k, f, path, work, block, unfinite):
     """The last part of lane ``k``'s step (:func:`_feed_step`), once its loops have run the
-    block (``block`` = ``(pos, vel, cmd, torque, load)``, and its ``state`` at the block's
-    end; ``unfinite``: whether a position or velocity of the block is not finite, which
+    block (``block`` = ``(pos, vel, cmd, torque, load)``, and its state at the block's end;
+    ``unfinite``: whether a position or velocity of the block is not finite, which
     diverges the lane): contour errors, progress, the episode's flags, reward, outputs and
     observation.
     ``path`` = ``(st, rx, ry)`` from :func:`_lane_inputs`, ``work`` = ``(px, py, eps,
-    tmp, lower, order)`` scratch. (Fewer than 30 arguments: a call with more passes them
-    as a tuple, which the compiler cannot inline.)"""
+    tmp, lower, order)`` scratch."""
     st, rx, ry = path
     px, py, eps, tmp, lower, order = work
     pos, vel, cmd, torque, load = block
-    tab = tabs[k, : nseg[k]]
-    length = pf[k, 0]
-    x0 = pf[k, 1]
-    y0 = pf[k, 2]
-    a = actions[k]
-    ov = _override(k, actions, applied, c)
-    s0 = s[k]
+    lf, li, c, state = f.lf, f.li, f.consts, f.state
+    n = int(c[_C.N_SUB])
+    ts = c[_C.TS]
+    tol = c[_C.TOL]
+    tab = f.tabs[k, : li[k, _LI.nseg]]
+    length = lf[k, _LF.length]
+    x0 = lf[k, _LF.x0]
+    y0 = lf[k, _LF.y0]
+    a = lf[k, _LF.in_action]
+    ov = _override(k, f)
+    s0 = lf[k, _LF.s]
     diverged = unfinite
     for j in range(n):
         px[j] = pos[j, 0] + x0
@@ -367,125 +428,114 @@ def _lane_outputs(k, tabs, nseg, pf, actions, applied, c, w, look, lo, hi, tol, 
             state[k, q] = 0.0
     path_distances(tab, px, py, n, eps, tmp, lower, order)
     ds = st[n] - s0
-    s[k] = st[n]
-    kk[k] += n
-    t = kk[k] * ts
-    rxe, rye = path_point(tab, length, s[k])
+    lf[k, _LF.s] = st[n]
+    li[k, _LI.k] += n
+    t = li[k, _LI.k] * ts
+    s1 = lf[k, _LF.s]
+    rxe, rye = path_point(tab, length, s1)
     xe = px[n - 1]
     ye = py[n - 1]
     etrack = py_hypot(rxe - xe, rye - ye)
-    diverged = diverged or etrack > c[4]
+    diverged = diverged or etrack > c[_C.DIVERGENCE]
     hit = -1
     # The set point's positions rise along the block (a feed and override never negative),
     # so none reaches the end unless the last does: the search is skipped (its second
     # condition keeps it for positions that do not rise).
     if st[n] >= length or not st[n] >= st[0]:
         for j in range(n):
-            if st[j + 1] >= length and math.hypot(px[j] - pf[k, 3], py[j] - pf[k, 4]) <= c[3]:
-                hit = j
-                break
+            if st[j + 1] >= length:
+                end = math.hypot(px[j] - lf[k, _LF.x_end], py[j] - lf[k, _LF.y_end])
+                if end <= c[_C.IN_POSITION]:
+                    hit = j
+                    break
     finished = hit >= 0 and not diverged
     terminated = diverged or finished
-    truncated = (not terminated) and t >= pf[k, 7] - 1e-12
+    truncated = (not terminated) and t >= lf[k, _LF.time_limit] - 1e-12
     for j in range(n):
         e = eps[j] / tol - 1.0
         tmp[j] = e if (e > 0.0 or e != e) else 0.0
     excess = np_mean(tmp[:n])
-    r = w[0] * ds / length - w[1] * (n * ts) / pf[k, 6] - w[2] * excess
+    prog = lf[k, _LF.programmed_time]
+    r = c[_C.W] * ds / length - c[_C.W + 1] * (n * ts) / prog - c[_C.W + 2] * excess
     if diverged:
-        r -= w[3]
-    reward[k] = r
-    override[k] = ov
-    prev_action[k] = a
+        r -= c[_C.W + 3]
+    lf[k, _LF.reward] = r
+    lf[k, _LF.override] = ov
+    lf[k, _LF.prev_action] = a
     for j in range(n):
         tmp[j] = torque[j, 0] * torque[j, 0] + torque[j, 1] * torque[j, 1]
     tsq = np_mean(tmp[:n])
     peak = row_largest(eps, n)
-    o = out[k]
-    o[0] = t
-    o[1] = cmd[n - 1, 0]
-    o[2] = cmd[n - 1, 1]
-    o[3] = xe
-    o[4] = ye
-    o[5] = rxe
-    o[6] = rye
-    o[7] = eps[n - 1]
-    o[8] = peak
-    o[9] = etrack
-    o[10] = vel[n, 0]
-    o[11] = vel[n, 1]
-    o[12] = torque[n - 1, 0]
-    o[13] = torque[n - 1, 1]
-    o[14] = tsq
-    o[15] = load[n - 1, 0]
-    o[16] = load[n - 1, 1]
-    o[17] = ov
-    o[18] = ov * pf[k, 5] if s[k] < length else 0.0
-    o[19] = s[k]
-    o[20] = (kk[k] - n + hit + 1) * ts if finished else np.nan
-    segment[k] = path_segment_index(tab, length, s[k])
-    flags[k, 0] = diverged
-    flags[k, 1] = finished
-    flags[k, 2] = terminated
-    flags[k, 3] = truncated
-    _feed_obs(k, tab, pf, s, override, prev_action, o[7], peak, rxe - xe, rye - ye, o[10],
-              o[11], tol, look, lo, hi, obs)  # fmt: skip
+    o = f.out[k]
+    o[_Out.t_s] = t
+    o[_Out.command_x_mm_s] = cmd[n - 1, 0]
+    o[_Out.command_y_mm_s] = cmd[n - 1, 1]
+    o[_Out.x_mm] = xe
+    o[_Out.y_mm] = ye
+    o[_Out.x_ref_mm] = rxe
+    o[_Out.y_ref_mm] = rye
+    o[_Out.contour_error_mm] = eps[n - 1]
+    o[_Out.peak_contour_error_mm] = peak
+    o[_Out.tracking_error_mm] = etrack
+    o[_Out.vx_mm_s] = vel[n, 0]
+    o[_Out.vy_mm_s] = vel[n, 1]
+    o[_Out.torque_x_Nm] = torque[n - 1, 0]
+    o[_Out.torque_y_Nm] = torque[n - 1, 1]
+    o[_Out.torque_sq_Nm2] = tsq
+    o[_Out.load_x_Nm] = load[n - 1, 0]
+    o[_Out.load_y_Nm] = load[n - 1, 1]
+    o[_Out.feed_override] = ov
+    o[_Out.path_speed_mm_s] = ov * lf[k, _LF.feed] if s1 < length else 0.0
+    o[_Out.path_s_mm] = s1
+    o[_Out.machining_time_s] = (li[k, _LI.k] - n + hit + 1) * ts if finished else np.nan
+    li[k, _LI.segment] = path_segment_index(tab, length, s1)
+    flags = f.flags
+    flags[k, _Flag.diverged] = diverged
+    flags[k, _Flag.finished] = finished
+    flags[k, _Flag.terminated] = terminated
+    flags[k, _Flag.truncated] = truncated
+    sig = (eps[n - 1], peak, rxe - xe, rye - ye, vel[n, 0], vel[n, 1])
+    _feed_obs(k, tab, f, sig)
 
 
 @numba.njit(cache=True, _nrt=False, nogil=True)
-def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, groups, lane, state, consts, obs,
-               flags, out, sc, order):  # fmt: skip
+def _feed_step(
+    lf, li, tabs, load_t, load_v, loops, groups, state, consts, obs, flags, out, sc, order
+):
     """One decision step of every lane (``ContouringFeedEnv.step`` after its input checks).
 
     ``lf`` and ``li`` hold the per-lane floats and integers (columns ``_LF``, ``_LI``),
     ``loops`` the lanes' closed loops (``ServoLanes.buf``), ``groups`` the same eight lanes
-    to a row (``ServoLanes.groups``, of all lanes: a block's lanes are ``lane[0]`` on,
-    ``lane`` every lane's index),
-    ``consts`` the env's constants: ``c`` = ``consts[:8]`` = ``[n_sub, Ts, tolerance,
-    in_position, divergence, override mid, override half, actuated]``: where ``actuated``
-    is 1 the override is ``applied[k]`` (what the CNC's actuation made of the action's),
-    else the action's; then the reward weights ``w``, the lookahead distances and the
-    observation's bounds (offsets ``_C_*``). ``flags[k]`` = ``[diverged, finished,
-    terminated, truncated]``; ``sc``, ``order`` = float and integer scratch
-    (``FeedCore._scratch``). The env calls it through :func:`_feed_step_packed` (one
-    table for every argument).
+    to a row (``ServoLanes.groups``, of all lanes: a block's lanes are ``li[0, _LI.lane]``
+    on), ``consts`` the env's constants (``_C``): where ``ACTUATED`` is 1 the override is
+    ``applied`` (what the CNC's actuation made of the action's), else the action's.
+    ``flags[k]`` (``_Flag``) = ``[diverged, finished, terminated, truncated]``; ``sc``,
+    ``order`` = float and integer scratch (``FeedCore._scratch``). The env calls it
+    through :func:`_feed_step_packed` (one table for every argument).
 
     Each lane's step is its inputs (:func:`_lane_inputs`), its closed loops over the
     block, then its outputs (:func:`_lane_outputs`). One lane (the single env) runs its
     loops by ``run_block``; more run ``LANES`` at a time, their loops side by side
     (``run_lanes``, about six times faster a lane: the same numbers)."""
-    actions, applied, s, override, prev_action, reward = (
-        lf[:, 0], lf[:, 1], lf[:, 2], lf[:, 3], lf[:, 4], lf[:, 5]
-    )  # fmt: skip
-    clipped, nseg, n_load, kk, n_clipped, segment = (
-        li[:, 0], li[:, 1], li[:, 2], li[:, 3], li[:, 4], li[:, 5]
-    )  # fmt: skip
-    c = consts[:_C_W]
-    w = consts[_C_W:_C_LOOK]
-    look = consts[_C_LOOK:_C_LO]
-    lo = consts[_C_LO:_C_HI]
-    hi = consts[_C_HI : _C_HI + _N_OBS]
-    n = int(c[0])
-    ts = c[1]
-    tol = c[2]
-    if actions.shape[0] == 1:  # one lane (the single env): its loops by run_block
+    f = _Feed(lf, li, tabs, load_t, load_v, state, consts, obs, flags, out)
+    n = int(consts[_C.N_SUB])
+    n_lanes = lf.shape[0]
+    if n_lanes == 1:  # one lane (the single env): its loops by run_block
         st, rx, ry, px, py, eps, tmp, ref, load, pos, vel, cmd, torque, zb, lower, pts = _carve(
             sc, n, order.size
         )
         ac, bc, cu, du, gu, tq, umax = lane_loops(loops[0])
-        k = actions.shape[0] - 1  # lane 0, not the constant 0: each function it reaches
+        k = n_lanes - 1  # lane 0, not the constant 0: each function it reaches
         # would be compiled once more for a constant lane
-        _lane_inputs(k, tabs, nseg, pf, actions, applied, clipped, n_clipped, c, s, kk, n_load,
-                     load_t, load_v, n, ts, st, rx, ry, ref, load, pts)  # fmt: skip
-        run_block(ac, bc, cu, du, gu, tq, umax[0], state[0], ref, load, pos, vel, cmd, torque, zb)
+        _lane_inputs(k, f, (st, rx, ry), ref, load, pts)
+        block = ServoBlock(ref, load, pos, vel, cmd, torque)
+        run_block((ac, bc, cu, du, gu, tq, umax[0]), state[0], block, zb)
         nan = 0.0  # NaN if a position or velocity is not finite (x - x is 0 for the others)
         for j in range(n):
             for q in range(2):
                 nan += (pos[j, q] - pos[j, q]) + (vel[j + 1, q] - vel[j + 1, q])
-        _lane_outputs(k, tabs, nseg, pf, actions, applied, c, w, look, lo, hi, tol, s, kk,
-                      override, prev_action, reward, segment, state, flags, out, obs, n, ts,
-                      (st, rx, ry), (px, py, eps, tmp, lower, order),
-                      (pos, vel, cmd, torque, load), nan != nan)  # fmt: skip
+        work = (px, py, eps, tmp, lower, order)
+        _lane_outputs(k, f, (st, rx, ry), work, (pos, vel, cmd, torque, load), nan != nan)
         return
     # Several lanes: their loops LANES at a time (run_lanes: the same numbers, faster).
     _, _, _, px, py, eps, tmp, _, _, _, _, _, _, _, lower, pts = _carve(sc, n, order.size)
@@ -497,13 +547,13 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, groups, lane, state, con
     torque3 = gtorque.reshape((n, 2, LANES))
     vel3 = gvel.reshape((n + 1, 2, LANES))
     ns = state.shape[1] // 2
-    g0 = lane[0] // LANES  # the block's first group (blocks start at multiples of LANES)
-    for k0 in range(0, actions.shape[0], LANES):
-        m = min(LANES, actions.shape[0] - k0)
+    g0 = li[0, _LI.lane] // LANES  # the block's first group (blocks start at multiples of LANES)
+    work = (px, py, eps, tmp, lower, order)
+    for k0 in range(0, n_lanes, LANES):
+        m = min(LANES, n_lanes - k0)
         for p in range(m):
-            _lane_inputs(k0 + p, tabs, nseg, pf, actions, applied, clipped, n_clipped, c, s,
-                         kk, n_load, load_t, load_v, n, ts, gst[p], grx[p], gry[p],
-                         ref3[:, :, p], load3[:, :, p], pts)  # fmt: skip
+            path = (gst[p], grx[p], gry[p])
+            _lane_inputs(k0 + p, f, path, ref3[:, :, p], load3[:, :, p], pts)
         for p in range(m, LANES):  # places without a lane: zero inputs (they stay zero)
             for j in range(n):
                 for q in range(2):
@@ -523,20 +573,31 @@ def _feed_step(lf, li, tabs, pf, load_t, load_v, loops, groups, lane, state, con
                 for p in range(LANES):
                     nan[p] += (gpos[a + p] - gpos[a + p]) + (gvel[b + p] - gvel[b + p])
         for p in range(m):
-            _lane_outputs(k0 + p, tabs, nseg, pf, actions, applied, c, w, look, lo, hi, tol, s,
-                          kk, override, prev_action, reward, segment, state, flags, out, obs, n,
-                          ts, (gst[p], grx[p], gry[p]), (px, py, eps, tmp, lower, order),
-                          (pos3[:, :, p], vel3[:, :, p], cmd3[:, :, p], torque3[:, :, p],
-                           load3[:, :, p]), nan[p] != nan[p])  # fmt: skip
+            path = (gst[p], grx[p], gry[p])
+            block = (pos3[:, :, p], vel3[:, :, p], cmd3[:, :, p], torque3[:, :, p], load3[:, :, p])
+            _lane_outputs(k0 + p, f, path, work, block, nan[p] != nan[p])
 
 
 @numba.njit(cache=True, nogil=True)
 def _feed_step_packed(t):
     """:func:`_feed_step` with its arguments in one table (``core.compiled.packed``): what every
     step calls (one array to unbox, not one per argument)."""
-    _feed_step(f8_2(t, 0), i8_2(t, 1), f8_3(t, 2), f8_2(t, 3), f8_2(t, 4), f8_3(t, 5), f8_2(t, 6),
-               f8_2(t, 7), i8_1(t, 8), f8_2(t, 9), f8_1(t, 10), f4_2(t, 11), b1_2(t, 12),
-               f8_2(t, 13), f8_1(t, 14), i8_1(t, 15))  # fmt: skip
+    _feed_step(*_step_tables(t), f8_1(t, 12), i8_1(t, 13))
+
+
+@numba.njit(cache=True, inline="always")
+def _step_tables(t):
+    """:func:`_feed_step`'s arguments before its scratch, from the kernel's table ``t``."""
+    tables = (f8_2(t, 0), i8_2(t, 1), f8_3(t, 2), f8_2(t, 3), f8_3(t, 4), f8_2(t, 5))
+    rest = (f8_2(t, 6), f8_2(t, 7), f8_1(t, 8), f4_2(t, 9), b1_2(t, 10), f8_2(t, 11))
+    return tables + rest
+
+
+@numba.njit(cache=True, inline="always")
+def _feed_of(t):
+    """The step's lane tables (:class:`_Feed`) from the kernel's table ``t``."""
+    lf, li, tabs, load_t, load_v, _, _, state, consts, obs, flags, out = _step_tables(t)
+    return _Feed(lf, li, tabs, load_t, load_v, state, consts, obs, flags, out)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -549,58 +610,70 @@ def _serve_feed_step(ctl, table, polls):
 #: Where :func:`_feed_step`'s arguments (``FeedCore._args``) hold the lanes: axis 0, none
 #: (shared) or scratch space, for :class:`~machining_envs.core.compiled.blocks.LaneBlocks`.
 _STEP_AXES = (
-    0, 0, 0, 0, 0, 0, 0, None, 0, 0, None, 0, 0, 0, SCRATCH, SCRATCH,  # _feed_step's
-    0, 0, 0, None, None, None, None, None, None, None, None, None,  # the start's (_F_START)
-)  # fmt: skip
+    *(0, 0, 0, 0, 0, 0, None, 0, None, 0, 0, 0, SCRATCH, SCRATCH),  # _feed_step's
+    *(0, 0, 0, None, *[None] * 8),  # the start's (_F_START)
+)
 #: Where the kernel's table (``FeedCore._args``) holds, after :func:`_feed_step`'s
 #: arguments, what a batch's start (:func:`_start_batch`) writes besides or reads: the
 #: score bounds, whether each lane's path is a circle and its circle, the start's
 #: constants (``FeedCore._start_consts``) and both axes' designs (``A``, ``B``, ``C``,
 #: ``D`` of X, then of Y).
-_F_START = 16
+_F_START = 14
 # The kernel's blocks of lanes start at multiples of ALIGN, and so at a group's first lane:
-# a block reads its groups' coefficients from its first lane's group on (lane[0]).
+# a block reads its groups' coefficients from its first lane's group on (li[0, _LI.lane]).
 assert ALIGN % LANES == 0
 
 
 @numba.njit(cache=True)
-def _feed_reset_obs(k, tabs, nseg, pf, s, override, prev_action, tol, look, lo, hi, obs):
+def _feed_reset_obs(k, f):
     """The first observation of lane ``k``'s episode (table at rest at the path's start)."""
-    _feed_obs(k, tabs[k, : nseg[k]], pf, s, override, prev_action, 0.0, 0.0, 0.0, 0.0, 0.0,
-              0.0, tol, look, lo, hi, obs)  # fmt: skip
+    _feed_obs(k, f.tabs[k, : f.li[k, _LI.nseg]], f, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
 
 
 @numba.njit(cache=True)
-def _start_drawn_lanes(lanes, ints, floats, drawn_tabs, feed, t_load, t_max, override_max,
-                       tabs, nseg, pf, bound, load_t, load_v, n_load, lf, li, state, out, flags,
-                       tol, look, lo, hi, obs):  # fmt: skip
-    """:meth:`FeedCore.start`'s arrays for every lane ``lanes[i]`` of a split's batch, from
-    its drawn numbers (``_RandomPaths.draw_lanes``: ``ints``, ``floats``, the tables, feeds
-    and load times), in ``start``'s arithmetic; ``t_max`` NaN: the time limit from the
+def _feed_reset_packed(t, k):
+    """:func:`_feed_reset_obs` on the kernel's table ``t``."""
+    _feed_reset_obs(k, _feed_of(t))
+
+
+@numba.njit(cache=True)
+def _start_drawn_lanes(f, lanes, drawn, t_load, t_max, override_max, bound):
+    """:meth:`FeedCore.start`'s arrays (``f``, and the score bounds ``bound``) for every
+    lane ``lanes[i]`` of a split's batch, from its drawn numbers (``drawn``,
+    ``_RandomPaths.draw_lanes``: ``ints``, ``floats``, the tables, feeds; the load times
+    ``t_load``), in ``start``'s arithmetic; ``t_max`` NaN: the time limit from the
     programmed time. The servo loops are started apart (:func:`_start_batch`)."""
-    s, override, prev_action = lf[:, 2], lf[:, 3], lf[:, 4]
-    in_clipped, kk, n_clipped, segment = li[:, 0], li[:, 3], li[:, 4], li[:, 5]
+    ints, floats, drawn_tabs, feed = drawn.ints, drawn.floats, drawn.tabs, drawn.feed
+    lf, li, tabs, load_t, load_v, state, out = (
+        f.lf,
+        f.li,
+        f.tabs,
+        f.load_t,
+        f.load_v,
+        f.state,
+        f.out,
+    )
     for i in range(lanes.size):
         k = lanes[i]
         n = ints[i, 0]
         for r in range(tabs.shape[1]):
             for c in range(tabs.shape[2]):
                 tabs[k, r, c] = drawn_tabs[i, r, c] if r < n else 0.0
-        nseg[k] = n
-        f = floats[i]
-        length = f[_D_LENGTH]
-        x0 = f[_D_X0]
-        y0 = f[_D_Y0]
+        li[k, _LI.nseg] = n
+        d = floats[i]
+        length = d[_D_LENGTH]
+        x0 = d[_D_X0]
+        y0 = d[_D_Y0]
         prog = length / feed[i]
-        p = pf[k]
-        p[0] = length
-        p[1] = x0
-        p[2] = y0
-        p[3] = f[_D_XE]
-        p[4] = f[_D_YE]
-        p[5] = feed[i]
-        p[6] = prog
-        p[7] = 5.0 * prog + 0.5 if t_max != t_max else t_max
+        p = lf[k]
+        p[_LF.length] = length
+        p[_LF.x0] = x0
+        p[_LF.y0] = y0
+        p[_LF.x_end] = d[_D_XE]
+        p[_LF.y_end] = d[_D_YE]
+        p[_LF.feed] = feed[i]
+        p[_LF.programmed_time] = prog
+        p[_LF.time_limit] = 5.0 * prog + 0.5 if t_max != t_max else t_max
         bound[k] = length / (override_max * feed[i])
         for q in range(load_t.shape[1]):
             load_t[k, q] = np.inf
@@ -609,44 +682,42 @@ def _start_drawn_lanes(lanes, ints, floats, drawn_tabs, feed, t_load, t_max, ove
             load_v[k, q, 1] = 0.0
         if ints[i, 1]:
             load_t[k, 0] = t_load[i]
-            load_v[k, 1, 0] = f[_D_A]
-            load_v[k, 1, 1] = f[_D_B]
-        n_load[k] = 1
-        s[k] = 0.0
-        kk[k] = 0
-        override[k] = 0.0
-        prev_action[k] = -1.0
-        n_clipped[k] = 0
+            load_v[k, 1, 0] = d[_D_A]
+            load_v[k, 1, 1] = d[_D_B]
+        li[k, _LI.n_load] = 1
+        p[_LF.s] = 0.0
+        li[k, _LI.k] = 0
+        p[_LF.override] = 0.0
+        p[_LF.prev_action] = -1.0
+        li[k, _LI.n_clipped] = 0
         for q in range(state.shape[1]):
             state[k, q] = 0.0
-        _feed_reset_obs(k, tabs, nseg, pf, s, override, prev_action, tol, look, lo, hi, obs)
+        _feed_reset_obs(k, f)
         tab = tabs[k, :n]
         rx, ry = path_point(tab, length, 0.0)
         o = out[k]
         for q in range(o.shape[0]):
             o[q] = 0.0
-        o[3] = x0
-        o[4] = y0
-        o[5] = rx
-        o[6] = ry
-        o[18] = 0.0 * feed[i] if 0.0 < length else 0.0
-        o[20] = np.nan
-        for q in range(flags.shape[1]):
-            flags[k, q] = False
-        in_clipped[k] = 0
-        segment[k] = path_segment_index(tab, length, 0.0)
+        o[_Out.x_mm] = x0
+        o[_Out.y_mm] = y0
+        o[_Out.x_ref_mm] = rx
+        o[_Out.y_ref_mm] = ry
+        o[_Out.path_speed_mm_s] = 0.0 * feed[i] if 0.0 < length else 0.0
+        o[_Out.machining_time_s] = np.nan
+        for q in range(f.flags.shape[1]):
+            f.flags[k, q] = False
+        li[k, _LI.in_clipped] = 0
+        li[k, _LI.segment] = path_segment_index(tab, length, 0.0)
 
 
 @numba.njit(cache=True)
-def _start_batch(t, lanes, ints, floats, drawn_tabs, feed, scale):
+def _start_batch(t, lanes, drawn):
     """:meth:`FeedCore.start_lanes`' arrays for every lane ``lanes[i]`` of a split's batch
-    from its drawn numbers (``_RandomPaths.draw_lanes``), in one call on the kernel's
-    table ``t``: its servo loops on the nominal plant with the inertias scaled by
-    ``scale[i]`` (``ServoLanes.start_scaled``'s numbers), then :func:`_start_drawn_lanes`;
-    the lane's path is no circle (paths of several segments)."""
-    lf, li, tabs, pf = f8_2(t, 0), i8_2(t, 1), f8_3(t, 2), f8_2(t, 3)
-    load_t, load_v, buf, groups = f8_2(t, 4), f8_3(t, 5), f8_2(t, 6), f8_2(t, 7)
-    state, consts, obs, flags, out = f8_2(t, 9), f8_1(t, 10), f4_2(t, 11), b1_2(t, 12), f8_2(t, 13)
+    from its drawn numbers (``drawn``, ``_RandomPaths.draw_lanes``), in one call on the
+    kernel's table ``t``: its servo loops on the nominal plant with the inertias scaled by
+    ``drawn.scale[i]`` (``ServoLanes.start_scaled``'s numbers), then
+    :func:`_start_drawn_lanes`; the lane's path is no circle (paths of several segments)."""
+    buf, groups = f8_2(t, 5), f8_2(t, 6)
     o = _F_START
     bound, has_circle, circle, sc = f8_1(t, o), b1_1(t, o + 1), f8_2(t, o + 2), f8_1(t, o + 3)
     designs = (
@@ -654,16 +725,13 @@ def _start_batch(t, lanes, ints, floats, drawn_tabs, feed, scale):
         (f8_2(t, o + 8), f8_2(t, o + 9), f8_2(t, o + 10), f8_2(t, o + 11)),
     )
     m = lanes.size
+    floats, feed = drawn.floats, drawn.feed
     t_load = np.empty(m)
     for i in range(m):
         f = floats[i]
         t_load[i] = load_time(f[_D_LENGTH], feed[i], f[_D_T])
-    start_scaled_loops(lanes, sc[:_S_TMAX], scale, designs, buf, groups)
-    _start_drawn_lanes(
-        lanes, ints, floats, drawn_tabs, feed, t_load, sc[_S_TMAX], sc[_S_OVERRIDE], tabs,
-        li[:, 1], pf, bound, load_t, load_v, li[:, 2], lf, li, state, out, flags, consts[2],
-        consts[_C_LOOK:_C_LO], consts[_C_LO:_C_HI], consts[_C_HI : _C_HI + _N_OBS], obs,
-    )  # fmt: skip
+    start_scaled_loops(lanes, sc[:_S_TMAX], drawn.scale, designs, buf, groups)
+    _start_drawn_lanes(_feed_of(t), lanes, drawn, t_load, sc[_S_TMAX], sc[_S_OVERRIDE], bound)
     for i in range(m):
         has_circle[lanes[i]] = False
         for q in range(3):
@@ -676,12 +744,22 @@ _S_TMAX = len(NOMINAL_LOOP_NUMBERS)
 _S_OVERRIDE = _S_TMAX + 1
 
 
+#: The step's signals in ``out`` from ``x_mm`` to ``path_s_mm``, info's keys.
+_SIGNALS = tuple(_Out.__members__)[_Out.x_mm : _Out.machining_time_s]
 #: The float keys between the flags and ``segment`` in the info's order.
-_INFO_OUT = (*_OUT[3:-1], "contour_tolerance_mm", "cost", "score_bound", "path_length_mm")
+_INFO_OUT = (
+    *_SIGNALS,
+    "contour_tolerance_mm",
+    "cost",
+    "score_bound",
+    "path_length_mm",
+)
 #: The float keys of a vector step's info, one row each of the table :func:`_info_rows`
 #: fills (``FeedCore.info_arrays``).
-_INFO_F = ("t_s", "command_x_mm_s", "command_y_mm_s", *_INFO_OUT, "feed_mm_s",
-           "programmed_time_s", "time_limit_s", "machining_time_s")  # fmt: skip
+_INFO_F = (
+    *("t_s", "command_x_mm_s", "command_y_mm_s", *_INFO_OUT),
+    *("feed_mm_s", "programmed_time_s", "time_limit_s", "machining_time_s"),
+)
 
 
 #: The boolean and integer keys of a vector step's info, one row each of the tables
@@ -691,7 +769,7 @@ _INFO_I = ("n_action_clipped", "segment")
 
 
 @numba.njit(cache=True)
-def _info_rows(out, pf, bound, flags, li, tol, rows, command, bits, ints):
+def _info_rows(out, lf, bound, flags, li, tol, rows, command, bits, ints):
     """Every lane's info, as :meth:`FeedCore.lane_info` reports it, one column per lane:
     the float keys into ``rows`` (one row per key of ``_INFO_F``; rows spaced apart,
     ``core.compiled.packed.spaced_rows``), its two commands into ``command`` (``(N, 2)``), the
@@ -708,20 +786,20 @@ def _info_rows(out, pf, bound, flags, li, tol, rows, command, bits, ints):
         for i in range(m):
             rows[3 + i, k] = o[3 + i]
         rows[3 + m, k] = tol
-        rows[4 + m, k] = 1.0 if o[8] > tol else 0.0
+        rows[4 + m, k] = 1.0 if o[_Out.peak_contour_error_mm] > tol else 0.0
         rows[5 + m, k] = bound[k]
-        rows[6 + m, k] = pf[k, 0]
-        rows[7 + m, k] = pf[k, 5]
-        rows[8 + m, k] = pf[k, 6]
-        rows[9 + m, k] = pf[k, 7]
-        rows[10 + m, k] = o[20] if flags[k, 1] else np.nan
-        bits[0, k] = li[k, 0] != 0
+        rows[6 + m, k] = lf[k, _LF.length]
+        rows[7 + m, k] = lf[k, _LF.feed]
+        rows[8 + m, k] = lf[k, _LF.programmed_time]
+        rows[9 + m, k] = lf[k, _LF.time_limit]
+        rows[10 + m, k] = o[_Out.machining_time_s] if flags[k, _Flag.finished] else np.nan
+        bits[0, k] = li[k, _LI.in_clipped] != 0
         bits[1, k] = False
-        bits[2, k] = flags[k, 0]
-        bits[3, k] = flags[k, 1]
-        bits[4, k] = flags[k, 1]
-        ints[0, k] = li[k, 4]
-        ints[1, k] = li[k, 5]
+        bits[2, k] = flags[k, _Flag.diverged]
+        bits[3, k] = flags[k, _Flag.finished]
+        bits[4, k] = flags[k, _Flag.finished]
+        ints[0, k] = li[k, _LI.n_clipped]
+        ints[1, k] = li[k, _LI.segment]
 
 
 class FeedCore(LaneCore):
@@ -732,11 +810,29 @@ class FeedCore(LaneCore):
 
     #: What a scenario may be: an object of this class or one of these names.
     scenario_types = (ContouringScenario, CONTOURING_SCENARIOS)
-    VIEWS = frozenset({*_LF, *_LI, "_c", "_lo", "_hi", "_args"})
+    #: The named views of the lane tables (made again on unpickling): ``lf``'s per-lane
+    #: floats before ``length``, ``pf`` (``lf``'s columns from ``length`` on), every
+    #: column of ``li``.
+    VIEWS = frozenset({*_LF.__members__, *_LI.__members__, "pf", "_args"})
 
-    def __init__(self, owner, n, scenario, params, servo, tolerance_mm, reward,
-                 decision_interval_s, override_max, max_episode_time_s, in_position_mm,
-                 divergence_mm, overrides, actuation=None):  # fmt: skip
+    def __init__(
+        self,
+        owner,
+        n,
+        scenario,
+        params,
+        *,
+        servo,
+        tolerance_mm,
+        reward,
+        decision_interval_s,
+        override_max,
+        max_episode_time_s,
+        in_position_mm,
+        divergence_mm,
+        overrides,
+        actuation=None,
+    ):
         self.params = resolve_params(
             owner, params, ContouringParams, ContouringParams.choi_et_al, overrides
         )
@@ -774,35 +870,36 @@ class FeedCore(LaneCore):
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         w = self.reward_weights
         cm = self.command_map
-        # The kernel's constants (_C_* offsets), with the bounds as the observation clips to
-        # them (Python floats of the float32 box); named by views.
-        self.consts = np.array([
-            n_sub, ts, self.tolerance_mm, self.in_position_mm, self.divergence_mm, cm.mid,
-            cm.half, 0.0, w.progress, w.time, w.tolerance, w.divergence, *LOOKAHEAD_MM,
-            *low.tolist(), *high.tolist(),
-        ])  # fmt: skip
+        # The kernel's constants (_C), with the bounds as the observation clips to them
+        # (Python floats of the float32 box).
+        scalars = (n_sub, ts, self.tolerance_mm, self.in_position_mm, self.divergence_mm)
+        weights = (w.progress, w.time, w.tolerance, w.divergence)
+        self.consts = np.array(
+            [*scalars, cm.mid, cm.half, 0.0, *weights, *LOOKAHEAD_MM, *low.tolist(), *high.tolist()]
+        )
+        assert self.consts.size == _C.HI + _N_OBS
         self.n = n
         # Per-lane floats and integers, each set in one array (one argument of the kernel)
         # and named by views of its columns (_LF, _LI).
         self.lf = np.zeros((n, len(_LF)))
+        self.lf[:, _LF.length :] = 1.0
         self.li = np.zeros((n, len(_LI)), dtype=np.int64)
         self.bind_views()
+        self.lane[:] = np.arange(n)  # each lane's index (the kernel's blocks read theirs)
         self.prev_action[:] = -1.0
         # The CNC's override handling, made now if the option sets it (its checks fail
         # here), else when a scenario first brings its own.
         self.act_lanes = None if self.actuation is None else self.actuation_lanes()
         self.nseg[:] = 1
         self.loops = ServoLanes(designs, n_sub, n)
-        self.lane = np.arange(n)  # each lane's index (the kernel's blocks read theirs)
         self.state = np.zeros((n, 2 * self.loops.n_states_axis))
         self.tabs = np.zeros((n, 4, SEGMENT_COLUMNS))
-        self.pf = np.ones((n, len(_PF)))
         self.bound = np.full(n, np.nan)
         self.load_t = np.full((n, 1), np.inf)
         self.load_v = np.zeros((n, 2, 2))
         self.obs = np.zeros((n, 16), dtype=np.float32)
         self.flags = np.zeros((n, 4), dtype=np.bool_)
-        self.out = np.zeros((n, len(_OUT)))
+        self.out = np.zeros((n, len(_Out)))
         #: Every lane's scenario and true parameters (built when read, for lanes started
         #: together by :meth:`start_lanes`).
         self.scenarios = LaneObjects(n)
@@ -821,10 +918,9 @@ class FeedCore(LaneCore):
         self._circles = 0  # lanes whose path is a circle (has_circle's count)
         p = self.params
         t_max = self.max_episode_time_s
-        self._start_consts = np.array([  # (_S_*)
-            *(getattr(p, name) for name in NOMINAL_LOOP_NUMBERS),
-            math.nan if t_max is None else float(t_max), self.override_max,
-        ])  # fmt: skip
+        nominal = [getattr(p, name) for name in NOMINAL_LOOP_NUMBERS]
+        t_max = math.nan if t_max is None else float(t_max)
+        self._start_consts = np.array([*nominal, t_max, self.override_max])  # (_S_*)
         n_seg = self.tabs.shape[1]
         self._scratch = (self._float_scratch(n_seg), np.zeros(n_seg, dtype=np.int64))
         self._packed = PackedArgs()  # the kernel's arguments in one table (core.compiled.packed)
@@ -834,14 +930,14 @@ class FeedCore(LaneCore):
         self._bind()
 
     def bind_views(self) -> None:
-        """Name the columns of ``lf`` (``_LF``), ``li`` (``_LI``) and ``consts``."""
-        for i, name in enumerate(_LF):
-            setattr(self, name, self.lf[:, i])
-        for i, name in enumerate(_LI):
-            setattr(self, name, self.li[:, i])
-        self._c = self.consts[:_C_W]
-        self._lo = self.consts[_C_LO:_C_HI]
-        self._hi = self.consts[_C_HI:]
+        """Name the columns of ``lf`` (``_LF``; ``pf``, from ``length`` on) and ``li``
+        (``_LI``)."""
+        for col in _LF:
+            if col < _LF.length:
+                setattr(self, col.name, self.lf[:, col])
+        self.pf = self.lf[:, _LF.length :]
+        for col in _LI:
+            setattr(self, col.name, self.li[:, col])
 
     def __setstate__(self, state: dict) -> None:
         state["servos"].flags.writeable = False  # (a pickle's array is writable)
@@ -854,7 +950,7 @@ class FeedCore(LaneCore):
     def actuation_lanes(self) -> ActuationLanes:
         """The CNC's actuation between the actions and the override, for every lane (a lane
         without settings passes its override unchanged)."""
-        self._c[7] = 1.0
+        self.consts[_C.ACTUATED] = 1.0
         return ActuationLanes(
             self.n, self.override_max, 0.0, self.decision_interval_s, self.actuation
         )
@@ -941,16 +1037,14 @@ class FeedCore(LaneCore):
             "scenario": sc.name,
             **circles,
         }
-        _feed_reset_obs(lane, self.tabs, self.nseg, self.pf, self.s, self.override,
-                        self.prev_action, self.tolerance_mm, self.consts[_C_LOOK:_C_LO],
-                        self._lo, self._hi, self.obs)  # fmt: skip
+        _feed_reset_packed(self._packed(self._args), lane)
         rx, ry = path.point(0.0)
         o = self.out[lane]
         o[:] = 0.0
-        o[_O["x_mm"]], o[_O["y_mm"]] = x0, y0
-        o[_O["x_ref_mm"]], o[_O["y_ref_mm"]] = rx, ry
-        o[_O["path_speed_mm_s"]] = 0.0 * sc.feed_mm_s if 0.0 < path.length else 0.0
-        o[_O["machining_time_s"]] = np.nan
+        o[_Out.x_mm], o[_Out.y_mm] = x0, y0
+        o[_Out.x_ref_mm], o[_Out.y_ref_mm] = rx, ry
+        o[_Out.path_speed_mm_s] = 0.0 * sc.feed_mm_s if 0.0 < path.length else 0.0
+        o[_Out.machining_time_s] = np.nan
         self.flags[lane] = False
         self.in_clipped[lane] = 0  # no action yet (the next step sets it)
         self.segment[lane] = path.segment_index(0.0)
@@ -967,12 +1061,12 @@ class FeedCore(LaneCore):
         drawn = factory.draw_lanes(self.rngs.table, lanes)
         if factory.segments[1] > self.tabs.shape[1]:
             self._grow(factory.segments[1], 1)
-        ks = settle_batch(self, lanes, factory.build_lane, (drawn,), factory.actuation,
-                          factory.name)  # fmt: skip
+        ks = settle_batch(
+            self, lanes, factory.build_lane, (drawn,), factory.actuation, factory.name
+        )
         if self._circles:  # the batch's paths are no circles
             self._circles -= int(np.count_nonzero(self.has_circle[lanes]))
-        _start_batch(self._packed(self._args), lanes, drawn.ints, drawn.floats, drawn.tabs,
-                     drawn.feed, drawn.scale)  # fmt: skip
+        _start_batch(self._packed(self._args), lanes, drawn)
         info = self.episode_info
         for k in ks:
             info[k] = None  # lane_info reads it from the arrays
@@ -1017,7 +1111,8 @@ class FeedCore(LaneCore):
         each was clipped is in ``in_clipped``. With CNC actuation on, the overrides the
         actions ask for pass through it first (``machining_envs.core.actuation``)."""
         if self.act_lanes is not None:
-            asked = self._c[5] + self._c[6] * self.in_action
+            c = self.consts
+            asked = c[_C.MID] + c[_C.HALF] * self.in_action
             self.applied[:] = self.act_lanes.apply(asked)
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
             _feed_step_packed(self._packed(self._args))
@@ -1029,22 +1124,29 @@ class FeedCore(LaneCore):
     def _bind(self) -> None:
         """Gather the kernel's arguments once (again whenever an array is replaced, as
         :meth:`_grow` does), not attribute by attribute every step."""
+        tables = (self.lf, self.li, self.tabs, self.load_t, self.load_v)
+        loops = (self.loops.buf, self.loops.groups, self.state, self.consts)
+        # then what a batch's start writes besides or reads (_F_START)
+        start = (self.bound, self.has_circle, self.circle, self._start_consts)
+        designs = tuple(m for axis in self.loops._design_arrays for m in axis)
         self._args = (
-            self.lf, self.li, self.tabs, self.pf, self.load_t, self.load_v, self.loops.buf,
-            self.loops.groups, self.lane, self.state, self.consts, self.obs, self.flags,
+            *tables,
+            *loops,
+            self.obs,
+            self.flags,
             self.out,
             *self._scratch,
-            # what a batch's start writes besides or reads (_F_START)
-            self.bound, self.has_circle, self.circle, self._start_consts,
-            *(m for axis in self.loops._design_arrays for m in axis),
-        )  # fmt: skip
+            *start,
+            *designs,
+        )
 
     def lane_info(self, k: int) -> dict:
         """The info of lane ``k`` after its reset or its last step."""
         out = self.out[k]
         o = out.tolist()
         diverged, finished, _, _ = self.flags[k].tolist()
-        in_clipped, _, _, _, n_clipped, segment = self.li[k].tolist()  # _LI
+        li = self.li[k].tolist()
+        in_clipped, n_clipped, segment = li[_LI.in_clipped], li[_LI.n_clipped], li[_LI.segment]
         info = {
             "t_s": o[0],
             "command": out[1:3].copy(),
@@ -1055,29 +1157,14 @@ class FeedCore(LaneCore):
             "breakage": False,
             "diverged": diverged,
             "finished": finished,
-            "x_mm": o[3],
-            "y_mm": o[4],
-            "x_ref_mm": o[5],
-            "y_ref_mm": o[6],
-            "contour_error_mm": o[7],
-            "peak_contour_error_mm": o[8],
-            "tracking_error_mm": o[9],
-            "cost": 1.0 if o[8] > self.tolerance_mm else 0.0,
-            "vx_mm_s": o[10],
-            "vy_mm_s": o[11],
-            "torque_x_Nm": o[12],
-            "torque_y_Nm": o[13],
-            "torque_sq_Nm2": o[14],
-            "load_x_Nm": o[15],
-            "load_y_Nm": o[16],
-            "feed_override": o[17],
-            "path_speed_mm_s": o[18],
-            "path_s_mm": o[19],
-            "segment": segment,
-            **self._episode_info(k),
         }
+        # the signals x_mm .. path_s_mm, named by out's columns
+        info.update(zip(_SIGNALS, o[_Out.x_mm : _Out.machining_time_s], strict=True))
+        info["cost"] = 1.0 if o[_Out.peak_contour_error_mm] > self.tolerance_mm else 0.0
+        info["segment"] = segment
+        info.update(self._episode_info(k))
         if finished:
-            info["machining_time_s"] = o[20]
+            info["machining_time_s"] = o[_Out.machining_time_s]
         return info
 
     def _episode_info(self, k: int) -> dict:
@@ -1108,8 +1195,18 @@ class FeedCore(LaneCore):
         command = np.empty((n, 2))
         bits = np.empty((len(_INFO_B), n), dtype=np.bool_)
         ints = np.empty((len(_INFO_I), n), dtype=np.int64)
-        _info_rows(self.out, self.pf, self.bound, self.flags, self.li, self.tolerance_mm, rows,
-                   command, bits, ints)  # fmt: skip
+        _info_rows(
+            self.out,
+            self.lf,
+            self.bound,
+            self.flags,
+            self.li,
+            self.tolerance_mm,
+            rows,
+            command,
+            bits,
+            ints,
+        )
         r = dict(zip(_INFO_F, rows, strict=True))
         b = dict(zip(_INFO_B, bits, strict=True))
         i = dict(zip(_INFO_I, ints, strict=True))

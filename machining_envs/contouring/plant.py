@@ -306,9 +306,14 @@ class ContouringPlant:
         k = 1.0 / (params.mm_per_rad * params.sample_time_s)
         #: The numbers :func:`step_axes` reads (``PLANT_COLUMNS`` of them).
         self.coefficients = np.concatenate(
-            (phx.ravel(), gax.ravel(), phy.ravel(), gay.ravel(),
-             (self._umax, params.inertia_x_kgm2 * k, params.inertia_y_kgm2 * k))
-        )  # fmt: skip
+            (
+                phx.ravel(),
+                gax.ravel(),
+                phy.ravel(),
+                gay.ravel(),
+                (self._umax, params.inertia_x_kgm2 * k, params.inertia_y_kgm2 * k),
+            )
+        )
         self.z = np.zeros(4)
         self.reset()
 

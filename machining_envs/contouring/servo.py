@@ -34,6 +34,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -70,6 +71,7 @@ __all__ = [
     "lane_loops",
     "lifted_matrix",
     "run_block",
+    "ServoBlock",
     "run_lanes",
     "gather_loops",
     "gather_states",
@@ -168,9 +170,13 @@ def closed_loop(params: ContouringParams, design: ServoDesign, axis: str | None 
 # ---- PI ------------------------------------------------------------------------------------
 @functools.lru_cache(maxsize=32)
 def _pi(
-    a_pole: float, ts: float, axis: str, kp_scale: float = 1.0, ki_scale: float = 1.0,
+    a_pole: float,
+    ts: float,
+    axis: str,
+    kp_scale: float = 1.0,
+    ki_scale: float = 1.0,
     setpoint_weight: float = 1.0 / 3.0,
-) -> ServoDesign:  # fmt: skip
+) -> ServoDesign:
     kp = a_pole / 3.0
     ki = a_pole**2 / 27.0
     if kp_scale != 1.0:
@@ -199,9 +205,12 @@ def _pi(
 
 
 def pi_design(
-    params: ContouringParams, axis: str, kp_scale: float = 1.0, ki_scale: float = 1.0,
+    params: ContouringParams,
+    axis: str,
+    kp_scale: float = 1.0,
+    ki_scale: float = 1.0,
     setpoint_weight: float = 1.0 / 3.0,
-) -> ServoDesign:  # fmt: skip
+) -> ServoDesign:
     r"""PI position controller for one axis, tuned by pole placement, without overshoot.
 
     With the axis ``G(s) = a / (s (s + a))`` and ``u = Kp (b r - y) + Ki \int (r - y)``, the
@@ -219,8 +228,9 @@ def pi_design(
     ``kp_scale``, ``ki_scale`` and ``setpoint_weight`` move the design away from that
     placement (for tuning; the defaults are the design above).
     """
-    return _pi(params.velocity_pole(axis), params.sample_time_s, axis, kp_scale, ki_scale,
-               setpoint_weight)  # fmt: skip
+    return _pi(
+        params.velocity_pole(axis), params.sample_time_s, axis, kp_scale, ki_scale, setpoint_weight
+    )
 
 
 # ---- H-infinity 2-DOF ----------------------------------------------------------------------
@@ -395,8 +405,15 @@ def _hinf_args(params, axis, rho, model_pole, weight_gain, weight_pole) -> tuple
         ("weight_pole", weight_pole, 0.0, 1e6),
     ):
         check_range(name, v, lo, hi, types=PY_NUMBER_TYPES)
-    return (params.velocity_pole(axis), params.sample_time_s, axis, float(rho),
-            float(model_pole), float(weight_gain), float(weight_pole))  # fmt: skip
+    return (
+        params.velocity_pole(axis),
+        params.sample_time_s,
+        axis,
+        float(rho),
+        float(model_pole),
+        float(weight_gain),
+        float(weight_pole),
+    )
 
 
 # ---- stored H-infinity designs -------------------------------------------------------------
@@ -430,10 +447,21 @@ def _stored_design(args: tuple) -> ServoDesign | None:
     if entry is None:
         return None
     arr = _frozen(*(np.reshape(entry[k], entry[k + "_shape"]) for k in "abcd"))
-    cont = _frozen(*(np.reshape(m, s) for m, s in
-                     zip(entry["continuous"], entry["continuous_shapes"], strict=True)))  # fmt: skip
-    return ServoDesign("hinf", args[2], float(entry["sample_time_s"]), *arr, continuous=cont,
-                       gamma=float(entry["gamma"]), details=dict(entry["details"]))  # fmt: skip
+    cont = _frozen(
+        *(
+            np.reshape(m, s)
+            for m, s in zip(entry["continuous"], entry["continuous_shapes"], strict=True)
+        )
+    )
+    return ServoDesign(
+        "hinf",
+        args[2],
+        float(entry["sample_time_s"]),
+        *arr,
+        continuous=cont,
+        gamma=float(entry["gamma"]),
+        details=dict(entry["details"]),
+    )
 
 
 def stored_hinf_design(params: ContouringParams, axis: str, rho: float = HINF_RHO):
@@ -466,8 +494,7 @@ def synthesize_stored_designs(rhos, path=None, params: ContouringParams | None =
     designs = {}
     for rho in sorted({float(r) for r in rhos}):
         for ax in AXES:
-            args = _hinf_args(params, ax, rho, HINF_MODEL_POLE, HINF_WEIGHT_GAIN,
-                              HINF_WEIGHT_POLE)  # fmt: skip
+            args = _hinf_args(params, ax, rho, HINF_MODEL_POLE, HINF_WEIGHT_GAIN, HINF_WEIGHT_POLE)
             designs[_design_key(args)] = _design_entry(_hinf.__wrapped__(*args))
     path = Path(path) if path is not None else HINF_DESIGNS_FILE
     doc = {
@@ -631,16 +658,32 @@ def _axis_period(a, b, c, du, gu, umax, z, r, load, zb, o):
     return load8(zb, o), uc, True
 
 
+class ServoBlock(NamedTuple):
+    """The arrays of one block of servo periods of both axes (:func:`run_block`): what it
+    reads, the set points ``ref`` and load torques ``load`` (``(nb, 2)``), and what it
+    writes, the positions ``pos``, velocities ``vel`` (``nb + 1`` rows: the start, then
+    after each period), commands ``cmd`` and motor torques ``torque``."""
+
+    ref: np.ndarray
+    load: np.ndarray
+    pos: np.ndarray
+    vel: np.ndarray
+    cmd: np.ndarray
+    torque: np.ndarray
+
+
 @numba.njit(cache=True, _nrt=False)
-def run_block(ac, bc, cu, du, gu, tq, umax, state, ref, load, pos, vel, cmd, torque, zb):
+def run_block(loop, state, block, zb):
     """Advance both axes of one loop by one block (``ServoLoop.run``; see there).
 
-    ``ac``, ``bc``, ``cu``, ``du``, ``gu``, ``tq`` are the lane's per-axis arrays (leading
-    dimension 2; see :func:`lane_loops`); ``state`` holds both axes' closed-loop states
-    (``n`` values each, ``n <= 8``); ``zb`` is scratch of 16 values. Writes ``pos``,
-    ``vel`` (``nb + 1`` rows: the start, then after each period), ``cmd``, ``torque``;
-    updates ``state``; returns whether a command clipped.
+    ``loop`` = ``(ac, bc, cu, du, gu, tq, umax)``: the lane's per-axis arrays (leading
+    dimension 2; see :func:`lane_loops`) and its command limit (a number); ``state`` holds
+    both axes' closed-loop states (``n`` values each, ``n <= 8``); ``block`` is a
+    :class:`ServoBlock`; ``zb`` is scratch of 16 values. Writes the block's positions,
+    velocities, commands and torques; updates ``state``; returns whether a command clipped.
     """
+    ac, bc, cu, du, gu, tq, umax = loop
+    ref, load, pos, vel, cmd, torque = block
     nb = ref.shape[0]
     n = state.shape[0] // 2
     zb[:] = 0.0
@@ -964,9 +1007,13 @@ def _start_loops(lanes, gain, mm_per_rad, dt, inertia, umax, designs, buf, group
 #: The nominal plant's numbers :func:`start_scaled_loops` reads, in this order: its loop
 #: gain, screw lead (mm/rad), sample time, X and Y inertias and command limit.
 NOMINAL_LOOP_NUMBERS = (
-    "loop_gain_Nms", "mm_per_rad", "sample_time_s", "inertia_x_kgm2", "inertia_y_kgm2",
+    "loop_gain_Nms",
+    "mm_per_rad",
+    "sample_time_s",
+    "inertia_x_kgm2",
+    "inertia_y_kgm2",
     "command_max_mm_s",
-)  # fmt: skip
+)
 
 
 @numba.njit(cache=True)
@@ -979,8 +1026,9 @@ def start_scaled_loops(lanes, nominal, scale, designs, buf, groups):
     for i in range(m):
         inertia[i, 0] = nominal[3] * scale[i, 0]
         inertia[i, 1] = nominal[4] * scale[i, 1]
-    _start_loops(lanes, nominal[0:1], nominal[1:2], nominal[2:3], inertia, nominal[5:6], designs,
-                 buf, groups)  # fmt: skip
+    _start_loops(
+        lanes, nominal[0:1], nominal[1:2], nominal[2:3], inertia, nominal[5:6], designs, buf, groups
+    )
 
 
 @numba.njit(cache=True, inline="always")
@@ -1091,8 +1139,14 @@ class ServoLanes:
         their inertias the same products), without making them (:func:`start_scaled_loops`,
         which a compiled batch start calls itself)."""
         numbers = np.array([getattr(nominal, name) for name in NOMINAL_LOOP_NUMBERS])
-        start_scaled_loops(lanes, numbers, np.asarray(scales, dtype=np.float64),
-                           self._design_arrays, self.buf, self.groups)  # fmt: skip
+        start_scaled_loops(
+            lanes,
+            numbers,
+            np.asarray(scales, dtype=np.float64),
+            self._design_arrays,
+            self.buf,
+            self.groups,
+        )
 
     def _start_arrays(self, lanes, gain, mm_per_rad, dt, inertia, umax) -> None:
         """The loops of ``lanes`` on plants of the loop gains ``gain``, screw leads
@@ -1100,8 +1154,9 @@ class ServoLanes:
         ``umax`` (one of each per lane, or one for all but the inertias), in one compiled
         call (:func:`_start_loops`)."""
         umax = np.asarray(umax, dtype=np.float64).reshape(-1)
-        _start_loops(lanes, gain, mm_per_rad, dt, inertia, umax, self._design_arrays,
-                     self.buf, self.groups)  # fmt: skip
+        _start_loops(
+            lanes, gain, mm_per_rad, dt, inertia, umax, self._design_arrays, self.buf, self.groups
+        )
 
 
 class ServoLoop:
@@ -1163,6 +1218,7 @@ class ServoLoop:
         torque = np.empty((nb, 2))
         ref = np.ascontiguousarray(ref, dtype=np.float64)
         load = np.ascontiguousarray(load, dtype=np.float64)
-        loops = (ln.ac[0], ln.bc[0], ln.cu[0], ln.du[0], ln.gu[0], ln.tq[0], float(ln.umax[0]))
-        clipped = run_block(*loops, state, ref, load, pos, vel, cmd, torque, self._zb)
+        loop = (ln.ac[0], ln.bc[0], ln.cu[0], ln.du[0], ln.gu[0], ln.tq[0], float(ln.umax[0]))
+        block = ServoBlock(ref, load, pos, vel, cmd, torque)
+        clipped = run_block(loop, state, block, self._zb)
         return pos, vel[1:], cmd, torque, bool(clipped)

@@ -7,27 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from machining_envs.contouring import _exact
-from machining_envs.contouring.paths import (
-    Arc,
-    Involute,
-    Line,
-    Path,
-    _near_distance,
-    _segment_distance,
-    _segment_distances,
-    path_distance,
-    path_distances,
-    path_heading,
-    path_point,
-    path_points,
-    path_segment_index,
-    row_largest,
-)
+from machining_envs.contouring import _exact, paths
+from machining_envs.contouring.paths import Arc, Involute, Line, Path
 from machining_envs.contouring.plant import ContouringParams
 from machining_envs.contouring.servo import (
     LANES,
     LANES_STATE_SIZE,
+    ServoBlock,
     ServoLanes,
     ServoLoop,
     gather_states,
@@ -132,25 +118,25 @@ def test_compiled_geometry_is_the_path_methods(path):
     s = np.concatenate([RNG.uniform(-1.0, length + 1.0, 300), [0.0, length], tab[1:, 1]])
     x, y = path.points(s)
     for k, sk in enumerate(s.tolist()):
-        assert path_point(tab, length, sk) == path.point(sk)
-        assert path_point(tab, length, sk) == (x[k], y[k])
-        assert path_heading(tab, length, sk) == path.headings(np.array([sk]))[0]
-        assert path_segment_index(tab, length, sk) == path.segment_index(sk)
+        assert paths.path_point(tab, length, sk) == path.point(sk)
+        assert paths.path_point(tab, length, sk) == (x[k], y[k])
+        assert paths.path_heading(tab, length, sk) == path.headings(np.array([sk]))[0]
+        assert paths.path_segment_index(tab, length, sk) == path.segment_index(sk)
     # Points near and far, inside and outside arcs and base circles.
     px = x + RNG.normal(0, 0.05, x.size) * RNG.choice([0.01, 1.0, 100.0], x.size)
     py = y + RNG.normal(0, 0.05, y.size) * RNG.choice([0.01, 1.0, 100.0], y.size)
     for a, b in zip(px.tolist(), py.tolist(), strict=True):
-        assert path_distance(tab, a, b) == path.distance(a, b)
+        assert paths.path_distance(tab, a, b) == path.distance(a, b)
     # Many points at once (the feed env's set points): path_point's formulas with the
     # vector sines and cosines, each within one unit in the last place of libm's: a
     # coordinate ``c + R cos`` within R 2**-52 plus its own rounding (twice for the
     # involute's ``R (cos + theta sin)``); a line's points to the last bit.
     xs, ys, scratch = np.empty(s.size), np.empty(s.size), np.empty(3 * s.size)
-    path_points(tab, length, s, s.size, xs, ys, scratch)
+    paths.path_points(tab, length, s, s.size, xs, ys, scratch)
     scale = max(abs(r[8]) * (1.0 + (abs(r[11]) if r[0] == 2.0 else 0.0)) for r in tab)
     bound = 2.0 * scale * 2.0**-52 + 2.0 * np.spacing(np.maximum(np.abs(x), np.abs(y)))
     assert np.all(np.abs(xs - x) <= bound) and np.all(np.abs(ys - y) <= bound)
-    on_lines = np.array([tab[path_segment_index(tab, length, v), 0] == 0.0 for v in s])
+    on_lines = np.array([tab[paths.path_segment_index(tab, length, v), 0] == 0.0 for v in s])
     assert xs[on_lines].tobytes() == x[on_lines].tobytes()
     assert ys[on_lines].tobytes() == y[on_lines].tobytes()
     # In increasing order (a block's set points, every segment's start among them), each
@@ -158,8 +144,8 @@ def test_compiled_geometry_is_the_path_methods(path):
     # scratch keeps it), and the same points.
     up = np.argsort(s, kind="stable")
     xo, yo = np.empty(s.size), np.empty(s.size)
-    path_points(tab, length, s[up], s.size, xo, yo, scratch)
-    segs = [path_segment_index(tab, length, v) for v in s[up]]
+    paths.path_points(tab, length, s[up], s.size, xo, yo, scratch)
+    segs = [paths.path_segment_index(tab, length, v) for v in s[up]]
     np.testing.assert_array_equal(scratch[2 * s.size :], segs)
     assert xo.tobytes() == xs[up].tobytes() and yo.tobytes() == ys[up].tobytes()
     # A row within one segment (one loop of that segment's formulas) gives the points the
@@ -169,14 +155,14 @@ def test_compiled_geometry_is_the_path_methods(path):
         within = np.flatnonzero(segs == k)
         sub = s[up][within]
         xk, yk, sk = np.empty(sub.size), np.empty(sub.size), np.empty(3 * sub.size)
-        path_points(tab, length, sub, sub.size, xk, yk, sk)
+        paths.path_points(tab, length, sub, sub.size, xk, yk, sk)
         assert xk.tobytes() == xo[within].tobytes() and yk.tobytes() == yo[within].tobytes()
         assert (sk[2 * sub.size :] == k).all()
     for lo in range(0, px.size - 50, 37):  # blocks of 50 points, as the feed env asks
         n = 50
         out, scratch = np.empty(n), np.empty(n)
         lower, order = np.empty(len(path.segments)), np.empty(len(path.segments), np.int64)
-        path_distances(tab, px[lo : lo + n], py[lo : lo + n], n, out, scratch, lower, order)
+        paths.path_distances(tab, px[lo : lo + n], py[lo : lo + n], n, out, scratch, lower, order)
         # numpy's array kernels (hypot, sqrt) differ by CPU in the last bit, and a distance is
         # a difference of two lengths: equal to 1e-12 mm.
         ref = path.distances(px[lo : lo + n], py[lo : lo + n])
@@ -187,7 +173,7 @@ def _all_segments(tab, px, py):
     """Each point's least distance over every segment of ``tab``, none skipped."""
     best, d = np.full(px.size, np.inf), np.empty(px.size)
     for row in tab:
-        _segment_distances(row, px, py, px.size, d)
+        paths._segment_distances(row, px, py, px.size, d)
         best = np.where(d < best, d, best)
     return best
 
@@ -220,14 +206,14 @@ def test_distances_skip_no_segment_that_is_nearer(path):
     lower, order = np.empty(len(tab)), np.empty(len(tab), np.int64)
     out, scratch = np.empty(50), np.empty(50)
     for i, (px, py) in enumerate(_blocks(path)):
-        path_distances(tab, px, py, 50, out, scratch, lower, order)
+        paths.path_distances(tab, px, py, 50, out, scratch, lower, order)
         assert out.tobytes() == _all_segments(tab, px, py).tobytes()
         if i < 12:  # a point not finite (the centre's too at 0 and 49): nothing skipped
             bad = (np.nan, np.inf, -np.inf, -np.abs(np.float64(np.nan)))[i % 4]
             j = (0, 17, 49)[i % 3]
             qx = px.copy()
             qx[j] = bad
-            path_distances(tab, qx, py, 50, out, scratch, lower, order)
+            paths.path_distances(tab, qx, py, 50, out, scratch, lower, order)
             others = np.arange(50) != j
             assert out[others].tobytes() == _all_segments(tab, qx, py)[others].tobytes()
             assert not np.isfinite(out[j])
@@ -235,7 +221,7 @@ def test_distances_skip_no_segment_that_is_nearer(path):
         cx, cy, r = row[3], row[4], row[5]  # the segment's bounding circle
         for spread in (1e-6 * r, 0.01 * r, r, 10.0 * r):
             for x, y in RNG.normal((cx, cy), spread, (200, 2)).tolist():
-                assert _near_distance(row, x, y) <= _segment_distance(row, x, y)
+                assert paths._near_distance(row, x, y) <= paths._segment_distance(row, x, y)
 
 
 @pytest.mark.parametrize("kind", ["hinf", "pi"])
@@ -319,8 +305,9 @@ def test_eight_lanes_at_once_are_run_block_to_the_last_bit(kind, generic):
     clipped = []
     for k in range(n):
         ac, bc, cu, du, gu, tq, umax = lane_loops(lanes.buf[k])
-        clipped.append(run_block(ac, bc, cu, du, gu, tq, umax[0], want_state[k], ref[k], load[k],
-                                 want[0][k], want[1][k], want[2][k], want[3][k], np.zeros(16)))  # fmt: skip
+        block = ServoBlock(ref[k], load[k], *(w[k] for w in want))
+        loop = (ac, bc, cu, du, gu, tq, umax[0])
+        clipped.append(run_block(loop, want_state[k], block, np.zeros(16)))
     assert clipped[2] and clipped[4] and not clipped[0]
     # run_lanes, LANES at a time ([row, axis, place] arrays)
     z = np.zeros(LANES_STATE_SIZE)
@@ -381,5 +368,5 @@ def test_row_largest_is_the_largest_or_the_last_nan():
     row[[3, 40]] = np.array([0x7FF8000000000001, 0x7FF8000000000000]).view(np.float64)
     rows.append(row)  # two NaNs, both of the sign bit clear
     for row in rows:
-        got, ref = row_largest(row, row.size), want(row)
+        got, ref = paths.row_largest(row, row.size), want(row)
         assert _bits(np.array([got])) == _bits(np.array([ref])), (row, got, ref)
