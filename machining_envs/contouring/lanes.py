@@ -8,6 +8,7 @@ import dataclasses
 import functools
 import math
 from dataclasses import dataclass
+from enum import IntEnum
 
 import numba
 import numpy as np
@@ -143,43 +144,79 @@ def circle_info(path: Path) -> dict:
 # Per lane, ``lf`` holds the floats: the plant's numbers (``PLANT_COLUMNS``), its state
 # ``[x, vx, y, vy]``, the path's length, the set point's advance per period, whether the
 # run is a step command, the path's end, the time from which the run may finish, the load
-# torques now and the previous action; ``li`` the integers (see the ``_L*`` indices). The
-# set points ahead (``_RING`` of them, the preview's horizon included) are kept in a ring
-# ``rb[lane, k % _RING] = [x, y]``.
+# torques now and the previous action; ``li`` the integers. The set points ahead (``_RING``
+# of them, the preview's horizon included) are kept in a ring ``rb[lane, k % _RING] = [x,
+# y]``. Each table's columns are named once (an IntEnum: constants to the compiler).
 
-_LZ, _LLEN, _LFTS, _LSTEP, _LEND, _LFIN, _LLOAD, _LPREV = 19, 23, 24, 25, 26, 28, 29, 31
-_NLF = 33
-# The plant's numbers fill the columns before the state (ContouringCore.start writes a
-# lane's row in this order).
-assert _LZ == PLANT_COLUMNS and _NLF == _LPREV + 2
-_IK, _ILOAD, _INLOAD, _INMAX, _ICLIP, _ISEG = 0, 1, 2, 3, 4, 5
-_NLI = 6
+
+class _LF(IntEnum):
+    """Columns of ``ContouringCore.lf`` from the plant's state on (the plant's numbers
+    fill those before it; ``ContouringCore.start`` writes a lane's row in this order)."""
+
+    Z = PLANT_COLUMNS  # the state [x, vx, y, vy]
+    LEN = Z + 4  # the path's length
+    FTS = LEN + 1  # the set point's advance per period
+    STEP = FTS + 1  # whether the run is a step command
+    END = STEP + 1  # the path's end (x, y)
+    FIN = END + 2  # the time from which the run may finish
+    LOAD = FIN + 1  # the load torques now (x, y)
+    PREV = LOAD + 2  # the previous action (x, y)
+
+
+_NLF = _LF.PREV + 2
+#: Columns of ``ContouringCore.li``: the period, the next load step, the load steps, the
+#: periods' limit, the clipped actions, the path's segment.
+_LI = IntEnum("_LI", "K LOAD NLOAD NMAX CLIP SEG", start=0)
 _CIRCLE_KEYS = ("circle_cx_mm", "circle_cy_mm", "circle_radius_mm")
 _RING = 64
 #: Columns of ``ContouringCore.out`` (the step's signals, read into ``info``).
-_OUT = ("reward", "t_s", "command_x_mm_s", "command_y_mm_s", "x_mm", "y_mm", "x_ref_mm",
-        "y_ref_mm", "contour_error_mm", "tracking_error_mm", "vx_mm_s", "vy_mm_s",
-        "torque_x_Nm", "torque_y_Nm", "torque_sq_Nm2", "load_x_Nm", "load_y_Nm", "path_s_mm",
-        "machining_time_s")  # fmt: skip
+_Out = IntEnum(
+    "_Out",
+    "reward t_s command_x_mm_s command_y_mm_s x_mm y_mm x_ref_mm y_ref_mm contour_error_mm"
+    " tracking_error_mm vx_mm_s vy_mm_s torque_x_Nm torque_y_Nm torque_sq_Nm2 load_x_Nm"
+    " load_y_Nm path_s_mm machining_time_s",
+    start=0,
+)
+_OUT = tuple(_Out.__members__)
+#: The step's signals in ``out`` from ``x_mm`` to ``path_s_mm``, info's keys.
+_SIGNALS = _OUT[_Out.x_mm : _Out.machining_time_s]
+#: Columns of ``ContouringCore.flags``.
+_Flag = IntEnum("_Flag", "diverged finished terminated truncated clipped", start=0)
 
 
 @numba.njit(cache=True)
 def _path_s(k, lf, lane):
     """Arc length of set point ``k`` (``ContouringEnv``'s schedule: ``min(k F Ts, L)``, or
     the path's end for a step command)."""
-    length = lf[lane, _LLEN]
-    if lf[lane, _LSTEP]:
+    length = lf[lane, _LF.LEN]
+    if lf[lane, _LF.STEP]:
         return length
-    return min(float(k) * lf[lane, _LFTS], length)
+    return min(float(k) * lf[lane, _LF.FTS], length)
 
 
 @numba.njit(cache=True)
 def _set_point(k, lane, tab, lf, rb):
     """Set point ``k`` of ``lane`` into its ring."""
-    x, y = path_point(tab, lf[lane, _LLEN], _path_s(k, lf, lane))
+    x, y = path_point(tab, lf[lane, _LF.LEN], _path_s(k, lf, lane))
     r = rb[lane, k % _RING]
     r[0] = x
     r[1] = y
+
+
+class _CF(IntEnum):
+    """Entries of ``ContouringCore.cf``: the sample time, the nominal command limit, the
+    in-position and divergence distances, the reward weights from ``W`` on (contour weight
+    and scale, tracking weight and scale, effort weight, torque scale, divergence weight),
+    the preview's scales (three) from ``PRE`` on, and the exponent 2 (read at run time:
+    CPython's ``x ** 2`` is ``pow``)."""
+
+    TS = 0
+    UMAX = 1
+    INPOS = 2
+    DIV = 3
+    W = 4
+    PRE = W + 7
+    TWO = PRE + 3
 
 
 @numba.njit(cache=True)
@@ -200,17 +237,26 @@ def _contour_obs(lane, k, x, y, vx, vy, lf, cf, rb, obs):
     o[5] = min(max(r0y / POSITION_SCALE_MM, -_POS_LIM), _POS_LIM)
     for i in range(3):
         ahead = ring[(k + _PTICKS[i]) % _RING]
-        o[6 + i] = (ahead[0] - r0x) * cf[_CPRE + i]
-        o[9 + i] = (ahead[1] - r0y) * cf[_CPRE + i]
-    o[12] = lf[lane, _LPREV]
-    o[13] = lf[lane, _LPREV + 1]
+        o[6 + i] = (ahead[0] - r0x) * cf[_CF.PRE + i]
+        o[9 + i] = (ahead[1] - r0y) * cf[_CF.PRE + i]
+    o[12] = lf[lane, _LF.PREV]
+    o[13] = lf[lane, _LF.PREV + 1]
 
 
-# cf: [Ts, command limit (nominal), in_position, divergence, contour weight, contour scale,
-#      tracking weight, tracking scale, effort weight, torque scale, divergence weight,
-#      preview scales (3), the exponent 2 (read at run time: CPython's x ** 2 is pow)]
-_CTS, _CUMAX, _CINPOS, _CDIV, _CW, _CPRE, _CTWO = 0, 1, 2, 3, 4, 11, 14
 _PTICKS = np.array(PREVIEW_TICKS)
+
+
+@numba.njit(cache=True, inline="always")
+def _load_steps(lane, t, lfl, li, loads):
+    """The load torques of ``lane`` (``lfl``: its row of ``lf``) at time ``t``: its load
+    steps due by then, from the next one (``li``'s ``LOAD``) on."""
+    i = li[lane, _LI.LOAD]
+    nl = li[lane, _LI.NLOAD]
+    while i < nl and loads[lane, i, 0] <= t + 1e-12:
+        lfl[_LF.LOAD] = loads[lane, i, 1]
+        lfl[_LF.LOAD + 1] = loads[lane, i, 2]
+        i += 1
+    li[lane, _LI.LOAD] = i
 
 
 @numba.njit(cache=True, _nrt=False, nogil=True)
@@ -220,9 +266,9 @@ def _contour_step(act, clipped, lf, li, cf, tabs, nseg, rb, loads, obs, out, fla
     ``act`` holds finite actions; one outside the box is clipped here (and ``clipped[lane]``
     set, as it is already where the caller clipped it). ``flags[k]`` = ``[diverged,
     finished, terminated, truncated, action clipped]``."""
-    ts = cf[_CTS]
-    umax = cf[_CUMAX]
-    two = cf[_CTWO]
+    ts = cf[_CF.TS]
+    umax = cf[_CF.UMAX]
+    two = cf[_CF.TWO]
     for lane in range(act.shape[0]):
         ax = act[lane, 0]
         ay = act[lane, 1]
@@ -232,26 +278,19 @@ def _contour_step(act, clipped, lf, li, cf, tabs, nseg, rb, loads, obs, out, fla
             act[lane, 0] = ax
             act[lane, 1] = ay
             clipped[lane] = True
-        li[lane, _ICLIP] += clipped[lane]
+        li[lane, _LI.CLIP] += clipped[lane]
         ux = ax * umax
         uy = ay * umax
-        k = li[lane, _IK]
+        k = li[lane, _LI.K]
         lfl = lf[lane]
-        nl = li[lane, _INLOAD]
-        if li[lane, _ILOAD] < nl:
-            t = k * ts
-            i = li[lane, _ILOAD]
-            while i < nl and loads[lane, i, 0] <= t + 1e-12:
-                lfl[_LLOAD] = loads[lane, i, 1]
-                lfl[_LLOAD + 1] = loads[lane, i, 2]
-                i += 1
-            li[lane, _ILOAD] = i
-        lx = lfl[_LLOAD]
-        ly = lfl[_LLOAD + 1]
-        z = lfl[_LZ : _LZ + 4]
+        if li[lane, _LI.LOAD] < li[lane, _LI.NLOAD]:
+            _load_steps(lane, k * ts, lfl, li, loads)
+        lx = lfl[_LF.LOAD]
+        ly = lfl[_LF.LOAD + 1]
+        z = lfl[_LF.Z : _LF.Z + 4]
         tx, ty = step_axes(lfl, z, ux, uy, lx, ly)
         k += 1
-        li[lane, _IK] = k
+        li[lane, _LI.K] = k
         tab = tabs[lane, : nseg[lane]]
         _set_point(k + _PTICKS[2], lane, tab, lf, rb)
         t = k * ts
@@ -273,50 +312,51 @@ def _contour_step(act, clipped, lf, li, cf, tabs, nseg, rb, loads, obs, out, fla
             z[3] = 0.0
         etrack = py_hypot(rx - x, ry - y)
         eps = path_distance(tab, x, y)
-        diverged = diverged or etrack > cf[_CDIV]
+        diverged = diverged or etrack > cf[_CF.DIV]
         finished = (
-            t >= lfl[_LFIN] - 1e-12 and py_hypot(x - lfl[_LEND], y - lfl[_LEND + 1]) <= cf[_CINPOS]
+            t >= lfl[_LF.FIN] - 1e-12
+            and py_hypot(x - lfl[_LF.END], y - lfl[_LF.END + 1]) <= cf[_CF.INPOS]
         )
         terminated = diverged or finished
-        truncated = (not terminated) and k >= li[lane, _INMAX]
-        t0 = cf[_CW + 5]
+        truncated = (not terminated) and k >= li[lane, _LI.NMAX]
+        t0 = cf[_CF.W + 5]
         rew = (
-            -cf[_CW] * eps / cf[_CW + 1]
-            - cf[_CW + 2] * etrack / cf[_CW + 3]
-            - cf[_CW + 4] * (py_square(tx / t0, two) + py_square(ty / t0, two))
+            -cf[_CF.W] * eps / cf[_CF.W + 1]
+            - cf[_CF.W + 2] * etrack / cf[_CF.W + 3]
+            - cf[_CF.W + 4] * (py_square(tx / t0, two) + py_square(ty / t0, two))
         )
         if diverged:
-            rew -= cf[_CW + 6]
-        lfl[_LPREV] = ax
-        lfl[_LPREV + 1] = ay
+            rew -= cf[_CF.W + 6]
+        lfl[_LF.PREV] = ax
+        lfl[_LF.PREV + 1] = ay
         o = out[lane]
-        o[0] = rew
-        o[1] = t
-        o[2] = ux
-        o[3] = uy
-        o[4] = x
-        o[5] = y
-        o[6] = rx
-        o[7] = ry
-        o[8] = eps
-        o[9] = etrack
-        o[10] = vx
-        o[11] = vy
-        o[12] = tx
-        o[13] = ty
-        o[14] = tx * tx + ty * ty
-        o[15] = lx
-        o[16] = ly
+        o[_Out.reward] = rew
+        o[_Out.t_s] = t
+        o[_Out.command_x_mm_s] = ux
+        o[_Out.command_y_mm_s] = uy
+        o[_Out.x_mm] = x
+        o[_Out.y_mm] = y
+        o[_Out.x_ref_mm] = rx
+        o[_Out.y_ref_mm] = ry
+        o[_Out.contour_error_mm] = eps
+        o[_Out.tracking_error_mm] = etrack
+        o[_Out.vx_mm_s] = vx
+        o[_Out.vy_mm_s] = vy
+        o[_Out.torque_x_Nm] = tx
+        o[_Out.torque_y_Nm] = ty
+        o[_Out.torque_sq_Nm2] = tx * tx + ty * ty
+        o[_Out.load_x_Nm] = lx
+        o[_Out.load_y_Nm] = ly
         sk = _path_s(k, lf, lane)
-        o[17] = sk
-        o[18] = t if finished else np.nan
-        li[lane, _ISEG] = path_segment_index(tab, lfl[_LLEN], sk)
+        o[_Out.path_s_mm] = sk
+        o[_Out.machining_time_s] = t if finished else np.nan
+        li[lane, _LI.SEG] = path_segment_index(tab, lfl[_LF.LEN], sk)
         f = flags[lane]
-        f[0] = diverged
-        f[1] = finished
-        f[2] = terminated
-        f[3] = truncated
-        f[4] = clipped[lane]
+        f[_Flag.diverged] = diverged
+        f[_Flag.finished] = finished
+        f[_Flag.terminated] = terminated
+        f[_Flag.truncated] = truncated
+        f[_Flag.clipped] = clipped[lane]
         _contour_obs(lane, k, x, y, vx, vy, lf, cf, rb, obs)
 
 
@@ -324,9 +364,9 @@ def _contour_step(act, clipped, lf, li, cf, tabs, nseg, rb, loads, obs, out, fla
 def _contour_step_packed(t):
     """:func:`_contour_step` with its arguments in one table (``core.compiled.packed``): what every
     step calls (one array to unbox, not one per argument)."""
-    _contour_step(f8_2(t, 0), i8_1(t, 1), f8_2(t, 2), i8_2(t, 3), f8_1(t, 4), f8_3(t, 5),
-                  i8_1(t, 6), f8_3(t, 7), f8_3(t, 8), f4_2(t, 9), f8_2(t, 10),
-                  b1_2(t, 11))  # fmt: skip
+    lanes = (f8_2(t, 0), i8_1(t, 1), f8_2(t, 2), i8_2(t, 3), f8_1(t, 4), f8_3(t, 5))
+    rest = (i8_1(t, 6), f8_3(t, 7), f8_3(t, 8), f4_2(t, 9), f8_2(t, 10), b1_2(t, 11))
+    _contour_step(*(lanes + rest))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -349,29 +389,24 @@ def _contour_start(lane, lf, li, cf, tabs, nseg, rb, loads, obs, out, flags):
     for k in range(_PTICKS[2] + 1):
         _set_point(k, lane, tab, lf, rb)
     lfl = lf[lane]
-    i = 0
-    nl = li[lane, _INLOAD]
-    while i < nl and loads[lane, i, 0] <= 0.0 + 1e-12:
-        lfl[_LLOAD] = loads[lane, i, 1]
-        lfl[_LLOAD + 1] = loads[lane, i, 2]
-        i += 1
-    li[lane, _ILOAD] = i
-    x0 = lfl[_LZ]
-    y0 = lfl[_LZ + 2]
+    li[lane, _LI.LOAD] = 0
+    _load_steps(lane, 0.0, lfl, li, loads)
+    x0 = lfl[_LF.Z]
+    y0 = lfl[_LF.Z + 2]
     r = rb[lane, 0]
     o = out[lane]
     o[:] = 0.0
-    o[4] = x0
-    o[5] = y0
-    o[6] = r[0]
-    o[7] = r[1]
-    o[9] = py_hypot(r[0] - x0, r[1] - y0)
-    o[15] = lfl[_LLOAD]
-    o[16] = lfl[_LLOAD + 1]
+    o[_Out.x_mm] = x0
+    o[_Out.y_mm] = y0
+    o[_Out.x_ref_mm] = r[0]
+    o[_Out.y_ref_mm] = r[1]
+    o[_Out.tracking_error_mm] = py_hypot(r[0] - x0, r[1] - y0)
+    o[_Out.load_x_Nm] = lfl[_LF.LOAD]
+    o[_Out.load_y_Nm] = lfl[_LF.LOAD + 1]
     sk = _path_s(0, lf, lane)
-    o[17] = sk
-    o[18] = np.nan
-    li[lane, _ISEG] = path_segment_index(tab, lfl[_LLEN], sk)
+    o[_Out.path_s_mm] = sk
+    o[_Out.machining_time_s] = np.nan
+    li[lane, _LI.SEG] = path_segment_index(tab, lfl[_LF.LEN], sk)
     flags[lane, :] = False
     _contour_obs(lane, 0, x0, y0, 0.0, 0.0, lf, cf, rb, obs)
 
@@ -386,8 +421,18 @@ class ContouringCore(LaneCore):
     #: What a scenario may be: an object of this class or one of these names.
     scenario_types = (ContouringScenario, CONTOURING_SCENARIOS)
 
-    def __init__(self, owner, n, scenario, params, reward, max_episode_time_s, in_position_mm,
-                 divergence_mm, overrides):  # fmt: skip
+    def __init__(
+        self,
+        owner,
+        n,
+        scenario,
+        params,
+        reward,
+        max_episode_time_s,
+        in_position_mm,
+        divergence_mm,
+        overrides,
+    ):
         self.params = resolve_params(
             owner, params, ContouringParams, ContouringParams.choi_et_al, overrides
         )
@@ -404,14 +449,14 @@ class ContouringCore(LaneCore):
         self.observation_space = spaces.Box(-high, high, dtype=np.float32)
         ts = self.params.sample_time_s
         w = self.reward_weights
-        self.cf = np.array(
-            [ts, umax, self.in_position_mm, self.divergence_mm, w.contour, w.contour_scale_mm,
-             w.tracking, w.tracking_scale_mm, w.effort, w.torque_scale_Nm, w.divergence,
-             *(1.0 / (k * ts * VELOCITY_SCALE_MM_S) for k in PREVIEW_TICKS), 2.0]
-        )  # fmt: skip
+        limits = (ts, umax, self.in_position_mm, self.divergence_mm)
+        weights = (w.contour, w.contour_scale_mm, w.tracking, w.tracking_scale_mm, w.effort)
+        weights += (w.torque_scale_Nm, w.divergence)
+        preview = tuple(1.0 / (k * ts * VELOCITY_SCALE_MM_S) for k in PREVIEW_TICKS)
+        self.cf = np.array([*limits, *weights, *preview, 2.0])  # (_CF)
         self.n = n
         self.lf = np.zeros((n, _NLF))
-        self.li = np.zeros((n, _NLI), dtype=np.int64)
+        self.li = np.zeros((n, len(_LI)), dtype=np.int64)
         self.tabs = np.zeros((n, 4, SEGMENT_COLUMNS))
         self.nseg = np.ones(n, dtype=np.int64)
         self.rb = np.zeros((n, _RING, 2))
@@ -438,8 +483,8 @@ class ContouringCore(LaneCore):
     def _bind(self) -> None:
         """Gather the kernel's arguments once (again whenever an array is replaced, as
         :meth:`_grow` does)."""
-        self._args = (self.act, self.clipped, self.lf, self.li, self.cf, self.tabs, self.nseg,
-                      self.rb, self.loads, self.obs, self.out, self.flags)  # fmt: skip
+        tables = (self.lf, self.li, self.cf, self.tabs, self.nseg, self.rb, self.loads)
+        self._args = (self.act, self.clipped, *tables, self.obs, self.out, self.flags)
 
     def _grow(self, n_seg: int, n_load: int) -> None:
         if n_seg > self.tabs.shape[1]:
@@ -478,18 +523,17 @@ class ContouringCore(LaneCore):
         if t_max is None:
             t_max = ref_end + sc.dwell_s + 0.5
         x0, y0 = path.start
-        # The lane's floats in one write, in the order of the _L* columns: the plant, its
+        # The lane's floats in one write, in the order of the _LF columns: the plant, its
         # state, the path's length, the set point's advance, step or not, the path's end,
         # the time from which it may finish, the loads and the previous action.
-        self.lf[lane] = [
-            *plant.coefficients.tolist(), x0, 0.0, y0, 0.0, path.length,
-            0.0 if sc.is_step else sc.feed_mm_s * ts, float(sc.is_step), *path.end,
-            ref_end + sc.dwell_s, 0.0, 0.0, 0.0, 0.0,
-        ]  # fmt: skip
+        run = (path.length, 0.0 if sc.is_step else sc.feed_mm_s * ts, float(sc.is_step))
+        run += (*path.end, ref_end + sc.dwell_s)
+        state = (x0, 0.0, y0, 0.0)
+        self.lf[lane] = [*plant.coefficients.tolist(), *state, *run, 0.0, 0.0, 0.0, 0.0]
         li = self.li[lane]
         li[:] = 0
-        li[_INLOAD] = len(sc.load_steps)
-        li[_INMAX] = int(math.ceil(t_max / ts - 1e-9))
+        li[_LI.NLOAD] = len(sc.load_steps)
+        li[_LI.NMAX] = int(math.ceil(t_max / ts - 1e-9))
         for i, step in enumerate(sc.load_steps):
             self.loads[lane, i] = step
         self.names[lane] = sc.name
@@ -498,8 +542,7 @@ class ContouringCore(LaneCore):
         self.circles[lane] = circle_info(path)
         self.has_circle[lane] = bool(self.circles[lane])
         self.circle[lane] = tuple(self.circles[lane].values()) or (0.0, 0.0, 0.0)
-        _contour_start(lane, self.lf, self.li, self.cf, self.tabs, self.nseg, self.rb,
-                       self.loads, self.obs, self.out, self.flags)  # fmt: skip
+        _contour_start(lane, *self._args[2:])  # (the step's arguments after the actions)
 
     def set_action(self, lane: int, action: list[float], clipped: bool) -> None:
         act = self.act[lane]
@@ -519,7 +562,7 @@ class ContouringCore(LaneCore):
         return self.out[:, 0], self.flags[:, 2], self.flags[:, 3]
 
     def clipped_count(self, lane: int) -> int:
-        return int(self.li[lane, _ICLIP])
+        return int(self.li[lane, _LI.CLIP])
 
     def step(self) -> None:
         """Advance every lane by one servo period with the (checked, clipped) actions in
@@ -545,35 +588,27 @@ class ContouringCore(LaneCore):
             "command_x_mm_s": o[2],
             "command_y_mm_s": o[3],
             "action_clipped": clipped,
-            "n_action_clipped": int(self.li[k, _ICLIP]),
+            "n_action_clipped": int(self.li[k, _LI.CLIP]),
             "breakage": False,
             "diverged": diverged,
             "finished": finished,
-            "x_mm": o[4],
-            "y_mm": o[5],
-            "x_ref_mm": o[6],
-            "y_ref_mm": o[7],
-            "contour_error_mm": o[8],
+        }
+        # the signals x_mm .. path_s_mm, named by out's columns
+        info.update(zip(_SIGNALS, o[_Out.x_mm : _Out.machining_time_s], strict=True))
+        eps = o[_Out.contour_error_mm]
+        more = {
             "contour_tolerance_mm": CONTOUR_TOLERANCE_MM,
-            "cost": 1.0 if o[8] > CONTOUR_TOLERANCE_MM else 0.0,
-            "tracking_error_mm": o[9],
-            "vx_mm_s": o[10],
-            "vy_mm_s": o[11],
-            "torque_x_Nm": o[12],
-            "torque_y_Nm": o[13],
-            "torque_sq_Nm2": o[14],
-            "load_x_Nm": o[15],
-            "load_y_Nm": o[16],
-            "path_s_mm": o[17],
-            "path_length_mm": float(self.lf[k, _LLEN]),
-            "segment": int(self.li[k, _ISEG]),
+            "cost": 1.0 if eps > CONTOUR_TOLERANCE_MM else 0.0,
+            "path_length_mm": float(self.lf[k, _LF.LEN]),
+            "segment": int(self.li[k, _LI.SEG]),
             "feed_mm_s": float(self.feeds[k]),
             "reference_end_s": float(self.ref_end[k]),
             "scenario": self.names[k],
         }
+        info.update(more)
         info.update(self.circles[k])
         if finished:
-            info["machining_time_s"] = o[18]
+            info["machining_time_s"] = o[_Out.machining_time_s]
         return info
 
     def info_arrays(self) -> dict:
@@ -587,17 +622,17 @@ class ContouringCore(LaneCore):
             "command_x_mm_s": o[:, 2],
             "command_y_mm_s": o[:, 3],
             "action_clipped": f[:, 4],
-            "n_action_clipped": self.li[:, _ICLIP].copy(),
+            "n_action_clipped": self.li[:, _LI.CLIP].copy(),
             "breakage": np.zeros(self.n, dtype=bool),
             "diverged": f[:, 0],
             "finished": f[:, 1],
         }
-        for i, name in enumerate(_OUT[4:-1], start=4):
+        for i, name in enumerate(_SIGNALS, start=_Out.x_mm):
             info[name] = o[:, i]
         info["contour_tolerance_mm"] = np.full(self.n, CONTOUR_TOLERANCE_MM)
         info["cost"] = (o[:, 8] > CONTOUR_TOLERANCE_MM).astype(np.float64)
-        info["path_length_mm"] = self.lf[:, _LLEN].copy()
-        info["segment"] = self.li[:, _ISEG].copy()
+        info["path_length_mm"] = self.lf[:, _LF.LEN].copy()
+        info["segment"] = self.li[:, _LI.SEG].copy()
         info["feed_mm_s"] = self.feeds.copy()
         info["reference_end_s"] = self.ref_end.copy()
         info["scenario"] = self.names.array()
