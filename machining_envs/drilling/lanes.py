@@ -88,6 +88,17 @@ _K = IntEnum(
 )
 
 
+def _ints(columns: type[IntEnum]) -> type:
+    """``columns``' members as plain ints (class attributes), for the Python side: numpy
+    takes an IntEnum member as an index by its slow path, and reading a member costs more
+    than a class attribute (together some 10 % of a single env's step)."""
+    return type(f"{columns.__name__}I", (), {c.name: int(c) for c in columns})
+
+
+_EvI, _FlagI, _CountI = _ints(_Ev), _ints(_Flag), _ints(_Count)
+_PI, _SI, _OutI = _ints(_P), _ints(_S), _ints(_Out)
+
+
 class _Tables(NamedTuple):
     """The lane tables a start writes (:func:`_start`), views of the step's table."""
 
@@ -299,8 +310,11 @@ def _start(k, drill, t):
 
 
 @numba.njit(cache=True)
-def _start_packed(t, k, drill, bound):
-    """:func:`_start` with the step's table ``t`` (:func:`_step_packed`'s)."""
+def _start_packed(t, k, row, eng_depth, eng_torque, eng_thrust, x, bound):
+    """:func:`_start` with the step's table ``t`` (:func:`_step_packed`'s) and the drill's
+    arrays (:class:`_Drill`'s fields: a record made here, not in Python, costs no typing of
+    it at each call)."""
+    drill = _Drill(row, eng_depth, eng_torque, eng_thrust, x)
     _, _, par, eng, state, out, consts, ev, flags, counts, obs, _ = _step_args(t)
     _start(k, drill, _Tables(par, eng, state, out, consts, ev, flags, counts, obs, bound))
 
@@ -422,14 +436,10 @@ class DrillingCore(LaneCore):
         # control) or at the stage's top speed (feed control).
         v = p.feed_velocity_mm_s if self.control == "voltage" else p.feed_speed_max_mm_s
         x = (u, truth.valve_static_gain_per_V * u, truth.free_speed_rad_s(u), 0.0, tr, v)
-        drill = _Drill(
-            self.lanes.lane_row(truth, c, d, target),
-            c.engage_depth_mm,
-            c.engage_torque,
-            c.engage_thrust,
-            np.array((*x, self._a0, self._c0)),
-        )
-        _start_packed(self._packed(self._args), lane, drill, self.bound)
+        row = self.lanes.lane_row(truth, c, d, target)
+        engagement = (c.engage_depth_mm, c.engage_torque, c.engage_thrust)
+        x = np.array((*x, self._a0, self._c0))
+        _start_packed(self._packed(self._args), lane, row, *engagement, x, self.bound)
         self.rngs.bind(lane, rng)  # the hole's noise comes from it too
         breakage = float(self.lanes.par[lane, _P.BREAK])
         if not tr < breakage:  # the message is made only when it fails
@@ -442,25 +452,29 @@ class DrillingCore(LaneCore):
             )
 
     def set_action(self, lane: int, action: float, clipped: bool) -> None:
-        self.ev[lane, _Ev.ACTION] = action
-        self.flags[lane, _Flag.IN_CLIPPED] = clipped
+        self.ev[lane, _EvI.ACTION] = action
+        self.flags[lane, _FlagI.IN_CLIPPED] = clipped
 
     def set_actions(self, actions: np.ndarray) -> None:
-        self.ev[:, _Ev.ACTION] = actions[:, 0]  # clipped to the box by the kernel
+        self.ev[:, _EvI.ACTION] = actions[:, 0]  # clipped to the box by the kernel
 
     def outcome(self, lane: int) -> tuple[float, bool, bool]:
         f = self.flags[lane]
-        return float(self.ev[lane, _Ev.REWARD]), bool(f[_Flag.TERMINATED]), bool(f[_Flag.TRUNCATED])
+        return (
+            float(self.ev[lane, _EvI.REWARD]),
+            bool(f[_FlagI.TERMINATED]),
+            bool(f[_FlagI.TRUNCATED]),
+        )
 
     def step_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return (
-            self.ev[:, _Ev.REWARD],
-            self.flags[:, _Flag.TERMINATED],
-            self.flags[:, _Flag.TRUNCATED],
+            self.ev[:, _EvI.REWARD],
+            self.flags[:, _FlagI.TERMINATED],
+            self.flags[:, _FlagI.TRUNCATED],
         )
 
     def clipped_count(self, lane: int) -> int:
-        return int(self.counts[lane, _Count.N_CLIPPED])
+        return int(self.counts[lane, _CountI.N_CLIPPED])
 
     def step(self) -> None:
         """Advance every lane with its action ``ev[:, _Ev.ACTION]`` (finite; clipped to the
@@ -494,32 +508,32 @@ class DrillingCore(LaneCore):
         ) = self.lanes.out[k].tolist()
         e = self.ev[k].tolist()
         clipped, diverged, breakage, finished = self.flags[
-            k, _Flag.CLIPPED : _Flag.TERMINATED
+            k, _FlagI.CLIPPED : _FlagI.TERMINATED
         ].tolist()
         n_clipped, segment = self.counts[k].tolist()
         p = self.lanes.par[k]
         sc = self.scenarios[k]
         info = {
-            "t_s": float(self.lanes.state[k, _S.T]),
-            "command": e[_Ev.COMMAND],
+            "t_s": float(self.lanes.state[k, _SI.T]),
+            "command": e[_EvI.COMMAND],
             "action_clipped": clipped,
             "n_action_clipped": n_clipped,
             "breakage": breakage,
             "diverged": diverged,
             "finished": finished,
             "torque_Nmm": torque,
-            "torque_limit_Nmm": e[_Ev.TR],
-            "cost": 1.0 if self.flags[k, _Flag.OVER] else 0.0,
+            "torque_limit_Nmm": e[_EvI.TR],
+            "cost": 1.0 if self.flags[k, _FlagI.OVER] else 0.0,
             "score_bound": float(self.bound[k]),
-            "measured": e[_Ev.MEAS],
+            "measured": e[_EvI.MEAS],
             "peak_torque_Nmm": peak,
-            "breakage_torque_Nmm": float(p[_P.BREAK]),
+            "breakage_torque_Nmm": float(p[_PI.BREAK]),
             "thrust_N": thrust,
             "measured_thrust_N": meas_thrust,
             "spindle_hz": speed,
             "measured_spindle_hz": meas_speed,
             "spindle_rpm": 60.0 * speed,
-            "voltage_V": e[_Ev.VOLTAGE],
+            "voltage_V": e[_EvI.VOLTAGE],
             "valve_opening": valve,
             "feed_velocity_mm_s": feed,
             "feed_mm_per_rev": per_rev,
@@ -546,42 +560,42 @@ class DrillingCore(LaneCore):
         e = self.ev.copy()
         f = self.flags.copy()
         c = self.counts.copy()
-        lane = self.lanes.par[:, [_P.BREAK, _P.TARGET, _P.D]]
-        done = f[:, _Flag.FINISHED]
-        finish = o[:, _Out.finish_time_s]  # NaN unless the hole was finished in this step
+        lane = self.lanes.par[:, [_PI.BREAK, _PI.TARGET, _PI.D]]
+        done = f[:, _FlagI.FINISHED]
+        finish = o[:, _OutI.finish_time_s]  # NaN unless the hole was finished in this step
         return {
-            "t_s": self.lanes.state[:, _S.T].copy(),
-            "command": e[:, _Ev.COMMAND],
-            "action_clipped": f[:, _Flag.CLIPPED],
-            "n_action_clipped": c[:, _Count.N_CLIPPED],
-            "breakage": f[:, _Flag.BREAKAGE],
-            "diverged": f[:, _Flag.DIVERGED],
+            "t_s": self.lanes.state[:, _SI.T].copy(),
+            "command": e[:, _EvI.COMMAND],
+            "action_clipped": f[:, _FlagI.CLIPPED],
+            "n_action_clipped": c[:, _CountI.N_CLIPPED],
+            "breakage": f[:, _FlagI.BREAKAGE],
+            "diverged": f[:, _FlagI.DIVERGED],
             "finished": done,
-            "torque_Nmm": o[:, _Out.torque_Nmm],
-            "torque_limit_Nmm": e[:, _Ev.TR],
-            "cost": f[:, _Flag.OVER].astype(np.float64),
+            "torque_Nmm": o[:, _OutI.torque_Nmm],
+            "torque_limit_Nmm": e[:, _EvI.TR],
+            "cost": f[:, _FlagI.OVER].astype(np.float64),
             "score_bound": self.bound.copy(),
-            "measured": e[:, _Ev.MEAS],
-            "peak_torque_Nmm": o[:, _Out.peak_torque_Nmm],
+            "measured": e[:, _EvI.MEAS],
+            "peak_torque_Nmm": o[:, _OutI.peak_torque_Nmm],
             "breakage_torque_Nmm": lane[:, 0],
-            "thrust_N": o[:, _Out.thrust_N],
-            "measured_thrust_N": o[:, _Out.measured_thrust_N],
-            "spindle_hz": o[:, _Out.speed_hz],
-            "measured_spindle_hz": o[:, _Out.measured_speed_hz],
-            "spindle_rpm": 60.0 * o[:, _Out.speed_hz],
-            "voltage_V": e[:, _Ev.VOLTAGE],
-            "valve_opening": o[:, _Out.valve_opening],
-            "feed_velocity_mm_s": o[:, _Out.feed_velocity_mm_s],
-            "feed_mm_per_rev": o[:, _Out.feed_mm_per_rev],
-            "cutting": o[:, _Out.cutting] != 0.0,
-            "engagement": o[:, _Out.engagement],
-            "position_mm": o[:, _Out.position_mm],
-            "depth_mm": o[:, _Out.depth_mm],
+            "thrust_N": o[:, _OutI.thrust_N],
+            "measured_thrust_N": o[:, _OutI.measured_thrust_N],
+            "spindle_hz": o[:, _OutI.speed_hz],
+            "measured_spindle_hz": o[:, _OutI.measured_speed_hz],
+            "spindle_rpm": 60.0 * o[:, _OutI.speed_hz],
+            "voltage_V": e[:, _EvI.VOLTAGE],
+            "valve_opening": o[:, _OutI.valve_opening],
+            "feed_velocity_mm_s": o[:, _OutI.feed_velocity_mm_s],
+            "feed_mm_per_rev": o[:, _OutI.feed_mm_per_rev],
+            "cutting": o[:, _OutI.cutting] != 0.0,
+            "engagement": o[:, _OutI.engagement],
+            "position_mm": o[:, _OutI.position_mm],
+            "depth_mm": o[:, _OutI.depth_mm],
             "target_depth_mm": lane[:, 1],
-            "packed_chip_mm": o[:, _Out.packed_mm],
-            "chip_ratio": o[:, _Out.chip_ratio],
+            "packed_chip_mm": o[:, _OutI.packed_mm],
+            "chip_ratio": o[:, _OutI.chip_ratio],
             "diameter_mm": lane[:, 2],
-            "segment": c[:, _Count.SEGMENT],
+            "segment": c[:, _CountI.SEGMENT],
             "scenario": self.names.array(),
             "drilling_time_s": finish,
             "_drilling_time_s": done.copy(),

@@ -1073,6 +1073,20 @@ def _accel(g, xv, friction, load, w):
     return g[_G.K2] * xv - g[_G.K3] * friction - load / (w if w > _W_FLOOR else _W_FLOOR)
 
 
+@numba.njit(cache=True, inline="always")
+def _mid_stage(k0, k1, g, tmp, friction, speeds, col, h):
+    """RK4's second or third stage of lanes ``k0 .. k1 - 1`` (:func:`advance`): the
+    acceleration at the speed ``tmp[:, _T.WB]`` into column ``col``, and the speed a step
+    ``h`` on (into ``_T.WB`` and ``speeds``)."""
+    for k in range(k0, k1):
+        wb = tmp[k - k0, _T.WB]
+        f = _accel(g, tmp[k - k0, _T.XB], friction[k - k0], tmp[k - k0, _T.LOAD], wb)
+        tmp[k - k0, col] = f
+        wb = tmp[k - k0, _T.W] + h * f
+        tmp[k - k0, _T.WB] = wb if wb > 0.0 else 0.0
+        speeds[k - k0] = tmp[k - k0, _T.WB]
+
+
 #: Lanes whose step advances together, stage by stage (see :func:`advance`).
 LANE_BLOCK = 16
 
@@ -1192,17 +1206,11 @@ def advance(k0, k1, m, g, par, eng, state, inputs, out, tmp, rows):
             tmp[k - k0, _T.WB] = wb if wb > 0.0 else 0.0
             speeds[k - k0] = tmp[k - k0, _T.WB]
         powers(speeds, 0, friction, 0, nb, g[_G.N])
-        for stage in range(2):  # the second and third stages (f2, f3): the speed at the
-            # midpoint from f2, at the end from f3
-            h = g[_G.H2] if stage == 0 else g[_G.H]
-            for k in range(k0, k1):
-                wb = tmp[k - k0, _T.WB]
-                f = _accel(g, tmp[k - k0, _T.XB], friction[k - k0], tmp[k - k0, _T.LOAD], wb)
-                tmp[k - k0, _T.F2 + stage] = f
-                wb = tmp[k - k0, _T.W] + h * f
-                tmp[k - k0, _T.WB] = wb if wb > 0.0 else 0.0
-                speeds[k - k0] = tmp[k - k0, _T.WB]
-            powers(speeds, 0, friction, 0, nb, g[_G.N])
+        # the second and third stages: the speed at the midpoint from f2, at the end from f3
+        _mid_stage(k0, k1, g, tmp, friction, speeds, _T.F2, g[_G.H2])
+        powers(speeds, 0, friction, 0, nb, g[_G.N])
+        _mid_stage(k0, k1, g, tmp, friction, speeds, _T.F3, g[_G.H])
+        powers(speeds, 0, friction, 0, nb, g[_G.N])
         for k in range(k0, k1):
             wc = tmp[k - k0, _T.WB]
             f4 = _accel(g, tmp[k - k0, _T.XC], friction[k - k0], tmp[k - k0, _T.LOAD], wc)
