@@ -1145,8 +1145,7 @@ class FeedCore(LaneCore):
         out = self.out[k]
         o = out.tolist()
         diverged, finished, _, _ = self.flags[k].tolist()
-        li = self.li[k].tolist()
-        in_clipped, n_clipped, segment = li[_LI.in_clipped], li[_LI.n_clipped], li[_LI.segment]
+        in_clipped, _, _, _, n_clipped, segment, _ = self.li[k].tolist()  # _LI
         info = {
             "t_s": o[0],
             "command": out[1:3].copy(),
@@ -1157,14 +1156,29 @@ class FeedCore(LaneCore):
             "breakage": False,
             "diverged": diverged,
             "finished": finished,
+            "x_mm": o[3],
+            "y_mm": o[4],
+            "x_ref_mm": o[5],
+            "y_ref_mm": o[6],
+            "contour_error_mm": o[7],
+            "peak_contour_error_mm": o[8],
+            "tracking_error_mm": o[9],
+            "cost": 1.0 if o[8] > self.tolerance_mm else 0.0,
+            "vx_mm_s": o[10],
+            "vy_mm_s": o[11],
+            "torque_x_Nm": o[12],
+            "torque_y_Nm": o[13],
+            "torque_sq_Nm2": o[14],
+            "load_x_Nm": o[15],
+            "load_y_Nm": o[16],
+            "feed_override": o[17],
+            "path_speed_mm_s": o[18],
+            "path_s_mm": o[19],
+            "segment": segment,
+            **self._episode_info(k),
         }
-        # the signals x_mm .. path_s_mm, named by out's columns
-        info.update(zip(_SIGNALS, o[_Out.x_mm : _Out.machining_time_s], strict=True))
-        info["cost"] = 1.0 if o[_Out.peak_contour_error_mm] > self.tolerance_mm else 0.0
-        info["segment"] = segment
-        info.update(self._episode_info(k))
         if finished:
-            info["machining_time_s"] = o[_Out.machining_time_s]
+            info["machining_time_s"] = o[20]
         return info
 
     def _episode_info(self, k: int) -> dict:

@@ -178,6 +178,16 @@ _Out = IntEnum(
     start=0,
 )
 _OUT = tuple(_Out.__members__)
+
+
+def _ints(columns: type[IntEnum]) -> type:
+    """``columns``' members as plain ints (class attributes), for the Python side: numpy
+    takes an IntEnum member as an index by its slow path, and reading a member costs more
+    than a class attribute (together some 10 % of a single env's step)."""
+    return type(f"{columns.__name__}I", (), {c.name: int(c) for c in columns})
+
+
+_LFI, _LII = _ints(_LF), _ints(_LI)
 #: The step's signals in ``out`` from ``x_mm`` to ``path_s_mm``, info's keys.
 _SIGNALS = _OUT[_Out.x_mm : _Out.machining_time_s]
 #: Columns of ``ContouringCore.flags``.
@@ -562,7 +572,7 @@ class ContouringCore(LaneCore):
         return self.out[:, 0], self.flags[:, 2], self.flags[:, 3]
 
     def clipped_count(self, lane: int) -> int:
-        return int(self.li[lane, _LI.CLIP])
+        return int(self.li[lane, _LII.CLIP])
 
     def step(self) -> None:
         """Advance every lane by one servo period with the (checked, clipped) actions in
@@ -588,27 +598,35 @@ class ContouringCore(LaneCore):
             "command_x_mm_s": o[2],
             "command_y_mm_s": o[3],
             "action_clipped": clipped,
-            "n_action_clipped": int(self.li[k, _LI.CLIP]),
+            "n_action_clipped": int(self.li[k, _LII.CLIP]),
             "breakage": False,
             "diverged": diverged,
             "finished": finished,
-        }
-        # the signals x_mm .. path_s_mm, named by out's columns
-        info.update(zip(_SIGNALS, o[_Out.x_mm : _Out.machining_time_s], strict=True))
-        eps = o[_Out.contour_error_mm]
-        more = {
+            "x_mm": o[4],
+            "y_mm": o[5],
+            "x_ref_mm": o[6],
+            "y_ref_mm": o[7],
+            "contour_error_mm": o[8],
             "contour_tolerance_mm": CONTOUR_TOLERANCE_MM,
-            "cost": 1.0 if eps > CONTOUR_TOLERANCE_MM else 0.0,
-            "path_length_mm": float(self.lf[k, _LF.LEN]),
-            "segment": int(self.li[k, _LI.SEG]),
+            "cost": 1.0 if o[8] > CONTOUR_TOLERANCE_MM else 0.0,
+            "tracking_error_mm": o[9],
+            "vx_mm_s": o[10],
+            "vy_mm_s": o[11],
+            "torque_x_Nm": o[12],
+            "torque_y_Nm": o[13],
+            "torque_sq_Nm2": o[14],
+            "load_x_Nm": o[15],
+            "load_y_Nm": o[16],
+            "path_s_mm": o[17],
+            "path_length_mm": float(self.lf[k, _LFI.LEN]),
+            "segment": int(self.li[k, _LII.SEG]),
             "feed_mm_s": float(self.feeds[k]),
             "reference_end_s": float(self.ref_end[k]),
             "scenario": self.names[k],
         }
-        info.update(more)
         info.update(self.circles[k])
         if finished:
-            info["machining_time_s"] = o[_Out.machining_time_s]
+            info["machining_time_s"] = o[18]
         return info
 
     def info_arrays(self) -> dict:
@@ -622,17 +640,17 @@ class ContouringCore(LaneCore):
             "command_x_mm_s": o[:, 2],
             "command_y_mm_s": o[:, 3],
             "action_clipped": f[:, 4],
-            "n_action_clipped": self.li[:, _LI.CLIP].copy(),
+            "n_action_clipped": self.li[:, _LII.CLIP].copy(),
             "breakage": np.zeros(self.n, dtype=bool),
             "diverged": f[:, 0],
             "finished": f[:, 1],
         }
-        for i, name in enumerate(_SIGNALS, start=_Out.x_mm):
+        for i, name in enumerate(_SIGNALS, start=int(_Out.x_mm)):
             info[name] = o[:, i]
         info["contour_tolerance_mm"] = np.full(self.n, CONTOUR_TOLERANCE_MM)
         info["cost"] = (o[:, 8] > CONTOUR_TOLERANCE_MM).astype(np.float64)
-        info["path_length_mm"] = self.lf[:, _LF.LEN].copy()
-        info["segment"] = self.li[:, _LI.SEG].copy()
+        info["path_length_mm"] = self.lf[:, _LFI.LEN].copy()
+        info["segment"] = self.li[:, _LII.SEG].copy()
         info["feed_mm_s"] = self.feeds.copy()
         info["reference_end_s"] = self.ref_end.copy()
         info["scenario"] = self.names.array()
