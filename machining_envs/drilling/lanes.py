@@ -302,8 +302,7 @@ def _start(k, drill, t):
         o[9 + i] = _pymin(_pymax(0.0 / ts, lo), hi)
     q = t.out[k]
     q[:] = 0.0
-    q[_Out.measured_speed_hz] = hz
-    q[_Out.speed_hz] = hz
+    q[_Out.measured_speed_hz] = q[_Out.speed_hz] = hz
     q[_Out.valve_opening] = x1
     q[_Out.position_mm] = position
     q[_Out.finish_time_s] = np.nan
