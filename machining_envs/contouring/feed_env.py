@@ -12,6 +12,7 @@ from machining_envs.contouring.env import (
 )
 from machining_envs.contouring.feed_lanes import (
     DEFAULT_TOLERANCE_MM,
+    FEED_OPTIONS,
     LOOKAHEAD_MM,
     FeedCore,
     FeedReward,
@@ -174,22 +175,9 @@ class ContouringFeedEnv(LaneEnv):
         actuation: Actuation | dict | None = None,
         **overrides,
     ):
-        self._core = core = FeedCore(
-            type(self).__name__,
-            1,
-            scenario,
-            params,
-            servo=servo,
-            tolerance_mm=tolerance_mm,
-            reward=reward,
-            decision_interval_s=decision_interval_s,
-            override_max=override_max,
-            max_episode_time_s=max_episode_time_s,
-            in_position_mm=in_position_mm,
-            divergence_mm=divergence_mm,
-            overrides=overrides,
-            actuation=actuation,
-        )
+        given = locals()  # the core's keywords are this method's of the same names
+        options = {name: given[name] for name in FEED_OPTIONS}
+        self._core = core = FeedCore(type(self).__name__, 1, scenario, params, **options)
         self._adopt(core, scenario, render_mode)
         self.servo = core.servo
         self.tolerance_mm = core.tolerance_mm
@@ -258,22 +246,10 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
         **overrides,
     ):
         check_vector_args(self.env_name, num_threads, overrides)
-        core = FeedCore(
-            type(self).__name__,
-            check_num_envs(num_envs),
-            first_scenario(scenario),
-            params,
-            servo=servo,
-            tolerance_mm=tolerance_mm,
-            reward=reward,
-            decision_interval_s=decision_interval_s,
-            override_max=override_max,
-            max_episode_time_s=max_episode_time_s,
-            in_position_mm=in_position_mm,
-            divergence_mm=divergence_mm,
-            overrides=overrides,
-            actuation=actuation,
-        )
+        given = locals()  # the core's keywords are this method's of the same names
+        options = {name: given[name] for name in FEED_OPTIONS}
+        n, first = check_num_envs(num_envs), first_scenario(scenario)
+        core = FeedCore(type(self).__name__, n, first, params, **options)
         super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
         self.servo = core.servo
         self.tolerance_mm = core.tolerance_mm

@@ -802,6 +802,14 @@ def _info_rows(out, lf, bound, flags, li, tol, rows, command, bits, ints):
         ints[1, k] = li[k, _LI.segment]
 
 
+#: ``FeedCore``'s keyword arguments: both envs' arguments of the same names (the
+#: options, and the parameters' overrides), which they pass on.
+FEED_OPTIONS = (
+    *("servo", "tolerance_mm", "reward", "decision_interval_s", "override_max"),
+    *("max_episode_time_s", "in_position_mm", "divergence_mm", "actuation", "overrides"),
+)
+
+
 class FeedCore(LaneCore):
     """The state and arithmetic of N ContouringFeed-v0 episodes, shared by
     ``ContouringFeedEnv`` (one lane) and ``ContouringFeedVectorEnv`` (N lanes): each lane's
