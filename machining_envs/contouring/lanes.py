@@ -433,16 +433,16 @@ class ContouringCore(LaneCore):
 
     def __init__(
         self,
-        owner,
-        n,
-        scenario,
-        params,
-        reward,
-        max_episode_time_s,
-        in_position_mm,
-        divergence_mm,
-        overrides,
-    ):
+        owner: str,
+        n: int,
+        scenario: str | ContouringScenario,
+        params: ContouringParams | None,
+        reward: ContouringReward | dict | None,
+        max_episode_time_s: float | None,
+        in_position_mm: float,
+        divergence_mm: float,
+        overrides: dict,
+    ) -> None:
         self.params = resolve_params(
             owner, params, ContouringParams, ContouringParams.choi_et_al, overrides
         )
