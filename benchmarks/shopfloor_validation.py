@@ -9,6 +9,15 @@ feed). The held-out ``shopfloor`` split itself is not touched.
 
     python benchmarks/shopfloor_validation.py --env machining_envs/Turning-v0 --out x.json
     python benchmarks/shopfloor_validation.py --env machining_envs/EndMilling-v0 --only afc
+
+With ``--tuned FILE`` (e.g. ``agents/bench/tuned_shopfloor.json``, written by
+``machining-bench tune --machine docs/my_cnc.yml``) nothing is tuned: the benchmark's
+shop-floor rows (the spec's ``machine_tuned`` at the file's settings, with the file's env
+options) run on ``validation`` and each is compared with the spec's ``machine_reference``
+by the benchmark's verdict rule (paired intervals at every allowance, overload ceiling on):
+
+    python benchmarks/shopfloor_validation.py --env machining_envs/EndMilling-v0 \
+        --tuned agents/bench/tuned_shopfloor.json
 """
 
 from __future__ import annotations
@@ -30,6 +39,77 @@ from machining_envs.core.actuation import SHOPFLOOR_ACTUATION
 from machining_envs.core.splits import split_seeds
 from machining_envs.turning.scenarios import SHOPFLOOR_SPINDLE_POWER_W
 
+
+def reasons(rows, score) -> dict:
+    """How many episodes fail at the 2 % allowance, by first reason."""
+    out = {"unfinished": 0, "broken": 0, "overloaded": 0, "over the limit": 0}
+    for r in rows:
+        if r.get("finished", 0.0) != 1.0:
+            out["unfinished"] += 1
+        elif r.get("breakage", 0.0) != 0.0 or r.get("diverged", 0.0) != 0.0:
+            out["broken"] += 1
+        elif r.get("overloaded", 0.0) != 0.0:
+            out["overloaded"] += 1
+        elif not score.counts(r):
+            out["over the limit"] += 1
+    return out
+
+
+def from_file(env_id: str, path: str, n: int, out: str | None) -> None:
+    """The ``--tuned`` check (module docstring): one table line per row."""
+    from agents.bench.declarations import benchmark_spec
+    from agents.bench.tune import load_tuned, machine_tuned_factory
+    from agents.eval.stats import allowance_sweep
+    from machining_envs.core.score import ALLOWANCES
+
+    spec = benchmark_spec(env_id)
+    tuned = load_tuned(path)
+    kwargs = {**spec.env_kwargs, **tuned.get("env_kwargs", {}).get(env_id, {})}
+    env = gym.make(env_id, **kwargs)
+    score, failed = task_of(env).score, task_of(env).score.failed_value(env)
+    env.close()
+    seed = split_seeds("validation", n)[0]
+    rows, out_data = {}, {"env_kwargs": kwargs, "agents": {}}
+    for cls in spec.machine_tuned:
+        f = machine_tuned_factory(cls, env_id, tuned)
+        if f is None:
+            print(f"{cls.__name__}: no settings in {path}")
+            continue
+        t0 = time.perf_counter()
+        rows[cls] = evaluate(f, env_id, ["validation"], n, seed, env_kwargs=kwargs).rows
+        print(f"{cls.__name__}: {time.perf_counter() - t0:.0f} s", flush=True)
+    ref = rows[spec.machine_reference]
+    k = score.scale
+    print(f"\n{env_id}, {n} validation episodes, settings of {path}")
+    print(f"| agent | kept at {' / '.join(f'{a:.1%}' for a in ALLOWANCES)} | mean "
+          f"{score.label} (counting) | score | " + " | ".join(f"vs constant feed at {a:.1%}"
+          for a in ALLOWANCES) + " | verdict |")  # fmt: skip
+    print("|---" * (5 + len(ALLOWANCES)) + "|")
+    for cls, rs in rows.items():
+        kept = [sum(score.counts(r, a) for r in rs) / len(rs) for a in ALLOWANCES]
+        vals = [r[score.value_key] for r in rs if score.counts(r)]
+        mean = sum(vals) / len(vals) if vals else float("nan")
+        s = score(rs, failed)
+        entry = {"kept": kept, "mean_counting": mean, "score": s, "fails": reasons(rs, score),
+                 "params": tuned["envs"][env_id][cls.__name__]["params"]}  # fmt: skip
+        if "afc_stop" in rs[0]:
+            entry["afc_stops"] = sum(r["afc_stop"] for r in rs)
+        cells, verdict = ["reference"] * len(ALLOWANCES), "reference"
+        if cls is not spec.machine_reference:
+            diffs, verdict = allowance_sweep(ref, rs, score, failed)
+            entry["vs_constant_feed"], entry["verdict"] = diffs, verdict
+            cells = [f"{d['diff'] * k:+.1f} [{d['low'] * k:+.1f}, {d['high'] * k:+.1f}]"
+                     for d in diffs]  # fmt: skip
+        out_data["agents"][cls.__name__] = entry
+        print(f"| {cls.__name__} | " + " / ".join(f"{x:.0%}" for x in kept)
+              + f" | {mean * k:.4g} | {s['score'] * k:.4g} | " + " | ".join(cells)
+              + f" | {verdict} |", entry["fails"], entry.get("afc_stops", ""),
+              flush=True)  # fmt: skip
+    if out:
+        with open(out, "w") as fh:
+            json.dump(out_data, fh, indent=1, default=float)
+
+
 MACHINES = {
     "machining_envs/Turning-v0": {
         "actuation": dataclasses.asdict(SHOPFLOOR_ACTUATION),
@@ -49,7 +129,17 @@ KEYS = {
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--env", default="machining_envs/Turning-v0", choices=sorted(MACHINES))
+    ap.add_argument(
+        "--env",
+        default="machining_envs/Turning-v0",
+        choices=sorted({*MACHINES, "machining_envs/ContouringFeed-v0"}),
+    )
+    ap.add_argument(
+        "--tuned",
+        default=None,
+        metavar="FILE",
+        help="run the settings of this tuned file instead of tuning",
+    )
     ap.add_argument("--trials", type=int, default=30)
     ap.add_argument("--episodes", type=int, default=16)
     ap.add_argument("--validation", type=int, default=100)
@@ -57,6 +147,11 @@ def main() -> None:
     ap.add_argument("--only", nargs="*", default=None, choices=sorted(KEYS),
                     help="the runs to make besides the constant feed")  # fmt: skip
     args = ap.parse_args()
+    if args.tuned is not None:
+        from_file(args.env, args.tuned, args.validation, args.out)
+        return
+    if args.env not in MACHINES:
+        ap.error(f"--env {args.env} needs --tuned (this script tunes {sorted(MACHINES)})")
     machine = MACHINES[args.env]
     constant = ConstantFeed if "Turning" in args.env else MillingConstantFeed
     runs = {

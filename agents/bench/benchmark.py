@@ -3,7 +3,10 @@
 ``machining-bench benchmark [--quick] [--out results]`` runs, for each env, the physical
 bound, the MPC oracle (where built), the paper's classical agents, the tuned classical
 agents (``agents/bench/tuned.json``) and the learned policies (every training seed) on
-the fixed episodes of the ``test`` split, paired by seed, and on the ``ood`` split apart.
+the fixed episodes of the ``test`` split, paired by seed, and on the ``ood`` split apart;
+on the ``shopfloor`` split also the classical agents tuned for the shop-floor machine
+(``agents/bench/tuned_shopfloor.json``, rows "(tuned, shop floor)", compared with the
+constant feed tuned for that machine).
 It prints one table per env and writes ``benchmark.csv`` (every episode), ``report.md``,
 ``results.md`` (the test tables, one number a cell) and PNG plots. The paper reproductions
 follow.
@@ -63,8 +66,18 @@ def _env_section(env_id, n_test, n_ood, n_oracle, quick, seed, out, verbose, t0,
     spec = next(s for s in BENCHMARKS if s.env_id == env_id)
     tuned = _tuned_settings()
     t_env = time.perf_counter()
+    machine_tuned = load_tuned(tune.SHOPFLOOR_TUNED_FILE)
     run = run_env(
-        spec, n_test, n_ood, n_oracle, tuned, verbose, t0, one_seed=quick, oracle_apart=apart
+        spec,
+        n_test,
+        n_ood,
+        n_oracle,
+        tuned,
+        verbose,
+        t0,
+        one_seed=quick,
+        oracle_apart=apart,
+        machine_tuned=machine_tuned,
     )
     section = env_section(run, tuned, n_test, n_ood, quick, seed, Path(out))
     section["rows"] = run.all_rows()

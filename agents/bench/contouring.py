@@ -362,6 +362,8 @@ PROCESS = Process(
             ("paper_circle", "paper_involute"),
             "paper_involute",
             tuned=(ConstantOverride, LookAheadFeed),
+            machine_tuned=(ConstantOverride, LookAheadFeed),
+            machine_reference=ConstantOverride,
             learned=("contouring_feed_ppo", "contouring_feed_ppo_residual"),
             extra_splits=("shopfloor",),
             table_metrics=(

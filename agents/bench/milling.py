@@ -32,6 +32,7 @@ import math
 import gymnasium as gym
 import numpy as np
 
+from agents.afc import AdaptiveFeedControl
 from agents.bench.figures import reproduction_figure, save_figure
 from agents.bench.spec import BenchmarkSpec, Process, Robustness
 from agents.eval import rollout
@@ -427,6 +428,13 @@ PROCESS = Process(
             ("paper_step", "paper_taper"),
             "paper_step",
             tuned=(MillingConstantFeed, FixedGainIntegral, IntegralACC),
+            machine_tuned=(
+                MillingConstantFeed,
+                FixedGainIntegral,
+                IntegralACC,
+                AdaptiveFeedControl,
+            ),
+            machine_reference=MillingConstantFeed,
             learned=("end_milling_ppo",),
             oracle=_oracle,
             oracle_episodes=20,

@@ -38,6 +38,15 @@ SPLIT_NOTES = {
 }
 
 
+#: Under the ``shopfloor`` table, where it has rows tuned for the shop-floor machine.
+SHOPFLOOR_ROWS_NOTE = (
+    'Rows "(tuned, shop floor)": tuned by `machining-bench tune --machine docs/my_cnc.yml '
+    "--allowance 0.005` (`agents/bench/tuned_shopfloor.json`) on `train` workpieces run on "
+    "the described machine; the `shopfloor` episodes above were not used. Their verdict is "
+    "against the shop-floor reference, the constant feed tuned for the same machine."
+)
+
+
 def env_section(
     run: EnvRun, tuned: dict, n_test: int, n_ood: int, quick: bool, seed: int, out: Path
 ) -> dict:
@@ -81,6 +90,8 @@ def env_section(
         if note:
             head += f" ({note})"
         split_lines += [f"{head}, {n_ood} episodes:", "", tables[sr.split], ""]
+        if sr.split == "shopfloor" and run.machine_cls:
+            split_lines += [SHOPFLOOR_ROWS_NOTE, ""]
     lines = [
         f"## {env_name}",
         "",

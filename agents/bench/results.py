@@ -10,7 +10,9 @@ and with the physical bound on the oracle's own episodes.
 
 The reference is the best tuned classical agent: among the rows of the spec's ``tuned``
 classes, the lowest ``validation_score`` in ``tuned.json`` (chosen without looking at
-``test``).
+``test``). The rows tuned for the shop-floor machine (the ``shopfloor`` split's rows of the
+spec's ``machine_tuned``, :func:`machine_reference`) are compared with the constant feed
+tuned for that machine (the spec's ``machine_reference``), by the same rule.
 """
 
 from __future__ import annotations
@@ -31,7 +33,15 @@ from agents.eval.stats import (
 )
 from machining_envs.core.score import ALLOWANCES
 
-__all__ = ["AgentResult", "SplitResults", "reference", "split_results", "SEED_FLOOR", "fmt"]
+__all__ = [
+    "AgentResult",
+    "SplitResults",
+    "reference",
+    "machine_reference",
+    "split_results",
+    "SEED_FLOOR",
+    "fmt",
+]
 
 #: A training seed that keeps fewer than this share of its workpieces is flagged.
 SEED_FLOOR = 0.8
@@ -92,6 +102,12 @@ def reference(run: EnvRun, tuned: dict) -> str | None:
     return best
 
 
+def machine_reference(run: EnvRun) -> str | None:
+    """The row of the constant feed tuned for the shop-floor machine (None: not run)."""
+    cls = run.spec.machine_reference
+    return next((n for n, c in run.machine_cls.items() if c is cls), None)
+
+
 _ORDER = {"oracle": 0, "paper": 1, "tuned": 2, "learned": 3}
 
 
@@ -103,19 +119,23 @@ def _bounds(rows: list[dict], key: str | None) -> np.ndarray | None:
 def split_results(run: EnvRun, split: str, ref: str | None, seed: int = 0) -> SplitResults:
     """Every agent's results on ``split`` (see the module docstring)."""
     score, failed = run.score, run.failed
-    names = sorted(run.names(split), key=lambda n: _ORDER[run.kind[n]])
+    names = sorted(run.names(split), key=lambda n: (_ORDER[run.kind[n]], n in run.machine_cls))
     out: dict[str, AgentResult] = {}
+    shop_ref = machine_reference(run)
     for name in names:
         rows = run.rows[name][split]
         res = AgentResult(name, run.kind[name], agent_stats(rows, score, failed, seed))
+        own = shop_ref if name in run.machine_cls else ref
         if run.kind[name] == "oracle":
             res.verdict = "– (reads the truth)"
-        elif ref is not None and name != ref and split in run.rows.get(ref, {}):
+        elif own is not None and name != own and split in run.rows.get(own, {}):
             res.diffs, res.verdict = allowance_sweep(
-                run.rows[ref][split], rows, score, failed, seed
+                run.rows[own][split], rows, score, failed, seed
             )
-        elif name == ref:
-            res.verdict = "reference"
+            if own != ref:
+                res.verdict = f"{res.verdict} (vs the shop-floor reference)"
+        elif name == own:
+            res.verdict = "reference" if own == ref else "reference (shop floor)"
         if run.kind[name] == "learned":
             res.seed_shares = seed_count_shares(rows, score)
         b = _bounds(rows, score.bound_key)

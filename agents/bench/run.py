@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import gymnasium as gym
 
 from agents.bench.spec import BenchmarkSpec
-from agents.bench.tune import tuned_factory
+from agents.bench.tune import machine_tuned_factory, tuned_factory
 from agents.eval import Evaluation, evaluate
 from machining_envs.core.splits import split_seeds
 
@@ -47,12 +47,18 @@ def installed(module: str) -> bool:
 class Job:
     """One row's agent: its ``kind`` (paper, tuned, learned, oracle), its factory
     ``env -> agent``, the training seed of a learned policy and the class of a tuned row
-    (one of the spec's ``tuned``)."""
+    (one of the spec's ``tuned``). A row tuned for the shop-floor machine (one of the
+    spec's ``machine_tuned``) has ``machine_cls`` instead, runs on the ``splits`` named
+    only (None: every split) and with ``env_kwargs`` (the machine's env options) over the
+    spec's."""
 
     kind: str
     factory: object
     policy_seed: int | None = None
     tuned_cls: type | None = None
+    machine_cls: type | None = None
+    splits: tuple[str, ...] | None = None
+    env_kwargs: dict | None = None
 
 
 class EnvRun:
@@ -65,6 +71,8 @@ class EnvRun:
         self.rows: dict[str, dict[str, list]] = {}
         self.factory: dict[str, object] = {}
         self.tuned_cls: dict[str, type] = {}
+        #: The rows tuned for the shop-floor machine: name -> class (of ``machine_tuned``).
+        self.machine_cls: dict[str, type] = {}
         #: Agent name -> the trajectory of test episode ``plot_seed`` (a learned row: its
         #: first training seed's).
         self.trajectories: dict[str, dict] = {}
@@ -93,17 +101,51 @@ class EnvRun:
         return [n for n in self.rows if split in self.rows[n]]
 
 
-def jobs_of(spec: BenchmarkSpec, tuned: dict, verbose: bool, one_seed: bool = False) -> list[Job]:
+def jobs_of(
+    spec: BenchmarkSpec,
+    tuned: dict,
+    verbose: bool,
+    one_seed: bool = False,
+    machine_tuned: dict | None = None,
+) -> list[Job]:
     """Every row the env's benchmark runs but the oracle (with ``one_seed``, each learned
-    row's first training seed only)."""
+    row's first training seed only). ``machine_tuned``: the settings tuned for the
+    shop-floor machine (``agents/bench/tuned_shopfloor.json``), whose rows run on the
+    ``shopfloor`` split where the spec has it."""
     out = [Job("paper", f) for f in spec.paper_agents]
-    for cls in spec.tuned:
-        f = tuned_factory(cls, spec.env_id, tuned)
-        if f is None:
-            if verbose:
-                print(f"  {cls.__name__}: no tuned settings (run `machining-bench tune`)")
-            continue
-        out.append(Job("tuned", f, tuned_cls=cls))
+    # (classes, their settings file, factory, what a missing entry prints, Job's fields)
+    groups = [
+        (
+            spec.tuned,
+            tuned,
+            tuned_factory,
+            "no tuned settings (run `machining-bench tune`)",
+            lambda cls: {"tuned_cls": cls},
+        )
+    ]
+    if "shopfloor" in spec.extra_splits and machine_tuned:
+        kwargs = machine_tuned.get("env_kwargs", {}).get(spec.env_id, {})
+        groups.append(
+            (
+                spec.machine_tuned,
+                machine_tuned,
+                machine_tuned_factory,
+                "no settings tuned for the shop-floor machine",
+                lambda cls: {
+                    "machine_cls": cls,
+                    "splits": ("shopfloor",),
+                    "env_kwargs": dict(kwargs),
+                },
+            )
+        )
+    for classes, data, make, missing, fields in groups:
+        for cls in classes:
+            f = make(cls, spec.env_id, data)
+            if f is None:
+                if verbose:
+                    print(f"  {cls.__name__}: {missing}")
+                continue
+            out.append(Job("tuned", f, **fields(cls)))
     if spec.learned:
         if not installed("stable_baselines3"):
             if verbose:
@@ -197,17 +239,28 @@ def run_env(
     t0,
     one_seed: bool = False,
     oracle_apart: bool = False,
+    machine_tuned: dict | None = None,
 ) -> EnvRun:
     """Run every row of ``spec`` (see the module docstring): ``n_test`` test episodes,
     ``n_ood`` of ``ood`` and of each extra split, and the oracle on the first
-    ``min(n_oracle, spec.oracle_episodes)`` test episodes. ``oracle_apart``: the oracle runs
-    in a process of its own beside the other rows (the same episodes, the same numbers; it
-    is the slowest row, so the env takes about the longer of the two instead of their sum)."""
+    ``min(n_oracle, spec.oracle_episodes)`` test episodes; the rows tuned for the
+    shop-floor machine (``machine_tuned``) on the ``shopfloor`` split only. ``oracle_apart``:
+    the oracle runs in a process of its own beside the other rows (the same episodes, the
+    same numbers; it is the slowest row, so the env takes about the longer of the two
+    instead of their sum)."""
     run = EnvRun(spec)
     env_name = spec.env_id.split("/")[-1]
-    jobs = jobs_of(spec, tuned, verbose, one_seed)
     named = (("test", n_test), ("ood", n_ood), *((x, n_ood) for x in spec.extra_splits))
     splits = [(split, n) for split, n in named if n > 0]
+    jobs = [
+        j
+        for j in jobs_of(spec, tuned, verbose, one_seed, machine_tuned)
+        if j.splits is None or any(s in j.splits for s, _ in splits)
+    ]
+
+    def job_splits(job):
+        return [(s, n) for s, n in splits if job.splits is None or s in job.splits]
+
     oracle_skipped = None
     if spec.oracle is not None and n_oracle < spec.oracle_episodes and not spec.oracle_in_quick:
         oracle_skipped = f"  oracle skipped in --quick ({spec.oracle_seconds:g} s an episode)"
@@ -220,7 +273,8 @@ def run_env(
     # The plotted episode: among the oracle's episodes where it runs, so that it is drawn too.
     run.plot_seed = representative_seed(spec, test_seeds[: n_oracle_run or None])
     plot_keys = _plot_keys(spec)
-    progress = _Progress(env_name, len(jobs) * len(splits) + n_oracle_run, verbose, t0)
+    n_runs = sum(len(job_splits(j)) for j in jobs)
+    progress = _Progress(env_name, n_runs + n_oracle_run, verbose, t0)
     oracle_args = (spec.env_id, n_oracle_run, test_seeds[0], run.plot_seed, plot_keys)
     apart = None
     if oracle_apart and n_oracle_run > 0:
@@ -228,7 +282,8 @@ def run_env(
     try:
         for k, job in enumerate(jobs):
             tag = f" seed {job.policy_seed}" if job.policy_seed is not None else ""
-            for split, n in splits:
+            kwargs = {**spec.env_kwargs, **(job.env_kwargs or {})}
+            for split, n in job_splits(job):
                 progress.working_on(f"{job.kind}{tag} on {split}")
                 keep = None
                 if split == "test":  # the first agent keeps all, where no bound chose one
@@ -239,7 +294,7 @@ def run_env(
                     [split],
                     n_episodes=n,
                     seed=split_seeds(split, n)[0],
-                    env_kwargs=spec.env_kwargs,
+                    env_kwargs=kwargs,
                     keep_seeds=keep,
                     extra_keys=plot_keys,
                 )
@@ -249,6 +304,8 @@ def run_env(
                 run.factory.setdefault(name, job.factory)
                 if job.tuned_cls is not None:
                     run.tuned_cls[name] = job.tuned_cls
+                if job.machine_cls is not None:
+                    run.machine_cls[name] = job.machine_cls
                 run.add(name, job.kind, split, ev.rows, job.policy_seed)
                 progress.done(f"{k + 1}/{len(jobs)} {job.kind} {name}{tag} on {split}")
         if oracle_skipped is not None:

@@ -68,6 +68,12 @@ class BenchmarkSpec:
     """Scenario of the paper-agent trajectory plot."""
     tuned: tuple[type, ...] = ()
     """Classical agent classes (with ``TUNABLE``) tuned by ``machining-bench tune``."""
+    machine_tuned: tuple[type, ...] = ()
+    """Classical agent classes ``machining-bench tune --machine`` tunes for a described
+    machine (default: ``tuned``); the benchmark's ``shopfloor`` split runs them at the
+    settings of ``agents/bench/tuned_shopfloor.json``, labelled "(tuned, shop floor)"."""
+    machine_reference: type | None = None
+    """The constant feed among ``machine_tuned``: the reference of the shop-floor rows."""
     learned: tuple[str, ...] = ()
     """Folders of ``agents/rl/pretrained`` whose policies the benchmark scores."""
     oracle: Callable | None = None

@@ -256,6 +256,8 @@ PROCESS = Process(
             ("paper_245", "paper_405", "paper_700", "taper_405"),
             "paper_405",
             tuned=(ConstantFeed, FixedGainPI, VariableGainPI, AdaptiveFeedControl),
+            machine_tuned=(ConstantFeed, FixedGainPI, VariableGainPI, AdaptiveFeedControl),
+            machine_reference=ConstantFeed,
             learned=("turning_ppo", "turning_ppo_residual", "turning_td3_residual"),
             extra_splits=("wear", "shopfloor"),
             margin_points=tuple(OperatingPoint(rpm, 2.0) for rpm in (245.0, 405.0, 700.0)),

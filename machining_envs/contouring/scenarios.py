@@ -24,7 +24,7 @@ from machining_envs.contouring.paths import (
     smooth_table,
 )
 from machining_envs.contouring.plant import ContouringParams
-from machining_envs.core.actuation import Actuation
+from machining_envs.core.actuation import SHOPFLOOR_OVERRIDE, Actuation
 from machining_envs.core.checks import (
     PY_NUMBER_TYPES,
     check_below,
@@ -199,17 +199,6 @@ def _paper(name: str, path: Callable[[], Path], feed: float, loads=()):
         return ContouringScenario(name, path(), feed, loads)
 
     return make
-
-
-#: The feed-override handling of the ``shopfloor`` scenarios of ContouringFeed-v0, as shares
-#: of the default override range [0, 2]: 1 % steps of the programmed feed, at most 5x the
-#: programmed feed per second (0.2 s from rest to it) and 120x per second squared, two
-#: decisions (20 ms) of delay. Chosen, not measured: a CNC applies the override through its
-#: feed planner, which limits how fast the path speed may change; these limits bind on the
-#: paths' corners, where an ideal override would brake within one decision.
-SHOPFLOOR_OVERRIDE = Actuation(
-    quantum=0.005, max_rate_per_s=2.5, delay_steps=2, max_accel_per_s2=60.0
-)
 
 
 class _RandomPaths:

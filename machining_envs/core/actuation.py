@@ -85,6 +85,18 @@ SHOPFLOOR_ACTUATION = Actuation(
 )
 
 
+#: The feed-override handling of the ``shopfloor`` scenarios of ContouringFeed-v0
+#: (``machining_envs.contouring.scenarios``), as shares
+#: of the default override range [0, 2]: 1 % steps of the programmed feed, at most 5x the
+#: programmed feed per second (0.2 s from rest to it) and 120x per second squared, two
+#: decisions (20 ms) of delay. Chosen, not measured: a CNC applies the override through its
+#: feed planner, which limits how fast the path speed may change; these limits bind on the
+#: paths' corners, where an ideal override would brake within one decision.
+SHOPFLOOR_OVERRIDE = Actuation(
+    quantum=0.005, max_rate_per_s=2.5, delay_steps=2, max_accel_per_s2=60.0
+)
+
+
 def resolve_actuation(actuation) -> Actuation | None:
     """``None`` (off), a dict of :class:`Actuation` fields, or an ``Actuation``."""
     if actuation is None:

@@ -12,6 +12,9 @@ machine a controller is deployed on. :func:`load_machine` reads them from a file
     spindle_power_W: 2200 # rated spindle power (Turning-v0: the spindle slows above it)
     power_sensor: true    # optional: the drive's power as the load channel
                           # (true, or the fields of machining_envs.core.sensors.PowerSensor)
+    feed_override:        # optional: ContouringFeed-v0's override handling (the fields of
+      delay_steps: 2      # Actuation, as shares of the override range [0, 2]; default:
+      quantum: 0.005      # the actuation above)
 
 and :meth:`Machine.env_kwargs` turns the description into the options of an env
 (``gym.make(env_id, **machine.env_kwargs(env_id))``), which ``machining-bench tune
@@ -33,14 +36,19 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation, resolve_actuation
+from machining_envs.core.actuation import (
+    SHOPFLOOR_ACTUATION,
+    SHOPFLOOR_OVERRIDE,
+    Actuation,
+    resolve_actuation,
+)
 from machining_envs.core.checks import check_range
 from machining_envs.core.sensors import PowerSensor, resolve_power_sensor
 
 __all__ = ["Machine", "load_machine", "SHOPFLOOR_MACHINE"]
 
 #: The keys a machine file may hold.
-_KEYS = ("name", "actuation", "spindle_power_W", "power_sensor")
+_KEYS = ("name", "actuation", "spindle_power_W", "power_sensor", "feed_override")
 
 
 @dataclass(frozen=True)
@@ -55,12 +63,17 @@ class Machine:
     above it; EndMilling-v0 and ContouringFeed-v0 have no spindle-power model."""
     power_sensor: PowerSensor | None = None
     """The drive's power signal as the load channel (Turning-v0, EndMilling-v0)."""
+    feed_override: Actuation | None = None
+    """ContouringFeed-v0's feed-override handling, as shares of the env's override range
+    ``[0, override_max]`` (its decisions are 10 ms, not the 0.1 s of the cutting envs);
+    None: ``actuation``."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
             raise ValueError(f"machine name must be a non-empty string, got {self.name!r}")
         object.__setattr__(self, "actuation", resolve_actuation(self.actuation))
         object.__setattr__(self, "power_sensor", resolve_power_sensor(self.power_sensor))
+        object.__setattr__(self, "feed_override", resolve_actuation(self.feed_override))
         if self.spindle_power_W is not None:
             check_range("spindle_power_W", self.spindle_power_W, 0.0, 1e7, lo_open=True)
 
@@ -70,8 +83,11 @@ class Machine:
         left out (the spindle power outside Turning-v0, the power sensor outside Turning-v0
         and EndMilling-v0)."""
         kw: dict = {}
-        if self.actuation is not None:
-            kw["actuation"] = dataclasses.asdict(self.actuation)
+        act = self.actuation
+        if env_id.endswith("/ContouringFeed-v0") and self.feed_override is not None:
+            act = self.feed_override
+        if act is not None:
+            kw["actuation"] = dataclasses.asdict(act)
         turning = env_id.endswith("/Turning-v0")
         if self.spindle_power_W is not None and turning:
             kw["spindle_power_W"] = float(self.spindle_power_W)
@@ -87,6 +103,9 @@ class Machine:
             "spindle_power_W": self.spindle_power_W,
             "power_sensor": (
                 None if self.power_sensor is None else dataclasses.asdict(self.power_sensor)
+            ),
+            "feed_override": (
+                None if self.feed_override is None else dataclasses.asdict(self.feed_override)
             ),
         }
 
@@ -107,7 +126,9 @@ class Machine:
 
 
 #: The machine of the held-out ``shopfloor`` split, as a file would describe it.
-SHOPFLOOR_MACHINE = Machine("shopfloor", SHOPFLOOR_ACTUATION, 2200.0)
+SHOPFLOOR_MACHINE = Machine(
+    "shopfloor", SHOPFLOOR_ACTUATION, 2200.0, feed_override=SHOPFLOOR_OVERRIDE
+)
 
 
 def load_machine(path) -> Machine:
@@ -133,6 +154,7 @@ def load_machine(path) -> Machine:
             actuation=data.get("actuation"),
             spindle_power_W=data.get("spindle_power_W"),
             power_sensor=data.get("power_sensor"),
+            feed_override=data.get("feed_override"),
         )
     except (TypeError, ValueError) as e:
         raise ValueError(f"machine file {path}: {e}") from None

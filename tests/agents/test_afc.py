@@ -142,3 +142,48 @@ def test_programmed_feed_is_the_constant_feed():
     b, _ = cf.predict(obs)
     # in air at the start: the idle factor (1.0 by default) times the programmed feed
     assert a == pytest.approx(b)
+
+
+def test_end_milling_on_the_shop_floor_machine_keeps_its_rules():
+    """EndMilling-v0 on the shop-floor machine (delay, 1 % steps, rate limits), a whole
+    `validation` workpiece: the commanded override is the programmed feed times the factor,
+    within [fmin, fmax] in the material and at the idle factor in air; the log's peak load
+    and smallest factor are those of the episode as recomputed from the observations."""
+    import gymnasium as gym
+
+    from machining_envs.core.machine import SHOPFLOOR_MACHINE
+
+    env_id = "machining_envs/EndMilling-v0"
+    env = gym.make(env_id, **SHOPFLOOR_MACHINE.env_kwargs(env_id))
+    afc = AdaptiveFeedControl.from_env(env, fmin=0.5, fmax=1.6, fidl=2.0, gain=0.3,
+                                       wear_margin=None)  # fmt: skip
+    obs, _ = env.reset(seed=3, options={"scenario": "validation"})
+    state, first, idle = None, True, None
+    cmap = afc.command_map
+    cut_loads, factors_in = [], []
+    done = False
+    while not done:
+        a, state = afc.predict(obs, state, np.array([first]))
+        load = float(afc.load_units(obs[None, :].astype(np.float64))[0][0])
+        idle = load if first else idle
+        first = False
+        ovr = float(state[0, 0])
+        prog = afc.programmed._act(obs[None, :].astype(np.float64), np.zeros((1, 0)))[0, 0]
+        expected = np.clip(cmap.action_to_command(prog) * ovr, cmap.command_min, cmap.command_max)
+        assert float(cmap.action_to_command(float(a[0]))) == pytest.approx(expected, rel=1e-5)
+        if state[0, 3] == 3.0:  # stopped (overload): the feed held at zero
+            assert ovr == 0.0 and state[0, 9] == 1.0
+        elif state[0, 12] == 1.0:  # in air
+            assert ovr == pytest.approx(2.0)
+        else:
+            assert 0.5 - 1e-12 <= ovr <= 1.6 + 1e-12
+            factors_in.append(ovr)
+        cut_loads.append(load - idle)
+        obs, _, term, trunc, _ = env.step(a)
+        done = term or trunc
+    log = afc.episode_log(state)[0]
+    assert factors_in and log["control_time_s"] > 0
+    assert log["peak_load"] == pytest.approx(max(cut_loads))
+    assert log["min_feed_factor"] == pytest.approx(min(factors_in))
+    assert log["breakage"] == 0.0
+    env.close()

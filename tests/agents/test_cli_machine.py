@@ -42,3 +42,33 @@ def test_train_passes_the_machine_to_the_envs(tmp_path, monkeypatch):
     kw = seen["overrides"]["env_kwargs"]
     assert kw["actuation"]["max_rate_per_s"] == SHOPFLOOR_ACTUATION.max_rate_per_s
     assert kw["spindle_power_W"] == 2200.0
+
+
+def test_tune_at_the_strictest_allowance_records_it(tmp_path):
+    """``--allowance 0.005``: the objective counts an episode at the verdict's strictest
+    allowance; the file states it (budget and command) and keeps each env's machine
+    options."""
+    out = tmp_path / "tuned.json"
+    args = ["tune", "--env", "machining_envs/ContouringFeed-v0", "--trials", "1",
+            "--episodes", "1", "--allowance", "0.005"]  # fmt: skip
+    assert main([*args, "--machine", EXAMPLE, "--out", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data["budget"]["allowance"] == 0.005
+    assert data["command"].endswith("--allowance 0.005")
+    env_id = "machining_envs/ContouringFeed-v0"
+    assert data["commands"][env_id] == data["command"]
+    assert data["env_kwargs"][env_id]["actuation"]["max_rate_per_s"] == 2.5  # feed_override
+    assert set(data["envs"][env_id]) == {"ConstantOverride", "LookAheadFeed"}
+
+
+def test_tuning_budget_allowance_is_checked():
+    import pytest
+
+    from agents.bench.tune import TuningBudget
+
+    assert "allowance" not in TuningBudget().as_dict()  # the protocol's 2 %: files unchanged
+    with pytest.raises(ValueError, match="allowance"):
+        TuningBudget(allowance=0.03)
+    with pytest.raises(SystemExit) as e:  # argparse names the choices
+        main(["tune", "--allowance", "0.03"])
+    assert e.value.code == 2

@@ -1,12 +1,13 @@
 """The machine description file (machining_envs.core.machine)."""
 
+import dataclasses
 from pathlib import Path
 
 import gymnasium as gym
 import pytest
 
 import machining_envs  # noqa: F401
-from machining_envs.core.actuation import SHOPFLOOR_ACTUATION
+from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, SHOPFLOOR_OVERRIDE
 from machining_envs.core.machine import SHOPFLOOR_MACHINE, Machine, load_machine
 from machining_envs.core.sensors import PowerSensor
 
@@ -19,6 +20,8 @@ def test_example_file_is_the_shopfloor_machine():
     assert m.actuation == SHOPFLOOR_ACTUATION
     assert m.spindle_power_W == SHOPFLOOR_MACHINE.spindle_power_W
     assert m.power_sensor is None
+    assert m.feed_override == SHOPFLOOR_OVERRIDE == SHOPFLOOR_MACHINE.feed_override
+    assert m.as_dict() == {**SHOPFLOOR_MACHINE.as_dict(), "name": "my_lathe"}
     assert load_machine(EXAMPLE).as_dict() == {**m.as_dict()}
     assert Machine(**{**m.as_dict(), "name": "x"}).actuation == m.actuation
 
@@ -51,6 +54,7 @@ def test_env_kwargs_per_env(tmp_path):
         ("power_sensor: {idle_W: -5}\n", "idle_W"),
         ("- 1\n- 2\n", "mapping"),
         ("actuation: {delay: 1}\n", "unknown settings"),
+        ("feed_override: {quantum: 2}\n", "quantum"),
     ],
 )
 def test_bad_files_name_the_key(tmp_path, text, match):
@@ -70,3 +74,18 @@ def test_spread_around_the_description():
     assert {v.delay_steps for v in variants} == {1, 2, 3}
     assert {v.max_rate_per_s for v in variants} == {0.4, 0.625}
     assert all(v.quantum == 0.01 for v in variants)
+
+
+def test_contouring_feed_gets_the_feed_override():
+    """ContouringFeed-v0's override has its own handling (10 ms decisions, range [0, 2]);
+    without one it gets the machine's actuation."""
+    kw = SHOPFLOOR_MACHINE.env_kwargs("machining_envs/ContouringFeed-v0")
+    assert kw == {"actuation": dataclasses.asdict(SHOPFLOOR_OVERRIDE)}
+    assert (
+        SHOPFLOOR_MACHINE.env_kwargs("machining_envs/EndMilling-v0")["actuation"]["max_rate_per_s"]
+        == SHOPFLOOR_ACTUATION.max_rate_per_s
+    )
+    plain = Machine("m", SHOPFLOOR_ACTUATION)
+    assert plain.env_kwargs("machining_envs/ContouringFeed-v0") == {
+        "actuation": dataclasses.asdict(SHOPFLOOR_ACTUATION)
+    }

@@ -1,0 +1,107 @@
+"""The benchmark's shop-floor rows: the classical agents tuned for the shop-floor machine
+run on the ``shopfloor`` split only, with the machine's env options, labelled as such, and
+are judged against the constant feed tuned for that machine."""
+
+import dataclasses
+import json
+
+import pytest
+
+from agents import AdaptiveFeedControl, ConstantFeed
+from agents.bench.declarations import BENCHMARKS, benchmark_spec
+from agents.bench.results import machine_reference, reference, split_results
+from agents.bench.run import jobs_of, run_env
+from agents.bench.tune import SHOPFLOOR_TUNED_FILE, load_tuned, paper_settings
+from agents.eval.stats import allowance_sweep
+from machining_envs.core.machine import SHOPFLOOR_MACHINE
+
+TURNING = "machining_envs/Turning-v0"
+
+
+def _machine_file(spec, env):
+    """A tuned-for-the-machine file holding the classes' default settings."""
+    entries = {}
+    for cls in spec.machine_tuned:
+        entries[cls.__name__] = {"params": paper_settings(cls, env), "validation_score": 1.0}
+    return {
+        "envs": {spec.env_id: entries},
+        "env_kwargs": {spec.env_id: SHOPFLOOR_MACHINE.env_kwargs(spec.env_id)},
+    }
+
+
+def test_every_shopfloor_env_declares_its_machine_rows_and_reference():
+    for spec in BENCHMARKS:
+        if "shopfloor" not in spec.extra_splits:
+            continue
+        assert spec.machine_tuned, spec.env_id
+        assert spec.machine_reference in spec.machine_tuned, spec.env_id
+    assert AdaptiveFeedControl in benchmark_spec("machining_envs/EndMilling-v0").machine_tuned
+
+
+def test_jobs_run_on_the_shopfloor_split_with_the_machine():
+    import gymnasium as gym
+
+    spec = benchmark_spec(TURNING)
+    env = gym.make(TURNING)
+    data = _machine_file(spec, env)
+    env.close()
+    jobs = [j for j in jobs_of(spec, {}, False, machine_tuned=data) if j.machine_cls]
+    assert [j.machine_cls for j in jobs] == list(spec.machine_tuned)
+    for j in jobs:
+        assert j.splits == ("shopfloor",)
+        assert j.env_kwargs == SHOPFLOOR_MACHINE.env_kwargs(TURNING)
+        assert j.tuned_cls is None  # not a candidate for the ideal rows' reference
+    # No machine file: no such rows.
+    assert not [j for j in jobs_of(spec, {}, False) if j.machine_cls]
+
+
+def test_rows_labelled_and_judged_against_the_machine_constant_feed():
+    import gymnasium as gym
+
+    full = benchmark_spec(TURNING)
+    spec = dataclasses.replace(
+        full, paper_agents=(), learned=(), oracle=None, tuned=(ConstantFeed,),
+        machine_tuned=(ConstantFeed, AdaptiveFeedControl), extra_splits=("shopfloor",),
+    )  # fmt: skip
+    env = gym.make(TURNING)
+    data = _machine_file(spec, env)
+    ideal = {"envs": {TURNING: {"ConstantFeed": {"params": paper_settings(ConstantFeed, env),
+                                                 "validation_score": 1.0}}}}  # fmt: skip
+    env.close()
+    run = run_env(spec, 2, 3, 0, ideal, False, 0.0, machine_tuned=data)
+    shop = [n for n in run.machine_cls]
+    assert len(shop) == 2 and all(n.endswith("(tuned, shop floor)") for n in shop)
+    for n in shop:  # the shopfloor split only, with the machine's options
+        assert set(run.rows[n]) == {"shopfloor"} and len(run.rows[n]["shopfloor"]) == 3
+    ref, shop_ref = reference(run, ideal), machine_reference(run)
+    assert (
+        ref.endswith("(tuned)") and shop_ref in shop and run.machine_cls[shop_ref] is ConstantFeed
+    )
+    sr = split_results(run, "shopfloor", ref)
+    assert sr.agents[shop_ref].verdict == "reference (shop floor)"
+    afc = next(n for n in shop if n != shop_ref)
+    assert sr.agents[afc].verdict.endswith("(vs the shop-floor reference)")
+    assert (
+        sr.agents[afc].diffs
+        == allowance_sweep(
+            run.rows[shop_ref]["shopfloor"], run.rows[afc]["shopfloor"], run.score, run.failed, 0
+        )[0]
+    )
+    assert len(sr.agents[afc].diffs) == 3
+    assert sr.agents[ref].verdict == "reference"
+    # Not run where the split is not (test only: the quick run has no extra split).
+    quick = run_env(spec, 2, 0, 0, ideal, False, 0.0, machine_tuned=data)
+    assert not quick.machine_cls
+
+
+def test_shipped_file_covers_every_machine_row():
+    data = load_tuned(SHOPFLOOR_TUNED_FILE)
+    if not data:
+        pytest.skip("tuned_shopfloor.json not generated")
+    assert data["command"].startswith("machining-bench tune")
+    for spec in BENCHMARKS:
+        if not spec.machine_tuned:
+            continue
+        assert set(data["envs"][spec.env_id]) == {c.__name__ for c in spec.machine_tuned}
+        assert data["env_kwargs"][spec.env_id] == SHOPFLOOR_MACHINE.env_kwargs(spec.env_id)
+    json.dumps(data)
