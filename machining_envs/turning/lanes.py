@@ -5,6 +5,7 @@ step, start and info of N lathes, which :class:`TurningEnv` (one lane) and
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 
 import numba
@@ -21,19 +22,17 @@ from machining_envs.core.checks import PY_NUMBER_TYPES, check_below, check_range
 from machining_envs.core.compiled.blocks import LaneBlocks, serve_one_table_with_tail
 from machining_envs.core.compiled.kernels import clip_unit_linear
 from machining_envs.core.compiled.normals import LaneGenerators, lane_noise
-from machining_envs.core.compiled.packed import (
-    PackedArgs,
-    as_float,
-    as_int,
-    b1_1,
-    b1_2,
-    f4_2,
-    f8_1,
-    f8_2,
-    f8_3,
-    i8_1,
-    i8_2,
-    spaced_rows,
+from machining_envs.core.compiled.packed import PackedArgs, spaced_rows
+from machining_envs.core.compiled.schema import (
+    LANES,
+    SHARED,
+    axes,
+    bind_columns,
+    flatten,
+    gather,
+    offsets,
+    record,
+    via_table,
 )
 from machining_envs.core.env import (
     check_episode_time,
@@ -52,9 +51,10 @@ from machining_envs.core.sensors import PowerSensorLanes, resolve_power_sensor
 from machining_envs.core.workpieces import lane_segments, traverse_time
 from machining_envs.turning.plant import (
     SPINDLE_RPM_RANGE,
+    SpeedFree,
+    TurningArrays,
     TurningLanes,
     TurningParams,
-    lane_ints,
     spindle_drive,
     start_lane,
     step_lane,
@@ -77,16 +77,90 @@ _FORCE_OBS = (-1.0, 10.0)
 TurningReward = LimitReward
 
 
-@numba.njit(cache=True)
-def _env_lane(k, out, finish, t, gain, fs, meas, fr, vmax, brk, max_t, w, prev_action, fr_obs,
-              rpm_obs, obs, reward, flags):  # fmt: skip
-    """Reward, observation and episode flags of lane ``k`` from the plant's signals.
+#: Columns of ``TurningCore.ef``, the env's per-lane floats (views of the same names).
+EF = enum.IntEnum(
+    "EF",
+    "in_action in_command in_noise force_limit vmax breakage_force prev_action fr_obs rpm_obs"
+    " reward command",
+    start=0,
+    module=__name__,
+)
+#: Columns of ``TurningCore.eb``, the env's per-lane flags: the six of ``flags``, then
+#: ``in_clipped`` and ``clipped``.
+EB = enum.IntEnum(
+    "EB",
+    "diverged breakage finished terminated truncated over in_clipped clipped",
+    start=0,
+    module=__name__,
+)
 
-    ``fr`` holds the force limits; ``w`` = ``[tracking, overforce, target, progress,
-    breakage]``; ``flags[k]`` = ``[diverged, breakage, finished, terminated, truncated,
-    over the limit]``.
-    """
+#: The env's arrays the step reads and writes (``TurningCore``'s; ``gain`` the sensor's,
+#: ``fs`` the force scale, ``w`` the reward weights ``[tracking, overforce, target,
+#: progress, breakage]``, ``rng_table`` the lanes' noise generators' rows).
+TurningEnvArrays = record(
+    "TurningEnvArrays",
+    __name__,
+    ef=LANES.f8_2,
+    eb=LANES.b1_2,
+    gain=SHARED.f8,
+    fs=SHARED.f8,
+    meas=LANES.f8_2,
+    max_t=SHARED.f8,
+    w=SHARED.f8_1,
+    obs=LANES.f4_2,
+    n_clipped=LANES.i8_1,
+    rng_table=LANES.i8_2,
+    noise_counts=LANES.f8_1,
+)
+#: What an episode's start writes besides (``TurningCore``'s arrays of these names).
+TurningEpisodes = record(
+    "TurningEpisodes",
+    __name__,
+    bound=LANES.f8_1,
+    spindle=LANES.f8_1,
+    spindle_set=LANES.f8_1,
+    power=LANES.f8_2,
+    diameter=LANES.f8_1,
+    length=LANES.f8_1,
+)
+#: A batch of starts the blocks of lanes make (:func:`_start_pending`): each lane's index
+#: (a block's first tells it where its lanes begin), the pending starts ``[count,
+#: lanes...]``, the split's numbers (:data:`BN`), and each pending lane's speed,
+#: uniforms, segments, segment count and whether its step matrix was made.
+TurningBatch = record(
+    "TurningBatch",
+    __name__,
+    lane_index=LANES.i8_1,
+    pending=SHARED.i8_1,
+    nums=SHARED.f8_1,
+    rpm=SHARED.f8_1,
+    v=SHARED.f8_2,
+    segments=SHARED.f8_3,
+    counts=SHARED.i8_1,
+    ok=SHARED.b1_1,
+)
+#: The records of the kernel's table (``TurningCore._kernel_args``), in order: the step
+#: reads the first two, a start all but the last, a batch of starts all.
+_TABLE = (TurningArrays, TurningEnvArrays, TurningEpisodes, SpeedFree, TurningBatch)
+_AT_PLANT, _AT_ENV, _AT_EPISODE, _AT_FREE, _AT_BATCH, _ = offsets(*_TABLE)
+#: Where the table's arguments hold the lanes, for
+#: :class:`~machining_envs.core.compiled.blocks.LaneBlocks`.
+_STEP_AXES = axes(*_TABLE)
+_read_plant = TurningArrays.reader
+_read_env = TurningEnvArrays.reader
+_read_episode = TurningEpisodes.reader
+_read_free = SpeedFree.reader
+_read_batch = TurningBatch.reader
+
+
+@numba.njit(cache=True)
+def _env_lane(k, a, e):
+    """Reward, observation and episode flags of lane ``k`` from the plant's signals (``a``,
+    :data:`TurningArrays`) into the env's arrays (``e``, :data:`TurningEnvArrays`):
+    ``e.eb[k]`` = ``[diverged, breakage, finished, terminated, truncated, over the limit,
+    ...]``."""
     lo, hi = _FORCE_OBS
+    out, ef, flags, w = a.out, e.ef, e.eb, e.w
     force, peak, counts, pos = out[k, 0], out[k, 1], out[k, 2], out[k, 5]
     diverged = not (np.isfinite(force) and np.isfinite(counts) and np.isfinite(pos))
     if diverged:  # never seen; kept so that no NaN can reach an observation or a reward
@@ -96,61 +170,45 @@ def _env_lane(k, out, finish, t, gain, fs, meas, fr, vmax, brk, max_t, w, prev_a
         out[k, 0] = 0.0
         out[k, 1] = 0.0
         out[k, 2] = 0.0
-    m = meas[k]
+    m = e.meas[k]
     for i in range(m.size - 1, 0, -1):
         m[i] = m[i - 1]
-    m[0] = counts / gain
-    breakage = peak > brk[k]
-    finished = not np.isnan(finish[k])
+    m[0] = counts / e.gain
+    breakage = peak > ef[k, EF.breakage_force]
+    finished = not np.isnan(a.out_finish[k])
     terminated = diverged or breakage or finished
-    truncated = (not terminated) and t[k] >= max_t - 1e-9
-    e = force / fr[k]
-    r = -w[0] * abs(e / w[2] - 1.0) - w[1] * max(0.0, e - 1.0)
+    truncated = (not terminated) and a.lane_f[k, 5] >= e.max_t - 1e-9
+    fr = ef[k, EF.force_limit]
+    x = force / fr
+    r = -w[0] * abs(x / w[2] - 1.0) - w[1] * max(0.0, x - 1.0)
     if w[3]:
-        r += w[3] * out[k, 4] / vmax[k]
+        r += w[3] * out[k, 4] / ef[k, EF.vmax]
     if breakage or diverged:
         r -= w[4]
-    reward[k] = r
-    flags[k, 0] = diverged
-    flags[k, 1] = breakage
-    flags[k, 2] = finished
-    flags[k, 3] = terminated
-    flags[k, 4] = truncated
-    flags[k, 5] = force > fr[k]
-    o = obs[k]
+    ef[k, EF.reward] = r
+    flags[k, EB.diverged] = diverged
+    flags[k, EB.breakage] = breakage
+    flags[k, EB.finished] = finished
+    flags[k, EB.terminated] = terminated
+    flags[k, EB.truncated] = truncated
+    flags[k, EB.over] = force > fr
+    o = e.obs[k]
+    fs = e.fs
     o[0] = min(max(m[0] / fs, lo), hi)
-    o[1] = fr_obs[k]
-    o[2] = prev_action[k]
-    o[3] = rpm_obs[k]
+    o[1] = ef[k, EF.fr_obs]
+    o[2] = ef[k, EF.prev_action]
+    o[3] = ef[k, EF.rpm_obs]
     for i in range(1, m.size):
         o[3 + i] = min(max(m[i] / fs, lo), hi)
 
 
-#: Columns of ``TurningCore.ef``, the env's per-lane floats.
-_EF = ("in_action", "in_command", "in_noise", "force_limit", "vmax", "breakage_force",
-       "prev_action", "fr_obs", "rpm_obs", "reward", "command")  # fmt: skip
-#: Columns of ``TurningCore.eb``, the env's per-lane flags: the six of ``flags``, then
-#: ``in_clipped`` and ``clipped``.
-_EB = ("diverged", "breakage", "finished", "terminated", "truncated", "over", "in_clipped",
-       "clipped")  # fmt: skip
-
-
-_EF_COMMAND = _EF.index("command")
-_EF_REWARD = _EF.index("reward")
-_EF_FORCE_LIMIT = _EF.index("force_limit")
-_EF_VMAX = _EF.index("vmax")
-_EF_BREAKAGE = _EF.index("breakage_force")
-_EF_PREV_ACTION = _EF.index("prev_action")
-_EF_FR_OBS = _EF.index("fr_obs")
-_EF_RPM_OBS = _EF.index("rpm_obs")
-
-
 #: The float keys of a vector step's info, one row each of the table
 #: :func:`_info_rows` fills (``TurningCore.info_arrays``).
-_INFO_F = ("t_s", "command", "force_N", "force_limit_N", "cost", "score_bound", "measured",
-           "measured_counts", "peak_force_N", "feed_mm_per_rev", "feed_velocity_mm_s",
-           "position_mm", "depth_mm", "spindle_rpm", "spindle_power_W", "cutting_power_W",
-           "workpiece_length_mm", "machining_time_s")  # fmt: skip
+_INFO_F = (
+    "t_s command force_N force_limit_N cost score_bound measured measured_counts peak_force_N"
+    " feed_mm_per_rev feed_velocity_mm_s position_mm depth_mm spindle_rpm spindle_power_W"
+    " cutting_power_W workpiece_length_mm machining_time_s"
+).split()
 
 
 @numba.njit(cache=True)
@@ -165,9 +223,9 @@ def _info_rows(lane_f, ef, eb, out, out_finish, meas, bound, spindle, diameter, 
         o = out[k]
         ok = not eb[k, 0]
         rows[0, k] = lane_f[k, 5]
-        rows[1, k] = ef[k, _EF_COMMAND]
+        rows[1, k] = ef[k, EF.command]
         rows[2, k] = o[0]
-        rows[3, k] = ef[k, _EF_FORCE_LIMIT]
+        rows[3, k] = ef[k, EF.force_limit]
         rows[4, k] = 1.0 if eb[k, 5] else 0.0
         rows[5, k] = bound[k]
         rows[6, k] = meas[k, 0]
@@ -184,63 +242,48 @@ def _info_rows(lane_f, ef, eb, out, out_finish, meas, bound, spindle, diameter, 
         rows[17, k] = out_finish[k] if eb[k, 2] else np.nan
 
 
-@numba.njit(cache=True, inline="always")
-def _env_floats(ef):
-    """The columns of ``ef`` (``_EF``), as views."""
-    return (ef[:, 0], ef[:, 1], ef[:, 2], ef[:, 3], ef[:, 4], ef[:, 5], ef[:, 6], ef[:, 7],
-            ef[:, 8], ef[:, 9], ef[:, 10])  # fmt: skip
-
-
 @numba.njit(cache=True, _nrt=False, nogil=True)
-def _step(ef, eb, feed, li, filt, z, buf, base, edges, d0, slope, lane_f, finished, m, n_f,
-          out, out_finish, gain, fs, meas, max_t, w, obs, n_clipped, rng_table,
-          noise_counts, work):  # fmt: skip
+def _step(a, e):
     """One step of every lane: the actions' bookkeeping, the sensor noise, the plant, the
     env's outputs.
 
-    ``ef`` and ``eb`` hold the env's per-lane floats and flags (``TurningCore``'s ``_EF``
-    and ``_EB`` columns), ``li`` the plant's integers (``TurningLanes.li``). A lane with
-    noise (``noise_counts[k]`` counts per unit normal) draws a normal from its generator
-    (row ``rng_table[k]``, ``core.compiled.normals``), a lane without draws none. ``work`` is the
-    plant's scratch (``TurningLanes.work``): nothing is allocated here, so it is compiled
-    without reference counting (``_nrt=False``): the views of each lane's rows it makes cost
-    no atomic counts (they took a fifth of it). ``matvec``, which it calls for filters outside
-    the two-row scheme, keeps the runtime for what it hands to ``np.dot``.
+    ``a`` holds the plant's arrays (:data:`TurningArrays`), ``e`` the env's
+    (:data:`TurningEnvArrays`: its per-lane floats and flags, columns :data:`EF` and
+    :data:`EB`). A lane with noise (``noise_counts[k]`` counts per unit normal) draws a
+    normal from its generator (row ``rng_table[k]``, ``core.compiled.normals``), a lane
+    without draws none. ``a.work`` is the plant's scratch: nothing is allocated here, so it
+    is compiled without reference counting (``_nrt=False``): the views of each lane's rows
+    it makes cost no atomic counts. ``matvec``, which it calls for filters outside the
+    two-row scheme, keeps the runtime for what it hands to ``np.dot``.
     The env calls it through :func:`_step_packed` (one table for every argument)."""
-    (actions, commands, noise, fr, vmax, brk, prev_action, fr_obs, rpm_obs, reward,
-     last_command) = _env_floats(ef)  # fmt: skip
-    flags, clipped, last_clipped = eb[:, :6], eb[:, 6], eb[:, 7]
-    cols, nseg, seg, out_seg = lane_ints(li)
-    t = lane_f[:, 5]
-    for k in range(z.shape[0]):
-        prev_action[k] = actions[k]
-        last_command[k] = commands[k]
-        last_clipped[k] = clipped[k]
-        n_clipped[k] += clipped[k]
-        noise[k] = lane_noise(rng_table, k, noise_counts[k])
-        step_lane(
-            k, feed, base, cols, li, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f,
-            finished, m, n_f, commands[k], noise[k], out, out_seg, out_finish,
-        )  # fmt: skip
-        _env_lane(k, out, out_finish, t, gain, fs, meas, fr, vmax, brk, max_t, w, prev_action,
-                  fr_obs, rpm_obs, obs, reward, flags)  # fmt: skip
+    ef, eb = e.ef, e.eb
+    for k in range(a.z.shape[0]):
+        ef[k, EF.prev_action] = ef[k, EF.in_action]
+        ef[k, EF.command] = ef[k, EF.in_command]
+        eb[k, EB.clipped] = eb[k, EB.in_clipped]
+        e.n_clipped[k] += eb[k, EB.in_clipped]
+        ef[k, EF.in_noise] = lane_noise(e.rng_table, k, e.noise_counts[k])
+        step_lane(k, a, ef[k, EF.in_command], ef[k, EF.in_noise])
+        _env_lane(k, a, e)
 
 
 @numba.njit(cache=True, nogil=True)
 def _step_packed(t, op):
     """The core's kernel with its arguments in one table (``core.compiled.packed``;
-    ``TurningCore._kernel_args``), one array to unbox, not one per argument: ``op`` 0 is
-    :func:`_step` of the table's lanes, 1 starts those of its lanes that the pending table
-    lists (:func:`_start_pending`). On several threads each block of lanes runs it on its
-    own table, so a vector env's resetting lanes start on the blocks' threads too."""
+    ``TurningCore._kernel_args``, records :data:`_TABLE`), one array to unbox, not one per
+    argument: ``op`` 0 is :func:`_step` of the table's lanes, 1 starts those of its lanes
+    that the pending table lists (:func:`_start_pending`). On several threads each block
+    of lanes runs it on its own table, so a vector env's resetting lanes start on the
+    blocks' threads too."""
     if op == 0:
-        _step(f8_2(t, 0), b1_2(t, 1), f8_2(t, 2), i8_2(t, 3), f8_2(t, 4), f8_2(t, 5), f8_2(t, 6),
-              f8_1(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12),
-              as_int(t, 13), as_int(t, 14), f8_2(t, 15), f8_1(t, 16), as_float(t, 17),
-              as_float(t, 18), f8_2(t, 19), as_float(t, 20), f8_1(t, 21), f4_2(t, 22),
-              i8_1(t, 23), i8_2(t, 24), f8_1(t, 25), f8_2(t, 26))  # fmt: skip
+        _step(_read_plant(t, _AT_PLANT), _read_env(t, _AT_ENV))
     else:
         _start_pending(t)
+
+
+#: :func:`_step_packed` as :class:`~machining_envs.core.compiled.blocks.LaneBlocks` calls
+#: a kernel of flat arguments.
+_step_flat = via_table(_step_packed, len(_STEP_AXES))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -250,37 +293,24 @@ def _serve_step(ctl, table, polls):
     return serve_one_table_with_tail(_step_packed, ctl, table, polls)
 
 
-#: Where the kernel's table (``TurningCore._kernel_args``) holds, after :func:`_step`'s
-#: arguments, the other arrays :func:`_start` writes and the linear blocks' tables, then
-#: each lane's index, then the pending starts: ``[count, lanes...]``, the split's numbers,
-#: and each pending lane's speed, uniforms, segments, segment count and whether its step
-#: matrix was made. (The noise scales :func:`_start` writes are :func:`_step`'s, at 25.)
-_T_START = 27
-_T_LANE = _T_START + 13
-_T_PENDING = _T_LANE + 1
-
-
 @numba.njit(cache=True)
 def _start_pending(t):
-    """:func:`_start_drawn_lanes` for the pending lanes (the table's, ``_T_PENDING``) that
-    lie in the table's block of lanes (its first lane's index at ``_T_LANE``), each lane
+    """:func:`_start_drawn_lanes` for the pending lanes (the table's :data:`TurningBatch`)
+    that lie in the table's block of lanes (its first lane's index first), each lane
     writing its own rows and its ``ok``."""
-    first = i8_1(t, _T_LANE)
-    pending = i8_1(t, _T_PENDING)
-    p = _T_PENDING
-    _start_drawn_lanes(t, pending[1 : pending[0] + 1], first[0], first[0] + first.size,
-                       f8_1(t, p + 1), f8_1(t, p + 2), f8_2(t, p + 3), f8_3(t, p + 4),
-                       i8_1(t, p + 5), b1_1(t, p + 6))  # fmt: skip
+    b = _read_batch(t, _AT_BATCH)
+    first = b.lane_index
+    lanes = b.pending[1 : b.pending[0] + 1]
+    lo, hi = first[0], first[0] + first.size
+    _start_drawn_lanes(t, lanes, lo, hi, b.nums, b.rpm, b.v, b.segments, b.counts, b.ok)
 
 
 @numba.njit(cache=True)
-def _start(k, full_history, consts, segments, x, ef, eb, feed, li, z, buf, edges, d0, slope,
-           lane_f, finished, out, out_finish, fs, meas, obs, n_clipped, bound, noise_counts,
-           spindle, spindle_set, power, diameter, length, spindle_rpm, phis, gams,
-           base, sa, sb, ts):  # fmt: skip
+def _start(k, full_history, consts, segments, x, a, e, ep, free):
     """The arrays of lane ``k`` at the start of an episode (``TurningCore.start``): the
-    plant's (:func:`~machining_envs.turning.plant.start_lane`, whose return it returns),
-    then the env's, the tool at rest at the workpiece's start.
+    plant's (``a``, :func:`~machining_envs.turning.plant.start_lane` on the tables
+    ``free``, whose return it returns), then the env's (``e``) and the episode's (``ep``),
+    the tool at rest at the workpiece's start.
 
     ``x`` = ``[rpm, force limit, Vmax, breakage force, noise (counts), diameter, score
     bound, spindle power]`` of the cut (the bound NaN: computed here, for a sharp tool, as
@@ -288,63 +318,66 @@ def _start(k, full_history, consts, segments, x, ef, eb, feed, li, z, buf, edges
     plant's lane constants (``TurningLanes.lane_constants``).
     """
     rpm, limit, vmax, brk, noise, diam, b = x[0], x[1], x[2], x[3], x[4], x[5], x[6]
-    ok = start_lane(k, rpm, full_history, consts, segments, phis, gams, base, sa, sb, ts, feed,
-                    li, z, buf, edges, d0, slope, lane_f, finished, spindle_rpm)  # fmt: skip
+    ok = start_lane(k, rpm, full_history, consts, segments, free, a)
     if b != b:  # machining_time_bound with no wear: traverse_time_s's closed form (left
         # NaN, for machining_time_bound to refuse, where that refuses its numbers)
         p = consts[1]
         c = bound_coefficient(consts[0], p, limit, x[7], diam, rpm)
         if c > 0.0 and p > 0.0 and vmax > 0.0:
             b = traverse_time(segments, c, 1.0 / p, vmax)
-    fr_obs = min(limit / fs, 10.0)
+    fr_obs = min(limit / e.fs, 10.0)
     rpm_obs = rpm / 1000.0
-    e = ef[k]
-    e[_EF_FORCE_LIMIT] = limit
-    e[_EF_VMAX] = vmax
-    e[_EF_BREAKAGE] = brk
-    e[_EF_PREV_ACTION] = -1.0
-    e[_EF_FR_OBS] = fr_obs
-    e[_EF_RPM_OBS] = rpm_obs
-    e[_EF_COMMAND] = 0.0
-    bound[k] = b
-    noise_counts[k] = noise
-    meas[k, :] = 0.0
-    n_clipped[k] = 0
-    spindle[k] = rpm
-    spindle_set[k] = rpm
-    power[k, :] = 0.0
-    diameter[k] = diam
+    f = e.ef[k]
+    f[EF.force_limit] = limit
+    f[EF.vmax] = vmax
+    f[EF.breakage_force] = brk
+    f[EF.prev_action] = -1.0
+    f[EF.fr_obs] = fr_obs
+    f[EF.rpm_obs] = rpm_obs
+    f[EF.command] = 0.0
+    ep.bound[k] = b
+    e.noise_counts[k] = noise
+    e.meas[k, :] = 0.0
+    e.n_clipped[k] = 0
+    ep.spindle[k] = rpm
+    ep.spindle_set[k] = rpm
+    ep.power[k, :] = 0.0
+    ep.diameter[k] = diam
     ns = segments.shape[1] - 1
-    length[k] = segments[0, ns]
-    o = obs[k]
+    ep.length[k] = segments[0, ns]
+    o = e.obs[k]
     o[:] = 0.0
     o[1] = fr_obs
     o[2] = -1.0
     o[3] = rpm_obs
     # The signals of a cut not yet begun, where lane_info and info_arrays read them until the
     # first step (which writes every one): the tool at rest at the workpiece's start.
-    eb[k, :] = False
-    out[k, :] = 0.0
-    out[k, 6] = segments[1, 0]  # the depth at the start
-    li[k, 3] = 0  # the segment
-    out_finish[k] = np.nan
+    e.eb[k, :] = False
+    a.out[k, :] = 0.0
+    a.out[k, 6] = segments[1, 0]  # the depth at the start
+    a.li[k, 3] = 0  # the segment
+    a.out_finish[k] = np.nan
     return ok
 
 
 #: The numbers :func:`_start_drawn_lanes` reads of a split and the nominal parameters
-#: (``_batch_numbers``), in its order.
-_BATCH_NUMBERS = (
-    "force_coefficient", "feed_exponent", "sensor_gain", "command_max", "margin",
-    "spindle_power_W", "max_feed_velocity_mm_s", "breakage_force_N", "noise_std_N",
-    "workpiece_diameter_mm", "kf_low", "kf_span", "p_low", "p_span", "noise_low", "noise_span",
-    "limit_varies", "limit_low", "limit_span",
-)  # fmt: skip
+#: (``_batch_numbers``), in its order: the nominal Kf, p, Ke, U_max, margin, spindle power,
+#: Vmax, breakage force, noise and diameter, then the split's ranges (low, span) of the
+#: scales of Kf, p and the noise, whether the limit varies, and its range.
+BN = enum.IntEnum(
+    "BN",
+    "force_coefficient feed_exponent sensor_gain command_max margin spindle_power_W"
+    " max_feed_velocity_mm_s breakage_force_N noise_std_N workpiece_diameter_mm kf_low kf_span"
+    " p_low p_span noise_low noise_span limit_varies limit_low limit_span",
+    start=0,
+    module=__name__,
+)
 
 
 def _batch_numbers(core, factory) -> np.ndarray:
-    """What :func:`_start_drawn_lanes` reads (``_BATCH_NUMBERS``) for lanes of
-    ``factory``'s split on ``core``'s nominal parameters: the numbers
-    ``TurningScenario.true_params`` and ``TurningLanes.lane_constants`` take."""
+    """What :func:`_start_drawn_lanes` reads (:data:`BN`) for lanes of ``factory``'s split
+    on ``core``'s nominal parameters: the numbers ``TurningScenario.true_params`` and
+    ``TurningLanes.lane_constants`` take."""
     p = core.params
     power = factory.shop["spindle_power_W"]
     power = power if math.isfinite(power) else p.spindle_power_W
@@ -352,13 +385,28 @@ def _batch_numbers(core, factory) -> np.ndarray:
     lows, spans = factory.lows, factory.spans
     varies = factory.limit_varies
     limit = (lows[3], spans[3]) if varies else (float(factory.limit_N[0]), 0.0)
-    nums = np.array([
-        p.force_coefficient, p.feed_exponent, ke, cmax, margin, power,
-        p.max_feed_velocity_mm_s, p.breakage_force_N, p.noise_std_N, p.workpiece_diameter_mm,
-        lows[0], spans[0], lows[1], spans[1], lows[2], spans[2], float(varies), *limit,
-    ], dtype=np.float64)  # fmt: skip
-    assert nums.size == len(_BATCH_NUMBERS)
-    return nums
+    numbers = {
+        "force_coefficient": p.force_coefficient,
+        "feed_exponent": p.feed_exponent,
+        "sensor_gain": ke,
+        "command_max": cmax,
+        "margin": margin,
+        "spindle_power_W": power,
+        "max_feed_velocity_mm_s": p.max_feed_velocity_mm_s,
+        "breakage_force_N": p.breakage_force_N,
+        "noise_std_N": p.noise_std_N,
+        "workpiece_diameter_mm": p.workpiece_diameter_mm,
+        "kf_low": lows[0],
+        "kf_span": spans[0],
+        "p_low": lows[1],
+        "p_span": spans[1],
+        "noise_low": lows[2],
+        "noise_span": spans[2],
+        "limit_varies": float(varies),
+        "limit_low": limit[0],
+        "limit_span": limit[1],
+    }
+    return np.array([numbers[b.name] for b in BN], dtype=np.float64)
 
 
 @numba.njit(cache=True)
@@ -366,23 +414,30 @@ def _start_drawn_lanes(t, lanes, lo, hi, nums, rpm, v, segments, counts, ok):
     """:func:`_start_packed` for every lane ``lanes[i]`` of a split's batch that lies in
     ``lo .. hi - 1`` (the lanes of ``t``, whose first is lane ``lo``): its speed ``rpm[i]``,
     segments ``segments[i, :, : counts[i] + 1]`` and uniforms ``v[i]`` (the split factory's
-    ``draw_lanes``), on the split's and nominal numbers ``nums`` (``_batch_numbers``): the
+    ``draw_lanes``), on the split's and nominal numbers ``nums`` (:data:`BN`): the
     true parameters ``TurningScenario.true_params`` makes of them (a sharp tool), in its
     order of operations. ``ok[i]``: whether the lane's step matrix was made
     (:func:`_start_packed`'s return)."""
-    (kf, pexp, ke, cmax, margin, power, vmax, brk, noise_std, diam, kf_lo, kf_span, p_lo,
-     p_span, n_lo, n_span, varies, l_lo, l_span) = (
-        nums[0], nums[1], nums[2], nums[3], nums[4], nums[5], nums[6], nums[7], nums[8],
-        nums[9], nums[10], nums[11], nums[12], nums[13], nums[14], nums[15], nums[16],
-        nums[17], nums[18])  # fmt: skip
+    kf, pexp, ke = nums[BN.force_coefficient], nums[BN.feed_exponent], nums[BN.sensor_gain]
+    cmax, margin, power = nums[BN.command_max], nums[BN.margin], nums[BN.spindle_power_W]
+    vmax, brk = nums[BN.max_feed_velocity_mm_s], nums[BN.breakage_force_N]
+    noise_std, diam = nums[BN.noise_std_N], nums[BN.workpiece_diameter_mm]
+    kf_lo, kf_span, p_lo, p_span = (
+        nums[BN.kf_low],
+        nums[BN.kf_span],
+        nums[BN.p_low],
+        nums[BN.p_span],
+    )
+    n_lo, n_span = nums[BN.noise_low], nums[BN.noise_span]
+    varies, l_lo, l_span = nums[BN.limit_varies], nums[BN.limit_low], nums[BN.limit_span]
     full = math.isfinite(power)
     x = np.empty(8)
     for i in range(lanes.size):
         if not lo <= lanes[i] < hi:
             continue
         vi = v[i]
-        consts = (kf * (kf_lo + kf_span * vi[0]), pexp * (p_lo + p_span * vi[1]), ke, cmax,
-                  margin, 0.0)  # fmt: skip
+        kf_i = kf * (kf_lo + kf_span * vi[0])
+        consts = (kf_i, pexp * (p_lo + p_span * vi[1]), ke, cmax, margin, 0.0)
         x[0] = rpm[i]
         x[1] = l_lo + l_span * vi[3] if varies != 0.0 else l_lo
         x[2] = vmax
@@ -396,28 +451,11 @@ def _start_drawn_lanes(t, lanes, lo, hi, nums, rpm, v, segments, counts, ok):
 
 @numba.njit(cache=True)
 def _start_packed(t, k, full_history, consts, segments, x):
-    """:func:`_start` with its arrays in the kernel's table ``t`` (:func:`_step_packed`'s:
-    the step's, then the start's from ``_T_START``); ``k`` is the lane's index in ``t``."""
-    s = _T_START
-    return _start(
-        k, full_history, consts, segments, x, f8_2(t, 0), b1_2(t, 1), f8_2(t, 2), i8_2(t, 3),
-        f8_2(t, 5), f8_2(t, 6), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), b1_1(t, 12),
-        f8_2(t, 15), f8_1(t, 16), as_float(t, 18), f8_2(t, 19), f4_2(t, 22), i8_1(t, 23),
-        f8_1(t, s), f8_1(t, 25), f8_1(t, s + 1), f8_1(t, s + 2), f8_2(t, s + 3),
-        f8_1(t, s + 4), f8_1(t, s + 5), f8_1(t, s + 6), f8_3(t, s + 7), f8_2(t, s + 8),
-        f8_2(t, s + 9), f8_2(t, s + 10), f8_2(t, s + 11), as_float(t, s + 12),
-    )  # fmt: skip
-
-
-#: Where :func:`_step`'s arguments (``TurningCore._kernel_args``) hold the lanes: axis 0
-#: or none (shared), for :class:`~machining_envs.core.compiled.blocks.LaneBlocks`.
-_STEP_AXES = (
-    0, 0, 0, 0, None, 0, 0, None, 0, 0, 0, 0, 0, None, None, 0, 0, None, None, 0, None, None, 0, 0, 0,
-    0, 0,  # _step's
-    0, 0, 0, 0, 0, 0, 0, None, None, None, None, None, None,  # the start's (_T_START)
-    0,  # each lane's index (_T_LANE)
-    None, None, None, None, None, None, None,  # the pending starts (_T_PENDING)
-)  # fmt: skip
+    """:func:`_start` with its arrays in the kernel's table ``t`` (:func:`_step_packed`'s,
+    records :data:`_TABLE`); ``k`` is the lane's index in ``t``."""
+    a, e = _read_plant(t, _AT_PLANT), _read_env(t, _AT_ENV)
+    ep, free = _read_episode(t, _AT_EPISODE), _read_free(t, _AT_FREE)
+    return _start(k, full_history, consts, segments, x, a, e, ep, free)
 
 
 class TurningCore(LaneCore):
@@ -428,10 +466,21 @@ class TurningCore(LaneCore):
 
     #: What a scenario may be: an object of this class or one of these names.
     scenario_types = (TurningScenario, TURNING_SCENARIOS)
-    VIEWS = frozenset({*_EF, "flags", "in_clipped", "clipped", "_args"})
+    VIEWS = frozenset({*EF.__members__, "flags", "in_clipped", "clipped", "_args"})
 
-    def __init__(self, owner, n, scenario, params, spindle_rpm, reward, max_episode_time_s,
-                 overrides, actuation=None, power_sensor=None):  # fmt: skip
+    def __init__(
+        self,
+        owner,
+        n,
+        scenario,
+        params,
+        spindle_rpm,
+        reward,
+        max_episode_time_s,
+        overrides,
+        actuation=None,
+        power_sensor=None,
+    ):
         self.params = resolve_params(
             owner, params, TurningParams, TurningParams.noh_kim_kim_1992, overrides
         )
@@ -468,8 +517,8 @@ class TurningCore(LaneCore):
         self.scenarios = LaneObjects(n)
         # The per-lane floats and flags the kernel reads and writes, each set in one array
         # (one argument of the kernel) and named here by views of its columns.
-        self.ef = np.zeros((n, len(_EF)))
-        self.eb = np.zeros((n, len(_EB)), dtype=np.bool_)
+        self.ef = np.zeros((n, len(EF)))
+        self.eb = np.zeros((n, len(EB)), dtype=np.bool_)
         self.bind_views()
         self.force_limit[:] = 1.0
         self.vmax[:] = 1.0
@@ -501,40 +550,43 @@ class TurningCore(LaneCore):
         self._args: tuple | None = None
         self._args_version = -1
         self._packed = PackedArgs()  # the kernel's arguments in one table (core.compiled.packed)
-        #: Each lane's index (a block's first tells the kernel where its lanes begin).
-        self.lane_index = np.arange(n, dtype=np.int64)
-        #: The starts a vector env's blocks make (_start_pending): [count, lanes...], the
-        #: split's numbers, and each lane's draws (sized for the first batch, grown with it).
-        self._pending = np.zeros(n + 1, dtype=np.int64)
-        self._pending_draws = (np.zeros(len(_BATCH_NUMBERS)), np.zeros(n), np.zeros((n, 4)),
-                               np.zeros((n, 4, 2)), np.zeros(n, dtype=np.int64),
-                               np.zeros(n, dtype=np.bool_))  # fmt: skip
+        #: The starts a vector env's blocks make (_start_pending; the draws sized for the
+        #: first batch, grown with it).
+        self._batch = TurningBatch(
+            lane_index=np.arange(n, dtype=np.int64),
+            pending=np.zeros(n + 1, dtype=np.int64),
+            nums=np.zeros(len(BN)),
+            rpm=np.zeros(n),
+            v=np.zeros((n, 4)),
+            segments=np.zeros((n, 4, 2)),
+            counts=np.zeros(n, dtype=np.int64),
+            ok=np.zeros(n, dtype=np.bool_),
+        )
         #: The blocks of lanes the kernel steps at once (one thread unless a vector env
         #: asks for more).
         self.blocks = LaneBlocks(n)
 
     def bind_views(self) -> None:
-        """Name the columns of ``ef`` (``_EF``) and ``eb`` (``_EB``)."""
-        for i, name in enumerate(_EF):
-            setattr(self, name, self.ef[:, i])
-        self.flags = self.eb[:, :6]
-        self.in_clipped = self.eb[:, 6]
-        self.clipped = self.eb[:, 7]
+        """Name the columns of ``ef`` (:data:`EF`) and ``eb`` (:data:`EB`)."""
+        bind_columns(self, self.ef, EF)
+        self.flags = self.eb[:, : EB.in_clipped]
+        self.in_clipped = self.eb[:, EB.in_clipped]
+        self.clipped = self.eb[:, EB.clipped]
 
     def set_action(self, lane: int, action: float, clipped: bool) -> None:
         ef = self.ef[lane]
-        ef[0] = action  # in_action, in_command (_EF)
-        ef[1] = self.command_map.action_to_command(action)
+        ef[EF.in_action] = action
+        ef[EF.in_command] = self.command_map.action_to_command(action)
         self.in_clipped[lane] = clipped
 
     def set_actions(self, actions: np.ndarray) -> None:
         m = self.command_map  # linear: one compiled pass clips and maps
-        clip_unit_linear(actions[:, 0], self.in_action, self.in_clipped, self.in_command,
-                         m.mid, m.half)  # fmt: skip
+        a = actions[:, 0]
+        clip_unit_linear(a, self.in_action, self.in_clipped, self.in_command, m.mid, m.half)
 
     def outcome(self, lane: int) -> tuple[float, bool, bool]:
-        terminated, truncated = self.eb[lane, 3:5].tolist()
-        return float(self.ef[lane, _EF_REWARD]), terminated, truncated
+        terminated, truncated = self.eb[lane, EB.terminated : EB.over].tolist()
+        return float(self.ef[lane, EF.reward]), terminated, truncated
 
     def step_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self.reward, self.flags[:, 3], self.flags[:, 4]
@@ -578,12 +630,11 @@ class TurningCore(LaneCore):
         diameter = float(truth.workpiece_diameter_mm)
         # The score bound: computed by the kernel for a sharp tool, here with wear.
         bound = math.nan if truth.wear_per_100mm == 0.0 else machining_time_bound(sc, truth)
-        x = np.array((rpm, limit, truth.max_feed_velocity_mm_s, truth.breakage_force_N,
-                      truth.sensor_gain * truth.noise_std_N, diameter, bound, power_W))  # fmt: skip
-        if not _start_packed(
-            self._packed(self._kernel_args()), lane, full, lanes.lane_constants(truth),
-            segments, x,
-        ):  # fmt: skip
+        noise = truth.sensor_gain * truth.noise_std_N
+        vmax, brk = truth.max_feed_velocity_mm_s, truth.breakage_force_N
+        x = np.array((rpm, limit, vmax, brk, noise, diameter, bound, power_W))
+        table = self._packed(self._kernel_args())
+        if not _start_packed(table, lane, full, lanes.lane_constants(truth), segments, x):
             lanes._load_matrices(lane, rpm, full)
         if not self.bound[lane] == self.bound[lane]:  # refused by the kernel: let it say why
             self.bound[lane] = machining_time_bound(sc, truth)
@@ -597,8 +648,8 @@ class TurningCore(LaneCore):
             self.power_lanes.discard(lane)
         self.names[lane] = sc.name
         # What the episode's infos repeat, as Python values: read once, not at every step.
-        self.episode_info[lane] = (float(self.bound[lane]), float(self.length[lane]), sc.name,
-                                   rpm, diameter)  # fmt: skip
+        bound, length = float(self.bound[lane]), float(self.length[lane])
+        self.episode_info[lane] = (bound, length, sc.name, rpm, diameter)
         if self.power_sensor:
             self._sense_power([lane])
 
@@ -619,16 +670,17 @@ class TurningCore(LaneCore):
         self.lanes.fit_segments(int(counts.max()))
         if self.blocks.one:
             ok = np.empty(lanes.size, dtype=np.bool_)
-            _start_drawn_lanes(self._packed(self._kernel_args()), lanes, 0, self.n, nums, rpm, v,
-                               segments, counts, ok)  # fmt: skip
+            table = self._packed(self._kernel_args())
+            _start_drawn_lanes(table, lanes, 0, self.n, nums, rpm, v, segments, counts, ok)
         else:  # each block of lanes starts its own, on its thread
             ok = self._start_in_blocks(lanes, nums, rpm, v, segments, counts)
         ks = lanes.tolist()
         if not ok.all():
             for i in np.flatnonzero(~ok).tolist():  # left for zoh (never in the plant's ranges)
                 self.lanes._load_matrices(ks[i], float(rpm[i]), full)
-        settle_batch(self, lanes, factory.build_lane, (rpm, segments, counts, v),
-                     factory.shop["actuation"], factory.name)  # fmt: skip
+        draws = (rpm, segments, counts, v)
+        actuation = factory.shop["actuation"]
+        settle_batch(self, lanes, factory.build_lane, draws, actuation, factory.name)
         bounds = self.bound[lanes]
         if np.isnan(bounds).any():  # refused by the kernel: let it say why
             for i in np.flatnonzero(bounds != bounds).tolist():
@@ -667,52 +719,22 @@ class TurningCore(LaneCore):
         return ok
 
     def _kernel_args(self) -> tuple:
-        """The kernel's arguments (:func:`_step`'s, then from ``_T_START`` on what
-        :func:`_start` writes besides and the pending starts), in order, rebuilt when the
-        plant's arrays are: one table serves the step and every start."""
+        """The kernel's arguments: the fields of its records (:data:`_TABLE`) in order,
+        rebuilt when the plant's arrays are: one table serves the step and every start."""
         lanes = self.lanes
         if self._args is None or self._args_version != lanes.version:
-            self._args = (
-                self.ef,
-                self.eb,
-                lanes.feed,
-                lanes.li,
-                lanes.filt,
-                lanes.z,
-                lanes.buf,
-                lanes.base,
-                lanes.edges,
-                lanes.d0,
-                lanes.slope,
-                lanes.lane_f,
-                lanes.finished,
-                lanes.m,
-                lanes.n_f,
-                lanes.out,
-                lanes.out_finish,
-                self._gain,
-                self._fs,
-                self.meas,
-                self.max_episode_time_s,
-                self._w,
-                self.obs,
-                self.n_clipped,
-                self.rngs.table,
-                self.noise_counts,
-                lanes.work,
-                # what _start writes besides (_T_START), and the linear blocks' tables
-                self.bound,
-                self.spindle,
-                self.spindle_set,
-                self.power,
-                self.diameter,
-                self.length,
-                lanes.spindle_rpm,
-                *lanes.speed_free,
-                self.lane_index,
-                self._pending,
-                *self._pending_draws,
+            env = gather(
+                TurningEnvArrays,
+                self,
+                gain=self._gain,
+                fs=self._fs,
+                max_t=self.max_episode_time_s,
+                w=self._w,
+                rng_table=self.rngs.table,
             )
+            episodes = gather(TurningEpisodes, self)
+            free = lanes.speed_free
+            self._args = flatten(lanes.arrays(), env, episodes, free, self._batch)
             self._args_version = lanes.version
         return self._args
 
@@ -746,38 +768,37 @@ class TurningCore(LaneCore):
         )
         for k in self.power_lanes:  # a power-limited spindle's own
             cutting[k] = self.power[k, 1]
-        self.power_sensor.update(self.obs, lanes, cutting, rpm, self.ef[:, _EF_FORCE_LIMIT] * v)
+        self.power_sensor.update(self.obs, lanes, cutting, rpm, self.force_limit * v)
 
     def _run_blocks(self, op: int) -> None:
         """:func:`_step_packed`'s ``op`` on every block of lanes, on the blocks' threads
         (its tables always pack: every array holds the lanes on axis 0 or is shared)."""
-        self.blocks.run(_step, self._kernel_args(), _STEP_AXES, op, packed=_step_packed,
-                        serve=_serve_step)  # fmt: skip
+        args = self._kernel_args()
+        self.blocks.run(_step_flat, args, _STEP_AXES, op, packed=_step_packed, serve=_serve_step)
 
     def _start_in_blocks(self, lanes, nums, rpm, v, segments, counts) -> np.ndarray:
         """:func:`_start_drawn_lanes` for a batch, each block of lanes starting its own on
         its thread (:func:`_start_pending`): the same numbers as one call over the batch.
         Whether each lane's step matrix was made."""
         size = lanes.size
-        shapes = (v.shape[1], segments.shape[2])
-        draws = self._pending_draws
-        if shapes[0] > draws[2].shape[1] or shapes[1] > draws[3].shape[2]:  # grow them
+        width, points = v.shape[1], segments.shape[2]
+        b = self._batch
+        if width > b.v.shape[1] or points > b.segments.shape[2]:  # grow them
             n = self.n
-            self._pending_draws = draws = (
-                draws[0], draws[1], np.zeros((n, max(shapes[0], draws[2].shape[1]))),
-                np.zeros((n, 4, max(shapes[1], draws[3].shape[2]))), draws[4], draws[5],
-            )  # fmt: skip
+            width_max, points_max = max(width, b.v.shape[1]), max(points, b.segments.shape[2])
+            b = self._batch = b._replace(
+                v=np.zeros((n, width_max)), segments=np.zeros((n, 4, points_max))
+            )
             self._args = None  # the kernel's table holds them
-        p_nums, p_rpm, p_v, p_segments, p_counts, p_ok = draws
-        self._pending[0] = size
-        self._pending[1 : size + 1] = lanes
-        p_nums[:] = nums
-        p_rpm[:size] = rpm
-        p_v[:size, : shapes[0]] = v
-        p_segments[:size, :, : shapes[1]] = segments
-        p_counts[:size] = counts
+        b.pending[0] = size
+        b.pending[1 : size + 1] = lanes
+        b.nums[:] = nums
+        b.rpm[:size] = rpm
+        b.v[:size, :width] = v
+        b.segments[:size, :, :points] = segments
+        b.counts[:size] = counts
         self._run_blocks(1)
-        return p_ok[:size].copy()
+        return b.ok[:size].copy()
 
     def _spindle_drives(self) -> None:
         """The power-limited spindles (``TurningParams.spindle_power_W``): each lane's speed
@@ -805,10 +826,9 @@ class TurningCore(LaneCore):
         ef = self.ef[k].tolist()
         episode = self.episode_info[k]
         if episode is None:  # a lane started with others (start_lanes)
-            episode = self.episode_info[k] = (
-                float(self.bound[k]), float(self.length[k]), self.names[k],
-                float(self.spindle_set[k]), float(self.diameter[k]),
-            )  # fmt: skip
+            bound, length = float(self.bound[k]), float(self.length[k])
+            rpm, diameter = float(self.spindle_set[k]), float(self.diameter[k])
+            episode = self.episode_info[k] = (bound, length, self.names[k], rpm, diameter)
         bound, length, name, rpm, diameter = episode
         if k in self.power_lanes:  # drive and cutting power from the spindle's drive
             p_drive, p_cut = self.power[k].tolist()
@@ -818,14 +838,14 @@ class TurningCore(LaneCore):
             p_drive = p_cut = max(force, 0.0) * (rpm * (math.pi / 30.0)) * (diameter * 0.0005)
         info = {
             "t_s": float(lanes.lane_f[k, 5]),
-            "command": ef[_EF_COMMAND],
+            "command": ef[EF.command],
             "action_clipped": clipped,
             "n_action_clipped": int(self.n_clipped[k]),
             "breakage": breakage,
             "diverged": diverged,
             "finished": finished,
             "force_N": force,
-            "force_limit_N": ef[_EF_FORCE_LIMIT],
+            "force_limit_N": ef[EF.force_limit],
             "cost": 1.0 if over else 0.0,
             "score_bound": bound,
             "measured": float(self.meas[k, 0]),
@@ -852,8 +872,20 @@ class TurningCore(LaneCore):
         """The step info of every lane, as arrays (``machining_time_s`` with its mask): views
         of one table of the float keys (:func:`_info_rows`) and one copy of the flags."""
         c = spaced_rows(len(_INFO_F), self.n)
-        _info_rows(self.lanes.lane_f, self.ef, self.eb, self.lanes.out, self.lanes.out_finish,
-                   self.meas, self.bound, self.spindle, self.diameter, self.length, c)  # fmt: skip
+        a = self.lanes
+        _info_rows(
+            a.lane_f,
+            self.ef,
+            self.eb,
+            a.out,
+            a.out_finish,
+            self.meas,
+            self.bound,
+            self.spindle,
+            self.diameter,
+            self.length,
+            c,
+        )
         for k in self.power_lanes:  # drive and cutting power from the spindle's drive
             c[14, k], c[15, k] = self.power[k]
         f = self.eb.copy()

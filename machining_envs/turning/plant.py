@@ -32,6 +32,7 @@ import numpy as np
 
 from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
 from machining_envs.core.compiled.kernels import fma, matvec, powers, read_only, row_max, row_min
+from machining_envs.core.compiled.schema import LANES, SHARED, record
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
 from machining_envs.core.workpieces import load_segments
 
@@ -424,14 +425,29 @@ def _fill_matrices(params: _LinearKey, spindle_rpm: float, feed, lag) -> int:
     return lags
 
 
+#: What :func:`start_lane` reads of the linear blocks besides the speed, which every lane
+#: shares (:func:`_speed_free_tables`): the servo's transitions over ``i h``, the step
+#: matrix's rows on the current pair, the continuous servo ``(A, B)``, the sample time.
+SpeedFree = record(
+    "SpeedFree",
+    __name__,
+    phis=SHARED.f8_3,
+    gams=SHARED.f8_2,
+    base=SHARED.f8_2,
+    sa=SHARED.f8_2,
+    sb=SHARED.f8_2,
+    ts=SHARED.f8,
+)
+
+
 @functools.lru_cache(maxsize=16)
 def _speed_free_tables(params: _LinearKey) -> tuple:
     """What :func:`_lane_matrices` reads besides the speed: ``(phis, gams, base, A, B,
     Ts)`` (the servo's transitions over ``i h``, the step matrix's rows on the current
     pair, the continuous servo, the sample time), read-only."""
     phis, gams = _speed_free(params)[:2]
-    return (phis, gams, _speed_free_rows(params)[0], *_servo_system(params),
-            float(params.sample_time_s))  # fmt: skip
+    a, b = _servo_system(params)
+    return SpeedFree(phis, gams, _speed_free_rows(params)[0], a, b, float(params.sample_time_s))
 
 
 @numba.njit(cache=True)
@@ -611,18 +627,11 @@ def _profile_depths(y, edges, d0, slope, nseg, i, force, m, kf):
 
 
 @numba.njit(cache=True)
-def _step_lanes(
-    feed, base, li, filt, z, buf, work, edges, d0, slope, lane_f, finished, m, n_f, commands,
-    noise, out_f, out_finish,
-):  # fmt: skip
-    """Advance every lane by one sample (:func:`step_lane` on each; ``li`` holds the
-    lanes' integers, ``TurningLanes.li``)."""
-    cols, nseg, seg, out_seg = lane_ints(li)
-    for k in range(z.shape[0]):
-        step_lane(
-            k, feed, base, cols, li, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f,
-            finished, m, n_f, commands[k], noise[k], out_f, out_seg, out_finish,
-        )  # fmt: skip
+def _step_lanes(a, commands, noise):
+    """Advance every lane of the arrays ``a`` (:data:`TurningArrays`) by one sample
+    (:func:`step_lane` on each)."""
+    for k in range(a.z.shape[0]):
+        step_lane(k, a, commands[k], noise[k])
 
 
 @numba.njit(cache=True, inline="always")
@@ -751,18 +760,20 @@ def _filter_pair(f, x, w, out):
 
 
 @numba.njit(cache=True)
-def step_lane(
-    k, feed, base, cols, li, filt, z, buf, work, edges, d0, slope, nseg, seg, lane_f, finished,
-    m, n_f, command, noise, out_f, out_seg, out_finish,
-):  # fmt: skip
-    """Advance lane ``k`` by one sample (see :class:`TurningLanes` for the layout; ``li``
-    is ``TurningLanes.li``, of which :func:`lane_ints` names the first columns).
+def step_lane(k, a, command, noise):
+    """Advance lane ``k`` of the arrays ``a`` (:data:`TurningArrays`; see
+    :class:`TurningLanes` for the layout; ``a.li`` is ``TurningLanes.li``, of which
+    :func:`lane_ints` names the first columns) by one sample.
 
     ``lane_f[k]`` holds ``[Kf, p, Ke, U_max, length, t, margin, Ts, wear per mm]``;
     ``out_f[k]`` gets
     ``[force, peak force, measured counts, feed per rev, feed velocity, position, depth]``.
     The arithmetic is that of one cut, whatever the number of lanes.
     """
+    feed, base, li, filt, z, buf, work = a.feed, a.base, a.li, a.filt, a.z, a.buf, a.work
+    edges, d0, slope, lane_f, finished = a.edges, a.d0, a.slope, a.lane_f, a.finished
+    m, n_f, out_f, out_finish = a.m, a.n_f, a.out, a.out_finish
+    cols, nseg, seg, out_seg = lane_ints(li)
     n_rows = 2 * m + 3
     kf, pexp, gain, cmax, length, t, margin, ts, wear = lane_f[k]
     c = cols[k]
@@ -869,6 +880,30 @@ def spindle_drive(params: TurningParams, rpm: float, rpm_set: float, force_N: fl
     return min(w_next * (30.0 / math.pi), rpm_set), p_drive, p_cut
 
 
+#: The arrays of :class:`TurningLanes` its kernels read and write (its attributes of
+#: these names), as one argument: :func:`step_lane`'s and :func:`start_lane`'s.
+TurningArrays = record(
+    "TurningArrays",
+    __name__,
+    feed=LANES.f8_2,
+    base=SHARED.f8_1,
+    li=LANES.i8_2,
+    filt=SHARED.f8_2,
+    z=LANES.f8_2,
+    buf=LANES.f8_2,
+    work=LANES.f8_2,
+    edges=LANES.f8_2,
+    d0=LANES.f8_2,
+    slope=LANES.f8_2,
+    lane_f=LANES.f8_2,
+    finished=LANES.b1_1,
+    m=SHARED.i8,
+    n_f=SHARED.i8,
+    out=LANES.f8_2,
+    out_finish=LANES.f8_1,
+    spindle_rpm=LANES.f8_1,
+)
+
 #: Fields of ``TurningLanes.out`` (one row per lane after each step).
 LANE_SIGNALS = (
     "force_N",
@@ -882,21 +917,23 @@ LANE_SIGNALS = (
 
 
 @numba.njit(cache=True)
-def start_lane(k, rpm, full_history, consts, segments, phis, gams, base, sa, sb, ts, feed, li,
-               z, buf, edges, d0, slope, lane_f, finished, spindle_rpm):  # fmt: skip
-    """Lane ``k``'s arrays (:class:`TurningLanes`) at the start of a cut at ``rpm`` on the
-    workpiece ``segments`` (``DepthProfile.segment_array``; the tables must hold its
+def start_lane(k, rpm, full_history, consts, segments, free, a):
+    """Lane ``k``'s arrays (``a``, :data:`TurningArrays`) at the start of a cut at ``rpm``
+    on the workpiece ``segments`` (``DepthProfile.segment_array``; the tables must hold its
     segments), the machine at rest at its start: the step matrix at that speed
-    (:func:`_lane_matrices`, padded to the slowest speed's memory with ``full_history``),
-    the lane's ``consts`` (:meth:`TurningLanes.lane_constants`) and clock. Returns False
-    where the step matrix is left for ``zoh`` (:meth:`TurningLanes._load_matrices`)."""
+    (:func:`_lane_matrices` of the tables ``free``, :data:`SpeedFree`, padded to the
+    slowest speed's memory with ``full_history``), the lane's ``consts``
+    (:meth:`TurningLanes.lane_constants`) and clock. Returns False where the step matrix
+    is left for ``zoh`` (:meth:`TurningLanes._load_matrices`)."""
+    li, z, buf, lane_f, finished, ts = a.li, a.z, a.buf, a.lane_f, a.finished, free.ts
     m = li.shape[1] - 4
-    lags = _lane_matrices(phis, gams, base, sa, sb, ts, rpm, feed[k].reshape((4, m)).T, li[k, 4:])
+    phis, gams, base, sa, sb = free.phis, free.gams, free.base, free.sa, free.sb
+    lags = _lane_matrices(phis, gams, base, sa, sb, ts, rpm, a.feed[k].reshape((4, m)).T, li[k, 4:])
     li[k, 0] = z.shape[1] if full_history else 4 * (lags + 1)
     z[k, :] = 0.0
     buf[k, :] = 0.0
     ns = segments.shape[1] - 1
-    load_segments(segments, k, edges, d0, slope)
+    load_segments(segments, k, a.edges, a.d0, a.slope)
     li[k, 1] = ns
     li[k, 2] = 0
     kf, p, ke, cmax, margin, wear = consts
@@ -911,7 +948,7 @@ def start_lane(k, rpm, full_history, consts, segments, phis, gams, base, sa, sb,
     row[7] = ts
     row[8] = wear
     finished[k] = False
-    spindle_rpm[k] = rpm
+    a.spindle_rpm[k] = rpm
     return lags >= 0
 
 
@@ -1004,15 +1041,17 @@ class TurningLanes:
         self.fit_segments(segments.shape[1] - 1)
         rpm = float(spindle_rpm)
         full = math.isfinite(params.spindle_power_W)
-        if not start_lane(
-            lane, rpm, full, self.lane_constants(params), segments, *self.speed_free, self.feed,
-            self.li, self.z, self.buf, self.edges, self.d0, self.slope, self.lane_f,
-            self.finished, self.spindle_rpm,
-        ):  # fmt: skip
+        consts = self.lane_constants(params)
+        if not start_lane(lane, rpm, full, consts, segments, self.speed_free, self.arrays()):
             self._load_matrices(lane, rpm, full)
 
+    def arrays(self):
+        """The lanes' arrays as the kernels take them (:data:`TurningArrays`; a new record
+        after ``fit_segments`` replaced some)."""
+        return TurningArrays(*(getattr(self, name) for name in TurningArrays._fields))
+
     @property
-    def speed_free(self) -> tuple:
+    def speed_free(self) -> SpeedFree:
         """What :func:`start_lane` reads of the linear blocks (:func:`_speed_free_tables`)."""
         return _speed_free_tables(self._key)
 
@@ -1020,8 +1059,14 @@ class TurningLanes:
         """``lane_f``'s constants of a cut with the true ``params`` (:func:`start_lane`):
         ``(Kf, p, Ke, U_max, margin, wear per mm)``."""
         margin = _velocity_bound(self._key, params.command_max) * params.sample_time_s
-        return (params.force_coefficient, params.feed_exponent, params.sensor_gain,
-                params.command_max, margin, params.wear_per_100mm / 100.0)  # fmt: skip
+        return (
+            params.force_coefficient,
+            params.feed_exponent,
+            params.sensor_gain,
+            params.command_max,
+            margin,
+            params.wear_per_100mm / 100.0,
+        )
 
     def fit_segments(self, n_segments: int) -> None:
         """Widen the per-lane workpiece tables to hold ``n_segments`` segments (a new
@@ -1039,8 +1084,9 @@ class TurningLanes:
         with zero columns to the memory of the slowest speed, so that the lane keeps every
         sample instant it could ever need and its speed may change between samples."""
         m = self.m
-        lags = _fill_matrices(self._key, spindle_rpm, self.feed[lane].reshape(4, m).T,
-                              self.lag[lane])  # fmt: skip
+        lags = _fill_matrices(
+            self._key, spindle_rpm, self.feed[lane].reshape(4, m).T, self.lag[lane]
+        )
         self.cols[lane] = self.z.shape[1] if full_history else 4 * (lags + 1)
 
     def set_speed(self, lane: int, spindle_rpm: float) -> None:
@@ -1057,26 +1103,8 @@ class TurningLanes:
         """Hold ``commands[k]`` (counts; clipped to [0, U_max]) in every lane for one sample,
         with ``noise_counts[k]`` added to lane ``k``'s measurement; results in ``out``,
         ``out_segment`` and ``out_finish``."""
-        _step_lanes(
-            self.feed,
-            self.base,
-            self.li,
-            self.filt,
-            self.z,
-            self.buf,
-            self.work,
-            self.edges,
-            self.d0,
-            self.slope,
-            self.lane_f,
-            self.finished,
-            self.m,
-            self.n_f,
-            np.asarray(commands, dtype=np.float64),
-            np.asarray(noise_counts, dtype=np.float64),
-            self.out,
-            self.out_finish,
-        )
+        commands = np.asarray(commands, dtype=np.float64)
+        _step_lanes(self.arrays(), commands, np.asarray(noise_counts, dtype=np.float64))
 
     @property
     def t_s(self) -> np.ndarray:

@@ -28,6 +28,7 @@ from machining_envs.core.compiled.packed import (
     i8_2,
     pack,
 )
+from machining_envs.core.compiled.schema import unflatten
 from machining_envs.drilling import lanes as drilling_env
 from machining_envs.milling import lanes as milling_env
 from machining_envs.turning import lanes as turning_env
@@ -166,9 +167,9 @@ def test_packed_args_pack_again_for_another_tuple_only():
 #: id -> (kernel, trampoline, trailing arguments) of each process.
 KERNELS = {
     # (Turning-v0's table also holds the start's arrays and the pending starts, after
-    # _step's; its trampoline's op 0 is the step)
+    # _step's records; its trampoline's op 0 is the step)
     "Turning-v0": (
-        lambda *args: turning_env._step(*args[: turning_env._T_START]),
+        lambda *args: turning_env._step(*unflatten(args, turning_env._TABLE[:2])),
         turning_env._step_packed,
         (0,),
     ),
