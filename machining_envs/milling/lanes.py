@@ -4,58 +4,32 @@ step, start and info of N milling machines, which :class:`EndMillingEnv` (one la
 
 from __future__ import annotations
 
+import enum
 import math
 
 import numba
 import numpy as np
 from gymnasium import spaces
 
-from machining_envs.core.actions import (
-    ACTION_MAPS,
-    ActionMap,
-)
-from machining_envs.core.actuation import (
-    ActuationLanes,
-    configure_lane,
-    resolve_actuation,
-)
+from machining_envs.core.actions import ACTION_MAPS, ActionMap
+from machining_envs.core.actuation import ActuationLanes, configure_lane, resolve_actuation
 from machining_envs.core.checks import check_below
 from machining_envs.core.compiled.blocks import LaneBlocks, serve_one_table_with_tail
 from machining_envs.core.compiled.kernels import copy_into
 from machining_envs.core.compiled.normals import LaneGenerators, lane_noise
-from machining_envs.core.compiled.packed import (
-    PackedArgs,
-    as_float,
-    as_int,
-    b1_1,
-    b1_2,
-    f4_2,
-    f8_1,
-    f8_2,
-    f8_2_rows,
-    i8_1,
-    i8_2,
-    spaced_rows,
-)
-from machining_envs.core.env import (
-    check_episode_time,
-    check_scenario_spec,
-    resolve_params,
-)
-from machining_envs.core.lanes import (
-    LaneCore,
-    LaneNames,
-    LaneObjects,
-    settle_batch,
-    split_batch,
-)
+from machining_envs.core.compiled.packed import PackedArgs, spaced_rows
+from machining_envs.core.compiled.schema import axes, flatten, gather, offsets, record, via_table
+from machining_envs.core.env import check_episode_time, check_scenario_spec, resolve_params
+from machining_envs.core.lanes import LaneCore, LaneNames, LaneObjects, settle_batch, split_batch
 from machining_envs.core.reward import LimitReward, resolve_reward
 from machining_envs.core.sensors import PowerSensorLanes, resolve_power_sensor
 from machining_envs.core.workpieces import lane_segments, traverse_time
 from machining_envs.milling.plant import (
     KGF,
     LANE_CONSTANTS,
+    LC,
     SPINDLE_RPM_RANGE,
+    MillingArrays,
     MillingLanes,
     MillingParams,
     check_depth,
@@ -100,20 +74,22 @@ _INFO_F = (
 #: Each episode's constants held after the signals, in the rows of ``MillingCore.info_f``
 #: (the core's arrays of these names are views of those rows).
 _INFO_LANE = ("torque_limit", "bound", "spindle", "length", "volume")
-_DEPTH_ROW = _INFO_F.index("depth_mm")
-_TIME_ROW = _INFO_F.index("machining_time_s")
-#: Columns of ``MillingLanes.lane_f`` a lane's start reads or writes.
-_RPM, _FEXP, _C1, _DEXP, _FT_PER_VF, _REV_PER_S, _WEAR = (
-    LANE_CONSTANTS.index(c)
-    for c in (
-        "spindle_rpm",
-        "feed_exponent",
-        "torque_gain",
-        "depth_exponent",
-        "ft_per_vf",
-        "rev_per_s",
-        "wear_per_mm",
-    )
+#: The rows of ``MillingCore.info_f`` by name: the signals, then the episode's constants.
+IF = enum.IntEnum("IF", _INFO_F + _INFO_LANE, start=0, module=__name__)
+#: The info's keys read from ``info_f`` (in the info's order, between the flags and the
+#: segment, then after the segment), with their rows.
+_INFO_SIGNALS = (
+    ("torque_Nmm", IF.torque_Nmm),
+    ("torque_limit_Nmm", IF.torque_limit),
+    ("cost", IF.cost),
+    ("score_bound", IF.bound),
+    *((key, IF[key]) for key in _INFO_F[IF.measured : IF.removed_volume_mm3]),
+)
+_INFO_EPISODE = (
+    ("spindle_rpm", IF.spindle),
+    ("removed_volume_mm3", IF.removed_volume_mm3),
+    ("workpiece_length_mm", IF.length),
+    ("workpiece_volume_mm3", IF.volume),
 )
 
 
@@ -132,50 +108,79 @@ def _clamp(x, lo, hi):
     return x
 
 
+#: The env's arrays the step reads and writes (``MillingCore``'s of these names; ``cmap``
+#: the action map's constants, ``rng_table`` the lanes' noise generators' rows, ``ke``
+#: the sensor's gain, ``max_t`` the episode's length, ``w`` the reward weights;
+#: ``torque_limit`` a row of ``info_f``).
+MillingEnvArrays = record(
+    "MillingEnvArrays",
+    __name__,
+    """
+    in_action noise_counts commands noise torque_limit breakage_torque vmax n_teeth w_axial
+    prev_action tr_obs rpm_obs reward: lanes f8_1
+    in_clipped n_clipped: lanes i8_1
+    rng_table: lanes i8_2
+    cumulative meas: lanes f8_2
+    obs: lanes f4_2
+    flags: lanes b1_2
+    info_f: lanes_t f8_2_rows
+    cmap w: shared f8_1
+    ke max_t: shared f8
+    """,
+)
+#: The records of the kernel's table (``MillingCore._kernel_args``), in order.
+_TABLE = (MillingArrays, MillingEnvArrays)
+_AT_PLANT, _AT_ENV, _ = offsets(*_TABLE)
+#: Where the table's arguments hold the lanes (axis 0, axis 1: ``info_f``, or none), for
+#: :class:`~machining_envs.core.compiled.blocks.LaneBlocks`.
+_STEP_AXES = axes(*_TABLE)
+_read_plant = MillingArrays.reader
+_read_env = MillingEnvArrays.reader
+
+
 @numba.njit(cache=True, nogil=True)
-def _step(actions, clipped, cmap, rng_table, noise_counts, commands, noise, big, lag,
-          z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, out, out_seg, out_finish, work,
-          ke, tr, brk, vmax, n_teeth, w_axial, cumulative, max_t, w, meas, prev_action,
-          tr_obs, rpm_obs, obs, reward, flags, n_clipped, info_f, stage):  # fmt: skip
-    """One step of every lane: the actions (clipped to the box, ``clipped[k]`` set to 1
-    where they were) and their commands, the sensor noise (``stage`` 1),
-    then the plant (:func:`step_lanes`) and each lane's reward, observation, episode flags
-    and info (``stage`` 2); ``stage`` 3 does both. Between the two, the CNC's actuation may
-    change ``commands`` (``machining_envs.core.actuation``).
+def _step(a, e, stage):
+    """One step of every lane of the plant's arrays ``a`` (:data:`MillingArrays`) and the
+    env's ``e`` (:data:`MillingEnvArrays`): the actions (clipped to the box,
+    ``in_clipped[k]`` set to 1 where they were) and their commands, the sensor noise
+    (``stage`` 1), then the plant (:func:`step_lanes`) and each lane's reward,
+    observation, episode flags and info (``stage`` 2); ``stage`` 3 does both. Between the
+    two, the CNC's actuation may change ``commands`` (``machining_envs.core.actuation``).
 
     ``cmap`` = ``[log, command_min, span, c, g, mid, half]`` of the action map
     (:class:`machining_envs.core.env.ActionMap`): the command is
     ``command_min + span expm1(c (a + 1)) / g`` on the log map, ``mid + half a`` on the
     linear one. A lane with noise draws a normal from its generator (row ``rng_table[k]``,
     ``core.compiled.normals``).
-    ``tr`` holds the torque limits; ``w`` = ``[tracking, overtorque, target, progress,
-    breakage]``; ``flags[k]`` = ``[diverged, breakage, finished, terminated, truncated,
-    over the limit]``;
-    ``info_f[:, k]`` gets the signals of ``_INFO_F``.
+    ``w`` = ``[tracking, overtorque, target, progress, breakage]``; ``flags[k]`` =
+    ``[diverged, breakage, finished, terminated, truncated, over the limit]``;
+    ``info_f[:, k]`` gets the signals of :data:`IF`.
     """
-    n = z.shape[0]
+    actions, clipped, cmap, commands, noise = e.in_action, e.in_clipped, e.cmap, e.commands, e.noise
+    prev_action, n_clipped, info_f, meas, obs = e.prev_action, e.n_clipped, e.info_f, e.meas, e.obs
+    out, lane_f, out_finish, flags, tr = a.out, a.lane_f, a.out_finish, e.flags, e.torque_limit
+    n = a.z.shape[0]
     log_map = cmap[0] != 0.0
     for k in range(n if stage & 1 else 0):  # stage 1: the commands
-        a = actions[k]
-        if a > 1.0:  # clipped to the box (np.clip's numbers; finite, checked before)
-            a = actions[k] = 1.0
+        act = actions[k]
+        if act > 1.0:  # clipped to the box (np.clip's numbers; finite, checked before)
+            act = actions[k] = 1.0
             clipped[k] = 1
-        elif a < -1.0:
-            a = actions[k] = -1.0
+        elif act < -1.0:
+            act = actions[k] = -1.0
             clipped[k] = 1
         if log_map:
-            cmd = cmap[1] + cmap[2] * math.expm1(cmap[3] * (a + 1.0)) / cmap[4]
+            cmd = cmap[1] + cmap[2] * math.expm1(cmap[3] * (act + 1.0)) / cmap[4]
         else:
-            cmd = cmap[5] + cmap[6] * a
+            cmd = cmap[5] + cmap[6] * act
         commands[k] = cmd
-        info_f[1, k] = cmd
-        noise[k] = lane_noise(rng_table, k, noise_counts[k])
-        prev_action[k] = a
+        info_f[IF.command, k] = cmd
+        noise[k] = lane_noise(e.rng_table, k, e.noise_counts[k])
+        prev_action[k] = act
         n_clipped[k] += clipped[k]
     if not stage & 2:
         return
-    step_lanes(big, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, commands,
-               noise, out, out_seg, out_finish, work)  # fmt: skip
+    step_lanes(a, commands, noise)
     lo, hi = _TORQUE_OBS
     n_meas = meas.shape[1]
     for k in range(n):
@@ -197,23 +202,24 @@ def _step(actions, clipped, cmap, rng_table, noise_counts, commands, noise, big,
             torque = 0.0
             peak = 0.0
             counts = 0.0
-        measured = counts / ke
+        measured = counts / e.ke
         for i in range(n_meas - 1, 0, -1):
             meas[k, i] = meas[k, i - 1]
         meas[k, 0] = measured
-        t = lane_f[k, 8]
-        breakage = peak > brk[k]
+        t = lane_f[k, LC.t_s]
+        breakage = peak > e.breakage_torque[k]
         finished_k = not np.isnan(out_finish[k])
         terminated = diverged or breakage or finished_k
-        truncated = (not terminated) and t >= max_t - 1e-9
-        e = torque / tr[k]
-        over = e - 1.0
-        r = -w[0] * abs(e / w[2] - 1.0) - w[1] * (over if over > 0.0 else 0.0)
+        truncated = (not terminated) and t >= e.max_t - 1e-9
+        w = e.w
+        x = torque / tr[k]
+        over = x - 1.0
+        r = -w[0] * abs(x / w[2] - 1.0) - w[1] * (over if over > 0.0 else 0.0)
         if w[3] != 0.0 and not diverged:
-            r += w[3] * vf / vmax[k]
+            r += w[3] * vf / e.vmax[k]
         if breakage or diverged:
             r -= w[4]
-        reward[k] = r
+        e.reward[k] = r
         flags[k, 0] = diverged
         flags[k, 1] = breakage
         flags[k, 2] = finished_k
@@ -225,41 +231,43 @@ def _step(actions, clipped, cmap, rng_table, noise_counts, commands, noise, big,
             mean_feed = 0.0
             vf = 0.0
             pos = 0.0
-        info_f[0, k] = t
-        info_f[2, k] = torque
-        info_f[3, k] = measured
-        info_f[4, k] = counts
-        info_f[5, k] = peak
-        info_f[6, k] = feed
-        info_f[7, k] = mean_feed
-        info_f[8, k] = feed / n_teeth[k]
-        info_f[9, k] = vf
-        info_f[10, k] = pos
-        info_f[11, k] = out[k, 7]
-        info_f[12, k] = w_axial[k] * cut_area_at(pos, edges, d0, slope, cumulative, k, nseg[k])
-        info_f[13, k] = out_finish[k]  # NaN unless the lane finished (flags[k, 2])
-        info_f[14, k] = 1.0 if flags[k, 5] else 0.0  # the cost
+        info_f[IF.t_s, k] = t
+        info_f[IF.torque_Nmm, k] = torque
+        info_f[IF.measured, k] = measured
+        info_f[IF.measured_counts, k] = counts
+        info_f[IF.peak_torque_Nmm, k] = peak
+        info_f[IF.feed_mm_per_rev, k] = feed
+        info_f[IF.mean_feed_mm_per_rev, k] = mean_feed
+        info_f[IF.feed_per_tooth_mm, k] = feed / e.n_teeth[k]
+        info_f[IF.feed_velocity_mm_s, k] = vf
+        info_f[IF.position_mm, k] = pos
+        info_f[IF.depth_mm, k] = out[k, 7]
+        area = cut_area_at(pos, a.edges, a.d0, a.slope, e.cumulative, k, a.nseg[k])
+        info_f[IF.removed_volume_mm3, k] = e.w_axial[k] * area
+        # NaN unless the lane finished (flags[k, 2])
+        info_f[IF.machining_time_s, k] = out_finish[k]
+        info_f[IF.cost, k] = 1.0 if flags[k, 5] else 0.0
         sc = tr[k]
         obs[k, 0] = _clamp(measured / sc, lo, hi)
-        obs[k, 1] = tr_obs[k]
+        obs[k, 1] = e.tr_obs[k]
         obs[k, 2] = prev_action[k]
-        obs[k, 3] = rpm_obs[k]
+        obs[k, 3] = e.rpm_obs[k]
         for i in range(1, n_meas):
             obs[k, 3 + i] = _clamp(meas[k, i] / sc, lo, hi)
 
 
 @numba.njit(cache=True, nogil=True)
 def _step_packed(t, stage):
-    """:func:`_step` with its arguments in one table (``core.compiled.packed``): what every
-    step calls (one array to unbox, not one per argument). ``info_f`` holds the lanes on
-    axis 1, so a block's is a view of some of its columns (``f8_2_rows``)."""
-    _step(f8_1(t, 0), i8_1(t, 1), f8_1(t, 2), i8_2(t, 3), f8_1(t, 4), f8_1(t, 5),
-          f8_1(t, 6), f8_2(t, 7), f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), f8_2(t, 12),
-          f8_2(t, 13), f8_2(t, 14), i8_1(t, 15), i8_1(t, 16), b1_1(t, 17), as_int(t, 18),
-          f8_2(t, 19), i8_1(t, 20), f8_1(t, 21), f8_2(t, 22), as_float(t, 23), f8_1(t, 24),
-          f8_1(t, 25), f8_1(t, 26), f8_1(t, 27), f8_1(t, 28), f8_2(t, 29), as_float(t, 30),
-          f8_1(t, 31), f8_2(t, 32), f8_1(t, 33), f8_1(t, 34), f8_1(t, 35), f4_2(t, 36),
-          f8_1(t, 37), b1_2(t, 38), i8_1(t, 39), f8_2_rows(t, 40), stage)  # fmt: skip
+    """:func:`_step` with its arguments in one table (``core.compiled.packed``, records
+    :data:`_TABLE`): what every step calls (one array to unbox, not one per argument).
+    ``info_f`` holds the lanes on axis 1, so a block's is a view of some of its columns
+    (``f8_2_rows``)."""
+    _step(_read_plant(t, _AT_PLANT), _read_env(t, _AT_ENV), stage)
+
+
+#: :func:`_step_packed` as :class:`~machining_envs.core.compiled.blocks.LaneBlocks` calls
+#: a kernel of flat arguments.
+_step_flat = via_table(_step_packed, len(_STEP_AXES))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -270,12 +278,10 @@ def _serve_step(ctl, table, polls):
 
 
 @numba.njit(cache=True)
-def _start(k, row, x, segments, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished,
-           out_seg, noise_counts, breakage, vmax, n_teeth, w_axial, cumulative,
-           meas, prev_action, tr_obs, rpm_obs, obs, flags, in_clipped, n_clipped, info_f):  # fmt: skip
+def _start(k, row, x, segments, a, e):
     """The arrays of lane ``k`` at the start of an episode (``MillingCore.start``): the
-    plant's (:func:`~machining_envs.milling.plant.start_lane`, from its constants ``row``),
-    then the env's, the tool at rest at the workpiece's start.
+    plant's (``a``, :func:`~machining_envs.milling.plant.start_lane`, from its constants
+    ``row``), then the env's (``e``), the tool at rest at the workpiece's start.
 
     ``x`` = ``[torque limit, Vmax, breakage torque, noise (counts), teeth, axial depth,
     limit's observation, score bound, process lag]`` of the cut (the bound NaN: computed
@@ -285,19 +291,19 @@ def _start(k, row, x, segments, lag, z, buf, lane_f, edges, d0, slope, nseg, seg
     every signal zero but the depth and the machining time (NaN), then the episode's
     constants (``_INFO_LANE``).
     """
-    tr, vm, brk, noise, teeth, w, t_obs, b, lag_s = (x[0], x[1], x[2], x[3], x[4], x[5], x[6],
-                                                      x[7], x[8])  # fmt: skip
-    start_lane(k, row, lag_s, segments, lag, z, buf, edges, d0, slope, nseg, seg, lane_f,
-               finished)  # fmt: skip
-    rpm = row[_RPM]
+    tr, vm, brk, noise, teeth, w, t_obs = x[0], x[1], x[2], x[3], x[4], x[5], x[6]
+    b, lag_s = x[7], x[8]
+    start_lane(k, row, lag_s, segments, a)
+    rpm = row[LC.spindle_rpm]
     ns = segments.shape[1] - 1
     if b != b:  # machining_time_bound with no wear: traverse_time_s's closed form (left
         # NaN, for machining_time_bound to refuse, where that refuses its numbers)
-        e = row[_FEXP]
-        c = bound_coefficient(row[_C1], e, tr, teeth, rpm)
-        q = row[_DEXP] / e
+        fexp = row[LC.feed_exponent]
+        c = bound_coefficient(row[LC.torque_gain], fexp, tr, teeth, rpm)
+        q = row[LC.depth_exponent] / fexp
         if c > 0.0 and q > 0.0 and vm > 0.0:
             b = traverse_time(segments, c, q, vm)
+    cumulative, info_f, obs = e.cumulative, e.info_f, e.obs
     # The area under the profile up to each edge (CutArea's cumulative sums).
     area = 0.0
     cumulative[k, 0] = 0.0
@@ -309,67 +315,70 @@ def _start(k, row, x, segments, lag, z, buf, lane_f, edges, d0, slope, nseg, seg
         cumulative[k, i] = area
     for i in range(info_f.shape[0]):
         info_f[i, k] = 0.0
-    info_f[_DEPTH_ROW, k] = segments[1, 0]
-    info_f[_TIME_ROW, k] = np.nan
-    nf = len(_INFO_F)
-    info_f[nf, k] = tr
-    info_f[nf + 1, k] = b
-    info_f[nf + 2, k] = rpm
-    info_f[nf + 3, k] = segments[0, ns]
-    info_f[nf + 4, k] = w * area
-    vmax[k] = vm
-    breakage[k] = brk
-    noise_counts[k] = noise
-    n_teeth[k] = teeth
-    w_axial[k] = w
-    meas[k, :] = 0.0
-    tr_obs[k] = t_obs
-    rpm_obs[k] = rpm / 1000.0
-    prev_action[k] = -1.0
-    n_clipped[k] = 0
+    info_f[IF.depth_mm, k] = segments[1, 0]
+    info_f[IF.machining_time_s, k] = np.nan
+    info_f[IF.torque_limit, k] = tr
+    info_f[IF.bound, k] = b
+    info_f[IF.spindle, k] = rpm
+    info_f[IF.length, k] = segments[0, ns]
+    info_f[IF.volume, k] = w * area
+    e.vmax[k] = vm
+    e.breakage_torque[k] = brk
+    e.noise_counts[k] = noise
+    e.n_teeth[k] = teeth
+    e.w_axial[k] = w
+    e.meas[k, :] = 0.0
+    e.tr_obs[k] = t_obs
+    e.rpm_obs[k] = rpm / 1000.0
+    e.prev_action[k] = -1.0
+    e.n_clipped[k] = 0
     o = obs[k]
     o[:] = 0.0
     o[1] = t_obs
     o[2] = -1.0
     o[3] = rpm / 1000.0
-    flags[k, :] = False  # no flag, no clipped action yet
-    in_clipped[k] = 0
-    out_seg[k] = 0
+    e.flags[k, :] = False  # no flag, no clipped action yet
+    e.in_clipped[k] = 0
+    a.out_segment[k] = 0
 
 
 @numba.njit(cache=True)
 def _start_packed(t, k, row, x, segments):
     """:func:`_start` with the step's table ``t`` (:func:`_step_packed`'s)."""
-    _start(k, row, x, segments, f8_2(t, 8), f8_2(t, 9), f8_2(t, 10), f8_2(t, 11), f8_2(t, 12),
-           f8_2(t, 13), f8_2(t, 14), i8_1(t, 15), i8_1(t, 16), b1_1(t, 17), i8_1(t, 20),
-           f8_1(t, 4), f8_1(t, 25), f8_1(t, 26), f8_1(t, 27), f8_1(t, 28),
-           f8_2(t, 29), f8_2(t, 32), f8_1(t, 33), f8_1(t, 34), f8_1(t, 35), f4_2(t, 36),
-           b1_2(t, 38), i8_1(t, 1), i8_1(t, 39), f8_2_rows(t, 40))  # fmt: skip
+    _start(k, row, x, segments, _read_plant(t, _AT_PLANT), _read_env(t, _AT_ENV))
 
 
 #: What :func:`_start_drawn_lanes` reads of the nominal parameters and a split's ranges
-#: (:func:`_batch_numbers`), in this order after the nominal lane constants.
-_BATCH_NUMBERS = (
-    "spindle_rpm", "torque_limit_Nmm", "power_law", "feed_exponent", "torque_coefficient_kgfmm",
-    "tool_diameter_mm", "tangential_coefficient_N_mm2", "n_teeth", "axial_depth_mm",
-    "max_feed_velocity_mm_s", "breakage_torque_Nmm", "sensor_gain", "noise_std_Nmm",
-    "process_lag_rev", "rpm_low", "rpm_high", "ks_low", "ks_span", "m_low", "m_span",
-    "noise_low", "noise_span",
-)  # fmt: skip
+#: (:func:`_batch_numbers`), in this order after the nominal lane constants (so that
+#: ``nominal[BN.n_teeth]`` is the nominal number of teeth).
+BN = enum.IntEnum(
+    "BN",
+    "spindle_rpm torque_limit_Nmm power_law feed_exponent torque_coefficient_kgfmm"
+    " tool_diameter_mm tangential_coefficient_N_mm2 n_teeth axial_depth_mm"
+    " max_feed_velocity_mm_s breakage_torque_Nmm sensor_gain noise_std_Nmm process_lag_rev"
+    " rpm_low rpm_high ks_low ks_span m_low m_span noise_low noise_span",
+    start=len(LANE_CONSTANTS),
+    module=__name__,
+)
 
 
 def _batch_numbers(params: MillingParams, factory: _SplitFactory) -> np.ndarray:
     """The numbers :func:`_start_drawn_lanes` reads: ``params``'s lane constants
-    (:meth:`MillingLanes.lane_constants` at the nominal speed), then ``_BATCH_NUMBERS``."""
+    (:meth:`MillingLanes.lane_constants` at the nominal speed), then :data:`BN`."""
     p = params
     lows, spans = factory.lows, factory.spans
-    numbers = (
-        p.spindle_rpm, p.torque_limit_Nmm, p.force_model == "power_law", p.feed_exponent,
-        p.torque_coefficient_kgfmm, p.tool_diameter_mm, p.tangential_coefficient_N_mm2,
-        p.n_teeth, p.axial_depth_mm, p.max_feed_velocity_mm_s, p.breakage_torque_Nmm,
-        p.sensor_gain, p.noise_std_Nmm, p.process_lag_rev, *SPINDLE_RPM_RANGE, lows[2],
-        spans[2], lows[3], spans[3], lows[4], spans[4],
-    )  # fmt: skip
+    given = {
+        "power_law": p.force_model == "power_law",
+        "rpm_low": SPINDLE_RPM_RANGE[0],
+        "rpm_high": SPINDLE_RPM_RANGE[1],
+        "ks_low": lows[2],
+        "ks_span": spans[2],
+        "m_low": lows[3],
+        "m_span": spans[3],
+        "noise_low": lows[4],
+        "noise_span": spans[4],
+    }
+    numbers = [given[b.name] if b.name in given else getattr(p, b.name) for b in BN]
     row = MillingLanes.lane_constants(p, p.spindle_rpm)
     return np.concatenate((row, np.array(numbers, dtype=np.float64)))
 
@@ -384,8 +393,39 @@ def _start_drawn_lanes(t, lanes, nominal, v, scales, segments, counts):
     ``nominal`` (:func:`_batch_numbers`). Returns the first ``i`` whose speed falls
     outside ``SPINDLE_RPM_RANGE`` (none is started from it on), or -1."""
     nc = len(LANE_CONSTANTS)
-    (n_rpm, n_limit, power_law, fexp, ks, diam, kt, teeth, axial, vmax, brk, ke, noise_std,
-     lag_rev, rpm_lo, rpm_hi, ks_lo, ks_span, m_lo, m_span, nz_lo, nz_span) = nominal[nc:]  # fmt: skip
+    n_rpm, n_limit, power_law = (
+        nominal[BN.spindle_rpm],
+        nominal[BN.torque_limit_Nmm],
+        nominal[BN.power_law],
+    )
+    fexp, ks, diam = (
+        nominal[BN.feed_exponent],
+        nominal[BN.torque_coefficient_kgfmm],
+        nominal[BN.tool_diameter_mm],
+    )
+    kt, teeth, axial = (
+        nominal[BN.tangential_coefficient_N_mm2],
+        nominal[BN.n_teeth],
+        nominal[BN.axial_depth_mm],
+    )
+    vmax, brk, ke = (
+        nominal[BN.max_feed_velocity_mm_s],
+        nominal[BN.breakage_torque_Nmm],
+        nominal[BN.sensor_gain],
+    )
+    noise_std, lag_rev = nominal[BN.noise_std_Nmm], nominal[BN.process_lag_rev]
+    rpm_lo, rpm_hi, ks_lo, ks_span = (
+        nominal[BN.rpm_low],
+        nominal[BN.rpm_high],
+        nominal[BN.ks_low],
+        nominal[BN.ks_span],
+    )
+    m_lo, m_span, nz_lo, nz_span = (
+        nominal[BN.m_low],
+        nominal[BN.m_span],
+        nominal[BN.noise_low],
+        nominal[BN.noise_span],
+    )
     row = np.empty(nc)
     x = np.empty(9)
     for i in range(lanes.size):
@@ -395,15 +435,15 @@ def _start_drawn_lanes(t, lanes, nominal, v, scales, segments, counts):
         limit = n_limit * scales[i, 1]
         ks_scale = ks_lo + ks_span * v[i, 2]
         copy_into(row, nominal[:nc])  # the columns the truth keeps
-        row[_FT_PER_VF] = 60.0 / (rpm * teeth)
+        row[LC.ft_per_vf] = 60.0 / (rpm * teeth)
         if power_law != 0.0:
-            row[_FEXP] = fexp * (m_lo + m_span * v[i, 3])
-            row[_C1] = KGF * (ks * ks_scale) * diam
+            row[LC.feed_exponent] = fexp * (m_lo + m_span * v[i, 3])
+            row[LC.torque_gain] = KGF * (ks * ks_scale) * diam
         else:  # the average-force model's torque_gain(1.0)
-            row[_C1] = teeth * (kt * ks_scale) * axial * 1.0 / (2.0 * math.pi)
-        row[_RPM] = rpm
-        row[_REV_PER_S] = rpm / 60.0
-        row[_WEAR] = 0.0  # a sharp tool (the batch takes no wear)
+            row[LC.torque_gain] = teeth * (kt * ks_scale) * axial * 1.0 / (2.0 * math.pi)
+        row[LC.spindle_rpm] = rpm
+        row[LC.rev_per_s] = rpm / 60.0
+        row[LC.wear_per_mm] = 0.0  # a sharp tool (the batch takes no wear)
         x[0] = limit
         x[1] = vmax
         x[2] = brk
@@ -426,14 +466,6 @@ def _info_table(n: int) -> np.ndarray:
     return table
 
 
-#: Where :func:`_step`'s arguments (``MillingCore._kernel_args``) hold the lanes: axis 0, axis
-#: 1 (``info_f``) or none (shared), for :class:`~machining_envs.core.compiled.blocks.LaneBlocks`.
-_STEP_AXES = (
-    0, 0, None, 0, 0, 0, 0, None, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, None, 0, 0, 0, 0, None,
-    0, 0, 0, 0, 0, 0, None, None, 0, 0, 0, 0, 0, 0, 0, 0, 1,
-)  # fmt: skip
-
-
 def _map_constants(command_map: ActionMap) -> np.ndarray:
     """The action map's constants as the compiled step reads them (see :func:`_step`)."""
     return command_map.constants()
@@ -450,8 +482,19 @@ class MillingCore(LaneCore):
     scenario_types = (MillingScenario, MILLING_SCENARIOS)
     VIEWS = frozenset({*_INFO_LANE, "_args"})
 
-    def __init__(self, owner, n, scenario, params, reward, max_episode_time_s, action_map,
-                 overrides, actuation=None, power_sensor=None):  # fmt: skip
+    def __init__(
+        self,
+        owner: str,
+        n: int,
+        scenario: str | MillingScenario,
+        params: MillingParams | None,
+        reward: LimitReward | dict | None,
+        max_episode_time_s: float,
+        action_map: str,
+        overrides: dict,
+        actuation=None,
+        power_sensor=None,
+    ):
         self.params = resolve_params(
             owner, params, MillingParams, MillingParams.park_yoon_1986, overrides
         )
@@ -567,10 +610,11 @@ class MillingCore(LaneCore):
         # The score bound: computed by the kernel for a sharp tool, here with wear.
         bound = math.nan if truth.wear_per_100mm == 0.0 else machining_time_bound(sc, truth, rpm)
         row = self.lanes.lane_constants(truth, rpm)
-        x = np.array((tr, truth.max_feed_velocity_mm_s, truth.breakage_torque_Nmm,
-                      truth.sensor_gain * truth.noise_std_Nmm, truth.n_teeth,
-                      truth.axial_depth_mm, min(tr / nominal.torque_limit_Nmm, 10.0), bound,
-                      truth.process_lag_s(rpm)))  # fmt: skip
+        noise = truth.sensor_gain * truth.noise_std_Nmm
+        vmax, brk = truth.max_feed_velocity_mm_s, truth.breakage_torque_Nmm
+        teeth, axial = truth.n_teeth, truth.axial_depth_mm
+        tr_obs = min(tr / nominal.torque_limit_Nmm, 10.0)
+        x = np.array((tr, vmax, brk, noise, teeth, axial, tr_obs, bound, truth.process_lag_s(rpm)))
         _start_packed(self._packed(self._kernel_args()), lane, row, x, segments)
         if not self.bound[lane] == self.bound[lane]:  # refused by the kernel: let it say why
             self.bound[lane] = machining_time_bound(sc, truth, rpm)
@@ -610,8 +654,8 @@ class MillingCore(LaneCore):
         nominal = self._batch_numbers.get(factory)
         if nominal is None:
             nominal = self._batch_numbers[factory] = _batch_numbers(self.params, factory)
-        bad = _start_drawn_lanes(self._packed(self._kernel_args()), lanes, nominal, v, scales,
-                                 segments, counts)  # fmt: skip
+        table = self._packed(self._kernel_args())
+        bad = _start_drawn_lanes(table, lanes, nominal, v, scales, segments, counts)
         if bad >= 0:  # a range's end rounded past SPINDLE_RPM_RANGE: the lane's check says so
             sc = factory.build_lane(segments, counts, v, bad)
             sc.spindle_rpm(p)
@@ -621,8 +665,8 @@ class MillingCore(LaneCore):
                 f"{p.spindle_rpm * sc.spindle_scale:g} rpm, outside the spindle_rpm range "
                 f"[{lo}, {hi}]"
             )
-        ks = settle_batch(self, lanes, factory.build_lane, (segments, counts, v),
-                          factory.actuation, factory.name)  # fmt: skip
+        draws = (segments, counts, v)
+        ks = settle_batch(self, lanes, factory.build_lane, draws, factory.actuation, factory.name)
         for k in ks:
             if not self.bound[k] == self.bound[k]:  # refused by the kernel: let it say why
                 self.bound[k] = machining_time_bound(
@@ -657,52 +701,20 @@ class MillingCore(LaneCore):
         return ok
 
     def _kernel_args(self) -> tuple:
-        """The arguments of :func:`_step`, in order (rebuilt when the lane arrays are)."""
+        """The arguments of :func:`_step_packed`'s table: the fields of its records
+        (:data:`_TABLE`) in order, rebuilt when the lane arrays are."""
         lanes = self.lanes
         if self._args is None or self._args_version != lanes.version:
-            self._args = (
-                self.in_action,
-                self.in_clipped,
-                self._cmap,
-                self.rngs.table,
-                self.noise_counts,
-                self.commands,
-                self.noise,
-                lanes.big,
-                lanes.lag,
-                lanes.z,
-                lanes.buf,
-                lanes.lane_f,
-                lanes.edges,
-                lanes.d0,
-                lanes.slope,
-                lanes.nseg,
-                lanes.seg,
-                lanes.finished,
-                lanes.m,
-                lanes.out,
-                lanes.out_segment,
-                lanes.out_finish,
-                lanes.work,
-                self._ke,
-                self.torque_limit,
-                self.breakage_torque,
-                self.vmax,
-                self.n_teeth,
-                self.w_axial,
-                self.cumulative,
-                self.max_episode_time_s,
-                self._w,
-                self.meas,
-                self.prev_action,
-                self.tr_obs,
-                self.rpm_obs,
-                self.obs,
-                self.reward,
-                self.flags,
-                self.n_clipped,
-                self.info_f,
+            env = gather(
+                MillingEnvArrays,
+                self,
+                cmap=self._cmap,
+                rng_table=self.rngs.table,
+                ke=self._ke,
+                max_t=self.max_episode_time_s,
+                w=self._w,
             )
+            self._args = flatten(lanes.arrays(), env)
             self._args_version = lanes.version
         return self._args
 
@@ -736,7 +748,7 @@ class MillingCore(LaneCore):
         else:
             self._run(args, 1)
             self.commands[:] = self.act_lanes.apply(self.commands)
-            self.info_f[1] = self.commands
+            self.info_f[IF.command] = self.commands
             self._run(args, 2)
         if self.power_sensor:
             self._sense_power()
@@ -745,53 +757,37 @@ class MillingCore(LaneCore):
         """The drive's power reading into the observations (option ``power_sensor``,
         ``machining_envs.core.sensors``): of ``lanes`` that start, else a step of all."""
         c = self.info_f  # the step's signals (info_arrays' rows), read without a copy
-        rpm = c[17]
+        rpm = c[IF.spindle]
         w = rpm * (math.pi / 30.0) * 1e-3  # angular speed, rad/s, per N·mm
-        self.power_sensor.update(self.obs, lanes, c[2] * w, rpm, c[15] * w)
+        self.power_sensor.update(self.obs, lanes, c[IF.torque_Nmm] * w, rpm, c[IF.torque_limit] * w)
 
     def _run(self, args: tuple, stage: int) -> None:
         """:func:`_step` of ``stage`` over every lane (on the blocks of lanes, if several)."""
         if self.blocks.one:  # the single env, or few lanes: no blocks to hand out
             _step_packed(self._packed(args), stage)
         else:
-            self.blocks.run(_step, args, _STEP_AXES, stage, packed=_step_packed, serve=_serve_step)
+            run = self.blocks.run
+            run(_step_flat, args, _STEP_AXES, stage, packed=_step_packed, serve=_serve_step)
 
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""
-        (t, command, torque, measured, counts, peak, feed, mean_feed, feed_tooth, vf, pos,
-         depth, removed, finish, cost,
-         limit, bound, rpm, length, volume) = self.info_f[:, k].tolist()  # fmt: skip
+        c = self.info_f[:, k].tolist()
         diverged, breakage, finished = self.flags[k, :3].tolist()
         info = {
-            "t_s": t,
-            "command": command,
+            "t_s": c[IF.t_s],
+            "command": c[IF.command],
             "action_clipped": bool(self.in_clipped[k]),
             "n_action_clipped": int(self.n_clipped[k]),
             "breakage": breakage,
             "diverged": diverged,
             "finished": finished,
-            "torque_Nmm": torque,
-            "torque_limit_Nmm": limit,
-            "cost": cost,
-            "score_bound": bound,
-            "measured": measured,
-            "measured_counts": counts,
-            "peak_torque_Nmm": peak,
-            "feed_mm_per_rev": feed,
-            "mean_feed_mm_per_rev": mean_feed,
-            "feed_per_tooth_mm": feed_tooth,
-            "feed_velocity_mm_s": vf,
-            "position_mm": pos,
-            "depth_mm": depth,
+            **{key: c[row] for key, row in _INFO_SIGNALS},
             "segment": int(self.lanes.out_segment[k]),
-            "spindle_rpm": rpm,
-            "removed_volume_mm3": removed,
-            "workpiece_length_mm": length,
-            "workpiece_volume_mm3": volume,
+            **{key: c[row] for key, row in _INFO_EPISODE},
             "scenario": self.names[k],
         }
         if finished:
-            info["machining_time_s"] = finish
+            info["machining_time_s"] = c[IF.machining_time_s]
         if self.power_sensor:
             info.update(self.power_sensor.lane_info(k))
         return info
@@ -803,33 +799,18 @@ class MillingCore(LaneCore):
         c = self.info_f.copy()
         f = self.flags.copy()
         return {
-            "t_s": c[0],
-            "command": c[1],
+            "t_s": c[IF.t_s],
+            "command": c[IF.command],
             "action_clipped": self.in_clipped.astype(bool),
             "n_action_clipped": self.n_clipped.copy(),
             "breakage": f[:, 1],
             "diverged": f[:, 0],
             "finished": f[:, 2],
-            "torque_Nmm": c[2],
-            "torque_limit_Nmm": c[15],
-            "cost": c[14],
-            "score_bound": c[16],
-            "measured": c[3],
-            "measured_counts": c[4],
-            "peak_torque_Nmm": c[5],
-            "feed_mm_per_rev": c[6],
-            "mean_feed_mm_per_rev": c[7],
-            "feed_per_tooth_mm": c[8],
-            "feed_velocity_mm_s": c[9],
-            "position_mm": c[10],
-            "depth_mm": c[11],
+            **{key: c[row] for key, row in _INFO_SIGNALS},
             "segment": self.lanes.out_segment.copy(),
-            "spindle_rpm": c[17],
-            "removed_volume_mm3": c[12],
-            "workpiece_length_mm": c[18],
-            "workpiece_volume_mm3": c[19],
+            **{key: c[row] for key, row in _INFO_EPISODE},
             "scenario": self.names.array(),
-            "machining_time_s": c[13],  # NaN where the lane did not finish
+            "machining_time_s": c[IF.machining_time_s],  # NaN where the lane did not finish
             "_machining_time_s": self.flags[:, 2].copy(),
             **(self.power_sensor.info_arrays() if self.power_sensor else {}),
         }

@@ -39,6 +39,7 @@ This module imports numpy, scipy and numba; it knows nothing of gymnasium.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import functools
 import math
 from dataclasses import dataclass
@@ -49,6 +50,7 @@ import numpy as np
 
 from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
 from machining_envs.core.compiled.kernels import copy_into, matvec, powers, read_only
+from machining_envs.core.compiled.schema import gather, record
 from machining_envs.core.lti import zoh, zoh_tf
 from machining_envs.core.workpieces import load_segments
 
@@ -574,10 +576,23 @@ LANE_CONSTANTS = (
     "plateau",  # index of that plateau (-1: none yet)
     "wear_per_mm",  # w of the torque coefficient's growth Ks (1 + w x) (0: a sharp tool)
 )
-_T = LANE_CONSTANTS.index("t_s")
-_WEAR = LANE_CONSTANTS.index("wear_per_mm")
-_H = LANE_CONSTANTS.index("substep_s")
-_LENGTH = LANE_CONSTANTS.index("length_mm")
+#: The columns of ``MillingLanes.lane_f`` by name (``lane_f[k, LC.t_s]``).
+LC = enum.IntEnum("LC", LANE_CONSTANTS, start=0, module=__name__)
+
+#: The arrays of :class:`MillingLanes` its kernels read and write (its attributes of
+#: these names), as one argument: :func:`step_lanes`' and :func:`start_lane`'s.
+MillingArrays = record(
+    "MillingArrays",
+    __name__,
+    """
+    big: shared f8_2
+    lag z buf lane_f edges d0 slope out work: lanes f8_2
+    nseg seg out_segment: lanes i8_1
+    finished: lanes b1_1
+    m: shared i8
+    out_finish: lanes f8_1
+    """,
+)
 
 #: Fields of ``MillingLanes.out`` (one row per lane after each step).
 LANE_SIGNALS = (
@@ -619,11 +634,9 @@ def _depth_at(x, edges, d0, slope, k, nseg):
 
 
 @numba.njit(cache=True)
-def step_lanes(
-    big, lag, z, buf, lane_f, edges, d0, slope, nseg, seg, finished, m, commands, noise,
-    out, out_seg, out_finish, work,
-):  # fmt: skip
-    """Advance every lane by one sample (see :class:`MillingLanes` for the layout).
+def step_lanes(a, commands, noise):
+    """Advance every lane of the arrays ``a`` (:data:`MillingArrays`; see
+    :class:`MillingLanes` for the layout) by one sample.
 
     Lane ``k`` holds ``commands[k]`` (counts, clipped to ``[0, U_max]``): the servo and
     position at the M sub-step points and the next state are one product with ``big[0]``;
@@ -638,22 +651,25 @@ def step_lanes(
     the depths' powers on their way to ``buf``), ``work[k, 3M + 3:]`` the depths along a
     taper.
     """
+    big, lag, z, buf, lane_f, work, m = a.big, a.lag, a.z, a.buf, a.lane_f, a.work, a.m
+    edges, d0, slope, nseg, seg, finished = a.edges, a.d0, a.slope, a.nseg, a.seg, a.finished
+    out, out_seg, out_finish = a.out, a.out_segment, a.out_finish
     n_lanes = z.shape[0]
     tq = 2 * m + 3
     for k in range(n_lanes):
         u = commands[k]
         if 0.0 > u:
             u = 0.0
-        if lane_f[k, 0] < u:
-            u = lane_f[k, 0]
+        if lane_f[k, LC.command_max] < u:
+            u = lane_f[k, LC.command_max]
         z[k, 3] = u
     matvec(big, tq, 4, z, work)
     for k in range(n_lanes):
-        ftpv = lane_f[k, 1]
-        fexp = lane_f[k, 2]
-        c = lane_f[k, 3]
-        dexp = lane_f[k, 4]
-        power = lane_f[k, 5] != 0.0
+        ftpv = lane_f[k, LC.ft_per_vf]
+        fexp = lane_f[k, LC.feed_exponent]
+        c = lane_f[k, LC.torque_gain]
+        dexp = lane_f[k, LC.depth_exponent]
+        power = lane_f[k, LC.power_law] != 0.0
         p_end = work[k, 2 * m - 1]
         # buf[k] = [T_0, u_0, u_1 .. u_M]: the static torque at this sample's sub-steps
         if fexp == 1.0:
@@ -683,12 +699,12 @@ def step_lanes(
             sl = slope[k, i]
             if sl == 0.0:
                 depth_end = d0[k, i]
-                if lane_f[k, 14] == i:
-                    scale = lane_f[k, 13]
+                if lane_f[k, LC.plateau] == i:
+                    scale = lane_f[k, LC.plateau_scale]
                 else:
                     scale = c * depth_end**dexp if power else c * depth_end
-                    lane_f[k, 13] = scale
-                    lane_f[k, 14] = i
+                    lane_f[k, LC.plateau_scale] = scale
+                    lane_f[k, LC.plateau] = i
                 for j in range(m):
                     buf[k, 2 + j] *= scale
             elif power:  # a taper: the depths' powers in vectors, through the scratch
@@ -712,7 +728,7 @@ def step_lanes(
                 buf[k, 2 + j] *= c * depth_end**dexp if power else c * depth_end
             i = bisect_right(edges, k, n_s + 1, p_end) - 1
             seg[k] = min(max(i, 0), n_s - 1)
-        wear = lane_f[k, _WEAR]
+        wear = lane_f[k, LC.wear_per_mm]
         if wear != 0.0:  # Ks (1 + w x): the tool dulls along the cut (wear_per_100mm)
             for j in range(m):
                 buf[k, 2 + j] *= 1.0 + wear * work[k, m + j]
@@ -736,15 +752,15 @@ def step_lanes(
         z[k, 2] = work[k, 2 * m + 2]
         out[k, 0] = t_end
         out[k, 1] = peak
-        out[k, 2] = lane_f[k, 6] * t_end + noise[k]
+        out[k, 2] = lane_f[k, LC.sensor_gain] * t_end + noise[k]
         out[k, 3] = vf
-        out[k, 4] = vf * 60.0 / lane_f[k, 11]
-        out[k, 5] = (p_end - p_start) / (lane_f[k, 12] * lane_f[k, 10])
+        out[k, 4] = vf * 60.0 / lane_f[k, LC.spindle_rpm]
+        out[k, 5] = (p_end - p_start) / (lane_f[k, LC.rev_per_s] * lane_f[k, LC.sample_time_s])
         out[k, 6] = p_end
         out_seg[k] = seg[k]
         out_finish[k] = np.nan
-        t = lane_f[k, 8]
-        length = lane_f[k, 7]
+        t = lane_f[k, LC.t_s]
+        length = lane_f[k, LC.length_mm]
         if not finished[k] and p_end >= length:
             j = 0
             while not work[k, m + j] >= length:
@@ -756,9 +772,9 @@ def step_lanes(
                 frac = 0.0
             if 1.0 < frac:
                 frac = 1.0
-            out_finish[k] = t + (j + frac) * lane_f[k, 9]
+            out_finish[k] = t + (j + frac) * lane_f[k, LC.substep_s]
             finished[k] = True
-        lane_f[k, 8] = t + lane_f[k, 10]
+        lane_f[k, LC.t_s] = t + lane_f[k, LC.sample_time_s]
 
 
 def check_depth(profile, params: MillingParams) -> None:
@@ -772,25 +788,25 @@ def check_depth(profile, params: MillingParams) -> None:
 
 
 @numba.njit(cache=True)
-def start_lane(k, row, lag_s, segments, lag, z, buf, edges, d0, slope, nseg, seg, lane_f,
-               finished):  # fmt: skip
-    """Lane ``k``'s arrays (:class:`MillingLanes`) at the start of a cut on the workpiece
+def start_lane(k, row, lag_s, segments, a):
+    """Lane ``k``'s arrays (``a``, :data:`MillingArrays`) at the start of a cut on the workpiece
     ``segments`` (``DepthProfile.segment_array``; the tables must hold its segments), the
     tool at rest at its start: its constants ``row`` (:meth:`MillingLanes.lane_constants`;
     only its first ``len(LANE_CONSTANTS)`` values are read) and the lag matrix of the
     process lag ``lag_s`` (:func:`lag_rows`)."""
+    lag, z, buf, lane_f, nseg, seg = a.lag, a.z, a.buf, a.lane_f, a.nseg, a.seg
     m = buf.shape[1] - 2
-    lag_rows(m, row[_H], lag_s, lag[k].reshape((m, m + 2)))  # a view: filled in place
+    lag_rows(m, row[LC.substep_s], lag_s, lag[k].reshape((m, m + 2)))  # a view: filled in place
     z[k, :] = 0.0
     buf[k, :] = 0.0
     ns = segments.shape[1] - 1
-    load_segments(segments, k, edges, d0, slope)
+    load_segments(segments, k, a.edges, a.d0, a.slope)
     nseg[k] = ns
     seg[k] = 0
     for i in range(lane_f.shape[1]):
         lane_f[k, i] = row[i]
-    lane_f[k, _LENGTH] = segments[0, ns]
-    finished[k] = False
+    lane_f[k, LC.length_mm] = segments[0, ns]
+    a.finished[k] = False
 
 
 class CutModel(NamedTuple):
@@ -905,9 +921,13 @@ class MillingLanes:
         rpm = float(spindle_rpm)
         segments = profile.segment_copy()
         self.fit_segments(segments.shape[1] - 1)
-        start_lane(lane, self.lane_constants(params, rpm), params.process_lag_s(rpm), segments,
-                   self.lag, self.z, self.buf, self.edges, self.d0, self.slope, self.nseg,
-                   self.seg, self.lane_f, self.finished)  # fmt: skip
+        row = self.lane_constants(params, rpm)
+        start_lane(lane, row, params.process_lag_s(rpm), segments, self.arrays())
+
+    def arrays(self):
+        """The lanes' arrays as the kernels take them (:data:`MillingArrays`; a new record
+        after ``fit_segments`` replaced some)."""
+        return gather(MillingArrays, self)
 
     def fit_segments(self, n_segments: int) -> None:
         """Widen the per-lane workpiece tables to hold ``n_segments`` segments (a new
@@ -932,41 +952,37 @@ class MillingLanes:
         else:
             c = params.torque_gain(1.0).item()
             dexp, power = 1.0, 0.0
-        return np.array((
-            params.command_max, 60.0 / (rpm * params.n_teeth), params.torque_feed_exponent, c,
-            dexp, power, params.sensor_gain, 0.0, 0.0, params.sample_time_s / params.substeps,
-            params.sample_time_s, rpm, rpm / 60.0, 0.0, -1.0, params.wear_per_100mm / 100.0,
-        ))  # fmt: skip
+        row = {
+            "command_max": params.command_max,
+            "ft_per_vf": 60.0 / (rpm * params.n_teeth),
+            "feed_exponent": params.torque_feed_exponent,
+            "torque_gain": c,
+            "depth_exponent": dexp,
+            "power_law": power,
+            "sensor_gain": params.sensor_gain,
+            "length_mm": 0.0,
+            "t_s": 0.0,
+            "substep_s": params.sample_time_s / params.substeps,
+            "sample_time_s": params.sample_time_s,
+            "spindle_rpm": rpm,
+            "rev_per_s": rpm / 60.0,
+            "plateau_scale": 0.0,
+            "plateau": -1.0,
+            "wear_per_mm": params.wear_per_100mm / 100.0,
+        }
+        return np.array([row[name] for name in LANE_CONSTANTS])
 
     def step(self, commands: np.ndarray, noise_counts: np.ndarray) -> None:
         """Hold ``commands[k]`` (counts; clipped to [0, U_max]) in every lane for one sample,
         with ``noise_counts[k]`` added to lane ``k``'s measurement; results in ``out``,
         ``out_segment`` and ``out_finish``."""
-        step_lanes(
-            self.big,
-            self.lag,
-            self.z,
-            self.buf,
-            self.lane_f,
-            self.edges,
-            self.d0,
-            self.slope,
-            self.nseg,
-            self.seg,
-            self.finished,
-            self.m,
-            np.asarray(commands, dtype=np.float64),
-            np.asarray(noise_counts, dtype=np.float64),
-            self.out,
-            self.out_segment,
-            self.out_finish,
-            self.work,
-        )
+        commands = np.asarray(commands, dtype=np.float64)
+        step_lanes(self.arrays(), commands, np.asarray(noise_counts, dtype=np.float64))
 
     @property
     def t_s(self) -> np.ndarray:
         """Time of each lane since its cut started, s."""
-        return self.lane_f[:, _T]
+        return self.lane_f[:, LC.t_s]
 
 
 class MillingPlant:
@@ -1000,7 +1016,7 @@ class MillingPlant:
     @property
     def t_s(self) -> float:
         """Time since the cut started, s."""
-        return float(self._lanes.lane_f[0, _T])
+        return float(self._lanes.lane_f[0, LC.t_s])
 
     @property
     def z(self) -> np.ndarray:

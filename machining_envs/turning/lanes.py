@@ -13,19 +13,13 @@ import numpy as np
 from gymnasium import spaces
 
 from machining_envs.core.actions import ActionMap
-from machining_envs.core.actuation import (
-    ActuationLanes,
-    configure_lane,
-    resolve_actuation,
-)
+from machining_envs.core.actuation import ActuationLanes, configure_lane, resolve_actuation
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_below, check_range
 from machining_envs.core.compiled.blocks import LaneBlocks, serve_one_table_with_tail
 from machining_envs.core.compiled.kernels import clip_unit_linear
 from machining_envs.core.compiled.normals import LaneGenerators, lane_noise
 from machining_envs.core.compiled.packed import PackedArgs, spaced_rows
 from machining_envs.core.compiled.schema import (
-    LANES,
-    SHARED,
     axes,
     bind_columns,
     flatten,
@@ -34,18 +28,8 @@ from machining_envs.core.compiled.schema import (
     record,
     via_table,
 )
-from machining_envs.core.env import (
-    check_episode_time,
-    check_scenario_spec,
-    resolve_params,
-)
-from machining_envs.core.lanes import (
-    LaneCore,
-    LaneNames,
-    LaneObjects,
-    settle_batch,
-    split_batch,
-)
+from machining_envs.core.env import check_episode_time, check_scenario_spec, resolve_params
+from machining_envs.core.lanes import LaneCore, LaneNames, LaneObjects, settle_batch, split_batch
 from machining_envs.core.reward import LimitReward, resolve_reward
 from machining_envs.core.sensors import PowerSensorLanes, resolve_power_sensor
 from machining_envs.core.workpieces import lane_segments, traverse_time
@@ -100,28 +84,25 @@ EB = enum.IntEnum(
 TurningEnvArrays = record(
     "TurningEnvArrays",
     __name__,
-    ef=LANES.f8_2,
-    eb=LANES.b1_2,
-    gain=SHARED.f8,
-    fs=SHARED.f8,
-    meas=LANES.f8_2,
-    max_t=SHARED.f8,
-    w=SHARED.f8_1,
-    obs=LANES.f4_2,
-    n_clipped=LANES.i8_1,
-    rng_table=LANES.i8_2,
-    noise_counts=LANES.f8_1,
+    """
+    ef meas: lanes f8_2
+    eb: lanes b1_2
+    obs: lanes f4_2
+    n_clipped: lanes i8_1
+    rng_table: lanes i8_2
+    noise_counts: lanes f8_1
+    gain fs max_t: shared f8
+    w: shared f8_1
+    """,
 )
 #: What an episode's start writes besides (``TurningCore``'s arrays of these names).
 TurningEpisodes = record(
     "TurningEpisodes",
     __name__,
-    bound=LANES.f8_1,
-    spindle=LANES.f8_1,
-    spindle_set=LANES.f8_1,
-    power=LANES.f8_2,
-    diameter=LANES.f8_1,
-    length=LANES.f8_1,
+    """
+    bound spindle spindle_set diameter length: lanes f8_1
+    power: lanes f8_2
+    """,
 )
 #: A batch of starts the blocks of lanes make (:func:`_start_pending`): each lane's index
 #: (a block's first tells it where its lanes begin), the pending starts ``[count,
@@ -130,14 +111,14 @@ TurningEpisodes = record(
 TurningBatch = record(
     "TurningBatch",
     __name__,
-    lane_index=LANES.i8_1,
-    pending=SHARED.i8_1,
-    nums=SHARED.f8_1,
-    rpm=SHARED.f8_1,
-    v=SHARED.f8_2,
-    segments=SHARED.f8_3,
-    counts=SHARED.i8_1,
-    ok=SHARED.b1_1,
+    """
+    lane_index: lanes i8_1
+    pending counts: shared i8_1
+    nums rpm: shared f8_1
+    v: shared f8_2
+    segments: shared f8_3
+    ok: shared b1_1
+    """,
 )
 #: The records of the kernel's table (``TurningCore._kernel_args``), in order: the step
 #: reads the first two, a start all but the last, a batch of starts all.
@@ -470,14 +451,14 @@ class TurningCore(LaneCore):
 
     def __init__(
         self,
-        owner,
-        n,
-        scenario,
-        params,
-        spindle_rpm,
-        reward,
-        max_episode_time_s,
-        overrides,
+        owner: str,
+        n: int,
+        scenario: str | TurningScenario,
+        params: TurningParams | None,
+        spindle_rpm: float | None,
+        reward: LimitReward | dict | None,
+        max_episode_time_s: float,
+        overrides: dict,
         actuation=None,
         power_sensor=None,
     ):

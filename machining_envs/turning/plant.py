@@ -32,7 +32,7 @@ import numpy as np
 
 from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
 from machining_envs.core.compiled.kernels import fma, matvec, powers, read_only, row_max, row_min
-from machining_envs.core.compiled.schema import LANES, SHARED, record
+from machining_envs.core.compiled.schema import gather, record
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
 from machining_envs.core.workpieces import load_segments
 
@@ -431,12 +431,11 @@ def _fill_matrices(params: _LinearKey, spindle_rpm: float, feed, lag) -> int:
 SpeedFree = record(
     "SpeedFree",
     __name__,
-    phis=SHARED.f8_3,
-    gams=SHARED.f8_2,
-    base=SHARED.f8_2,
-    sa=SHARED.f8_2,
-    sb=SHARED.f8_2,
-    ts=SHARED.f8,
+    """
+    phis: shared f8_3
+    gams base sa sb: shared f8_2
+    ts: shared f8
+    """,
 )
 
 
@@ -885,23 +884,15 @@ def spindle_drive(params: TurningParams, rpm: float, rpm_set: float, force_N: fl
 TurningArrays = record(
     "TurningArrays",
     __name__,
-    feed=LANES.f8_2,
-    base=SHARED.f8_1,
-    li=LANES.i8_2,
-    filt=SHARED.f8_2,
-    z=LANES.f8_2,
-    buf=LANES.f8_2,
-    work=LANES.f8_2,
-    edges=LANES.f8_2,
-    d0=LANES.f8_2,
-    slope=LANES.f8_2,
-    lane_f=LANES.f8_2,
-    finished=LANES.b1_1,
-    m=SHARED.i8,
-    n_f=SHARED.i8,
-    out=LANES.f8_2,
-    out_finish=LANES.f8_1,
-    spindle_rpm=LANES.f8_1,
+    """
+    feed z buf work edges d0 slope lane_f out: lanes f8_2
+    li: lanes i8_2
+    finished: lanes b1_1
+    out_finish spindle_rpm: lanes f8_1
+    base: shared f8_1
+    filt: shared f8_2
+    m n_f: shared i8
+    """,
 )
 
 #: Fields of ``TurningLanes.out`` (one row per lane after each step).
@@ -1048,7 +1039,7 @@ class TurningLanes:
     def arrays(self):
         """The lanes' arrays as the kernels take them (:data:`TurningArrays`; a new record
         after ``fit_segments`` replaced some)."""
-        return TurningArrays(*(getattr(self, name) for name in TurningArrays._fields))
+        return gather(TurningArrays, self)
 
     @property
     def speed_free(self) -> SpeedFree:

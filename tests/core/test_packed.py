@@ -173,7 +173,11 @@ KERNELS = {
         turning_env._step_packed,
         (0,),
     ),
-    "EndMilling-v0": (milling_env._step, milling_env._step_packed, (3,)),
+    "EndMilling-v0": (
+        lambda *args: milling_env._step(*unflatten(args, milling_env._TABLE), args[-1]),
+        milling_env._step_packed,
+        (3,),
+    ),
     "MicroDrilling-v0": (drilling_env._step, drilling_env._step_packed, ()),
     "Contouring-v0": (contouring_env._contour_step, contouring_env._contour_step_packed, ()),
     # (ContouringFeed-v0's also holds what a batch's start reads and writes, after

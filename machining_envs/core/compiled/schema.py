@@ -6,8 +6,8 @@ parallel tuples elsewhere must follow, a kernel takes a few **records**: named t
 arrays and numbers, which numba types field by field (``plant.z`` compiles to the array
 itself, no lookup at run time). A record class is declared once with :func:`record`,
 each field with its kind (dtype and dimensions, or a number) and where its array holds
-the lanes (:data:`LANES` on axis 0, :data:`LANES_T` on axis 1, :data:`SHARED` for all
-lanes), and from that declaration come:
+the lanes (on axis 0, on axis 1, or shared by all lanes), and from that declaration
+come:
 
 - the record's **reader** (``Cls.reader``, a compiled function ``reader(t, o)``): the
   record rebuilt from a packed table (``core.compiled.packed``) whose slots ``o, o + 1,
@@ -39,9 +39,7 @@ import numpy as np
 from machining_envs.core.compiled import packed
 
 __all__ = [
-    "LANES",
-    "LANES_T",
-    "SHARED",
+    "PLACES",
     "Field",
     "axes",
     "bind_columns",
@@ -69,6 +67,10 @@ _READERS = {
 }
 
 
+#: Where a field holds the lanes, by the word that names it in a record's spec.
+PLACES = {"lanes": 0, "lanes_t": 1, "shared": None}
+
+
 @dataclasses.dataclass(frozen=True)
 class Field:
     """A record field's kind (a key of the packed readers: ``"f8_2"`` a 2-d float64 array,
@@ -78,40 +80,44 @@ class Field:
     kind: str
     axis: int | None
 
-    def __post_init__(self) -> None:
-        if self.kind not in _READERS:
-            raise ValueError(f"kind must be one of {sorted(_READERS)}, got {self.kind!r}")
+
+def _parse(name: str, spec: str) -> dict[str, Field]:
+    """The fields of a record's ``spec``: lines ``names...: place kind`` (a line of names
+    alone continues on the next)."""
+    fields: dict[str, Field] = {}
+    pending: list[str] = []
+    for line in spec.strip().splitlines():
+        names, sep, what = line.partition(":")
+        pending += names.split()
+        if not sep:
+            continue
+        words = what.split()
+        if len(words) != 2 or words[0] not in PLACES or words[1] not in _READERS:
+            raise ValueError(
+                f"record {name}: each line of the spec must be 'names...: place kind' with a "
+                f"place of {sorted(PLACES)} and a kind of {sorted(_READERS)}, got {line!r}"
+            )
+        for field in pending:
+            if field in fields:
+                raise ValueError(f"record {name}: field {field!r} is declared twice")
+            fields[field] = Field(words[1], PLACES[words[0]])
+        pending = []
+    if pending:
+        raise ValueError(f"record {name}: fields {pending} have no 'place kind'")
+    return fields
 
 
-class _Axis:
-    """``LANES.f8_2`` is ``Field("f8_2", 0)``: the fields of one placement by kind."""
-
-    def __init__(self, axis: int | None) -> None:
-        self._axis = axis
-
-    def __getattr__(self, kind: str) -> Field:
-        if kind.startswith("_"):
-            raise AttributeError(kind)
-        return Field(kind, self._axis)
-
-
-#: Fields whose axis 0 is the lanes (a block of lanes gets its rows).
-LANES = _Axis(0)
-#: Fields whose axis 1 is the lanes (a block gets its columns: ``f8_2_rows``).
-LANES_T = _Axis(1)
-#: Fields every lane shares (numbers, constant tables): passed whole to every block.
-SHARED = _Axis(None)
-
-
-def record(name: str, module: str, **fields: Field) -> type:
+def record(name: str, module: str, spec: str) -> type:
     """A named tuple class ``name`` of ``module`` (where it must be bound to ``name``, for
-    pickles and numba's cache) with ``fields`` in order, and ``Cls.fields`` (the
-    :class:`Field` of each), ``Cls.axes`` (their axis codes) and ``Cls.reader``: the
-    compiled ``reader(t, o)`` that rebuilds a record from slots ``o ..`` of a packed
-    table (bind it to a module global to call it from compiled code)."""
-    for key, f in fields.items():
-        if not isinstance(f, Field):
-            raise TypeError(f"record {name}: field {key} must be a Field, got {f!r}")
+    pickles and numba's cache) whose fields ``spec`` declares, a line for the fields of
+    one kind and place: ``"z buf work: lanes f8_2"`` (places: ``lanes``, the lanes on
+    axis 0; ``lanes_t``, on axis 1; ``shared``: every lane's; kinds: the packed readers',
+    ``f8`` a float, ``i8`` an int, ``f8_2`` a 2-d float64 array, ...). The fields stand
+    in the spec's order. The class gets ``Cls.fields`` (the :class:`Field` of each),
+    ``Cls.axes`` (their axis codes) and ``Cls.reader``: the compiled ``reader(t, o)``
+    that rebuilds a record from slots ``o ..`` of a packed table (bind it to a module
+    global to call it from compiled code)."""
+    fields = _parse(name, spec)
     cls = collections.namedtuple(name, list(fields), module=module)
     cls.fields = tuple(fields.values())
     cls.axes = tuple(f.axis for f in cls.fields)
