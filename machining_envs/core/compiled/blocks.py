@@ -280,9 +280,11 @@ class _Worker:
         self.wake = threading.Event()
         self.error: BaseException | None = None
         self.thread = threading.Thread(
-            target=self._loop, args=(kernel, args, with_tail, serve), daemon=True,
+            target=self._loop,
+            args=(kernel, args, with_tail, serve),
+            daemon=True,
             name="machining-envs-lanes",
-        )  # fmt: skip
+        )
         self.thread.start()
 
     def _loop(self, kernel, args: tuple, with_tail: bool, serve) -> None:
@@ -353,9 +355,21 @@ class LaneBlocks:
     def __getstate__(self) -> dict:
         # Threads and views do not pickle: made anew when next needed.
         state = dict(self.__dict__)
-        state.update(_pool=None, _pool_pid=0, _source=None, _blocks=[], _tables=None,
-                     _tables_of=None, _workers=[], _served=None, _workers_pid=0, _number=0,
-                     _finalizer=None, _ctls=None, _asleep=None)  # fmt: skip
+        state.update(
+            _pool=None,
+            _pool_pid=0,
+            _source=None,
+            _blocks=[],
+            _tables=None,
+            _tables_of=None,
+            _workers=[],
+            _served=None,
+            _workers_pid=0,
+            _number=0,
+            _finalizer=None,
+            _ctls=None,
+            _asleep=None,
+        )
         return state
 
     def _block_args(self, args: tuple, axes: tuple) -> list[tuple]:

@@ -176,16 +176,27 @@ def get8(typingctx, v, i):
     return types.float64(vec8, i), codegen
 
 
-@intrinsic
-def add8(typingctx, a, b):
-    """``a + b`` for two :class:`Vec8Type` values, value by value."""
-    if not (a == vec8 and b == vec8):
-        return None
+def _binary8(name: str, op: str, doc: str):
+    """The intrinsic ``name`` of two :class:`Vec8Type` values: LLVM's ``op`` (``fadd``,
+    ...) value by value."""
 
-    def codegen(context, builder, signature, args):
-        return builder.fadd(args[0], args[1])
+    def typer(typingctx, a, b):
+        if not (a == vec8 and b == vec8):
+            return None
 
-    return vec8(vec8, vec8), codegen
+        def codegen(context, builder, signature, args):
+            return getattr(builder, op)(args[0], args[1])
+
+        return vec8(vec8, vec8), codegen
+
+    typer.__name__ = typer.__qualname__ = name
+    typer.__doc__ = doc
+    return intrinsic(typer)
+
+
+add8 = _binary8("add8", "fadd", "``a + b`` for two :class:`Vec8Type` values, value by value.")
+mul8 = _binary8("mul8", "fmul", "``a * b`` for two :class:`Vec8Type` values, value by value.")
+sub8 = _binary8("sub8", "fsub", "``a - b`` for two :class:`Vec8Type` values, value by value.")
 
 
 @intrinsic
@@ -214,30 +225,6 @@ def fma8(typingctx, a, b, c):
         return _fma8_ir(builder, *args)
 
     return vec8(vec8, vec8, vec8), codegen
-
-
-@intrinsic
-def mul8(typingctx, a, b):
-    """``a * b`` for two :class:`Vec8Type` values, value by value."""
-    if not (a == vec8 and b == vec8):
-        return None
-
-    def codegen(context, builder, signature, args):
-        return builder.fmul(args[0], args[1])
-
-    return vec8(vec8, vec8), codegen
-
-
-@intrinsic
-def sub8(typingctx, a, b):
-    """``a - b`` for two :class:`Vec8Type` values, value by value."""
-    if not (a == vec8 and b == vec8):
-        return None
-
-    def codegen(context, builder, signature, args):
-        return builder.fsub(args[0], args[1])
-
-    return vec8(vec8, vec8), codegen
 
 
 @intrinsic

@@ -62,8 +62,12 @@ SLOT = 5
 _FLOAT = 1
 _INT = 2
 #: The array kinds by dtype; an array's code is 8 * kind + dimensions.
-_KINDS = {np.dtype(np.float64): 1, np.dtype(np.float32): 2, np.dtype(np.int64): 3,
-          np.dtype(np.bool_): 4}  # fmt: skip
+_KINDS = {
+    np.dtype(np.float64): 1,
+    np.dtype(np.float32): 2,
+    np.dtype(np.int64): 3,
+    np.dtype(np.bool_): 4,
+}
 
 
 def _code(kind: int, ndim: int) -> int:
@@ -123,8 +127,9 @@ def pack(args: tuple) -> np.ndarray:
             table[o] = _INT
             table[o + 1] = a
         else:
-            raise TypeError(f"pack: argument {i} is a {type(a).__name__}; expected an array, "
-                            "a float or an int")  # fmt: skip
+            raise TypeError(
+                f"pack: argument {i} is a {type(a).__name__}; expected an array, a float or an int"
+            )
     return table
 
 
