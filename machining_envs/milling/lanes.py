@@ -393,66 +393,39 @@ def _start_drawn_lanes(t, lanes, nominal, v, scales, segments, counts):
     ``nominal`` (:func:`_batch_numbers`). Returns the first ``i`` whose speed falls
     outside ``SPINDLE_RPM_RANGE`` (none is started from it on), or -1."""
     nc = len(LANE_CONSTANTS)
-    n_rpm, n_limit, power_law = (
-        nominal[BN.spindle_rpm],
-        nominal[BN.torque_limit_Nmm],
-        nominal[BN.power_law],
-    )
-    fexp, ks, diam = (
-        nominal[BN.feed_exponent],
-        nominal[BN.torque_coefficient_kgfmm],
-        nominal[BN.tool_diameter_mm],
-    )
-    kt, teeth, axial = (
-        nominal[BN.tangential_coefficient_N_mm2],
-        nominal[BN.n_teeth],
-        nominal[BN.axial_depth_mm],
-    )
-    vmax, brk, ke = (
-        nominal[BN.max_feed_velocity_mm_s],
-        nominal[BN.breakage_torque_Nmm],
-        nominal[BN.sensor_gain],
-    )
-    noise_std, lag_rev = nominal[BN.noise_std_Nmm], nominal[BN.process_lag_rev]
-    rpm_lo, rpm_hi, ks_lo, ks_span = (
-        nominal[BN.rpm_low],
-        nominal[BN.rpm_high],
-        nominal[BN.ks_low],
-        nominal[BN.ks_span],
-    )
-    m_lo, m_span, nz_lo, nz_span = (
-        nominal[BN.m_low],
-        nominal[BN.m_span],
-        nominal[BN.noise_low],
-        nominal[BN.noise_span],
-    )
+    b = nominal
+    teeth, n_limit = b[BN.n_teeth], b[BN.torque_limit_Nmm]
     row = np.empty(nc)
     x = np.empty(9)
     for i in range(lanes.size):
-        rpm = n_rpm * scales[i, 0]
-        if not (rpm_lo <= rpm <= rpm_hi):
+        rpm = b[BN.spindle_rpm] * scales[i, 0]
+        if not (b[BN.rpm_low] <= rpm <= b[BN.rpm_high]):
             return i
         limit = n_limit * scales[i, 1]
-        ks_scale = ks_lo + ks_span * v[i, 2]
+        ks_scale = b[BN.ks_low] + b[BN.ks_span] * v[i, 2]
         copy_into(row, nominal[:nc])  # the columns the truth keeps
         row[LC.ft_per_vf] = 60.0 / (rpm * teeth)
-        if power_law != 0.0:
-            row[LC.feed_exponent] = fexp * (m_lo + m_span * v[i, 3])
-            row[LC.torque_gain] = KGF * (ks * ks_scale) * diam
+        if b[BN.power_law] != 0.0:
+            row[LC.feed_exponent] = b[BN.feed_exponent] * (b[BN.m_low] + b[BN.m_span] * v[i, 3])
+            ks = b[BN.torque_coefficient_kgfmm] * ks_scale
+            row[LC.torque_gain] = KGF * ks * b[BN.tool_diameter_mm]
         else:  # the average-force model's torque_gain(1.0)
-            row[LC.torque_gain] = teeth * (kt * ks_scale) * axial * 1.0 / (2.0 * math.pi)
+            kt = b[BN.tangential_coefficient_N_mm2] * ks_scale
+            row[LC.torque_gain] = teeth * kt * b[BN.axial_depth_mm] * 1.0 / (2.0 * math.pi)
         row[LC.spindle_rpm] = rpm
         row[LC.rev_per_s] = rpm / 60.0
         row[LC.wear_per_mm] = 0.0  # a sharp tool (the batch takes no wear)
         x[0] = limit
-        x[1] = vmax
-        x[2] = brk
-        x[3] = ke * (noise_std * (nz_lo + nz_span * v[i, 4]))
+        x[1] = b[BN.max_feed_velocity_mm_s]
+        x[2] = b[BN.breakage_torque_Nmm]
+        x[3] = b[BN.sensor_gain] * (
+            b[BN.noise_std_Nmm] * (b[BN.noise_low] + b[BN.noise_span] * v[i, 4])
+        )
         x[4] = teeth
-        x[5] = axial
+        x[5] = b[BN.axial_depth_mm]
         x[6] = min(limit / n_limit, 10.0)
         x[7] = np.nan  # the score bound: worked out by _start
-        x[8] = 60.0 * lag_rev / rpm
+        x[8] = 60.0 * b[BN.process_lag_rev] / rpm
         _start_packed(t, lanes[i], row, x, lane_segments(segments, i, counts))
     return -1
 

@@ -399,34 +399,28 @@ def _start_drawn_lanes(t, lanes, lo, hi, nums, rpm, v, segments, counts, ok):
     true parameters ``TurningScenario.true_params`` makes of them (a sharp tool), in its
     order of operations. ``ok[i]``: whether the lane's step matrix was made
     (:func:`_start_packed`'s return)."""
-    kf, pexp, ke = nums[BN.force_coefficient], nums[BN.feed_exponent], nums[BN.sensor_gain]
-    cmax, margin, power = nums[BN.command_max], nums[BN.margin], nums[BN.spindle_power_W]
-    vmax, brk = nums[BN.max_feed_velocity_mm_s], nums[BN.breakage_force_N]
-    noise_std, diam = nums[BN.noise_std_N], nums[BN.workpiece_diameter_mm]
-    kf_lo, kf_span, p_lo, p_span = (
-        nums[BN.kf_low],
-        nums[BN.kf_span],
-        nums[BN.p_low],
-        nums[BN.p_span],
-    )
-    n_lo, n_span = nums[BN.noise_low], nums[BN.noise_span]
-    varies, l_lo, l_span = nums[BN.limit_varies], nums[BN.limit_low], nums[BN.limit_span]
-    full = math.isfinite(power)
+    b = nums
+    ke = b[BN.sensor_gain]
+    full = math.isfinite(b[BN.spindle_power_W])
     x = np.empty(8)
     for i in range(lanes.size):
         if not lo <= lanes[i] < hi:
             continue
         vi = v[i]
-        kf_i = kf * (kf_lo + kf_span * vi[0])
-        consts = (kf_i, pexp * (p_lo + p_span * vi[1]), ke, cmax, margin, 0.0)
+        kf = b[BN.force_coefficient] * (b[BN.kf_low] + b[BN.kf_span] * vi[0])
+        pexp = b[BN.feed_exponent] * (b[BN.p_low] + b[BN.p_span] * vi[1])
+        consts = (kf, pexp, ke, b[BN.command_max], b[BN.margin], 0.0)
         x[0] = rpm[i]
-        x[1] = l_lo + l_span * vi[3] if varies != 0.0 else l_lo
-        x[2] = vmax
-        x[3] = brk
-        x[4] = ke * (noise_std * (n_lo + n_span * vi[2]))  # the sensor's gain Ke
-        x[5] = diam
+        x[1] = b[BN.limit_low]
+        if b[BN.limit_varies] != 0.0:
+            x[1] = b[BN.limit_low] + b[BN.limit_span] * vi[3]
+        x[2] = b[BN.max_feed_velocity_mm_s]
+        x[3] = b[BN.breakage_force_N]
+        # the sensor's gain Ke times the noise
+        x[4] = ke * (b[BN.noise_std_N] * (b[BN.noise_low] + b[BN.noise_span] * vi[2]))
+        x[5] = b[BN.workpiece_diameter_mm]
         x[6] = np.nan
-        x[7] = power
+        x[7] = b[BN.spindle_power_W]
         ok[i] = _start_packed(t, lanes[i] - lo, full, consts, lane_segments(segments, i, counts), x)
 
 

@@ -10,20 +10,10 @@ import numba
 import numpy as np
 import pytest
 
+from machining_envs.core.compiled import schema
 from machining_envs.core.compiled.packed import pack
-from machining_envs.core.compiled.schema import (
-    Field,
-    axes,
-    bind_columns,
-    flatten,
-    gather,
-    offsets,
-    record,
-    unflatten,
-    via_table,
-)
 
-Plant = record(
+Plant = schema.record(
     "Plant",
     __name__,
     """
@@ -34,7 +24,7 @@ Plant = record(
     m: shared i8
     """,
 )
-Env = record(
+Env = schema.record(
     "Env",
     __name__,
     """
@@ -44,7 +34,7 @@ Env = record(
 )
 _read_plant = Plant.reader
 _read_env = Env.reader
-_AT_PLANT, _AT_ENV, _END = offsets(Plant, Env)
+_AT_PLANT, _AT_ENV, _END = schema.offsets(Plant, Env)
 
 Col = enum.IntEnum("Col", "a b c", start=0)
 
@@ -82,9 +72,11 @@ def _arrays(n=3):
 
 def test_a_record_declares_its_fields_kinds_and_axes_once():
     assert Plant._fields == ("z", "buf", "seg", "info", "gain", "m")
-    assert Plant.fields[0] == Field("f8_2", 0) and Plant.fields[3] == Field("f8_2_rows", 1)
+    assert Plant.fields[0] == schema.Field("f8_2", 0) and Plant.fields[3] == schema.Field(
+        "f8_2_rows", 1
+    )
     assert Plant.axes == (0, 0, 0, 1, None, None)
-    assert axes(Plant, Env) == Plant.axes + (0, 0)
+    assert schema.axes(Plant, Env) == Plant.axes + (0, 0)
     assert (_AT_PLANT, _AT_ENV, _END) == (0, 6, 8)
     # a record pickles by reference to its class (bound to its name in its module)
     p, _ = _arrays()
@@ -94,8 +86,8 @@ def test_a_record_declares_its_fields_kinds_and_axes_once():
 def test_the_trampoline_hands_its_kernel_the_same_records():
     direct, packed = _arrays(), _arrays()
     _kernel(*direct)
-    _trampoline(pack(flatten(*packed)))
-    for a, b in zip(flatten(*direct), flatten(*packed), strict=True):
+    _trampoline(pack(schema.flatten(*packed)))
+    for a, b in zip(schema.flatten(*direct), schema.flatten(*packed), strict=True):
         if isinstance(a, np.ndarray):
             assert a.tobytes() == b.tobytes()
     assert direct[1].done.all() and direct[0].seg.tolist() == [2, 2, 2]
@@ -104,22 +96,22 @@ def test_the_trampoline_hands_its_kernel_the_same_records():
 
 def test_flatten_unflatten_gather_and_via_table():
     plant, env = _arrays()
-    flat = flatten(plant, env)
+    flat = schema.flatten(plant, env)
     assert len(flat) == _END
-    back = unflatten((*flat, 3), (Plant, Env))  # what follows the records is left out
+    back = schema.unflatten((*flat, 3), (Plant, Env))  # what follows the records is left out
     assert back == (plant, env)
 
     class Holder:
         obs = env.obs
 
-    assert gather(Env, Holder, done=env.done) == env
+    assert schema.gather(Env, Holder, done=env.done) == env
     calls = []
 
     def trampoline(table, tail):
         calls.append((table.size, tail))
         _trampoline(table)
 
-    via_table(trampoline, _END)(*flat, 7)
+    schema.via_table(trampoline, _END)(*flat, 7)
     assert calls == [(_END * 5, 7)] and env.done.all()
 
 
@@ -129,7 +121,7 @@ def test_named_columns_are_views():
 
     table = np.zeros((4, 3))
     core = Core()
-    bind_columns(core, table, Col)
+    schema.bind_columns(core, table, Col)
     core.b[:] = 2.0
     assert table[:, 1].tolist() == [2.0] * 4 and core.c.base is table
 
@@ -146,7 +138,7 @@ def test_named_columns_are_views():
 )
 def test_a_bad_spec_is_refused_naming_the_line(spec, message):
     with pytest.raises(ValueError, match=message):
-        record("Bad", __name__, spec)
+        schema.record("Bad", __name__, spec)
 
 
 _CACHED = """
