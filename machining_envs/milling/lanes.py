@@ -77,19 +77,19 @@ _INFO_LANE = ("torque_limit", "bound", "spindle", "length", "volume")
 #: The rows of ``MillingCore.info_f`` by name: the signals, then the episode's constants.
 IF = enum.IntEnum("IF", _INFO_F + _INFO_LANE, start=0, module=__name__)
 #: The info's keys read from ``info_f`` (in the info's order, between the flags and the
-#: segment, then after the segment), with their rows.
+#: segment, then after the segment), with their rows (plain ints: read at every step).
 _INFO_SIGNALS = (
-    ("torque_Nmm", IF.torque_Nmm),
-    ("torque_limit_Nmm", IF.torque_limit),
-    ("cost", IF.cost),
-    ("score_bound", IF.bound),
-    *((key, IF[key]) for key in _INFO_F[IF.measured : IF.removed_volume_mm3]),
+    ("torque_Nmm", int(IF.torque_Nmm)),
+    ("torque_limit_Nmm", int(IF.torque_limit)),
+    ("cost", int(IF.cost)),
+    ("score_bound", int(IF.bound)),
+    *((key, int(IF[key])) for key in _INFO_F[IF.measured : IF.removed_volume_mm3]),
 )
 _INFO_EPISODE = (
-    ("spindle_rpm", IF.spindle),
-    ("removed_volume_mm3", IF.removed_volume_mm3),
-    ("workpiece_length_mm", IF.length),
-    ("workpiece_volume_mm3", IF.volume),
+    ("spindle_rpm", int(IF.spindle)),
+    ("removed_volume_mm3", int(IF.removed_volume_mm3)),
+    ("workpiece_length_mm", int(IF.length)),
+    ("workpiece_volume_mm3", int(IF.volume)),
 )
 
 
