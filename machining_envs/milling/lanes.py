@@ -15,7 +15,7 @@ from machining_envs.core.actions import ACTION_MAPS, ActionMap
 from machining_envs.core.actuation import ActuationLanes, configure_lane, resolve_actuation
 from machining_envs.core.checks import check_below
 from machining_envs.core.compiled.blocks import LaneBlocks, serve_one_table_with_tail
-from machining_envs.core.compiled.kernels import copy_into
+from machining_envs.core.compiled.kernels import copy_into, set_episode_flags
 from machining_envs.core.compiled.normals import LaneGenerators, lane_noise
 from machining_envs.core.compiled.packed import PackedArgs, spaced_rows
 from machining_envs.core.compiled.schema import axes, flatten, gather, offsets, record, via_table
@@ -76,6 +76,21 @@ _INFO_F = (
 _INFO_LANE = ("torque_limit", "bound", "spindle", "length", "volume")
 #: The rows of ``MillingCore.info_f`` by name: the signals, then the episode's constants.
 IF = enum.IntEnum("IF", _INFO_F + _INFO_LANE, start=0, module=__name__)
+#: The vector info's keys read from ``info_f`` with their rows, in the info's order: those
+#: between the flags and the segment, then those after it.
+_VECTOR_SIGNALS = (
+    ("torque_Nmm", IF.torque_Nmm),
+    ("torque_limit_Nmm", IF.torque_limit),
+    ("cost", IF.cost),
+    ("score_bound", IF.bound),
+    *((key, IF[key]) for key in _INFO_F[IF.measured : IF.removed_volume_mm3]),
+)
+_VECTOR_EPISODE = (
+    ("spindle_rpm", IF.spindle),
+    ("removed_volume_mm3", IF.removed_volume_mm3),
+    ("workpiece_length_mm", IF.length),
+    ("workpiece_volume_mm3", IF.volume),
+)
 
 
 #: The weights of the EndMilling reward (:class:`EndMillingEnv`, section Rewards): the
@@ -207,12 +222,8 @@ def _step(a, e, stage):
         if breakage or diverged:
             r -= w[4]
         e.reward[k] = r
-        flags[k, 0] = diverged
-        flags[k, 1] = breakage
-        flags[k, 2] = finished_k
-        flags[k, 3] = terminated
-        flags[k, 4] = truncated
-        flags[k, 5] = torque > tr[k]
+        above = torque > tr[k]
+        set_episode_flags(flags[k], diverged, breakage, finished_k, terminated, truncated, above)
         if diverged:
             feed = 0.0
             mean_feed = 0.0
@@ -731,28 +742,9 @@ class MillingCore(LaneCore):
 
     def lane_info(self, k: int) -> dict:
         """The step info of lane ``k`` (after :meth:`step`)."""
-        (  # the rows of info_f (IF), in order: one conversion, no lookup by name
-            t,
-            command,
-            torque,
-            measured,
-            counts,
-            peak,
-            feed,
-            mean_feed,
-            feed_tooth,
-            vf,
-            pos,
-            depth,
-            removed,
-            finish,
-            cost,
-            limit,
-            bound,
-            rpm,
-            length,
-            volume,
-        ) = self.info_f[:, k].tolist()
+        c = self.info_f[:, k].tolist()  # the rows of info_f (IF), in order
+        t, command, torque, measured, counts, peak, feed, mean_feed, feed_tooth, vf = c[:10]
+        pos, depth, removed, finish, cost, limit, bound, rpm, length, volume = c[10:]
         diverged, breakage, finished = self.flags[k, :3].tolist()
         info = {
             "t_s": t,
@@ -802,24 +794,9 @@ class MillingCore(LaneCore):
             "breakage": f[:, 1],
             "diverged": f[:, 0],
             "finished": f[:, 2],
-            "torque_Nmm": c[IF.torque_Nmm],
-            "torque_limit_Nmm": c[IF.torque_limit],
-            "cost": c[IF.cost],
-            "score_bound": c[IF.bound],
-            "measured": c[IF.measured],
-            "measured_counts": c[IF.measured_counts],
-            "peak_torque_Nmm": c[IF.peak_torque_Nmm],
-            "feed_mm_per_rev": c[IF.feed_mm_per_rev],
-            "mean_feed_mm_per_rev": c[IF.mean_feed_mm_per_rev],
-            "feed_per_tooth_mm": c[IF.feed_per_tooth_mm],
-            "feed_velocity_mm_s": c[IF.feed_velocity_mm_s],
-            "position_mm": c[IF.position_mm],
-            "depth_mm": c[IF.depth_mm],
+            **{key: c[row] for key, row in _VECTOR_SIGNALS},
             "segment": self.lanes.out_segment.copy(),
-            "spindle_rpm": c[IF.spindle],
-            "removed_volume_mm3": c[IF.removed_volume_mm3],
-            "workpiece_length_mm": c[IF.length],
-            "workpiece_volume_mm3": c[IF.volume],
+            **{key: c[row] for key, row in _VECTOR_EPISODE},
             "scenario": self.names.array(),
             "machining_time_s": c[IF.machining_time_s],  # NaN where the lane did not finish
             "_machining_time_s": self.flags[:, 2].copy(),

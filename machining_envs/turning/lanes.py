@@ -16,7 +16,7 @@ from machining_envs.core.actions import ActionMap
 from machining_envs.core.actuation import ActuationLanes, configure_lane, resolve_actuation
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_below, check_range
 from machining_envs.core.compiled.blocks import LaneBlocks, serve_one_table_with_tail
-from machining_envs.core.compiled.kernels import clip_unit_linear
+from machining_envs.core.compiled.kernels import clip_unit_linear, set_episode_flags
 from machining_envs.core.compiled.normals import LaneGenerators, lane_noise
 from machining_envs.core.compiled.packed import PackedArgs, spaced_rows
 from machining_envs.core.compiled.schema import (
@@ -173,12 +173,7 @@ def _env_lane(k, a, e):
     if breakage or diverged:
         r -= w[4]
     ef[k, EF.reward] = r
-    flags[k, EB.diverged] = diverged
-    flags[k, EB.breakage] = breakage
-    flags[k, EB.finished] = finished
-    flags[k, EB.terminated] = terminated
-    flags[k, EB.truncated] = truncated
-    flags[k, EB.over] = force > fr
+    set_episode_flags(flags[k], diverged, breakage, finished, terminated, truncated, force > fr)
     o = e.obs[k]
     fs = e.fs
     o[0] = min(max(m[0] / fs, lo), hi)

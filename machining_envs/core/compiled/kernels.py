@@ -47,6 +47,7 @@ __all__ = [
     "powers",
     "py_square",
     "read_only",
+    "set_episode_flags",
     "shift8",
     "sincos_row",
     "store8",
@@ -259,6 +260,15 @@ def shift8(typingctx, z, g, u, applied):
         return builder.select(moved, shifted, z_)
 
     return vec8(vec8, vec8, vec8, vec8), codegen
+
+
+@numba.njit(cache=True, inline="always")
+def set_episode_flags(row, diverged, breakage, finished, terminated, truncated, over):
+    """A lane's episode flags after a step into ``row[:6]``, in the lanes' common order:
+    diverged, tool breakage, workpiece finished, terminated, truncated, over the limit."""
+    flags = (diverged, breakage, finished, terminated, truncated, over)
+    for i in range(6):
+        row[i] = flags[i]
 
 
 @numba.njit(cache=True, inline="always")
