@@ -88,7 +88,9 @@ class AdaptiveFeedControl(Agent):
         ``"W"``, ``"N"`` or ``"N*mm"``, for the log.
     reference : float
         The given reference as a share of the observed limit, in (0, 1.5] (used when
-        ``teach_in_s`` is 0).
+        ``teach_in_s`` is 0). Set between steps (one value, or one per lane: a residual
+        policy's setpoint, ``agents.rl.residual`` with ``knob: reference``), it applies
+        from the next step on.
     teach_in_s : float
         Seconds of teach-in at 100 % override once in the material, in [0, 100] (0: the
         reference is given).
@@ -157,6 +159,7 @@ class AdaptiveFeedControl(Agent):
         self.ts = check_positive("sample_time_s", sample_time_s, 100.0)
         self.load_unit = str(load_unit)
         self.reference = check_positive("reference", reference, 1.5)
+        self._reference = self.reference  # the reference the state was started with
         self.teach_in_s = check_setting("teach_in_s", teach_in_s, 0.0, 100.0)
         self.fmin = check_setting("fmin", fmin, 0.05, 1.0)
         self.fmax = check_setting("fmax", fmax, 1.0, 5.0)
@@ -259,6 +262,10 @@ class AdaptiveFeedControl(Agent):
         cut = load - state[:, _IDLE]  # the cutting load
         phase = state[:, _PHASE]
         ref = state[:, _REF]
+        if self.teach_in_s <= 0 and np.any(self.reference != self._reference):
+            # a supervisor (agents.rl.residual) moved the given reference: it applies now,
+            # as a share of the limit above the idle load, as initial_state computes it
+            ref = np.maximum(self.reference * limit - state[:, _IDLE], 1e-9)
         ovr = state[:, _OVR]
         limit_cut = np.maximum(limit - state[:, _IDLE], 1e-9)
         state[:, _PEAK] = np.maximum(state[:, _PEAK], cut)
@@ -308,7 +315,8 @@ class AdaptiveFeedControl(Agent):
             in_material, np.minimum(state[:, _FMIN_SEEN], ovr), state[:, _FMIN_SEEN]
         )
         state[:, _PHASE] = phase
-        state[:, _REF] = ref
+        if self.teach_in_s > 0:  # (a moved given reference is not kept: the state's is)
+            state[:, _REF] = ref
         state[:, _OVR] = ovr
         state[:, _AIR] = air
         state[:, _LIMIT] = limit

@@ -187,3 +187,27 @@ def test_end_milling_on_the_shop_floor_machine_keeps_its_rules():
     assert log["min_feed_factor"] == pytest.approx(min(factors_in))
     assert log["breakage"] == 0.0
     env.close()
+
+
+def test_reference_moved_between_steps_applies_from_the_next_step():
+    """A supervisor (a residual policy) that moves the given reference is obeyed: the
+    integral action then acts on the error to the new reference, per lane."""
+    afc, m = _afc(reference=0.5, gain=0.5, fmin=0.5, fmax=2.0)
+    obs = np.array([[0.0, 1.0, 0.0, 0.5, 0.0, 0.0, 0.0]] * 2)
+    state = afc.initial_state(2, obs)
+    afc.predict(obs, state.copy())  # in air
+    cut = obs.copy()
+    cut[:, 0] = 0.5  # at the reference 0.5: no change of the override
+    a, st = afc.predict(cut, state)
+    np.testing.assert_allclose(m.action_to_command(a[:, 0]), PROGRAMMED * 1.0, rtol=1e-6)
+    afc.reference = np.array([0.5, 0.8])  # lane 1's setpoint raised, lane 0's kept
+    a, st = afc.predict(cut, st)
+    # lane 0: error 0 -> override 1; lane 1: 1 + 0.5 (1 - 0.5/0.8)
+    np.testing.assert_allclose(
+        m.action_to_command(a[:, 0]), PROGRAMMED * np.array([1.0, 1.0 + 0.5 * 0.375]), rtol=1e-6
+    )
+    afc.reference = 0.5  # back to the value it was made with: the stored reference again
+    a2, _ = afc.predict(cut, st.copy())  # at the reference 0.5 again: overrides held
+    np.testing.assert_allclose(
+        m.action_to_command(a2[:, 0]), PROGRAMMED * np.array([1.0, 1.0 + 0.5 * 0.375]), rtol=1e-6
+    )

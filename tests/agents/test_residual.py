@@ -60,6 +60,26 @@ def test_a_zero_policy_is_the_tuned_regulator_step_for_step():
     assert info["setpoint"] == pytest.approx(agent.setpoint)
 
 
+def test_over_the_tuned_afc_a_zero_policy_is_the_afc_and_a_raised_cap_cuts_faster():
+    from agents.afc import AdaptiveFeedControl
+
+    kw = {"knob": "fmax", "span": 1.0, "lo": 1.0, "hi": 4.0}
+    env, *_, agent, info = _zero_policy_runs_the_tuned_agent(
+        TURNING, AdaptiveFeedControl, 600, **kw
+    )
+    assert info["setpoint"] == pytest.approx(agent.fmax)
+    # the policy's cap reaches the AFC: at the top of the span the workpiece is cut sooner
+    steps = {}
+    for a in (0.0, 1.0):
+        env.reset(seed=5)
+        for k in range(3000):
+            *_, te, tr, _ = env.step(np.full(env.action_space.shape, a, np.float32))
+            if te or tr:
+                break
+        steps[a] = k
+    assert steps[1.0] < 0.95 * steps[0.0]
+
+
 def test_the_replaying_agent_runs_what_the_wrapper_ran():
     policy = _Policy()
     wrapped = SetpointResidual(gym.make(TURNING), BASE, span=0.3)

@@ -1,0 +1,146 @@
+"""Learned policies against the best tuned classical agent on ``validation``, with the gate.
+
+For each policy folder (a shipped ``agents/rl/pretrained/<name>`` with ``seed_<k>/``
+subfolders, or a folder of ``train`` run folders ``seed_<k>/``), every seed's policy runs
+the same ``--episodes`` ``validation`` episodes as the reference (the best tuned classical
+agent of ``agents/bench/tuned.json`` by its validation score, unless ``--reference``), and
+the seed gate (``agents.rl.gate``) runs on each seed unless ``--no-gate``. Printed and
+written (``--out``, JSON): per seed the gate verdict, the counting share and the mean
+charged time; per policy (the seeds pooled, an episode's value the mean over its seeds, as
+the benchmark pools them) the counting share, the mean time and the paired difference
+against the reference (reference - policy, positive: the policy is better) with its 95 %
+bootstrap interval at each allowance of ``machining_envs.core.score.ALLOWANCES`` and the
+verdict. ``test`` and ``ood`` are never run.
+
+    python benchmarks/policy_validation.py --env machining_envs/Turning-v0 \\
+        agents/rl/pretrained/turning_ppo_residual runs/lag/lagafc --out val.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from agents.bench.tune import tuned_factory
+from agents.eval import evaluate
+from agents.eval.stats import allowance_sweep, seed_count_shares
+from agents.rl.callbacks import evaluation_setup
+from agents.rl.gate import gate_policy
+from agents.rl.policy import load_policy
+from machining_envs.core.score import ALLOWANCES
+from machining_envs.core.splits import split_seeds
+
+TUNED = Path(__file__).resolve().parents[1] / "agents" / "bench" / "tuned.json"
+
+
+def best_tuned(env_id: str) -> str:
+    """The class name of ``env_id``'s tuned agent with the lowest validation score."""
+    entries = json.loads(TUNED.read_text())["envs"][env_id]
+    return min(entries, key=lambda k: entries[k].get("validation_score", float("inf")))
+
+
+def _agent_class(name: str):
+    import agents
+
+    cls = getattr(agents, name, None)
+    if cls is None:
+        raise ValueError(f"--reference: no agent class {name!r} in agents")
+    return cls
+
+
+def seed_models(folder: Path) -> list[tuple[int, Path]]:
+    """``(seed, best_model.zip)`` of every ``seed_<k>/`` under ``folder``."""
+    found = []
+    for p in sorted(folder.glob("seed_*/best_model.zip")):
+        tail = p.parent.name.removeprefix("seed_")
+        if tail.isdigit():
+            found.append((int(tail), p))
+    if not found:
+        raise FileNotFoundError(f"no seed_<k>/best_model.zip under {folder}")
+    return found
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--env", default="machining_envs/Turning-v0")
+    ap.add_argument("folders", nargs="+", type=Path)
+    ap.add_argument("--episodes", type=int, default=50, help="validation episodes")
+    ap.add_argument("--reference", default=None, help="tuned agent class (default: the best)")
+    ap.add_argument("--no-gate", action="store_true")
+    ap.add_argument("--out", type=Path, default=None)
+    a = ap.parse_args(argv)
+
+    import torch
+
+    torch.set_num_threads(1)
+    metrics_fn, score, failed = evaluation_setup(a.env, {})
+    seed0 = split_seeds("validation", a.episodes)[0]
+
+    def run(agent):
+        ev = evaluate(agent, a.env, ["validation"], n_episodes=a.episodes, seed=seed0,
+                      metrics_fn=metrics_fn)  # fmt: skip
+        return ev.rows
+
+    ref_name = a.reference or best_tuned(a.env)
+    t0 = time.perf_counter()
+    ref_rows = run(tuned_factory(_agent_class(ref_name), a.env))
+    ref_counts = float(np.mean([score.counts(r) for r in ref_rows]))
+    ref_mean = float(np.mean([score.charged(r, failed) for r in ref_rows]))
+    print(f"reference {ref_name}: counts {ref_counts:.0%}, mean {ref_mean:.2f} s "
+          f"({time.perf_counter() - t0:.0f} s)", flush=True)  # fmt: skip
+    report = {"env": a.env, "episodes": a.episodes, "reference": ref_name,
+              "reference_counts": ref_counts, "reference_mean": ref_mean, "policies": {}}  # fmt: skip
+    for folder in a.folders:
+        rows, seeds = [], {}
+        for seed, model in seed_models(folder):
+            t1 = time.perf_counter()
+            r = run(load_policy(model))
+            for row in r:
+                row["policy_seed"] = seed
+            rows += r
+            entry = {
+                "counts": float(np.mean([score.counts(x) for x in r])),
+                "mean": float(np.mean([score.charged(x, failed) for x in r])),
+            }
+            if not a.no_gate:
+                g = gate_policy(model, a.env)
+                entry["gate"] = {"passed": g.passed, "counting": g.counting, "n": g.n,
+                                 "overloaded": g.overloaded, "by_group": g.by_group}  # fmt: skip
+            entry["wall_s"] = round(time.perf_counter() - t1, 1)
+            seeds[seed] = entry
+            gate = entry.get("gate")
+            gtxt = "" if gate is None else (
+                f"; gate {'PASS' if gate['passed'] else 'FAIL'} {gate['counting']}/{gate['n']},"
+                f" {gate['overloaded']} overloaded"
+            )  # fmt: skip
+            print(f"{folder} seed {seed}: counts {entry['counts']:.0%}, mean "
+                  f"{entry['mean']:.2f} s{gtxt} ({entry['wall_s']} s)", flush=True)  # fmt: skip
+        diffs, verdict = allowance_sweep(ref_rows, rows, score, failed)
+        pooled = {
+            "counts": float(np.mean([score.counts(x) for x in rows])),
+            "mean": float(np.mean([score.charged(x, failed) for x in rows])),
+            "seed_counts_by_allowance": {
+                str(al): seed_count_shares(rows, score, al) for al in ALLOWANCES
+            },
+            "diffs": {str(al): d for al, d in zip(ALLOWANCES, diffs, strict=True)},
+            "verdict": verdict,
+            "seeds": seeds,
+        }
+        report["policies"][str(folder)] = pooled
+        cells = ", ".join(
+            f"{al:.1%}: {d['diff']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]"
+            for al, d in zip(ALLOWANCES, diffs, strict=True)
+        )
+        print(f"{folder}: counts {pooled['counts']:.0%}, mean {pooled['mean']:.2f} s; "
+              f"vs {ref_name} {cells}; {verdict}", flush=True)  # fmt: skip
+    if a.out is not None:
+        a.out.write_text(json.dumps(report, indent=2, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
