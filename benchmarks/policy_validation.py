@@ -14,6 +14,7 @@ verdict. ``test`` and ``ood`` are never run.
 
     python benchmarks/policy_validation.py --env machining_envs/Turning-v0 \\
         agents/rl/pretrained/turning_ppo_residual runs/lag/lagafc --out val.json
+    python benchmarks/policy_validation.py runs/pen runs/lag --baseline runs/pen
 """
 
 from __future__ import annotations
@@ -71,6 +72,8 @@ def main(argv=None) -> int:
     ap.add_argument("--episodes", type=int, default=50, help="validation episodes")
     ap.add_argument("--reference", default=None, help="tuned agent class (default: the best)")
     ap.add_argument("--no-gate", action="store_true")
+    ap.add_argument("--baseline", type=Path, default=None,
+                    help="one of the folders: every other is also compared with it, paired")  # fmt: skip
     ap.add_argument("--out", type=Path, default=None)
     a = ap.parse_args(argv)
 
@@ -92,6 +95,7 @@ def main(argv=None) -> int:
     ref_mean = float(np.mean([score.charged(r, failed) for r in ref_rows]))
     print(f"reference {ref_name}: counts {ref_counts:.0%}, mean {ref_mean:.2f} s "
           f"({time.perf_counter() - t0:.0f} s)", flush=True)  # fmt: skip
+    pooled_rows = {}
     report = {"env": a.env, "episodes": a.episodes, "reference": ref_name,
               "reference_counts": ref_counts, "reference_mean": ref_mean, "policies": {}}  # fmt: skip
     for folder in a.folders:
@@ -131,12 +135,29 @@ def main(argv=None) -> int:
             "seeds": seeds,
         }
         report["policies"][str(folder)] = pooled
+        pooled_rows[folder] = rows
         cells = ", ".join(
             f"{al:.1%}: {d['diff']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]"
             for al, d in zip(ALLOWANCES, diffs, strict=True)
         )
         print(f"{folder}: counts {pooled['counts']:.0%}, mean {pooled['mean']:.2f} s; "
               f"vs {ref_name} {cells}; {verdict}", flush=True)  # fmt: skip
+    if a.baseline is not None:
+        if a.baseline not in pooled_rows:
+            raise SystemExit(f"--baseline {a.baseline} must be one of the folders")
+        for folder, rows in pooled_rows.items():
+            if folder == a.baseline:
+                continue
+            diffs, verdict = allowance_sweep(pooled_rows[a.baseline], rows, score, failed)
+            report["policies"][str(folder)]["vs_baseline"] = {
+                "baseline": str(a.baseline), "verdict": verdict,
+                "diffs": {str(al): d for al, d in zip(ALLOWANCES, diffs, strict=True)},
+            }  # fmt: skip
+            cells = ", ".join(
+                f"{al:.1%}: {d['diff']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]"
+                for al, d in zip(ALLOWANCES, diffs, strict=True)
+            )
+            print(f"{folder} vs {a.baseline}: {cells}; {verdict}", flush=True)
     if a.out is not None:
         a.out.write_text(json.dumps(report, indent=2, default=float))
     return 0
