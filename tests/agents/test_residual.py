@@ -155,7 +155,7 @@ def test_a_trained_residual_run_reloads_as_a_residual_agent_and_reproduces_its_s
     out = train(TURNING, "ppo", tmp_path / "run", config_path=CONFIG_DIR / "ppo_residual.yml",
                 n_timesteps=2048, progress_bar=False, verbose=False)  # fmt: skip
     agent = load_policy(out / "best_model.zip")
-    assert isinstance(agent, ResidualAgent) and agent.base.name.startswith("adaptive PI")
+    assert isinstance(agent, ResidualAgent) and agent.base.name.startswith("AFC")  # its base
     with open(out / "eval.csv") as fh:
         rows = list(csv.DictReader(fh))
     best = min(float(r["score"]) for r in rows)
