@@ -86,12 +86,13 @@ def test_bad_configs_fail_before_training(tmp_path, text, message):
 
 @pytest.mark.parametrize("algo", ["sac", "td3"])
 def test_shipped_residual_configs_of_the_off_policy_algorithms_load(algo):
-    """The residual formulation's configs of SAC and TD3 share PPO's wrapper and reward (the
-    equal-budget comparison); TD3 explores with rl-zoo3's Gaussian action noise."""
+    """The residual formulation's configs of SAC and TD3 share the wrapper and reward of PPO
+    over the adaptive PI (the equal-budget comparison); TD3 explores with rl-zoo3's Gaussian
+    action noise."""
     from agents.rl.config import CONFIG_DIR
 
     cfg = load_config(TURNING, algo, CONFIG_DIR / f"{algo}_residual.yml")
-    ppo = load_config(TURNING, "ppo", CONFIG_DIR / "ppo_residual.yml")
+    ppo = load_config(TURNING, "ppo", CONFIG_DIR / "ppo_residual_pi.yml")
     assert cfg.residual == ppo.residual and cfg.env_kwargs == ppo.env_kwargs
     assert cfg.noise_type == ("normal" if algo == "td3" else None)
 
