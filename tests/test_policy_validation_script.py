@@ -1,0 +1,25 @@
+"""The policy validation script runs end to end on a tiny budget (numbers not judged)."""
+
+import json
+
+from tests.benchmark_scripts import run_benchmark
+
+
+def test_policy_validation_script_compares_every_seed_with_the_best_tuned_agent(tmp_path):
+    out = tmp_path / "v.json"
+    ppo = "agents/rl/pretrained/turning_ppo_residual"
+    td3 = "agents/rl/pretrained/turning_td3_residual"
+    printed = run_benchmark(
+        f"policy_validation.py --env machining_envs/Turning-v0 {ppo} {td3} --episodes 2 "
+        f"--no-gate --baseline {td3} --out {out}"
+    )
+    assert "reference AdaptiveFeedControl" in printed
+    assert f"{ppo} vs {td3}:" in printed
+    data = json.loads(out.read_text())
+    assert data["reference"] == "AdaptiveFeedControl" and data["episodes"] == 2
+    row = data["policies"][ppo]
+    assert sorted(row["seeds"]) == ["0", "1", "2", "3", "4"]
+    assert set(row["diffs"]) == {"0.005", "0.01", "0.02"}
+    for d in (*row["diffs"].values(), *row["vs_baseline"]["diffs"].values()):
+        assert d["n"] == 2 and d["low"] <= d["diff"] <= d["high"]
+    assert "vs_baseline" not in data["policies"][td3]
