@@ -171,6 +171,31 @@ def drawn_scenarios(env: gym.Env, name: str, n: int) -> list:
     return drawn
 
 
+def reset_by_name_and_object(env: gym.Env, name: str, scenario) -> tuple[dict, dict]:
+    """The infos of ``env`` reset (seed 0) to the named scenario ``name``, then to the
+    scenario object ``scenario``; each info must name the scenario it was reset to."""
+    _, named = env.reset(seed=0, options={"scenario": name})
+    assert named["scenario"] == name
+    _, given = env.reset(options={"scenario": scenario})
+    assert given["scenario"] == scenario.name
+    return named, given
+
+
+def split_draws(factories: dict, splits: Sequence[str], seeds: int = 40):
+    """``(split, scenario, rng)`` for each split and seed 0 to ``seeds``-1: the scenario
+    that ``factories[split]`` builds from ``default_rng(seed)``, and the split's stream
+    ``split_rng(default_rng(seed), split)`` from which a test draws the same numbers again,
+    field by field, to check the factory's order of draws. The factories' scenarios must
+    also pass their class's checks (:func:`assert_drawn_scenarios_pass_their_checks`)."""
+    from machining_envs.core.splits import split_rng
+
+    assert_drawn_scenarios_pass_their_checks(factories)
+    for split in splits:
+        for seed in range(seeds):
+            scenario = factories[split](np.random.default_rng(seed))
+            yield split, scenario, split_rng(np.random.default_rng(seed), split)
+
+
 def agents_built_on_train_and_test(factory: Callable, env_id: str) -> tuple:
     """The agents ``factory`` builds from one env reset to a training draw, then to a
     held-out one: an agent designed from nominal parameters only builds the same twice."""

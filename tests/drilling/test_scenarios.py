@@ -9,17 +9,16 @@ from tests.helpers import (
     TRAIN_OOD,
     assert_splits_share_a_distribution_not_episodes,
     drawn_scenarios,
+    reset_by_name_and_object,
 )
 
 
 def test_scenarios_by_name_and_object():
     env = gym.make(DRILLING)
-    _, info = env.reset(seed=0, options={"scenario": "paper_0.7"})
-    assert info["scenario"] == "paper_0.7" and info["target_depth_mm"] == pytest.approx(7.0)
     sc = DrillingScenario("mine", 0.55, aspect_ratio=4.0, torque_limit_Nmm=0.3)
-    _, info = env.reset(options={"scenario": sc})
-    assert info["scenario"] == "mine" and info["diameter_mm"] == 0.55
-    assert info["torque_limit_Nmm"] == 0.3 and info["target_depth_mm"] == pytest.approx(2.2)
+    info, mine = reset_by_name_and_object(env, "paper_0.7", sc)
+    assert info["target_depth_mm"] == pytest.approx(7.0) and mine["diameter_mm"] == 0.55
+    assert mine["torque_limit_Nmm"] == 0.3 and mine["target_depth_mm"] == pytest.approx(2.2)
     # ood has deeper holes, worse chips and other limits.
     draws = {name: drawn_scenarios(env, name, 200) for name in TRAIN_OOD}
     ar = {k: [s.aspect_ratio for s in v] for k, v in draws.items()}

@@ -14,17 +14,18 @@ from tests.helpers import (
     assert_ood_reaches_beyond_train,
     assert_splits_share_a_distribution_not_episodes,
     drawn_scenarios,
+    reset_by_name_and_object,
+    split_draws,
 )
 
 
 def test_scenarios_by_name_and_object():
     env = gym.make(MILLING)
-    _, info = env.reset(seed=0, options={"scenario": "paper_taper"})
-    assert info["scenario"] == "paper_taper" and info["workpiece_length_mm"] == 40.0
-    assert info["workpiece_volume_mm3"] == pytest.approx(32.0 * 40.0 * 1.5)
     sc = MillingScenario("mine", DepthProfile.steps((0.5, 1.5), 5.0), spindle_scale=1.5)
-    _, info = env.reset(options={"scenario": sc})
-    assert info["scenario"] == "mine" and info["spindle_rpm"] == 600.0
+    info, mine = reset_by_name_and_object(env, "paper_taper", sc)
+    assert info["workpiece_length_mm"] == 40.0
+    assert info["workpiece_volume_mm3"] == pytest.approx(32.0 * 40.0 * 1.5)
+    assert mine["spindle_rpm"] == 600.0
     # ood reaches depths and speeds training never does.
     draws = {name: drawn_scenarios(env, name, 200) for name in TRAIN_OOD}
     rpm = {k: [s.spindle_scale for s in v] for k, v in draws.items()}
@@ -58,30 +59,21 @@ def test_split_draws_are_numpys_scalar_draws_in_order():
     """The split scenarios are drawn as one scalar draw per field, in a fixed order (the
     split's episodes must never change): the factories compute the same numbers from one
     call, and skip the checks of values drawn from checked ranges."""
-    from machining_envs.core.splits import split_rng
     from machining_envs.milling.scenarios import MILLING_SCENARIOS
-    from tests.helpers import assert_drawn_scenarios_pass_their_checks
 
-    assert_drawn_scenarios_pass_their_checks(MILLING_SCENARIOS)
-    for split, wear in (("train", None), ("ood", None), ("wear", (0.5, 1.5))):
-        for seed in range(40):
-            sc = MILLING_SCENARIOS[split](np.random.default_rng(seed))
-            rng = split_rng(np.random.default_rng(seed), split)
-            spread = 0.25 if split == "ood" else 0.2
-            s_range, d_range = (
-                ((0.7, 1.4), (0.4, 3.5)) if split == "ood" else ((0.8, 1.25), (0.5, 3.0))
-            )
-            prof = DepthProfile.random(
-                rng, d_range, (2, 6) if split == "ood" else (2, 5), (5.0, 12.0), 0.3
-            )
-            assert sc.profile.edges_mm == prof.edges_mm
-            assert sc.profile.end_depths_mm == prof.end_depths_mm
-            assert sc.spindle_scale == float(np.exp(rng.uniform(*np.log(s_range))))
-            assert sc.torque_limit_scale == float(np.exp(rng.uniform(*np.log(s_range))))
-            assert sc.torque_coefficient_scale == rng.uniform(1 - spread, 1 + spread)
-            assert sc.feed_exponent_scale == rng.uniform(1 - spread, 1 + spread)
-            assert sc.noise_scale == rng.uniform(0.5, 2.0)
-            assert sc.wear_per_100mm == (rng.uniform(*wear) if wear else 0.0)
+    for split, sc, rng in split_draws(MILLING_SCENARIOS, ("train", "ood", "wear")):
+        ood = split == "ood"
+        spread = 0.25 if ood else 0.2
+        s_range, d_range = ((0.7, 1.4), (0.4, 3.5)) if ood else ((0.8, 1.25), (0.5, 3.0))
+        prof = DepthProfile.random(rng, d_range, (2, 6) if ood else (2, 5), (5.0, 12.0), 0.3)
+        assert sc.profile.edges_mm == prof.edges_mm
+        assert sc.profile.end_depths_mm == prof.end_depths_mm
+        assert sc.spindle_scale == float(np.exp(rng.uniform(*np.log(s_range))))
+        assert sc.torque_limit_scale == float(np.exp(rng.uniform(*np.log(s_range))))
+        assert sc.torque_coefficient_scale == rng.uniform(1 - spread, 1 + spread)
+        assert sc.feed_exponent_scale == rng.uniform(1 - spread, 1 + spread)
+        assert sc.noise_scale == rng.uniform(0.5, 2.0)
+        assert sc.wear_per_100mm == (rng.uniform(0.5, 1.5) if split == "wear" else 0.0)
 
 
 def test_the_envs_score_bound_and_volume_are_the_scenarios():

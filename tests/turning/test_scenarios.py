@@ -10,16 +10,16 @@ from tests.helpers import (
     assert_ood_reaches_beyond_train,
     assert_splits_share_a_distribution_not_episodes,
     drawn_scenarios,
+    reset_by_name_and_object,
+    split_draws,
 )
 
 
 def test_scenarios_by_name_and_object():
     env = gym.make(TURNING)
-    _, info = env.reset(seed=0, options={"scenario": "taper_405"})
-    assert info["scenario"] == "taper_405" and info["workpiece_length_mm"] == 45.0
     sc = TurningScenario("mine", DepthProfile.steps((0.5, 1.5), 5.0), spindle_rpm=600.0)
-    _, info = env.reset(options={"scenario": sc})
-    assert info["scenario"] == "mine" and info["spindle_rpm"] == 600.0
+    info, mine = reset_by_name_and_object(env, "taper_405", sc)
+    assert info["workpiece_length_mm"] == 45.0 and mine["spindle_rpm"] == 600.0
     # ood reaches speeds and limits the training set never does.
     rpms = {name: [s.spindle_rpm for s in drawn_scenarios(env, name, 200)] for name in TRAIN_OOD}
     assert_ood_reaches_beyond_train(rpms, 245.0, 700.0)
@@ -38,28 +38,22 @@ def test_split_draws_are_numpys_scalar_draws_in_order():
     calls, and skip the checks of values drawn from checked ranges."""
     import numpy as np
 
-    from machining_envs.core.splits import split_rng
     from machining_envs.turning.scenarios import TURNING_SCENARIOS
-    from tests.helpers import assert_drawn_scenarios_pass_their_checks
 
-    assert_drawn_scenarios_pass_their_checks(TURNING_SCENARIOS)
-    for split in ("train", "ood", "wear", "shopfloor"):
+    for split, sc, rng in split_draws(TURNING_SCENARIOS, ("train", "ood", "wear", "shopfloor")):
         ood = split == "ood"
-        for seed in range(40):
-            sc = TURNING_SCENARIOS[split](np.random.default_rng(seed))
-            rng = split_rng(np.random.default_rng(seed), split)
-            rpm = (200.0, 800.0) if ood else (245.0, 700.0)
-            assert sc.spindle_rpm == float(np.exp(rng.uniform(np.log(rpm[0]), np.log(rpm[1]))))
-            prof = DepthProfile.random(
-                rng, (0.5, 3.5) if ood else (0.5, 3.0), (2, 6) if ood else (2, 5), (4.0, 12.0)
-            )
-            assert sc.profile.edges_mm == prof.edges_mm
-            assert sc.profile.end_depths_mm == prof.end_depths_mm
-            assert sc.force_coefficient_scale == rng.uniform(0.8, 1.2)
-            assert sc.feed_exponent_scale == rng.uniform(0.8, 1.2)
-            assert sc.noise_scale == rng.uniform(0.5, 2.0)
-            assert sc.force_limit_N == (rng.uniform(700.0, 1300.0) if ood else 1000.0)
-            assert sc.wear_per_100mm == (rng.uniform(0.3, 1.0) if split == "wear" else 0.0)
+        rpm = (200.0, 800.0) if ood else (245.0, 700.0)
+        assert sc.spindle_rpm == float(np.exp(rng.uniform(np.log(rpm[0]), np.log(rpm[1]))))
+        prof = DepthProfile.random(
+            rng, (0.5, 3.5) if ood else (0.5, 3.0), (2, 6) if ood else (2, 5), (4.0, 12.0)
+        )
+        assert sc.profile.edges_mm == prof.edges_mm
+        assert sc.profile.end_depths_mm == prof.end_depths_mm
+        assert sc.force_coefficient_scale == rng.uniform(0.8, 1.2)
+        assert sc.feed_exponent_scale == rng.uniform(0.8, 1.2)
+        assert sc.noise_scale == rng.uniform(0.5, 2.0)
+        assert sc.force_limit_N == (rng.uniform(700.0, 1300.0) if ood else 1000.0)
+        assert sc.wear_per_100mm == (rng.uniform(0.3, 1.0) if split == "wear" else 0.0)
 
 
 def test_the_envs_score_bound_is_machining_time_bound():
