@@ -14,3 +14,12 @@ def run_benchmark(command: str) -> str:
     return subprocess.run(
         [sys.executable, str(BENCHMARKS / name), *args], capture_output=True, text=True, check=True
     ).stdout
+
+
+def run_benchmark_json(command: str, out: Path) -> tuple[str, object]:
+    """What ``python benchmarks/<command> --out <out>`` prints, and the JSON it writes to
+    ``out``."""
+    import json
+
+    printed = run_benchmark(f"{command} --out {out}")
+    return printed, json.loads(out.read_text())

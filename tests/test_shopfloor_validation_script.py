@@ -1,18 +1,15 @@
 """The shop-floor validation script runs end to end on a tiny budget (numbers not judged)."""
 
-import json
-
-from tests.benchmark_scripts import run_benchmark
+from tests.benchmark_scripts import run_benchmark_json
 
 
 def test_shopfloor_validation_script_compares_with_the_constant_feed(tmp_path):
-    out = tmp_path / "x.json"
-    printed = run_benchmark(
+    printed, data = run_benchmark_json(
         "shopfloor_validation.py --env machining_envs/Turning-v0 --trials 1 --episodes 1 "
-        f"--validation 2 --only afc --out {out}"
+        "--validation 2 --only afc",
+        tmp_path / "x.json",
     )
     assert "AFC (force/torque channel) vs constant feed" in printed
-    data = json.loads(out.read_text())
     assert set(data) == {"constant feed", "AFC (force/torque channel)"}
     d = data["AFC (force/torque channel)"]["vs_constant_feed"]
     assert d["n"] == 2 and d["low"] <= d["diff"] <= d["high"]
@@ -24,13 +21,12 @@ def test_shopfloor_validation_from_the_tuned_file(tmp_path):
     constant feed at every allowance, with the reasons episodes fail."""
     from agents.bench.tune import SHOPFLOOR_TUNED_FILE
 
-    out = tmp_path / "x.json"
-    printed = run_benchmark(
+    printed, data = run_benchmark_json(
         "shopfloor_validation.py --env machining_envs/ContouringFeed-v0 "
-        f"--tuned {SHOPFLOOR_TUNED_FILE} --validation 2 --out {out}"
+        f"--tuned {SHOPFLOOR_TUNED_FILE} --validation 2",
+        tmp_path / "x.json",
     )
     assert "| LookAheadFeed |" in printed
-    data = json.loads(out.read_text())
     la = data["agents"]["LookAheadFeed"]
     assert len(la["vs_constant_feed"]) == 3 and la["verdict"]
     assert set(la["fails"]) == {"unfinished", "broken", "overloaded", "over the limit"}
@@ -38,12 +34,10 @@ def test_shopfloor_validation_from_the_tuned_file(tmp_path):
 
 
 def test_shopfloor_ceiling_script_sweeps_the_constant_feed(tmp_path):
-    out = tmp_path / "c.json"
-    printed = run_benchmark(
-        "shopfloor_ceiling.py --env machining_envs/Turning-v0 --setpoints 0.8 "
-        f"--episodes 2 --out {out}"
+    printed, rows = run_benchmark_json(
+        "shopfloor_ceiling.py --env machining_envs/Turning-v0 --setpoints 0.8 --episodes 2",
+        tmp_path / "c.json",
     )
     assert "| shop floor | 0.8 |" in printed
-    rows = json.loads(out.read_text())
     assert [r["machine"] for r in rows] == ["ideal", "shop floor"]
     assert all(len(r["kept"]) == 3 for r in rows)

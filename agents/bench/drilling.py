@@ -48,6 +48,11 @@ RANKED = ("torque_mean_Nmm", "torque_std_Nmm", "thrust_mean_N", "thrust_std_N")
 _AGENTS = (("no control", NoControl), ("PD", PD), ("sliding mode", SlidingMode))
 
 
+def _slashed(values, fmt: str) -> str:
+    """``values`` written with ``fmt`` and joined by slashes: ``"0.31/0.35/0.42"``."""
+    return "/".join(format(v, fmt) for v in values)
+
+
 def drilling_comparison(
     diameters=PAPER_DIAMETERS_MM, seeds=(0, 1, 2), keep_seed: int | None = None
 ) -> dict:
@@ -139,11 +144,8 @@ def reproduce_drilling(out_dir=None, seed: int = 0, verbose: bool = True, n_seed
         "Fig. 12",
         "no control: force rises with depth (0.5 mm, 750 Hz)",
         "torque and thrust rise",
-        "torque by fifths of depth "
-        + "/".join(f"{v:.2f}" for v in means_t)
-        + " N·mm; thrust "
-        + "/".join(f"{v:.2f}" for v in means_h)
-        + " N",
+        f"torque by fifths of depth {_slashed(means_t, '.2f')} N·mm; "
+        f"thrust {_slashed(means_h, '.2f')} N",
         up_t and up_h,
         traj=tr12,
     )
@@ -212,11 +214,8 @@ def reproduce_drilling(out_dir=None, seed: int = 0, verbose: bool = True, n_seed
         "§1",
         "peck drilling: safe but slow",
         "low productivity",
-        "peck "
-        + "/".join(f"{v:.1f}" for v in peck_t)
-        + " s vs sliding mode "
-        + "/".join(f"{v:.1f}" for v in smc_t)
-        + f" s (0.5-0.8 mm), {peck_broke} broken",
+        f"peck {_slashed(peck_t, '.1f')} s vs sliding mode {_slashed(smc_t, '.1f')} s "
+        f"(0.5-0.8 mm), {peck_broke} broken",
         peck_broke == 0 and all(a > b for a, b in zip(peck_t, smc_t, strict=True)),
     )
 

@@ -181,21 +181,26 @@ def test_train_save_reload_resume(tiny, tmp_path):
     agent = load_policy(run / "final_model.zip")
     assert agent.obs_rms is not None and np.any(agent.obs_rms.var != 1.0)
     # A run folder is never overwritten; --resume continues it to a new total.
-    with pytest.raises(FileExistsError):
-        train(TURNING, "ppo", run, config_path=tiny, progress_bar=False, verbose=False)
-    train(
-        TURNING,
-        "ppo",
-        run,
-        config_path=tiny,
-        n_timesteps=512,
-        resume=True,
-        progress_bar=False,
-        verbose=False,
-    )
     from stable_baselines3 import PPO
 
-    assert PPO.load(run / "final_model.zip").num_timesteps >= 512
+    with pytest.raises(FileExistsError):
+        train(TURNING, "ppo", run, config_path=tiny, progress_bar=False, verbose=False)
+
+    def resumed_to(n_timesteps: int) -> int:
+        """The steps of the final model after ``--resume`` to ``n_timesteps`` in all."""
+        train(
+            TURNING,
+            "ppo",
+            run,
+            config_path=tiny,
+            n_timesteps=n_timesteps,
+            resume=True,
+            progress_bar=False,
+            verbose=False,
+        )
+        return PPO.load(run / "final_model.zip").num_timesteps
+
+    assert resumed_to(512) >= 512
     # The model files name no folder of the machine that trained them: the run's TensorBoard
     # folder is given again when a run resumes, and both sessions logged there.
     for name in ("final_model.zip", "best_model.zip"):
@@ -208,17 +213,7 @@ def test_train_save_reload_resume(tiny, tmp_path):
     import shutil
 
     shutil.rmtree(run / "checkpoints")
-    train(
-        TURNING,
-        "ppo",
-        run,
-        config_path=tiny,
-        n_timesteps=768,
-        resume=True,
-        progress_bar=False,
-        verbose=False,
-    )
-    assert PPO.load(run / "final_model.zip").num_timesteps >= 768
+    assert resumed_to(768) >= 768
 
 
 def test_statistics_are_never_unpickled(tmp_path):
