@@ -15,6 +15,7 @@ from machining_envs.core.checks import check_range
 
 __all__ = [
     "Agent",
+    "ProcessController",
     "unwrap",
     "unwrap_as",
     "check_setting",
@@ -223,3 +224,22 @@ class Agent:
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.name!r})"
+
+
+class ProcessController(Agent):
+    """A controller designed from what a process's env tells of its nominal machine.
+
+    Subclasses set ``io_type``, a class whose ``from_env(env)`` reads the env's nominal
+    constants (``agents.turning.TurningIO``, ...), and take that object as the first
+    argument of ``__init__``.
+    """
+
+    io_type: type
+
+    @classmethod
+    def from_env(cls, env, *args, **kwargs):
+        """The controller for ``env``, designed from its nominal constants only:
+        ``cls(cls.io_type.from_env(env), *args, **kwargs)``, with the settings of the
+        class's own parameters. ``TypeError`` if ``env`` is not of the controller's process.
+        """
+        return cls(cls.io_type.from_env(env), *args, **kwargs)

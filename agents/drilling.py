@@ -80,7 +80,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.base import Agent, check_positive, check_setting, unwrap_as
+from agents.base import ProcessController, check_positive, check_setting, unwrap_as
 from machining_envs.core.checks import PY_NUMBER_TYPES
 from machining_envs.core.lti import zoh
 from machining_envs.drilling.env import MicroDrillingEnv
@@ -164,7 +164,16 @@ class DrillingIO:
         return (2.0 * (command - self.command_min) / span - 1.0)[:, None]
 
 
-class NoControl(Agent):
+class _DrillingController(ProcessController):
+    """What the drilling controllers share: the observation they read and what they are
+    designed from."""
+
+    obs_dim = _OBS_DIM
+    obs_index = _I
+    io_type = DrillingIO
+
+
+class NoControl(_DrillingController):
     """The paper's uncontrolled run: the nominal voltage (545 Hz) and the nominal feed, held.
 
     With ``control="voltage"`` it holds ``voltage`` (default ``nominal_voltage``); with
@@ -177,8 +186,6 @@ class NoControl(Agent):
     #: the regulators must beat: the task charges nothing for spindle speed.
     TUNABLE = {"voltage": (2.0, 10.0, False)}
     state_size = 0
-    obs_dim = _OBS_DIM
-    obs_index = _I
 
     def __init__(self, io: DrillingIO, voltage: float | None = None):
         self.io = io
@@ -193,15 +200,11 @@ class NoControl(Agent):
             self.command = p.feed_velocity_mm_s
         self.name = "no control" if voltage is None else f"constant {self.command:.3g} V"
 
-    @classmethod
-    def from_env(cls, env, voltage: float | None = None) -> NoControl:
-        return cls(DrillingIO.from_env(env), voltage)
-
     def _act(self, obs, state):
         return self.io.action(np.full(obs.shape[0], self.command))
 
 
-class PD(Agent):
+class PD(_DrillingController):
     r"""PD control of the torque by the valve voltage (the paper's Fig. 15).
 
     .. math::
@@ -242,8 +245,6 @@ class PD(Agent):
     """
 
     state_size = 2  # [filtered error e^f_{k-1} (N·mm), started (0/1)]
-    obs_dim = _OBS_DIM
-    obs_index = _I
     #: Free parameters and their search ranges (low, high, log scale) for tuning.
     TUNABLE = {
         "loop_gain": (0.3, 30.0, True),
@@ -275,10 +276,6 @@ class PD(Agent):
         self._alpha = 1.0 - math.exp(-ts / tf) if tf > 0 else 1.0
         self.name = f"PD L={loop_gain:.3g}"
 
-    @classmethod
-    def from_env(cls, env, **kwargs) -> PD:
-        return cls(DrillingIO.from_env(env), **kwargs)
-
     def initial_state(self, n, obs):
         st = np.zeros((n, self.state_size))
         return st
@@ -304,7 +301,7 @@ class PD(Agent):
 _FEED, _OUT, _BACK = 0.0, 1.0, 2.0
 
 
-class PeckDrilling(Agent):
+class PeckDrilling(_DrillingController):
     """Peck drilling on ``control="feed"``: feed ``q`` mm, retract out of the hole, return.
 
     The drill retracts once the hole is ``peck_diameters`` x D deeper than where the current
@@ -336,8 +333,6 @@ class PeckDrilling(Agent):
     TUNABLE = {"peck_diameters": (0.25, 5.0, True), "feed_scale": (0.2, 4.0, True)}
     #: The env keywords the agent needs (it commands the feed): tuning makes its env so.
     ENV_KWARGS = {"control": "feed"}
-    obs_dim = _OBS_DIM
-    obs_index = _I
 
     def __init__(
         self,
@@ -363,10 +358,6 @@ class PeckDrilling(Agent):
         self.name = f"peck q={peck_diameters:g}D" + (
             f", {feed_scale:g}x feed" if feed_scale != 1.0 else ""
         )
-
-    @classmethod
-    def from_env(cls, env, **kwargs) -> PeckDrilling:
-        return cls(DrillingIO.from_env(env), **kwargs)
 
     def _act(self, obs, state):
         io = self.io
@@ -456,7 +447,7 @@ def sliding_mode_input(x1, x2, x3, k4, y_ref, lam, phi, k_near, k_far, params):
     return u, s, e
 
 
-class SlidingMode(Agent):
+class SlidingMode(_DrillingController):
     r"""Sliding-mode torque regulation by the valve voltage (see the module docstring).
 
     Parameters
@@ -496,8 +487,6 @@ class SlidingMode(Agent):
     }
     # [x1_hat, x2_hat, k4_hat, S, e, started, near(0/1), u]
     state_size = 8
-    obs_dim = _OBS_DIM
-    obs_index = _I
     STATE = {"x1": 0, "x2": 1, "k4": 2, "S": 3, "e": 4, "started": 5, "near": 6, "u": 7}
 
     def __init__(
@@ -540,10 +529,6 @@ class SlidingMode(Agent):
         self._gam = gam[:, 0]
         self._alpha = 1.0 - math.exp(-ts / self.k4_filter_s) if self.k4_filter_s > 0 else 1.0
         self.name = f"sliding mode lambda={lam:.3g}"
-
-    @classmethod
-    def from_env(cls, env, **kwargs) -> SlidingMode:
-        return cls(DrillingIO.from_env(env), **kwargs)
 
     def boundary_layer(self, torque_ref_Nmm):
         """phi, N·mm/s^2, for a reference torque."""

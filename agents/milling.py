@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.base import Agent, check_positive, unwrap_as
+from agents.base import ProcessController, check_positive, unwrap_as
 from machining_envs.core.actions import ActionMap
 from machining_envs.milling.env import EndMillingEnv
 from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams
@@ -84,7 +84,16 @@ class MillingIO:
         return (2.0 * command / self.command_max - 1.0)[:, None]
 
 
-class FixedGainIntegral(Agent):
+class _MillingController(ProcessController):
+    """What the end-milling controllers share: the observation they read and what they are
+    designed from."""
+
+    obs_dim = 7
+    obs_index = _I
+    io_type = MillingIO
+
+
+class FixedGainIntegral(_MillingController):
     r"""Integral torque controller of Park & Yoon (1986), eq. (1)-(4), with a fixed gain.
 
     .. math:: E(i) = T_r - T_c(i),\quad W(i) = W(i-1) + T_s E(i),\quad U(i) = K_c W(i)
@@ -104,8 +113,6 @@ class FixedGainIntegral(Agent):
     """
 
     state_size = 1  # [W]
-    obs_dim = 7
-    obs_index = _I
     #: Free parameters and their search ranges (low, high, log scale) for tuning.
     TUNABLE = {"kc": (0.02, 2.0, True), "setpoint": (0.5, 1.0, False)}
 
@@ -115,10 +122,6 @@ class FixedGainIntegral(Agent):
         self.setpoint = check_positive("setpoint", setpoint, 1.5)
         self.name = f"fixed integral Kc={kc:.3g}"
 
-    @classmethod
-    def from_env(cls, env, kc: float = 0.2, setpoint: float = 1.0) -> FixedGainIntegral:
-        return cls(MillingIO.from_env(env), kc, setpoint)
-
     def _act(self, obs, state):
         tc, tr = self.io.torque_counts(obs, self.setpoint)
         w = state[:, 0] + self.io.sample_time_s * (tr - tc)
@@ -127,7 +130,7 @@ class FixedGainIntegral(Agent):
         return self.io.action(u)
 
 
-class IntegralACC(Agent):
+class IntegralACC(_MillingController):
     r"""Integral ACC with the Koren-Masory variable-gain estimator (Park & Yoon eq. 12-19).
 
     Every sample, with ``U`` the command that was held while ``Tc`` was produced:
@@ -177,8 +180,6 @@ class IntegralACC(Agent):
     """
 
     state_size = 6  # [W, Km, Kc, U held, Km at start, Kc at start]
-    obs_dim = 7
-    obs_index = _I
     #: Free parameters and their search ranges (low, high, log scale) for tuning.
     TUNABLE = {
         "kc_design": (0.02, 1.0, True),
@@ -259,7 +260,7 @@ class IntegralACC(Agent):
         return self.io.action(u)
 
 
-class MillingConstantFeed(Agent):
+class MillingConstantFeed(_MillingController):
     """Baseline without AC: one programmed feed velocity for the whole cut.
 
     By default the feed is chosen, as a process planner would, so that the nominal torque
@@ -270,8 +271,6 @@ class MillingConstantFeed(Agent):
     """
 
     state_size = 0
-    obs_dim = 7
-    obs_index = _I
     #: Free parameters and their search ranges (low, high, log scale) for tuning.
     TUNABLE = {"design_depth_mm": (0.5, 4.0, False), "setpoint": (0.5, 1.0, False)}
 
@@ -298,16 +297,6 @@ class MillingConstantFeed(Agent):
                 f"(the servo's top feed), got {feed_mm_per_min!r}"
             )
         self.name = f"constant feed {self.feed_mm_per_min:.3g} mm/min"
-
-    @classmethod
-    def from_env(
-        cls,
-        env,
-        feed_mm_per_min: float | None = None,
-        design_depth_mm: float = 3.0,
-        setpoint: float = 1.0,
-    ) -> MillingConstantFeed:
-        return cls(MillingIO.from_env(env), feed_mm_per_min, design_depth_mm, setpoint)
 
     @classmethod
     def paper(cls, env, workpiece: str) -> MillingConstantFeed:

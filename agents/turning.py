@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.base import Agent, check_positive, unwrap_as
+from agents.base import ProcessController, check_positive, unwrap_as
 from machining_envs.core.checks import PY_NUMBER_TYPES
 from machining_envs.turning.env import TurningEnv
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams, unit_plant_coefficients
@@ -81,7 +81,16 @@ class TurningIO:
         return (2.0 * command / self.command_max - 1.0)[:, None]
 
 
-class FixedGainPI(Agent):
+class _TurningController(ProcessController):
+    """What the turning controllers share: the observation they read and what they are
+    designed from."""
+
+    obs_dim = 7
+    obs_index = _I
+    io_type = TurningIO
+
+
+class FixedGainPI(_TurningController):
     r"""Fixed-gain PI force controller of Noh, Kim & Kim (1992), eq. (12)-(13).
 
     .. math:: C(z) = K_h + \frac{K_g}{1 - z^{-1}} = \frac{K_h (K_{gh} - z^{-1})}{1 - z^{-1}},
@@ -103,8 +112,6 @@ class FixedGainPI(Agent):
     """
 
     state_size = 2  # [U_{k-1} (counts), E_{k-1} (counts)]
-    obs_dim = 7
-    obs_index = _I
     #: Free parameters and their search ranges (low, high, log scale) for tuning.
     TUNABLE = {
         "kh": (0.002, 0.1, True),
@@ -119,12 +126,6 @@ class FixedGainPI(Agent):
         self.setpoint = _positive("setpoint", setpoint, 1.5)
         self.name = f"fixed PI Kh={kh:.3g}"
 
-    @classmethod
-    def from_env(
-        cls, env, kh: float = 0.02, kgh: float = 1.9, setpoint: float = 1.0
-    ) -> FixedGainPI:
-        return cls(TurningIO.from_env(env), kh, kgh, setpoint)
-
     def _act(self, obs, state):
         fm, fr = self.io.force_counts(obs, self.setpoint)
         e = fr - fm
@@ -134,7 +135,7 @@ class FixedGainPI(Agent):
         return self.io.action(u)
 
 
-class ConstantFeed(Agent):
+class ConstantFeed(_TurningController):
     """Industrial baseline: one feed per revolution for the whole cut, no force feedback.
 
     The feed is chosen, as a process planner would, so that the nominal force law gives
@@ -147,8 +148,6 @@ class ConstantFeed(Agent):
     """
 
     state_size = 0
-    obs_dim = 7
-    obs_index = _I
     #: Free parameters and their search ranges (low, high, log scale) for tuning.
     TUNABLE = {"design_depth_mm": (0.5, 6.0, False), "setpoint": (0.5, 1.0, False)}
 
@@ -169,16 +168,6 @@ class ConstantFeed(Agent):
             self.feed_mm_per_rev = None
             self.name = f"constant feed, designed for {design_depth_mm:.2g} mm"
 
-    @classmethod
-    def from_env(
-        cls,
-        env,
-        feed_mm_per_rev: float | None = None,
-        design_depth_mm: float = 3.0,
-        setpoint: float = 1.0,
-    ) -> ConstantFeed:
-        return cls(TurningIO.from_env(env), feed_mm_per_rev, design_depth_mm, setpoint)
-
     def _act(self, obs, state):
         p = self.io.params
         feed = self.feed_mm_per_rev
@@ -189,7 +178,7 @@ class ConstantFeed(Agent):
         return self.io.action(np.clip(u, 0.0, self.io.command_max))
 
 
-class VariableGainPI(Agent):
+class VariableGainPI(_TurningController):
     r"""PI controller whose gain holds the open-loop gain ``K = Kh Kp`` constant, eq. (15)-(16).
 
     .. math:: K_h = K / \hat K_p, \qquad \hat K_p = F_c / \hat U
@@ -228,8 +217,6 @@ class VariableGainPI(Agent):
     }
     # [E_{k-1}, Kp_hat, U_{k-1..k-3}, U_hat_{k-1..k-3}, b1..b3, a1..a3]
     state_size = 14
-    obs_dim = 7
-    obs_index = _I
 
     def __init__(
         self,
