@@ -171,14 +171,16 @@ def drawn_scenarios(env: gym.Env, name: str, n: int) -> list:
     return drawn
 
 
-def reset_by_name_and_object(env: gym.Env, name: str, scenario) -> tuple[dict, dict]:
-    """The infos of ``env`` reset (seed 0) to the named scenario ``name``, then to the
-    scenario object ``scenario``; each info must name the scenario it was reset to."""
-    _, named = env.reset(seed=0, options={"scenario": name})
-    assert named["scenario"] == name
-    _, given = env.reset(options={"scenario": scenario})
-    assert given["scenario"] == scenario.name
-    return named, given
+def train_and_ood_values(env_id: str, n: int, *fields: str) -> dict:
+    """``{field: {"train": [...], "ood": [...]}}``: each field (a dotted attribute path) of
+    the scenarios an ``env_id`` env draws for ``train`` and ``ood`` on resets with seeds 0 to
+    ``n``-1."""
+    from operator import attrgetter
+
+    env = gym.make(env_id)
+    draws = {name: drawn_scenarios(env, name, n) for name in TRAIN_OOD}
+    env.close()
+    return {f: {k: [attrgetter(f)(s) for s in v] for k, v in draws.items()} for f in fields}
 
 
 def split_draws(factories: dict, splits: Sequence[str], seeds: int = 40):

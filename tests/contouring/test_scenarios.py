@@ -1,21 +1,14 @@
-"""Contouring scenarios: by name or object, training and held-out sets, bad scenarios refused."""
+"""Contouring scenarios: training and held-out sets, bad scenarios refused (by name or
+object: ``tests/envs/test_scenarios.py``)."""
 
-import gymnasium as gym
 import pytest
 
 from machining_envs import ContouringScenario, Path
-from tests.helpers import CONTOURING, TRAIN_OOD, assert_ood_reaches_beyond_train, drawn_scenarios
+from tests.helpers import CONTOURING, assert_ood_reaches_beyond_train, train_and_ood_values
 
 
-def test_scenarios_by_name_and_object_and_train_vs_test():
-    env = gym.make(CONTOURING)
-    _, info = env.reset(seed=0, options={"scenario": "paper_corner"})
-    assert info["scenario"] == "paper_corner" and info["path_length_mm"] == pytest.approx(100.0)
-    sc = ContouringScenario("mine", Path.line((1.0, 1.0), (5.0, 4.0)), feed_mm_s=20.0)
-    _, info = env.reset(options={"scenario": sc})
-    assert info["scenario"] == "mine" and (info["x_mm"], info["y_mm"]) == (1.0, 1.0)
-    # train and test differ: the held-out set reaches feeds the training set never does.
-    feeds = {name: [s.feed_mm_s for s in drawn_scenarios(env, name, 100)] for name in TRAIN_OOD}
+def test_ood_reaches_feeds_training_never_does():
+    feeds = train_and_ood_values(CONTOURING, 100, "feed_mm_s")["feed_mm_s"]
     assert_ood_reaches_beyond_train(feeds, 20.0, 60.0)
 
 

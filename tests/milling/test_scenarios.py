@@ -1,5 +1,5 @@
-"""Milling scenarios: by name or object, training and held-out sets, the cut area of a
-profile, bad scenarios refused."""
+"""Milling scenarios: training and held-out sets, the cut area of a profile, bad scenarios
+refused (by name or object: ``tests/envs/test_scenarios.py``)."""
 
 import gymnasium as gym
 import numpy as np
@@ -10,27 +10,16 @@ from machining_envs.core.workpieces import DepthProfile
 from machining_envs.milling.scenarios import cut_area_mm2
 from tests.helpers import (
     MILLING,
-    TRAIN_OOD,
     assert_ood_reaches_beyond_train,
-    assert_splits_share_a_distribution_not_episodes,
-    drawn_scenarios,
-    reset_by_name_and_object,
     split_draws,
+    train_and_ood_values,
 )
 
 
-def test_scenarios_by_name_and_object():
-    env = gym.make(MILLING)
-    sc = MillingScenario("mine", DepthProfile.steps((0.5, 1.5), 5.0), spindle_scale=1.5)
-    info, mine = reset_by_name_and_object(env, "paper_taper", sc)
-    assert info["workpiece_length_mm"] == 40.0
-    assert info["workpiece_volume_mm3"] == pytest.approx(32.0 * 40.0 * 1.5)
-    assert mine["spindle_rpm"] == 600.0
-    # ood reaches depths and speeds training never does.
-    draws = {name: drawn_scenarios(env, name, 200) for name in TRAIN_OOD}
-    rpm = {k: [s.spindle_scale for s in v] for k, v in draws.items()}
-    depth = {k: [s.profile.max_depth_mm for s in v] for k, v in draws.items()}
-    assert_ood_reaches_beyond_train(rpm, 0.8, 1.25)
+def test_ood_reaches_depths_and_speeds_training_never_does():
+    v = train_and_ood_values(MILLING, 200, "spindle_scale", "profile.max_depth_mm")
+    assert_ood_reaches_beyond_train(v["spindle_scale"], 0.8, 1.25)
+    depth = v["profile.max_depth_mm"]
     assert max(depth["train"]) <= 3.0 < max(depth["ood"])
 
 
@@ -49,10 +38,6 @@ def test_bad_scenarios_name_the_field():
         MillingScenario("x", DepthProfile.steps(), spindle_scale=-1.0)
     with pytest.raises(ValueError, match="profile"):
         MillingScenario("x", [1.0, 2.0])
-
-
-def test_splits_share_a_distribution_but_not_episodes():
-    assert_splits_share_a_distribution_not_episodes(gym.make(MILLING), lambda s: s.spindle_scale)
 
 
 def test_split_draws_are_numpys_scalar_draws_in_order():

@@ -1,35 +1,23 @@
-"""Turning scenarios: by name or object, training and held-out sets, bad scenarios refused."""
+"""Turning scenarios: training and held-out sets, bad scenarios refused (by name
+or object: ``tests/envs/test_scenarios.py``)."""
 
 import gymnasium as gym
 
-from machining_envs import TurningScenario
 from machining_envs.core.workpieces import DepthProfile
 from tests.helpers import (
-    TRAIN_OOD,
     TURNING,
     assert_ood_reaches_beyond_train,
-    assert_splits_share_a_distribution_not_episodes,
-    drawn_scenarios,
-    reset_by_name_and_object,
     split_draws,
+    train_and_ood_values,
 )
 
 
-def test_scenarios_by_name_and_object():
-    env = gym.make(TURNING)
-    sc = TurningScenario("mine", DepthProfile.steps((0.5, 1.5), 5.0), spindle_rpm=600.0)
-    info, mine = reset_by_name_and_object(env, "taper_405", sc)
-    assert info["workpiece_length_mm"] == 45.0 and mine["spindle_rpm"] == 600.0
-    # ood reaches speeds and limits the training set never does.
-    rpms = {name: [s.spindle_rpm for s in drawn_scenarios(env, name, 200)] for name in TRAIN_OOD}
-    assert_ood_reaches_beyond_train(rpms, 245.0, 700.0)
-    limits = {n: [s.force_limit_N for s in drawn_scenarios(env, n, 100)] for n in TRAIN_OOD}
+def test_ood_reaches_speeds_and_limits_training_never_does():
+    v = train_and_ood_values(TURNING, 200, "spindle_rpm", "force_limit_N")
+    assert_ood_reaches_beyond_train(v["spindle_rpm"], 245.0, 700.0)
+    limits = v["force_limit_N"]
     assert set(limits["train"]) == {1000.0}
     assert min(limits["ood"]) < 800.0 and max(limits["ood"]) > 1200.0
-
-
-def test_splits_share_a_distribution_but_not_episodes():
-    assert_splits_share_a_distribution_not_episodes(gym.make(TURNING), lambda s: s.spindle_rpm)
 
 
 def test_split_draws_are_numpys_scalar_draws_in_order():
