@@ -1,15 +1,9 @@
-"""Contouring scenarios: training and held-out sets, bad scenarios refused (by name or
-object: ``tests/envs/test_scenarios.py``)."""
+"""Contouring scenarios: bad scenarios refused, drawn ones as checked (by name or object,
+and the held-out sets: ``tests/envs/test_scenarios.py``)."""
 
 import pytest
 
 from machining_envs import ContouringScenario, Path
-from tests.helpers import CONTOURING, assert_ood_reaches_beyond_train, train_and_ood_values
-
-
-def test_ood_reaches_feeds_training_never_does():
-    feeds = train_and_ood_values(CONTOURING, 100, "feed_mm_s")["feed_mm_s"]
-    assert_ood_reaches_beyond_train(feeds, 20.0, 60.0)
 
 
 def test_bad_scenarios_name_the_field():

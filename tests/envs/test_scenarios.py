@@ -19,7 +19,9 @@ from tests.helpers import (
     DRILLING,
     MILLING,
     TURNING,
+    assert_ood_reaches_beyond_train,
     assert_splits_share_a_distribution_not_episodes,
+    train_and_ood_values,
 )
 
 _STEPS = DepthProfile.steps((0.5, 1.5), 5.0)
@@ -80,3 +82,18 @@ def test_scenarios_by_name_and_object(env_id, named, given):
 )
 def test_splits_share_a_distribution_but_not_episodes(env_id, field):
     assert_splits_share_a_distribution_not_episodes(gym.make(env_id), attrgetter(field))
+
+
+@pytest.mark.parametrize(
+    "env_id, field, n, train_low, train_high",
+    [
+        (TURNING, "spindle_rpm", 200, 245.0, 700.0),
+        (MILLING, "spindle_scale", 200, 0.8, 1.25),
+        (CONTOURING, "feed_mm_s", 100, 20.0, 60.0),
+    ],
+)
+def test_ood_reaches_beyond_train(env_id, field, n, train_low, train_high):
+    """The ``ood`` split reaches speeds (feeds) the training set, within ``[train_low,
+    train_high]``, never does."""
+    values = train_and_ood_values(env_id, n, field)[field]
+    assert_ood_reaches_beyond_train(values, train_low, train_high)
