@@ -34,21 +34,6 @@ def test_action_map_round_trip_both_modes():
     assert feed.command_to_action(0.32) == pytest.approx(0.32 / 3.0)
 
 
-@pytest.mark.parametrize(
-    "kwargs, match",
-    [
-        ({"control": "pressure"}, "control"),
-        ({"valve_damping": -0.7}, "valve_damping"),
-        ({"nominal_voltage": 12.0}, "nominal_voltage"),
-        ({"scenario": "paper_0.9"}, "scenario"),
-        ({"max_episode_time_s": -1}, "max_episode_time_s"),
-    ],
-)
-def test_bad_values_are_refused_naming_them(kwargs, match):
-    with pytest.raises(ValueError, match=match):
-        gym.make(DRILLING, **kwargs)
-
-
 def test_kwargs_override_parameters():
     env = gym.make(DRILLING, torque_noise_Nmm=0.02, nominal_voltage=6.0, scenario="paper_0.6")
     _, info = env.reset(seed=0)

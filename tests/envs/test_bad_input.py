@@ -1,6 +1,6 @@
-"""Bad input to every env, the same way: actions that are not real numbers, options that are
-not a dict, and a bool where a parameter or a reward weight takes a number, are refused
-with a message that names the env or the field."""
+"""Bad input to every env, the same way: keywords out of range, actions that are not real
+numbers, options that are not a dict, and a bool where a parameter or a reward weight takes
+a number, are refused with a message that names the env or the field."""
 
 from __future__ import annotations
 
@@ -12,8 +12,37 @@ import numpy as np
 import pytest
 
 import machining_envs
+from tests.helpers import CONTOURING, CONTOURING_FEED, DRILLING, MILLING, TURNING
 
 NOT_REAL = ["0.3", b"0.3", np.array(["0.3"]), [0.3 + 1j], "abc", {}, True, [None]]
+
+
+#: (env id, keywords it is made with, what the message must name)
+BAD_VALUES = [
+    (TURNING, {"spindle_rpm": -405}, "spindle_rpm"),
+    (TURNING, {"scenario": "paper_999"}, "scenario"),
+    (MILLING, {"spindle_rpm": -400}, "spindle_rpm"),
+    (MILLING, {"force_model": "mechanistic"}, "force_model"),
+    (MILLING, {"scenario": "paper_wedge"}, "scenario"),
+    (MILLING, {"params": {"servo_gain": 0.02}}, "params"),
+    (DRILLING, {"control": "pressure"}, "control"),
+    (DRILLING, {"valve_damping": -0.7}, "valve_damping"),
+    (DRILLING, {"nominal_voltage": 12.0}, "nominal_voltage"),
+    (DRILLING, {"scenario": "paper_0.9"}, "scenario"),
+    (DRILLING, {"max_episode_time_s": -1}, "max_episode_time_s"),
+    (CONTOURING, {"inertia_x_kgm2": -1.0}, "inertia_x_kgm2"),
+    (CONTOURING, {"scenario": "paper_square"}, "scenario"),
+    (CONTOURING, {"in_position_mm": -1.0}, "in_position_mm"),
+    (CONTOURING_FEED, {"servo": "pid"}, "servo"),
+    (CONTOURING_FEED, {"tolerance_mm": 0.0}, "tolerance_mm"),
+    (CONTOURING_FEED, {"decision_interval_s": 0.00033}, "decision_interval_s"),
+]
+
+
+@pytest.mark.parametrize("env_id, kwargs, match", BAD_VALUES)
+def test_bad_values_are_refused_naming_them(env_id, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        gym.make(env_id, **kwargs)
 
 
 @pytest.fixture(scope="module", params=machining_envs.ENV_IDS)

@@ -67,20 +67,6 @@ def test_classical_agent_is_unaffected_by_the_action_map():
     np.testing.assert_allclose(runs["log"], runs["linear"], rtol=1e-4, atol=1e-4)
 
 
-@pytest.mark.parametrize(
-    "kwargs, match",
-    [
-        ({"spindle_rpm": -400}, "spindle_rpm"),
-        ({"force_model": "mechanistic"}, "force_model"),
-        ({"scenario": "paper_wedge"}, "scenario"),
-        ({"params": {"servo_gain": 0.02}}, "params"),
-    ],
-)
-def test_bad_values_are_refused_naming_them(kwargs, match):
-    with pytest.raises(ValueError, match=match):
-        gym.make(MILLING, **kwargs)
-
-
 def test_bad_reset_input_is_refused():
     with pytest.raises(ValueError, match="reset options"):
         gym.make(MILLING).reset(options={"scenario": "train", "depth": 2})
