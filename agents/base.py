@@ -16,6 +16,7 @@ from machining_envs.core.checks import check_range
 __all__ = [
     "Agent",
     "ProcessController",
+    "SETPOINT_SEARCH",
     "unwrap",
     "unwrap_as",
     "check_setting",
@@ -23,6 +24,12 @@ __all__ = [
     "check_observation",
     "observation_field",
 ]
+
+
+#: The search range (low, high, log scale) of a regulator's ``setpoint``, its share of the
+#: observed limit, in every ``TUNABLE``: the papers regulate at the limit (1.0); tuning may
+#: keep a margin below it, down to half.
+SETPOINT_SEARCH = (0.5, 1.0, False)
 
 
 def observation_field(index: int, obs_index: dict | None) -> str:

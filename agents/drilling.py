@@ -80,7 +80,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.base import ProcessController, check_positive, check_setting, unwrap_as
+from agents.base import SETPOINT_SEARCH, ProcessController, check_positive, check_setting, unwrap_as
 from machining_envs.core.checks import PY_NUMBER_TYPES
 from machining_envs.core.lti import zoh
 from machining_envs.drilling.env import MicroDrillingEnv
@@ -249,7 +249,7 @@ class PD(_DrillingController):
     TUNABLE = {
         "loop_gain": (0.3, 30.0, True),
         "derivative_time_s": (0.002, 0.2, True),
-        "setpoint": (0.5, 1.0, False),
+        "setpoint": SETPOINT_SEARCH,
     }
 
     def __init__(
@@ -483,7 +483,7 @@ class SlidingMode(_DrillingController):
     TUNABLE = {
         "lam": (2.0, 60.0, True),
         "epsilon": (0.005, 0.2, True),
-        "setpoint": (0.5, 1.0, False),
+        "setpoint": SETPOINT_SEARCH,
     }
     # [x1_hat, x2_hat, k4_hat, S, e, started, near(0/1), u]
     state_size = 8

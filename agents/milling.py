@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.base import ProcessController, check_positive, unwrap_as
+from agents.base import SETPOINT_SEARCH, ProcessController, check_positive, unwrap_as
 from machining_envs.core.actions import ActionMap
 from machining_envs.milling.env import EndMillingEnv
 from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams
@@ -114,7 +114,7 @@ class FixedGainIntegral(_MillingController):
 
     state_size = 1  # [W]
     #: Free parameters and their search ranges (low, high, log scale) for tuning.
-    TUNABLE = {"kc": (0.02, 2.0, True), "setpoint": (0.5, 1.0, False)}
+    TUNABLE = {"kc": (0.02, 2.0, True), "setpoint": SETPOINT_SEARCH}
 
     def __init__(self, io: MillingIO, kc: float = 0.2, setpoint: float = 1.0):
         self.io = io
@@ -184,7 +184,7 @@ class IntegralACC(_MillingController):
     TUNABLE = {
         "kc_design": (0.02, 1.0, True),
         "c1": (1e-4, 1e-2, True),
-        "setpoint": (0.5, 1.0, False),
+        "setpoint": SETPOINT_SEARCH,
     }
 
     def __init__(
@@ -272,7 +272,7 @@ class MillingConstantFeed(_MillingController):
 
     state_size = 0
     #: Free parameters and their search ranges (low, high, log scale) for tuning.
-    TUNABLE = {"design_depth_mm": (0.5, 4.0, False), "setpoint": (0.5, 1.0, False)}
+    TUNABLE = {"design_depth_mm": (0.5, 4.0, False), "setpoint": SETPOINT_SEARCH}
 
     def __init__(
         self,

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.base import ProcessController, check_positive, unwrap_as
+from agents.base import SETPOINT_SEARCH, ProcessController, check_positive, unwrap_as
 from machining_envs.core.checks import PY_NUMBER_TYPES
 from machining_envs.turning.env import TurningEnv
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams, unit_plant_coefficients
@@ -116,7 +116,7 @@ class FixedGainPI(_TurningController):
     TUNABLE = {
         "kh": (0.002, 0.1, True),
         "kgh": (1.05, 5.0, True),
-        "setpoint": (0.5, 1.0, False),
+        "setpoint": SETPOINT_SEARCH,
     }
 
     def __init__(self, io: TurningIO, kh: float = 0.02, kgh: float = 1.9, setpoint: float = 1.0):
@@ -149,7 +149,7 @@ class ConstantFeed(_TurningController):
 
     state_size = 0
     #: Free parameters and their search ranges (low, high, log scale) for tuning.
-    TUNABLE = {"design_depth_mm": (0.5, 6.0, False), "setpoint": (0.5, 1.0, False)}
+    TUNABLE = {"design_depth_mm": (0.5, 6.0, False), "setpoint": SETPOINT_SEARCH}
 
     def __init__(
         self,
@@ -213,7 +213,7 @@ class VariableGainPI(_TurningController):
     TUNABLE = {
         "k": (0.05, 0.8, True),
         "kgh": (1.05, 5.0, True),
-        "setpoint": (0.5, 1.0, False),
+        "setpoint": SETPOINT_SEARCH,
     }
     # [E_{k-1}, Kp_hat, U_{k-1..k-3}, U_hat_{k-1..k-3}, b1..b3, a1..a3]
     state_size = 14
@@ -370,10 +370,10 @@ class DelayAwarePI(VariableGainPI):
         As for :class:`VariableGainPI`.
     """
 
+    #: The phase margin instead of VariableGainPI's K, the rest as VariableGainPI's.
     TUNABLE = {
         "phase_margin_deg": (20.0, 80.0, False),
-        "kgh": (1.05, 5.0, True),
-        "setpoint": (0.5, 1.0, False),
+        **{k: v for k, v in VariableGainPI.TUNABLE.items() if k != "k"},
     }
 
     def __init__(
