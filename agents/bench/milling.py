@@ -34,12 +34,11 @@ import numpy as np
 
 from agents.afc import AdaptiveFeedControl
 from agents.bench.figures import reproduction_figure, save_figure
-from agents.bench.spec import BenchmarkSpec, Process, Robustness
+from agents.bench.spec import BenchmarkSpec, ConstantDepthCut, Process, Robustness
 from agents.eval import rollout
 from agents.milling import FixedGainIntegral, IntegralACC, MillingConstantFeed
 from machining_envs.core.lti import critical_gain
 from machining_envs.core.metrics import OSC_WINDOW_S, oscillation_amplitude, segment_bounds
-from machining_envs.core.workpieces import DepthProfile
 from machining_envs.milling.metrics import milling_metrics
 from machining_envs.milling.plant import MillingParams
 from machining_envs.milling.scenarios import PAPER_LENGTH_MM, MillingScenario
@@ -413,12 +412,6 @@ def _oracle(env):
     return MillingMPCOracle.from_env(env)
 
 
-def _grid_cut(spindle_scale: float, depth_mm: float) -> MillingScenario:
-    """One constant-depth cut of the robustness grid (nominal process constants)."""
-    prof = DepthProfile.steps((depth_mm,), PAPER_LENGTH_MM, name=f"{depth_mm:g} mm")
-    return MillingScenario(f"grid_{spindle_scale:g}_{depth_mm:g}", prof, float(spindle_scale))
-
-
 PROCESS = Process(
     "milling",
     benchmarks=(
@@ -446,7 +439,7 @@ PROCESS = Process(
                 (0.7, 0.85, 1.0, 1.2, 1.4),
                 "radial depth (mm)",
                 (0.5, 1.0, 2.0, 3.0),
-                _grid_cut,
+                ConstantDepthCut(MillingScenario, PAPER_LENGTH_MM),
             ),
             table_metrics=(
                 "machining_time_min",

@@ -19,8 +19,9 @@ from gymnasium.envs.registration import load_env_creator
 import machining_envs  # noqa: F401  (registers the env ids)
 from agents.eval import task_of
 from machining_envs.core.score import Task
+from machining_envs.core.workpieces import DepthProfile
 
-__all__ = ["BenchmarkSpec", "Process", "Robustness", "TABLE_METRICS"]
+__all__ = ["BenchmarkSpec", "ConstantDepthCut", "Process", "Robustness", "TABLE_METRICS"]
 
 #: Metrics shown in the printed table by default (all are in the CSV).
 TABLE_METRICS = (
@@ -47,6 +48,20 @@ class Robustness:
     y_label: str
     y_values: tuple[float, ...]
     scenario: Callable[[float, float], object]
+
+
+@dataclass(frozen=True)
+class ConstantDepthCut:
+    """A :class:`Robustness` grid's cell for turning or milling: at ``(speed, depth_mm)``, one
+    constant depth over ``length_mm`` with the nominal process constants, ``speed`` being the
+    scenario class's third argument (``spindle_rpm``, ``spindle_scale``)."""
+
+    scenario_cls: type
+    length_mm: float
+
+    def __call__(self, speed: float, depth_mm: float):
+        prof = DepthProfile.steps((depth_mm,), self.length_mm, name=f"{depth_mm:g} mm")
+        return self.scenario_cls(f"grid_{speed:g}_{depth_mm:g}", prof, float(speed))
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ import numpy as np
 
 from agents.afc import AdaptiveFeedControl
 from agents.bench.figures import reproduction_figure, save_figure
-from agents.bench.spec import BenchmarkSpec, Process, Robustness
+from agents.bench.spec import BenchmarkSpec, ConstantDepthCut, Process, Robustness
 from agents.eval import rollout
 from agents.eval.margins import OperatingPoint
 from agents.turning import ConstantFeed, FixedGainPI, VariableGainPI
@@ -34,7 +34,6 @@ from machining_envs.core.metrics import (
     oscillation_amplitude,
     segment_bounds,
 )
-from machining_envs.core.workpieces import DepthProfile
 from machining_envs.turning.scenarios import PAPER_STEP_SEGMENT_MM, TurningScenario
 
 __all__ = [
@@ -241,12 +240,6 @@ def _oracle(env):
     return TurningMPCOracle.from_env(env)
 
 
-def _grid_cut(rpm: float, depth_mm: float) -> TurningScenario:
-    """One constant-depth cut of the robustness grid (nominal process constants)."""
-    prof = DepthProfile.steps((depth_mm,), 3 * PAPER_STEP_SEGMENT_MM, name=f"{depth_mm:g} mm")
-    return TurningScenario(f"grid_{rpm:g}_{depth_mm:g}", prof, float(rpm))
-
-
 PROCESS = Process(
     "turning",
     benchmarks=(
@@ -268,7 +261,7 @@ PROCESS = Process(
                 (245.0, 350.0, 500.0, 700.0),
                 "depth of cut (mm)",
                 (0.5, 1.0, 2.0, 3.0),
-                _grid_cut,
+                ConstantDepthCut(TurningScenario, 3 * PAPER_STEP_SEGMENT_MM),
             ),
         ),
     ),
