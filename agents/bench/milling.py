@@ -34,7 +34,13 @@ import numpy as np
 
 from agents.afc import AdaptiveFeedControl
 from agents.bench.figures import reproduction_figure, save_figure
-from agents.bench.spec import BenchmarkSpec, ConstantDepthCut, Process, Robustness
+from agents.bench.spec import (
+    BenchmarkSpec,
+    ConstantDepthCut,
+    DeferredAgent,
+    Process,
+    Robustness,
+)
 from agents.eval import rollout
 from agents.milling import FixedGainIntegral, IntegralACC, MillingConstantFeed
 from machining_envs.core.lti import critical_gain
@@ -405,13 +411,6 @@ def plot_milling_reproduction(runs: dict, fig5: dict, gains: dict, path) -> None
 # --- The declaration: what the benchmark, the CLI and the docs know of milling -------------
 
 
-def _oracle(env):
-    """The MPC oracle (``agents.oracle``; imported when the benchmark runs it: CasADi)."""
-    from agents.oracle import MillingMPCOracle
-
-    return MillingMPCOracle.from_env(env)
-
-
 PROCESS = Process(
     "milling",
     benchmarks=(
@@ -429,7 +428,7 @@ PROCESS = Process(
             ),
             machine_reference=MillingConstantFeed,
             learned=("end_milling_ppo",),
-            oracle=_oracle,
+            oracle=DeferredAgent("agents.oracle.MillingMPCOracle"),
             oracle_episodes=20,
             oracle_in_quick=False,  # a cut of some 2000 samples: about 16 s
             oracle_seconds=16.0,

@@ -10,6 +10,7 @@ episode metrics and primary score are not declared here: they belong to the env'
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -21,7 +22,14 @@ from agents.eval import task_of
 from machining_envs.core.score import Task
 from machining_envs.core.workpieces import DepthProfile
 
-__all__ = ["BenchmarkSpec", "ConstantDepthCut", "Process", "Robustness", "TABLE_METRICS"]
+__all__ = [
+    "BenchmarkSpec",
+    "ConstantDepthCut",
+    "DeferredAgent",
+    "Process",
+    "Robustness",
+    "TABLE_METRICS",
+]
 
 #: Metrics shown in the printed table by default (all are in the CSV).
 TABLE_METRICS = (
@@ -62,6 +70,19 @@ class ConstantDepthCut:
     def __call__(self, speed: float, depth_mm: float):
         prof = DepthProfile.steps((depth_mm,), self.length_mm, name=f"{depth_mm:g} mm")
         return self.scenario_cls(f"grid_{speed:g}_{depth_mm:g}", prof, float(speed))
+
+
+@dataclass(frozen=True)
+class DeferredAgent:
+    """An agent factory ``env -> Class.from_env(env)`` that imports ``Class`` (``path``:
+    ``"module.Class"``) only when called: for agents whose imports are heavy or optional
+    (the MPC oracles need CasADi)."""
+
+    path: str
+
+    def __call__(self, env):
+        module, _, name = self.path.rpartition(".")
+        return getattr(importlib.import_module(module), name).from_env(env)
 
 
 @dataclass(frozen=True)

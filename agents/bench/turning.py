@@ -24,7 +24,13 @@ import numpy as np
 
 from agents.afc import AdaptiveFeedControl
 from agents.bench.figures import reproduction_figure, save_figure
-from agents.bench.spec import BenchmarkSpec, ConstantDepthCut, Process, Robustness
+from agents.bench.spec import (
+    BenchmarkSpec,
+    ConstantDepthCut,
+    DeferredAgent,
+    Process,
+    Robustness,
+)
 from agents.eval import rollout
 from agents.eval.margins import OperatingPoint
 from agents.turning import ConstantFeed, FixedGainPI, VariableGainPI
@@ -233,13 +239,6 @@ def plot_turning_reproduction(results, path) -> None:
 # --- The declaration: what the benchmark, the CLI and the docs know of turning -------------
 
 
-def _oracle(env):
-    """The MPC oracle (``agents.oracle``; imported when the benchmark runs it: CasADi)."""
-    from agents.oracle import TurningMPCOracle
-
-    return TurningMPCOracle.from_env(env)
-
-
 PROCESS = Process(
     "turning",
     benchmarks=(
@@ -254,7 +253,7 @@ PROCESS = Process(
             learned=("turning_ppo", "turning_ppo_residual", "turning_td3_residual"),
             extra_splits=("wear", "shopfloor"),
             margin_points=tuple(OperatingPoint(rpm, 2.0) for rpm in (245.0, 405.0, 700.0)),
-            oracle=_oracle,
+            oracle=DeferredAgent("agents.oracle.TurningMPCOracle"),
             oracle_episodes=20,
             robustness=Robustness(
                 "spindle speed (rpm)",

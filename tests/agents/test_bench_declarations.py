@@ -1,5 +1,6 @@
-"""The robustness grids of turning and milling: each cell one constant depth at the grid's
-speed, built by a picklable declaration (``--jobs`` sends specs to other processes)."""
+"""The declared pieces of turning's and milling's benchmarks: the robustness grid (each cell
+one constant depth at the grid's speed) and the MPC oracle, both picklable (``--jobs`` sends
+specs to other processes)."""
 
 import pickle
 
@@ -23,3 +24,17 @@ def test_grid_cells_are_constant_depth_cuts_at_the_grid_speed(process, speed_fie
             assert sc.profile.edges_mm == (0.0, length_mm)
             assert sc.profile.start_depths_mm == sc.profile.end_depths_mm == (y,)
     assert pickle.loads(pickle.dumps(grid)).scenario(x, y) == sc
+
+
+def test_the_oracles_are_imported_when_built():
+    """The turning and milling oracles are declared by import path (CasADi loads only when
+    the benchmark builds one); built, each is its process's MPC oracle."""
+    pytest.importorskip("casadi")
+    import gymnasium as gym
+
+    from agents.oracle import MillingMPCOracle, TurningMPCOracle
+
+    for process, cls in ((TURNING_PROCESS, TurningMPCOracle), (MILLING_PROCESS, MillingMPCOracle)):
+        spec = process.benchmarks[0]
+        oracle = pickle.loads(pickle.dumps(spec.oracle))(gym.make(spec.env_id))
+        assert type(oracle) is cls
