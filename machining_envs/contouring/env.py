@@ -36,9 +36,6 @@ from machining_envs.core.rendering import (
 )
 from machining_envs.core.vector import (
     LaneVectorEnv,
-    check_num_envs,
-    check_vector_args,
-    first_scenario,
 )
 
 __all__ = [
@@ -204,18 +201,7 @@ class ContouringEnv(LaneEnv):
         divergence_mm: float = 50.0,
         **overrides,
     ):
-        self._core = core = ContouringCore(
-            type(self).__name__,
-            1,
-            scenario,
-            params,
-            reward,
-            max_episode_time_s,
-            in_position_mm,
-            divergence_mm,
-            overrides,
-        )
-        self._adopt(core, scenario, render_mode)
+        core = self._open(ContouringCore, locals())  # the core's options by their names
         self.in_position_mm = core.in_position_mm
         self.divergence_mm = core.divergence_mm
         self._umax = self.params.command_max_mm_s
@@ -267,19 +253,7 @@ class ContouringVectorEnv(LaneVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **overrides,
     ):
-        check_vector_args(self.env_name, num_threads, overrides)
-        core = ContouringCore(
-            type(self).__name__,
-            check_num_envs(num_envs),
-            first_scenario(scenario),
-            params,
-            reward,
-            max_episode_time_s,
-            in_position_mm,
-            divergence_mm,
-            overrides,
-        )
-        super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
+        self._open(ContouringCore, locals())  # the core's options by their names
 
 
 def render_trace(path: Path, log: EpisodeLog, title: str) -> np.ndarray:

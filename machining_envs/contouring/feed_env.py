@@ -12,7 +12,6 @@ from machining_envs.contouring.env import (
 )
 from machining_envs.contouring.feed_lanes import (
     DEFAULT_TOLERANCE_MM,
-    FEED_OPTIONS,
     LOOKAHEAD_MM,
     FeedCore,
     FeedReward,
@@ -32,9 +31,6 @@ from machining_envs.core.rendering import (
 )
 from machining_envs.core.vector import (
     LaneVectorEnv,
-    check_num_envs,
-    check_vector_args,
-    first_scenario,
 )
 
 __all__ = ["ContouringFeedEnv", "ContouringFeedVectorEnv", "FeedReward", "LOOKAHEAD_MM"]
@@ -175,10 +171,7 @@ class ContouringFeedEnv(LaneEnv):
         actuation: Actuation | dict | None = None,
         **overrides,
     ):
-        given = locals()  # the core's keywords are this method's of the same names
-        options = {name: given[name] for name in FEED_OPTIONS}
-        self._core = core = FeedCore(type(self).__name__, 1, scenario, params, **options)
-        self._adopt(core, scenario, render_mode)
+        core = self._open(FeedCore, locals())  # the core's options by their names
         self.servo = core.servo
         self.tolerance_mm = core.tolerance_mm
         self.decision_interval_s = core.decision_interval_s
@@ -245,12 +238,7 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **overrides,
     ):
-        check_vector_args(self.env_name, num_threads, overrides)
-        given = locals()  # the core's keywords are this method's of the same names
-        options = {name: given[name] for name in FEED_OPTIONS}
-        n, first = check_num_envs(num_envs), first_scenario(scenario)
-        core = FeedCore(type(self).__name__, n, first, params, **options)
-        super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
+        core = self._open(FeedCore, locals())  # the core's options by their names
         self.servo = core.servo
         self.tolerance_mm = core.tolerance_mm
         self.override_max = core.override_max

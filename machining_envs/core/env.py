@@ -116,13 +116,21 @@ class LaneEnv(gym.Env, abc.ABC):
     that its vector env holds N of, so that a lane and the single env run the same code.
 
     A subclass builds its core (a :class:`~machining_envs.core.lanes.LaneCore` of one lane)
-    in ``__init__`` and hands it to :meth:`_adopt`, and says how an action is checked
+    in ``__init__`` from its arguments (:meth:`_open`), and says how an action is checked
     (:meth:`_set_action`) and what it keeps of a new episode (:meth:`_began`); ``reset``,
     ``step`` and the command map are shared. ``_LOG_FIELDS`` names what a rendered episode
     records of ``info`` (:class:`EpisodeLog`).
     """
 
     _LOG_FIELDS: dict[str, str] = {}
+
+    def _open(self, core_cls: type, given: dict):
+        """Build a ``core_cls`` of one lane from the env's arguments ``given`` (its
+        ``__init__``'s ``locals()``: ``scenario``, ``render_mode`` and the core's options,
+        named as the core names them, ``LaneCore.from_options``), adopt it and return it."""
+        core = core_cls.from_options(type(self).__name__, 1, given["scenario"], given)
+        self._adopt(core, given["scenario"], given["render_mode"])
+        return core
 
     def _adopt(self, core, scenario, render_mode) -> None:
         """Take ``core`` (of one lane) and give the env the public attributes every env

@@ -13,9 +13,6 @@ from machining_envs.core.rendering import (
 )
 from machining_envs.core.vector import (
     LaneVectorEnv,
-    check_num_envs,
-    check_vector_args,
-    first_scenario,
 )
 from machining_envs.drilling.lanes import (
     CONTROL_MODES,
@@ -217,17 +214,7 @@ class MicroDrillingEnv(LaneEnv):
         max_episode_time_s: float = 150.0,
         **overrides,
     ):
-        core = DrillingCore(
-            type(self).__name__,
-            1,
-            scenario,
-            control,
-            params,
-            reward,
-            max_episode_time_s,
-            overrides,
-        )
-        self._adopt(core, scenario, render_mode)
+        core = self._open(DrillingCore, locals())  # the core's options by their names
         self.control = core.control
         self.plant: DrillingLanes | None = None
 
@@ -295,16 +282,5 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **overrides,
     ):
-        check_vector_args(self.env_name, num_threads, overrides)
-        core = DrillingCore(
-            type(self).__name__,
-            check_num_envs(num_envs),
-            first_scenario(scenario),
-            control,
-            params,
-            reward,
-            max_episode_time_s,
-            overrides,
-        )
-        super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
+        core = self._open(DrillingCore, locals())  # the core's options by their names
         self.control = core.control

@@ -17,9 +17,6 @@ from machining_envs.core.rendering import (
 from machining_envs.core.sensors import PowerSensor
 from machining_envs.core.vector import (
     LaneVectorEnv,
-    check_num_envs,
-    check_vector_args,
-    first_scenario,
 )
 from machining_envs.milling.lanes import (
     MillingCore,
@@ -206,19 +203,7 @@ class EndMillingEnv(LaneEnv):
         power_sensor: PowerSensor | dict | bool | None = None,
         **overrides,
     ):
-        core = MillingCore(
-            type(self).__name__,
-            1,
-            scenario,
-            params,
-            reward,
-            max_episode_time_s,
-            action_map,
-            overrides,
-            actuation,
-            power_sensor,
-        )
-        self._adopt(core, scenario, render_mode)
+        core = self._open(MillingCore, locals())  # the core's options by their names
         #: The spindle-power sensor's settings (option ``power_sensor``), None when off.
         self.power_sensor = core.power_sensor and core.power_sensor.sensor
         #: The CNC's actuation (option ``actuation``), None when ideal.
@@ -288,17 +273,4 @@ class EndMillingVectorEnv(LaneVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **overrides,
     ):
-        check_vector_args(self.env_name, num_threads, overrides)
-        core = MillingCore(
-            type(self).__name__,
-            check_num_envs(num_envs),
-            first_scenario(scenario),
-            params,
-            reward,
-            max_episode_time_s,
-            action_map,
-            overrides,
-            actuation,
-            power_sensor,
-        )
-        super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
+        self._open(MillingCore, locals())  # the core's options by their names
