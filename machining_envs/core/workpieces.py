@@ -34,6 +34,7 @@ __all__ = [
     "SplitCuts",
     "lane_segments",
     "load_segments",
+    "SegmentTables",
     "traverse_time",
 ]
 
@@ -620,3 +621,30 @@ def load_segments(segments, lane, edges, d0, slope):
     for i in range(d0.shape[1]):
         d0[lane, i] = segments[1, i] if i < n else 0.0
         slope[lane, i] = segments[3, i] if i < n else 0.0
+
+
+class SegmentTables:
+    """The per-lane workpiece tables of a batch of cuts, which :func:`load_segments` fills:
+    ``edges`` (``(n, S + 1)``), ``d0`` and ``slope`` (``(n, S)``), grown to the most
+    segments ``S`` a lane's profile has had (:meth:`fit_segments`). A batch's plant
+    (``TurningLanes``, ``MillingLanes``) makes them with :meth:`_new_segment_tables`."""
+
+    def _new_segment_tables(self, n: int) -> None:
+        """Tables of ``n`` lanes for one segment each."""
+        self._s_max = 1
+        #: Counts replacements of the lane arrays (by a profile with more segments).
+        self.version = 0
+        self.edges = np.zeros((n, 2))
+        self.d0 = np.zeros((n, 1))
+        self.slope = np.zeros((n, 1))
+
+    def fit_segments(self, n_segments: int) -> None:
+        """Widen the per-lane workpiece tables to hold ``n_segments`` segments (a new
+        ``version``: references to the old tables are stale)."""
+        if n_segments > self._s_max:
+            grow = n_segments - self._s_max
+            self.edges = np.pad(self.edges, ((0, 0), (0, grow)), mode="edge")
+            self.d0 = np.pad(self.d0, ((0, 0), (0, grow)))
+            self.slope = np.pad(self.slope, ((0, 0), (0, grow)))
+            self._s_max = n_segments
+            self.version += 1
