@@ -61,7 +61,6 @@ from machining_envs.core.checks import (
     replace_checked,
 )
 from machining_envs.core.compiled.kernels import copy_into, powers, py_square, read_only
-from machining_envs.core.compiled.schema import gather
 from machining_envs.core.lti import zoh
 
 __all__ = [
@@ -423,14 +422,32 @@ class _GeometryKey(NamedTuple):
 
     @classmethod
     def of(cls, p: DrillingParams) -> _GeometryKey:
-        """The key of ``p``: its fields of these names, and its free speed at the nominal
-        voltage."""
-        return gather(cls, p, nominal_speed_hz=p.free_speed_hz(p.nominal_voltage))
+        return cls(
+            p.point_angle_deg,
+            p.helix_angle_deg,
+            p.web_ratio,
+            p.friction_angle_deg,
+            p.chisel_rake_deg,
+            p.shear_stress_MPa,
+            p.indentation_coeff_MPa,
+            p.indentation_wedge_deg,
+            p.feed_velocity_mm_s,
+            p.free_speed_hz(p.nominal_voltage),
+        )
 
     def shape(self) -> tuple:
         """The fields other than the shear stress (what :func:`_cutting_geometry` needs)."""
-        i = _GeometryKey._fields.index("shear_stress_MPa")
-        return self[:i] + self[i + 1 :]
+        return (
+            self.point_angle_deg,
+            self.helix_angle_deg,
+            self.web_ratio,
+            self.friction_angle_deg,
+            self.chisel_rake_deg,
+            self.indentation_coeff_MPa,
+            self.indentation_wedge_deg,
+            self.feed_velocity_mm_s,
+            self.nominal_speed_hz,
+        )
 
 
 @dataclass(frozen=True)

@@ -303,8 +303,16 @@ class _LinearKey(NamedTuple):
 
     @classmethod
     def of(cls, p: TurningParams) -> _LinearKey:
-        """The key of ``p``: its fields (and properties) of these names."""
-        return gather(cls, p)
+        return cls(
+            p.servo_gain,
+            p.servo_natural_freq_rad_s,
+            p.servo_damping,
+            p.gear_ratio,
+            p.sensor_cutoff_hz,
+            p.sensor_filter_order,
+            p.sample_time_s,
+            p.substeps,
+        )
 
 
 @functools.lru_cache(maxsize=16)
