@@ -31,8 +31,6 @@ from machining_envs.core.actions import real_actions
 from machining_envs.core.env import LaneEnv
 from machining_envs.core.rendering import (
     EpisodeLog,
-    present_frame,
-    ready_to_render,
 )
 from machining_envs.core.vector import (
     LaneVectorEnv,
@@ -184,6 +182,7 @@ class ContouringEnv(LaneEnv):
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+    _ID = "Contouring-v0"
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = CONTOURING_TASK
     #: Positions of the observation's fields, for controllers that read them by name.
@@ -215,11 +214,8 @@ class ContouringEnv(LaneEnv):
     def _set_action(self, action) -> None:
         self._core.set_action(0, *check_action_vector(action, 2, "ContouringEnv"))
 
-    def render(self):
-        if not ready_to_render(self):
-            return None
-        img = render_trace(self._path, self._log, f"Contouring-v0 | {self.scenario.name}")
-        return present_frame(img, self.render_mode, "Contouring-v0")
+    def _draw(self):
+        return render_trace(self._path, self._log, f"Contouring-v0 | {self.scenario.name}")
 
 
 class ContouringVectorEnv(LaneVectorEnv):

@@ -25,10 +25,6 @@ from machining_envs.core.actuation import (
     Actuation,
 )
 from machining_envs.core.env import LaneEnv
-from machining_envs.core.rendering import (
-    present_frame,
-    ready_to_render,
-)
 from machining_envs.core.vector import (
     LaneVectorEnv,
 )
@@ -150,6 +146,7 @@ class ContouringFeedEnv(LaneEnv):
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+    _ID = "ContouringFeed-v0"
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = FEED_TASK
     _LOG_FIELDS = TRACE_LOG_FIELDS
@@ -186,15 +183,12 @@ class ContouringFeedEnv(LaneEnv):
     def _set_action(self, action) -> None:
         self._core.set_action(0, *check_action_vector(action, 1, "ContouringFeedEnv"))
 
-    def render(self):
-        if not ready_to_render(self):
-            return None
-        img = render_trace(
+    def _draw(self):
+        return render_trace(
             self._path,
             self._log,
             f"ContouringFeed-v0 | {self.scenario.name} | servo {self.servo}",
         )
-        return present_frame(img, self.render_mode, "ContouringFeed-v0")
 
 
 class ContouringFeedVectorEnv(LaneVectorEnv):

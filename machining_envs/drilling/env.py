@@ -7,8 +7,6 @@ from gymnasium.vector import AutoresetMode
 from machining_envs.core.actions import check_action
 from machining_envs.core.env import LaneEnv
 from machining_envs.core.rendering import (
-    present_frame,
-    ready_to_render,
     render_signals,
 )
 from machining_envs.core.vector import (
@@ -175,6 +173,7 @@ class MicroDrillingEnv(LaneEnv):
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
+    _ID = "MicroDrilling-v0"
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = DRILLING_TASK
     #: Positions of the observation's fields, for controllers that read them by name.
@@ -224,12 +223,10 @@ class MicroDrillingEnv(LaneEnv):
     def _set_action(self, action) -> None:
         self._core.set_action(0, *check_action(action, "MicroDrillingEnv"))
 
-    def render(self):
-        if not ready_to_render(self):
-            return None
+    def _draw(self):
         log = self._log
         t = log["t"]
-        img = render_signals(
+        return render_signals(
             t,
             [
                 (
@@ -249,7 +246,6 @@ class MicroDrillingEnv(LaneEnv):
             f"MicroDrilling-v0 | {self.scenario.name} | D = {self.scenario.diameter_mm:.2f} mm"
             f" | control = {self.control}",
         )
-        return present_frame(img, self.render_mode, "MicroDrilling-v0")
 
 
 class MicroDrillingVectorEnv(LaneVectorEnv):

@@ -10,8 +10,6 @@ from machining_envs.core.actuation import (
 )
 from machining_envs.core.env import LaneEnv
 from machining_envs.core.rendering import (
-    present_frame,
-    ready_to_render,
     render_signals,
 )
 from machining_envs.core.sensors import PowerSensor
@@ -178,6 +176,7 @@ class EndMillingEnv(LaneEnv):
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+    _ID = "EndMilling-v0"
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = MILLING_TASK
     #: Positions of the observation's fields, for controllers that read them by name.
@@ -216,14 +215,12 @@ class EndMillingEnv(LaneEnv):
     def _set_action(self, action) -> None:
         self._core.set_action(0, *check_action(action, "EndMillingEnv"))
 
-    def render(self):
-        if not ready_to_render(self):
-            return None
+    def _draw(self):
         log = self._log
         t = log["t"]
         tr = float(self._core.torque_limit[0])
         rpm = float(self._core.spindle[0])
-        img = render_signals(
+        return render_signals(
             t,
             [
                 (
@@ -239,7 +236,6 @@ class EndMillingEnv(LaneEnv):
             ],
             f"EndMilling-v0 | {self.scenario.name} | {rpm:.0f} rpm",
         )
-        return present_frame(img, self.render_mode, "EndMilling-v0")
 
 
 class EndMillingVectorEnv(LaneVectorEnv):

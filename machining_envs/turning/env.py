@@ -10,8 +10,6 @@ from machining_envs.core.actuation import (
 )
 from machining_envs.core.env import LaneEnv
 from machining_envs.core.rendering import (
-    present_frame,
-    ready_to_render,
     render_signals,
 )
 from machining_envs.core.sensors import PowerSensor
@@ -164,6 +162,7 @@ class TurningEnv(LaneEnv):
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+    _ID = "Turning-v0"
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = TURNING_TASK
     #: Positions of the observation's fields, for controllers that read them by name.
@@ -203,12 +202,10 @@ class TurningEnv(LaneEnv):
     def _set_action(self, action) -> None:
         self._core.set_action(0, *check_action(action, "TurningEnv"))
 
-    def render(self):
-        if not ready_to_render(self):
-            return None
+    def _draw(self):
         log = self._log
         t = log["t"]
-        img = render_signals(
+        return render_signals(
             t,
             [
                 (
@@ -224,7 +221,6 @@ class TurningEnv(LaneEnv):
             ],
             f"Turning-v0 | {self.scenario.name} | {self.scenario.spindle_rpm:.0f} rpm",
         )
-        return present_frame(img, self.render_mode, "Turning-v0")
 
 
 class TurningVectorEnv(LaneVectorEnv):
