@@ -40,13 +40,15 @@ def by_module(package: str, **modules: tuple[str, ...]) -> dict[str, str]:
     return {name: f"{package}.{module}" for module, names in modules.items() for name in names}
 
 
-def env_entry_points(package: str, envs: dict[str, tuple[str, str, str]]) -> tuple[dict, dict]:
+def env_entry_points(package: str, envs: dict[str, tuple]) -> tuple[dict, dict]:
     """``(ENTRY_POINTS, VECTOR_ENTRY_POINTS)`` of a process package (what ``machining_envs``
     registers): ``envs`` maps each env name (``"Turning-v0"``, registered as
     ``machining_envs/Turning-v0``) to its module in ``package`` and the names of its single
-    and its native vector env classes (``gym.make_vec(id, num_envs=N)``)."""
+    and its native vector env classes (``gym.make_vec(id, num_envs=N)``; None for an env
+    without one, which ``gym.make_vec`` then vectorises itself)."""
     single, vector = {}, {}
     for env, (module, single_cls, vector_cls) in envs.items():
         single[f"machining_envs/{env}"] = f"{package}.{module}:{single_cls}"
-        vector[f"machining_envs/{env}"] = f"{package}.{module}:{vector_cls}"
+        if vector_cls is not None:
+            vector[f"machining_envs/{env}"] = f"{package}.{module}:{vector_cls}"
     return single, vector

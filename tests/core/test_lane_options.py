@@ -130,6 +130,8 @@ def test_exports_and_entry_points_of_a_process_package():
     single, vector = env_entry_points("pkg", {"X-v0": ("env", "XEnv", "XVectorEnv")})
     assert single == {"machining_envs/X-v0": "pkg.env:XEnv"}
     assert vector == {"machining_envs/X-v0": "pkg.env:XVectorEnv"}
+    single, vector = env_entry_points("pkg", {"Y-v0": ("plain", "YEnv", None)})
+    assert single == {"machining_envs/Y-v0": "pkg.plain:YEnv"} and vector == {}
 
 
 def test_the_registered_ids_and_their_entry_points():
