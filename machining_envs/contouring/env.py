@@ -31,14 +31,9 @@ from machining_envs.core.actions import real_actions
 from machining_envs.core.env import LaneEnv
 from machining_envs.core.rendering import (
     EpisodeLog,
-    present_frame,
-    ready_to_render,
 )
 from machining_envs.core.vector import (
     LaneVectorEnv,
-    check_num_envs,
-    check_vector_args,
-    first_scenario,
 )
 
 __all__ = [
@@ -187,6 +182,7 @@ class ContouringEnv(LaneEnv):
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+    _ID = "Contouring-v0"
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = CONTOURING_TASK
     #: Positions of the observation's fields, for controllers that read them by name.
@@ -204,18 +200,7 @@ class ContouringEnv(LaneEnv):
         divergence_mm: float = 50.0,
         **overrides,
     ):
-        self._core = core = ContouringCore(
-            type(self).__name__,
-            1,
-            scenario,
-            params,
-            reward,
-            max_episode_time_s,
-            in_position_mm,
-            divergence_mm,
-            overrides,
-        )
-        self._adopt(core, scenario, render_mode)
+        core = self._open(ContouringCore, locals())  # the core's options by their names
         self.in_position_mm = core.in_position_mm
         self.divergence_mm = core.divergence_mm
         self._umax = self.params.command_max_mm_s
@@ -229,11 +214,8 @@ class ContouringEnv(LaneEnv):
     def _set_action(self, action) -> None:
         self._core.set_action(0, *check_action_vector(action, 2, "ContouringEnv"))
 
-    def render(self):
-        if not ready_to_render(self):
-            return None
-        img = render_trace(self._path, self._log, f"Contouring-v0 | {self.scenario.name}")
-        return present_frame(img, self.render_mode, "Contouring-v0")
+    def _draw(self):
+        return render_trace(self._path, self._log, f"Contouring-v0 | {self.scenario.name}")
 
 
 class ContouringVectorEnv(LaneVectorEnv):
@@ -267,19 +249,7 @@ class ContouringVectorEnv(LaneVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **overrides,
     ):
-        check_vector_args(self.env_name, num_threads, overrides)
-        core = ContouringCore(
-            type(self).__name__,
-            check_num_envs(num_envs),
-            first_scenario(scenario),
-            params,
-            reward,
-            max_episode_time_s,
-            in_position_mm,
-            divergence_mm,
-            overrides,
-        )
-        super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
+        self._open(ContouringCore, locals())  # the core's options by their names
 
 
 def render_trace(path: Path, log: EpisodeLog, title: str) -> np.ndarray:

@@ -12,7 +12,6 @@ from machining_envs.contouring.env import (
 )
 from machining_envs.contouring.feed_lanes import (
     DEFAULT_TOLERANCE_MM,
-    FEED_OPTIONS,
     LOOKAHEAD_MM,
     FeedCore,
     FeedReward,
@@ -26,15 +25,8 @@ from machining_envs.core.actuation import (
     Actuation,
 )
 from machining_envs.core.env import LaneEnv
-from machining_envs.core.rendering import (
-    present_frame,
-    ready_to_render,
-)
 from machining_envs.core.vector import (
     LaneVectorEnv,
-    check_num_envs,
-    check_vector_args,
-    first_scenario,
 )
 
 __all__ = ["ContouringFeedEnv", "ContouringFeedVectorEnv", "FeedReward", "LOOKAHEAD_MM"]
@@ -154,6 +146,7 @@ class ContouringFeedEnv(LaneEnv):
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+    _ID = "ContouringFeed-v0"
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = FEED_TASK
     _LOG_FIELDS = TRACE_LOG_FIELDS
@@ -175,10 +168,7 @@ class ContouringFeedEnv(LaneEnv):
         actuation: Actuation | dict | None = None,
         **overrides,
     ):
-        given = locals()  # the core's keywords are this method's of the same names
-        options = {name: given[name] for name in FEED_OPTIONS}
-        self._core = core = FeedCore(type(self).__name__, 1, scenario, params, **options)
-        self._adopt(core, scenario, render_mode)
+        core = self._open(FeedCore, locals())  # the core's options by their names
         self.servo = core.servo
         self.tolerance_mm = core.tolerance_mm
         self.decision_interval_s = core.decision_interval_s
@@ -193,15 +183,12 @@ class ContouringFeedEnv(LaneEnv):
     def _set_action(self, action) -> None:
         self._core.set_action(0, *check_action_vector(action, 1, "ContouringFeedEnv"))
 
-    def render(self):
-        if not ready_to_render(self):
-            return None
-        img = render_trace(
+    def _draw(self):
+        return render_trace(
             self._path,
             self._log,
             f"ContouringFeed-v0 | {self.scenario.name} | servo {self.servo}",
         )
-        return present_frame(img, self.render_mode, "ContouringFeed-v0")
 
 
 class ContouringFeedVectorEnv(LaneVectorEnv):
@@ -245,12 +232,7 @@ class ContouringFeedVectorEnv(LaneVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **overrides,
     ):
-        check_vector_args(self.env_name, num_threads, overrides)
-        given = locals()  # the core's keywords are this method's of the same names
-        options = {name: given[name] for name in FEED_OPTIONS}
-        n, first = check_num_envs(num_envs), first_scenario(scenario)
-        core = FeedCore(type(self).__name__, n, first, params, **options)
-        super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
+        core = self._open(FeedCore, locals())  # the core's options by their names
         self.servo = core.servo
         self.tolerance_mm = core.tolerance_mm
         self.override_max = core.override_max

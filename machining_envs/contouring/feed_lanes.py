@@ -93,13 +93,7 @@ from machining_envs.core.env import (
     check_scenario_spec,
     resolve_params,
 )
-from machining_envs.core.lanes import (
-    LaneCore,
-    LaneNames,
-    LaneObjects,
-    settle_batch,
-    split_batch,
-)
+from machining_envs.core.lanes import LaneCore, LaneNames, LaneObjects, settle_batch, split_batch
 from machining_envs.core.reward import check_reward_weights, resolve_reward
 
 #: The observation previews the path's turn over these distances ahead of the set point, mm.
@@ -802,14 +796,6 @@ def _info_rows(out, lf, bound, flags, li, tol, rows, command, bits, ints):
         ints[1, k] = li[k, _LI.segment]
 
 
-#: ``FeedCore``'s keyword arguments: both envs' arguments of the same names (the
-#: options, and the parameters' overrides), which they pass on.
-FEED_OPTIONS = (
-    *("servo", "tolerance_mm", "reward", "decision_interval_s", "override_max"),
-    *("max_episode_time_s", "in_position_mm", "divergence_mm", "actuation", "overrides"),
-)
-
-
 class FeedCore(LaneCore):
     """The state and arithmetic of N ContouringFeed-v0 episodes, shared by
     ``ContouringFeedEnv`` (one lane) and ``ContouringFeedVectorEnv`` (N lanes): each lane's
@@ -828,8 +814,8 @@ class FeedCore(LaneCore):
         owner,
         n,
         scenario,
-        params,
         *,
+        params,
         servo,
         tolerance_mm,
         reward,
@@ -1086,16 +1072,12 @@ class FeedCore(LaneCore):
         once)."""
         if not isinstance(factory, _RandomPaths) or factory.segments[0] < 2:
             return False
-        ok = self._batch_ok.get(factory)
-        if ok is None:
-            try:
-                for sc in factory.extremes:
-                    check_feed(sc, self.params)
-                ok = True
-            except ValueError:
-                ok = False
-            self._batch_ok[factory] = ok
-        return ok
+
+        def check(sc) -> bool:
+            check_feed(sc, self.params)  # raises ValueError for a scenario it refuses
+            return True
+
+        return self._extremes_pass(factory, check)
 
     def set_action(self, lane: int, action: list[float], clipped: bool) -> None:
         self.in_action[lane] = action[0]

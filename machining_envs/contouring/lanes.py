@@ -436,6 +436,7 @@ class ContouringCore(LaneCore):
         owner: str,
         n: int,
         scenario: str | ContouringScenario,
+        *,
         params: ContouringParams | None,
         reward: ContouringReward | dict | None,
         max_episode_time_s: float | None,

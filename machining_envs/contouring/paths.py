@@ -59,6 +59,15 @@ def _point(name: str, p) -> tuple[float, float]:
     return _finite(f"{name}[0]", x), _finite(f"{name}[1]", y)
 
 
+def _circle(center, radius) -> tuple[tuple[float, float], float]:
+    """The checked ``center`` (a point) and ``radius`` (> 0 mm) of an arc or an involute's
+    base circle."""
+    center_mm, radius_mm = _point("center", center), _finite("radius", radius)
+    if not radius_mm > 0:
+        raise ValueError(f"radius must be > 0 mm, got {radius!r}")
+    return center_mm, radius_mm
+
+
 class Line:
     """Straight segment from ``start`` to ``end`` (mm)."""
 
@@ -134,10 +143,7 @@ class Arc:
     kind = "arc"
 
     def __init__(self, center, radius: float, start_angle: float, sweep: float) -> None:
-        self.center = _point("center", center)
-        self.radius = _finite("radius", radius)
-        if not self.radius > 0:
-            raise ValueError(f"radius must be > 0 mm, got {radius!r}")
+        self.center, self.radius = _circle(center, radius)
         self.start_angle = _finite("start_angle", start_angle)
         self.sweep = _finite("sweep", sweep)
         if not 0 < abs(self.sweep) <= _TWO_PI + 1e-12:
@@ -259,10 +265,7 @@ class Involute:
         theta_start: float = 0.0,
         theta_end: float = 0.5 * math.pi,
     ) -> None:
-        self.center = _point("center", center)
-        self.radius = _finite("radius", radius)
-        if not self.radius > 0:
-            raise ValueError(f"radius must be > 0 mm, got {radius!r}")
+        self.center, self.radius = _circle(center, radius)
         self.theta1 = _finite("theta1", theta1)
         self.theta_start = _finite("theta_start", theta_start)
         self.theta_end = _finite("theta_end", theta_end)

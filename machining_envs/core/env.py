@@ -14,7 +14,13 @@ import numpy as np
 
 from machining_envs.core.checks import PY_NUMBER_TYPES, is_real
 from machining_envs.core.metrics import note_severity
-from machining_envs.core.rendering import EpisodeLog, check_render_mode, record_step
+from machining_envs.core.rendering import (
+    EpisodeLog,
+    check_render_mode,
+    present_frame,
+    ready_to_render,
+    record_step,
+)
 
 __all__ = [
     "LaneEnv",
@@ -116,13 +122,24 @@ class LaneEnv(gym.Env, abc.ABC):
     that its vector env holds N of, so that a lane and the single env run the same code.
 
     A subclass builds its core (a :class:`~machining_envs.core.lanes.LaneCore` of one lane)
-    in ``__init__`` and hands it to :meth:`_adopt`, and says how an action is checked
-    (:meth:`_set_action`) and what it keeps of a new episode (:meth:`_began`); ``reset``,
-    ``step`` and the command map are shared. ``_LOG_FIELDS`` names what a rendered episode
-    records of ``info`` (:class:`EpisodeLog`).
+    in ``__init__`` from its arguments (:meth:`_open`), and says how an action is checked
+    (:meth:`_set_action`), what it keeps of a new episode (:meth:`_began`) and how an
+    episode is drawn (:meth:`_draw`); ``reset``, ``step``, ``render`` and the command map
+    are shared. ``_LOG_FIELDS`` names what a rendered episode records of ``info``
+    (:class:`EpisodeLog`).
     """
 
     _LOG_FIELDS: dict[str, str] = {}
+    #: The env's id without its namespace (``"Turning-v0"``): the window ``render`` shows.
+    _ID: str = ""
+
+    def _open(self, core_cls: type, given: dict):
+        """Build a ``core_cls`` of one lane from the env's arguments ``given`` (its
+        ``__init__``'s ``locals()``: ``scenario``, ``render_mode`` and the core's options,
+        named as the core names them, ``LaneCore.from_options``), adopt it and return it."""
+        core = core_cls.from_options(type(self).__name__, 1, given["scenario"], given)
+        self._adopt(core, given["scenario"], given["render_mode"])
+        return core
 
     def _adopt(self, core, scenario, render_mode) -> None:
         """Take ``core`` (of one lane) and give the env the public attributes every env
@@ -172,6 +189,10 @@ class LaneEnv(gym.Env, abc.ABC):
         """Called when an episode has started (``self.scenario`` is set): what the env
         keeps of it (its ``plant``, its path)."""
 
+    @abc.abstractmethod
+    def _draw(self):
+        """The episode so far (``self._log``) drawn as an RGB array, for :meth:`render`."""
+
     def _noted(self, info: dict) -> dict:
         """``info`` with the step's ``excess`` over the limit and the scenario's
         ``overload_ratio`` (the class's ``task.limit_keys``,
@@ -211,3 +232,10 @@ class LaneEnv(gym.Env, abc.ABC):
         reward, terminated, truncated = self._outcome()
         self._ended = terminated or truncated
         return core.obs[0].copy(), reward, terminated, truncated, info
+
+    def render(self):
+        """The episode so far: an RGB array (``render_mode="rgb_array"``), or shown in a
+        window (``"human"``, returns None); None, with a warning, without a render mode."""
+        if not ready_to_render(self):
+            return None
+        return present_frame(self._draw(), self.render_mode, self._ID)

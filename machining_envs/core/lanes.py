@@ -15,6 +15,7 @@ Also here: the per-lane bookkeeping every core shares (:class:`LaneNames`,
 from __future__ import annotations
 
 import abc
+import inspect
 
 import numpy as np
 
@@ -33,6 +34,13 @@ __all__ = [
 
 class LaneCore(abc.ABC):
     """The engine of N lanes of one process, as the envs see it.
+
+    Construction
+    ------------
+    ``Core(owner, n, scenario, **options)``: ``owner`` names the env in error messages,
+    ``n`` is the number of lanes and ``scenario`` the default one; the options are the
+    core's keyword-only parameters (:attr:`OPTIONS`), the env arguments of the same names,
+    which an env passes on with :meth:`from_options`.
 
     Attributes a core sets in ``__init__``
     ---------------------------------------
@@ -63,6 +71,19 @@ class LaneCore(abc.ABC):
 
     #: The names of the attributes that are views of the core's tables (see Pickling).
     VIEWS: frozenset[str] = frozenset()
+    #: The core's options: its ``__init__``'s keyword-only parameters (set per class).
+    OPTIONS: tuple[str, ...] = ()
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        parameters = inspect.signature(cls.__init__).parameters.values()
+        cls.OPTIONS = tuple(p.name for p in parameters if p.kind is p.KEYWORD_ONLY)
+
+    @classmethod
+    def from_options(cls, owner: str, n: int, scenario, given: dict) -> LaneCore:
+        """A core of ``n`` lanes whose options are read by name from ``given``: an env's
+        ``__init__`` arguments (its ``locals()``), which name them as the core does."""
+        return cls(owner, n, scenario, **{name: given[name] for name in cls.OPTIONS})
 
     # ---- starting episodes ---------------------------------------------------------------
     @abc.abstractmethod
@@ -80,6 +101,20 @@ class LaneCore(abc.ABC):
         """Whether :meth:`start_lanes` may start the scenarios of the split ``factory``
         together (:func:`split_batch`); by default never."""
         return False
+
+    def _extremes_pass(self, factory, check) -> bool:
+        """Whether every scenario of ``factory.extremes`` (the two ends of a split's
+        ranges) passes ``check`` (returns true, raises no ``ValueError``): what
+        :meth:`batches` asks of a split before its lanes start together, worked out once
+        per factory and kept in the core's ``_batch_ok``."""
+        ok = self._batch_ok.get(factory)
+        if ok is None:
+            try:
+                ok = all(check(sc) for sc in factory.extremes)
+            except ValueError:
+                ok = False
+            self._batch_ok[factory] = ok
+        return ok
 
     # ---- one step ------------------------------------------------------------------------
     @abc.abstractmethod
@@ -117,6 +152,21 @@ class LaneCore(abc.ABC):
     def info_arrays(self) -> dict:
         """Every lane's info as it stands, as new arrays of length ``n`` (the vector env's
         ``info``; a key only some lanes hold comes with its ``"_" + key`` mask)."""
+
+    # ---- the compiled kernel's arguments -----------------------------------------------
+    def _kernel_args(self) -> tuple:
+        """The kernel's arguments (:meth:`_make_kernel_args`), kept in ``_args`` until the
+        plant (``lanes``) replaces its arrays (a new ``lanes.version``), for a core whose
+        kernel takes them in one table (``core.compiled.packed``)."""
+        version = self.lanes.version
+        if self._args is None or self._args_version != version:
+            self._args = self._make_kernel_args()
+            self._args_version = version
+        return self._args
+
+    def _make_kernel_args(self) -> tuple:
+        """The kernel's arguments as they stand (see :meth:`_kernel_args`)."""
+        raise NotImplementedError(f"{type(self).__name__} keeps no kernel arguments")
 
     # ---- pickling ----------------------------------------------------------------------
     def bind_views(self) -> None:  # noqa: B027 (a core without views has nothing to do)

@@ -12,7 +12,7 @@ import importlib
 import sys
 from collections.abc import Callable
 
-__all__ = ["lazy_exports"]
+__all__ = ["lazy_exports", "by_module", "env_entry_points"]
 
 
 def lazy_exports(package: str, names: dict[str, str]) -> tuple[Callable, Callable]:
@@ -31,3 +31,24 @@ def lazy_exports(package: str, names: dict[str, str]) -> tuple[Callable, Callabl
         return sorted(set(vars(sys.modules[package])) | set(names))
 
     return __getattr__, __dir__
+
+
+def by_module(package: str, **modules: tuple[str, ...]) -> dict[str, str]:
+    """:func:`lazy_exports`'s ``names`` from the names each module of ``package`` exports:
+    ``by_module("machining_envs.turning", plant=("TurningParams",))`` is
+    ``{"TurningParams": "machining_envs.turning.plant"}``."""
+    return {name: f"{package}.{module}" for module, names in modules.items() for name in names}
+
+
+def env_entry_points(package: str, envs: dict[str, tuple]) -> tuple[dict, dict]:
+    """``(ENTRY_POINTS, VECTOR_ENTRY_POINTS)`` of a process package (what ``machining_envs``
+    registers): ``envs`` maps each env name (``"Turning-v0"``, registered as
+    ``machining_envs/Turning-v0``) to its module in ``package`` and the names of its single
+    and its native vector env classes (``gym.make_vec(id, num_envs=N)``; None for an env
+    without one, which ``gym.make_vec`` then vectorises itself)."""
+    single, vector = {}, {}
+    for env, (module, single_cls, vector_cls) in envs.items():
+        single[f"machining_envs/{env}"] = f"{package}.{module}:{single_cls}"
+        if vector_cls is not None:
+            vector[f"machining_envs/{env}"] = f"{package}.{module}:{vector_cls}"
+    return single, vector

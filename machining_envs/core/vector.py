@@ -199,6 +199,19 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         self._overload = np.full(self.num_envs, math.inf)
         self.default_scenario = self._lane_scenarios(scenario)
 
+    def _open(self, core_cls: type, given: dict):
+        """Check the env's arguments ``given`` (its ``__init__``'s ``locals()``:
+        ``num_envs``, ``scenario``, ``num_threads``, ``autoreset_mode`` and the core's
+        options, named as the core names them), build a ``core_cls`` of ``num_envs`` lanes
+        from them (``LaneCore.from_options``), take it (:meth:`__init__`) and return it."""
+        check_vector_args(self.env_name, given["num_threads"], given["overrides"])
+        n, scenario = check_num_envs(given["num_envs"]), given["scenario"]
+        core = core_cls.from_options(type(self).__name__, n, first_scenario(scenario), given)
+        LaneVectorEnv.__init__(
+            self, n, core, scenario, given["num_threads"], given["autoreset_mode"]
+        )
+        return core
+
     # ---- the command map, for classical agents -----------------------------------------
     def action_to_command(self, action):
         """The physical command for an action in [-1, 1] (``command_map``), as the single

@@ -31,9 +31,11 @@ __all__ = [
     "drawn_profile",
     "drawn_lane_cuts",
     "drawn_lane_profile",
+    "cut_ranges",
     "SplitCuts",
     "lane_segments",
     "load_segments",
+    "SegmentTables",
     "traverse_time",
 ]
 
@@ -339,25 +341,14 @@ class DepthProfile:
         return float(trapezoid(np.maximum(slowness, 1.0 / v_max), x))
 
 
-def drawn_profile(
-    state,
-    before: int,
-    depth_range_mm,
-    n_segments,
-    segment_mm,
-    taper_probability: float,
-    max_jump_ratio: float,
-    after: int,
-    name: str,
-):
+def drawn_profile(state, before: int, ranges: tuple, after: int, name: str):
     """A random workpiece drawn from a split's compiled stream (``state``:
     :func:`~machining_envs.core.splits.split_state`) between ``before`` and ``after``
     uniform numbers, in one compiled call: ``(the uniforms before, the profile, the
     uniforms after)``, the numbers that ``rng.random(before)``,
     :meth:`DepthProfile.random` ``(rng, ...)`` and ``rng.random(after)`` give from the
-    split's generator. For scenario factories, which check their ranges once: these are
-    not checked again."""
-    ranges = _cut_ranges(depth_range_mm, n_segments, segment_mm, taper_probability, max_jump_ratio)
+    split's generator, ``ranges`` being :func:`cut_ranges` of the same arguments. For
+    scenario factories, which check their ranges once: these are not checked again."""
     b, table, a = _draw_cut(state, before, *ranges, after)
     return b, _drawn(table, name), a
 
@@ -405,17 +396,14 @@ class SplitCuts:
         self.depth, self.segments = depth, segments
         # Checked here, once: the factory builds its workpieces without checking again.
         DepthProfile.check_random_ranges(depth, segments, segment_mm, 2.5)
-        self._cut_ranges = (depth, segments, segment_mm, 0.3, 2.5)
+        self._cut_ranges = cut_ranges(depth, segments, segment_mm, 0.3, 2.5)
 
     def drawn(self, env_rng: np.random.Generator) -> tuple[np.ndarray, DepthProfile, list[float]]:
         """One scenario's numbers from the env's generator: the uniforms before, the
         workpiece, and the ranges' uniforms (:func:`drawn_profile`)."""
+        state = split_state(env_rng, self.name)
         b, profile, v = drawn_profile(
-            split_state(env_rng, self.name),
-            self.before,
-            *self._cut_ranges,
-            len(self.lows),
-            self.profile_name,
+            state, self.before, self._cut_ranges, len(self.lows), self.profile_name
         )
         return b, profile, v.tolist()
 
@@ -425,7 +413,7 @@ class SplitCuts:
         segment counts, uniforms)`` of shapes ``(L, before)``, ``(L, 4, S + 1)``, ``(L,)``
         and ``(L, len(lows))`` (:func:`drawn_lane_cuts`)."""
         return drawn_lane_cuts(
-            table, lanes, self.name, self.before, *self._cut_ranges, len(self.lows)
+            table, lanes, self.name, self.before, self._cut_ranges, len(self.lows)
         )
 
     def lane_profile(self, segments: np.ndarray, counts: np.ndarray, i: int) -> DepthProfile:
@@ -444,18 +432,7 @@ def _drawn(table: np.ndarray, name: str) -> DepthProfile:
     return DepthProfile._built(table, name)
 
 
-def drawn_lane_cuts(
-    table,
-    lanes: np.ndarray,
-    split: str,
-    before: int,
-    depth_range_mm,
-    n_segments,
-    segment_mm,
-    taper_probability: float,
-    max_jump_ratio: float,
-    after: int,
-):
+def drawn_lane_cuts(table, lanes: np.ndarray, split: str, before: int, ranges: tuple, after: int):
     """:func:`drawn_profile`'s numbers for many lanes in one compiled call, each from the
     ``split``'s stream of its own generator (row ``lanes[i]`` of ``table``, a
     :class:`~machining_envs.core.compiled.normals.LaneGenerators` table): what ``drawn_profile(
@@ -464,12 +441,14 @@ def drawn_lane_cuts(
     shape ``(L, before)``; every lane's segments (:meth:`DepthProfile.segment_array`'s
     rows), lane ``i``'s in ``segments[i, :, : counts[i] + 1]``; the uniforms after,
     ``(L, after)``."""
-    ranges = _cut_ranges(depth_range_mm, n_segments, segment_mm, taper_probability, max_jump_ratio)
     return _draw_lane_cuts(table, lanes, _split_key(split), before, *ranges, after)
 
 
-def _cut_ranges(depth_range_mm, n_segments, segment_mm, taper_probability, max_jump_ratio):
-    """The workpiece's ranges as :func:`_draw_cut` takes them (floats and ints, in order)."""
+def cut_ranges(depth_range_mm, n_segments, segment_mm, taper_probability, max_jump_ratio):
+    """The ranges of a random workpiece (the arguments of :meth:`DepthProfile.random`
+    after its generator, checked by :meth:`DepthProfile.check_random_ranges`) as
+    :func:`drawn_profile` and :func:`drawn_lane_cuts` take them: floats and ints, in
+    order."""
     lo, hi = depth_range_mm
     s_lo, s_hi = segment_mm
     return (
@@ -620,3 +599,30 @@ def load_segments(segments, lane, edges, d0, slope):
     for i in range(d0.shape[1]):
         d0[lane, i] = segments[1, i] if i < n else 0.0
         slope[lane, i] = segments[3, i] if i < n else 0.0
+
+
+class SegmentTables:
+    """The per-lane workpiece tables of a batch of cuts, which :func:`load_segments` fills:
+    ``edges`` (``(n, S + 1)``), ``d0`` and ``slope`` (``(n, S)``), grown to the most
+    segments ``S`` a lane's profile has had (:meth:`fit_segments`). A batch's plant
+    (``TurningLanes``, ``MillingLanes``) makes them with :meth:`_new_segment_tables`."""
+
+    def _new_segment_tables(self, n: int) -> None:
+        """Tables of ``n`` lanes for one segment each."""
+        self._s_max = 1
+        #: Counts replacements of the lane arrays (by a profile with more segments).
+        self.version = 0
+        self.edges = np.zeros((n, 2))
+        self.d0 = np.zeros((n, 1))
+        self.slope = np.zeros((n, 1))
+
+    def fit_segments(self, n_segments: int) -> None:
+        """Widen the per-lane workpiece tables to hold ``n_segments`` segments (a new
+        ``version``: references to the old tables are stale)."""
+        if n_segments > self._s_max:
+            grow = n_segments - self._s_max
+            self.edges = np.pad(self.edges, ((0, 0), (0, grow)), mode="edge")
+            self.d0 = np.pad(self.d0, ((0, 0), (0, grow)))
+            self.slope = np.pad(self.slope, ((0, 0), (0, grow)))
+            self._s_max = n_segments
+            self.version += 1

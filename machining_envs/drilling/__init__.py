@@ -5,28 +5,22 @@ drills, the train/test distributions), ``metrics`` (torque statistics, drilling 
 task), ``env`` (``MicroDrilling-v0``).
 """
 
-from machining_envs.core.lazy import lazy_exports
+from machining_envs.core.lazy import by_module, env_entry_points, lazy_exports
 
-#: What this package exports, and the module each comes from (loaded on first use, so
-#: that registering the ids imports none of the physics).
-_EXPORTS = {
-    "DrillingReward": "machining_envs.drilling.env",
-    "MicroDrillingEnv": "machining_envs.drilling.env",
-    "MicroDrillingVectorEnv": "machining_envs.drilling.env",
-    "DrillingLanes": "machining_envs.drilling.plant",
-    "DrillingParams": "machining_envs.drilling.plant",
-    "DrillingPlant": "machining_envs.drilling.plant",
-    "DRILLING_SCENARIOS": "machining_envs.drilling.scenarios",
-    "DrillingScenario": "machining_envs.drilling.scenarios",
-}
+#: What this package exports, by the module each comes from (loaded on first use, so that
+#: registering the ids imports none of the physics).
+_EXPORTS = by_module(
+    __name__,
+    env=("DrillingReward", "MicroDrillingEnv", "MicroDrillingVectorEnv"),
+    plant=("DrillingLanes", "DrillingParams", "DrillingPlant"),
+    scenarios=("DRILLING_SCENARIOS", "DrillingScenario"),
+)
 __all__ = [*_EXPORTS, "ENTRY_POINTS", "VECTOR_ENTRY_POINTS"]
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
-#: The env ids of this process and their entry points (registered by ``machining_envs``).
-ENTRY_POINTS = {
-    "machining_envs/MicroDrilling-v0": "machining_envs.drilling.env:MicroDrillingEnv",
-}
-#: Their native vector envs (``gym.make_vec(id, num_envs=N)``).
-VECTOR_ENTRY_POINTS = {
-    "machining_envs/MicroDrilling-v0": "machining_envs.drilling.env:MicroDrillingVectorEnv",
-}
+#: The env ids of this process and their entry points, single and native vector env
+#: (registered by ``machining_envs``).
+ENTRY_POINTS, VECTOR_ENTRY_POINTS = env_entry_points(
+    __name__,
+    {"MicroDrilling-v0": ("env", "MicroDrillingEnv", "MicroDrillingVectorEnv")},
+)

@@ -7,15 +7,10 @@ from gymnasium.vector import AutoresetMode
 from machining_envs.core.actions import check_action
 from machining_envs.core.env import LaneEnv
 from machining_envs.core.rendering import (
-    present_frame,
-    ready_to_render,
     render_signals,
 )
 from machining_envs.core.vector import (
     LaneVectorEnv,
-    check_num_envs,
-    check_vector_args,
-    first_scenario,
 )
 from machining_envs.drilling.lanes import (
     CONTROL_MODES,
@@ -178,6 +173,7 @@ class MicroDrillingEnv(LaneEnv):
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
+    _ID = "MicroDrilling-v0"
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = DRILLING_TASK
     #: Positions of the observation's fields, for controllers that read them by name.
@@ -217,17 +213,7 @@ class MicroDrillingEnv(LaneEnv):
         max_episode_time_s: float = 150.0,
         **overrides,
     ):
-        core = DrillingCore(
-            type(self).__name__,
-            1,
-            scenario,
-            control,
-            params,
-            reward,
-            max_episode_time_s,
-            overrides,
-        )
-        self._adopt(core, scenario, render_mode)
+        core = self._open(DrillingCore, locals())  # the core's options by their names
         self.control = core.control
         self.plant: DrillingLanes | None = None
 
@@ -237,12 +223,10 @@ class MicroDrillingEnv(LaneEnv):
     def _set_action(self, action) -> None:
         self._core.set_action(0, *check_action(action, "MicroDrillingEnv"))
 
-    def render(self):
-        if not ready_to_render(self):
-            return None
+    def _draw(self):
         log = self._log
         t = log["t"]
-        img = render_signals(
+        return render_signals(
             t,
             [
                 (
@@ -262,7 +246,6 @@ class MicroDrillingEnv(LaneEnv):
             f"MicroDrilling-v0 | {self.scenario.name} | D = {self.scenario.diameter_mm:.2f} mm"
             f" | control = {self.control}",
         )
-        return present_frame(img, self.render_mode, "MicroDrilling-v0")
 
 
 class MicroDrillingVectorEnv(LaneVectorEnv):
@@ -295,16 +278,5 @@ class MicroDrillingVectorEnv(LaneVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **overrides,
     ):
-        check_vector_args(self.env_name, num_threads, overrides)
-        core = DrillingCore(
-            type(self).__name__,
-            check_num_envs(num_envs),
-            first_scenario(scenario),
-            control,
-            params,
-            reward,
-            max_episode_time_s,
-            overrides,
-        )
-        super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
+        core = self._open(DrillingCore, locals())  # the core's options by their names
         self.control = core.control

@@ -337,7 +337,9 @@ class DrillingCore(LaneCore):
     #: What a scenario may be: an object of this class or one of these names.
     scenario_types = (DrillingScenario, DRILLING_SCENARIOS)
 
-    def __init__(self, owner, n, scenario, control, params, reward, max_episode_time_s, overrides):
+    def __init__(
+        self, owner, n, scenario, *, control, params, reward, max_episode_time_s, overrides
+    ):
         self.params = resolve_params(
             owner, params, DrillingParams, DrillingParams.cheong_cho, overrides
         )

@@ -5,25 +5,22 @@
 ``metrics`` (eq. 20 machining time, MRR; the task), ``env`` (``EndMilling-v0``).
 """
 
-from machining_envs.core.lazy import lazy_exports
+from machining_envs.core.lazy import by_module, env_entry_points, lazy_exports
 
-#: What this package exports, and the module each comes from (loaded on first use, so
-#: that registering the ids imports none of the physics).
-_EXPORTS = {
-    "EndMillingEnv": "machining_envs.milling.env",
-    "EndMillingVectorEnv": "machining_envs.milling.env",
-    "MillingReward": "machining_envs.milling.env",
-    "MillingParams": "machining_envs.milling.plant",
-    "MillingPlant": "machining_envs.milling.plant",
-    "MILLING_SCENARIOS": "machining_envs.milling.scenarios",
-    "MillingScenario": "machining_envs.milling.scenarios",
-}
+#: What this package exports, by the module each comes from (loaded on first use, so that
+#: registering the ids imports none of the physics).
+_EXPORTS = by_module(
+    __name__,
+    env=("EndMillingEnv", "EndMillingVectorEnv", "MillingReward"),
+    plant=("MillingParams", "MillingPlant"),
+    scenarios=("MILLING_SCENARIOS", "MillingScenario"),
+)
 __all__ = [*_EXPORTS, "ENTRY_POINTS", "VECTOR_ENTRY_POINTS"]
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
-#: The env ids of this process and their entry points (registered by ``machining_envs``).
-ENTRY_POINTS = {"machining_envs/EndMilling-v0": "machining_envs.milling.env:EndMillingEnv"}
-#: Their native vector envs (``gym.make_vec(id, num_envs=N)``).
-VECTOR_ENTRY_POINTS = {
-    "machining_envs/EndMilling-v0": "machining_envs.milling.env:EndMillingVectorEnv"
-}
+#: The env ids of this process and their entry points, single and native vector env
+#: (registered by ``machining_envs``).
+ENTRY_POINTS, VECTOR_ENTRY_POINTS = env_entry_points(
+    __name__,
+    {"EndMilling-v0": ("env", "EndMillingEnv", "EndMillingVectorEnv")},
+)

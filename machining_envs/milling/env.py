@@ -10,16 +10,11 @@ from machining_envs.core.actuation import (
 )
 from machining_envs.core.env import LaneEnv
 from machining_envs.core.rendering import (
-    present_frame,
-    ready_to_render,
     render_signals,
 )
 from machining_envs.core.sensors import PowerSensor
 from machining_envs.core.vector import (
     LaneVectorEnv,
-    check_num_envs,
-    check_vector_args,
-    first_scenario,
 )
 from machining_envs.milling.lanes import (
     MillingCore,
@@ -181,6 +176,7 @@ class EndMillingEnv(LaneEnv):
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+    _ID = "EndMilling-v0"
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = MILLING_TASK
     #: Positions of the observation's fields, for controllers that read them by name.
@@ -206,19 +202,7 @@ class EndMillingEnv(LaneEnv):
         power_sensor: PowerSensor | dict | bool | None = None,
         **overrides,
     ):
-        core = MillingCore(
-            type(self).__name__,
-            1,
-            scenario,
-            params,
-            reward,
-            max_episode_time_s,
-            action_map,
-            overrides,
-            actuation,
-            power_sensor,
-        )
-        self._adopt(core, scenario, render_mode)
+        core = self._open(MillingCore, locals())  # the core's options by their names
         #: The spindle-power sensor's settings (option ``power_sensor``), None when off.
         self.power_sensor = core.power_sensor and core.power_sensor.sensor
         #: The CNC's actuation (option ``actuation``), None when ideal.
@@ -231,14 +215,12 @@ class EndMillingEnv(LaneEnv):
     def _set_action(self, action) -> None:
         self._core.set_action(0, *check_action(action, "EndMillingEnv"))
 
-    def render(self):
-        if not ready_to_render(self):
-            return None
+    def _draw(self):
         log = self._log
         t = log["t"]
         tr = float(self._core.torque_limit[0])
         rpm = float(self._core.spindle[0])
-        img = render_signals(
+        return render_signals(
             t,
             [
                 (
@@ -254,7 +236,6 @@ class EndMillingEnv(LaneEnv):
             ],
             f"EndMilling-v0 | {self.scenario.name} | {rpm:.0f} rpm",
         )
-        return present_frame(img, self.render_mode, "EndMilling-v0")
 
 
 class EndMillingVectorEnv(LaneVectorEnv):
@@ -288,17 +269,4 @@ class EndMillingVectorEnv(LaneVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **overrides,
     ):
-        check_vector_args(self.env_name, num_threads, overrides)
-        core = MillingCore(
-            type(self).__name__,
-            check_num_envs(num_envs),
-            first_scenario(scenario),
-            params,
-            reward,
-            max_episode_time_s,
-            action_map,
-            overrides,
-            actuation,
-            power_sensor,
-        )
-        super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
+        self._open(MillingCore, locals())  # the core's options by their names

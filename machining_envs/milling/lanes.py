@@ -458,6 +458,7 @@ class MillingCore(LaneCore):
         owner: str,
         n: int,
         scenario: str | MillingScenario,
+        *,
         params: MillingParams | None,
         reward: LimitReward | dict | None,
         max_episode_time_s: float,
@@ -654,40 +655,31 @@ class MillingCore(LaneCore):
         breakage torque)."""
         if not isinstance(factory, _SplitFactory) or factory.wear is not None:
             return False
-        ok = self._batch_ok.get(factory)
-        if ok is None:
-            nominal = self.params
-            try:
-                for sc in factory.extremes:
-                    sc.spindle_rpm(nominal)
-                    truth = sc.true_params(nominal)
-                    ok = factory.depth[1] <= truth.tool_diameter_mm and (
-                        sc.torque_limit_Nmm(nominal) < truth.breakage_torque_Nmm
-                    )
-                    if not ok:
-                        break
-            except ValueError:
-                ok = False
-            self._batch_ok[factory] = ok
-        return ok
+        nominal = self.params
 
-    def _kernel_args(self) -> tuple:
-        """The arguments of :func:`_step_packed`'s table: the fields of its records
-        (:data:`_TABLE`) in order, rebuilt when the lane arrays are."""
-        lanes = self.lanes
-        if self._args is None or self._args_version != lanes.version:
-            env = gather(
-                MillingEnvArrays,
-                self,
-                cmap=self._cmap,
-                rng_table=self.rngs.table,
-                ke=self._ke,
-                max_t=self.max_episode_time_s,
-                w=self._w,
+        def check(sc) -> bool:
+            sc.spindle_rpm(nominal)
+            truth = sc.true_params(nominal)
+            return factory.depth[1] <= truth.tool_diameter_mm and (
+                sc.torque_limit_Nmm(nominal) < truth.breakage_torque_Nmm
             )
-            self._args = flatten(lanes.arrays(), env)
-            self._args_version = lanes.version
-        return self._args
+
+        return self._extremes_pass(factory, check)
+
+    def _make_kernel_args(self) -> tuple:
+        """The arguments of :func:`_step_packed`'s table: the fields of its records
+        (:data:`_TABLE`) in order (``_kernel_args`` keeps them until the lane arrays are
+        replaced)."""
+        env = gather(
+            MillingEnvArrays,
+            self,
+            cmap=self._cmap,
+            rng_table=self.rngs.table,
+            ke=self._ke,
+            max_t=self.max_episode_time_s,
+            w=self._w,
+        )
+        return flatten(self.lanes.arrays(), env)
 
     def set_action(self, lane: int, action: float, clipped: bool) -> None:
         self.in_action[lane] = action

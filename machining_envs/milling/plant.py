@@ -52,7 +52,7 @@ from machining_envs.core.checks import check_field, check_integer, check_range, 
 from machining_envs.core.compiled.kernels import copy_into, matvec, powers, read_only
 from machining_envs.core.compiled.schema import gather, record
 from machining_envs.core.lti import zoh, zoh_tf
-from machining_envs.core.workpieces import load_segments
+from machining_envs.core.workpieces import SegmentTables, load_segments
 
 __all__ = [
     "MillingParams",
@@ -828,7 +828,7 @@ class CutModel(NamedTuple):
     """Time since the cut started, s."""
 
 
-class MillingLanes:
+class MillingLanes(SegmentTables):
     """N independent cuts stepped together: the physics of every end-milling env.
 
     Each lane has its own true parameters (torque law and its coefficients, sensor gain),
@@ -876,12 +876,7 @@ class MillingLanes:
         self.z = np.zeros((self.n, 4))
         self.buf = np.zeros((self.n, m + 2))
         self.lane_f = np.zeros((self.n, len(LANE_CONSTANTS)))
-        self._s_max = 1
-        #: Counts replacements of the lane arrays (by a profile with more segments).
-        self.version = 0
-        self.edges = np.zeros((self.n, 2))
-        self.d0 = np.zeros((self.n, 1))
-        self.slope = np.zeros((self.n, 1))
+        self._new_segment_tables(self.n)  # the workpieces' tables (SegmentTables)
         self.nseg = np.ones(self.n, dtype=np.int64)
         self.seg = np.zeros(self.n, dtype=np.int64)
         self.finished = np.zeros(self.n, dtype=np.bool_)
@@ -928,17 +923,6 @@ class MillingLanes:
         """The lanes' arrays as the kernels take them (:data:`MillingArrays`; a new record
         after ``fit_segments`` replaced some)."""
         return gather(MillingArrays, self)
-
-    def fit_segments(self, n_segments: int) -> None:
-        """Widen the per-lane workpiece tables to hold ``n_segments`` segments (a new
-        ``version``: references to the old tables are stale)."""
-        if n_segments > self._s_max:
-            grow = n_segments - self._s_max
-            self.edges = np.pad(self.edges, ((0, 0), (0, grow)), mode="edge")
-            self.d0 = np.pad(self.d0, ((0, 0), (0, grow)))
-            self.slope = np.pad(self.slope, ((0, 0), (0, grow)))
-            self._s_max = n_segments
-            self.version += 1
 
     @staticmethod
     def lane_constants(params: MillingParams, spindle_rpm: float) -> np.ndarray:

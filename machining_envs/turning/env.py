@@ -10,16 +10,11 @@ from machining_envs.core.actuation import (
 )
 from machining_envs.core.env import LaneEnv
 from machining_envs.core.rendering import (
-    present_frame,
-    ready_to_render,
     render_signals,
 )
 from machining_envs.core.sensors import PowerSensor
 from machining_envs.core.vector import (
     LaneVectorEnv,
-    check_num_envs,
-    check_vector_args,
-    first_scenario,
 )
 from machining_envs.turning.lanes import (
     TurningCore,
@@ -167,6 +162,7 @@ class TurningEnv(LaneEnv):
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+    _ID = "Turning-v0"
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = TURNING_TASK
     #: Positions of the observation's fields, for controllers that read them by name.
@@ -192,19 +188,7 @@ class TurningEnv(LaneEnv):
         power_sensor: PowerSensor | dict | bool | None = None,
         **overrides,
     ):
-        core = TurningCore(
-            type(self).__name__,
-            1,
-            scenario,
-            params,
-            spindle_rpm,
-            reward,
-            max_episode_time_s,
-            overrides,
-            actuation,
-            power_sensor,
-        )
-        self._adopt(core, scenario, render_mode)
+        core = self._open(TurningCore, locals())  # the core's options by their names
         #: The spindle-power sensor's settings (option ``power_sensor``), None when off.
         self.power_sensor = core.power_sensor and core.power_sensor.sensor
         #: The CNC's actuation (option ``actuation``), None when ideal.
@@ -218,12 +202,10 @@ class TurningEnv(LaneEnv):
     def _set_action(self, action) -> None:
         self._core.set_action(0, *check_action(action, "TurningEnv"))
 
-    def render(self):
-        if not ready_to_render(self):
-            return None
+    def _draw(self):
         log = self._log
         t = log["t"]
-        img = render_signals(
+        return render_signals(
             t,
             [
                 (
@@ -239,7 +221,6 @@ class TurningEnv(LaneEnv):
             ],
             f"Turning-v0 | {self.scenario.name} | {self.scenario.spindle_rpm:.0f} rpm",
         )
-        return present_frame(img, self.render_mode, "Turning-v0")
 
 
 class TurningVectorEnv(LaneVectorEnv):
@@ -276,17 +257,4 @@ class TurningVectorEnv(LaneVectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         **overrides,
     ):
-        check_vector_args(self.env_name, num_threads, overrides)
-        core = TurningCore(
-            type(self).__name__,
-            check_num_envs(num_envs),
-            first_scenario(scenario),
-            params,
-            spindle_rpm,
-            reward,
-            max_episode_time_s,
-            overrides,
-            actuation,
-            power_sensor,
-        )
-        super().__init__(num_envs, core, scenario, num_threads, autoreset_mode)
+        self._open(TurningCore, locals())  # the core's options by their names

@@ -449,6 +449,7 @@ class TurningCore(LaneCore):
         owner: str,
         n: int,
         scenario: str | TurningScenario,
+        *,
         params: TurningParams | None,
         spindle_rpm: float | None,
         reward: LimitReward | dict | None,
@@ -681,38 +682,29 @@ class TurningCore(LaneCore):
             return False
         if self.spindle_rpm_override is not None:
             return False
-        ok = self._batch_ok.get(factory)
-        if ok is None:
-            try:
-                for sc in factory.extremes:
-                    truth = sc.true_params(self.params)
-                    ok = float(sc.force_limit_N) < truth.breakage_force_N
-                    if not ok:
-                        break
-            except ValueError:
-                ok = False
-            self._batch_ok[factory] = ok
-        return ok
 
-    def _kernel_args(self) -> tuple:
-        """The kernel's arguments: the fields of its records (:data:`_TABLE`) in order,
-        rebuilt when the plant's arrays are: one table serves the step and every start."""
+        def check(sc) -> bool:
+            truth = sc.true_params(self.params)
+            return float(sc.force_limit_N) < truth.breakage_force_N
+
+        return self._extremes_pass(factory, check)
+
+    def _make_kernel_args(self) -> tuple:
+        """The kernel's arguments: the fields of its records (:data:`_TABLE`) in order
+        (``_kernel_args`` keeps them until the plant's arrays are replaced): one table
+        serves the step and every start."""
+        env = gather(
+            TurningEnvArrays,
+            self,
+            gain=self._gain,
+            fs=self._fs,
+            max_t=self.max_episode_time_s,
+            w=self._w,
+            rng_table=self.rngs.table,
+        )
+        episodes = gather(TurningEpisodes, self)
         lanes = self.lanes
-        if self._args is None or self._args_version != lanes.version:
-            env = gather(
-                TurningEnvArrays,
-                self,
-                gain=self._gain,
-                fs=self._fs,
-                max_t=self.max_episode_time_s,
-                w=self._w,
-                rng_table=self.rngs.table,
-            )
-            episodes = gather(TurningEpisodes, self)
-            free = lanes.speed_free
-            self._args = flatten(lanes.arrays(), env, episodes, free, self._batch)
-            self._args_version = lanes.version
-        return self._args
+        return flatten(lanes.arrays(), env, episodes, lanes.speed_free, self._batch)
 
     def step(self) -> None:
         """Advance every lane with the inputs in ``in_action`` (clipped to the box),

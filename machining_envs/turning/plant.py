@@ -34,7 +34,7 @@ from machining_envs.core.checks import check_field, check_integer, check_range, 
 from machining_envs.core.compiled.kernels import fma, matvec, powers, read_only, row_max, row_min
 from machining_envs.core.compiled.schema import gather, record
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
-from machining_envs.core.workpieces import load_segments
+from machining_envs.core.workpieces import SegmentTables, load_segments
 
 __all__ = [
     "TurningParams",
@@ -943,7 +943,7 @@ def start_lane(k, rpm, full_history, consts, segments, free, a):
     return lags >= 0
 
 
-class TurningLanes:
+class TurningLanes(SegmentTables):
     """N independent cuts stepped together: the physics of every turning env.
 
     Each lane has its own true parameters, spindle speed and workpiece
@@ -991,12 +991,7 @@ class TurningLanes:
         self.buf = np.zeros((self.n, filt.shape[1]))
         #: Scratch of the kernel: the step matrix's rows, then the filter's next state.
         self.work = np.zeros((self.n, 2 * m + 3 + self.n_f))
-        self._s_max = 1
-        #: Counts replacements of the lane arrays (by a profile with more segments).
-        self.version = 0
-        self.edges = np.zeros((self.n, 2))
-        self.d0 = np.zeros((self.n, 1))
-        self.slope = np.zeros((self.n, 1))
+        self._new_segment_tables(self.n)  # the workpieces' tables (SegmentTables)
         #: Per lane ``[Kf, p, Ke, U_max, length, t, margin, Ts, wear per mm]``.
         self.lane_f = np.zeros((self.n, 9))
         self.finished = np.zeros(self.n, dtype=np.bool_)
@@ -1058,17 +1053,6 @@ class TurningLanes:
             margin,
             params.wear_per_100mm / 100.0,
         )
-
-    def fit_segments(self, n_segments: int) -> None:
-        """Widen the per-lane workpiece tables to hold ``n_segments`` segments (a new
-        ``version``: references to the old tables are stale)."""
-        if n_segments > self._s_max:
-            grow = n_segments - self._s_max
-            self.edges = np.pad(self.edges, ((0, 0), (0, grow)), mode="edge")
-            self.d0 = np.pad(self.d0, ((0, 0), (0, grow)))
-            self.slope = np.pad(self.slope, ((0, 0), (0, grow)))
-            self._s_max = n_segments
-            self.version += 1
 
     def _load_matrices(self, lane: int, spindle_rpm: float, full_history: bool) -> None:
         """The step matrix of ``lane`` at ``spindle_rpm``. With ``full_history`` it is padded

@@ -97,7 +97,7 @@ def test_drawn_profile_is_depth_profile_random_between_uniforms():
     ``random`` give from :func:`split_rng`'s generator: the same numbers and the same
     profile, over many states and both factories' shapes."""
     from machining_envs.core.splits import split_state
-    from machining_envs.core.workpieces import DepthProfile, drawn_profile
+    from machining_envs.core.workpieces import DepthProfile, cut_ranges, drawn_profile
 
     for seed in range(300):
         for before, after, segments, seg_mm in ((1, 5, (2, 5), (4.0, 12.0)),
@@ -107,8 +107,8 @@ def test_drawn_profile_is_depth_profile_random_between_uniforms():
             want_b = g.random(before)
             want = DepthProfile.random(g, (0.5, 3.0), segments, seg_mm, 0.3, 2.5, name="p")
             want_a = g.random(after)
-            got_b, got, got_a = drawn_profile(split_state(b, "train"), before, (0.5, 3.0),
-                                              segments, seg_mm, 0.3, 2.5, after, "p")  # fmt: skip
+            ranges = cut_ranges((0.5, 3.0), segments, seg_mm, 0.3, 2.5)
+            got_b, got, got_a = drawn_profile(split_state(b, "train"), before, ranges, after, "p")
             assert got == want
             np.testing.assert_array_equal(got.segment_array(), want.segment_array())
             assert got_b.tolist() == want_b.tolist() and got_a.tolist() == want_a.tolist()
