@@ -158,13 +158,15 @@ def run_benchmark(
         for env_id in chosen:
             sections[env_id] = _env_section(env_id, *args)
             _show(sections[env_id], verbose)
-    else:  # one env per process; the longest (listed last) start first
+    else:  # one env per process; the longest start first
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
         ctx = multiprocessing.get_context("spawn")  # no fork of torch's or numba's threads
         with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=one_thread) as pool:
-            futures = {pool.submit(_env_section, e, *args, True): e for e in reversed(chosen)}
+            longest = sorted(BENCHMARKS, key=lambda s: -s.expected_seconds)
+            order = [s.env_id for s in longest if s.env_id in chosen]
+            futures = {pool.submit(_env_section, e, *args, True): e for e in order}
             for f in as_completed(futures):
                 sections[futures[f]] = f.result()
                 _show(sections[futures[f]], verbose)

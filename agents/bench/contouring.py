@@ -341,6 +341,7 @@ PROCESS = Process(
             "paper_circle",
             tuned=(PIPosition, HInf2DOF),
             learned=("contouring_ppo", "contouring_ppo_residual"),
+            rows_seconds=500.0,
             table_metrics=(
                 "max_contour_error_mm",
                 "rms_contour_error_mm",

@@ -432,6 +432,7 @@ PROCESS = Process(
             oracle_episodes=20,
             oracle_in_quick=False,  # a cut of some 2000 samples: about 16 s
             oracle_seconds=16.0,
+            rows_seconds=250.0,
             extra_splits=("wear", "shopfloor"),
             robustness=Robustness(
                 "spindle speed (x nominal)",

@@ -119,6 +119,10 @@ class BenchmarkSpec:
     """Whether ``--quick`` runs the oracle (on one episode)."""
     oracle_seconds: float = 10.0
     """About how long the oracle takes an episode on 2 cores, s (for the skip message)."""
+    rows_seconds: float = 60.0
+    """About how long the env's rows but the oracle take in the full run on one core, s
+    (measured; docs/results.md has the last run). With ``--jobs``, the envs whose rows or oracle
+    take longest start first."""
     env_kwargs: dict = field(default_factory=dict)
     """Keyword arguments of ``gym.make`` for every row (tuning uses them too)."""
     robustness: Robustness | None = None
@@ -136,6 +140,13 @@ class BenchmarkSpec:
     plot_main: tuple[str, str | None, str] = ("force_N", "force_limit_N", "force (N)")
     plot_lower: tuple[str, str] = ("feed_mm_per_rev", "feed (mm/rev)")
     plot_context: tuple[str, str] | None = ("depth_mm", "depth (mm)")
+
+    @property
+    def expected_seconds(self) -> float:
+        """About how long the env takes in the full run with its oracle apart, s: the
+        longer of its rows and its oracle's episodes."""
+        oracle = self.oracle_seconds * self.oracle_episodes if self.oracle is not None else 0.0
+        return max(self.rows_seconds, oracle)
 
     @property
     def task(self) -> Task:

@@ -255,6 +255,8 @@ PROCESS = Process(
             margin_points=tuple(OperatingPoint(rpm, 2.0) for rpm in (245.0, 405.0, 700.0)),
             oracle=DeferredAgent("agents.oracle.TurningMPCOracle"),
             oracle_episodes=20,
+            oracle_seconds=2.0,
+            rows_seconds=100.0,
             robustness=Robustness(
                 "spindle speed (rpm)",
                 (245.0, 350.0, 500.0, 700.0),

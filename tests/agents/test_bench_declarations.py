@@ -38,3 +38,19 @@ def test_the_oracles_are_imported_when_built():
         spec = process.benchmarks[0]
         oracle = pickle.loads(pickle.dumps(spec.oracle))(gym.make(spec.env_id))
         assert type(oracle) is cls
+
+
+def test_expected_seconds_is_the_longer_of_rows_and_oracle():
+    from agents.bench.declarations import BENCHMARKS
+
+    by_id = {s.env_id: s for s in BENCHMARKS}
+    milling = by_id["machining_envs/EndMilling-v0"]
+    assert milling.expected_seconds == max(
+        milling.rows_seconds, milling.oracle_seconds * milling.oracle_episodes
+    )
+    contouring = by_id["machining_envs/Contouring-v0"]
+    assert contouring.oracle is None
+    assert contouring.expected_seconds == contouring.rows_seconds
+    # With --jobs 2 the two longest envs start at once, the others fill in after them.
+    longest = sorted(BENCHMARKS, key=lambda s: -s.expected_seconds)[:2]
+    assert {s.env_id for s in longest} == {contouring.env_id, milling.env_id}
