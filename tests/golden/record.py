@@ -110,6 +110,9 @@ def _groups():
 def _factory_name(factory) -> str:
     if isinstance(factory, functools.partial):
         return factory.__name__
+    owner = getattr(factory, "__self__", None)  # a class's from_env: the class, not its base
+    if isinstance(owner, type):
+        return owner.__name__
     return factory.__qualname__.replace(".from_env", "")
 
 
