@@ -22,6 +22,7 @@ import numpy as np
 from machining_envs.core.actuation import configure_lane
 
 __all__ = [
+    "CachedKernelArgs",
     "LaneCore",
     "LaneNames",
     "LaneObjects",
@@ -153,21 +154,6 @@ class LaneCore(abc.ABC):
         """Every lane's info as it stands, as new arrays of length ``n`` (the vector env's
         ``info``; a key only some lanes hold comes with its ``"_" + key`` mask)."""
 
-    # ---- the compiled kernel's arguments -----------------------------------------------
-    def _kernel_args(self) -> tuple:
-        """The kernel's arguments (:meth:`_make_kernel_args`), kept in ``_args`` until the
-        plant (``lanes``) replaces its arrays (a new ``lanes.version``), for a core whose
-        kernel takes them in one table (``core.compiled.packed``)."""
-        version = self.lanes.version
-        if self._args is None or self._args_version != version:
-            self._args = self._make_kernel_args()
-            self._args_version = version
-        return self._args
-
-    def _make_kernel_args(self) -> tuple:
-        """The kernel's arguments as they stand (see :meth:`_kernel_args`)."""
-        raise NotImplementedError(f"{type(self).__name__} keeps no kernel arguments")
-
     # ---- pickling ----------------------------------------------------------------------
     def bind_views(self) -> None:  # noqa: B027 (a core without views has nothing to do)
         """Name the columns of the core's tables (the attributes of ``VIEWS``)."""
@@ -181,6 +167,27 @@ class LaneCore(abc.ABC):
         if "_args" in self.VIEWS:  # a cache of the kernel's arguments, views among them
             self._args = None
         self.bind_views()
+
+
+class CachedKernelArgs(abc.ABC):
+    """For a :class:`LaneCore` whose kernel takes its arguments in one table
+    (``core.compiled.packed``): the arguments, built by :meth:`_make_kernel_args`, kept in
+    ``_args`` until the plant (``lanes``) replaces its arrays (a new ``lanes.version``)."""
+
+    _args: tuple | None = None
+    _args_version: int = -1
+
+    def _kernel_args(self) -> tuple:
+        """The kernel's arguments as they stand, from the cache while it holds."""
+        version = self.lanes.version
+        if self._args is None or self._args_version != version:
+            self._args = self._make_kernel_args()
+            self._args_version = version
+        return self._args
+
+    @abc.abstractmethod
+    def _make_kernel_args(self) -> tuple:
+        """The kernel's arguments, built anew."""
 
 
 class LaneNames:

@@ -20,7 +20,14 @@ from machining_envs.core.compiled.normals import LaneGenerators, lane_noise
 from machining_envs.core.compiled.packed import PackedArgs, spaced_rows
 from machining_envs.core.compiled.schema import axes, flatten, gather, offsets, record, via_table
 from machining_envs.core.env import check_episode_time, check_scenario_spec, resolve_params
-from machining_envs.core.lanes import LaneCore, LaneNames, LaneObjects, settle_batch, split_batch
+from machining_envs.core.lanes import (
+    CachedKernelArgs,
+    LaneCore,
+    LaneNames,
+    LaneObjects,
+    settle_batch,
+    split_batch,
+)
 from machining_envs.core.reward import LimitReward, resolve_reward
 from machining_envs.core.sensors import PowerSensorLanes, resolve_power_sensor
 from machining_envs.core.workpieces import lane_segments, traverse_time
@@ -442,7 +449,7 @@ def _map_constants(command_map: ActionMap) -> np.ndarray:
     return command_map.constants()
 
 
-class MillingCore(LaneCore):
+class MillingCore(CachedKernelArgs, LaneCore):
     """The state and arithmetic of N end-milling episodes, shared by ``EndMillingEnv`` (one
     lane) and ``EndMillingVectorEnv`` (N lanes): the plant (:class:`MillingLanes`) and the
     command, noise, reward, observation, episode end and info computed for all lanes by one
@@ -532,8 +539,6 @@ class MillingCore(LaneCore):
         self.in_clipped = np.zeros(n, dtype=np.int64)
         self.commands = np.zeros(n)
         self.noise = np.zeros(n)
-        self._args: tuple | None = None
-        self._args_version = -1
         self._packed = PackedArgs()  # the kernel's arguments in one table (core.compiled.packed)
         #: The blocks of lanes the kernel steps at once (one thread unless a vector env
         #: asks for more).

@@ -29,7 +29,14 @@ from machining_envs.core.compiled.schema import (
     via_table,
 )
 from machining_envs.core.env import check_episode_time, check_scenario_spec, resolve_params
-from machining_envs.core.lanes import LaneCore, LaneNames, LaneObjects, settle_batch, split_batch
+from machining_envs.core.lanes import (
+    CachedKernelArgs,
+    LaneCore,
+    LaneNames,
+    LaneObjects,
+    settle_batch,
+    split_batch,
+)
 from machining_envs.core.reward import LimitReward, resolve_reward
 from machining_envs.core.sensors import PowerSensorLanes, resolve_power_sensor
 from machining_envs.core.workpieces import lane_segments, traverse_time
@@ -434,7 +441,7 @@ def _start_packed(t, k, full_history, consts, segments, x):
     return _start(k, full_history, consts, segments, x, a, e, ep, free)
 
 
-class TurningCore(LaneCore):
+class TurningCore(CachedKernelArgs, LaneCore):
     """The state and arithmetic of N turning episodes, shared by ``TurningEnv`` (one lane)
     and ``TurningVectorEnv`` (N lanes): the plant (:class:`TurningLanes`) and the reward,
     observation and episode end computed for all lanes by one compiled function, so that a
@@ -524,8 +531,6 @@ class TurningCore(LaneCore):
         self.power_lanes: set[int] = set()
         self.length = np.zeros(n)
         self.names = LaneNames(n)
-        self._args: tuple | None = None
-        self._args_version = -1
         self._packed = PackedArgs()  # the kernel's arguments in one table (core.compiled.packed)
         #: The starts a vector env's blocks make (_start_pending; the draws sized for the
         #: first batch, grown with it).

@@ -191,12 +191,11 @@ KERNELS = {
 
 
 def _arguments(core) -> tuple:
-    """The kernel's arguments: from ``_kernel_args`` where the core builds them there (it
-    overrides ``_make_kernel_args``), else the tuple it keeps in ``_args``."""
-    from machining_envs.core.lanes import LaneCore
+    """The kernel's arguments: from ``_kernel_args`` where the core builds them there, else
+    the tuple it keeps in ``_args``."""
+    from machining_envs.core.lanes import CachedKernelArgs
 
-    builds = type(core)._make_kernel_args is not LaneCore._make_kernel_args
-    return core._kernel_args() if builds else core._args
+    return core._kernel_args() if isinstance(core, CachedKernelArgs) else core._args
 
 
 @pytest.mark.parametrize("env_id", sorted(KERNELS))
