@@ -19,10 +19,12 @@ import inspect
 
 import numpy as np
 
-from machining_envs.core.actuation import configure_lane
+from machining_envs.core.actuation import ActuationLanes, configure_lane, resolve_actuation
+from machining_envs.core.sensors import PowerSensorLanes, resolve_power_sensor
 
 __all__ = [
     "CachedKernelArgs",
+    "FeedCnc",
     "LaneCore",
     "LaneNames",
     "LaneObjects",
@@ -188,6 +190,24 @@ class CachedKernelArgs(abc.ABC):
     @abc.abstractmethod
     def _make_kernel_args(self) -> tuple:
         """The kernel's arguments, built anew."""
+
+
+class FeedCnc:
+    """For a regulation core whose command is a feed velocity from 0 to
+    ``params.command_max``, every ``params.sample_time_s``: the CNC's actuation option and the
+    optional spindle-power sensor (the load channel), resolved once, and the actuation
+    lanes."""
+
+    def _set_cnc(self, n: int, actuation, power_sensor) -> None:
+        sensor = resolve_power_sensor(power_sensor)
+        self.power_sensor = sensor and PowerSensorLanes(sensor, n, self.params.sample_time_s)
+        self.actuation = resolve_actuation(actuation)
+
+    def actuation_lanes(self) -> ActuationLanes:
+        """The CNC's actuation between the commands and the servo, every lane on the env's
+        option until its scenario says otherwise."""
+        p = self.params
+        return ActuationLanes(self.n, p.command_max, 0.0, p.sample_time_s, self.actuation)
 
 
 class LaneNames:

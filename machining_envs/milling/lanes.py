@@ -12,7 +12,7 @@ import numpy as np
 from gymnasium import spaces
 
 from machining_envs.core.actions import ACTION_MAPS, ActionMap
-from machining_envs.core.actuation import ActuationLanes, configure_lane, resolve_actuation
+from machining_envs.core.actuation import configure_lane
 from machining_envs.core.checks import check_below
 from machining_envs.core.compiled.blocks import LaneBlocks, serve_one_table_with_tail
 from machining_envs.core.compiled.kernels import copy_into, set_episode_flags
@@ -22,6 +22,7 @@ from machining_envs.core.compiled.schema import axes, flatten, gather, offsets, 
 from machining_envs.core.env import check_episode_time, check_scenario_spec, resolve_params
 from machining_envs.core.lanes import (
     CachedKernelArgs,
+    FeedCnc,
     LaneCore,
     LaneNames,
     LaneObjects,
@@ -29,7 +30,6 @@ from machining_envs.core.lanes import (
     split_batch,
 )
 from machining_envs.core.reward import LimitReward, resolve_reward
-from machining_envs.core.sensors import PowerSensorLanes, resolve_power_sensor
 from machining_envs.core.workpieces import lane_segments, traverse_time
 from machining_envs.milling.plant import (
     KGF,
@@ -449,7 +449,7 @@ def _map_constants(command_map: ActionMap) -> np.ndarray:
     return command_map.constants()
 
 
-class MillingCore(CachedKernelArgs, LaneCore):
+class MillingCore(FeedCnc, CachedKernelArgs, LaneCore):
     """The state and arithmetic of N end-milling episodes, shared by ``EndMillingEnv`` (one
     lane) and ``EndMillingVectorEnv`` (N lanes): the plant (:class:`MillingLanes`) and the
     command, noise, reward, observation, episode end and info computed for all lanes by one
@@ -477,9 +477,7 @@ class MillingCore(CachedKernelArgs, LaneCore):
         self.params = resolve_params(
             owner, params, MillingParams, MillingParams.park_yoon_1986, overrides
         )
-        sensor = resolve_power_sensor(power_sensor)  # the spindle power as the load channel
-        self.power_sensor = sensor and PowerSensorLanes(sensor, n, self.params.sample_time_s)
-        self.actuation = resolve_actuation(actuation)
+        self._set_cnc(n, actuation, power_sensor)  # the spindle power: the load channel
         self.reward_weights = resolve_reward(reward, MillingReward)
         w = self.reward_weights
         self._w = w.weights()
@@ -554,12 +552,6 @@ class MillingCore(CachedKernelArgs, LaneCore):
         state["info_f"] = _info_table(info.shape[1])
         state["info_f"][:] = info
         super().__setstate__(state)
-
-    def actuation_lanes(self) -> ActuationLanes:
-        """The CNC's actuation between the commands and the servo, every lane on the env's
-        option until its scenario says otherwise."""
-        p = self.params
-        return ActuationLanes(self.n, p.command_max, 0.0, p.sample_time_s, self.actuation)
 
     def start(self, lane: int, spec, rng: np.random.Generator) -> None:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its

@@ -13,7 +13,7 @@ import numpy as np
 from gymnasium import spaces
 
 from machining_envs.core.actions import ActionMap
-from machining_envs.core.actuation import ActuationLanes, configure_lane, resolve_actuation
+from machining_envs.core.actuation import configure_lane
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_below, check_range
 from machining_envs.core.compiled.blocks import LaneBlocks, serve_one_table_with_tail
 from machining_envs.core.compiled.kernels import clip_unit_linear, set_episode_flags
@@ -31,6 +31,7 @@ from machining_envs.core.compiled.schema import (
 from machining_envs.core.env import check_episode_time, check_scenario_spec, resolve_params
 from machining_envs.core.lanes import (
     CachedKernelArgs,
+    FeedCnc,
     LaneCore,
     LaneNames,
     LaneObjects,
@@ -38,7 +39,6 @@ from machining_envs.core.lanes import (
     split_batch,
 )
 from machining_envs.core.reward import LimitReward, resolve_reward
-from machining_envs.core.sensors import PowerSensorLanes, resolve_power_sensor
 from machining_envs.core.workpieces import lane_segments, traverse_time
 from machining_envs.turning.plant import (
     SPINDLE_RPM_RANGE,
@@ -441,7 +441,7 @@ def _start_packed(t, k, full_history, consts, segments, x):
     return _start(k, full_history, consts, segments, x, a, e, ep, free)
 
 
-class TurningCore(CachedKernelArgs, LaneCore):
+class TurningCore(FeedCnc, CachedKernelArgs, LaneCore):
     """The state and arithmetic of N turning episodes, shared by ``TurningEnv`` (one lane)
     and ``TurningVectorEnv`` (N lanes): the plant (:class:`TurningLanes`) and the reward,
     observation and episode end computed for all lanes by one compiled function, so that a
@@ -468,9 +468,7 @@ class TurningCore(CachedKernelArgs, LaneCore):
         self.params = resolve_params(
             owner, params, TurningParams, TurningParams.noh_kim_kim_1992, overrides
         )
-        sensor = resolve_power_sensor(power_sensor)  # the spindle power as the load channel
-        self.power_sensor = sensor and PowerSensorLanes(sensor, n, self.params.sample_time_s)
-        self.actuation = resolve_actuation(actuation)
+        self._set_cnc(n, actuation, power_sensor)  # the spindle power: the load channel
         if spindle_rpm is not None:
             spindle_rpm = check_range(
                 "spindle_rpm", spindle_rpm, *SPINDLE_RPM_RANGE, types=PY_NUMBER_TYPES
@@ -575,12 +573,6 @@ class TurningCore(CachedKernelArgs, LaneCore):
 
     def clipped_count(self, lane: int) -> int:
         return int(self.n_clipped[lane])
-
-    def actuation_lanes(self) -> ActuationLanes:
-        """The CNC's actuation between the commands and the servo, every lane on the env's
-        option until its scenario says otherwise."""
-        p = self.params
-        return ActuationLanes(self.n, p.command_max, 0.0, p.sample_time_s, self.actuation)
 
     def start(self, lane: int, spec, rng: np.random.Generator) -> None:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
