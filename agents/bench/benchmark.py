@@ -39,11 +39,14 @@ from agents.eval import Evaluation
 from machining_envs.core.checks import is_seed
 from machining_envs.core.splits import split_seeds
 
-__all__ = ["run_benchmark", "check_env_ids", "SIZES"]
+__all__ = ["run_benchmark", "check_env_ids", "SIZES", "EXTRA_SIZES"]
 
 #: Episodes per agent for the quick and the full run: (test, ood, at most this many test
 #: episodes for an oracle, which also stops at its spec's ``oracle_episodes``).
 SIZES = {"quick": (8, 0, 1), "full": (100, 25, 100)}
+#: Episodes of an extra held-out split where they are not ``ood``'s, per run: the full run
+#: judges the shop-floor rows (``docs/shopfloor.md``) on 100 episodes, as it does ``test``.
+EXTRA_SIZES = {"quick": {}, "full": {"shopfloor": 100}}
 
 
 def _tuned_settings() -> dict:
@@ -78,6 +81,7 @@ def _env_section(env_id, n_test, n_ood, n_oracle, quick, seed, out, verbose, t0,
         one_seed=quick,
         oracle_apart=apart,
         machine_tuned=machine_tuned,
+        n_extra=EXTRA_SIZES["quick" if quick else "full"],
     )
     section = env_section(run, tuned, n_test, n_ood, quick, seed, Path(out))
     section["rows"] = run.all_rows()
@@ -113,7 +117,8 @@ def run_benchmark(
 ) -> Evaluation:
     """Run every env's benchmark (or those in ``envs``); return all episode rows.
 
-    ``quick``: 8 test episodes per agent instead of 100, no ood (25 in the full run), one
+    ``quick``: 8 test episodes per agent instead of 100, no ood (25 in the full run) nor extra
+    split (25 each in the full run, the ``shopfloor`` split 100: ``EXTRA_SIZES``), one
     episode for the oracles that are fast enough (``oracle_in_quick``), each learned row's
     first training seed only, no robustness grid, learning curves or loop margins. ``seed``
     seeds the bootstrap only: the episodes are the splits' fixed ones. ``jobs``: envs run at

@@ -89,7 +89,8 @@ def env_section(
         head = "`ood` (beyond the training ranges)" if sr.split == "ood" else f"`{sr.split}`"
         if note:
             head += f" ({note})"
-        split_lines += [f"{head}, {n_ood} episodes:", "", tables[sr.split], ""]
+        n = run.n_episodes.get(sr.split, n_ood)
+        split_lines += [f"{head}, {n} episodes:", "", tables[sr.split], ""]
         if sr.split == "shopfloor" and run.machine_cls:
             split_lines += [SHOPFLOOR_ROWS_NOTE, ""]
     lines = [

@@ -77,6 +77,8 @@ class EnvRun:
         #: first training seed's).
         self.trajectories: dict[str, dict] = {}
         self.plot_seed: int | None = None
+        #: Split -> the episodes each of its rows runs.
+        self.n_episodes: dict[str, int] = {}
         env = gym.make(spec.env_id, **spec.env_kwargs)
         try:
             self.score = spec.task.score
@@ -240,9 +242,11 @@ def run_env(
     one_seed: bool = False,
     oracle_apart: bool = False,
     machine_tuned: dict | None = None,
+    n_extra: dict | None = None,
 ) -> EnvRun:
     """Run every row of ``spec`` (see the module docstring): ``n_test`` test episodes,
-    ``n_ood`` of ``ood`` and of each extra split, and the oracle on the first
+    ``n_ood`` of ``ood`` and of each extra split (``n_extra``: split -> episodes, where
+    not ``n_ood``; only where ``n_ood`` is not 0), and the oracle on the first
     ``min(n_oracle, spec.oracle_episodes)`` test episodes; the rows tuned for the
     shop-floor machine (``machine_tuned``) on the ``shopfloor`` split only. ``oracle_apart``:
     the oracle runs in a process of its own beside the other rows (the same episodes, the
@@ -250,8 +254,10 @@ def run_env(
     instead of their sum)."""
     run = EnvRun(spec)
     env_name = spec.env_id.split("/")[-1]
-    named = (("test", n_test), ("ood", n_ood), *((x, n_ood) for x in spec.extra_splits))
+    extra = [(x, (n_extra or {}).get(x, n_ood) if n_ood else 0) for x in spec.extra_splits]
+    named = (("test", n_test), ("ood", n_ood), *extra)
     splits = [(split, n) for split, n in named if n > 0]
+    run.n_episodes = dict(splits)
     jobs = [
         j
         for j in jobs_of(spec, tuned, verbose, one_seed, machine_tuned)

@@ -102,3 +102,26 @@ def test_shipped_file_covers_every_machine_row():
         assert set(data["envs"][spec.env_id]) == {c.__name__ for c in spec.machine_tuned}
         assert data["env_kwargs"][spec.env_id] == SHOPFLOOR_MACHINE.env_kwargs(spec.env_id)
     json.dumps(data)
+
+
+def test_full_run_judges_the_shopfloor_split_on_100_episodes():
+    import gymnasium as gym
+
+    from agents.bench.benchmark import EXTRA_SIZES, SIZES
+
+    assert EXTRA_SIZES["full"]["shopfloor"] == SIZES["full"][0] == 100
+    assert EXTRA_SIZES["quick"] == {} and SIZES["quick"][1] == 0  # --quick runs no extra split
+    spec = dataclasses.replace(
+        benchmark_spec(TURNING), paper_agents=(), learned=(), oracle=None, tuned=(),
+        machine_tuned=(ConstantFeed,), extra_splits=("wear", "shopfloor"),
+    )  # fmt: skip
+    env = gym.make(TURNING)
+    data = _machine_file(spec, env)
+    env.close()
+    run = run_env(spec, 1, 2, 0, {}, False, 0.0, machine_tuned=data, n_extra={"shopfloor": 4})
+    assert run.n_episodes == {"test": 1, "ood": 2, "wear": 2, "shopfloor": 4}
+    (name,) = run.machine_cls
+    assert len(run.rows[name]["shopfloor"]) == 4
+    # without ood (the quick run) no extra split runs, whatever n_extra says
+    quick = run_env(spec, 1, 0, 0, {}, False, 0.0, machine_tuned=data, n_extra={"shopfloor": 4})
+    assert quick.n_episodes == {"test": 1}
