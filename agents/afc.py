@@ -22,6 +22,12 @@ torque. What it does, rule by rule (the manual's column names in brackets):
 - **In air** (cutting load below ``pout`` x the reference, POUT, recommended 8 %) the tool
   traverses at the idle factor ``fidl`` (FIDL); on entering the material the factor starts
   from ``fent`` (FENT, at most 100 %).
+- **Approach** (the library's rule, not the manual's): before the first contact the tool
+  approaches at ``fapp`` (default ``fidl``). The contact shows in the load only, so a
+  control whose override takes effect ``d`` periods late (a machine with interpolator
+  delay, ``machining_envs.core.actuation``) enters the material at the approach factor
+  whatever it commands on contact; ``from_env`` therefore sets ``fapp = fent`` on an env
+  whose actuation has a delay (later air cuts still run at ``fidl``).
 - **Overload reaction** (OVLD = S): the load above the reference for more than
   ``overload_s`` (one second) while the factor sits at ``fmin``: NC stop, the feed held at
   zero for the rest of the episode, and the ``stop`` flag raised.
@@ -101,6 +107,8 @@ class AdaptiveFeedControl(Agent):
         Override in air, in [0.05, 5].
     fent : float
         Override on entering the material, in [0.05, 1].
+    fapp : float or None
+        Override before the first contact (the approach), in [0.05, 5]; None: ``fidl``.
     pout : float
         Cutting load below which the tool is in air, as a share of the reference, in
         [0.01, 0.5] (manual: 8 %).
@@ -143,6 +151,7 @@ class AdaptiveFeedControl(Agent):
         fmax: float = 1.3,
         fidl: float = 1.0,
         fent: float = 1.0,
+        fapp: float | None = None,
         pout: float = 0.08,
         gain: float = 0.2,
         overload_s: float = 1.0,
@@ -165,6 +174,7 @@ class AdaptiveFeedControl(Agent):
         self.fmax = check_setting("fmax", fmax, 1.0, 5.0)
         self.fidl = check_setting("fidl", fidl, 0.05, 5.0)
         self.fent = check_setting("fent", fent, 0.05, 1.0)
+        self.fapp = self.fidl if fapp is None else check_setting("fapp", fapp, 0.05, 5.0)
         self.pout = check_setting("pout", pout, 0.01, 0.5)
         self.gain = check_positive("gain", gain, 2.0)
         self.overload_s = check_positive("overload_s", overload_s, 100.0)
@@ -185,7 +195,9 @@ class AdaptiveFeedControl(Agent):
     def from_env(cls, env, design_depth_mm: float = 3.0, setpoint: float = 1.0, **kwargs):
         """The AFC for a Turning-v0 or EndMilling-v0 env: its programmed feed is the
         constant feed designed for ``design_depth_mm`` at ``setpoint`` x the limit; the
-        load channel is the env's (its ``power_sensor`` if on)."""
+        load channel is the env's (its ``power_sensor`` if on). Where the env's actuation
+        delays the override and ``fapp`` is not given, the approach runs at ``fent``
+        (module docstring)."""
         from machining_envs.milling.env import EndMillingEnv
         from machining_envs.turning.env import TurningEnv
 
@@ -219,6 +231,9 @@ class AdaptiveFeedControl(Agent):
                 "AdaptiveFeedControl needs a TurningEnv or an EndMillingEnv, got "
                 f"{type(base).__name__}"
             )
+        act = getattr(base, "actuation", None)
+        if act is not None and act.delay_steps > 0 and kwargs.get("fapp") is None:
+            kwargs["fapp"] = kwargs.get("fent", 1.0)
         programmed_obs = None
         if sensor is not None:  # the observation shows powers: the planner's limit is nominal
             scale = float(sensor.power_scale_W)
@@ -247,7 +262,7 @@ class AdaptiveFeedControl(Agent):
     def initial_state(self, n, obs):
         st = np.zeros((n, self.state_size))
         load, limit = self.load_units(obs)
-        st[:, _OVR] = self.fidl
+        st[:, _OVR] = self.fapp
         st[:, _IDLE] = load  # feed at rest: the idle load
         st[:, _LIMIT] = limit
         st[:, _REF] = np.maximum(self.reference * limit - load, 1e-9)
@@ -292,7 +307,8 @@ class AdaptiveFeedControl(Agent):
         new = np.clip(new, self.fmin, self.fmax)
         ovr = np.where(control & ~air, new, ovr)
         ovr = np.where(phase == _TEACH, 1.0, ovr)
-        ovr = np.where(air & ~stopped, self.fidl, ovr)
+        idle = np.where(phase == _WAIT, self.fapp, self.fidl)  # before the first contact: fapp
+        ovr = np.where(air & ~stopped, idle, ovr)
         in_ctrl = control & ~air
         state[:, _T_CTRL] += np.where(control, ts, 0.0)
         # overload: above the reference at fmin for more than overload_s -> NC stop

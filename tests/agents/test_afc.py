@@ -147,7 +147,8 @@ def test_programmed_feed_is_the_constant_feed():
 def test_end_milling_on_the_shop_floor_machine_keeps_its_rules():
     """EndMilling-v0 on the shop-floor machine (delay, 1 % steps, rate limits), a whole
     `validation` workpiece: the commanded override is the programmed feed times the factor,
-    within [fmin, fmax] in the material and at the idle factor in air; the log's peak load
+    within [fmin, fmax] in the material, at the entry factor before the first contact (the
+    machine delays the override) and at the idle factor in air after it; the log's peak load
     and smallest factor are those of the episode as recomputed from the observations."""
     import gymnasium as gym
 
@@ -173,8 +174,8 @@ def test_end_milling_on_the_shop_floor_machine_keeps_its_rules():
         assert float(cmap.action_to_command(float(a[0]))) == pytest.approx(expected, rel=1e-5)
         if state[0, 3] == 3.0:  # stopped (overload): the feed held at zero
             assert ovr == 0.0 and state[0, 9] == 1.0
-        elif state[0, 12] == 1.0:  # in air
-            assert ovr == pytest.approx(2.0)
+        elif state[0, 12] == 1.0:  # in air: approaching at FENT (100 %), later at FIDL
+            assert ovr == pytest.approx(1.0 if state[0, 3] == 0.0 else 2.0)
         else:
             assert 0.5 - 1e-12 <= ovr <= 1.6 + 1e-12
             factors_in.append(ovr)
@@ -211,3 +212,26 @@ def test_reference_moved_between_steps_applies_from_the_next_step():
     np.testing.assert_allclose(
         m.action_to_command(a2[:, 0]), PROGRAMMED * np.array([1.0, 1.0 + 0.5 * 0.375]), rtol=1e-6
     )
+
+
+def test_approaches_at_fapp_then_idles_at_fidl():
+    afc, m = _afc(fidl=1.8, fapp=0.9, fent=1.0, pout=0.08, reference=0.5)
+    # before the first contact: the approach factor; in the material: FENT; in air after
+    # the cut: the idle factor
+    commands, _, _ = _run(afc, m, [0.0, 0.0, 0.0, 0.3, 0.0, 0.0])
+    np.testing.assert_allclose(commands / PROGRAMMED, [0.9, 0.9, 0.9, 1.0, 1.8, 1.8], rtol=1e-6)
+    assert _afc(fidl=1.8)[0].fapp == 1.8  # by default the approach is at the idle factor
+    with pytest.raises(ValueError, match="fapp"):
+        _afc(fapp=6.0)
+
+
+def test_from_env_approaches_at_fent_on_a_delayed_machine():
+    import gymnasium as gym
+
+    for env_id in ("machining_envs/Turning-v0", "machining_envs/EndMilling-v0"):
+        delayed = gym.make(env_id, actuation={"delay_steps": 2})
+        ideal = gym.make(env_id, actuation={"quantum": 0.01})  # no delay
+        assert AdaptiveFeedControl.from_env(delayed, fidl=2.0, fent=0.8).fapp == 0.8
+        assert AdaptiveFeedControl.from_env(delayed, fidl=2.0, fapp=1.5).fapp == 1.5  # given
+        assert AdaptiveFeedControl.from_env(ideal, fidl=2.0).fapp == 2.0
+        assert AdaptiveFeedControl.from_env(gym.make(env_id), fidl=2.0).fapp == 2.0
