@@ -26,6 +26,7 @@ _EXPORTS = {
     "MillingConstantFeed": "agents.milling",
     "ConstantOverride": "agents.contouring",
     "LookAheadFeed": "agents.contouring",
+    "ContourAFC": "agents.contouring",
     "HInf2DOF": "agents.contouring",
     "PIPosition": "agents.contouring",
     "NoControl": "agents.drilling",

@@ -132,6 +132,7 @@ class AdaptiveFeedControl(Agent):
         "design_depth_mm": (0.5, 6.0, False),
         "reference": (0.5, 1.0, False),
         "gain": (0.02, 1.0, True),
+        "fmin": (0.2, 1.0, False),
         "fmax": (1.0, 3.0, False),
         "fidl": (0.5, 3.0, False),
     }

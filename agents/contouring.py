@@ -57,6 +57,7 @@ __all__ = [
     "HInf2DOF",
     "ConstantOverride",
     "LookAheadFeed",
+    "ContourAFC",
     "calibrate_constant_override",
     "BASELINE_OVERRIDE",
     "CALIBRATION_SEEDS",
@@ -459,6 +460,121 @@ class LookAheadFeed(Agent):
         # A floor keeps the set point moving: slowing to zero at the path's end would
         # approach it without ever arriving.
         override = np.clip(v / feed, MIN_OVERRIDE, self.override_cap)
+        return (2.0 * override / self.override_max - 1.0)[:, None]
+
+
+class ContourAFC(Agent):
+    r"""Adaptive feed control on the contour error: the industrial AFC's law
+    (:class:`agents.AdaptiveFeedControl`) with the contour error as the load, on
+    ContouringFeed-v0's override.
+
+    The programmed feed is the look-ahead planner's (:class:`LookAheadFeed`: the feed the
+    CNC's planner allows from the path previewed ahead); the controller moves a factor
+    ``k`` on it to hold the largest contour error of each decision at ``reference`` x the
+    tolerance, by integral action on the relative error, fast down and slow up:
+
+    .. math:: k_j = \mathrm{clip}\big(k_{j-1} + g\,\rho_j\,(1 - e_j / (r\,\varepsilon)),
+              f_{min}, f_{max}\big), \qquad o_j = \mathrm{clip}(k_j\, o^{plan}_j, 0,
+              o_{max})
+
+    at decision ``j``, with ``e_j`` the largest contour error over the decision before
+    (observation 1, as a multiple of the tolerance ``epsilon``; 0 at the start),
+    ``o^plan_j`` the planner's override, ``k_{-1} = fent`` and ``rho_j = 1`` where the
+    error is above the reference, ``rise`` where below. Feedback on what the table does,
+    where the planner alone cannot know the episode's axes (their inertias vary) nor the
+    override's handling (a machine's delay and rate limits). Unlike a force in turning,
+    the contour error is near zero on every straight and peaks at the corners: a
+    symmetric integral would speed up on each straight and arrive at the next corner too
+    fast. So an error above the reference slows the rest of the path at once, and the
+    factor recovers slowly (``rise`` of the gain) while the path is cut within it. It
+    reads nothing hidden.
+
+    Parameters
+    ----------
+    override_max : float
+        The env's largest override (action +1).
+    centripetal_mm_s2, tangential_mm_s2, override_cap : float
+        The planner's (:class:`LookAheadFeed`).
+    reference : float
+        The contour error held, as a share of the tolerance, in (0, 2].
+    gain : float
+        Change of the factor per decision per unit of relative error, in (0, 2].
+    rise : float
+        The share of ``gain`` while the error is below the reference, in (0, 1].
+    fmin, fmax : float
+        Bounds of the factor: ``fmin`` in [0.05, 1], ``fmax`` in [1, 5].
+    fent : float
+        The factor at the path's start, in [0.05, 1].
+
+    The defaults (reference 0.7, gain 0.2, rise 0.01, fmax 1.2, fent 0.9) were chosen on
+    `train` episodes of the shop-floor machine; ``TUNABLE`` has the planner's three and
+    the feedback's ``reference``, ``gain`` and ``rise``.
+    """
+
+    state_size = 1  # the factor k
+    obs_dim = 16
+    #: Free parameters and their search ranges (low, high, log scale) for tuning: the
+    #: planner's and the feedback's.
+    TUNABLE = {
+        **LookAheadFeed.TUNABLE,
+        "reference": (0.3, 1.0, False),
+        "gain": (0.01, 1.0, True),
+        "rise": (0.002, 0.5, True),
+    }
+
+    def __init__(
+        self,
+        override_max: float,
+        centripetal_mm_s2: float = 1000.0,
+        tangential_mm_s2: float = 1000.0,
+        override_cap: float = 1.0,
+        reference: float = 0.7,
+        gain: float = 0.2,
+        rise: float = 0.01,
+        fmin: float = 0.2,
+        fmax: float = 1.2,
+        fent: float = 0.9,
+    ):
+        from agents.base import check_setting
+
+        self.planner = LookAheadFeed(
+            override_max, centripetal_mm_s2, tangential_mm_s2, override_cap
+        )
+        self.override_max = self.planner.override_max
+        self.centripetal_mm_s2 = self.planner.centripetal_mm_s2
+        self.tangential_mm_s2 = self.planner.tangential_mm_s2
+        self.override_cap = self.planner.override_cap
+        self.reference = check_positive("reference", reference, 2.0)
+        self.gain = check_positive("gain", gain, 2.0)
+        self.fmin = check_setting("fmin", fmin, 0.05, 1.0)
+        self.fmax = check_setting("fmax", fmax, 1.0, 5.0)
+        self.fent = check_setting("fent", fent, 0.05, 1.0)
+        self.rise = check_setting("rise", rise, 0.0, 1.0, lo_open=True)
+        self.name = f"contour AFC ref {self.reference:.2g}"
+
+    @classmethod
+    def from_env(
+        cls,
+        env,
+        centripetal_mm_s2: float = 1000.0,
+        tangential_mm_s2: float = 1000.0,
+        override_cap: float = 1.0,
+        **kwargs,
+    ) -> ContourAFC:
+        base = unwrap_as(env, ContouringFeedEnv, "ContourAFC")
+        return cls(base.override_max, centripetal_mm_s2, tangential_mm_s2, override_cap, **kwargs)
+
+    def initial_state(self, n, obs):
+        return np.full((n, self.state_size), self.fent)
+
+    def _act(self, obs, state):
+        k = state[:, 0]
+        e = obs[:, 1].astype(np.float64)  # largest contour error of the decision / tolerance
+        rel = 1.0 - e / self.reference
+        k = np.clip(k + self.gain * np.where(rel > 0, self.rise, 1.0) * rel, self.fmin, self.fmax)
+        state[:, 0] = k
+        plan = 0.5 * (self.planner._act(obs, state[:, :0])[:, 0] + 1.0) * self.override_max
+        override = np.clip(k * plan, 0.0, self.override_max)
         return (2.0 * override / self.override_max - 1.0)[:, None]
 
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from agents.bench.figures import reproduction_figure, save_figure
 from agents.bench.spec import BenchmarkSpec, Process
-from agents.contouring import ConstantOverride, HInf2DOF, LookAheadFeed, PIPosition
+from agents.contouring import ConstantOverride, ContourAFC, HInf2DOF, LookAheadFeed, PIPosition
 from agents.eval import rollout
 from machining_envs.contouring.metrics import contouring_metrics
 from machining_envs.contouring.paths import Path
@@ -363,7 +363,7 @@ PROCESS = Process(
             ("paper_circle", "paper_involute"),
             "paper_involute",
             tuned=(ConstantOverride, LookAheadFeed),
-            machine_tuned=(ConstantOverride, LookAheadFeed),
+            machine_tuned=(ConstantOverride, LookAheadFeed, ContourAFC),
             machine_reference=ConstantOverride,
             learned=("contouring_feed_ppo", "contouring_feed_ppo_residual"),
             extra_splits=("shopfloor",),

@@ -58,7 +58,7 @@ def test_tune_at_the_strictest_allowance_records_it(tmp_path):
     env_id = "machining_envs/ContouringFeed-v0"
     assert data["commands"][env_id] == data["command"]
     assert data["env_kwargs"][env_id]["actuation"]["max_rate_per_s"] == 2.5  # feed_override
-    assert set(data["envs"][env_id]) == {"ConstantOverride", "LookAheadFeed"}
+    assert set(data["envs"][env_id]) == {"ConstantOverride", "LookAheadFeed", "ContourAFC"}
 
 
 def test_tuning_budget_allowance_is_checked():

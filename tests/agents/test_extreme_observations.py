@@ -14,8 +14,12 @@ import pytest
 import agents as a
 from tests.agents.test_robustness import CLASSICAL, IDS
 
-AGENTS = [*CLASSICAL, ("machining_envs/ContouringFeed-v0", {}, a.LookAheadFeed.from_env)]
-AGENT_IDS = [*IDS, "LookAheadFeed-ContouringFeed-v0"]
+AGENTS = [
+    *CLASSICAL,
+    ("machining_envs/ContouringFeed-v0", {}, a.LookAheadFeed.from_env),
+    ("machining_envs/ContouringFeed-v0", {}, a.ContourAFC.from_env),
+]
+AGENT_IDS = [*IDS, "LookAheadFeed-ContouringFeed-v0", "ContourAFC-ContouringFeed-v0"]
 #: Finite values a broken sensor, a unit mistake or a fuzzer may put in an observation.
 EXTREMES = (-1e30, 1e30, 0.0, 5e-324, -5e-324, 1e-30, 3.4e38, -3.4e38)
 

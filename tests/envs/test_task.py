@@ -13,6 +13,7 @@ from agents import (
     PD,
     ConstantFeed,
     ConstantOverride,
+    ContourAFC,
     FixedGainIntegral,
     FixedGainPI,
     HInf2DOF,
@@ -81,6 +82,7 @@ TUNABLE_CASES = AGENT_CASES + [
     (CONTOURING, HInf2DOF),
     (FEED, ConstantOverride),
     (FEED, LookAheadFeed),
+    (FEED, ContourAFC),
 ]
 
 
