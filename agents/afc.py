@@ -43,8 +43,10 @@ torque. What it does, rule by rule (the manual's column names in brackets):
   episode's row (``afc_*`` columns).
 
 The law is the industrial one (integral action on the relative load, bounded override),
-not a model-based design: it knows nothing of the plant's gain, delay or filter; its
-``gain`` is tuned (``TUNABLE``) by the protocol every classical agent follows.
+not a model-based design: it knows nothing of the plant's gain or filter, and of the
+machine's delay only whether there is one (the approach rule); its ``gain``, reference
+and override bounds are tuned (``TUNABLE``; for a described machine ``MACHINE_TUNABLE``,
+with ``fmin``) by the protocol every classical agent follows.
 """
 
 from __future__ import annotations
@@ -132,9 +134,20 @@ class AdaptiveFeedControl(Agent):
         "design_depth_mm": (0.5, 6.0, False),
         "reference": (0.5, 1.0, False),
         "gain": (0.02, 1.0, True),
-        "fmin": (0.2, 1.0, False),
         "fmax": (1.0, 3.0, False),
         "fidl": (0.5, 3.0, False),
+    }
+    #: Tuned for a described machine (``machining-bench tune --machine``), also ``fmin``: the
+    #: overload stop (above the reference at ``fmin``) is reached there, where a delayed,
+    #: rate-limited override and a spindle that slows when overloaded leave the load above
+    #: the reference longer.
+    MACHINE_TUNABLE = {
+        "design_depth_mm": TUNABLE["design_depth_mm"],
+        "reference": TUNABLE["reference"],
+        "gain": TUNABLE["gain"],
+        "fmin": (0.2, 1.0, False),
+        "fmax": TUNABLE["fmax"],
+        "fidl": TUNABLE["fidl"],
     }
 
     def __init__(

@@ -489,6 +489,10 @@ class ContourAFC(Agent):
     factor recovers slowly (``rise`` of the gain) while the path is cut within it. It
     reads nothing hidden.
 
+    The defaults (reference 0.7, gain 0.2, rise 0.01, fmax 1.2, fent 0.9) were chosen on
+    ``train`` episodes of the shop-floor machine; ``TUNABLE`` has the planner's three and
+    the feedback's ``reference``, ``gain`` and ``rise``.
+
     Parameters
     ----------
     override_max : float
@@ -505,10 +509,6 @@ class ContourAFC(Agent):
         Bounds of the factor: ``fmin`` in [0.05, 1], ``fmax`` in [1, 5].
     fent : float
         The factor at the path's start, in [0.05, 1].
-
-    The defaults (reference 0.7, gain 0.2, rise 0.01, fmax 1.2, fent 0.9) were chosen on
-    `train` episodes of the shop-floor machine; ``TUNABLE`` has the planner's three and
-    the feedback's ``reference``, ``gain`` and ``rise``.
     """
 
     state_size = 1  # the factor k

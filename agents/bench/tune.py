@@ -18,8 +18,11 @@ limit, a constant feed). The protocol, the same for every agent of every env:
 ``machining-bench tune --machine my_cnc.yml``): every env is made with the options that put
 its plant on the described CNC (``machining_envs.core.machine``), for the trials and the
 validation check alike; the held-out ``shopfloor`` split is not used. The classes tuned are
-the spec's ``machine_tuned`` (default: its ``tuned``), and each env's entries record the
-machine and the env options they were tuned with. The benchmark's shop-floor rows read
+the spec's ``machine_tuned`` (default: its ``tuned``), each over its ``MACHINE_TUNABLE``
+where it declares one (a search space for a described machine, e.g. the AFC's with its
+lower override bound, whose overload stop a machine's actuation makes reachable; default
+``TUNABLE``), and each env's entries record the machine and the env options they were
+tuned with. The benchmark's shop-floor rows read
 ``agents/bench/tuned_shopfloor.json`` (:data:`SHOPFLOOR_TUNED_FILE`), written by
 ``machining-bench tune --machine docs/my_cnc.yml --out agents/bench/tuned_shopfloor.json``
 (the library's reference shop-floor machine).
@@ -54,6 +57,7 @@ __all__ = [
     "tuned_factory",
     "machine_tuned_factory",
     "paper_settings",
+    "search_space",
 ]
 
 #: Where the tuned settings ship.
@@ -100,12 +104,19 @@ class TuningBudget:
         return out
 
 
-def paper_settings(cls, env) -> dict:
+def search_space(cls, machine: bool = False) -> dict:
+    """``cls``'s free parameters and their ranges: ``TUNABLE``, or with ``machine`` (tuning
+    for a described machine) its ``MACHINE_TUNABLE`` where it declares one."""
+    return getattr(cls, "MACHINE_TUNABLE", cls.TUNABLE) if machine else cls.TUNABLE
+
+
+def paper_settings(cls, env, machine: bool = False) -> dict:
     """The settings of ``cls.from_env(env)`` (its defaults: the paper's, or the library's
-    own calibration where the paper gives none) for every key of ``cls.TUNABLE``."""
+    own calibration where the paper gives none) for every key of its search space
+    (:func:`search_space`)."""
     agent = cls.from_env(env)
     try:
-        return {name: float(getattr(agent, name)) for name in cls.TUNABLE}
+        return {name: float(getattr(agent, name)) for name in search_space(cls, machine)}
     except AttributeError as e:
         raise ValueError(
             f"{cls.__name__}.TUNABLE names a setting its agents do not keep: {e}"
@@ -144,18 +155,21 @@ def tune_agent(
     budget: TuningBudget | None = None,
     env_kwargs: dict | None = None,
     verbose: bool = False,
+    machine: bool = False,
 ) -> dict:
-    """Tune one agent class on one env by the protocol above; returns its ``tuned.json`` entry."""
+    """Tune one agent class on one env by the protocol above; returns its ``tuned.json``
+    entry. ``machine``: tuning for a described machine (the class's ``MACHINE_TUNABLE``
+    where it has one)."""
     import optuna
 
     budget = budget or TuningBudget()
     # The keywords the agent itself needs (``ENV_KWARGS``: PeckDrilling commands the feed).
     env_kwargs = {**dict(env_kwargs or {}), **getattr(cls, "ENV_KWARGS", {})}
     check_not_held_out([env_kwargs.get("scenario", "train")], "tuning (env_kwargs.scenario)")
-    space = cls.TUNABLE
+    space = search_space(cls, machine)
     env = gym.make(env_id, **env_kwargs)
     try:
-        paper = paper_settings(cls, env)
+        paper = paper_settings(cls, env, machine)
         score = task_of(env).score
         failed = score.failed_value(env)
     finally:
@@ -245,7 +259,7 @@ def tune_all(
         if machine is not None:
             kwargs.update(machine.env_kwargs(spec.env_id))
         for cls in classes:  # written after each agent: a long run keeps what it did
-            entry = tune_agent(cls, spec.env_id, budget, kwargs, verbose)
+            entry = tune_agent(cls, spec.env_id, budget, kwargs, verbose, machine is not None)
             # Read again before writing: another process may have written other envs.
             data = load_tuned(path) if path.is_file() else {}
             data["command"] = command

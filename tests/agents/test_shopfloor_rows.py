@@ -125,3 +125,35 @@ def test_full_run_judges_the_shopfloor_split_on_100_episodes():
     # without ood (the quick run) no extra split runs, whatever n_extra says
     quick = run_env(spec, 1, 0, 0, {}, False, 0.0, machine_tuned=data, n_extra={"shopfloor": 4})
     assert quick.n_episodes == {"test": 1}
+
+
+def test_machine_search_space_and_the_shipped_settings_within_it():
+    """Tuned for a machine, a class searches its ``MACHINE_TUNABLE`` (the AFC: also
+    ``fmin``), else its ``TUNABLE``; the shipped Turning-v0 and ContouringFeed-v0 entries
+    hold a value within range for every key of that space."""
+    import gymnasium as gym
+
+    from agents import ContourAFC
+    from agents.bench.tune import TuningBudget, search_space, tune_agent
+
+    assert search_space(AdaptiveFeedControl) == AdaptiveFeedControl.TUNABLE
+    assert set(search_space(AdaptiveFeedControl, machine=True)) == {
+        *AdaptiveFeedControl.TUNABLE, "fmin"}  # fmt: skip
+    assert search_space(ConstantFeed, machine=True) == ConstantFeed.TUNABLE
+    kwargs = SHOPFLOOR_MACHINE.env_kwargs(TURNING)
+    entry = tune_agent(AdaptiveFeedControl, TURNING, TuningBudget(1, 1, 0), kwargs, machine=True)
+    assert set(entry["params"]) == set(entry["paper_params"]) == set(
+        AdaptiveFeedControl.MACHINE_TUNABLE)  # fmt: skip
+    assert entry["paper_params"]["fmin"] == 0.7
+    data = load_tuned(SHOPFLOOR_TUNED_FILE)
+    for env_id in (TURNING, "machining_envs/ContouringFeed-v0"):
+        spec = benchmark_spec(env_id)
+        env = gym.make(env_id, **data["env_kwargs"][env_id])
+        for cls in spec.machine_tuned:
+            e = data["envs"][env_id][cls.__name__]
+            space = search_space(cls, machine=True)
+            assert set(e["params"]) == set(space), (env_id, cls.__name__)
+            assert all(lo <= e["params"][k] <= hi for k, (lo, hi, _) in space.items())
+            assert e["paper_params"] == paper_settings(cls, env, machine=True)
+        env.close()
+    assert ContourAFC in benchmark_spec("machining_envs/ContouringFeed-v0").machine_tuned
