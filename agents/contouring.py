@@ -34,7 +34,7 @@ import gymnasium as gym
 import numpy as np
 from scipy.linalg import block_diag
 
-from agents.base import Agent, check_positive, unwrap, unwrap_as
+from agents.base import Agent, check_positive, check_setting, unwrap, unwrap_as
 from machining_envs.contouring.env import ERROR_SCALE_MM, POSITION_SCALE_MM, ContouringEnv
 from machining_envs.contouring.feed_env import (
     DEFAULT_TOLERANCE_MM,
@@ -497,8 +497,6 @@ class ContourAFC(Agent):
     ----------
     override_max : float
         The env's largest override (action +1).
-    centripetal_mm_s2, tangential_mm_s2, override_cap : float
-        The planner's (:class:`LookAheadFeed`).
     reference : float
         The contour error held, as a share of the tolerance, in (0, 2].
     gain : float
@@ -509,6 +507,9 @@ class ContourAFC(Agent):
         Bounds of the factor: ``fmin`` in [0.05, 1], ``fmax`` in [1, 5].
     fent : float
         The factor at the path's start, in [0.05, 1].
+    **planner
+        The planner's ``centripetal_mm_s2``, ``tangential_mm_s2``, ``override_cap``
+        (:class:`LookAheadFeed`).
     """
 
     state_size = 1  # the factor k
@@ -525,21 +526,15 @@ class ContourAFC(Agent):
     def __init__(
         self,
         override_max: float,
-        centripetal_mm_s2: float = 1000.0,
-        tangential_mm_s2: float = 1000.0,
-        override_cap: float = 1.0,
         reference: float = 0.7,
         gain: float = 0.2,
         rise: float = 0.01,
         fmin: float = 0.2,
         fmax: float = 1.2,
         fent: float = 0.9,
+        **planner,
     ):
-        from agents.base import check_setting
-
-        self.planner = LookAheadFeed(
-            override_max, centripetal_mm_s2, tangential_mm_s2, override_cap
-        )
+        self.planner = LookAheadFeed(override_max, **planner)
         self.override_max = self.planner.override_max
         self.centripetal_mm_s2 = self.planner.centripetal_mm_s2
         self.tangential_mm_s2 = self.planner.tangential_mm_s2
@@ -553,16 +548,11 @@ class ContourAFC(Agent):
         self.name = f"contour AFC ref {self.reference:.2g}"
 
     @classmethod
-    def from_env(
-        cls,
-        env,
-        centripetal_mm_s2: float = 1000.0,
-        tangential_mm_s2: float = 1000.0,
-        override_cap: float = 1.0,
-        **kwargs,
-    ) -> ContourAFC:
+    def from_env(cls, env, **kwargs) -> ContourAFC:
+        """The controller for a ContouringFeed-v0 env (its override range); ``kwargs``: the
+        settings above and the planner's."""
         base = unwrap_as(env, ContouringFeedEnv, "ContourAFC")
-        return cls(base.override_max, centripetal_mm_s2, tangential_mm_s2, override_cap, **kwargs)
+        return cls(base.override_max, **kwargs)
 
     def initial_state(self, n, obs):
         return np.full((n, self.state_size), self.fent)
