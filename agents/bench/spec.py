@@ -128,7 +128,8 @@ class BenchmarkSpec:
     robustness: Robustness | None = None
     extra_splits: tuple[str, ...] = ()
     """Held-out splits beyond ``test`` and ``ood`` reported beside them (``wear``), with as
-    many episodes as ``ood``."""
+    many episodes as ``ood`` where ``agents.bench.benchmark.EXTRA_SIZES`` gives none (the
+    full run: ``shopfloor`` 100)."""
     margin_points: tuple = ()
     """Operating points (``agents.eval.margins.OperatingPoint``) of the loop-margin table:
     every feedback agent linearised there (turning only)."""
