@@ -19,12 +19,13 @@ import math
 import time
 from pathlib import Path
 
+import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback
 from stable_baselines3.common.vec_env import VecNormalize
 
 from agents.rl.stats import save_stats
 
-__all__ = ["ValidationCallback", "JsonStatsCheckpoint", "save_model"]
+__all__ = ["ValidationCallback", "JsonStatsCheckpoint", "save_model", "selection_score"]
 
 
 #: What an episode that does not count costs in the primary score, s: Turning-v0's time
@@ -81,6 +82,32 @@ def _positive_int(name: str, value) -> int:
     return value
 
 
+def _allowances(value) -> list[float] | None:
+    """``ValidationCallback``'s ``allowances``: None, or a non-empty list of shares in (0, 1)."""
+    if value is None:
+        return None
+    ok = isinstance(value, (list, tuple)) and len(value) > 0
+    ok = ok and all(
+        isinstance(a, (int, float)) and not isinstance(a, bool) and 0.0 < a < 1.0 for a in value
+    )
+    if not ok:
+        raise ValueError(
+            "ValidationCallback: allowances must be a non-empty list of shares of steps in "
+            f"(0, 1), e.g. [0.005, 0.01, 0.02], got {value!r}"
+        )
+    return [float(a) for a in value]
+
+
+def selection_score(rows, score, failed_value: float, allowances) -> float:
+    """The mean over ``allowances`` of ``score``'s mean charged value of ``rows`` (a
+    ``PrimaryScore``; an episode counts at an allowance if under that share of its steps
+    were over the limit): the best-model score of :class:`ValidationCallback` given
+    ``allowances``."""
+    return float(
+        np.mean([np.mean([score.charged(r, failed_value, a) for r in rows]) for a in allowances])
+    )
+
+
 class ValidationCallback(BaseCallback):
     """Evaluation on ``validation`` episodes while training (see the module doc).
 
@@ -96,6 +123,12 @@ class ValidationCallback(BaseCallback):
     checkpoint_freq : int, optional
         Env steps between checkpoints, when the run has a folder (``machining-bench
         train``); rl-zoo3 runs save with its own ``--save-freq``.
+    allowances : list of float, optional
+        The shares of steps over the limit at which an episode still counts, for the score
+        that chooses the best model: the mean over them of the env's primary score (e.g.
+        ``[0.005, 0.01, 0.02]``, the benchmark's verdict allowances, so that a policy that
+        counts only at the loosest one is not chosen). Default: the score's own allowance
+        (2 %). ``valid`` is always the share counting at 2 %.
     """
 
     def __init__(
@@ -105,6 +138,7 @@ class ValidationCallback(BaseCallback):
         scenarios=("validation",),
         checkpoint_freq: int | None = None,
         verbose: int = 1,
+        allowances=None,
     ):
         from machining_envs.core.splits import check_not_held_out
 
@@ -120,6 +154,7 @@ class ValidationCallback(BaseCallback):
         self.checkpoint_freq = (
             None if checkpoint_freq is None else _positive_int("checkpoint_freq", checkpoint_freq)
         )
+        self.allowances = _allowances(allowances)
         self.best = math.inf
         self.next_at = 0
         self.last: dict | None = None
@@ -234,6 +269,8 @@ class ValidationCallback(BaseCallback):
             metrics_fn=metrics_fn,
         )
         s = score_fn(ev.rows, failed_value)
+        if self.allowances is not None:
+            s["score"] = selection_score(ev.rows, score_fn, failed_value, self.allowances)
         sec = score_fn.secondary_key or "secondary"
         s = {"score": s["score"], "valid": s["valid"], sec: s["secondary"]}
         self.last, self.last_at = s, self.model.num_timesteps

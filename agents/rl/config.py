@@ -163,6 +163,9 @@ class TrainConfig:
     eval_episodes: int = 10
     eval_scenarios: list = field(default_factory=lambda: ["validation"])
     checkpoint_freq: int = 20_000
+    eval_allowances: list | None = None
+    """The allowances the best model is chosen at (``ValidationCallback``'s ``allowances``;
+    None: the score's own, 2 %)."""
     action_increment: float | None = None
     """If set, the policy outputs a change of the env's action of at most this much per step
     (``machining_envs.wrappers.IncrementalAction``); the saved policy applies it by itself."""
@@ -242,6 +245,7 @@ def _read_callbacks(where: str, value, cfg: TrainConfig) -> None:
                 raise ConfigError(f"{where}: callback {name}: {exc}") from None
             cfg.eval_freq, cfg.eval_episodes = cb.eval_freq, cb.n_episodes
             cfg.eval_scenarios = cb.scenarios
+            cfg.eval_allowances = cb.allowances
             if cb.checkpoint_freq is not None:
                 cfg.checkpoint_freq = cb.checkpoint_freq
         else:

@@ -349,7 +349,12 @@ def train(
         (out / "config.json").write_text(json.dumps(meta, indent=2, default=str))
 
     eval_cb = ValidationCallback(
-        cfg.eval_freq, cfg.eval_episodes, cfg.eval_scenarios, cfg.checkpoint_freq, verbose=0
+        cfg.eval_freq,
+        cfg.eval_episodes,
+        cfg.eval_scenarios,
+        cfg.checkpoint_freq,
+        verbose=0,
+        allowances=cfg.eval_allowances,
     ).bind(env_id, cfg.env_kwargs, increment, out, cfg.residual)
     eval_cb.on_evaluation = on_evaluation
     callbacks = [eval_cb, *(cls(**kwargs) for cls, kwargs in cfg.callbacks)]
