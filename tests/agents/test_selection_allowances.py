@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+import yaml
 
 pytest.importorskip("stable_baselines3")
 
@@ -34,18 +35,15 @@ def test_bad_allowances_are_refused_naming_them(bad):
 def test_a_training_configuration_carries_them_to_the_run(tmp_path):
     from agents.rl.config import ConfigError, load_config
 
-    path = tmp_path / "ppo.yml"
-    path.write_text(
-        "machining_envs/Turning-v0:\n"
-        "  policy: MlpPolicy\n"
-        "  n_timesteps: 1000\n"
-        "  callback:\n"
-        "    - agents.rl.callbacks.ValidationCallback:\n"
-        "        {eval_freq: 500, allowances: [0.005, 0.01, 0.02]}\n"
-    )
-    cfg = load_config("machining_envs/Turning-v0", "ppo", path)
+    env_id, path = "machining_envs/Turning-v0", tmp_path / "ppo.yml"
+
+    def entry(allowances):
+        cb = {"agents.rl.callbacks.ValidationCallback": {"allowances": allowances}}
+        path.write_text(yaml.safe_dump({env_id: {"n_timesteps": 1000, "callback": [cb]}}))
+        return path
+
+    cfg = load_config(env_id, "ppo", entry([0.005, 0.01, 0.02]))
     assert cfg.eval_allowances == [0.005, 0.01, 0.02]
-    assert load_config("machining_envs/Turning-v0", "ppo", None).eval_allowances is None
-    path.write_text(path.read_text().replace("0.005, 0.01, 0.02", "2"))
+    assert load_config(env_id, "ppo", None).eval_allowances is None
     with pytest.raises(ConfigError, match="allowances"):
-        load_config("machining_envs/Turning-v0", "ppo", path)
+        load_config(env_id, "ppo", entry(2))
