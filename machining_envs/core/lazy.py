@@ -12,7 +12,7 @@ import importlib
 import sys
 from collections.abc import Callable
 
-__all__ = ["lazy_exports", "by_module", "env_entry_points"]
+__all__ = ["lazy_exports", "by_module", "env_entry_points", "process_package"]
 
 
 def lazy_exports(package: str, names: dict[str, str]) -> tuple[Callable, Callable]:
@@ -52,3 +52,24 @@ def env_entry_points(package: str, envs: dict[str, tuple]) -> tuple[dict, dict]:
         if vector_cls is not None:
             vector[f"machining_envs/{env}"] = f"{package}.{module}:{vector_cls}"
     return single, vector
+
+
+def process_package(
+    package: str, envs: dict[str, tuple], **modules: tuple[str, ...]
+) -> tuple[list[str], Callable, Callable, dict, dict]:
+    """What a process package's ``__init__`` declares, from its exports and its env ids:
+    ``(__all__, __getattr__, __dir__, ENTRY_POINTS, VECTOR_ENTRY_POINTS)``, the names each
+    module of ``package`` exports (``modules`` as for :func:`by_module`), loaded on first use
+    (:func:`lazy_exports`), and the ids ``envs`` (as for :func:`env_entry_points`)::
+
+        __all__, __getattr__, __dir__, ENTRY_POINTS, VECTOR_ENTRY_POINTS = process_package(
+            __name__,
+            {"Turning-v0": ("env", "TurningEnv", "TurningVectorEnv")},
+            env=("TurningEnv", "TurningVectorEnv"),
+            plant=("TurningParams",),
+        )
+    """
+    exports = by_module(package, **modules)
+    single, vector = env_entry_points(package, envs)
+    getattr_, dir_ = lazy_exports(package, exports)
+    return [*exports, "ENTRY_POINTS", "VECTOR_ENTRY_POINTS"], getattr_, dir_, single, vector

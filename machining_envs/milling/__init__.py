@@ -5,22 +5,15 @@
 ``metrics`` (eq. 20 machining time, MRR; the task), ``env`` (``EndMilling-v0``).
 """
 
-from machining_envs.core.lazy import by_module, env_entry_points, lazy_exports
+from machining_envs.core.lazy import process_package
 
 #: What this package exports, by the module each comes from (loaded on first use, so that
-#: registering the ids imports none of the physics).
-_EXPORTS = by_module(
+#: registering the ids imports none of the physics), and the env ids of this process with
+#: their entry points, single and native vector env (registered by ``machining_envs``).
+__all__, __getattr__, __dir__, ENTRY_POINTS, VECTOR_ENTRY_POINTS = process_package(
     __name__,
+    {"EndMilling-v0": ("env", "EndMillingEnv", "EndMillingVectorEnv")},
     env=("EndMillingEnv", "EndMillingVectorEnv", "MillingReward"),
     plant=("MillingParams", "MillingPlant"),
     scenarios=("MILLING_SCENARIOS", "MillingScenario"),
-)
-__all__ = [*_EXPORTS, "ENTRY_POINTS", "VECTOR_ENTRY_POINTS"]
-__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
-
-#: The env ids of this process and their entry points, single and native vector env
-#: (registered by ``machining_envs``).
-ENTRY_POINTS, VECTOR_ENTRY_POINTS = env_entry_points(
-    __name__,
-    {"EndMilling-v0": ("env", "EndMillingEnv", "EndMillingVectorEnv")},
 )

@@ -15,7 +15,7 @@ from machining_envs.contouring.feed_env import ContouringFeedEnv, ContouringFeed
 from machining_envs.contouring.feed_lanes import FeedCore
 from machining_envs.contouring.lanes import ContouringCore
 from machining_envs.core.lanes import LaneCore
-from machining_envs.core.lazy import by_module, env_entry_points
+from machining_envs.core.lazy import by_module, env_entry_points, process_package
 from machining_envs.core.workpieces import SegmentTables
 from machining_envs.drilling.env import MicroDrillingEnv, MicroDrillingVectorEnv
 from machining_envs.drilling.lanes import DrillingCore
@@ -132,6 +132,23 @@ def test_exports_and_entry_points_of_a_process_package():
     assert vector == {"machining_envs/X-v0": "pkg.env:XVectorEnv"}
     single, vector = env_entry_points("pkg", {"Y-v0": ("plain", "YEnv", None)})
     assert single == {"machining_envs/Y-v0": "pkg.plain:YEnv"} and vector == {}
+
+
+def test_a_process_package_declared_in_one_call():
+    names, getattr_, dir_, single, vector = process_package(
+        "machining_envs.turning",
+        {"X-v0": ("env", "XEnv", "XVectorEnv")},
+        plant=("TurningParams",),
+    )
+    assert names == ["TurningParams", "ENTRY_POINTS", "VECTOR_ENTRY_POINTS"]
+    from machining_envs.turning.plant import TurningParams
+
+    assert getattr_("TurningParams") is TurningParams
+    assert "TurningParams" in dir_()
+    with pytest.raises(AttributeError, match="no attribute 'Nope'"):
+        getattr_("Nope")
+    assert single == {"machining_envs/X-v0": "machining_envs.turning.env:XEnv"}
+    assert vector == {"machining_envs/X-v0": "machining_envs.turning.env:XVectorEnv"}
 
 
 def test_the_registered_ids_and_their_entry_points():
