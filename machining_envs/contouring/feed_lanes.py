@@ -738,8 +738,11 @@ _S_TMAX = len(NOMINAL_LOOP_NUMBERS)
 _S_OVERRIDE = _S_TMAX + 1
 
 
-#: The step's signals in ``out`` from ``x_mm`` to ``path_s_mm``, info's keys.
+#: The step's signals in ``out`` from ``x_mm`` to ``path_s_mm``, info's keys, and their
+#: columns (as plain ints, as those of the peak contour error and the machining time).
 _SIGNALS = tuple(_Out.__members__)[_Out.x_mm : _Out.machining_time_s]
+_SIGNAL_COLUMNS = slice(int(_Out.x_mm), int(_Out.machining_time_s))
+_OUT_ERROR, _OUT_TIME = int(_Out.peak_contour_error_mm), int(_Out.machining_time_s)
 #: The float keys between the flags and ``segment`` in the info's order.
 _INFO_OUT = (
     *_SIGNALS,
@@ -1146,29 +1149,13 @@ class FeedCore(LaneCore):
             "breakage": False,
             "diverged": diverged,
             "finished": finished,
-            "x_mm": o[3],
-            "y_mm": o[4],
-            "x_ref_mm": o[5],
-            "y_ref_mm": o[6],
-            "contour_error_mm": o[7],
-            "peak_contour_error_mm": o[8],
-            "tracking_error_mm": o[9],
-            "cost": 1.0 if o[8] > self.tolerance_mm else 0.0,
-            "vx_mm_s": o[10],
-            "vy_mm_s": o[11],
-            "torque_x_Nm": o[12],
-            "torque_y_Nm": o[13],
-            "torque_sq_Nm2": o[14],
-            "load_x_Nm": o[15],
-            "load_y_Nm": o[16],
-            "feed_override": o[17],
-            "path_speed_mm_s": o[18],
-            "path_s_mm": o[19],
+            **dict(zip(_SIGNALS, o[_SIGNAL_COLUMNS], strict=True)),
+            "cost": 1.0 if o[_OUT_ERROR] > self.tolerance_mm else 0.0,
             "segment": segment,
             **self._episode_info(k),
         }
         if finished:
-            info["machining_time_s"] = o[20]
+            info["machining_time_s"] = o[_OUT_TIME]
         return info
 
     def _episode_info(self, k: int) -> dict:

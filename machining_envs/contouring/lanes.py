@@ -187,9 +187,11 @@ def _ints(columns: type[IntEnum]) -> type:
     return type(f"{columns.__name__}I", (), {c.name: int(c) for c in columns})
 
 
-_LFI, _LII = _ints(_LF), _ints(_LI)
-#: The step's signals in ``out`` from ``x_mm`` to ``path_s_mm``, info's keys.
+_LFI, _LII, _OutI = _ints(_LF), _ints(_LI), _ints(_Out)
+#: The step's signals in ``out`` from ``x_mm`` to ``path_s_mm``, info's keys, and their
+#: columns.
 _SIGNALS = _OUT[_Out.x_mm : _Out.machining_time_s]
+_SIGNAL_COLUMNS = slice(_OutI.x_mm, _OutI.machining_time_s)
 #: Columns of ``ContouringCore.flags``.
 _Flag = IntEnum("_Flag", "diverged finished terminated truncated clipped", start=0)
 
@@ -603,31 +605,18 @@ class ContouringCore(LaneCore):
             "breakage": False,
             "diverged": diverged,
             "finished": finished,
-            "x_mm": o[4],
-            "y_mm": o[5],
-            "x_ref_mm": o[6],
-            "y_ref_mm": o[7],
-            "contour_error_mm": o[8],
-            "contour_tolerance_mm": CONTOUR_TOLERANCE_MM,
-            "cost": 1.0 if o[8] > CONTOUR_TOLERANCE_MM else 0.0,
-            "tracking_error_mm": o[9],
-            "vx_mm_s": o[10],
-            "vy_mm_s": o[11],
-            "torque_x_Nm": o[12],
-            "torque_y_Nm": o[13],
-            "torque_sq_Nm2": o[14],
-            "load_x_Nm": o[15],
-            "load_y_Nm": o[16],
-            "path_s_mm": o[17],
-            "path_length_mm": float(self.lf[k, _LFI.LEN]),
-            "segment": int(self.li[k, _LII.SEG]),
-            "feed_mm_s": float(self.feeds[k]),
-            "reference_end_s": float(self.ref_end[k]),
-            "scenario": self.names[k],
         }
+        info.update(zip(_SIGNALS, o[_SIGNAL_COLUMNS], strict=True))
+        info["contour_tolerance_mm"] = CONTOUR_TOLERANCE_MM
+        info["cost"] = 1.0 if o[_OutI.contour_error_mm] > CONTOUR_TOLERANCE_MM else 0.0
+        info["path_length_mm"] = float(self.lf[k, _LFI.LEN])
+        info["segment"] = int(self.li[k, _LII.SEG])
+        info["feed_mm_s"] = float(self.feeds[k])
+        info["reference_end_s"] = float(self.ref_end[k])
+        info["scenario"] = self.names[k]
         info.update(self.circles[k])
         if finished:
-            info["machining_time_s"] = o[18]
+            info["machining_time_s"] = o[_OutI.machining_time_s]
         return info
 
     def info_arrays(self) -> dict:
