@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from gymnasium.vector import AutoresetMode
 
 from machining_envs.contouring.lanes import (
     ERROR_SCALE_MM,
@@ -220,36 +219,15 @@ class ContouringEnv(LaneEnv):
 
 class ContouringVectorEnv(LaneVectorEnv):
     """``machining_envs/Contouring-v0`` as a native vector env: N XY tables, each on its own
-    path with its own hidden inertias and loads, stepped by one compiled function.
-
-    ``gym.make_vec("machining_envs/Contouring-v0", num_envs=N, **kwargs)`` takes the keyword
-    arguments of :class:`ContouringEnv` (but not ``render_mode``), and ``num_threads``: the
-    threads that step the lanes (``machining_envs.core.vector``). Lane ``i`` after
-    ``reset(seed=s)`` runs exactly the episode ``ContouringEnv.reset(seed=s + i)`` runs,
-    with the same observations, rewards and ``info`` (here a dict of arrays; the circle's
-    keys and ``machining_time_s`` with their masks); every lane draws its own scenario from
-    its own generator. Finished lanes are reset at the next step by default, as Gymnasium's
-    (``autoreset_mode``; also ``"SAME_STEP"`` or ``"DISABLED"``): see
-    ``machining_envs.core.vector``.
+    path with its own hidden inertias and loads, stepped by one compiled function, each
+    lane exactly :class:`ContouringEnv` with the lane's seed (the circle's keys and
+    ``machining_time_s`` come with masks); its arguments are ``ContouringEnv``'s (not
+    ``render_mode``), ``num_threads`` and ``autoreset_mode``
+    (:class:`~machining_envs.core.vector.LaneVectorEnv`).
     """
 
-    env_name = "ContouringEnv"
-    task = CONTOURING_TASK
-
-    def __init__(
-        self,
-        num_envs: int = 1,
-        scenario: str | ContouringScenario = "train",
-        params: ContouringParams | None = None,
-        reward: ContouringReward | dict | None = None,
-        max_episode_time_s: float | None = None,
-        in_position_mm: float = 0.005,
-        divergence_mm: float = 50.0,
-        num_threads: int = 1,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        **overrides,
-    ):
-        self._open(ContouringCore, locals())  # the core's options by their names
+    single_env = ContouringEnv
+    core_cls = ContouringCore
 
 
 def render_trace(path: Path, log: EpisodeLog, title: str) -> np.ndarray:

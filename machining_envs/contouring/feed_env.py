@@ -3,8 +3,6 @@ CNC's own position loop (PI or H-infinity) drives the axes."""
 
 from __future__ import annotations
 
-from gymnasium.vector import AutoresetMode
-
 from machining_envs.contouring.env import (
     TRACE_LOG_FIELDS,
     check_action_vector,
@@ -193,46 +191,22 @@ class ContouringFeedEnv(LaneEnv):
 
 class ContouringFeedVectorEnv(LaneVectorEnv):
     """``machining_envs/ContouringFeed-v0`` as a native vector env: N tables, each on its
-    own path with its own hidden inertias and loads, stepped by one compiled function.
-
-    ``gym.make_vec("machining_envs/ContouringFeed-v0", num_envs=N, **kwargs)`` takes the
-    keyword arguments of :class:`ContouringFeedEnv` (but not ``render_mode``), and
-    ``num_threads``: the threads that step the lanes (``machining_envs.core.vector``). Lane
-    ``i`` after ``reset(seed=s)`` runs exactly the episode ``ContouringFeedEnv.reset(seed=s
-    + i)`` runs, with the same observations, rewards and ``info`` (here a dict of arrays;
-    the circle's keys and ``machining_time_s`` with their masks); every lane draws its own
-    scenario from its own generator. Finished lanes are reset at the next step by default, as Gymnasium's
-    (``autoreset_mode``; also ``"SAME_STEP"`` or ``"DISABLED"``): see
-    ``machining_envs.core.vector``.
+    own path with its own hidden inertias and loads, stepped by one compiled function, each
+    lane exactly :class:`ContouringFeedEnv` with the lane's seed (the circle's keys and
+    ``machining_time_s`` come with masks); its arguments are ``ContouringFeedEnv``'s (not
+    ``render_mode``), ``num_threads`` and ``autoreset_mode``
+    (:class:`~machining_envs.core.vector.LaneVectorEnv`).
     """
 
-    env_name = "ContouringFeedEnv"
-    task = FEED_TASK
     # A lane's decision costs about 1.3 µs compiled (50 servo periods), so a block of 64
     # lanes is some 80 µs of work: at N = 128-192 on two threads two blocks step 22-33 %
     # faster than one.
     min_block = 64
 
-    def __init__(
-        self,
-        num_envs: int = 1,
-        scenario: str | ContouringScenario = "train",
-        *,
-        params: ContouringParams | None = None,
-        servo: str = "hinf",
-        tolerance_mm: float | None = None,
-        reward: FeedReward | dict | None = None,
-        decision_interval_s: float = 0.01,
-        override_max: float = 2.0,
-        max_episode_time_s: float | None = None,
-        in_position_mm: float = 0.005,
-        divergence_mm: float = 50.0,
-        actuation: Actuation | dict | None = None,
-        num_threads: int = 1,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        **overrides,
-    ):
-        core = self._open(FeedCore, locals())  # the core's options by their names
+    single_env = ContouringFeedEnv
+    core_cls = FeedCore
+
+    def _took(self, core) -> None:
         self.servo = core.servo
         self.tolerance_mm = core.tolerance_mm
         self.override_max = core.override_max

@@ -61,6 +61,7 @@ about 0.1 ms after a call they take part in, which would slow the kernel's threa
 from __future__ import annotations
 
 import abc
+import inspect
 import math
 from typing import Any
 
@@ -86,6 +87,7 @@ __all__ = [
     "check_autoreset_mode",
     "check_vector_args",
     "first_scenario",
+    "vector_signature",
 ]
 
 
@@ -138,11 +140,62 @@ def check_num_envs(num_envs) -> int:
     return int(num_envs)
 
 
+def _single_options(single_env: type, scenario, options: dict) -> dict:
+    """The arguments of ``single_env`` a vector env of it is given: ``scenario`` (None: the
+    single env's default) and the keyword ``options``, bound by name as the single env's
+    ``__init__`` binds them (``TypeError`` for an argument it does not take; what its
+    ``**overrides`` gathers under ``"overrides"``), with its defaults for the others."""
+    given = {} if scenario is None else {"scenario": scenario}
+    bound = inspect.signature(single_env).bind_partial(**given, **options)
+    bound.apply_defaults()
+    arguments = dict(bound.arguments)
+    overrides = arguments.setdefault("overrides", {})
+    if arguments.get("render_mode") is not None:
+        overrides["render_mode"] = arguments["render_mode"]  # refused, by its name
+    return arguments
+
+
+def vector_signature(single_env: type) -> inspect.Signature:
+    """The signature of a vector env of ``single_env``: ``num_envs``, then the single env's
+    ``scenario`` and its options (keyword-only, with their defaults; not ``render_mode``),
+    ``num_threads``, ``autoreset_mode`` and the single env's ``**overrides``."""
+    P = inspect.Parameter
+    single = inspect.signature(single_env).parameters.values()
+    options = [p for p in single if p.name not in ("scenario", "render_mode")]
+    keywords = [p.replace(kind=P.KEYWORD_ONLY) for p in options if p.kind is not P.VAR_KEYWORD]
+    return inspect.Signature(
+        [
+            P("num_envs", P.POSITIONAL_OR_KEYWORD, default=1, annotation="int"),
+            inspect.signature(single_env).parameters["scenario"],
+            *keywords,
+            P("num_threads", P.KEYWORD_ONLY, default=1, annotation="int"),
+            P(
+                "autoreset_mode",
+                P.KEYWORD_ONLY,
+                default=AutoresetMode.NEXT_STEP,
+                annotation="AutoresetMode | str",
+            ),
+            *(p for p in options if p.kind is P.VAR_KEYWORD),
+        ]
+    )
+
+
 class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
-    """Base of the native vector envs (see the module docstring)."""
+    """Base of the native vector envs (see the module docstring).
+
+    A process's vector env names its ``single_env`` and the ``core_cls`` they share.
+    ``gym.make_vec(id, num_envs=N, **kwargs)`` then takes the keyword arguments of the
+    single env (but not ``render_mode``; its signature shows them), ``num_threads``: the
+    threads that step the lanes, and ``autoreset_mode``. Lane ``i`` after
+    ``reset(seed=s)`` runs exactly the episode the single env runs after
+    ``reset(seed=s + i)``, with the same observations, rewards and ``info`` (here a dict of
+    arrays; a key only some lanes have comes with its ``_key`` mask); every lane draws its
+    own scenario from its own generator. Finished lanes are reset at the next step by
+    default, as Gymnasium's (``autoreset_mode``; also ``"SAME_STEP"`` or ``"DISABLED"``).
+    """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
-    #: Name used in error messages (the single env's class name, say).
+    #: Name used in error messages (the single env's class name).
     env_name: str = "LaneVectorEnv"
     #: Fewest lanes a thread steps (``core.compiled.blocks.block_edges``; a multiple of 64): a
     #: process whose kernel costs little a lane keeps the default, 128; one whose kernel
@@ -152,20 +205,41 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
     #: ``limit_keys`` give each step's ``excess`` (``core.metrics.note_severity``).
     task = None
 
+    #: The single env this env runs N of (its class; set by every subclass): the vector env
+    #: takes its options, by the same names and with the same defaults.
+    single_env: type | None = None
+    #: The process's core (a ``machining_envs.core.lanes.LaneCore``) the two envs share.
+    core_cls: type | None = None
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        single = cls.single_env
+        if single is not None:  # its name (for messages), task and options are the env's
+            cls.env_name, cls.task = single.__name__, single.task
+            cls.__signature__ = vector_signature(single)
+
     def __init__(
         self,
-        num_envs: int,
-        core,
-        scenario,
+        num_envs: int = 1,
+        scenario=None,
+        *,
         num_threads: int = 1,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        **options,
     ) -> None:
-        """Take the process's ``core`` of ``num_envs`` lanes (built by the subclass from its
-        keywords): its kernel runs on this env's blocks of lanes, and the env has the
-        attributes every vector env has: ``params``, ``command_map``,
+        """``num_envs`` lanes of ``single_env`` on ``scenario`` (None: the single env's
+        default), whose keyword ``options`` are the single env's (but not ``render_mode``),
+        with its defaults: a ``core_cls`` of ``num_envs`` lanes built from them
+        (``LaneCore.from_options``), its kernel run on this env's blocks of lanes. The env
+        has the attributes every vector env has: ``params``, ``command_map``,
         ``max_episode_time_s`` and ``default_scenario`` (``scenario``, checked: one for
-        every lane or a list of one per lane)."""
-        self.num_envs = check_num_envs(num_envs)
+        every lane or a list of one per lane), and those the subclass takes from the core
+        (:meth:`_took`)."""
+        given = _single_options(self.single_env, scenario, options)
+        check_vector_args(self.env_name, num_threads, given["overrides"])
+        n, scenario = check_num_envs(num_envs), given["scenario"]
+        core = self.core_cls.from_options(type(self).__name__, n, first_scenario(scenario), given)
+        self.num_envs = n
         #: What happens to a lane whose episode ends (see the module docstring).
         self.autoreset_mode = check_autoreset_mode(autoreset_mode)
         self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
@@ -199,18 +273,12 @@ class LaneVectorEnv(gym.vector.VectorEnv, abc.ABC):
         self._overload = np.full(self.num_envs, math.inf)
         self.default_scenario = self._lane_scenarios(scenario)
 
-    def _open(self, core_cls: type, given: dict):
-        """Check the env's arguments ``given`` (its ``__init__``'s ``locals()``:
-        ``num_envs``, ``scenario``, ``num_threads``, ``autoreset_mode`` and the core's
-        options, named as the core names them), build a ``core_cls`` of ``num_envs`` lanes
-        from them (``LaneCore.from_options``), take it (:meth:`__init__`) and return it."""
-        check_vector_args(self.env_name, given["num_threads"], given["overrides"])
-        n, scenario = check_num_envs(given["num_envs"]), given["scenario"]
-        core = core_cls.from_options(type(self).__name__, n, first_scenario(scenario), given)
-        LaneVectorEnv.__init__(
-            self, n, core, scenario, given["num_threads"], given["autoreset_mode"]
-        )
-        return core
+        self._took(core)
+
+    def _took(self, core) -> None:
+        """Give the env what it takes from its ``core`` besides the attributes every vector
+        env has (the single env's public attributes of the process, say); by default
+        nothing."""
 
     # ---- the command map, for classical agents -----------------------------------------
     def action_to_command(self, action):

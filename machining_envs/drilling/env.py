@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from gymnasium.vector import AutoresetMode
-
 from machining_envs.core.actions import check_action
 from machining_envs.core.env import LaneEnv
 from machining_envs.core.rendering import (
@@ -250,33 +248,14 @@ class MicroDrillingEnv(LaneEnv):
 
 class MicroDrillingVectorEnv(LaneVectorEnv):
     """``machining_envs/MicroDrilling-v0`` as a native vector env: N drilling machines
-    stepped as arrays.
-
-    ``gym.make_vec("machining_envs/MicroDrilling-v0", num_envs=N, **kwargs)`` takes the
-    keyword arguments of :class:`MicroDrillingEnv` (but not ``render_mode``), ``control``
-    included, and ``num_threads``: the threads that step the lanes
-    (``machining_envs.core.vector``). Lane ``i`` after ``reset(seed=s)`` runs exactly the
-    episode ``MicroDrillingEnv.reset(seed=s + i)`` runs, with the same observations, rewards
-    and ``info`` (here a dict of arrays; ``drilling_time_s`` and ``machining_time_s`` come
-    with masks); every lane draws its own scenario from its own generator. Finished lanes
-    are reset at the next step by default, as Gymnasium's (``autoreset_mode``; also ``"SAME_STEP"`` or
-    ``"DISABLED"``): see ``machining_envs.core.vector``.
+    stepped as arrays, each lane exactly :class:`MicroDrillingEnv` with the lane's seed
+    (``drilling_time_s`` and ``machining_time_s`` come with masks); its arguments are
+    ``MicroDrillingEnv``'s, ``control`` included (not ``render_mode``), ``num_threads`` and
+    ``autoreset_mode`` (:class:`~machining_envs.core.vector.LaneVectorEnv`).
     """
 
-    env_name = "MicroDrillingEnv"
-    task = DRILLING_TASK
+    single_env = MicroDrillingEnv
+    core_cls = DrillingCore
 
-    def __init__(
-        self,
-        num_envs: int = 1,
-        scenario: str | DrillingScenario = "train",
-        control: str = "voltage",
-        params: DrillingParams | None = None,
-        reward: DrillingReward | dict | None = None,
-        max_episode_time_s: float = 150.0,
-        num_threads: int = 1,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        **overrides,
-    ):
-        core = self._open(DrillingCore, locals())  # the core's options by their names
+    def _took(self, core) -> None:
         self.control = core.control

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from gymnasium.vector import AutoresetMode
-
 from machining_envs.core.actions import check_action
 from machining_envs.core.actuation import (
     Actuation,
@@ -240,33 +238,10 @@ class EndMillingEnv(LaneEnv):
 
 class EndMillingVectorEnv(LaneVectorEnv):
     """``machining_envs/EndMilling-v0`` as a native vector env: N end-milling cuts stepped
-    as arrays.
-
-    ``gym.make_vec("machining_envs/EndMilling-v0", num_envs=N, **kwargs)`` takes the keyword
-    arguments of :class:`EndMillingEnv` (but not ``render_mode``), and ``num_threads``: the
-    threads that step the lanes (``machining_envs.core.vector``). Lane ``i`` after
-    ``reset(seed=s)`` runs exactly the episode ``EndMillingEnv.reset(seed=s + i)`` runs,
-    with the same observations, rewards and ``info`` (here a dict of arrays); every lane
-    draws its own scenario from its own generator. Finished lanes are reset at the next step
-    by default, as Gymnasium's (``autoreset_mode``; also ``"SAME_STEP"`` or ``"DISABLED"``): see
-    ``machining_envs.core.vector``.
+    as arrays, each lane exactly :class:`EndMillingEnv` with the lane's seed; its arguments
+    are ``EndMillingEnv``'s (not ``render_mode``), ``num_threads`` and ``autoreset_mode``
+    (:class:`~machining_envs.core.vector.LaneVectorEnv`).
     """
 
-    env_name = "EndMillingEnv"
-    task = MILLING_TASK
-
-    def __init__(
-        self,
-        num_envs: int = 1,
-        scenario: str | MillingScenario = "train",
-        params: MillingParams | None = None,
-        reward: MillingReward | dict | None = None,
-        max_episode_time_s: float = 1200.0,
-        action_map: str = "log",
-        actuation: Actuation | dict | None = None,
-        power_sensor: PowerSensor | dict | bool | None = None,
-        num_threads: int = 1,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        **overrides,
-    ):
-        self._open(MillingCore, locals())  # the core's options by their names
+    single_env = EndMillingEnv
+    core_cls = MillingCore

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from gymnasium.vector import AutoresetMode
-
 from machining_envs.core.actions import check_action
 from machining_envs.core.actuation import (
     Actuation,
@@ -224,37 +222,16 @@ class TurningEnv(LaneEnv):
 
 
 class TurningVectorEnv(LaneVectorEnv):
-    """``machining_envs/Turning-v0`` as a native vector env: N lathes stepped as arrays.
-
-    ``gym.make_vec("machining_envs/Turning-v0", num_envs=N, **kwargs)`` takes the keyword
-    arguments of :class:`TurningEnv` (but not ``render_mode``), and ``num_threads``: the
-    threads that step the lanes (``machining_envs.core.vector``). Lane ``i`` after
-    ``reset(seed=s)`` runs exactly the episode ``TurningEnv.reset(seed=s + i)`` runs, with
-    the same observations, rewards and ``info`` (here a dict of arrays); every lane draws
-    its own scenario from its own generator. Finished lanes are reset at the next step by
-    default, as Gymnasium's (``autoreset_mode``; also ``"SAME_STEP"`` or ``"DISABLED"``): see
-    ``machining_envs.core.vector``.
+    """``machining_envs/Turning-v0`` as a native vector env: N lathes stepped as arrays,
+    each lane exactly :class:`TurningEnv` with the lane's seed; its arguments are
+    ``TurningEnv``'s (not ``render_mode``), ``num_threads`` and ``autoreset_mode``
+    (:class:`~machining_envs.core.vector.LaneVectorEnv`).
     """
 
-    env_name = "TurningEnv"
-    task = TURNING_TASK
     # A lane's sample costs about 0.5 µs compiled (50 sub-steps), so a block of 64 lanes
     # is some 30 µs of work, well above handing it to a thread: at N = 128-192 on two
     # threads two blocks step 13-15 % faster than one.
     min_block = 64
 
-    def __init__(
-        self,
-        num_envs: int = 1,
-        scenario: str | TurningScenario = "train",
-        params: TurningParams | None = None,
-        spindle_rpm: float | None = None,
-        reward: TurningReward | dict | None = None,
-        max_episode_time_s: float = 200.0,
-        actuation: Actuation | dict | None = None,
-        power_sensor: PowerSensor | dict | bool | None = None,
-        num_threads: int = 1,
-        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        **overrides,
-    ):
-        self._open(TurningCore, locals())  # the core's options by their names
+    single_env = TurningEnv
+    core_cls = TurningCore

@@ -45,7 +45,32 @@ def test_every_core_option_is_an_argument_of_both_envs(core_cls, single, vector)
     )
     assert "params" in options and "overrides" in options
     for env_cls in (single, vector):
-        assert set(options) <= set(inspect.signature(env_cls.__init__).parameters)
+        assert set(options) <= set(inspect.signature(env_cls).parameters)
+
+
+@pytest.mark.parametrize("core_cls, single, vector", FACES, ids=lambda c: c.__name__)
+def test_a_vector_env_takes_the_options_of_its_single_env(core_cls, single, vector):
+    """The vector env's signature is the single env's (its options keyword-only, their
+    defaults the same) without ``render_mode``, with ``num_envs``, ``num_threads`` and
+    ``autoreset_mode``; its name and task are the single env's."""
+    ones = dict(inspect.signature(single).parameters)
+    many = dict(inspect.signature(vector).parameters)
+    assert list(many)[:2] == ["num_envs", "scenario"] and many["scenario"] == ones["scenario"]
+    assert "render_mode" not in many and {"num_threads", "autoreset_mode"} <= set(many)
+    for name, p in ones.items():
+        if name not in ("scenario", "render_mode", "overrides"):
+            assert many[name].kind is p.KEYWORD_ONLY and many[name].default == p.default
+    assert vector.env_name == single.__name__ and vector.task is single.task
+    assert vector.core_cls is core_cls
+
+
+def test_a_vector_env_refuses_what_its_single_env_refuses():
+    with pytest.raises(TypeError, match="positional argument"):
+        MicroDrillingVectorEnv(2, "train", "voltage")  # options are keyword-only
+    with pytest.raises(ValueError, match="render_mode='human'.*do not render"):
+        TurningVectorEnv(2, render_mode="human")
+    with pytest.raises(ValueError, match="control must be one of"):
+        MicroDrillingVectorEnv(2, control="current")
 
 
 class _Stub(LaneCore):
