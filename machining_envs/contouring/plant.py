@@ -34,7 +34,7 @@ import numba
 import numpy as np
 
 from machining_envs.contouring._exact import vecmat_rows
-from machining_envs.core.checks import check_field, replace_checked
+from machining_envs.core.checks import check_fields, replace_checked
 from machining_envs.core.compiled.kernels import read_only
 
 __all__ = ["ContouringParams", "ContouringPlant", "ContouringStep", "AXES", "step_axes"]
@@ -86,8 +86,7 @@ class ContouringParams:
     overshoots 10 % and rings for 40 ms, at 2 kHz it overshoots 2 % (see docs/contouring.md)."""
 
     def __post_init__(self) -> None:
-        for name, rule in _FIELD_RULES.items():
-            check_field(name, getattr(self, name), rule)
+        check_fields(self, _FIELD_RULES)
 
     @classmethod
     def choi_et_al(cls) -> ContouringParams:

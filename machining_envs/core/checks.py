@@ -208,6 +208,14 @@ def check_field(name: str, value, rule: tuple) -> None:
         check_range(name, value, rule[0], rule[1], lo_open=rule[2])
 
 
+def check_fields(params, rules: dict) -> None:
+    """Check each field of the parameter set ``params`` that ``rules`` names, in the order
+    of ``rules``, by its rule (:func:`check_field`): what a parameter dataclass's
+    ``__post_init__`` checks field by field."""
+    for name, rule in rules.items():
+        check_field(name, getattr(params, name), rule)
+
+
 def replace_checked(params, changes: dict, rules: dict, cls: type):
     """A copy of the frozen dataclass ``params`` (of exactly ``cls``) with ``changes``, of
     which only the changed fields are checked, by ``rules`` (field -> rule of

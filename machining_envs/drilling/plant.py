@@ -55,7 +55,7 @@ import numpy as np
 
 from machining_envs.core.checks import (
     check_below,
-    check_field,
+    check_fields,
     check_integer,
     check_range,
     replace_checked,
@@ -263,8 +263,7 @@ class DrillingParams:
     """Normalisation of thrusts in observations, N."""
 
     def __post_init__(self) -> None:
-        for name, rule in _FIELD_RULES.items():
-            check_field(name, getattr(self, name), rule)
+        check_fields(self, _FIELD_RULES)
         check_range("nominal_voltage", self.nominal_voltage, 0.0, self.voltage_max, lo_open=True)
         check_below(
             "feed_velocity_mm_s",

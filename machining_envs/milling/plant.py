@@ -48,7 +48,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
+from machining_envs.core.checks import check_fields, check_integer, check_range, replace_checked
 from machining_envs.core.compiled.kernels import copy_into, matvec, powers, read_only
 from machining_envs.core.compiled.schema import gather, record
 from machining_envs.core.lti import zoh, zoh_tf
@@ -215,8 +215,7 @@ class MillingParams:
     flutes of the 152 mm overhang. The episode terminates past it."""
 
     def __post_init__(self) -> None:
-        for name, rule in _FIELD_RULES.items():
-            check_field(name, getattr(self, name), rule)
+        check_fields(self, _FIELD_RULES)
 
     # ---- parameter sets ------------------------------------------------------------------
     @classmethod

@@ -30,7 +30,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from machining_envs.core.checks import check_field, check_integer, check_range, replace_checked
+from machining_envs.core.checks import check_fields, check_integer, check_range, replace_checked
 from machining_envs.core.compiled.kernels import fma, matvec, powers, read_only, row_max, row_min
 from machining_envs.core.compiled.schema import gather, record
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
@@ -151,8 +151,7 @@ class TurningParams:
     """Normalisation of forces in observations, N (the paper's reference force)."""
 
     def __post_init__(self) -> None:
-        for name, rule in _FIELD_RULES.items():
-            check_field(name, getattr(self, name), rule)
+        check_fields(self, _FIELD_RULES)
         if isinstance(self.sensor_filter_order, bool) or self.sensor_filter_order not in (1, 2):
             raise ValueError(
                 f"sensor_filter_order must be 1 or 2, got {self.sensor_filter_order!r}"

@@ -78,3 +78,18 @@ def test_replace_checked_applies_each_rule_exactly():
     for name, bad in (("a", 0.0), ("a", 2.0000001), ("b", -1e-300), ("b", math.inf)):
         with pytest.raises(ValueError, match=f"{name} must be in"):
             replace_checked(P(), {name: bad}, rules, P)
+
+
+def test_check_fields_checks_each_named_field_in_the_order_of_its_rules():
+    from types import SimpleNamespace
+
+    from machining_envs.core.checks import check_fields
+
+    rules = {"gain": (0.0, 10.0, True), "steps": ("int", 1, 5), "mode": ("choice", ("a",), "'a'")}
+    check_fields(SimpleNamespace(gain=1.0, steps=2, mode="a", other=-1.0), rules)
+    with pytest.raises(ValueError, match="gain"):  # the first bad field in the rules' order
+        check_fields(SimpleNamespace(gain=0.0, steps=9, mode="a"), rules)
+    with pytest.raises(ValueError, match="steps"):
+        check_fields(SimpleNamespace(gain=1.0, steps=9, mode="a"), rules)
+    with pytest.raises(ValueError, match="mode must be 'a'"):
+        check_fields(SimpleNamespace(gain=1.0, steps=2, mode="b"), rules)
