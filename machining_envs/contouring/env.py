@@ -180,7 +180,6 @@ class ContouringEnv(LaneEnv):
     (0.0002, 0.0, 0.0)
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
     _ID = "Contouring-v0"
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = CONTOURING_TASK

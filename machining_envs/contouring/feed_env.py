@@ -143,7 +143,6 @@ class ContouringFeedEnv(LaneEnv):
     (0.01, 1.0, 0.5)
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
     _ID = "ContouringFeed-v0"
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = FEED_TASK

@@ -129,6 +129,9 @@ class LaneEnv(gym.Env, abc.ABC):
     (:class:`EpisodeLog`).
     """
 
+    #: A single env renders its episode as an image or in a window (at ``render_fps``
+    #: samples a second, which a process may change).
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
     _LOG_FIELDS: dict[str, str] = {}
     #: The env's id without its namespace (``"Turning-v0"``): the window ``render`` shows.
     _ID: str = ""

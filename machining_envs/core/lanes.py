@@ -18,6 +18,7 @@ import abc
 import inspect
 
 import numpy as np
+from gymnasium import spaces
 
 from machining_envs.core.actuation import ActuationLanes, configure_lane, resolve_actuation
 from machining_envs.core.sensors import PowerSensorLanes, resolve_power_sensor
@@ -192,6 +193,15 @@ class CachedKernelArgs(abc.ABC):
         """The kernel's arguments, built anew."""
 
 
+#: The measured loads a feed-regulation env (turning, end milling) observes besides the
+#: newest, newest first.
+REGULATION_HISTORY = 3
+#: Where each field of a feed-regulation env's observation starts (its ``OBS_INDEX``): the
+#: measured load over its limit, the limit, the previous action, the spindle speed over
+#: 1000 rpm and the ``REGULATION_HISTORY`` measured loads before.
+REGULATION_OBS_INDEX = {"measured": 0, "limit": 1, "prev_action": 2, "spindle": 3, "history": 4}
+
+
 class FeedCnc:
     """For a regulation core whose command is a feed velocity from 0 to
     ``params.command_max``, every ``params.sample_time_s``: the CNC's actuation option and the
@@ -208,6 +218,18 @@ class FeedCnc:
         option until its scenario says otherwise."""
         p = self.params
         return ActuationLanes(self.n, p.command_max, 0.0, p.sample_time_s, self.actuation)
+
+    def _set_regulation_spaces(self, load_range: tuple[float, float], rpm_max: float) -> None:
+        """The action space (one action in [-1, 1]) and the observation space of the layout
+        ``REGULATION_OBS_INDEX``: the measured load and the last ``REGULATION_HISTORY`` ones
+        in ``load_range`` (over the limit), the limit, the previous action and the spindle
+        speed over 1000 rpm (at most ``rpm_max`` / 1000)."""
+        lo, hi = load_range
+        history = REGULATION_HISTORY
+        low = np.array([lo, 0.0, -1.0, 0.0] + [lo] * history, dtype=np.float32)
+        high = np.array([hi, 10.0, 1.0, rpm_max / 1000.0] + [hi] * history, dtype=np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
 
 
 class LaneNames:

@@ -170,7 +170,7 @@ class MicroDrillingEnv(LaneEnv):
     (5.0, 0.01, True)
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
+    metadata = {**LaneEnv.metadata, "render_fps": 25}
     _ID = "MicroDrilling-v0"
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = DRILLING_TASK

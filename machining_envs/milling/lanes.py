@@ -9,7 +9,6 @@ import math
 
 import numba
 import numpy as np
-from gymnasium import spaces
 
 from machining_envs.core.actions import ACTION_MAPS, ActionMap
 from machining_envs.core.actuation import configure_lane
@@ -21,6 +20,7 @@ from machining_envs.core.compiled.packed import PackedArgs, spaced_rows
 from machining_envs.core.compiled.schema import axes, flatten, gather, offsets, record, via_table
 from machining_envs.core.env import check_episode_time, check_scenario_spec, resolve_params
 from machining_envs.core.lanes import (
+    REGULATION_HISTORY,
     CachedKernelArgs,
     FeedCnc,
     LaneCore,
@@ -53,7 +53,7 @@ from machining_envs.milling.scenarios import (
     milling_scenario,
 )
 
-_HISTORY = 3
+_HISTORY = REGULATION_HISTORY
 #: Decades spanned by the command on the default logarithmic action map: the feeds that
 #: hold the torque on the test set span about two (the feed exponent m ~ 0.4 turns a 2x
 #: change of depth, Ks or reference into a ~5x change of feed), and one more keeps slow
@@ -491,13 +491,7 @@ class MillingCore(FeedCnc, CachedKernelArgs, LaneCore):
             0.0, self.params.command_max, scale=action_map, decades=COMMAND_DECADES
         )
         self._cmap = _map_constants(self.command_map)
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
-        t_lo, t_hi = _TORQUE_OBS
-        low = np.array([t_lo, 0.0, -1.0, 0.0] + [t_lo] * _HISTORY, dtype=np.float32)
-        high = np.array(
-            [t_hi, 10.0, 1.0, SPINDLE_RPM_RANGE[1] / 1000.0] + [t_hi] * _HISTORY, dtype=np.float32
-        )
-        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self._set_regulation_spaces(_TORQUE_OBS, SPINDLE_RPM_RANGE[1])
         self.n = n
         # The CNC's actuation, made now if the option sets it (its checks fail here), else
         # when a scenario first brings its own.

@@ -7,6 +7,7 @@ from machining_envs.core.actuation import (
     Actuation,
 )
 from machining_envs.core.env import LaneEnv
+from machining_envs.core.lanes import REGULATION_OBS_INDEX
 from machining_envs.core.rendering import (
     render_signals,
 )
@@ -159,12 +160,11 @@ class TurningEnv(LaneEnv):
     (2048, 0.1)
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
     _ID = "Turning-v0"
     #: Episode metrics and primary score of this env (``machining_envs.core.score.Task``).
     task = TURNING_TASK
     #: Positions of the observation's fields, for controllers that read them by name.
-    OBS_INDEX = {"measured": 0, "limit": 1, "prev_action": 2, "spindle": 3, "history": 4}
+    OBS_INDEX = REGULATION_OBS_INDEX
     #: The signals render() draws: name -> the info key each is read from.
     _LOG_FIELDS = {
         "t": "t_s",

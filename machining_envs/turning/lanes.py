@@ -10,7 +10,6 @@ import math
 
 import numba
 import numpy as np
-from gymnasium import spaces
 
 from machining_envs.core.actions import ActionMap
 from machining_envs.core.actuation import configure_lane
@@ -30,6 +29,7 @@ from machining_envs.core.compiled.schema import (
 )
 from machining_envs.core.env import check_episode_time, check_scenario_spec, resolve_params
 from machining_envs.core.lanes import (
+    REGULATION_HISTORY,
     CachedKernelArgs,
     FeedCnc,
     LaneCore,
@@ -59,7 +59,7 @@ from machining_envs.turning.scenarios import (
     turning_scenario,
 )
 
-_HISTORY = 3
+_HISTORY = REGULATION_HISTORY
 _FORCE_OBS = (-1.0, 10.0)
 
 
@@ -482,13 +482,7 @@ class TurningCore(FeedCnc, CachedKernelArgs, LaneCore):
         self._gain = float(self.params.sensor_gain)
         self._fs = float(self.params.force_scale_N)
         self.command_map = ActionMap(0.0, self.params.command_max)
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
-        f_lo, f_hi = _FORCE_OBS
-        low = np.array([f_lo, 0.0, -1.0, 0.0] + [f_lo] * _HISTORY, dtype=np.float32)
-        high = np.array(
-            [f_hi, 10.0, 1.0, SPINDLE_RPM_RANGE[1] / 1000.0] + [f_hi] * _HISTORY, dtype=np.float32
-        )
-        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self._set_regulation_spaces(_FORCE_OBS, SPINDLE_RPM_RANGE[1])
         self.n = n
         # The CNC's actuation, made now if the option sets it (its checks fail here), else
         # when a scenario first brings its own.
