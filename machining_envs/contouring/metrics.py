@@ -17,6 +17,7 @@ from machining_envs.core.metrics import (
     finish_time,
     overload_ratio,
     reads_info,
+    sample_period,
     score_bound,
     severity,
 )
@@ -140,7 +141,7 @@ def contouring_metrics(traj: dict) -> dict[str, float]:
         cost = np.asarray(traj["cost"], dtype=np.float64)[1:]
         out["time_over_tolerance"] = float(np.mean(cost > 0.0)) if cost.size else 0.0
         tol = np.asarray(traj["contour_tolerance_mm"], dtype=np.float64)[1:]
-        dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+        dt = sample_period(t)
         out.update(severity(excess_ratio(peak, tol, cost), dt, overload_ratio(traj)))
     else:
         out["time_over_tolerance"] = math.nan

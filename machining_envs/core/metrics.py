@@ -28,6 +28,7 @@ __all__ = [
     "episode_flag",
     "episode_end",
     "finish_time",
+    "sample_period",
     "score_bound",
     "overload_ratio",
     "SETTLE_BAND",
@@ -126,6 +127,12 @@ def episode_end(
         out[key] = float(episode_flag(traj, key))
     out["n_steps"] = float(t.size - 1)
     return out
+
+
+def sample_period(t: np.ndarray) -> float:
+    """The period of a trajectory's samples, s: the median step of its times ``t`` (0 for a
+    trajectory of one sample), by which the time integrals of the metrics are taken."""
+    return float(np.median(np.diff(t))) if t.size > 1 else 0.0
 
 
 def finish_time(traj: dict, key: str, finished: bool, t: np.ndarray) -> float:
@@ -232,7 +239,7 @@ def regulation_metrics(
     r = np.asarray(traj[limit], dtype=np.float64)
     cost = np.asarray(traj["cost"], dtype=np.float64)
     e = (y - r) / r
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    dt = sample_period(t)
     # Sample 0 is the reset (t = 0, nothing cut yet); errors are scored from the first step,
     # and only while the tool is in the workpiece (the last sample of a finished cut is air).
     cutting = np.asarray(traj.get("depth_mm", np.ones(t.size)), dtype=np.float64)[1:] > 0

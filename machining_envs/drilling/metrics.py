@@ -15,6 +15,7 @@ from machining_envs.core.metrics import (
     finish_time,
     overload_ratio,
     reads_info,
+    sample_period,
     score_bound,
     severity,
 )
@@ -87,7 +88,7 @@ def drilling_metrics(traj: dict) -> dict[str, float]:
     ref = np.asarray(traj["torque_limit_Nmm"], dtype=np.float64)[1:][mask]
     cost = np.asarray(traj["cost"], dtype=np.float64)[1:][mask]
     hz = np.asarray(traj["spindle_hz"], dtype=np.float64)[1:][mask]
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    dt = sample_period(t)
     out: dict[str, float] = severity(excess_ratio(tq, ref, cost), dt, overload_ratio(traj))
     if tq.size:
         r = float(np.mean(ref))

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from machining_envs.core.metrics import regulation_metrics
+from machining_envs.core.metrics import regulation_metrics, sample_period
 
 
 def _traj(force, segment=None, dt=0.1, finished_at=None):
@@ -56,3 +56,9 @@ def test_oscillation_is_measured_and_drift_is_not():
     drift = np.linspace(500.0, 1500.0, 200)
     assert regulation_metrics(_traj(osc))["oscillation"] == pytest.approx(0.3, rel=1e-9)
     assert regulation_metrics(_traj(drift))["oscillation"] < 0.01
+
+
+def test_the_sample_period_is_the_median_step_and_zero_for_one_sample():
+    assert sample_period(np.array([0.0, 0.1, 0.2, 0.35])) == pytest.approx(0.1)
+    assert sample_period(np.array([0.0])) == 0.0
+    assert sample_period(np.array([])) == 0.0
