@@ -12,6 +12,7 @@ from collections.abc import Iterable
 import gymnasium as gym
 import numpy as np
 
+from machining_envs.core.actions import check_action
 from machining_envs.core.checks import PY_NUMBER_TYPES, is_real
 from machining_envs.core.metrics import note_severity
 from machining_envs.core.rendering import (
@@ -122,10 +123,10 @@ class LaneEnv(gym.Env, abc.ABC):
     that its vector env holds N of, so that a lane and the single env run the same code.
 
     A subclass builds its core (a :class:`~machining_envs.core.lanes.LaneCore` of one lane)
-    in ``__init__`` from its arguments (:meth:`_open`), and says how an action is checked
-    (:meth:`_set_action`), what it keeps of a new episode (:meth:`_began`) and how an
-    episode is drawn (:meth:`_draw`); ``reset``, ``step``, ``render`` and the command map
-    are shared. ``_LOG_FIELDS`` names what a rendered episode records of ``info``
+    in ``__init__`` from its arguments (:meth:`_open`) and says how an episode is drawn
+    (:meth:`_draw`); how an action is checked (:meth:`_set_action`) and what it keeps of a
+    new episode (:meth:`_began`) have defaults (one number; the plant) it may override;
+    ``reset``, ``step``, ``render`` and the command map are shared. ``_LOG_FIELDS`` names what a rendered episode records of ``info``
     (:class:`EpisodeLog`).
     """
 
@@ -133,6 +134,9 @@ class LaneEnv(gym.Env, abc.ABC):
     #: samples a second, which a process may change).
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
     _LOG_FIELDS: dict[str, str] = {}
+    #: The episode's plant (the process's lanes of one lane, their true parameters in
+    #: ``plant.params``), set at every reset (:meth:`_began`); None before the first.
+    plant = None
     #: The env's id without its namespace (``"Turning-v0"``): the window ``render`` shows.
     _ID: str = ""
 
@@ -173,10 +177,12 @@ class LaneEnv(gym.Env, abc.ABC):
         return self.command_map.command_to_action(command)
 
     # ---- what a subclass says --------------------------------------------------------------
-    @abc.abstractmethod
     def _set_action(self, action) -> None:
         """Check ``action`` (``ValueError`` naming the env) and write it into lane 0 of the
-        core, with whether it was clipped (``core.set_action``)."""
+        core, with whether it was clipped (``core.set_action``): by default one number in
+        [-1, 1] (:func:`~machining_envs.core.actions.check_action`); an env whose action is
+        a vector overrides it."""
+        self._core.set_action(0, *check_action(action, type(self).__name__))
 
     def _outcome(self) -> tuple[float, bool, bool]:
         """Lane 0's reward, terminated and truncated after a step, as Python values."""
@@ -187,10 +193,11 @@ class LaneEnv(gym.Env, abc.ABC):
         """Actions clipped so far this episode (``info["n_action_clipped"]``)."""
         return self._core.clipped_count(0)
 
-    @abc.abstractmethod
     def _began(self, core) -> None:
         """Called when an episode has started (``self.scenario`` is set): what the env
-        keeps of it (its ``plant``, its path)."""
+        keeps of it; by default its ``plant``, the core's lanes (one lane). An env whose
+        core has no ``lanes`` overrides it."""
+        self.plant = core.lanes
 
     @abc.abstractmethod
     def _draw(self):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from machining_envs.core.actions import check_action
 from machining_envs.core.env import LaneEnv
 from machining_envs.core.rendering import (
     render_signals,
@@ -19,7 +18,6 @@ from machining_envs.drilling.lanes import (
 )
 from machining_envs.drilling.metrics import DRILLING_TASK
 from machining_envs.drilling.plant import (
-    DrillingLanes,
     DrillingParams,
 )
 from machining_envs.drilling.scenarios import (
@@ -213,13 +211,6 @@ class MicroDrillingEnv(LaneEnv):
     ):
         core = self._open(DrillingCore, locals())  # the core's options by their names
         self.control = core.control
-        self.plant: DrillingLanes | None = None
-
-    def _began(self, core) -> None:
-        self.plant = core.lanes
-
-    def _set_action(self, action) -> None:
-        self._core.set_action(0, *check_action(action, "MicroDrillingEnv"))
 
     def _draw(self):
         log = self._log

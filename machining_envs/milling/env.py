@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from machining_envs.core.actions import check_action
 from machining_envs.core.actuation import (
     Actuation,
 )
@@ -21,7 +20,6 @@ from machining_envs.milling.lanes import (
 )
 from machining_envs.milling.metrics import MILLING_TASK
 from machining_envs.milling.plant import (
-    MillingLanes,
     MillingParams,
 )
 from machining_envs.milling.scenarios import (
@@ -205,13 +203,6 @@ class EndMillingEnv(LaneEnv):
         self.power_sensor = core.power_sensor and core.power_sensor.sensor
         #: The CNC's actuation (option ``actuation``), None when ideal.
         self.actuation = core.actuation
-        self.plant: MillingLanes | None = None
-
-    def _began(self, core) -> None:
-        self.plant = core.lanes
-
-    def _set_action(self, action) -> None:
-        self._core.set_action(0, *check_action(action, "EndMillingEnv"))
 
     def _draw(self):
         log = self._log

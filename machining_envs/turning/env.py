@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from machining_envs.core.actions import check_action
 from machining_envs.core.actuation import (
     Actuation,
 )
@@ -21,7 +20,6 @@ from machining_envs.turning.lanes import (
 )
 from machining_envs.turning.metrics import TURNING_TASK
 from machining_envs.turning.plant import (
-    TurningLanes,
     TurningParams,
 )
 from machining_envs.turning.scenarios import (
@@ -192,13 +190,6 @@ class TurningEnv(LaneEnv):
         #: The CNC's actuation (option ``actuation``), None when ideal.
         self.actuation = core.actuation
         self.spindle_rpm_override = core.spindle_rpm_override
-        self.plant: TurningLanes | None = None
-
-    def _began(self, core) -> None:
-        self.plant = core.lanes
-
-    def _set_action(self, action) -> None:
-        self._core.set_action(0, *check_action(action, "TurningEnv"))
 
     def _draw(self):
         log = self._log

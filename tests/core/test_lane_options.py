@@ -193,3 +193,17 @@ def test_the_registered_ids_and_their_entry_points():
     from machining_envs import turning
 
     assert turning.TurningParams.__name__ == "TurningParams"  # the lazy export loads
+
+
+@pytest.mark.parametrize("single", [TurningEnv, EndMillingEnv, MicroDrillingEnv])
+def test_a_single_env_of_one_number_uses_the_default_action_check_and_plant(single):
+    """``LaneEnv``'s defaults: the action is one number, checked naming the env, and the
+    episode's plant is the core's lanes, None before the first reset."""
+    env = single()
+    assert env.plant is None
+    env.reset(seed=0)
+    assert env.plant is env._core.lanes
+    with pytest.raises(ValueError, match=single.__name__):
+        env.step(np.array([np.nan], dtype=np.float32))
+    with pytest.raises(ValueError, match=single.__name__):
+        env.step(np.zeros(2, dtype=np.float32))
