@@ -571,28 +571,31 @@ def _sweep(args, command):
     return 0
 
 
-def _evaluate_arguments(e):
-    e.add_argument("--model", required=True, help="a saved model .zip")
-    e.add_argument("--env", required=True, help="env id, e.g. machining_envs/Turning-v0")
-    e.add_argument("--scenarios", nargs="+", default=["validation"], help="scenario names")
-    e.add_argument("--episodes", type=_positive_int, default=20, help="episodes per scenario")
-    e.add_argument("--seed", type=_seed, default=5000, help="first episode seed (validation's)")
-    e.add_argument(
+def _saved_model_arguments(p, force_help: str):
+    """The arguments of a command that loads a saved model (``evaluate``, ``export``): the
+    model, its algorithm and VecNormalize statistics where its run folder does not say, and
+    ``--force`` (``force_help``) to use it on another env than it was trained on."""
+    p.add_argument("--model", required=True, help="a saved model .zip")
+    p.add_argument(
         "--algo",
         choices=ALGO_CHOICES,
         default=None,
         help="the model's algorithm (default: from config.json or the file name)",
     )
-    e.add_argument(
+    p.add_argument(
         "--stats",
         default=None,
         help="VecNormalize statistics (.json; default: *_vecnormalize.json beside the model)",
     )
-    e.add_argument(
-        "--force",
-        action="store_true",
-        help="evaluate on --env although config.json names another env",
-    )
+    p.add_argument("--force", action="store_true", help=force_help)
+
+
+def _evaluate_arguments(e):
+    _saved_model_arguments(e, "evaluate on --env although config.json names another env")
+    e.add_argument("--env", required=True, help="env id, e.g. machining_envs/Turning-v0")
+    e.add_argument("--scenarios", nargs="+", default=["validation"], help="scenario names")
+    e.add_argument("--episodes", type=_positive_int, default=20, help="episodes per scenario")
+    e.add_argument("--seed", type=_seed, default=5000, help="first episode seed (validation's)")
 
 
 def _evaluate_check(args):
@@ -632,26 +635,12 @@ def _export_arguments(x):
     form = x.add_mutually_exclusive_group(required=True)
     form.add_argument("--onnx", action="store_true", help="write ONNX")
     form.add_argument("--zoo", action="store_true", help="write an rl-zoo3 folder")
-    x.add_argument("--model", required=True, help="a saved model .zip")
+    _saved_model_arguments(x, "--onnx: check on --env although config.json names another env")
     x.add_argument("--env", default=None, help="env id (default: from config.json)")
     x.add_argument(
         "--out",
         default=None,
         help="the .onnx file or the rl-zoo3 folder (default: beside the model)",
-    )
-    x.add_argument(
-        "--algo",
-        choices=ALGO_CHOICES,
-        default=None,
-        help="the model's algorithm (default: from config.json or the file name)",
-    )
-    x.add_argument(
-        "--stats", default=None, help="VecNormalize statistics (.json; default: beside the model)"
-    )
-    x.add_argument(
-        "--force",
-        action="store_true",
-        help="--onnx: check on --env although config.json names another env",
     )
 
 
