@@ -234,36 +234,36 @@ def plot_robustness(run: EnvRun, ref: str | None, path: Path) -> Path | None:
         return None
     fig = Figure(figsize=(4.8 * len(who) + 1.0, 4), layout="constrained")
     axes = fig.subplots(1, len(who), squeeze=False)[0]
-    env = gym.make(run.spec.env_id, **run.spec.env_kwargs)
     score, failed = run.score, run.failed
-    try:
-        for ax, name in zip(axes, who, strict=True):
+    for ax, name in zip(axes, who, strict=True):
+        env = gym.make(run.spec.env_id, **run.env_kwargs_of(name))  # the env the row ran on
+        try:
             agent = run.factory[name](env)
             eff = np.full((len(grid.y_values), len(grid.x_values)), np.nan)
             for iy, y in enumerate(grid.y_values):
                 for ix, x in enumerate(grid.x_values):
                     tr = rollout(agent, env, grid.scenario(x, y), 0)
                     eff[iy, ix] = score.efficiency(run.spec.task.metrics(tr), failed)
-            im = ax.imshow(eff, origin="lower", vmin=0.0, vmax=1.0, cmap="viridis", aspect="auto")
-            for iy in range(eff.shape[0]):
-                for ix in range(eff.shape[1]):
-                    ax.text(
-                        ix,
-                        iy,
-                        f"{eff[iy, ix]:.2f}",
-                        ha="center",
-                        va="center",
-                        fontsize=7,
-                        color="w" if eff[iy, ix] < 0.6 else "k",
-                    )
-            ax.set_xticks(range(len(grid.x_values)), [f"{v:g}" for v in grid.x_values])
-            ax.set_yticks(range(len(grid.y_values)), [f"{v:g}" for v in grid.y_values])
-            ax.set_xlabel(grid.x_label)
-            ax.set_ylabel(grid.y_label)
-            ax.set_title(name, fontsize=9)
-        fig.colorbar(im, ax=list(axes), label="efficiency (bound / charged time)")
-    finally:
-        env.close()
+        finally:
+            env.close()
+        im = ax.imshow(eff, origin="lower", vmin=0.0, vmax=1.0, cmap="viridis", aspect="auto")
+        for iy in range(eff.shape[0]):
+            for ix in range(eff.shape[1]):
+                ax.text(
+                    ix,
+                    iy,
+                    f"{eff[iy, ix]:.2f}",
+                    ha="center",
+                    va="center",
+                    fontsize=7,
+                    color="w" if eff[iy, ix] < 0.6 else "k",
+                )
+        ax.set_xticks(range(len(grid.x_values)), [f"{v:g}" for v in grid.x_values])
+        ax.set_yticks(range(len(grid.y_values)), [f"{v:g}" for v in grid.y_values])
+        ax.set_xlabel(grid.x_label)
+        ax.set_ylabel(grid.y_label)
+        ax.set_title(name, fontsize=9)
+    fig.colorbar(im, ax=list(axes), label="efficiency (bound / charged time)")
     fig.suptitle(f"{run.spec.env_id}: robustness", fontsize=10)
     save_figure(fig, path)
     return path

@@ -145,7 +145,7 @@ def _learning_curves(run: EnvRun, ref: str | None, path: Path, pngs: list, seed:
             name,
             pretrained_seeds(name),
             run.spec.env_id,
-            run.spec.env_kwargs,
+            run.env_kwargs_of(ref) if ref is not None else run.spec.env_kwargs,
             run.score,
             run.failed,
             reference_row,

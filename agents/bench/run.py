@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import gymnasium as gym
 
 from agents.bench.spec import BenchmarkSpec
-from agents.bench.tune import machine_tuned_factory, tuned_factory
+from agents.bench.tune import agent_env_kwargs, machine_tuned_factory, tuned_factory
 from agents.eval import Evaluation, evaluate
 from machining_envs.core.splits import split_seeds
 
@@ -48,9 +48,11 @@ class Job:
     """One row's agent: its ``kind`` (paper, tuned, learned, oracle), its factory
     ``env -> agent``, the training seed of a learned policy and the class of a tuned row
     (one of the spec's ``tuned``). A row tuned for the shop-floor machine (one of the
-    spec's ``machine_tuned``) has ``machine_cls`` instead, runs on the ``splits`` named
-    only (None: every split) and with ``env_kwargs`` (the machine's env options) over the
-    spec's."""
+    spec's ``machine_tuned``) has ``machine_cls`` instead and runs on the ``splits`` named
+    only (None: every split). ``env_kwargs`` go over the spec's: the machine's env options,
+    a tuned class's ``ENV_KWARGS`` and a learned policy's run options
+    (``agents.rl.policy.policy_env_kwargs``): ``PeckDrilling`` and the peck policy drill
+    with ``control="feed"``, on the same episodes, scored by the same task."""
 
     kind: str
     factory: object
@@ -73,6 +75,9 @@ class EnvRun:
         self.tuned_cls: dict[str, type] = {}
         #: The rows tuned for the shop-floor machine: name -> class (of ``machine_tuned``).
         self.machine_cls: dict[str, type] = {}
+        #: Agent name -> the ``gym.make`` keywords its rows ran with (the spec's, with the
+        #: row's own over them: ``control="feed"`` for the peck cycles).
+        self.env_kwargs: dict[str, dict] = {}
         #: Agent name -> the trajectory of test episode ``plot_seed`` (a learned row: its
         #: first training seed's).
         self.trajectories: dict[str, dict] = {}
@@ -95,6 +100,10 @@ class EnvRun:
                 r["policy_seed"] = policy_seed
         self.kind.setdefault(name, kind)
         self.rows.setdefault(name, {}).setdefault(split, []).extend(rows)
+
+    def env_kwargs_of(self, name: str) -> dict:
+        """The ``gym.make`` keywords of ``name``'s env (see ``env_kwargs``)."""
+        return dict(self.env_kwargs.get(name, self.spec.env_kwargs))
 
     def all_rows(self) -> list[dict]:
         return [r for by in self.rows.values() for rs in by.values() for r in rs]
@@ -122,7 +131,7 @@ def jobs_of(
             tuned,
             tuned_factory,
             "no tuned settings (run `machining-bench tune`)",
-            lambda cls: {"tuned_cls": cls},
+            lambda cls: {"tuned_cls": cls, "env_kwargs": agent_env_kwargs(cls) or None},
         )
     ]
     if "shopfloor" in spec.extra_splits and machine_tuned:
@@ -136,7 +145,7 @@ def jobs_of(
                 lambda cls: {
                     "machine_cls": cls,
                     "splits": ("shopfloor",),
-                    "env_kwargs": dict(kwargs),
+                    "env_kwargs": agent_env_kwargs(cls, kwargs),
                 },
             )
         )
@@ -155,7 +164,7 @@ def jobs_of(
                     "  learned rows skipped: they need the rl extra (pip install 'machining-envs[rl]')"
                 )
         else:
-            from agents.rl.policy import load_policy, pretrained_seeds
+            from agents.rl.policy import load_policy, policy_env_kwargs, pretrained_seeds
 
             for name in spec.learned:
                 for seed, path in pretrained_seeds(name)[: 1 if one_seed else None]:
@@ -163,7 +172,9 @@ def jobs_of(
                     def make(env, path=path, name=name):
                         return load_policy(path, name=f"{name}", env=env)
 
-                    out.append(Job("learned", make, seed))
+                    # the env as the policy acts on it (a peck policy: control="feed")
+                    kwargs = policy_env_kwargs(path) or None
+                    out.append(Job("learned", make, seed, env_kwargs=kwargs))
     return out
 
 
@@ -308,6 +319,7 @@ def run_env(
                 if split == "test":
                     _keep_plotted(run, name, ev)
                 run.factory.setdefault(name, job.factory)
+                run.env_kwargs.setdefault(name, kwargs)
                 if job.tuned_cls is not None:
                     run.tuned_cls[name] = job.tuned_cls
                 if job.machine_cls is not None:

@@ -58,6 +58,7 @@ __all__ = [
     "machine_tuned_factory",
     "paper_settings",
     "search_space",
+    "agent_env_kwargs",
 ]
 
 #: Where the tuned settings ship.
@@ -108,6 +109,13 @@ def search_space(cls, machine: bool = False) -> dict:
     """``cls``'s free parameters and their ranges: ``TUNABLE``, or with ``machine`` (tuning
     for a described machine) its ``MACHINE_TUNABLE`` where it declares one."""
     return getattr(cls, "MACHINE_TUNABLE", cls.TUNABLE) if machine else cls.TUNABLE
+
+
+def agent_env_kwargs(cls, env_kwargs: dict | None = None) -> dict:
+    """The ``gym.make`` keywords ``cls``'s agents run with: ``env_kwargs`` (the benchmark
+    spec's) with the class's own ``ENV_KWARGS`` over them (``PeckDrilling`` commands the
+    feed: ``{"control": "feed"}``). Tuning and the benchmark's tuned rows both use it."""
+    return {**dict(env_kwargs or {}), **getattr(cls, "ENV_KWARGS", {})}
 
 
 def paper_settings(cls, env, machine: bool = False) -> dict:
@@ -163,8 +171,7 @@ def tune_agent(
     import optuna
 
     budget = budget or TuningBudget()
-    # The keywords the agent itself needs (``ENV_KWARGS``: PeckDrilling commands the feed).
-    env_kwargs = {**dict(env_kwargs or {}), **getattr(cls, "ENV_KWARGS", {})}
+    env_kwargs = agent_env_kwargs(cls, env_kwargs)
     check_not_held_out([env_kwargs.get("scenario", "train")], "tuning (env_kwargs.scenario)")
     space = search_space(cls, machine)
     env = gym.make(env_id, **env_kwargs)

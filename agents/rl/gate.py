@@ -284,13 +284,12 @@ def gate_policy(
     (``control="feed"`` for the pecking policy)."""
     import torch
 
-    from agents.rl.policy import load_policy, read_run_config, run_env_kwargs
+    from agents.rl.policy import load_policy, policy_env_kwargs
 
     # One thread: torch's default pool spins against a loaded machine (25x the CPU time
     # of one thread for the milling policy's batched inference on 2 busy cores).
     torch.set_num_threads(1)
-    meta = Path(model_path).parent / "config.json"
-    env_kwargs = run_env_kwargs(read_run_config(meta)) if meta.is_file() else {}
+    env_kwargs = policy_env_kwargs(model_path)
     agent = load_policy(model_path, algo=algo)
     return gate_agent(agent, env_id, env_kwargs, n_validation, per_edge, share)
 

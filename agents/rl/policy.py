@@ -20,6 +20,8 @@ __all__ = [
     "load_policy",
     "load_model",
     "read_run_config",
+    "run_env_kwargs",
+    "policy_env_kwargs",
     "pretrained",
     "pretrained_seeds",
     "PRETRAINED_DIR",
@@ -353,6 +355,22 @@ def _check_env(model_path: Path, meta: dict, model, residual, target, force: boo
         )
 
 
+def _check_env_options(model_path: Path, meta: dict, env) -> None:
+    """``ValueError`` where ``env`` was made with another value of an option its run trained
+    with (:func:`run_env_kwargs`; an option the env keeps as an attribute of that name, such
+    as MicroDrilling-v0's ``control``): the same spaces, other commands (a peck policy's
+    feed velocities read as valve voltages)."""
+    base = getattr(env, "unwrapped", env)
+    for key, want in run_env_kwargs(meta).items():
+        have = getattr(base, key, None)
+        if isinstance(want, str) and isinstance(have, str) and have != want:
+            raise ValueError(
+                f"{model_path} acts on the env made with {key}={want!r} (its run's "
+                f"env_kwargs), but this env has {key}={have!r}: make it with "
+                f"gym.make(..., {key}={want!r})"
+            )
+
+
 def load_policy(
     model_path,
     name: str | None = None,
@@ -459,6 +477,8 @@ def load_policy(
             raise ValueError(f"{meta_path}: action_increment: {exc}") from None
     if target is not None:
         _check_env(model_path, meta, model, residual, target, bool(force))
+        if not isinstance(env, str):
+            _check_env_options(model_path, meta, env)
     agent = PolicyAgent(
         model,
         obs_rms,
@@ -487,6 +507,13 @@ def run_env_kwargs(meta: dict) -> dict:
     ``env_kwargs`` without the training ``scenario`` and ``reward``): e.g. ``control``."""
     kwargs = dict(meta.get("config", {}).get("env_kwargs", {}) or {})
     return {k: v for k, v in kwargs.items() if k not in ("scenario", "reward")}
+
+
+def policy_env_kwargs(model_path) -> dict:
+    """:func:`run_env_kwargs` of the run whose model is ``model_path`` (its ``config.json``
+    beside it; ``{}`` where there is none): the keywords to make the env it acts on."""
+    meta = Path(model_path).parent / "config.json"
+    return run_env_kwargs(read_run_config(meta)) if meta.is_file() else {}
 
 
 PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"

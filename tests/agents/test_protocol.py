@@ -11,7 +11,14 @@ import pytest
 
 import machining_envs.core.env as core_env
 import machining_envs.core.vector as core_vector
-from agents.bench.tune import TuningBudget, load_tuned, paper_settings, tune_agent, tuned_factory
+from agents.bench.tune import (
+    TuningBudget,
+    agent_env_kwargs,
+    load_tuned,
+    paper_settings,
+    tune_agent,
+    tuned_factory,
+)
 from agents.rl import ConfigError, train
 from agents.turning import FixedGainPI
 from machining_envs.core.score import REGULATION_SCORE
@@ -111,7 +118,7 @@ def test_tuned_file_ships_settings_for_every_tuned_agent():
     for spec in BENCHMARKS:
         for cls in spec.tuned:
             entry = data["envs"][spec.env_id][cls.__name__]
-            env = gym.make(spec.env_id, **spec.env_kwargs)
+            env = gym.make(spec.env_id, **agent_env_kwargs(cls, spec.env_kwargs))
             assert entry["paper_params"] == paper_settings(cls, env)
             for k, (lo, hi, _) in cls.TUNABLE.items():
                 assert lo <= entry["params"][k] <= hi
@@ -237,7 +244,11 @@ def test_tuned_agents_run_under_sb3_evaluate_policy(spec, cls):
 
     scenario = spec.paper_scenarios[0]
     venv = DummyVecEnv(
-        [lambda: Monitor(gym.make(spec.env_id, scenario=scenario, **spec.env_kwargs))]
+        [
+            lambda: Monitor(
+                gym.make(spec.env_id, scenario=scenario, **agent_env_kwargs(cls, spec.env_kwargs))
+            )
+        ]
     )
     agent = tuned_factory(cls, spec.env_id)(venv.envs[0])
     assert agent.name.endswith("(tuned)")
