@@ -86,7 +86,15 @@ from machining_envs.core.lti import zoh
 from machining_envs.drilling.env import MicroDrillingEnv
 from machining_envs.drilling.plant import DrillingParams
 
-__all__ = ["DrillingIO", "NoControl", "PD", "PeckDrilling", "SlidingMode", "sliding_mode_input"]
+__all__ = [
+    "DrillingIO",
+    "NoControl",
+    "PD",
+    "PeckDrilling",
+    "TorquePeck",
+    "SlidingMode",
+    "sliding_mode_input",
+]
 
 _I = MicroDrillingEnv.OBS_INDEX
 _OBS_DIM = 12
@@ -363,12 +371,11 @@ class PeckDrilling(_DrillingController):
         io = self.io
         ts = io.sample_time_s
         pos, depth, _ = io.lengths_mm(obs)
-        q = self.peck_diameters * io.diameter_mm(obs)
         first = state[:, 2] == 0.0
         state[:, 1] = np.where(first, depth, state[:, 1])
         phase = np.where(first, _FEED, state[:, 0])
         # Transitions, then the command of the phase.
-        to_out = (phase == _FEED) & (depth >= state[:, 1] + q - 1e-9)
+        to_out = (phase == _FEED) & self._peck_now(obs, depth, state[:, 1])
         phase = np.where(to_out, _OUT, phase)
         to_back = (phase == _OUT) & (pos <= -self.clearance_mm + 1e-9)
         phase = np.where(to_back, _BACK, phase)
@@ -389,6 +396,59 @@ class PeckDrilling(_DrillingController):
         state[:, 0] = phase
         state[:, 2] = 1.0
         return io.action(v)
+
+    def _peck_now(self, obs, depth, began):
+        """Whether a feeding drill retracts now: the hole is ``q`` deeper than where the
+        current peck ``began`` (mm)."""
+        q = self.peck_diameters * self.io.diameter_mm(obs)
+        return depth >= began + q - 1e-9
+
+
+class TorquePeck(PeckDrilling):
+    """Peck drilling triggered by the torque: the drill retracts as soon as the measured
+    torque reaches ``torque_share`` x the observed limit (once the peck is at least
+    ``min_peck_diameters`` deep), the load-monitored peck cycle of industrial CNCs; the
+    cycle is :class:`PeckDrilling`'s otherwise (out of the hole, back, feed on).
+
+    Parameters
+    ----------
+    io : DrillingIO
+    torque_share : float
+        The share of the torque limit that triggers a peck (default 0.8), in (0, 2].
+    feed_scale : float
+        The feed while cutting as a multiple of the nominal feed (default 0.7: at the
+        nominal feed the chip-free torque at the nominal spindle speed is the limit itself).
+    peck_diameters : float
+        The deepest peck, in drill diameters (default 100: none; the torque decides).
+    min_peck_diameters : float
+        How deep a peck goes at least before the torque may end it, in drill diameters
+        (default 0.25): a retract clears the chips, so a torque still high there is noise,
+        and the cycle does not peck on the spot.
+    **kwargs
+        :class:`PeckDrilling`'s ``clearance_mm``, ``approach_gap_mm``, ``rapid_mm_s``.
+    """
+
+    TUNABLE = {"torque_share": (0.3, 1.0, False), "feed_scale": (0.2, 4.0, True)}
+    ENV_KWARGS = {"control": "feed"}
+
+    def __init__(
+        self,
+        io: DrillingIO,
+        torque_share: float = 0.8,
+        feed_scale: float = 0.7,
+        peck_diameters: float = 100.0,
+        min_peck_diameters: float = 0.25,
+        **kwargs,
+    ):
+        super().__init__(io, peck_diameters=peck_diameters, feed_scale=feed_scale, **kwargs)
+        self.torque_share = _in_range("torque_share", torque_share, 1e-3, 2.0)
+        self.min_peck_diameters = _in_range("min_peck_diameters", min_peck_diameters, 0.0, 100.0)
+        self.name = f"torque peck at {torque_share:.3g} x limit, {feed_scale:.3g}x feed"
+
+    def _peck_now(self, obs, depth, began):
+        torque, trigger = self.io.torque(obs, self.torque_share)
+        deep = depth >= began + self.min_peck_diameters * self.io.diameter_mm(obs) - 1e-9
+        return super()._peck_now(obs, depth, began) | (deep & (torque >= trigger))
 
 
 _TWO_PI = 2.0 * math.pi
