@@ -429,7 +429,6 @@ class TorquePeck(PeckDrilling):
     """
 
     TUNABLE = {"torque_share": (0.3, 1.0, False), "feed_scale": (0.2, 4.0, True)}
-    ENV_KWARGS = {"control": "feed"}
 
     def __init__(
         self,
