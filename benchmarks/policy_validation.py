@@ -26,12 +26,12 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.bench.tune import tuned_factory
+from agents.bench.tune import agent_env_kwargs, tuned_factory
 from agents.eval import evaluate
 from agents.eval.stats import allowance_sweep, seed_count_shares
 from agents.rl.callbacks import evaluation_setup
 from agents.rl.gate import gate_policy
-from agents.rl.policy import load_policy
+from agents.rl.policy import load_policy, policy_env_kwargs
 from machining_envs.core.score import ALLOWANCES
 from machining_envs.core.splits import split_seeds
 
@@ -83,14 +83,15 @@ def main(argv=None) -> int:
     metrics_fn, score, failed = evaluation_setup(a.env, {})
     seed0 = split_seeds("validation", a.episodes)[0]
 
-    def run(agent):
+    def run(agent, env_kwargs):
         ev = evaluate(agent, a.env, ["validation"], n_episodes=a.episodes, seed=seed0,
-                      metrics_fn=metrics_fn)  # fmt: skip
+                      env_kwargs=env_kwargs, metrics_fn=metrics_fn)  # fmt: skip
         return ev.rows
 
     ref_name = a.reference or best_tuned(a.env)
     t0 = time.perf_counter()
-    ref_rows = run(tuned_factory(_agent_class(ref_name), a.env))
+    ref_cls = _agent_class(ref_name)
+    ref_rows = run(tuned_factory(ref_cls, a.env), agent_env_kwargs(ref_cls))
     ref_counts = float(np.mean([score.counts(r) for r in ref_rows]))
     ref_mean = float(np.mean([score.charged(r, failed) for r in ref_rows]))
     print(f"reference {ref_name}: counts {ref_counts:.0%}, mean {ref_mean:.2f} s "
@@ -102,7 +103,8 @@ def main(argv=None) -> int:
         rows, seeds = [], {}
         for seed, model in seed_models(folder):
             t1 = time.perf_counter()
-            r = run(load_policy(model))
+            # on the env as trained (control="feed" for the peck policy), checked at load
+            r = run(lambda env, m=model: load_policy(m, env=env), policy_env_kwargs(model))
             for row in r:
                 row["policy_seed"] = seed
             rows += r
