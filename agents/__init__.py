@@ -32,6 +32,7 @@ _EXPORTS = {
     "NoControl": "agents.drilling",
     "PD": "agents.drilling",
     "PeckDrilling": "agents.drilling",
+    "TorquePeck": "agents.drilling",
     "SlidingMode": "agents.drilling",
 }
 __all__ = list(_EXPORTS)
