@@ -363,8 +363,8 @@ class PeckDrilling(_DrillingController):
         self.feed_scale = _in_range(
             "feed_scale", feed_scale, 1e-3, p.feed_speed_max_mm_s / p.feed_velocity_mm_s
         )
-        self.name = f"peck q={peck_diameters:g}D" + (
-            f", {feed_scale:g}x feed" if feed_scale != 1.0 else ""
+        self.name = f"peck q={peck_diameters:.3g}D" + (
+            f", {feed_scale:.3g}x feed" if feed_scale != 1.0 else ""
         )
 
     def _act(self, obs, state):
