@@ -16,10 +16,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import operator
 
 import numpy as np
 
 __all__ = [
+    "fields_of",
     "REAL_TYPES",
     "PY_NUMBER_TYPES",
     "INTEGER_TYPES",
@@ -245,6 +247,21 @@ def replace_checked(params, changes: dict, rules: dict, cls: type):
     new.__dict__.update(params.__dict__)
     new.__dict__.update(changes)
     return new
+
+
+def fields_of(cls: type, source):
+    """The named tuple ``cls`` of ``source``'s attributes (fields or properties) named as
+    its fields: the part of a parameter set a cache is keyed by (a key class's
+    ``of = classmethod(fields_of)``).
+
+    >>> from typing import NamedTuple
+    >>> class Key(NamedTuple):
+    ...     real: float
+    ...     imag: float
+    >>> fields_of(Key, 2 + 3j)
+    Key(real=2.0, imag=3.0)
+    """
+    return cls._make(operator.attrgetter(*cls._fields)(source))
 
 
 def drawn_instance(cls: type, fields: dict):

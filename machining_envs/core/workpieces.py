@@ -36,6 +36,7 @@ __all__ = [
     "lane_segments",
     "load_segments",
     "SegmentTables",
+    "SingleCut",
     "traverse_time",
 ]
 
@@ -605,7 +606,12 @@ class SegmentTables:
     """The per-lane workpiece tables of a batch of cuts, which :func:`load_segments` fills:
     ``edges`` (``(n, S + 1)``), ``d0`` and ``slope`` (``(n, S)``), grown to the most
     segments ``S`` a lane's profile has had (:meth:`fit_segments`). A batch's plant
-    (``TurningLanes``, ``MillingLanes``) makes them with :meth:`_new_segment_tables`."""
+    (``TurningLanes``, ``MillingLanes``) makes them with :meth:`_new_segment_tables`, and
+    sets ``STEP_KERNEL`` (its compiled step, a static method) and ``T_COLUMN`` (the column
+    of ``lane_f`` that holds each lane's clock) for :meth:`step` and :attr:`t_s`."""
+
+    STEP_KERNEL: staticmethod
+    T_COLUMN: int
 
     def _new_segment_tables(self, n: int) -> None:
         """Tables of ``n`` lanes for one segment each."""
@@ -626,3 +632,63 @@ class SegmentTables:
             self.slope = np.pad(self.slope, ((0, 0), (0, grow)))
             self._s_max = n_segments
             self.version += 1
+
+    def step(self, commands: np.ndarray, noise_counts: np.ndarray) -> None:
+        """Hold ``commands[k]`` (counts; clipped to [0, U_max]) in every lane for one sample,
+        with ``noise_counts[k]`` added to lane ``k``'s measurement; results in ``out``,
+        ``out_segment`` and ``out_finish``. The plant's compiled kernel is its class's
+        ``STEP_KERNEL`` (called with ``arrays()``, the commands and the noise)."""
+        commands = np.asarray(commands, dtype=np.float64)
+        self.STEP_KERNEL(self.arrays(), commands, np.asarray(noise_counts, dtype=np.float64))
+
+    @property
+    def t_s(self) -> np.ndarray:
+        """Time of each lane since its cut started, s (column ``T_COLUMN`` of ``lane_f``)."""
+        return self.lane_f[:, self.T_COLUMN]
+
+
+class SingleCut:
+    """One cut at a constant spindle speed: a batch of lanes (the class's ``LANES``, a
+    :class:`SegmentTables` plant) of one lane, whose :meth:`step` returns the class's
+    ``STEP`` record of the lane's signals (``out``), segment and finish time.
+
+    Parameters
+    ----------
+    params
+        The plant's true parameters for this cut.
+    spindle_rpm : float
+        Spindle speed, rpm, held for the whole cut.
+    profile : DepthProfile
+        Depth of cut along the workpiece. Reaching its length finishes the cut.
+    """
+
+    LANES: type
+    STEP: type
+
+    def __init__(self, params, spindle_rpm: float, profile) -> None:
+        self._lanes = self.LANES(params, 1)
+        self._lanes.start(0, params, spindle_rpm, profile)  # checks the cut
+        self.params = params
+        self.spindle_rpm = float(spindle_rpm)
+        self.profile = profile
+        self.length_mm = profile.length_mm
+        self.finished = False
+
+    def reset(self) -> None:
+        """The tool at rest at the workpiece's start: no feed, no load."""
+        self._lanes.start(0, self.params, self.spindle_rpm, self.profile)
+        self.finished = False
+
+    @property
+    def t_s(self) -> float:
+        """Time since the cut started, s."""
+        return float(self._lanes.t_s[0])
+
+    def step(self, command: float, noise_counts: float = 0.0):
+        """Hold ``command`` (counts; clipped to [0, command_max]) for one sample and advance."""
+        lanes = self._lanes
+        lanes.step(np.array([command], dtype=np.float64), np.array([noise_counts]))
+        fin = float(lanes.out_finish[0])
+        self.finished = bool(lanes.finished[0])
+        finish = None if math.isnan(fin) else fin
+        return self.STEP(*lanes.out[0].tolist(), int(lanes.out_segment[0]), finish)

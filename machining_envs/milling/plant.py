@@ -48,11 +48,17 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from machining_envs.core.checks import check_fields, check_integer, check_range, replace_checked
+from machining_envs.core.checks import (
+    check_fields,
+    check_integer,
+    check_range,
+    fields_of,
+    replace_checked,
+)
 from machining_envs.core.compiled.kernels import copy_into, matvec, powers, read_only
 from machining_envs.core.compiled.schema import gather, record
 from machining_envs.core.lti import zoh, zoh_tf
-from machining_envs.core.workpieces import SegmentTables, load_segments
+from machining_envs.core.workpieces import SegmentTables, SingleCut, load_segments
 
 __all__ = [
     "MillingParams",
@@ -471,16 +477,12 @@ class _ServoKey(NamedTuple):
     """The fields the servo's discretisation depends on (not the spindle or torque law)."""
 
     servo_gain: float
-    wn: float
-    damping: float
+    servo_natural_freq_rad_s: float
+    servo_damping: float
     sample_time_s: float
     substeps: int
 
-    @classmethod
-    def of(cls, p: MillingParams) -> _ServoKey:
-        return cls(
-            p.servo_gain, p.servo_natural_freq_rad_s, p.servo_damping, p.sample_time_s, p.substeps
-        )
+    of = classmethod(fields_of)
 
 
 @functools.lru_cache(maxsize=64)
@@ -489,7 +491,7 @@ def _servo_matrix(key: _ServoKey) -> np.ndarray:
     at the M sub-step points and the next state (3 rows), all exact (ZOH); read-only."""
     m = key.substeps
     h = key.sample_time_s / m
-    wn, z = key.wn, key.damping
+    wn, z = key.servo_natural_freq_rad_s, key.servo_damping
     a = np.array([[0.0, 1.0, 0.0], [-(wn**2), -2.0 * z * wn, 0.0], [1.0, 0.0, 0.0]])
     b = np.array([[0.0], [key.servo_gain * wn**2], [0.0]])
     phi_h, gam_h = zoh(a, b, h)
@@ -863,6 +865,9 @@ class MillingLanes(SegmentTables):
         Signals of the last step (``LANE_SIGNALS``), segment, finish time (NaN if none).
     """
 
+    STEP_KERNEL = staticmethod(step_lanes)
+    T_COLUMN = LC.t_s
+
     def __init__(self, params: MillingParams, n: int = 1) -> None:
         check_integer("n", n, 1, 1 << 24)
         self.n = int(n)
@@ -955,51 +960,14 @@ class MillingLanes(SegmentTables):
         }
         return np.array([row[name] for name in LANE_CONSTANTS])
 
-    def step(self, commands: np.ndarray, noise_counts: np.ndarray) -> None:
-        """Hold ``commands[k]`` (counts; clipped to [0, U_max]) in every lane for one sample,
-        with ``noise_counts[k]`` added to lane ``k``'s measurement; results in ``out``,
-        ``out_segment`` and ``out_finish``."""
-        commands = np.asarray(commands, dtype=np.float64)
-        step_lanes(self.arrays(), commands, np.asarray(noise_counts, dtype=np.float64))
 
-    @property
-    def t_s(self) -> np.ndarray:
-        """Time of each lane since its cut started, s."""
-        return self.lane_f[:, LC.t_s]
+class MillingPlant(SingleCut):
+    """Simulates one cut at a constant spindle speed: a :class:`MillingLanes` of one lane
+    (:class:`~machining_envs.core.workpieces.SingleCut`, with :class:`MillingParams`; the
+    profile is the radial depth of cut, zero outside it)."""
 
-
-class MillingPlant:
-    """Simulates one cut at a constant spindle speed: a :class:`MillingLanes` of one lane.
-
-    Parameters
-    ----------
-    params : MillingParams
-        The plant's true parameters for this cut.
-    spindle_rpm : float
-        Spindle speed N, rpm, held for the whole cut.
-    profile : DepthProfile
-        Radial depth of cut along the workpiece; zero outside it. Reaching its length
-        finishes the cut.
-    """
-
-    def __init__(self, params: MillingParams, spindle_rpm: float, profile) -> None:
-        self._lanes = MillingLanes(params, 1)
-        self._lanes.start(0, params, spindle_rpm, profile)
-        self.params = params
-        self.spindle_rpm = float(spindle_rpm)
-        self.profile = profile
-        self.length_mm = profile.length_mm
-        self.finished = False
-
-    def reset(self) -> None:
-        """Tool at rest at the workpiece's start: no feed, no torque."""
-        self._lanes.start(0, self.params, self.spindle_rpm, self.profile)
-        self.finished = False
-
-    @property
-    def t_s(self) -> float:
-        """Time since the cut started, s."""
-        return float(self._lanes.lane_f[0, LC.t_s])
+    LANES = MillingLanes
+    STEP = MillingStep
 
     @property
     def z(self) -> np.ndarray:
@@ -1011,23 +979,3 @@ class MillingPlant:
         """``[Vf (mm/s), dVf/dt (mm/s^2), position (mm), torque (N·mm)]`` now."""
         lanes = self._lanes
         return np.array([lanes.z[0, 0], lanes.z[0, 1], lanes.z[0, 2], lanes.buf[0, 0]])
-
-    def step(self, command: float, noise_counts: float = 0.0) -> MillingStep:
-        """Hold ``command`` (counts; clipped to [0, command_max]) for one sample and advance."""
-        lanes = self._lanes
-        lanes.step(np.array([command], dtype=np.float64), np.array([noise_counts]))
-        torque, peak, counts, vf, feed, mean_feed, pos, depth = lanes.out[0].tolist()
-        fin = float(lanes.out_finish[0])
-        self.finished = bool(lanes.finished[0])
-        return MillingStep(
-            torque,
-            peak,
-            counts,
-            vf,
-            feed,
-            mean_feed,
-            pos,
-            depth,
-            int(lanes.out_segment[0]),
-            None if math.isnan(fin) else fin,
-        )

@@ -30,11 +30,17 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from machining_envs.core.checks import check_fields, check_integer, check_range, replace_checked
+from machining_envs.core.checks import (
+    check_fields,
+    check_integer,
+    check_range,
+    fields_of,
+    replace_checked,
+)
 from machining_envs.core.compiled.kernels import fma, matvec, powers, read_only, row_max, row_min
 from machining_envs.core.compiled.schema import gather, record
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
-from machining_envs.core.workpieces import SegmentTables, load_segments
+from machining_envs.core.workpieces import SegmentTables, SingleCut, load_segments
 
 __all__ = [
     "TurningParams",
@@ -300,18 +306,7 @@ class _LinearKey(NamedTuple):
     sample_time_s: float
     substeps: int
 
-    @classmethod
-    def of(cls, p: TurningParams) -> _LinearKey:
-        return cls(
-            p.servo_gain,
-            p.servo_natural_freq_rad_s,
-            p.servo_damping,
-            p.gear_ratio,
-            p.sensor_cutoff_hz,
-            p.sensor_filter_order,
-            p.sample_time_s,
-            p.substeps,
-        )
+    of = classmethod(fields_of)
 
 
 @functools.lru_cache(maxsize=16)
@@ -960,6 +955,9 @@ class TurningLanes(SegmentTables):
         Number of lanes.
     """
 
+    STEP_KERNEL = staticmethod(_step_lanes)
+    T_COLUMN = 5
+
     def __init__(self, params: TurningParams, n: int = 1) -> None:
         check_integer("n", n, 1, 1 << 24)
         self.n = int(n)
@@ -1073,50 +1071,18 @@ class TurningLanes(SegmentTables):
         self._load_matrices(lane, float(spindle_rpm), True)
         self.spindle_rpm[lane] = float(spindle_rpm)
 
-    def step(self, commands: np.ndarray, noise_counts: np.ndarray) -> None:
-        """Hold ``commands[k]`` (counts; clipped to [0, U_max]) in every lane for one sample,
-        with ``noise_counts[k]`` added to lane ``k``'s measurement; results in ``out``,
-        ``out_segment`` and ``out_finish``."""
-        commands = np.asarray(commands, dtype=np.float64)
-        _step_lanes(self.arrays(), commands, np.asarray(noise_counts, dtype=np.float64))
 
-    @property
-    def t_s(self) -> np.ndarray:
-        """Time of each lane since its cut started, s."""
-        return self.lane_f[:, 5]
+class TurningPlant(SingleCut):
+    """Simulates one cut at a constant spindle speed: a :class:`TurningLanes` of one lane
+    (:class:`~machining_envs.core.workpieces.SingleCut`, with :class:`TurningParams`; the
+    depth of cut is zero past the profile's end)."""
 
-
-class TurningPlant:
-    """Simulates one cut at a constant spindle speed: a :class:`TurningLanes` of one lane.
-
-    Parameters
-    ----------
-    params : TurningParams
-        The plant's true parameters for this cut.
-    spindle_rpm : float
-        Spindle speed n, rpm, held for the whole cut.
-    profile : DepthProfile
-        Depth of cut along the workpiece; zero past its end. Reaching its length finishes
-        the cut.
-    """
+    LANES = TurningLanes
+    STEP = TurningStep
 
     def __init__(self, params: TurningParams, spindle_rpm: float, profile) -> None:
         _check("spindle_rpm", spindle_rpm, *SPINDLE_RPM_RANGE)
-        self.params = params
-        self.spindle_rpm = float(spindle_rpm)
-        self.profile = profile
-        self.length_mm = profile.length_mm
-        self._lanes = TurningLanes(params, 1)
-        self.reset()
-
-    def reset(self) -> None:
-        """Machine at rest at the workpiece's start: no feed, no force, filter settled at 0."""
-        self._lanes.start(0, self.params, self.spindle_rpm, self.profile)
-        self.finished = False
-
-    @property
-    def t_s(self) -> float:
-        return float(self._lanes.lane_f[0, 5])
+        super().__init__(params, spindle_rpm, profile)
 
     @property
     def _margin(self) -> float:
@@ -1132,23 +1098,3 @@ class TurningPlant:
     def state(self) -> np.ndarray:
         """Servo state ``[Vf (mm/s), dVf/dt (mm/s^2), position (mm)]`` now."""
         return self.z[:3].copy()
-
-    def step(self, command: float, noise_counts: float = 0.0) -> TurningStep:
-        """Hold ``command`` (counts; clipped to [0, command_max]) for one sample and advance."""
-        lanes = self._lanes
-        lanes.step(np.array([command], dtype=np.float64), np.array([noise_counts]))
-        o = lanes.out[0]
-        fin = float(lanes.out_finish[0])
-        finish = None if math.isnan(fin) else fin
-        self.finished = bool(lanes.finished[0])
-        return TurningStep(
-            float(o[0]),
-            float(o[1]),
-            float(o[2]),
-            float(o[3]),
-            float(o[4]),
-            float(o[5]),
-            float(o[6]),
-            int(lanes.out_segment[0]),
-            finish,
-        )
