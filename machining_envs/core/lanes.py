@@ -21,11 +21,13 @@ import numpy as np
 from gymnasium import spaces
 
 from machining_envs.core.actuation import ActuationLanes, configure_lane, resolve_actuation
+from machining_envs.core.env import check_episode_time, check_scenario_spec, resolve_params
+from machining_envs.core.reward import resolve_reward
 from machining_envs.core.sensors import PowerSensorLanes, resolve_power_sensor
 
 __all__ = [
     "CachedKernelArgs",
-    "FeedCnc",
+    "FeedRegulationCore",
     "LaneCore",
     "LaneNames",
     "LaneObjects",
@@ -202,16 +204,46 @@ REGULATION_HISTORY = 3
 REGULATION_OBS_INDEX = {"measured": 0, "limit": 1, "prev_action": 2, "spindle": 3, "history": 4}
 
 
-class FeedCnc:
-    """For a regulation core whose command is a feed velocity from 0 to
-    ``params.command_max``, every ``params.sample_time_s``: the CNC's actuation option and the
-    optional spindle-power sensor (the load channel), resolved once, and the actuation
-    lanes."""
+class FeedRegulationCore(CachedKernelArgs, LaneCore):
+    """The part of a :class:`LaneCore` that the feed-regulation processes (turning, end
+    milling) share: the command is a feed velocity from 0 to ``params.command_max``, every
+    ``params.sample_time_s``, the observation has the layout ``REGULATION_OBS_INDEX``, the
+    reward is a :class:`~machining_envs.core.reward.LimitReward`, the CNC's actuation and the
+    optional spindle-power sensor (the load channel) are options, and a split's lanes start
+    in one batch. A subclass keeps its compiled arithmetic; it calls :meth:`_set_regulation`
+    and :meth:`_set_cnc` first in its ``__init__``, starts a batch of lanes in :meth:`_start_batch` and builds
+    its infos with :meth:`_info`.
 
-    def _set_cnc(self, n: int, actuation, power_sensor) -> None:
+    It keeps, besides :class:`LaneCore`'s attributes, ``reward`` and ``flags`` (per lane:
+    diverged, breakage, finished, terminated, truncated, ...), ``n_clipped``, ``power_sensor``
+    and the plant ``lanes`` (its ``out_segment``)."""
+
+    #: ``(nominal parameters' class, its default set (a classmethod), reward weights'
+    #: class)``, set per process.
+    option_types: tuple
+
+    def _set_regulation(
+        self, owner: str, n: int, scenario, params, reward, max_episode_time_s, overrides
+    ) -> None:
+        """The options every regulation core checks, in order: ``params`` (of the class
+        :attr:`option_types` names, its default set if None, with ``overrides``), the reward
+        weights, the episode time and the default scenario (one of :attr:`scenario_types`)."""
+        params_type, defaults, reward_type = self.option_types
+        self.n = n
+        self.params = resolve_params(owner, params, params_type, defaults, overrides)
+        self.reward_weights = resolve_reward(reward, reward_type)
+        self._w = self.reward_weights.weights()
+        self.max_episode_time_s = check_episode_time(max_episode_time_s)
+        check_scenario_spec(scenario, *self.scenario_types)
+
+    def _set_cnc(self, actuation, power_sensor) -> None:
+        """The spindle-power sensor (the load channel) and the CNC's actuation, made now if
+        the option sets it (its checks failing here), else when a scenario first brings its
+        own."""
         sensor = resolve_power_sensor(power_sensor)
-        self.power_sensor = sensor and PowerSensorLanes(sensor, n, self.params.sample_time_s)
+        self.power_sensor = sensor and PowerSensorLanes(sensor, self.n, self.params.sample_time_s)
         self.actuation = resolve_actuation(actuation)
+        self.act_lanes = None if self.actuation is None else self.actuation_lanes()
 
     def actuation_lanes(self) -> ActuationLanes:
         """The CNC's actuation between the commands and the servo, every lane on the env's
@@ -230,6 +262,67 @@ class FeedCnc:
         high = np.array([hi, 10.0, 1.0, rpm_max / 1000.0] + [hi] * history, dtype=np.float32)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
+
+    def start_lanes(self, lanes: np.ndarray, spec, rngs) -> None:
+        """:meth:`start` for each lane ``k`` of ``lanes`` on the scenario ``spec``, drawn
+        with ``rngs[k]``: the same episodes, the same numbers. A split's scenarios (a name
+        such as ``"train"``) are drawn and started for all lanes in two compiled calls
+        (:meth:`_start_batch`), and a lane's scenario and true parameters are built only
+        when read (``scenarios[k]``, ``truths[k]``)."""
+        factory = split_batch(self, lanes, spec, rngs, self.scenario_types[1])
+        if factory is None:
+            return
+        self._start_batch(lanes, factory)
+        if self.power_sensor:
+            self._sense_power(lanes)
+
+    @abc.abstractmethod
+    def _start_batch(self, lanes: np.ndarray, factory) -> None:
+        """Start ``lanes`` on the scenarios the split ``factory`` draws for them (their
+        generators bound by :func:`split_batch`)."""
+
+    @abc.abstractmethod
+    def _sense_power(self, lanes=None) -> None:
+        """The drive's power reading into the observations (option ``power_sensor``,
+        ``machining_envs.core.sensors``): of ``lanes`` that start, else a step of all."""
+
+    def step_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.reward, self.flags[:, 3], self.flags[:, 4]
+
+    def clipped_count(self, lane: int) -> int:
+        return int(self.n_clipped[lane])
+
+    def _info(self, lane, head: tuple, flags, signals: dict, episode: dict, finish) -> dict:
+        """An info in the keys' order every regulation env shows: ``head`` is ``(t_s,
+        command, action_clipped)``, ``flags`` the lane's (or lanes') ``(diverged, breakage,
+        finished)``, then the process's ``signals`` and ``episode`` keys around the segment;
+        ``lane`` is an int (one lane's info: ``machining_time_s`` = ``finish`` when it
+        finished) or None (every lane's, as arrays: ``machining_time_s`` with its mask)."""
+        t_s, command, clipped = head
+        diverged, breakage, finished = flags
+        one = lane is not None
+        info = {
+            "t_s": t_s,
+            "command": command,
+            "action_clipped": clipped,
+            "n_action_clipped": int(self.n_clipped[lane]) if one else self.n_clipped.copy(),
+            "breakage": breakage,
+            "diverged": diverged,
+            "finished": finished,
+            **signals,
+            "segment": int(self.lanes.out_segment[lane]) if one else self.lanes.out_segment.copy(),
+            **episode,
+            "scenario": self.names[lane] if one else self.names.array(),
+        }
+        sensor = self.power_sensor
+        if not one:
+            info["machining_time_s"] = finish
+            info["_machining_time_s"] = finished.copy()
+        elif finished:
+            info["machining_time_s"] = finish
+        if sensor:
+            info.update(sensor.lane_info(lane) if one else sensor.info_arrays())
+        return info
 
 
 class LaneNames:

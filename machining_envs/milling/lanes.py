@@ -18,18 +18,14 @@ from machining_envs.core.compiled.kernels import copy_into, set_episode_flags
 from machining_envs.core.compiled.normals import LaneGenerators, lane_noise
 from machining_envs.core.compiled.packed import PackedArgs, spaced_rows
 from machining_envs.core.compiled.schema import axes, flatten, gather, offsets, record, via_table
-from machining_envs.core.env import check_episode_time, check_scenario_spec, resolve_params
 from machining_envs.core.lanes import (
     REGULATION_HISTORY,
-    CachedKernelArgs,
-    FeedCnc,
-    LaneCore,
+    FeedRegulationCore,
     LaneNames,
     LaneObjects,
     settle_batch,
-    split_batch,
 )
-from machining_envs.core.reward import LimitReward, resolve_reward
+from machining_envs.core.reward import LimitReward
 from machining_envs.core.workpieces import lane_segments, traverse_time
 from machining_envs.milling.plant import (
     KGF,
@@ -449,7 +445,7 @@ def _map_constants(command_map: ActionMap) -> np.ndarray:
     return command_map.constants()
 
 
-class MillingCore(FeedCnc, CachedKernelArgs, LaneCore):
+class MillingCore(FeedRegulationCore):
     """The state and arithmetic of N end-milling episodes, shared by ``EndMillingEnv`` (one
     lane) and ``EndMillingVectorEnv`` (N lanes): the plant (:class:`MillingLanes`) and the
     command, noise, reward, observation, episode end and info computed for all lanes by one
@@ -458,6 +454,8 @@ class MillingCore(FeedCnc, CachedKernelArgs, LaneCore):
 
     #: What a scenario may be: an object of this class or one of these names.
     scenario_types = (MillingScenario, MILLING_SCENARIOS)
+    #: The nominal parameters' class, its default set and the reward weights' class.
+    option_types = (MillingParams, MillingParams.park_yoon_1986, MillingReward)
     VIEWS = frozenset({*_INFO_LANE, "_args"})
 
     def __init__(
@@ -474,15 +472,8 @@ class MillingCore(FeedCnc, CachedKernelArgs, LaneCore):
         actuation=None,
         power_sensor=None,
     ):
-        self.params = resolve_params(
-            owner, params, MillingParams, MillingParams.park_yoon_1986, overrides
-        )
-        self._set_cnc(n, actuation, power_sensor)  # the spindle power: the load channel
-        self.reward_weights = resolve_reward(reward, MillingReward)
-        w = self.reward_weights
-        self._w = w.weights()
-        self.max_episode_time_s = check_episode_time(max_episode_time_s)
-        check_scenario_spec(scenario, MillingScenario, MILLING_SCENARIOS)
+        self._set_regulation(owner, n, scenario, params, reward, max_episode_time_s, overrides)
+        self._set_cnc(actuation, power_sensor)  # the spindle power: the load channel
         if action_map not in ACTION_MAPS:
             raise ValueError(
                 f"{owner}: action_map must be one of {list(ACTION_MAPS)}, got {action_map!r}"
@@ -492,10 +483,6 @@ class MillingCore(FeedCnc, CachedKernelArgs, LaneCore):
         )
         self._cmap = _map_constants(self.command_map)
         self._set_regulation_spaces(_TORQUE_OBS, SPINDLE_RPM_RANGE[1])
-        self.n = n
-        # The CNC's actuation, made now if the option sets it (its checks fail here), else
-        # when a scenario first brings its own.
-        self.act_lanes = None if self.actuation is None else self.actuation_lanes()
         self._ke = float(self.params.sensor_gain)
         self.lanes = MillingLanes(self.params, n)
         #: Each lane's scenario and true parameters (built when read after a batched start).
@@ -599,15 +586,7 @@ class MillingCore(FeedCnc, CachedKernelArgs, LaneCore):
             self.cumulative = np.pad(self.cumulative, ((0, 0), (0, grow)), mode="edge")
             self._args = None
 
-    def start_lanes(self, lanes: np.ndarray, spec, rngs) -> None:
-        """:meth:`start` for each lane ``k`` of ``lanes`` on the scenario ``spec``, drawn
-        with ``rngs[k]``: the same episodes, the same numbers. A split's scenarios (a name
-        such as ``"train"``) are drawn and started for all lanes in two compiled calls, and
-        a lane's scenario and true parameters are built only when read (``scenarios[k]``,
-        ``truths[k]``)."""
-        factory = split_batch(self, lanes, spec, rngs, MILLING_SCENARIOS)
-        if factory is None:
-            return
+    def _start_batch(self, lanes: np.ndarray, factory) -> None:
         segments, counts, v = factory.draw_lanes(self.rngs.table, lanes)
         p = self.params
         # The spindle and limit scales (numpy's exp, as the factory's), then every number
@@ -635,8 +614,6 @@ class MillingCore(FeedCnc, CachedKernelArgs, LaneCore):
                 self.bound[k] = machining_time_bound(
                     self.scenarios[k], self.truths[k], float(self.spindle[k])
                 )
-        if self.power_sensor:
-            self._sense_power(lanes)
 
     def batches(self, factory) -> bool:
         """Whether :meth:`start_lanes` may start ``factory``'s scenarios in one batch: a
@@ -684,12 +661,6 @@ class MillingCore(FeedCnc, CachedKernelArgs, LaneCore):
         flags = self.flags[lane]
         return float(self.reward[lane]), bool(flags[3]), bool(flags[4])
 
-    def step_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return self.reward, self.flags[:, 3], self.flags[:, 4]
-
-    def clipped_count(self, lane: int) -> int:
-        return int(self.n_clipped[lane])
-
     def step(self) -> None:
         """Advance every lane with the actions in ``in_action`` (finite; clipped to the box
         here, and marked 1 in ``in_clipped``, which may mark them clipped before), each
@@ -708,8 +679,6 @@ class MillingCore(FeedCnc, CachedKernelArgs, LaneCore):
             self._sense_power()
 
     def _sense_power(self, lanes=None) -> None:
-        """The drive's power reading into the observations (option ``power_sensor``,
-        ``machining_envs.core.sensors``): of ``lanes`` that start, else a step of all."""
         c = self.info_f  # the step's signals (info_arrays' rows), read without a copy
         rpm = c[IF.spindle]
         w = rpm * (math.pi / 30.0) * 1e-3  # angular speed, rad/s, per N·mm
@@ -728,15 +697,7 @@ class MillingCore(FeedCnc, CachedKernelArgs, LaneCore):
         c = self.info_f[:, k].tolist()  # the rows of info_f (IF), in order
         t, command, torque, measured, counts, peak, feed, mean_feed, feed_tooth, vf = c[:10]
         pos, depth, removed, finish, cost, limit, bound, rpm, length, volume = c[10:]
-        diverged, breakage, finished = self.flags[k, :3].tolist()
-        info = {
-            "t_s": t,
-            "command": command,
-            "action_clipped": bool(self.in_clipped[k]),
-            "n_action_clipped": int(self.n_clipped[k]),
-            "breakage": breakage,
-            "diverged": diverged,
-            "finished": finished,
+        signals = {
             "torque_Nmm": torque,
             "torque_limit_Nmm": limit,
             "cost": cost,
@@ -750,18 +711,15 @@ class MillingCore(FeedCnc, CachedKernelArgs, LaneCore):
             "feed_velocity_mm_s": vf,
             "position_mm": pos,
             "depth_mm": depth,
-            "segment": int(self.lanes.out_segment[k]),
+        }
+        episode = {
             "spindle_rpm": rpm,
             "removed_volume_mm3": removed,
             "workpiece_length_mm": length,
             "workpiece_volume_mm3": volume,
-            "scenario": self.names[k],
         }
-        if finished:
-            info["machining_time_s"] = finish
-        if self.power_sensor:
-            info.update(self.power_sensor.lane_info(k))
-        return info
+        head = (t, command, bool(self.in_clipped[k]))
+        return self._info(k, head, self.flags[k, :3].tolist(), signals, episode, finish)
 
     def info_arrays(self) -> dict:
         """The step info of every lane, as arrays (``machining_time_s`` with its mask): views
@@ -769,19 +727,8 @@ class MillingCore(FeedCnc, CachedKernelArgs, LaneCore):
         a few blocks of memory."""
         c = self.info_f.copy()
         f = self.flags.copy()
-        return {
-            "t_s": c[IF.t_s],
-            "command": c[IF.command],
-            "action_clipped": self.in_clipped.astype(bool),
-            "n_action_clipped": self.n_clipped.copy(),
-            "breakage": f[:, 1],
-            "diverged": f[:, 0],
-            "finished": f[:, 2],
-            **{key: c[row] for key, row in _VECTOR_SIGNALS},
-            "segment": self.lanes.out_segment.copy(),
-            **{key: c[row] for key, row in _VECTOR_EPISODE},
-            "scenario": self.names.array(),
-            "machining_time_s": c[IF.machining_time_s],  # NaN where the lane did not finish
-            "_machining_time_s": self.flags[:, 2].copy(),
-            **(self.power_sensor.info_arrays() if self.power_sensor else {}),
-        }
+        head = (c[IF.t_s], c[IF.command], self.in_clipped.astype(bool))
+        signals = {key: c[row] for key, row in _VECTOR_SIGNALS}
+        episode = {key: c[row] for key, row in _VECTOR_EPISODE}
+        finish = c[IF.machining_time_s]  # NaN where the lane did not finish
+        return self._info(None, head, (f[:, 0], f[:, 1], f[:, 2]), signals, episode, finish)

@@ -27,18 +27,14 @@ from machining_envs.core.compiled.schema import (
     record,
     via_table,
 )
-from machining_envs.core.env import check_episode_time, check_scenario_spec, resolve_params
 from machining_envs.core.lanes import (
     REGULATION_HISTORY,
-    CachedKernelArgs,
-    FeedCnc,
-    LaneCore,
+    FeedRegulationCore,
     LaneNames,
     LaneObjects,
     settle_batch,
-    split_batch,
 )
-from machining_envs.core.reward import LimitReward, resolve_reward
+from machining_envs.core.reward import LimitReward
 from machining_envs.core.workpieces import lane_segments, traverse_time
 from machining_envs.turning.plant import (
     SPINDLE_RPM_RANGE,
@@ -441,7 +437,7 @@ def _start_packed(t, k, full_history, consts, segments, x):
     return _start(k, full_history, consts, segments, x, a, e, ep, free)
 
 
-class TurningCore(FeedCnc, CachedKernelArgs, LaneCore):
+class TurningCore(FeedRegulationCore):
     """The state and arithmetic of N turning episodes, shared by ``TurningEnv`` (one lane)
     and ``TurningVectorEnv`` (N lanes): the plant (:class:`TurningLanes`) and the reward,
     observation and episode end computed for all lanes by one compiled function, so that a
@@ -449,6 +445,8 @@ class TurningCore(FeedCnc, CachedKernelArgs, LaneCore):
 
     #: What a scenario may be: an object of this class or one of these names.
     scenario_types = (TurningScenario, TURNING_SCENARIOS)
+    #: The nominal parameters' class, its default set and the reward weights' class.
+    option_types = (TurningParams, TurningParams.noh_kim_kim_1992, TurningReward)
     VIEWS = frozenset({*EF.__members__, "flags", "in_clipped", "clipped", "_args"})
 
     def __init__(
@@ -465,28 +463,17 @@ class TurningCore(FeedCnc, CachedKernelArgs, LaneCore):
         actuation=None,
         power_sensor=None,
     ):
-        self.params = resolve_params(
-            owner, params, TurningParams, TurningParams.noh_kim_kim_1992, overrides
-        )
-        self._set_cnc(n, actuation, power_sensor)  # the spindle power: the load channel
+        self._set_regulation(owner, n, scenario, params, reward, max_episode_time_s, overrides)
+        self._set_cnc(actuation, power_sensor)  # the spindle power: the load channel
         if spindle_rpm is not None:
             spindle_rpm = check_range(
                 "spindle_rpm", spindle_rpm, *SPINDLE_RPM_RANGE, types=PY_NUMBER_TYPES
             )
         self.spindle_rpm_override = spindle_rpm
-        self.reward_weights = resolve_reward(reward, TurningReward)
-        w = self.reward_weights
-        self._w = w.weights()
-        self.max_episode_time_s = check_episode_time(max_episode_time_s)
-        check_scenario_spec(scenario, TurningScenario, TURNING_SCENARIOS)
         self._gain = float(self.params.sensor_gain)
         self._fs = float(self.params.force_scale_N)
         self.command_map = ActionMap(0.0, self.params.command_max)
         self._set_regulation_spaces(_FORCE_OBS, SPINDLE_RPM_RANGE[1])
-        self.n = n
-        # The CNC's actuation, made now if the option sets it (its checks fail here), else
-        # when a scenario first brings its own.
-        self.act_lanes = None if self.actuation is None else self.actuation_lanes()
         self.lanes = TurningLanes(self.params, n)
         #: Every lane's scenario and true parameters (built when read, for lanes started
         #: together by :meth:`start_lanes`).
@@ -562,12 +549,6 @@ class TurningCore(FeedCnc, CachedKernelArgs, LaneCore):
         terminated, truncated = self.eb[lane, _TERMINATED:_OVER].tolist()
         return float(self.ef[lane, _REWARD]), terminated, truncated
 
-    def step_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return self.reward, self.flags[:, 3], self.flags[:, 4]
-
-    def clipped_count(self, lane: int) -> int:
-        return int(self.n_clipped[lane])
-
     def start(self, lane: int, spec, rng: np.random.Generator) -> None:
         """Start an episode in ``lane`` on the scenario ``spec`` (drawn with ``rng``); its
         first observation goes to ``obs[lane]``, its reset info is its :meth:`lane_info`
@@ -621,15 +602,7 @@ class TurningCore(FeedCnc, CachedKernelArgs, LaneCore):
         if self.power_sensor:
             self._sense_power([lane])
 
-    def start_lanes(self, lanes: np.ndarray, spec, rngs) -> None:
-        """:meth:`start` for each lane ``k`` of ``lanes`` on the scenario ``spec``, drawn
-        with ``rngs[k]``: the same episodes, the same numbers. A split's scenarios (a name
-        such as ``"train"``) are drawn and started for all lanes in two compiled calls, and
-        a lane's scenario and true parameters are built only when read (``scenarios[k]``,
-        ``truths[k]``)."""
-        factory = split_batch(self, lanes, spec, rngs, TURNING_SCENARIOS)
-        if factory is None:
-            return
+    def _start_batch(self, lanes: np.ndarray, factory) -> None:
         rpm, segments, counts, v = factory.draw_lanes(self.rngs.table, lanes)
         nums = self._batch_numbers.get(factory)
         if nums is None:
@@ -661,8 +634,6 @@ class TurningCore(FeedCnc, CachedKernelArgs, LaneCore):
         info = self.episode_info
         for k in ks:
             info[k] = None  # lane_info reads it from the arrays
-        if self.power_sensor:
-            self._sense_power(lanes)
 
     def batches(self, factory) -> bool:
         """Whether :meth:`start_lanes` may start ``factory``'s scenarios in one batch: a
@@ -714,8 +685,6 @@ class TurningCore(FeedCnc, CachedKernelArgs, LaneCore):
             self._sense_power()
 
     def _sense_power(self, lanes=None) -> None:
-        """The drive's power reading into the observations (option ``power_sensor``,
-        ``machining_envs.core.sensors``): of ``lanes`` that start, else a step of all."""
         # info's spindle_rpm, cutting_power_W and force_limit_N, from the lanes' tables (the
         # arithmetic of _info_rows, in its order), without building the whole info
         rpm = self.spindle
@@ -788,21 +757,15 @@ class TurningCore(FeedCnc, CachedKernelArgs, LaneCore):
             bound, length = float(self.bound[k]), float(self.length[k])
             rpm, diameter = float(self.spindle_set[k]), float(self.diameter[k])
             episode = self.episode_info[k] = (bound, length, self.names[k], rpm, diameter)
-        bound, length, name, rpm, diameter = episode
+        bound, length, _, rpm, diameter = episode
         if k in self.power_lanes:  # drive and cutting power from the spindle's drive
             p_drive, p_cut = self.power[k].tolist()
             rpm = float(self.spindle[k])
         else:  # an ideal spindle delivers what the cut asks: cutting_power_W's arithmetic,
             # in its order, on Python floats (the same numbers as _info_rows)
             p_drive = p_cut = max(force, 0.0) * (rpm * (math.pi / 30.0)) * (diameter * 0.0005)
-        info = {
-            "t_s": float(lanes.lane_f[k, 5]),
-            "command": ef[_COMMAND],
-            "action_clipped": clipped,
-            "n_action_clipped": int(self.n_clipped[k]),
-            "breakage": breakage,
-            "diverged": diverged,
-            "finished": finished,
+        feed_ok = not diverged  # a diverged lane shows no feed
+        signals = {
             "force_N": force,
             "force_limit_N": ef[_FORCE_LIMIT],
             "cost": 1.0 if over else 0.0,
@@ -810,22 +773,20 @@ class TurningCore(FeedCnc, CachedKernelArgs, LaneCore):
             "measured": float(self.meas[k, 0]),
             "measured_counts": counts,
             "peak_force_N": peak,
-            "feed_mm_per_rev": feed if not diverged else 0.0,
-            "feed_velocity_mm_s": vel if not diverged else 0.0,
-            "position_mm": pos if not diverged else 0.0,
+            "feed_mm_per_rev": feed if feed_ok else 0.0,
+            "feed_velocity_mm_s": vel if feed_ok else 0.0,
+            "position_mm": pos if feed_ok else 0.0,
             "depth_mm": depth,
-            "segment": int(lanes.out_segment[k]),
+        }
+        episode = {
             "spindle_rpm": rpm,
             "spindle_power_W": p_drive,
             "cutting_power_W": p_cut,
             "workpiece_length_mm": length,
-            "scenario": name,
         }
-        if finished:
-            info["machining_time_s"] = float(lanes.out_finish[k])
-        if self.power_sensor:
-            info.update(self.power_sensor.lane_info(k))
-        return info
+        head = (float(lanes.lane_f[k, 5]), ef[_COMMAND], clipped)
+        finish = float(lanes.out_finish[k])
+        return self._info(k, head, (diverged, breakage, finished), signals, episode, finish)
 
     def info_arrays(self) -> dict:
         """The step info of every lane, as arrays (``machining_time_s`` with its mask): views
@@ -849,19 +810,8 @@ class TurningCore(FeedCnc, CachedKernelArgs, LaneCore):
             c[14, k], c[15, k] = self.power[k]
         f = self.eb.copy()
         info = dict(zip(_INFO_F, c, strict=True))
-        return {
-            "t_s": info["t_s"],
-            "command": info["command"],
-            "action_clipped": f[:, 7],
-            "n_action_clipped": self.n_clipped.copy(),
-            "breakage": f[:, 1],
-            "diverged": f[:, 0],
-            "finished": f[:, 2],
-            **{k: info[k] for k in _INFO_F[2:13]},
-            "segment": self.lanes.out_segment.copy(),
-            **{k: info[k] for k in _INFO_F[13:17]},
-            "scenario": self.names.array(),
-            "machining_time_s": info["machining_time_s"],
-            "_machining_time_s": self.eb[:, 2].copy(),
-            **(self.power_sensor.info_arrays() if self.power_sensor else {}),
-        }
+        head = (info["t_s"], info["command"], f[:, 7])
+        signals = {k: info[k] for k in _INFO_F[2:13]}
+        episode = {k: info[k] for k in _INFO_F[13:17]}
+        finish = info["machining_time_s"]
+        return self._info(None, head, (f[:, 0], f[:, 1], f[:, 2]), signals, episode, finish)
