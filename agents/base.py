@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from machining_envs.core.checks import check_range
+from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
 
 __all__ = [
     "Agent",
@@ -21,6 +21,7 @@ __all__ = [
     "unwrap_as",
     "check_setting",
     "check_positive",
+    "check_positive_number",
     "check_observation",
     "observation_field",
 ]
@@ -115,6 +116,21 @@ def check_positive(name: str, value, hi: float = 1e9, **kind) -> float:
     ValueError: kc must be in (0, 1e+06], got 0
     """
     return check_setting(name, value, 0, hi, lo_open=True, **kind)
+
+
+def check_positive_number(name: str, value, hi: float = 1e9) -> float:
+    """:func:`check_positive` of a setting that must be a Python ``int`` or ``float``
+    (``machining_envs.core.checks.PY_NUMBER_TYPES``: no bool, no array, no numpy scalar
+    but ``np.float64``, a ``float``).
+
+    >>> check_positive_number("setpoint", 0.9, 1.5)
+    0.9
+    >>> check_positive_number("setpoint", np.float32(0.5), 1.5)
+    Traceback (most recent call last):
+    ...
+    ValueError: setpoint must be in (0, 1.5], got np.float32(0.5)
+    """
+    return check_positive(name, value, hi, types=PY_NUMBER_TYPES)
 
 
 class Agent:

@@ -80,7 +80,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.base import SETPOINT_SEARCH, ProcessController, check_positive, check_setting, unwrap_as
+from agents.base import SETPOINT_SEARCH, ProcessController, check_setting, unwrap_as
+from agents.base import check_positive_number as _positive
 from machining_envs.core.checks import PY_NUMBER_TYPES
 from machining_envs.core.lti import zoh
 from machining_envs.drilling.env import MicroDrillingEnv
@@ -102,7 +103,6 @@ _OBS_DIM = 12
 
 #: The drilling controllers' settings are Python numbers (a numpy scalar other than
 #: ``np.float64`` is refused, as it always was).
-_positive = functools.partial(check_positive, types=PY_NUMBER_TYPES)
 _in_range = functools.partial(check_setting, types=PY_NUMBER_TYPES)
 
 

@@ -15,8 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.base import SETPOINT_SEARCH, ProcessController, check_positive, unwrap_as
-from machining_envs.core.checks import PY_NUMBER_TYPES
+from agents.base import SETPOINT_SEARCH, ProcessController, check_positive_number, unwrap_as
 from machining_envs.turning.env import TurningEnv
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams, unit_plant_coefficients
 
@@ -33,11 +32,6 @@ _I = TurningEnv.OBS_INDEX
 #: The smallest observed force limit, as a share of the nominal, that the model-based
 #: initial values use; below it (a broken reading) they use the nominal limit.
 MIN_LIMIT_SHARE = 1e-6
-
-
-#: The turning controllers' settings are Python numbers, and (unlike the other processes')
-#: a bool passes as 0 or 1; kept so that no setting accepted before is refused.
-_positive = functools.partial(check_positive, types=PY_NUMBER_TYPES)
 
 
 @dataclass(frozen=True)
@@ -121,9 +115,9 @@ class FixedGainPI(_TurningController):
 
     def __init__(self, io: TurningIO, kh: float = 0.02, kgh: float = 1.9, setpoint: float = 1.0):
         self.io = io
-        self.kh = _positive("kh", kh)
-        self.kgh = _positive("kgh", kgh, 100.0)
-        self.setpoint = _positive("setpoint", setpoint, 1.5)
+        self.kh = check_positive_number("kh", kh)
+        self.kgh = check_positive_number("kgh", kgh, 100.0)
+        self.setpoint = check_positive_number("setpoint", setpoint, 1.5)
         self.name = f"fixed PI Kh={kh:.3g}"
 
     def _act(self, obs, state):
@@ -159,10 +153,10 @@ class ConstantFeed(_TurningController):
         setpoint: float = 1.0,
     ):
         self.io = io
-        self.design_depth_mm = _positive("design_depth_mm", design_depth_mm, 10.0)
-        self.setpoint = _positive("setpoint", setpoint, 1.5)
+        self.design_depth_mm = check_positive_number("design_depth_mm", design_depth_mm, 10.0)
+        self.setpoint = check_positive_number("setpoint", setpoint, 1.5)
         if feed_mm_per_rev is not None:
-            self.feed_mm_per_rev = _positive("feed_mm_per_rev", feed_mm_per_rev, 10.0)
+            self.feed_mm_per_rev = check_positive_number("feed_mm_per_rev", feed_mm_per_rev, 10.0)
             self.name = f"constant feed {feed_mm_per_rev:.3f} mm/rev"
         else:
             self.feed_mm_per_rev = None
@@ -229,14 +223,17 @@ class VariableGainPI(_TurningController):
         setpoint: float = 1.0,
     ):
         self.io = io
-        self.setpoint = _positive("setpoint", setpoint, 1.5)
-        self.k = _positive("k", k, 100.0)
-        self.kgh = _positive("kgh", kgh, 100.0)
-        self.design_depth_mm = _positive("design_depth_mm", design_depth_mm, 10.0)
+        self.setpoint = check_positive_number("setpoint", setpoint, 1.5)
+        self.k = check_positive_number("k", k, 100.0)
+        self.kgh = check_positive_number("kgh", kgh, 100.0)
+        self.design_depth_mm = check_positive_number("design_depth_mm", design_depth_mm, 10.0)
         self.min_command = (
-            _positive("min_command_fraction", min_command_fraction, 1.0) * io.command_max
+            check_positive_number("min_command_fraction", min_command_fraction, 1.0)
+            * io.command_max
         )
-        self.min_force_fraction = _positive("min_force_fraction", min_force_fraction, 1.0)
+        self.min_force_fraction = check_positive_number(
+            "min_force_fraction", min_force_fraction, 1.0
+        )
         self.name = f"adaptive PI K={k:.3g}"
 
     @classmethod
