@@ -68,7 +68,10 @@ class LimitReward:
     with ``p`` the env's progress this step (its section Rewards: the distance fed as a
     share of the most the servo can feed, the feed velocity as a share of the top one, the
     hole deepened as a share of the nominal feed's). The fields are in the order of the
-    weights array the compiled step reads (:meth:`weights`).
+    weights array the compiled step reads (:meth:`weights`). An env takes them as
+    ``reward=``: a ``LimitReward`` (``TurningReward``, ``MillingReward`` and
+    ``DrillingReward`` name it in each process), a dict of some fields, which may say
+    ``overforce`` or ``overtorque`` for ``overlimit`` (:attr:`FORMER_NAMES`), or None.
     """
 
     tracking: float = 1.0

@@ -81,11 +81,8 @@ class MicroDrillingEnv(LaneEnv):
     deepening in the step and ``v0`` the nominal feed (weights in :class:`DrillingReward`,
     configurable with ``reward=``):
     ``r = -1.0 |T/(0.9 L) - 1| - 4.0 max(0, T/L - 1) + 0.0 dz/(Ts v0) - 50 [breakage]``.
-    The reward's own setpoint 0.9 L (``target``) is a training choice, not the task's.
-    The weights (``tracking``, ``overlimit``, ``target``, ``progress``, ``breakage``) are
-    :class:`~machining_envs.core.reward.LimitReward`, the regulation envs' one weights type
-    (``DrillingReward`` names it here); a dict of them may say ``overforce`` or ``overtorque``
-    for ``overlimit``.
+    The weights, and the setpoint 0.9 L that is the reward's own (a training choice, not the
+    task's), are a :class:`~machining_envs.core.reward.LimitReward` (``DrillingReward`` here).
 
     ## Cost and score
     ``info["cost"]`` is 1.0 on a step where the drill is cutting and its torque is above the

@@ -80,11 +80,8 @@ class EndMillingEnv(LaneEnv):
     feed velocity and ``Vmax`` the servo's top feed velocity (weights in
     :class:`MillingReward`, configurable with ``reward=``):
     ``r = -1.0 |T/(0.9 L) - 1| - 4.0 max(0, T/L - 1) + 0.0 Vf/Vmax - 50 [breakage]``.
-    The reward's own setpoint 0.9 L (``target``) is a training choice, not the task's.
-    The weights (``tracking``, ``overlimit``, ``target``, ``progress``, ``breakage``) are
-    :class:`~machining_envs.core.reward.LimitReward`, the regulation envs' one weights type
-    (``MillingReward`` names it here); a dict of them may say ``overforce`` or ``overtorque``
-    for ``overlimit``.
+    The weights, and the setpoint 0.9 L that is the reward's own (a training choice, not the
+    task's), are a :class:`~machining_envs.core.reward.LimitReward` (``MillingReward`` here).
 
     ## Cost and score
     ``info["cost"]`` is 1.0 on a step whose torque sample is above the limit, else 0.0 (the
