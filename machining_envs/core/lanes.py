@@ -295,8 +295,8 @@ class FeedRegulationCore(CachedKernelArgs, LaneCore):
     def _info(self, lane, head: tuple, flags, signals: dict, episode: dict, finish) -> dict:
         """An info in the keys' order every regulation env shows: ``head`` is ``(t_s,
         command, action_clipped)``, ``flags`` the lane's (or lanes') ``(diverged, breakage,
-        finished)``, then the process's ``signals`` and ``episode`` keys around the segment;
-        ``lane`` is an int (one lane's info: ``machining_time_s`` = ``finish`` when it
+        finished)``, then the process's ``signals`` and ``episode`` keys (the last of these
+        ``scenario``) around the segment; ``lane`` is an int (one lane's info: ``machining_time_s`` = ``finish`` when it
         finished) or None (every lane's, as arrays: ``machining_time_s`` with its mask)."""
         t_s, command, clipped = head
         diverged, breakage, finished = flags
@@ -312,7 +312,6 @@ class FeedRegulationCore(CachedKernelArgs, LaneCore):
             **signals,
             "segment": int(self.lanes.out_segment[lane]) if one else self.lanes.out_segment.copy(),
             **episode,
-            "scenario": self.names[lane] if one else self.names.array(),
         }
         sensor = self.power_sensor
         if not one:

@@ -717,6 +717,7 @@ class MillingCore(FeedRegulationCore):
             "removed_volume_mm3": removed,
             "workpiece_length_mm": length,
             "workpiece_volume_mm3": volume,
+            "scenario": self.names[k],
         }
         head = (t, command, bool(self.in_clipped[k]))
         return self._info(k, head, self.flags[k, :3].tolist(), signals, episode, finish)
@@ -730,5 +731,6 @@ class MillingCore(FeedRegulationCore):
         head = (c[IF.t_s], c[IF.command], self.in_clipped.astype(bool))
         signals = {key: c[row] for key, row in _VECTOR_SIGNALS}
         episode = {key: c[row] for key, row in _VECTOR_EPISODE}
+        episode["scenario"] = self.names.array()
         finish = c[IF.machining_time_s]  # NaN where the lane did not finish
         return self._info(None, head, (f[:, 0], f[:, 1], f[:, 2]), signals, episode, finish)

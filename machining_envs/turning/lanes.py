@@ -757,7 +757,7 @@ class TurningCore(FeedRegulationCore):
             bound, length = float(self.bound[k]), float(self.length[k])
             rpm, diameter = float(self.spindle_set[k]), float(self.diameter[k])
             episode = self.episode_info[k] = (bound, length, self.names[k], rpm, diameter)
-        bound, length, _, rpm, diameter = episode
+        bound, length, name, rpm, diameter = episode
         if k in self.power_lanes:  # drive and cutting power from the spindle's drive
             p_drive, p_cut = self.power[k].tolist()
             rpm = float(self.spindle[k])
@@ -783,6 +783,7 @@ class TurningCore(FeedRegulationCore):
             "spindle_power_W": p_drive,
             "cutting_power_W": p_cut,
             "workpiece_length_mm": length,
+            "scenario": name,
         }
         head = (float(lanes.lane_f[k, 5]), ef[_COMMAND], clipped)
         finish = float(lanes.out_finish[k])
@@ -813,5 +814,6 @@ class TurningCore(FeedRegulationCore):
         head = (info["t_s"], info["command"], f[:, 7])
         signals = {k: info[k] for k in _INFO_F[2:13]}
         episode = {k: info[k] for k in _INFO_F[13:17]}
+        episode["scenario"] = self.names.array()
         finish = info["machining_time_s"]
         return self._info(None, head, (f[:, 0], f[:, 1], f[:, 2]), signals, episode, finish)
