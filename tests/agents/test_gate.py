@@ -127,7 +127,7 @@ def test_edge_episodes_are_validation_draws_with_one_field_at_a_train_end(env_id
 
 def test_train_ranges_are_the_scenario_modules():
     assert train_range("machining_envs/Turning-v0", "spindle_rpm") == (245.0, 700.0)
-    assert train_range("machining_envs/EndMilling-v0", "spindle_scale") == (0.8, 1.25)
+    assert train_range("machining_envs/EndMilling-v0", "spindle_scale") == (0.67, 1.6)
     lo, hi = train_range("machining_envs/MicroDrilling-v0", "aspect_ratio")
     assert lo < hi and math.isfinite(hi)
     with pytest.raises(ValueError, match="field"):

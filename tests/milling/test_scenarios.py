@@ -1,6 +1,8 @@
 """Milling scenarios: training and held-out sets, the cut area of a profile, bad scenarios
 refused (by name or object: ``tests/envs/test_scenarios.py``)."""
 
+import dataclasses
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -18,7 +20,37 @@ from tests.helpers import (
 def test_ood_reaches_depths_training_never_does():
     """(And speeds: ``tests/envs/test_scenarios.py``.)"""
     depth = train_and_ood_values(MILLING, 200, "profile.max_depth_mm")["profile.max_depth_mm"]
-    assert max(depth["train"]) <= 3.0 < max(depth["ood"])
+    assert max(depth["train"]) <= 3.5 < max(depth["ood"])
+
+
+def test_ood_strictly_contains_train_in_every_field():
+    """Every range ``ood`` draws from reaches beyond ``train``'s at both ends (the number of
+    segments: at the top), and ``validation`` and ``test`` draw from ``train``'s ranges."""
+    from machining_envs.milling.scenarios import MILLING_SCENARIOS
+
+    train, ood = MILLING_SCENARIOS["train"], MILLING_SCENARIOS["ood"]
+    assert ood.depth[0] < train.depth[0] and ood.depth[1] > train.depth[1]
+    assert ood.segments[0] <= train.segments[0] and ood.segments[1] > train.segments[1]
+    fields = (
+        "spindle_scale",
+        "torque_limit_scale",
+        "torque_coefficient_scale",
+        "feed_exponent_scale",
+    )
+    for field in fields:
+        (t_lo, t_hi), (o_lo, o_hi) = ([getattr(s, field) for s in f.extremes] for f in (train, ood))
+        assert o_lo < t_lo < t_hi < o_hi, field
+    for split in ("validation", "test"):
+        same = MILLING_SCENARIOS[split]
+        assert (same.depth, same.segments, same.lows, same.spans) == (
+            train.depth,
+            train.segments,
+            train.lows,
+            train.spans,
+        )
+        assert [dataclasses.replace(s, name="") for s in same.extremes] == [
+            dataclasses.replace(s, name="") for s in train.extremes
+        ]
 
 
 def test_cut_area_is_the_integral_of_the_profile():
@@ -46,13 +78,14 @@ def test_split_draws_are_numpys_scalar_draws_in_order():
 
     for split, sc, rng in split_draws(MILLING_SCENARIOS, ("train", "ood", "wear")):
         ood = split == "ood"
-        spread = 0.25 if ood else 0.2
-        s_range, d_range = ((0.7, 1.4), (0.4, 3.5)) if ood else ((0.8, 1.25), (0.5, 3.0))
+        spread = 0.4 if ood else 0.3
+        d_range, s_range = ((0.4, 4.0), (0.6, 1.8)) if ood else ((0.5, 3.5), (0.67, 1.6))
+        l_range = (0.7, 1.4) if ood else (0.8, 1.25)
         prof = DepthProfile.random(rng, d_range, (2, 6) if ood else (2, 5), (5.0, 12.0), 0.3)
         assert sc.profile.edges_mm == prof.edges_mm
         assert sc.profile.end_depths_mm == prof.end_depths_mm
         assert sc.spindle_scale == float(np.exp(rng.uniform(*np.log(s_range))))
-        assert sc.torque_limit_scale == float(np.exp(rng.uniform(*np.log(s_range))))
+        assert sc.torque_limit_scale == float(np.exp(rng.uniform(*np.log(l_range))))
         assert sc.torque_coefficient_scale == rng.uniform(1 - spread, 1 + spread)
         assert sc.feed_exponent_scale == rng.uniform(1 - spread, 1 + spread)
         assert sc.noise_scale == rng.uniform(0.5, 2.0)
