@@ -436,9 +436,9 @@ PROCESS = Process(
             extra_splits=("wear", "shopfloor"),
             robustness=Robustness(
                 "spindle speed (x nominal)",
-                (0.7, 0.85, 1.0, 1.2, 1.4),
+                (0.6, 0.8, 1.0, 1.3, 1.8),  # the ood split's speeds and depths
                 "radial depth (mm)",
-                (0.5, 1.0, 2.0, 3.0),
+                (0.5, 1.0, 2.0, 4.0),
                 ConstantDepthCut(MillingScenario, PAPER_LENGTH_MM),
             ),
             table_metrics=(
