@@ -78,7 +78,7 @@ def test_split_draws_are_numpys_scalar_draws_in_order():
 
     for split, sc, rng in split_draws(MILLING_SCENARIOS, ("train", "ood", "wear")):
         ood = split == "ood"
-        spread = 0.4 if ood else 0.3
+        ks, m = (0.4, 0.25) if ood else (0.3, 0.2)
         d_range, s_range = ((0.4, 4.0), (0.6, 1.8)) if ood else ((0.5, 3.5), (0.67, 1.6))
         l_range = (0.7, 1.4) if ood else (0.8, 1.25)
         prof = DepthProfile.random(rng, d_range, (2, 6) if ood else (2, 5), (5.0, 12.0), 0.3)
@@ -86,8 +86,8 @@ def test_split_draws_are_numpys_scalar_draws_in_order():
         assert sc.profile.end_depths_mm == prof.end_depths_mm
         assert sc.spindle_scale == float(np.exp(rng.uniform(*np.log(s_range))))
         assert sc.torque_limit_scale == float(np.exp(rng.uniform(*np.log(l_range))))
-        assert sc.torque_coefficient_scale == rng.uniform(1 - spread, 1 + spread)
-        assert sc.feed_exponent_scale == rng.uniform(1 - spread, 1 + spread)
+        assert sc.torque_coefficient_scale == rng.uniform(1 - ks, 1 + ks)
+        assert sc.feed_exponent_scale == rng.uniform(1 - m, 1 + m)
         assert sc.noise_scale == rng.uniform(0.5, 2.0)
         assert sc.wear_per_100mm == (rng.uniform(0.5, 1.5) if split == "wear" else 0.0)
 
