@@ -77,11 +77,17 @@ def test_scenarios_by_name_and_object(env_id, named, given):
 
 
 @pytest.mark.parametrize(
-    "env_id, field",
-    [(TURNING, "spindle_rpm"), (MILLING, "spindle_scale"), (DRILLING, "aspect_ratio")],
+    "env_id, field, inside",
+    [
+        (TURNING, "spindle_rpm", ()),
+        (MILLING, "spindle_scale", ("test",)),
+        (DRILLING, "aspect_ratio", ()),
+    ],
 )
-def test_splits_share_a_distribution_but_not_episodes(env_id, field):
-    assert_splits_share_a_distribution_not_episodes(gym.make(env_id), attrgetter(field))
+def test_splits_share_a_distribution_but_not_episodes(env_id, field, inside):
+    assert_splits_share_a_distribution_not_episodes(
+        gym.make(env_id), attrgetter(field), inside=inside
+    )
 
 
 @pytest.mark.parametrize(

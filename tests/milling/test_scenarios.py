@@ -25,7 +25,8 @@ def test_ood_reaches_depths_training_never_does():
 
 def test_ood_strictly_contains_train_in_every_field():
     """Every range ``ood`` draws from reaches beyond ``train``'s at both ends (the number of
-    segments: at the top), and ``validation`` and ``test`` draw from ``train``'s ranges."""
+    segments: at the top); ``validation`` draws from ``train``'s ranges, and ``test``, ``wear``
+    and ``shopfloor`` from ranges inside them."""
     from machining_envs.milling.scenarios import MILLING_SCENARIOS
 
     train, ood = MILLING_SCENARIOS["train"], MILLING_SCENARIOS["ood"]
@@ -40,14 +41,22 @@ def test_ood_strictly_contains_train_in_every_field():
     for field in fields:
         (t_lo, t_hi), (o_lo, o_hi) = ([getattr(s, field) for s in f.extremes] for f in (train, ood))
         assert o_lo < t_lo < t_hi < o_hi, field
-    for split in ("validation", "test"):
-        same = MILLING_SCENARIOS[split]
-        assert (same.depth, same.segments, same.lows, same.spans) == (
-            train.depth,
-            train.segments,
-            train.lows,
-            train.spans,
-        )
+    same = MILLING_SCENARIOS["validation"]
+    assert (same.depth, same.segments, same.lows, same.spans) == (
+        train.depth,
+        train.segments,
+        train.lows,
+        train.spans,
+    )
+    for split in ("test", "wear", "shopfloor"):
+        inner = MILLING_SCENARIOS[split]
+        assert train.depth[0] <= inner.depth[0] < inner.depth[1] <= train.depth[1], split
+        assert inner.segments == train.segments, split
+        for field in fields:
+            (t_lo, t_hi), (i_lo, i_hi) = (
+                [getattr(s, field) for s in f.extremes] for f in (train, inner)
+            )
+            assert t_lo <= i_lo < i_hi <= t_hi, (split, field)
         assert [dataclasses.replace(s, name="") for s in same.extremes] == [
             dataclasses.replace(s, name="") for s in train.extremes
         ]
@@ -78,8 +87,11 @@ def test_split_draws_are_numpys_scalar_draws_in_order():
 
     for split, sc, rng in split_draws(MILLING_SCENARIOS, ("train", "ood", "wear")):
         ood = split == "ood"
-        ks, m = (0.4, 0.25) if ood else (0.3, 0.2)
-        d_range, s_range = ((0.4, 4.0), (0.6, 1.8)) if ood else ((0.5, 3.5), (0.67, 1.6))
+        ks, m, d_range, s_range = {
+            "train": (0.3, 0.2, (0.5, 3.5), (0.67, 1.6)),
+            "ood": (0.4, 0.25, (0.4, 4.0), (0.6, 1.8)),
+            "wear": (0.2, 0.2, (0.5, 3.0), (0.8, 1.25)),  # the benchmark's ranges
+        }[split]
         l_range = (0.7, 1.4) if ood else (0.8, 1.25)
         prof = DepthProfile.random(rng, d_range, (2, 6) if ood else (2, 5), (5.0, 12.0), 0.3)
         assert sc.profile.edges_mm == prof.edges_mm
