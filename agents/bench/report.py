@@ -29,9 +29,9 @@ __all__ = ["env_section", "SPLIT_NOTES"]
 
 #: What the extra held-out splits are, for the report.
 SPLIT_NOTES = {
-    "wear": "the training ranges with a tool that dulls within the cut",
+    "wear": "the `test` ranges with a tool that dulls within the cut",
     "shopfloor": (
-        "the training ranges on a real CNC: feed override in 1 % steps, rate- and "
+        "the `test` ranges on a real CNC: feed override in 1 % steps, rate- and "
         "acceleration-limited, delayed 2 periods; in Turning-v0 also a 2.2 kW spindle that "
         "slows when overloaded"
     ),

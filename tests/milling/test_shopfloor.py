@@ -1,4 +1,4 @@
-"""The ``shopfloor`` split of EndMilling-v0: the training ranges on a real CNC's feed
+"""The ``shopfloor`` split of EndMilling-v0: the benchmark's (`test`) ranges on a real CNC's feed
 override (``SHOPFLOOR_ACTUATION``), held out, and every command the servo gets obeys it."""
 
 import gymnasium as gym
