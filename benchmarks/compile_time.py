@@ -60,8 +60,10 @@ def main(argv=None) -> None:
     print(f"python {sys.version.split()[0]}; seconds of the first single-env step and the first")
     print("vector-env step (16 lanes, two threads), imports included, in a fresh interpreter:")
     print("cold = an empty numba cache (a fresh install), cached = the cache the cold run left")
-    print(f"{'env':36s} {'cold single':>11s} {'cold vector':>11s} {'cold':>7s} {'cached':>7s}"
-          f" {'x cached':>8s}")  # fmt: skip
+    print(
+        f"{'env':36s} {'cold single':>11s} {'cold vector':>11s} {'cold':>7s} {'cached':>7s}"
+        f" {'x cached':>8s}"
+    )
     total = 0.0
     for env_id in args.env:
         with tempfile.TemporaryDirectory() as cache:

@@ -72,8 +72,12 @@ def main(argv=None) -> int:
     ap.add_argument("--episodes", type=int, default=50, help="validation episodes")
     ap.add_argument("--reference", default=None, help="tuned agent class (default: the best)")
     ap.add_argument("--no-gate", action="store_true")
-    ap.add_argument("--baseline", type=Path, default=None,
-                    help="one of the folders: every other is also compared with it, paired")  # fmt: skip
+    ap.add_argument(
+        "--baseline",
+        type=Path,
+        default=None,
+        help="one of the folders: every other is also compared with it, paired",
+    )
     ap.add_argument("--out", type=Path, default=None)
     a = ap.parse_args(argv)
 
@@ -84,8 +88,15 @@ def main(argv=None) -> int:
     seed0 = split_seeds("validation", a.episodes)[0]
 
     def run(agent, env_kwargs):
-        ev = evaluate(agent, a.env, ["validation"], n_episodes=a.episodes, seed=seed0,
-                      env_kwargs=env_kwargs, metrics_fn=metrics_fn)  # fmt: skip
+        ev = evaluate(
+            agent,
+            a.env,
+            ["validation"],
+            n_episodes=a.episodes,
+            seed=seed0,
+            env_kwargs=env_kwargs,
+            metrics_fn=metrics_fn,
+        )
         return ev.rows
 
     ref_name = a.reference or best_tuned(a.env)
@@ -94,11 +105,20 @@ def main(argv=None) -> int:
     ref_rows = run(tuned_factory(ref_cls, a.env), agent_env_kwargs(ref_cls))
     ref_counts = float(np.mean([score.counts(r) for r in ref_rows]))
     ref_mean = float(np.mean([score.charged(r, failed) for r in ref_rows]))
-    print(f"reference {ref_name}: counts {ref_counts:.0%}, mean {ref_mean:.2f} s "
-          f"({time.perf_counter() - t0:.0f} s)", flush=True)  # fmt: skip
+    print(
+        f"reference {ref_name}: counts {ref_counts:.0%}, mean {ref_mean:.2f} s "
+        f"({time.perf_counter() - t0:.0f} s)",
+        flush=True,
+    )
     pooled_rows = {}
-    report = {"env": a.env, "episodes": a.episodes, "reference": ref_name,
-              "reference_counts": ref_counts, "reference_mean": ref_mean, "policies": {}}  # fmt: skip
+    report = {
+        "env": a.env,
+        "episodes": a.episodes,
+        "reference": ref_name,
+        "reference_counts": ref_counts,
+        "reference_mean": ref_mean,
+        "policies": {},
+    }
     for folder in a.folders:
         rows, seeds = [], {}
         for seed, model in seed_models(folder):
@@ -114,17 +134,29 @@ def main(argv=None) -> int:
             }
             if not a.no_gate:
                 g = gate_policy(model, a.env)
-                entry["gate"] = {"passed": g.passed, "counting": g.counting, "n": g.n,
-                                 "overloaded": g.overloaded, "by_group": g.by_group}  # fmt: skip
+                entry["gate"] = {
+                    "passed": g.passed,
+                    "counting": g.counting,
+                    "n": g.n,
+                    "overloaded": g.overloaded,
+                    "by_group": g.by_group,
+                }
             entry["wall_s"] = round(time.perf_counter() - t1, 1)
             seeds[seed] = entry
             gate = entry.get("gate")
-            gtxt = "" if gate is None else (
-                f"; gate {'PASS' if gate['passed'] else 'FAIL'} {gate['counting']}/{gate['n']},"
-                f" {gate['overloaded']} overloaded"
-            )  # fmt: skip
-            print(f"{folder} seed {seed}: counts {entry['counts']:.0%}, mean "
-                  f"{entry['mean']:.2f} s{gtxt} ({entry['wall_s']} s)", flush=True)  # fmt: skip
+            gtxt = (
+                ""
+                if gate is None
+                else (
+                    f"; gate {'PASS' if gate['passed'] else 'FAIL'} {gate['counting']}/{gate['n']},"
+                    f" {gate['overloaded']} overloaded"
+                )
+            )
+            print(
+                f"{folder} seed {seed}: counts {entry['counts']:.0%}, mean "
+                f"{entry['mean']:.2f} s{gtxt} ({entry['wall_s']} s)",
+                flush=True,
+            )
         diffs, verdict = allowance_sweep(ref_rows, rows, score, failed)
         pooled = {
             "counts": float(np.mean([score.counts(x) for x in rows])),
@@ -142,8 +174,11 @@ def main(argv=None) -> int:
             f"{al:.1%}: {d['diff']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]"
             for al, d in zip(ALLOWANCES, diffs, strict=True)
         )
-        print(f"{folder}: counts {pooled['counts']:.0%}, mean {pooled['mean']:.2f} s; "
-              f"vs {ref_name} {cells}; {verdict}", flush=True)  # fmt: skip
+        print(
+            f"{folder}: counts {pooled['counts']:.0%}, mean {pooled['mean']:.2f} s; "
+            f"vs {ref_name} {cells}; {verdict}",
+            flush=True,
+        )
     if a.baseline is not None:
         if a.baseline not in pooled_rows:
             raise SystemExit(f"--baseline {a.baseline} must be one of the folders")
@@ -152,9 +187,10 @@ def main(argv=None) -> int:
                 continue
             diffs, verdict = allowance_sweep(pooled_rows[a.baseline], rows, score, failed)
             report["policies"][str(folder)]["vs_baseline"] = {
-                "baseline": str(a.baseline), "verdict": verdict,
+                "baseline": str(a.baseline),
+                "verdict": verdict,
                 "diffs": {str(al): d for al, d in zip(ALLOWANCES, diffs, strict=True)},
-            }  # fmt: skip
+            }
             cells = ", ".join(
                 f"{al:.1%}: {d['diff']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]"
                 for al, d in zip(ALLOWANCES, diffs, strict=True)

@@ -45,8 +45,10 @@ def main() -> None:
     seed = split_seeds("validation", args.episodes)[0]
     machines = {"ideal": {}, "shop floor": SHOPFLOOR_MACHINE.env_kwargs(args.env)}
     out = []
-    print(f"| machine | setpoint | kept at {' / '.join(f'{a:.1%}' for a in ALLOWANCES)} "
-          "| fails (unfinished, broken, overloaded, over limit) | mean time of counting |")  # fmt: skip
+    print(
+        f"| machine | setpoint | kept at {' / '.join(f'{a:.1%}' for a in ALLOWANCES)} "
+        "| fails (unfinished, broken, overloaded, over limit) | mean time of counting |"
+    )
     print("|---|---|---|---|---|")
     for label, kw in machines.items():
         for sp in args.setpoints:
@@ -56,11 +58,21 @@ def main() -> None:
             ok = [r[score.value_key] for r in rows if score.counts(r)]
             mean = sum(ok) / len(ok) if ok else float("nan")
             why = reasons(rows, score)
-            out.append({"machine": label, "setpoint": sp, "kept": kept, "fails": why,
-                        "mean_counting": mean})  # fmt: skip
-            print(f"| {label} | {sp:g} | " + " / ".join(f"{k:.0%}" for k in kept)
-                  + f" | {', '.join(str(v) for v in why.values())} | {mean:.1f} |",
-                  flush=True)  # fmt: skip
+            out.append(
+                {
+                    "machine": label,
+                    "setpoint": sp,
+                    "kept": kept,
+                    "fails": why,
+                    "mean_counting": mean,
+                }
+            )
+            print(
+                f"| {label} | {sp:g} | "
+                + " / ".join(f"{k:.0%}" for k in kept)
+                + f" | {', '.join(str(v) for v in why.values())} | {mean:.1f} |",
+                flush=True,
+            )
     if args.out:
         with open(args.out, "w") as fh:
             json.dump(out, fh, indent=1)

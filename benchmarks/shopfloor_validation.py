@@ -81,30 +81,45 @@ def from_file(env_id: str, path: str, n: int, out: str | None) -> None:
     ref = rows[spec.machine_reference]
     k = score.scale
     print(f"\n{env_id}, {n} validation episodes, settings of {path}")
-    print(f"| agent | kept at {' / '.join(f'{a:.1%}' for a in ALLOWANCES)} | mean "
-          f"{score.label} (counting) | score | " + " | ".join(f"vs constant feed at {a:.1%}"
-          for a in ALLOWANCES) + " | verdict |")  # fmt: skip
+    print(
+        f"| agent | kept at {' / '.join(f'{a:.1%}' for a in ALLOWANCES)} | mean "
+        f"{score.label} (counting) | score | "
+        + " | ".join(f"vs constant feed at {a:.1%}" for a in ALLOWANCES)
+        + " | verdict |"
+    )
     print("|---" * (5 + len(ALLOWANCES)) + "|")
     for cls, rs in rows.items():
         kept = [sum(score.counts(r, a) for r in rs) / len(rs) for a in ALLOWANCES]
         vals = [r[score.value_key] for r in rs if score.counts(r)]
         mean = sum(vals) / len(vals) if vals else float("nan")
         s = score(rs, failed)
-        entry = {"kept": kept, "mean_counting": mean, "score": s, "fails": reasons(rs, score),
-                 "params": tuned["envs"][env_id][cls.__name__]["params"]}  # fmt: skip
+        entry = {
+            "kept": kept,
+            "mean_counting": mean,
+            "score": s,
+            "fails": reasons(rs, score),
+            "params": tuned["envs"][env_id][cls.__name__]["params"],
+        }
         if "afc_stop" in rs[0]:
             entry["afc_stops"] = sum(r["afc_stop"] for r in rs)
         cells, verdict = ["reference"] * len(ALLOWANCES), "reference"
         if cls is not spec.machine_reference:
             diffs, verdict = allowance_sweep(ref, rs, score, failed)
             entry["vs_constant_feed"], entry["verdict"] = diffs, verdict
-            cells = [f"{d['diff'] * k:+.1f} [{d['low'] * k:+.1f}, {d['high'] * k:+.1f}]"
-                     for d in diffs]  # fmt: skip
+            cells = [
+                f"{d['diff'] * k:+.1f} [{d['low'] * k:+.1f}, {d['high'] * k:+.1f}]" for d in diffs
+            ]
         out_data["agents"][cls.__name__] = entry
-        print(f"| {cls.__name__} | " + " / ".join(f"{x:.0%}" for x in kept)
-              + f" | {mean * k:.4g} | {s['score'] * k:.4g} | " + " | ".join(cells)
-              + f" | {verdict} |", entry["fails"], entry.get("afc_stops", ""),
-              flush=True)  # fmt: skip
+        print(
+            f"| {cls.__name__} | "
+            + " / ".join(f"{x:.0%}" for x in kept)
+            + f" | {mean * k:.4g} | {s['score'] * k:.4g} | "
+            + " | ".join(cells)
+            + f" | {verdict} |",
+            entry["fails"],
+            entry.get("afc_stops", ""),
+            flush=True,
+        )
     if out:
         with open(out, "w") as fh:
             json.dump(out_data, fh, indent=1, default=float)
@@ -144,8 +159,13 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=16)
     ap.add_argument("--validation", type=int, default=100)
     ap.add_argument("--out", default=None)
-    ap.add_argument("--only", nargs="*", default=None, choices=sorted(KEYS),
-                    help="the runs to make besides the constant feed")  # fmt: skip
+    ap.add_argument(
+        "--only",
+        nargs="*",
+        default=None,
+        choices=sorted(KEYS),
+        help="the runs to make besides the constant feed",
+    )
     args = ap.parse_args()
     if args.tuned is not None:
         from_file(args.env, args.tuned, args.validation, args.out)
@@ -178,8 +198,9 @@ def main() -> None:
         rows[label] = ev.rows
         s = score(ev.rows, failed)
         out[label] = {"tuned": entry, "validation": s, "wall_s": time.perf_counter() - t0}
-        extra = {k: sum(r[k] for r in ev.rows) / len(ev.rows) for k in ev.rows[0]
-                 if k.startswith("afc_")}  # fmt: skip
+        extra = {
+            k: sum(r[k] for r in ev.rows) / len(ev.rows) for k in ev.rows[0] if k.startswith("afc_")
+        }
         out[label]["afc_log_means"] = extra
         print(f"{label}: kept {s['valid']:.0%}, score {s['score']:.2f} s {extra}", flush=True)
     ref = rows["constant feed"]

@@ -157,12 +157,21 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--lanes", type=int, default=1024)
     ap.add_argument("--env", nargs="+", default=list(machining_envs.ENV_IDS))
-    ap.add_argument("--episode-steps", type=int, default=20_000,
-                    help="single-env steps that measure the mean episode")  # fmt: skip
-    ap.add_argument("--threads", type=int, default=1,
-                    help="the vector env's num_threads (the compiled part runs on them)")  # fmt: skip
-    ap.add_argument("--frozen", action="store_true",
-                    help="also the compiled step timed alone on a frozen state")  # fmt: skip
+    ap.add_argument(
+        "--episode-steps",
+        type=int,
+        default=20_000,
+        help="single-env steps that measure the mean episode",
+    )
+    ap.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="the vector env's num_threads (the compiled part runs on them)",
+    )
+    ap.add_argument(
+        "--frozen", action="store_true", help="also the compiled step timed alone on a frozen state"
+    )
     args = ap.parse_args(argv)
     parts = ("compiled", "resets", "env Python", "base")
     print(
@@ -180,11 +189,10 @@ def main(argv=None) -> None:
         _, single_rate, resets = steps_per_second(env_id, args.episode_steps, seed=0)
         single = 1.0 / single_rate  # seconds per step of the single env, its resets counted
         episode = args.episode_steps / max(resets, 1)  # as throughput.py's steady columns
-        b = breakdown(env_id, args.lanes, episode, seed=0, num_threads=args.threads,
-                      frozen=args.frozen)  # fmt: skip
-        cells = "".join(
-            f" {b[p] * 1e6:7.2f} ({b[p] / b['total']:4.0%})" for p in parts
-        )  # fmt: skip
+        b = breakdown(
+            env_id, args.lanes, episode, seed=0, num_threads=args.threads, frozen=args.frozen
+        )
+        cells = "".join(f" {b[p] * 1e6:7.2f} ({b[p] / b['total']:4.0%})" for p in parts)
         print(
             f"{env_id:34s} {b['total'] * 1e6:6.2f}{cells} {b['resets/step']:11.1f}"
             f" {b['per reset'] * 1e6:9.0f} {single * 1e6:6.2f} {single / b['total']:8.1f}"

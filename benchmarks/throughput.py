@@ -121,9 +121,14 @@ def steady_window(episode_steps: float, num_envs: int) -> int:
 
 
 def vector_steady_rates(
-    env_id: str, num_envs: int, episode_steps: float, seed: int, rounds: int, single_steps: int,
+    env_id: str,
+    num_envs: int,
+    episode_steps: float,
+    seed: int,
+    rounds: int,
+    single_steps: int,
     threads: list[int],
-) -> dict[int, tuple[list[float], list[float]]]:  # fmt: skip
+) -> dict[int, tuple[list[float], list[float]]]:
     """Env-steps per second of the native vector env once its lanes' episodes have spread
     out (see the module docstring), in ``rounds`` windows, and after each window the single
     env's steps per second with resets over ``single_steps`` steps (:func:`steps_per_second`),
@@ -167,9 +172,15 @@ def bytes_per_lane(env_id: str, num_envs: int) -> float:
 
 
 def vector_table(
-    lanes: list[int], env_steps: int, sync_steps: int, singles: dict, rounds: int,
-    single_steps: int, threads: int, env_ids: tuple = machining_envs.ENV_IDS,
-) -> None:  # fmt: skip
+    lanes: list[int],
+    env_steps: int,
+    sync_steps: int,
+    singles: dict,
+    rounds: int,
+    single_steps: int,
+    threads: int,
+    env_ids: tuple = machining_envs.ENV_IDS,
+) -> None:
     """The vector envs' table; ``singles[id]`` = the single env's mean episode length in
     steps (from the first table); each steady round is paired with ``single_steps`` steps of
     the single env; the steady columns again with ``num_threads=threads`` if above 1."""
@@ -189,9 +200,10 @@ def vector_table(
         head += f" {'steady' + tag:>10s} {'x single' + tag:>11s} {'range':>11s}"
     print(head + f" {'x sync':>7s} {'kB/lane':>8s}")
     cart = vector_steps_per_second("CartPole-v1", ref_n, env_steps, 0, "vector_entry_point")
-    print(f"{'CartPoleVectorEnv (reference)':34s}" + "".join(
-        f" {cart:10.0f}" if n == ref_n else f" {'':>10s}" for n in lanes
-    ))  # fmt: skip
+    print(
+        f"{'CartPoleVectorEnv (reference)':34s}"
+        + "".join(f" {cart:10.0f}" if n == ref_n else f" {'':>10s}" for n in lanes)
+    )
     for env_id in env_ids:
         if gym.spec(env_id).vector_entry_point is None:
             print(f"{env_id:34s} no native vector env yet")
@@ -220,13 +232,18 @@ def main(argv=None) -> None:
     ap.add_argument("--sync-steps", type=int, default=20_000, help="env-steps of SyncVectorEnv")
     ap.add_argument("--no-vector", action="store_true", help="single envs only")
     ap.add_argument(
-        "--env", nargs="+", default=list(machining_envs.ENV_IDS), choices=machining_envs.ENV_IDS,
+        "--env",
+        nargs="+",
+        default=list(machining_envs.ENV_IDS),
+        choices=machining_envs.ENV_IDS,
         help="the ids to measure (default: every one), each against Pendulum-v1 as ever",
-    )  # fmt: skip
+    )
     ap.add_argument(
-        "--threads", type=int, default=usable_cpus(),
+        "--threads",
+        type=int,
+        default=usable_cpus(),
         help="num_threads of the second steady columns (default: this process's CPUs; 1: none)",
-    )  # fmt: skip
+    )
     args = ap.parse_args(argv)
     ids = [PEER, *args.env]
     rates = {i: [] for i in ids}
@@ -249,9 +266,15 @@ def main(argv=None) -> None:
     if not args.no_vector:
         episodes = {i: args.steps / max(med[i][2], 1) for i in ids}
         vector_table(
-            sorted(args.lanes), args.vector_steps, args.sync_steps, episodes, args.rounds,
-            args.steps, args.threads, tuple(args.env),
-        )  # fmt: skip
+            sorted(args.lanes),
+            args.vector_steps,
+            args.sync_steps,
+            episodes,
+            args.rounds,
+            args.steps,
+            args.threads,
+            tuple(args.env),
+        )
 
 
 if __name__ == "__main__":

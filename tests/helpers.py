@@ -30,8 +30,14 @@ def random_action(rng: np.random.Generator, env: gym.Env, bound: float = 1.0) ->
     return rng.uniform(-bound, bound, size=env.action_space.shape).astype(np.float32)
 
 
-def run_cut(env_id: str, agent_or_action, scenario, keys: Sequence[str], steps: int,
-            max_episode_time_s: float) -> tuple[np.ndarray, gym.Env]:  # fmt: skip
+def run_cut(
+    env_id: str,
+    agent_or_action,
+    scenario,
+    keys: Sequence[str],
+    steps: int,
+    max_episode_time_s: float,
+) -> tuple[np.ndarray, gym.Env]:
     """One episode of ``env_id`` on ``scenario`` (seed 0), driven by a constant action (a
     float) or an agent's ``predict``, for at most ``steps`` steps: the ``info[key]`` of every
     step for ``keys`` as rows of an array, and the unwrapped env."""

@@ -62,10 +62,11 @@ def test_stored_notebooks_hold_their_outputs(path):
     assert all(c.get("execution_count") for c in nb.cells if c.cell_type == "code"), path.name
     assert not [o for o in outputs if o.output_type == "error"]
     text = "".join(
-        o.get("text", "") + o.get("data", {}).get("text/markdown", "")
+        o.get("text", "")
+        + o.get("data", {}).get("text/markdown", "")
         + o.get("data", {}).get("text/plain", "")
         for o in outputs
-    )  # fmt: skip
+    )
     assert "/tmp" not in text and "ipywidgets" not in text
     assert any("image/png" in o.get("data", {}) for o in outputs), "no plot"
 

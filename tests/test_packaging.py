@@ -151,15 +151,37 @@ def test_the_wheel_holds_every_file_of_the_packages(tmp_path):
         ROOT,
         src,
         ignore=shutil.ignore_patterns(
-            ".git", ".venv", "results", "runs", "build", "dist", "*.egg-info", "__pycache__",
-            "notebooks", "tests", "docs", "benchmarks",
+            ".git",
+            ".venv",
+            "results",
+            "runs",
+            "build",
+            "dist",
+            "*.egg-info",
+            "__pycache__",
+            "notebooks",
+            "tests",
+            "docs",
+            "benchmarks",
         ),
-    )  # fmt: skip
+    )
     out = subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", str(src), "--no-deps", "--no-build-isolation",
-         "--quiet", "-w", str(tmp_path / "wheel")],
-        capture_output=True, text=True, timeout=300,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            str(src),
+            "--no-deps",
+            "--no-build-isolation",
+            "--quiet",
+            "-w",
+            str(tmp_path / "wheel"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     (wheel,) = (tmp_path / "wheel").glob("machining_envs-*.whl")
     with zipfile.ZipFile(wheel) as z:

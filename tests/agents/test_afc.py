@@ -119,10 +119,21 @@ def test_settings_are_checked(bad):
 
 
 def test_harness_records_the_log_on_the_env():
-    ev = evaluate(AdaptiveFeedControl.from_env, "machining_envs/Turning-v0", ["validation"],
-                  n_episodes=2, env_kwargs={"power_sensor": True})  # fmt: skip
-    ev1 = evaluate(AdaptiveFeedControl.from_env, "machining_envs/Turning-v0", ["validation"],
-                   n_episodes=2, env_kwargs={"power_sensor": True}, batched=False)  # fmt: skip
+    ev = evaluate(
+        AdaptiveFeedControl.from_env,
+        "machining_envs/Turning-v0",
+        ["validation"],
+        n_episodes=2,
+        env_kwargs={"power_sensor": True},
+    )
+    ev1 = evaluate(
+        AdaptiveFeedControl.from_env,
+        "machining_envs/Turning-v0",
+        ["validation"],
+        n_episodes=2,
+        env_kwargs={"power_sensor": True},
+        batched=False,
+    )
     for row, row1 in zip(ev.rows, ev1.rows, strict=True):
         for f in AFC_LOG_FIELDS:
             assert row["afc_" + f] == row1["afc_" + f]
@@ -156,8 +167,9 @@ def test_end_milling_on_the_shop_floor_machine_keeps_its_rules():
 
     env_id = "machining_envs/EndMilling-v0"
     env = gym.make(env_id, **SHOPFLOOR_MACHINE.env_kwargs(env_id))
-    afc = AdaptiveFeedControl.from_env(env, fmin=0.5, fmax=1.6, fidl=2.0, gain=0.3,
-                                       wear_margin=None)  # fmt: skip
+    afc = AdaptiveFeedControl.from_env(
+        env, fmin=0.5, fmax=1.6, fidl=2.0, gain=0.3, wear_margin=None
+    )
     obs, _ = env.reset(seed=3, options={"scenario": "validation"})
     state, first, idle = None, True, None
     cmap = afc.command_map

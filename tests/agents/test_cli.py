@@ -150,8 +150,15 @@ assert plt.get_fignums() == []
     # The quick report: the allowance columns, the verdict column, each learned row's worst
     # seed, the oracle beside the bound on its own episodes; results.md one number a cell.
     report = (tmp_path / "report.md").read_text()
-    for text in ("Δ at 0.5 %", "Δ at 1 %", "Δ at 2 %", "verdict vs", "worst seed counts",
-                 "physical bound, on the oracle's 1 ep.", "| reference |"):  # fmt: skip
+    for text in (
+        "Δ at 0.5 %",
+        "Δ at 1 %",
+        "Δ at 2 %",
+        "verdict vs",
+        "worst seed counts",
+        "physical bound, on the oracle's 1 ep.",
+        "| reference |",
+    ):
         assert text in report, text
     assert (tmp_path / "Turning-v0_allowances.png").stat().st_size > 0
     assert "| verdict |" in (tmp_path / "results.md").read_text()
@@ -160,7 +167,15 @@ assert plt.get_fignums() == []
 def test_evaluate_force_runs_a_model_on_another_env_of_the_same_spaces(capsys):
     """--force is passed down to the loader (which refuses a model of another env without it)."""
     model = "agents/rl/pretrained/turning_ppo/best_model.zip"
-    args = ["evaluate", "--model", model, "--env", "machining_envs/EndMilling-v0", "--force",
-            "--episodes", "1"]  # fmt: skip
+    args = [
+        "evaluate",
+        "--model",
+        model,
+        "--env",
+        "machining_envs/EndMilling-v0",
+        "--force",
+        "--episodes",
+        "1",
+    ]
     assert main(args) == 0
     assert "primary score" in capsys.readouterr().out

@@ -179,8 +179,12 @@ def test_export_zoo_writes_all_or_nothing(run, tmp_path, capsys):
     assert main(["export", "--zoo", "--model", model, "--out", str(out)]) == 2
     _one_line(capsys, "exists already")
     assert _snapshot(out) == before
-    assert main(["export", "--zoo", "--model", model, "--out", str(tmp_path / "x"), "--env",
-                 ENDMILLING]) == 2  # fmt: skip
+    assert (
+        main(
+            ["export", "--zoo", "--model", model, "--out", str(tmp_path / "x"), "--env", ENDMILLING]
+        )
+        == 2
+    )
     _one_line(capsys, "--zoo takes")
     assert main(["export", "--zoo", "--model", model, "--out", str(UNWRITABLE)]) == 2
     _one_line(capsys, "cannot write")
@@ -190,8 +194,19 @@ def test_export_zoo_writes_the_files_rl_zoo3_reads(run, tmp_path, capsys):
     """config.yml, args.yml (whose env_kwargs rl_zoo3.enjoy reads), env_kwargs.yml (what
     rl-zoo3's hub pages hold) and the statistics, as the README says."""
     yaml = pytest.importorskip("yaml")
-    assert main(["export", "--zoo", "--model", str(run / "best_model.zip"), "--out",
-                 str(tmp_path / "zoo")]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "export",
+                "--zoo",
+                "--model",
+                str(run / "best_model.zip"),
+                "--out",
+                str(tmp_path / "zoo"),
+            ]
+        )
+        == 0
+    )
     assert "--no-render" in capsys.readouterr().out
     params = tmp_path / "zoo" / "ppo" / "machining_envs-Turning-v0_1" / "machining_envs-Turning-v0"
     names = sorted(p.name for p in params.iterdir())

@@ -49,8 +49,17 @@ def test_tune_at_the_strictest_allowance_records_it(tmp_path):
     allowance; the file states it (budget and command) and keeps each env's machine
     options."""
     out = tmp_path / "tuned.json"
-    args = ["tune", "--env", "machining_envs/ContouringFeed-v0", "--trials", "1",
-            "--episodes", "1", "--allowance", "0.005"]  # fmt: skip
+    args = [
+        "tune",
+        "--env",
+        "machining_envs/ContouringFeed-v0",
+        "--trials",
+        "1",
+        "--episodes",
+        "1",
+        "--allowance",
+        "0.005",
+    ]
     assert main([*args, "--machine", EXAMPLE, "--out", str(out)]) == 0
     data = json.loads(out.read_text())
     assert data["budget"]["allowance"] == 0.005

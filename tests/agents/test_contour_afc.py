@@ -30,8 +30,9 @@ def _run(agent, errors):
 
 
 def test_hand_checked_factor():
-    afc = ContourAFC(OMAX, override_cap=0.8, reference=0.5, gain=0.2, rise=0.1, fmin=0.3,
-                     fmax=1.1, fent=0.9)  # fmt: skip
+    afc = ContourAFC(
+        OMAX, override_cap=0.8, reference=0.5, gain=0.2, rise=0.1, fmin=0.3, fmax=1.1, fent=0.9
+    )
     overrides, state = _run(afc, [0.0, 0.25, 1.0, 2.0, 0.0, 0.5])
     # on a straight the planner gives its cap, 0.8; the factor from fent = 0.9:
     k = [0.9 + 0.02]  # error 0: up by rise x gain x 1
@@ -45,8 +46,7 @@ def test_hand_checked_factor():
 
 
 def test_never_leaves_its_bounds_and_follows_the_planner():
-    afc = ContourAFC(OMAX, override_cap=1.0, reference=0.6, gain=0.5, rise=0.5, fmin=0.4,
-                     fmax=1.2)  # fmt: skip
+    afc = ContourAFC(OMAX, override_cap=1.0, reference=0.6, gain=0.5, rise=0.5, fmin=0.4, fmax=1.2)
     rng = np.random.default_rng(0)
     errors = np.where(rng.random(400) < 0.5, 0.0, rng.uniform(0.0, 3.0, 400))
     overrides, _ = _run(afc, errors)
@@ -72,7 +72,7 @@ def test_never_leaves_its_bounds_and_follows_the_planner():
         {"fmax": 0.5},
         {"fent": 0.0},
         {"override_cap": 3.0},
-    ],  # fmt: skip
+    ],
 )
 def test_settings_are_checked(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):

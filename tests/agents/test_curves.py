@@ -50,15 +50,22 @@ def _task():
 def test_the_curve_is_the_seeds_iqm_and_finds_the_first_match(tmp_path):
     score, failed = _task()
     factory = VariableGainPI.from_env
-    ev = evaluate(factory, TURNING, ["validation"], n_episodes=N_EPISODES,
-                  seed=split_seeds("validation", N_EPISODES)[0])  # fmt: skip
+    ev = evaluate(
+        factory,
+        TURNING,
+        ["validation"],
+        n_episodes=N_EPISODES,
+        seed=split_seeds("validation", N_EPISODES)[0],
+    )
     ref = float(score(ev.rows, failed)["score"])
     assert math.isfinite(ref)
     # five seeds: far above the reference, then just above, then below at evaluation 3
-    table = {s: [ref * 4 + s, ref * 1.5 + s, ref * 1.01 + 0.1 * s, ref * 0.5 + 0.1 * s]
-             for s in range(5)}  # fmt: skip
-    c = learning_curve("fake", _fake_runs(tmp_path, table), TURNING, {}, score, failed,
-                       ("adaptive PI", factory))  # fmt: skip
+    table = {
+        s: [ref * 4 + s, ref * 1.5 + s, ref * 1.01 + 0.1 * s, ref * 0.5 + 0.1 * s] for s in range(5)
+    }
+    c = learning_curve(
+        "fake", _fake_runs(tmp_path, table), TURNING, {}, score, failed, ("adaptive PI", factory)
+    )
     assert c.reference_score == pytest.approx(ref, rel=1e-12)
     assert c.first_match == 3
     np.testing.assert_allclose(c.steps, [1002, 2002, 3002, 4002])
@@ -73,7 +80,14 @@ def test_the_curve_is_the_seeds_iqm_and_finds_the_first_match(tmp_path):
 def test_a_curve_that_never_matches_says_so_with_its_best(tmp_path):
     score, failed = _task()
     table = {s: [1e6, 5e5 + s] for s in range(3)}
-    c = learning_curve("fake", _fake_runs(tmp_path, table), TURNING, {}, score, failed,
-                       ("adaptive PI", VariableGainPI.from_env))  # fmt: skip
+    c = learning_curve(
+        "fake",
+        _fake_runs(tmp_path, table),
+        TURNING,
+        {},
+        score,
+        failed,
+        ("adaptive PI", VariableGainPI.from_env),
+    )
     assert c.first_match is None
     assert "never matches it within 2001 env steps" in c.summary(1.0, "s")

@@ -135,8 +135,9 @@ def test_a_model_without_data_is_refused_under_python_O(run):
         "except ValueError as e:\n    print('refused:', e)\n"
     )
     root = Path(__file__).resolve().parents[2]
-    out = subprocess.run([sys.executable, "-O", "-c", code], capture_output=True, text=True,
-                         cwd=root, check=True).stdout  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-O", "-c", code], capture_output=True, text=True, cwd=root, check=True
+    ).stdout
     assert "refused:" in out and "best_model.zip" in out and "no data" in out
 
 
@@ -280,13 +281,27 @@ def test_a_run_that_cannot_be_resumed_is_refused_naming_the_file(run, tmp_path):
     shutil.copy(run / "best_model.zip", folder / "final_model.zip")
     # The run normalises: its statistics must be there.
     with pytest.raises(ConfigError, match="final_vecnormalize.json"):
-        train(TURNING, "ppo", folder, config_path=config, resume=True, progress_bar=False,
-              verbose=False)  # fmt: skip
+        train(
+            TURNING,
+            "ppo",
+            folder,
+            config_path=config,
+            resume=True,
+            progress_bar=False,
+            verbose=False,
+        )
     shutil.copy(run / "best_vecnormalize.json", folder / "final_vecnormalize.json")
     (folder / "final_model.zip").write_bytes(b"PK\x03\x04 damaged")
     with pytest.raises(ConfigError, match="final_model.zip: not a PPO model"):
-        train(TURNING, "ppo", folder, config_path=config, resume=True, progress_bar=False,
-              verbose=False)  # fmt: skip
+        train(
+            TURNING,
+            "ppo",
+            folder,
+            config_path=config,
+            resume=True,
+            progress_bar=False,
+            verbose=False,
+        )
 
 
 # ---- other files read -----------------------------------------------------------------------
@@ -310,8 +325,9 @@ def test_a_binary_training_config_is_refused_naming_the_file(tmp_path):
         (b'{"envs": []}', "has no VariableGainPI entry"),
     ],
 )
-def test_a_damaged_tuned_file_is_refused_by_the_residual_spec(tmp_path, monkeypatch, content,
-                                                              message):  # fmt: skip
+def test_a_damaged_tuned_file_is_refused_by_the_residual_spec(
+    tmp_path, monkeypatch, content, message
+):
     from agents.rl import residual
 
     path = tmp_path / "tuned.json"

@@ -145,8 +145,9 @@ def test_a_gated_sweep_trains_gates_and_records_its_seeds(tmp_path):
     from agents.rl.sweep import SweepSettings
 
     settings = SweepSettings("machining_envs/Turning-v0", seeds=[0, 1], n_timesteps=512, workers=2)
-    out = gated_sweep(settings, tmp_path / "s", n_validation=2, per_edge=1, max_replacements=1,
-                      verbose=False)  # fmt: skip
+    out = gated_sweep(
+        settings, tmp_path / "s", n_validation=2, per_edge=1, max_replacements=1, verbose=False
+    )
     saved = json.loads((tmp_path / "s" / "gate.json").read_text())
     assert saved["asked"] == [0, 1] and set(saved["verdicts"]) >= {"0", "1"}
     assert sorted(out["passed"] + out["failed"]) == sorted(int(s) for s in saved["verdicts"])

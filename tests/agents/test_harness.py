@@ -118,9 +118,14 @@ BATCHED_CASES = [
     (DRILLING_ID, {"control": "feed"}, PeckDrilling.from_env, ["ood", "paper_0.6"], 4),
     (CONTOURING_ID, {}, PIPosition.from_env, ["ood", "paper_step_load"], 3),
     (CONTOURING_ID, {}, HInf2DOF.from_env, ["ood", "paper_circle_load"], 3),
-    ("machining_envs/ContouringFeed-v0", {}, ConstantOverride.from_env,
-     ["ood", "paper_involute"], 3),
-]  # fmt: skip
+    (
+        "machining_envs/ContouringFeed-v0",
+        {},
+        ConstantOverride.from_env,
+        ["ood", "paper_involute"],
+        3,
+    ),
+]
 
 
 @pytest.mark.parametrize(

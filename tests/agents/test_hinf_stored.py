@@ -74,8 +74,12 @@ def test_hinf_actions_do_not_depend_on_the_blas_kernel(tmp_path):
             envvars["OPENBLAS_CORETYPE"] = kernel
         envvars["PYTHONPATH"] = str(ROOT) + os.pathsep + envvars.get("PYTHONPATH", "")
         out = tmp_path / f"act_{kernel}.npy"
-        subprocess.run([sys.executable, "-c", _ACT, str(tmp_path / "obs.npy"), str(out), *rhos],
-                       check=True, env=envvars, cwd=ROOT)  # fmt: skip
+        subprocess.run(
+            [sys.executable, "-c", _ACT, str(tmp_path / "obs.npy"), str(out), *rhos],
+            check=True,
+            env=envvars,
+            cwd=ROOT,
+        )
         runs[kernel] = np.load(out)
     assert runs["Haswell"].shape[0] == len(obs) * len(rhos)
     np.testing.assert_array_equal(runs["Haswell"], runs[None])

@@ -24,10 +24,12 @@ def test_oracle_keeps_the_limit_near_the_bound_and_beats_the_adaptive_pi():
     oracle.rows += evaluate(
         TurningMPCOracle.from_env, TURNING, ["validation"], 2, seed=5000, batched=False
     ).rows
-    pi = evaluate(lambda e: VariableGainPI.from_env(e, setpoint=0.7), TURNING, ["paper_405"], 1,
-                  seed=0).rows  # fmt: skip
-    pi += evaluate(lambda e: VariableGainPI.from_env(e, setpoint=0.7), TURNING, ["validation"], 2,
-                   seed=5000).rows  # fmt: skip
+    pi = evaluate(
+        lambda e: VariableGainPI.from_env(e, setpoint=0.7), TURNING, ["paper_405"], 1, seed=0
+    ).rows
+    pi += evaluate(
+        lambda e: VariableGainPI.from_env(e, setpoint=0.7), TURNING, ["validation"], 2, seed=5000
+    ).rows
     for r, q in zip(oracle.rows, pi, strict=True):
         assert score.counts(r) and r["time_over_limit"] == 0.0, r
         assert r["score_bound"] * (1 - 1e-9) <= r["machining_time_s"] <= 1.1 * r["score_bound"]

@@ -144,8 +144,14 @@ def test_the_benchmark_warns_when_the_tuned_settings_are_missing(tmp_path, monke
 def _rows(values, policy_seed=None):
     out = []
     for i, v in enumerate(values):
-        r = {"seed": i, "machining_time_s": float(v), "finished": 1.0, "breakage": 0.0,
-             "time_over_limit": 0.0, "score_bound": 10.0}  # fmt: skip
+        r = {
+            "seed": i,
+            "machining_time_s": float(v),
+            "finished": 1.0,
+            "breakage": 0.0,
+            "time_over_limit": 0.0,
+            "score_bound": 10.0,
+        }
         if policy_seed is not None:
             r["policy_seed"] = policy_seed
         out.append(r)

@@ -138,8 +138,12 @@ def test_the_vector_form_runs_each_lane_as_the_wrapper_does_across_resets():
 def test_bad_residual_settings_are_refused_naming_them(tmp_path, kwargs, match):
     import yaml
 
-    cfg = {TURNING: {"policy": "MlpPolicy", "env_wrapper": [
-        {"agents.rl.residual.SetpointResidual": kwargs}]}}  # fmt: skip
+    cfg = {
+        TURNING: {
+            "policy": "MlpPolicy",
+            "env_wrapper": [{"agents.rl.residual.SetpointResidual": kwargs}],
+        }
+    }
     path = tmp_path / "c.yml"
     path.write_text(yaml.safe_dump(cfg))
     with pytest.raises(ConfigError, match=match):
@@ -152,8 +156,15 @@ def test_a_trained_residual_run_reloads_as_a_residual_agent_and_reproduces_its_s
     from agents.rl.train import evaluate_policy_file
     from machining_envs.core.splits import split_seeds
 
-    out = train(TURNING, "ppo", tmp_path / "run", config_path=CONFIG_DIR / "ppo_residual.yml",
-                n_timesteps=2048, progress_bar=False, verbose=False)  # fmt: skip
+    out = train(
+        TURNING,
+        "ppo",
+        tmp_path / "run",
+        config_path=CONFIG_DIR / "ppo_residual.yml",
+        n_timesteps=2048,
+        progress_bar=False,
+        verbose=False,
+    )
     agent = load_policy(out / "best_model.zip")
     assert isinstance(agent, ResidualAgent) and agent.base.name.startswith("AFC")  # its base
     with open(out / "eval.csv") as fh:

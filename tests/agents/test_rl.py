@@ -402,9 +402,15 @@ def test_native_vector_training_reproduces_a_fixed_seed_run(tmp_path, increment)
     runs = {}
     for name, vec in (("native_a", "native"), ("native_b", "native"), ("dummy", "dummy")):
         runs[name] = train(
-            TURNING, "ppo", tmp_path / name, seed=4, config_path=path, progress_bar=False,
-            verbose=False, vec=vec,
-        )  # fmt: skip
+            TURNING,
+            "ppo",
+            tmp_path / name,
+            seed=4,
+            config_path=path,
+            progress_bar=False,
+            verbose=False,
+            vec=vec,
+        )
     assert json.loads((runs["native_a"] / "config.json").read_text())["vec"] == "native"
     a, b, d = (_final_parameters(runs[k]) for k in ("native_a", "native_b", "dummy"))
     for pa, pb, pd in zip(a, b, d, strict=True):

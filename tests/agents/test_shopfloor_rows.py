@@ -58,13 +58,26 @@ def test_rows_labelled_and_judged_against_the_machine_constant_feed():
 
     full = benchmark_spec(TURNING)
     spec = dataclasses.replace(
-        full, paper_agents=(), learned=(), oracle=None, tuned=(ConstantFeed,),
-        machine_tuned=(ConstantFeed, AdaptiveFeedControl), extra_splits=("shopfloor",),
-    )  # fmt: skip
+        full,
+        paper_agents=(),
+        learned=(),
+        oracle=None,
+        tuned=(ConstantFeed,),
+        machine_tuned=(ConstantFeed, AdaptiveFeedControl),
+        extra_splits=("shopfloor",),
+    )
     env = gym.make(TURNING)
     data = _machine_file(spec, env)
-    ideal = {"envs": {TURNING: {"ConstantFeed": {"params": paper_settings(ConstantFeed, env),
-                                                 "validation_score": 1.0}}}}  # fmt: skip
+    ideal = {
+        "envs": {
+            TURNING: {
+                "ConstantFeed": {
+                    "params": paper_settings(ConstantFeed, env),
+                    "validation_score": 1.0,
+                }
+            }
+        }
+    }
     env.close()
     run = run_env(spec, 2, 3, 0, ideal, False, 0.0, machine_tuned=data)
     shop = [n for n in run.machine_cls]
@@ -112,9 +125,14 @@ def test_full_run_judges_the_shopfloor_split_on_100_episodes():
     assert EXTRA_SIZES["full"]["shopfloor"] == SIZES["full"][0] == 100
     assert EXTRA_SIZES["quick"] == {} and SIZES["quick"][1] == 0  # --quick runs no extra split
     spec = dataclasses.replace(
-        benchmark_spec(TURNING), paper_agents=(), learned=(), oracle=None, tuned=(),
-        machine_tuned=(ConstantFeed,), extra_splits=("wear", "shopfloor"),
-    )  # fmt: skip
+        benchmark_spec(TURNING),
+        paper_agents=(),
+        learned=(),
+        oracle=None,
+        tuned=(),
+        machine_tuned=(ConstantFeed,),
+        extra_splits=("wear", "shopfloor"),
+    )
     env = gym.make(TURNING)
     data = _machine_file(spec, env)
     env.close()
@@ -138,12 +156,17 @@ def test_machine_search_space_and_the_shipped_settings_within_it():
 
     assert search_space(AdaptiveFeedControl) == AdaptiveFeedControl.TUNABLE
     assert set(search_space(AdaptiveFeedControl, machine=True)) == {
-        *AdaptiveFeedControl.TUNABLE, "fmin"}  # fmt: skip
+        *AdaptiveFeedControl.TUNABLE,
+        "fmin",
+    }
     assert search_space(ConstantFeed, machine=True) == ConstantFeed.TUNABLE
     kwargs = SHOPFLOOR_MACHINE.env_kwargs(TURNING)
     entry = tune_agent(AdaptiveFeedControl, TURNING, TuningBudget(1, 1, 0), kwargs, machine=True)
-    assert set(entry["params"]) == set(entry["paper_params"]) == set(
-        AdaptiveFeedControl.MACHINE_TUNABLE)  # fmt: skip
+    assert (
+        set(entry["params"])
+        == set(entry["paper_params"])
+        == set(AdaptiveFeedControl.MACHINE_TUNABLE)
+    )
     assert entry["paper_params"]["fmin"] == 0.7
     data = load_tuned(SHOPFLOOR_TUNED_FILE)
     for env_id in (TURNING, "machining_envs/ContouringFeed-v0"):

@@ -11,8 +11,15 @@ from machining_envs.core.score import ALLOWANCES, REGULATION_SCORE
 def _rows(times, over, policy_seed=None, overloaded=0.0):
     out = []
     for i, (t, o) in enumerate(zip(times, over, strict=True)):
-        r = {"seed": i, "machining_time_s": float(t), "finished": 1.0, "breakage": 0.0,
-             "time_over_limit": float(o), "overloaded": overloaded, "score_bound": 10.0}  # fmt: skip
+        r = {
+            "seed": i,
+            "machining_time_s": float(t),
+            "finished": 1.0,
+            "breakage": 0.0,
+            "time_over_limit": float(o),
+            "overloaded": overloaded,
+            "score_bound": 10.0,
+        }
         if policy_seed is not None:
             r["policy_seed"] = policy_seed
         out.append(r)

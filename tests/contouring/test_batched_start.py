@@ -37,8 +37,11 @@ def test_lanes_started_together_start_as_one_by_one(spec):
         sa, sb = one.scenarios[k], many.scenarios[k]
         np.testing.assert_array_equal(sa.path.table(), sb.path.table(), strict=True)
         assert (sa.path.length, sa.path.start, sa.path.end, sa.path.name) == (
-            sb.path.length, sb.path.start, sb.path.end, sb.path.name
-        )  # fmt: skip
+            sb.path.length,
+            sb.path.start,
+            sb.path.end,
+            sb.path.name,
+        )
         fields = ("name", "feed_mm_s", "load_steps", "inertia_scale", "dwell_s", "actuation")
         assert [getattr(sa, f) for f in fields] == [getattr(sb, f) for f in fields], k
         assert one.truths[k] == many.truths[k], k
@@ -106,6 +109,11 @@ def test_the_circle_keys_come_and_go_with_the_lanes_on_circles():
     core.start(5, "paper_circle", venv.unwrapped.lane_rngs[5])
     core.start(5, "paper_circle", venv.unwrapped.lane_rngs[5])  # (counted once)
     assert core._circles == 1 and core.info_arrays()["_circle_radius_mm"].tolist() == [
-        False, False, False, False, False, True
-    ]  # fmt: skip
+        False,
+        False,
+        False,
+        False,
+        False,
+        True,
+    ]
     venv.close()

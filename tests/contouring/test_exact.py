@@ -285,8 +285,13 @@ def test_eight_lanes_at_once_are_run_block_to_the_last_bit(kind, generic):
     nb, n = 50, 13
     lanes = ServoLanes(designs, nb, n)
     for k in range(n):
-        lanes.start(k, p.replace(inertia_x_kgm2=p.inertia_x_kgm2 * RNG.uniform(0.7, 1.4),
-                                 inertia_y_kgm2=p.inertia_y_kgm2 * RNG.uniform(0.7, 1.4)))  # fmt: skip
+        lanes.start(
+            k,
+            p.replace(
+                inertia_x_kgm2=p.inertia_x_kgm2 * RNG.uniform(0.7, 1.4),
+                inertia_y_kgm2=p.inertia_y_kgm2 * RNG.uniform(0.7, 1.4),
+            ),
+        )
     ns = lanes.n_states_axis
     state = RNG.normal(0, 1e-3, (n, 2 * ns))
     ref = np.cumsum(RNG.normal(0, 0.02, (n, nb, 2)), axis=1)
@@ -318,13 +323,25 @@ def test_eight_lanes_at_once_are_run_block_to_the_last_bit(kind, generic):
         g_load = np.zeros((nb, 2, LANES))
         g_ref[:, :, :m] = ref[k0 : k0 + m].transpose(1, 2, 0)
         g_load[:, :, :m] = load[k0 : k0 + m].transpose(1, 2, 0)
-        outs = [np.full((nb, 2, LANES), 7.0), np.full((nb + 1, 2, LANES), 7.0),
-                np.full((nb, 2, LANES), 7.0), np.full((nb, 2, LANES), 7.0)]  # fmt: skip
+        outs = [
+            np.full((nb, 2, LANES), 7.0),
+            np.full((nb + 1, 2, LANES), 7.0),
+            np.full((nb, 2, LANES), 7.0),
+            np.full((nb, 2, LANES), 7.0),
+        ]
         gather_states(got_state, k0, m, z)
-        run_lanes(lanes.groups[k0 // LANES], 8 if generic else ns, nb, z, g_ref.ravel(),
-                  g_load.ravel(),
-                  outs[0].reshape(-1), outs[1].reshape(-1), outs[2].reshape(-1),
-                  outs[3].reshape(-1))  # fmt: skip
+        run_lanes(
+            lanes.groups[k0 // LANES],
+            8 if generic else ns,
+            nb,
+            z,
+            g_ref.ravel(),
+            g_load.ravel(),
+            outs[0].reshape(-1),
+            outs[1].reshape(-1),
+            outs[2].reshape(-1),
+            outs[3].reshape(-1),
+        )
         scatter_lanes(got_state, k0, m, z)
         for g, w in zip(outs, want, strict=True):
             got = g[:, :, :m].transpose(2, 0, 1)

@@ -53,8 +53,13 @@ def test_the_heavier_kernels_step_smaller_blocks():
 
     import machining_envs  # noqa: F401  (registers the ids)
 
-    for env_id, lanes in (("Turning-v0", 64), ("ContouringFeed-v0", 64), ("EndMilling-v0", 128),
-                          ("MicroDrilling-v0", 128), ("Contouring-v0", 128)):  # fmt: skip
+    for env_id, lanes in (
+        ("Turning-v0", 64),
+        ("ContouringFeed-v0", 64),
+        ("EndMilling-v0", 128),
+        ("MicroDrilling-v0", 128),
+        ("Contouring-v0", 128),
+    ):
         venv = gym.make_vec(f"machining_envs/{env_id}", num_envs=128, num_threads=4)
         try:
             assert venv.unwrapped.min_block == lanes

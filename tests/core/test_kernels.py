@@ -42,9 +42,20 @@ def _numpy_blas_orders_as_matvec() -> bool:
 
     blas = [i for i in threadpool_info() if "numpy" in i.get("filepath", "")]
     arch = str(blas[0].get("architecture", "")).lower() if blas else ""
-    return bool(blas) and blas[0].get("internal_api") == "openblas" and arch in {
-        "haswell", "zen", "steamroller", "excavator", "skylakex", "cooperlake", "sapphirerapids"
-    }  # fmt: skip
+    return (
+        bool(blas)
+        and blas[0].get("internal_api") == "openblas"
+        and arch
+        in {
+            "haswell",
+            "zen",
+            "steamroller",
+            "excavator",
+            "skylakex",
+            "cooperlake",
+            "sapphirerapids",
+        }
+    )
 
 
 def _shapes(substeps):
@@ -85,8 +96,16 @@ def _eight_wide(acc, a, b, o, sa, sb):
     out = np.empty((4, 8))
     v = add_scaled8(load8(acc, o), a, b, o, sa, sb)
     store8(out[0], 0, add8(v, load8(acc, o)))
-    w = (get8(v, 0), get8(v, 1), get8(v, 2), get8(v, 3), get8(v, 4), get8(v, 5), get8(v, 6),
-         get8(v, 7))  # fmt: skip
+    w = (
+        get8(v, 0),
+        get8(v, 1),
+        get8(v, 2),
+        get8(v, 3),
+        get8(v, 4),
+        get8(v, 5),
+        get8(v, 6),
+        get8(v, 7),
+    )
     for i in range(8):
         out[1, i] = w[i]
         out[2, i] = fma(b[o + i], sb, fma(a[o + i], sa, acc[o + i]))
@@ -253,8 +272,9 @@ def test_sines_and_cosines_are_libms_to_one_unit_in_the_last_place(span):
 
 def test_sines_and_cosines_outside_the_vector_range_are_libms():
     """Zero keeps its sign, and tiny, huge, infinite and NaN angles are libm's exactly."""
-    x = np.array([0.0, -0.0, 1e-9, -2.0**-28, 5e-324, 2.0**20 + 1.0, -1e7, 1e300, np.inf,
-                  -np.inf, np.nan])  # fmt: skip
+    x = np.array(
+        [0.0, -0.0, 1e-9, -(2.0**-28), 5e-324, 2.0**20 + 1.0, -1e7, 1e300, np.inf, -np.inf, np.nan]
+    )
     for fn in (_sincos_each, lambda a, s, c: _sincos_row(a, a.size, s, c)):
         s, c = np.empty_like(x), np.empty_like(x)
         with np.errstate(invalid="ignore"):
@@ -389,8 +409,12 @@ def test_clip_unit_is_numpys_clip_and_linear_map_to_the_last_bit():
     from machining_envs.core.compiled.kernels import clip_unit, clip_unit_linear
 
     rng = np.random.default_rng(3)
-    a = np.concatenate([rng.uniform(-3.0, 3.0, 500), [-1.0, 1.0, -0.0, 0.0, 1e300, -1e300,
-                        np.nextafter(1.0, 2.0), np.nextafter(-1.0, -2.0)]])  # fmt: skip
+    a = np.concatenate(
+        [
+            rng.uniform(-3.0, 3.0, 500),
+            [-1.0, 1.0, -0.0, 0.0, 1e300, -1e300, np.nextafter(1.0, 2.0), np.nextafter(-1.0, -2.0)],
+        ]
+    )
     n = a.size
     table = np.zeros((n, 3))
     flags = np.zeros((n, 2), dtype=bool)

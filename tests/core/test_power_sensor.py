@@ -145,8 +145,9 @@ def test_vector_lane_equals_single_env(env_id):
 
 
 def test_reading_is_held_and_quantised():
-    env = gym.make(TURNING, scenario="validation",
-                   power_sensor={"sample_time_s": 0.3, "quantum_W": 20.0})  # fmt: skip
+    env = gym.make(
+        TURNING, scenario="validation", power_sensor={"sample_time_s": 0.3, "quantum_W": 20.0}
+    )
     obs, info = env.reset(seed=1)
     readings = [info["spindle_power_measured_W"]]
     for x in _actions(30):

@@ -72,8 +72,11 @@ def test_note_severity_adds_the_step_excess_to_one_or_many_lanes():
     info = {"force_N": 1100.0, "force_limit_N": 1000.0, "cost": 1.0}
     note_severity(info, ("force_N", "force_limit_N"), 1.5)
     assert info["excess"] == pytest.approx(0.1) and info["overload_ratio"] == 1.5
-    arrays = {"force_N": np.array([900.0, 1300.0]), "force_limit_N": np.full(2, 1000.0),
-              "cost": np.array([0.0, 1.0])}  # fmt: skip
+    arrays = {
+        "force_N": np.array([900.0, 1300.0]),
+        "force_limit_N": np.full(2, 1000.0),
+        "cost": np.array([0.0, 1.0]),
+    }
     note_severity(arrays, ("force_N", "force_limit_N"), np.array([1.5, 2.0]))
     np.testing.assert_allclose(arrays["excess"], [0.0, 0.3])
     np.testing.assert_array_equal(arrays["overload_ratio"], [1.5, 2.0])
@@ -83,9 +86,14 @@ def test_note_severity_adds_the_step_excess_to_one_or_many_lanes():
 
 @pytest.mark.parametrize(
     "env_id",
-    ["machining_envs/Turning-v0", "machining_envs/EndMilling-v0", "machining_envs/MicroDrilling-v0",
-     "machining_envs/Contouring-v0", "machining_envs/ContouringFeed-v0"],
-)  # fmt: skip
+    [
+        "machining_envs/Turning-v0",
+        "machining_envs/EndMilling-v0",
+        "machining_envs/MicroDrilling-v0",
+        "machining_envs/Contouring-v0",
+        "machining_envs/ContouringFeed-v0",
+    ],
+)
 def test_every_constrained_env_reports_the_step_excess(env_id):
     import gymnasium as gym
 

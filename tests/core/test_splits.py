@@ -100,8 +100,10 @@ def test_drawn_profile_is_depth_profile_random_between_uniforms():
     from machining_envs.core.workpieces import DepthProfile, cut_ranges, drawn_profile
 
     for seed in range(300):
-        for before, after, segments, seg_mm in ((1, 5, (2, 5), (4.0, 12.0)),
-                                                (0, 6, (2, 6), (5.0, 12.0))):  # fmt: skip
+        for before, after, segments, seg_mm in (
+            (1, 5, (2, 5), (4.0, 12.0)),
+            (0, 6, (2, 6), (5.0, 12.0)),
+        ):
             a, b = np.random.default_rng(seed), np.random.default_rng(seed)
             g = split_rng(a, "train")
             want_b = g.random(before)

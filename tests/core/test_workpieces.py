@@ -77,10 +77,12 @@ def test_random_profiles_draw_the_numbers_of_their_description(ranges):
     what they are)."""
     (lo, hi), segments, (s_lo, s_hi), taper_p, jump = ranges
     for seed in range(400):
-        p = DepthProfile.random(np.random.default_rng(seed), (lo, hi), segments, (s_lo, s_hi),
-                                taper_p, jump)  # fmt: skip
-        ref = _reference_random(np.random.default_rng(seed), lo, hi, segments, s_lo, s_hi,
-                                taper_p, jump)  # fmt: skip
+        p = DepthProfile.random(
+            np.random.default_rng(seed), (lo, hi), segments, (s_lo, s_hi), taper_p, jump
+        )
+        ref = _reference_random(
+            np.random.default_rng(seed), lo, hi, segments, s_lo, s_hi, taper_p, jump
+        )
         assert (p.edges_mm, p.start_depths_mm, p.end_depths_mm) == ref
 
 

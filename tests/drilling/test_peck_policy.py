@@ -63,9 +63,14 @@ def test_a_zero_residual_is_the_peck_cycle_step_for_step():
     from agents.rl.residual import SetpointResidual
 
     env = SetpointResidual(
-        gym.make(DRILLING_ID, control="feed"), BASE, params=PARAMS, knob="peck_diameters",
-        span=1.0, lo=0.1, hi=5.0,
-    )  # fmt: skip
+        gym.make(DRILLING_ID, control="feed"),
+        BASE,
+        params=PARAMS,
+        knob="peck_diameters",
+        span=1.0,
+        lo=0.1,
+        hi=5.0,
+    )
     plain = gym.make(DRILLING_ID, control="feed")
     agent = PeckDrilling.from_env(plain, **PARAMS)
     o, _ = env.reset(seed=5)
@@ -112,14 +117,37 @@ def test_a_pecking_policy_trains_and_replays_over_the_peck_cycle(tmp_path):
     from agents.rl.config import CONFIG_DIR
     from agents.rl.residual import ResidualAgent
 
-    wrapper = [{"agents.rl.residual.SetpointResidual": {
-        "base": BASE, "params": PARAMS, "knob": "peck_diameters", "span": 1.0, "lo": 0.1,
-        "hi": 5.0}}]  # fmt: skip
-    cb = [{"agents.rl.callbacks.ValidationCallback": {
-        "eval_freq": 1024, "n_episodes": 2, "scenarios": ["validation"]}}]  # fmt: skip
-    out = train(DRILLING_ID, "ppo", tmp_path / "run", config_path=CONFIG_DIR / "ppo_peck.yml",
-                n_timesteps=2048, progress_bar=False, verbose=False,
-                overrides={"env_wrapper": wrapper, "callback": cb, "n_envs": 2})  # fmt: skip
+    wrapper = [
+        {
+            "agents.rl.residual.SetpointResidual": {
+                "base": BASE,
+                "params": PARAMS,
+                "knob": "peck_diameters",
+                "span": 1.0,
+                "lo": 0.1,
+                "hi": 5.0,
+            }
+        }
+    ]
+    cb = [
+        {
+            "agents.rl.callbacks.ValidationCallback": {
+                "eval_freq": 1024,
+                "n_episodes": 2,
+                "scenarios": ["validation"],
+            }
+        }
+    ]
+    out = train(
+        DRILLING_ID,
+        "ppo",
+        tmp_path / "run",
+        config_path=CONFIG_DIR / "ppo_peck.yml",
+        n_timesteps=2048,
+        progress_bar=False,
+        verbose=False,
+        overrides={"env_wrapper": wrapper, "callback": cb, "n_envs": 2},
+    )
     agent = load_policy(out / "best_model.zip")
     assert isinstance(agent, ResidualAgent) and agent.base.name.startswith("peck")
     rows = (out / "eval.csv").read_text().splitlines()

@@ -12,8 +12,17 @@ from machining_envs.drilling.plant import DrillingParams
 from machining_envs.drilling.scenarios import DrillingScenario
 from tests.helpers import DRILLING, held_out_draws, run_cut
 
-KEYS = ("torque_Nmm", "spindle_hz", "chip_ratio", "depth_mm", "feed_velocity_mm_s",
-        "engagement", "voltage_V", "torque_limit_Nmm", "cost")  # fmt: skip
+KEYS = (
+    "torque_Nmm",
+    "spindle_hz",
+    "chip_ratio",
+    "depth_mm",
+    "feed_velocity_mm_s",
+    "engagement",
+    "voltage_V",
+    "torque_limit_Nmm",
+    "cost",
+)
 
 
 def _hole(wear, **kw):

@@ -45,9 +45,18 @@ SHARED_INFO_KEYS = frozenset(
 )
 #: Keys of the envs that regulate a cut (turning, milling, drilling): the measurement and the cut.
 _CUT_KEYS = frozenset(
-    {"measured", "feed_mm_per_rev", "depth_mm", "spindle_rpm", "position_mm", "finished", "segment",
-     "cost", "score_bound"}
-)  # fmt: skip
+    {
+        "measured",
+        "feed_mm_per_rev",
+        "depth_mm",
+        "spindle_rpm",
+        "position_mm",
+        "finished",
+        "segment",
+        "cost",
+        "score_bound",
+    }
+)
 
 
 @dataclass(frozen=True)

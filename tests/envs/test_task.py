@@ -34,8 +34,11 @@ FEED = "machining_envs/ContouringFeed-v0"
 def _turning_speed(env, sc, truth, a):
     """Feed velocity at the force limit (eq. 8 inverted), capped at the servo's top."""
     f = truth.feed_for_force(sc.force_limit_N, np.maximum(a, 1e-300))
-    return np.where(a > 0, np.minimum(truth.max_feed_velocity_mm_s, f * sc.spindle_rpm / 60.0),
-                    truth.max_feed_velocity_mm_s)  # fmt: skip
+    return np.where(
+        a > 0,
+        np.minimum(truth.max_feed_velocity_mm_s, f * sc.spindle_rpm / 60.0),
+        truth.max_feed_velocity_mm_s,
+    )
 
 
 def _milling_speed(env, sc, truth, a):
@@ -50,10 +53,19 @@ def _milling_speed(env, sc, truth, a):
 
 #: env id -> (limit info key, signal info key, agent classes, speed at the limit, time key)
 CASES = {
-    TURNING: ("force_limit_N", "force_N", (ConstantFeed, FixedGainPI, VariableGainPI), _turning_speed),
-    MILLING: ("torque_limit_Nmm", "torque_Nmm", (MillingConstantFeed, FixedGainIntegral, IntegralACC),
-              _milling_speed),
-}  # fmt: skip
+    TURNING: (
+        "force_limit_N",
+        "force_N",
+        (ConstantFeed, FixedGainPI, VariableGainPI),
+        _turning_speed,
+    ),
+    MILLING: (
+        "torque_limit_Nmm",
+        "torque_Nmm",
+        (MillingConstantFeed, FixedGainIntegral, IntegralACC),
+        _milling_speed,
+    ),
+}
 
 
 def _flat_turning():
@@ -136,8 +148,9 @@ def test_counting_episodes_never_beat_the_bound(env_id, cls):
     env = gym.make(env_id)
     score = env.unwrapped.task.score
     for setpoint in (1.0, 0.8):
-        ev = evaluate(lambda e, s=setpoint: cls.from_env(e, setpoint=s), env_id, ["validation"], 12,
-                      seed=5000)  # fmt: skip
+        ev = evaluate(
+            lambda e, s=setpoint: cls.from_env(e, setpoint=s), env_id, ["validation"], 12, seed=5000
+        )
         for r in ev.rows:
             if score.counts(r):
                 # (to rounding: a constant-feed hole takes its floor exactly)
@@ -166,8 +179,9 @@ def test_the_set_point_is_a_share_of_the_observed_limit(env_id, cls):
     flat cut whose limit is not the nominal one."""
     limit_key, signal_key = CASES[env_id][:2]
     sc = FLAT[env_id]()
-    ev = evaluate(lambda e: cls.from_env(e, setpoint=0.8), env_id, [sc], 1, seed=0,
-                  keep_trajectories=True)  # fmt: skip
+    ev = evaluate(
+        lambda e: cls.from_env(e, setpoint=0.8), env_id, [sc], 1, seed=0, keep_trajectories=True
+    )
     tr = ev.trajectories[0]
     late = tr[signal_key][len(tr[signal_key]) // 2 : -2]
     assert np.median(late) == pytest.approx(0.8 * tr[limit_key][0], rel=0.03)

@@ -359,9 +359,13 @@ def test_an_autoreset_that_raises_leaves_the_batch_to_reset(mode):
     ``ood`` force limit above a 1 kN breakage force): the step raises naming it, and the
     batch, with that lane half-started, steps no further until reset()."""
     env = make_vec(
-        "machining_envs/Turning-v0", num_envs=1, scenario="ood", breakage_force_N=1000.0,
-        max_episode_time_s=0.3, autoreset_mode=mode,
-    )  # fmt: skip
+        "machining_envs/Turning-v0",
+        num_envs=1,
+        scenario="ood",
+        breakage_force_N=1000.0,
+        max_episode_time_s=0.3,
+        autoreset_mode=mode,
+    )
     env.reset(seed=1)  # its first limit is below 1 kN
     action = np.zeros((1, 1), dtype=np.float32)
     with pytest.raises(ValueError, match="^lane 0: .*force_limit_N .* below the tool's breakage"):

@@ -267,9 +267,10 @@ def _run_episode(env_id: str, kwargs: dict, factory, scenario: str, seed: int) -
         "truncated": np.array(trunc_l, dtype=np.int8),
     }
     keys = sorted(
-        k for k, v in info_l[-1].items()
+        k
+        for k, v in info_l[-1].items()
         if isinstance(v, (bool, int, float, np.number)) and k not in DERIVED_INFO
-    )  # fmt: skip
+    )
     for k in keys:
         out["info/" + k] = np.array([r.get(k, math.nan) for r in info_l], dtype=np.float64)
     return out

@@ -96,9 +96,12 @@ def case_scale(key: str, golden: dict) -> float:
 
 
 def assert_close_to_scale(
-    key: str, actual: np.ndarray, desired: np.ndarray, least_scale: float = 0.0,
+    key: str,
+    actual: np.ndarray,
+    desired: np.ndarray,
+    least_scale: float = 0.0,
     rtol: float | None = None,
-) -> None:  # fmt: skip
+) -> None:
     """``actual`` equals ``desired`` where it is not finite, and elsewhere within 1e-9 of
     each column's scale (float32: one float32 step at that scale), plus 1e-12; a column's
     scale is the largest magnitude of its recorded values, or ``least_scale`` if larger.

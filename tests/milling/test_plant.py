@@ -227,8 +227,16 @@ def test_a_lane_of_a_batch_is_the_one_lane_plant():
         lanes.step(u, noise)
         for k, plant in enumerate(plants):
             s = plant.step(float(u[k]), float(noise[k]))
-            row = (s.torque_Nmm, s.peak_torque_Nmm, s.measured_counts, s.feed_velocity_mm_s,
-                   s.feed_mm_per_rev, s.mean_feed_mm_per_rev, s.position_mm, s.depth_mm)  # fmt: skip
+            row = (
+                s.torque_Nmm,
+                s.peak_torque_Nmm,
+                s.measured_counts,
+                s.feed_velocity_mm_s,
+                s.feed_mm_per_rev,
+                s.mean_feed_mm_per_rev,
+                s.position_mm,
+                s.depth_mm,
+            )
             assert np.array(row).tobytes() == lanes.out[k].tobytes()
             assert s.segment == lanes.out_segment[k]
             fin = lanes.out_finish[k]

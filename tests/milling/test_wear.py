@@ -40,8 +40,7 @@ def test_a_fixed_feed_sees_the_torque_grow_as_the_law_says(wear):
 
 def test_a_sharp_tool_is_bit_for_bit_the_papers_plant():
     sharp, _ = _run(-0.3, _cut(0.0), steps=200)
-    plain = MillingScenario("plain", DepthProfile.steps((2.0,), 60.0, name="2 mm"),
-                            noise_scale=0.0)  # fmt: skip
+    plain = MillingScenario("plain", DepthProfile.steps((2.0,), 60.0, name="2 mm"), noise_scale=0.0)
     rows, _ = _run(-0.3, plain, steps=200)
     np.testing.assert_array_equal(sharp, rows)
 

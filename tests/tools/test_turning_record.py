@@ -31,8 +31,15 @@ def _record(params, scenario, seed=1):
     while True:
         a = LEVELS[(k // 15) % len(LEVELS)]
         obs, _, terminated, truncated, info = env.step(np.array([a]))
-        rows.append((k * p.sample_time_s, (a + 1) / 2 * p.command_max,
-                     obs[0] * p.force_scale_N, scenario.spindle_rpm, info["depth_mm"]))  # fmt: skip
+        rows.append(
+            (
+                k * p.sample_time_s,
+                (a + 1) / 2 * p.command_max,
+                obs[0] * p.force_scale_N,
+                scenario.spindle_rpm,
+                info["depth_mm"],
+            )
+        )
         k += 1
         if terminated or truncated:
             return rows

@@ -36,8 +36,9 @@ def test_a_fixed_feed_sees_the_force_grow_as_the_law_says(wear):
 
 def test_a_sharp_tool_is_bit_for_bit_the_papers_plant():
     sharp, _ = _run(-0.5, _cut(0.0))
-    plain = TurningScenario("plain", DepthProfile.steps((1.5,), 60.0, name="1.5 mm"), 405.0,
-                            1000.0, noise_scale=0.0)  # fmt: skip
+    plain = TurningScenario(
+        "plain", DepthProfile.steps((1.5,), 60.0, name="1.5 mm"), 405.0, 1000.0, noise_scale=0.0
+    )
     rows, _ = _run(-0.5, plain)
     np.testing.assert_array_equal(sharp, rows)
 
