@@ -340,7 +340,7 @@ PROCESS = Process(
             ("paper_circle", "paper_involute"),
             "paper_circle",
             tuned=(PIPosition, HInf2DOF),
-            learned=("contouring_ppo", "contouring_ppo_residual"),
+            learned=("contouring_ppo_residual",),
             rows_seconds=500.0,
             table_metrics=(
                 "max_contour_error_mm",
@@ -365,7 +365,7 @@ PROCESS = Process(
             tuned=(ConstantOverride, LookAheadFeed),
             machine_tuned=(ConstantOverride, LookAheadFeed, ContourAFC),
             machine_reference=ConstantOverride,
-            learned=("contouring_feed_ppo", "contouring_feed_ppo_residual"),
+            learned=("contouring_feed_ppo_residual",),
             extra_splits=("shopfloor",),
             table_metrics=(
                 "cycle_time_s",

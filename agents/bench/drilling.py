@@ -353,7 +353,7 @@ PROCESS = Process(
             # The peck cycles drill with control="feed" (their ENV_KWARGS) on the same
             # episodes, scored by the same task: agents.bench.run's tuned rows.
             tuned=(NoControl, PD, SlidingMode, PeckDrilling, TorquePeck),
-            learned=("micro_drilling_ppo", "micro_drilling_ppo_peck"),
+            learned=("micro_drilling_ppo_peck",),
             extra_splits=("wear",),
             robustness=Robustness(
                 "cutting constant (x nominal)",

@@ -24,7 +24,14 @@ A run folder holds everything needed to reload or continue it::
 """
 
 from agents.rl.config import ALGOS, CONFIG_DIR, ConfigError, TrainConfig, load_config
-from agents.rl.policy import PRETRAINED_DIR, PolicyAgent, load_policy, pretrained, pretrained_seeds
+from agents.rl.policy import (
+    GATE_FAILED,
+    PRETRAINED_DIR,
+    PolicyAgent,
+    load_policy,
+    pretrained,
+    pretrained_seeds,
+)
 from agents.rl.train import FAILED_EPISODE_TIME_S, evaluate_policy_file, primary_score, train
 
 __all__ = [
@@ -42,4 +49,5 @@ __all__ = [
     "pretrained",
     "pretrained_seeds",
     "PRETRAINED_DIR",
+    "GATE_FAILED",
 ]

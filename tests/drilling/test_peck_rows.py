@@ -56,7 +56,7 @@ def test_the_peck_rows_run_on_the_feed_env_the_others_on_the_spec_s():
     assert by_cls[TorquePeck].env_kwargs == FEED
     assert by_cls[NoControl].env_kwargs is None and by_cls[SlidingMode].env_kwargs is None
     learned = [j for j in jobs if j.kind == "learned"]
-    assert [j.env_kwargs for j in learned] == [None, FEED]  # micro_drilling_ppo, then peck
+    assert [j.env_kwargs for j in learned] == [FEED]  # the peck policy
     env = gym.make(spec.env_id, **{**spec.env_kwargs, **by_cls[PeckDrilling].env_kwargs})
     assert by_cls[PeckDrilling].factory(env).name.endswith("(tuned)")
 
