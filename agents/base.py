@@ -9,6 +9,9 @@ reset before acting. Observations may be one env's ``(obs_dim,)`` or a batch
 
 from __future__ import annotations
 
+import inspect
+from dataclasses import dataclass
+
 import numpy as np
 
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
@@ -17,6 +20,9 @@ __all__ = [
     "Agent",
     "ProcessController",
     "SETPOINT_SEARCH",
+    "SETPOINT",
+    "Setting",
+    "tunable",
     "unwrap",
     "unwrap_as",
     "check_setting",
@@ -31,6 +37,49 @@ __all__ = [
 #: observed limit, in every ``TUNABLE``: the papers regulate at the limit (1.0); tuning may
 #: keep a margin below it, down to half.
 SETPOINT_SEARCH = (0.5, 1.0, False)
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One keyword setting of a controller: its default, the values it accepts and, for a
+    free parameter, the range tuning searches.
+
+    A controller lists its settings in ``SETTINGS`` (name -> ``Setting``, in the order of
+    its constructor's arguments after the design input); :meth:`Agent.configure` checks
+    them and keeps each as an attribute of the same name, and those with a ``search``
+    range are the class's ``TUNABLE`` (:func:`tunable`).
+    """
+
+    default: object
+    """The value when none is given (``None``: the controller works one out)."""
+    hi: float | None = 1e9
+    """The largest value accepted; ``None``: the controller checks the value itself (a
+    range that depends on the machine). ``None`` is accepted where it is the default."""
+    lo: float = 0.0
+    """The smallest value accepted (excluded while ``lo_open``)."""
+    lo_open: bool = True
+    """Accept ``(lo, hi]`` rather than ``[lo, hi]``."""
+    search: tuple[float, float, bool] | None = None
+    """The range tuning searches, ``(low, high, log scale)``; ``None``: not tuned."""
+
+    def check(self, name: str, value, types: tuple[type, ...] | None = None):
+        """``value`` checked by :func:`check_setting` (as a float), or as given where the
+        range is the controller's own or ``value`` is a ``None`` default."""
+        if self.hi is None or (value is None and self.default is None):
+            return value
+        kind = {} if types is None else {"types": types}
+        return check_setting(name, value, self.lo, self.hi, lo_open=self.lo_open, **kind)
+
+
+#: A regulator's ``setpoint``: its share of the observed limit, in (0, 1.5], 1.0 (the
+#: papers' choice) by default, searched over :data:`SETPOINT_SEARCH`.
+SETPOINT = Setting(1.0, hi=1.5, search=SETPOINT_SEARCH)
+
+
+def tunable(settings: dict[str, Setting]) -> dict[str, tuple[float, float, bool]]:
+    """The free parameters of ``settings`` and their search ranges, in order: a class's
+    ``TUNABLE``."""
+    return {name: s.search for name, s in settings.items() if s.search is not None}
 
 
 def observation_field(index: int, obs_index: dict | None) -> str:
@@ -146,6 +195,49 @@ class Agent:
     obs_dim: int | None = None
     #: The env's ``OBS_INDEX`` (field name -> first index), for error messages.
     obs_index: dict | None = None
+    #: The keyword settings (:class:`Setting`) that :meth:`configure` checks and keeps.
+    SETTINGS: dict[str, Setting] = {}
+    #: The free parameters and their search ranges (low, high, log scale) for tuning
+    #: (``agents.bench.tune``); by default those of the class's own ``SETTINGS``.
+    TUNABLE: dict[str, tuple[float, float, bool]] = {}
+    #: What counts as a number in a setting (``None``: any real number; a process's
+    #: controllers may take Python numbers only, ``PY_NUMBER_TYPES``).
+    setting_types: tuple[type, ...] | None = None
+    _settings_signature = inspect.Signature([])
+
+    def __init_subclass__(cls, **kwargs):
+        """A class that lists its own ``SETTINGS`` gets the signature they make (its
+        ``__init__``'s named arguments, then the settings with their defaults) and, unless it
+        declares one, the ``TUNABLE`` they make."""
+        super().__init_subclass__(**kwargs)
+        if "SETTINGS" not in cls.__dict__:
+            return
+        if "TUNABLE" not in cls.__dict__:
+            cls.TUNABLE = tunable(cls.SETTINGS)
+        kind = inspect.Parameter.POSITIONAL_OR_KEYWORD
+        cls._settings_signature = inspect.Signature(
+            [inspect.Parameter(k, kind, default=s.default) for k, s in cls.SETTINGS.items()]
+        )
+        named = [
+            p
+            for p in list(inspect.signature(cls.__init__).parameters.values())[1:]
+            if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)
+        ]
+        cls.__signature__ = inspect.Signature(
+            named + list(cls._settings_signature.parameters.values())
+        )
+
+    def configure(self, args: tuple, kwargs: dict) -> None:
+        """Binds the constructor's further ``args`` and ``kwargs`` to ``SETTINGS`` (in order,
+        then by name; ``TypeError`` as for a call), checks each (``ValueError`` naming it
+        and its range) and keeps it as an attribute of its name."""
+        try:
+            given = self._settings_signature.bind(*args, **kwargs).arguments
+        except TypeError as e:
+            raise TypeError(f"{type(self).__name__}(): {e}") from None
+        for name, setting in self.SETTINGS.items():
+            value = given.get(name, setting.default)
+            setattr(self, name, setting.check(name, value, self.setting_types))
 
     def initial_state(self, n: int, obs: np.ndarray) -> np.ndarray:
         """State of ``n`` fresh episodes whose first observations are ``obs`` (n, obs_dim)."""
@@ -258,6 +350,16 @@ class ProcessController(Agent):
     """
 
     io_type: type
+
+    def __init__(self, io, *args, **kwargs):
+        """``io``, an ``io_type``; then the class's ``SETTINGS`` by position or name
+        (:meth:`configure`), and :meth:`_setup`."""
+        self.io = io
+        self.configure(args, kwargs)
+        self._setup()
+
+    def _setup(self) -> None:
+        """What the controller works out once its settings are kept (its ``name``, ...)."""
 
     @classmethod
     def from_env(cls, env, *args, **kwargs):

@@ -17,7 +17,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.base import SETPOINT_SEARCH, ProcessController, check_positive, unwrap_as
+from agents.base import (
+    SETPOINT,
+    SETPOINT_SEARCH,
+    ProcessController,
+    Setting,
+    check_positive,
+    unwrap_as,
+)
 from machining_envs.core.actions import ActionMap
 from machining_envs.milling.env import EndMillingEnv
 from machining_envs.milling.plant import SPINDLE_RPM_RANGE, MillingParams
@@ -113,14 +120,11 @@ class FixedGainIntegral(_MillingController):
     """
 
     state_size = 1  # [W]
-    #: Free parameters and their search ranges (low, high, log scale) for tuning.
-    TUNABLE = {"kc": (0.02, 2.0, True), "setpoint": SETPOINT_SEARCH}
+    #: The settings after ``io``: default, accepted range, search range (``TUNABLE``).
+    SETTINGS = {"kc": Setting(0.2, hi=1e6, search=(0.02, 2.0, True)), "setpoint": SETPOINT}
 
-    def __init__(self, io: MillingIO, kc: float = 0.2, setpoint: float = 1.0):
-        self.io = io
-        self.kc = check_positive("kc", kc, 1e6)
-        self.setpoint = check_positive("setpoint", setpoint, 1.5)
-        self.name = f"fixed integral Kc={kc:.3g}"
+    def _setup(self):
+        self.name = f"fixed integral Kc={self.kc:.3g}"
 
     def _act(self, obs, state):
         tc, tr = self.io.torque_counts(obs, self.setpoint)
@@ -271,30 +275,24 @@ class MillingConstantFeed(_MillingController):
     """
 
     state_size = 0
-    #: Free parameters and their search ranges (low, high, log scale) for tuning.
-    TUNABLE = {"design_depth_mm": (0.5, 4.0, False), "setpoint": SETPOINT_SEARCH}
+    #: The settings after ``io``: default, accepted range, search range (``TUNABLE``).
+    SETTINGS = {
+        "feed_mm_per_min": Setting(None, hi=1e5),
+        "design_depth_mm": Setting(3.0, hi=100.0, search=(0.5, 4.0, False)),
+        "setpoint": SETPOINT,
+    }
 
-    def __init__(
-        self,
-        io: MillingIO,
-        feed_mm_per_min: float | None = None,
-        design_depth_mm: float = 3.0,
-        setpoint: float = 1.0,
-    ):
-        self.io = io
-        self.design_depth_mm = check_positive("design_depth_mm", design_depth_mm, 100.0)
-        self.setpoint = check_positive("setpoint", setpoint, 1.5)
-        if feed_mm_per_min is None:
-            self.feed_mm_per_min = None
+    def _setup(self):
+        io = self.io
+        if self.feed_mm_per_min is None:
             self.command = None
-            self.name = f"constant feed, designed for {design_depth_mm:.2g} mm"
+            self.name = f"constant feed, designed for {self.design_depth_mm:.2g} mm"
             return
-        self.feed_mm_per_min = check_positive("feed_mm_per_min", feed_mm_per_min, 1e5)
         self.command = self.feed_mm_per_min / 60.0 / io.params.servo_gain
         if self.command > io.command_max:
             raise ValueError(
                 f"feed_mm_per_min must be at most {60.0 * io.params.max_feed_velocity_mm_s:g} "
-                f"(the servo's top feed), got {feed_mm_per_min!r}"
+                f"(the servo's top feed), got {self.feed_mm_per_min!r}"
             )
         self.name = f"constant feed {self.feed_mm_per_min:.3g} mm/min"
 

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.base import SETPOINT_SEARCH, ProcessController, check_positive_number, unwrap_as
+from agents.base import SETPOINT, ProcessController, Setting, unwrap_as
+from machining_envs.core.checks import PY_NUMBER_TYPES, check_integer, check_range
 from machining_envs.turning.env import TurningEnv
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams, unit_plant_coefficients
 
@@ -82,6 +83,7 @@ class _TurningController(ProcessController):
     obs_dim = 7
     obs_index = _I
     io_type = TurningIO
+    setting_types = PY_NUMBER_TYPES
 
 
 class FixedGainPI(_TurningController):
@@ -106,19 +108,15 @@ class FixedGainPI(_TurningController):
     """
 
     state_size = 2  # [U_{k-1} (counts), E_{k-1} (counts)]
-    #: Free parameters and their search ranges (low, high, log scale) for tuning.
-    TUNABLE = {
-        "kh": (0.002, 0.1, True),
-        "kgh": (1.05, 5.0, True),
-        "setpoint": SETPOINT_SEARCH,
+    #: The settings after ``io``: default, accepted range, search range (``TUNABLE``).
+    SETTINGS = {
+        "kh": Setting(0.02, search=(0.002, 0.1, True)),
+        "kgh": Setting(1.9, hi=100.0, search=(1.05, 5.0, True)),
+        "setpoint": SETPOINT,
     }
 
-    def __init__(self, io: TurningIO, kh: float = 0.02, kgh: float = 1.9, setpoint: float = 1.0):
-        self.io = io
-        self.kh = check_positive_number("kh", kh)
-        self.kgh = check_positive_number("kgh", kgh, 100.0)
-        self.setpoint = check_positive_number("setpoint", setpoint, 1.5)
-        self.name = f"fixed PI Kh={kh:.3g}"
+    def _setup(self):
+        self.name = f"fixed PI Kh={self.kh:.3g}"
 
     def _act(self, obs, state):
         fm, fr = self.io.force_counts(obs, self.setpoint)
@@ -142,25 +140,18 @@ class ConstantFeed(_TurningController):
     """
 
     state_size = 0
-    #: Free parameters and their search ranges (low, high, log scale) for tuning.
-    TUNABLE = {"design_depth_mm": (0.5, 6.0, False), "setpoint": SETPOINT_SEARCH}
+    #: The settings after ``io``: default, accepted range, search range (``TUNABLE``).
+    SETTINGS = {
+        "feed_mm_per_rev": Setting(None, hi=10.0),
+        "design_depth_mm": Setting(3.0, hi=10.0, search=(0.5, 6.0, False)),
+        "setpoint": SETPOINT,
+    }
 
-    def __init__(
-        self,
-        io: TurningIO,
-        feed_mm_per_rev: float | None = None,
-        design_depth_mm: float = 3.0,
-        setpoint: float = 1.0,
-    ):
-        self.io = io
-        self.design_depth_mm = check_positive_number("design_depth_mm", design_depth_mm, 10.0)
-        self.setpoint = check_positive_number("setpoint", setpoint, 1.5)
-        if feed_mm_per_rev is not None:
-            self.feed_mm_per_rev = check_positive_number("feed_mm_per_rev", feed_mm_per_rev, 10.0)
-            self.name = f"constant feed {feed_mm_per_rev:.3f} mm/rev"
+    def _setup(self):
+        if self.feed_mm_per_rev is not None:
+            self.name = f"constant feed {self.feed_mm_per_rev:.3f} mm/rev"
         else:
-            self.feed_mm_per_rev = None
-            self.name = f"constant feed, designed for {design_depth_mm:.2g} mm"
+            self.name = f"constant feed, designed for {self.design_depth_mm:.2g} mm"
 
     def _act(self, obs, state):
         p = self.io.params
@@ -203,38 +194,21 @@ class VariableGainPI(_TurningController):
         Force regulated at, as a share of the observed limit (paper: 1.0), in (0, 1.5].
     """
 
-    #: Free parameters and their search ranges (low, high, log scale) for tuning.
-    TUNABLE = {
-        "k": (0.05, 0.8, True),
-        "kgh": (1.05, 5.0, True),
-        "setpoint": SETPOINT_SEARCH,
+    #: The settings after ``io``: default, accepted range, search range (``TUNABLE``).
+    SETTINGS = {
+        "k": Setting(0.5, hi=100.0, search=(0.05, 0.8, True)),
+        "kgh": FixedGainPI.SETTINGS["kgh"],
+        "design_depth_mm": Setting(2.0, hi=10.0),
+        "min_command_fraction": Setting(0.01, hi=1.0),
+        "min_force_fraction": Setting(0.05, hi=1.0),
+        "setpoint": SETPOINT,
     }
     # [E_{k-1}, Kp_hat, U_{k-1..k-3}, U_hat_{k-1..k-3}, b1..b3, a1..a3]
     state_size = 14
 
-    def __init__(
-        self,
-        io: TurningIO,
-        k: float = 0.5,
-        kgh: float = 1.9,
-        design_depth_mm: float = 2.0,
-        min_command_fraction: float = 0.01,
-        min_force_fraction: float = 0.05,
-        setpoint: float = 1.0,
-    ):
-        self.io = io
-        self.setpoint = check_positive_number("setpoint", setpoint, 1.5)
-        self.k = check_positive_number("k", k, 100.0)
-        self.kgh = check_positive_number("kgh", kgh, 100.0)
-        self.design_depth_mm = check_positive_number("design_depth_mm", design_depth_mm, 10.0)
-        self.min_command = (
-            check_positive_number("min_command_fraction", min_command_fraction, 1.0)
-            * io.command_max
-        )
-        self.min_force_fraction = check_positive_number(
-            "min_force_fraction", min_force_fraction, 1.0
-        )
-        self.name = f"adaptive PI K={k:.3g}"
+    def _setup(self):
+        self.min_command = self.min_command_fraction * self.io.command_max
+        self.name = f"adaptive PI K={self.k:.3g}"
 
     @classmethod
     def from_env(
@@ -367,26 +341,21 @@ class DelayAwarePI(VariableGainPI):
         As for :class:`VariableGainPI`.
     """
 
-    #: The phase margin instead of VariableGainPI's K, the rest as VariableGainPI's.
-    TUNABLE = {
-        "phase_margin_deg": (20.0, 80.0, False),
-        **{k: v for k, v in VariableGainPI.TUNABLE.items() if k != "k"},
+    #: The settings after ``io``: the delay and phase margin designed for (checked below)
+    #: instead of VariableGainPI's K, the rest as VariableGainPI's.
+    SETTINGS = {
+        "delay_steps": Setting(2, hi=None),
+        "phase_margin_deg": Setting(45.0, hi=None, search=(20.0, 80.0, False)),
+        "kgh": VariableGainPI.SETTINGS["kgh"],
+        "setpoint": SETPOINT,
+        **{k: v for k, v in VariableGainPI.SETTINGS.items() if k not in ("k", "kgh", "setpoint")},
     }
 
-    def __init__(
-        self,
-        io: TurningIO,
-        delay_steps: int = 2,
-        phase_margin_deg: float = 45.0,
-        kgh: float = 1.9,
-        setpoint: float = 1.0,
-        **kwargs,
-    ):
-        from machining_envs.core.checks import check_integer, check_range
-
-        super().__init__(io, 0.5, kgh, setpoint=setpoint, **kwargs)
-        self.delay_steps = check_integer("delay_steps", delay_steps, 0, 50)
-        self.phase_margin_deg = check_range("phase_margin_deg", phase_margin_deg, 10.0, 89.0)
+    def _setup(self):
+        self.k = VariableGainPI.SETTINGS["k"].default  # (unused: K is designed per episode)
+        super()._setup()
+        self.delay_steps = check_integer("delay_steps", self.delay_steps, 0, 50)
+        self.phase_margin_deg = check_range("phase_margin_deg", self.phase_margin_deg, 10.0, 89.0)
         self.name = f"delay-aware PI PM={self.phase_margin_deg:.0f}°, delay {self.delay_steps}"
         # [adaptive PI's state, K of the episode]
         self.state_size = VariableGainPI.state_size + 1
