@@ -80,7 +80,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.base import SETPOINT_SEARCH, ProcessController, check_setting, unwrap_as
+from agents.base import SETPOINT, ProcessController, Setting, check_setting, unwrap_as
 from agents.base import check_positive_number as _positive
 from machining_envs.core.checks import PY_NUMBER_TYPES
 from machining_envs.core.lti import zoh
@@ -179,6 +179,14 @@ class _DrillingController(ProcessController):
     obs_dim = _OBS_DIM
     obs_index = _I
     io_type = DrillingIO
+    setting_types = PY_NUMBER_TYPES
+
+    def _voltage_floor(self) -> float:
+        """``min_voltage`` (a setting) checked against the machine's range; the nominal
+        voltage where it is None."""
+        p = self.io.params
+        lo = p.nominal_voltage if self.min_voltage is None else self.min_voltage
+        return _in_range("min_voltage", lo, 0.0, p.voltage_max)
 
 
 class NoControl(_DrillingController):
@@ -253,36 +261,24 @@ class PD(_DrillingController):
     """
 
     state_size = 2  # [filtered error e^f_{k-1} (N·mm), started (0/1)]
-    #: Free parameters and their search ranges (low, high, log scale) for tuning.
-    TUNABLE = {
-        "loop_gain": (0.3, 30.0, True),
-        "derivative_time_s": (0.002, 0.2, True),
-        "setpoint": SETPOINT_SEARCH,
+    #: The settings after ``io``: default, accepted range, search range (``TUNABLE``).
+    SETTINGS = {
+        "loop_gain": Setting(3.0, hi=1e3, search=(0.3, 30.0, True)),
+        "derivative_time_s": Setting(0.02, hi=10.0, lo_open=False, search=(0.002, 0.2, True)),
+        "derivative_filter": Setting(5.0, hi=1e3),
+        "min_voltage": Setting(None, hi=None),  # (the machine's range: _voltage_floor)
+        "setpoint": SETPOINT,
     }
 
-    def __init__(
-        self,
-        io: DrillingIO,
-        loop_gain: float = 3.0,
-        derivative_time_s: float = 0.02,
-        derivative_filter: float = 5.0,
-        min_voltage: float | None = None,
-        setpoint: float = 1.0,
-    ):
-        io.require("voltage", "PD")
-        self.io = io
-        self.setpoint = _positive("setpoint", setpoint, 1.5)
-        p = io.params
-        self.loop_gain = _positive("loop_gain", loop_gain, 1e3)
-        self.derivative_time_s = _in_range("derivative_time_s", derivative_time_s, 0.0, 10.0)
-        self.derivative_filter = _positive("derivative_filter", derivative_filter, 1e3)
-        lo = p.nominal_voltage if min_voltage is None else min_voltage
-        self.min_voltage = _in_range("min_voltage", lo, 0.0, p.voltage_max)
+    def _setup(self):
+        self.io.require("voltage", "PD")
+        p = self.io.params
+        self.min_voltage = self._voltage_floor()
         self.u0 = p.nominal_voltage
         ts = p.sample_time_s
         tf = self.derivative_time_s / self.derivative_filter
         self._alpha = 1.0 - math.exp(-ts / tf) if tf > 0 else 1.0
-        self.name = f"PD L={loop_gain:.3g}"
+        self.name = f"PD L={self.loop_gain:.3g}"
 
     def initial_state(self, n, obs):
         st = np.zeros((n, self.state_size))
@@ -538,40 +534,25 @@ class SlidingMode(_DrillingController):
         Torque regulated at, as a share of the observed limit (paper: 1.0), in (0, 1.5].
     """
 
-    #: Free parameters and their search ranges (low, high, log scale) for tuning.
-    TUNABLE = {
-        "lam": (2.0, 60.0, True),
-        "epsilon": (0.005, 0.2, True),
-        "setpoint": SETPOINT_SEARCH,
+    #: The settings after ``io``: default, accepted range, search range (``TUNABLE``).
+    SETTINGS = {
+        "lam": Setting(12.0, hi=1e3, search=(2.0, 60.0, True)),
+        "epsilon": Setting(0.03, hi=1.0, search=(0.005, 0.2, True)),
+        "near_rate": Setting(35.0, hi=1e4),
+        "far_ratio": Setting(0.25, hi=1e3),
+        "k4_filter_s": Setting(0.02, hi=10.0, lo_open=False),
+        "min_voltage": PD.SETTINGS["min_voltage"],
+        "engage_fraction": Setting(0.3, hi=1.0, lo_open=False),
+        "setpoint": SETPOINT,
     }
     # [x1_hat, x2_hat, k4_hat, S, e, started, near(0/1), u]
     state_size = 8
     STATE = {"x1": 0, "x2": 1, "k4": 2, "S": 3, "e": 4, "started": 5, "near": 6, "u": 7}
 
-    def __init__(
-        self,
-        io: DrillingIO,
-        lam: float = 12.0,
-        epsilon: float = 0.03,
-        near_rate: float = 35.0,
-        far_ratio: float = 0.25,
-        k4_filter_s: float = 0.02,
-        min_voltage: float | None = None,
-        engage_fraction: float = 0.3,
-        setpoint: float = 1.0,
-    ):
-        io.require("voltage", "SlidingMode")
-        self.io = io
-        self.setpoint = _positive("setpoint", setpoint, 1.5)
-        p = io.params
-        self.lam = _positive("lam", lam, 1e3)
-        self.epsilon = _positive("epsilon", epsilon, 1.0)
-        self.near_rate = _positive("near_rate", near_rate, 1e4)
-        self.far_ratio = _positive("far_ratio", far_ratio, 1e3)
-        self.k4_filter_s = _in_range("k4_filter_s", k4_filter_s, 0.0, 10.0)
-        lo = p.nominal_voltage if min_voltage is None else min_voltage
-        self.min_voltage = _in_range("min_voltage", lo, 0.0, p.voltage_max)
-        self.engage_fraction = _in_range("engage_fraction", engage_fraction, 0.0, 1.0)
+    def _setup(self):
+        self.io.require("voltage", "SlidingMode")
+        p = self.io.params
+        self.min_voltage = self._voltage_floor()
         ts = p.sample_time_s
         a = np.array(
             [
@@ -587,7 +568,7 @@ class SlidingMode(_DrillingController):
         self._phi = phi
         self._gam = gam[:, 0]
         self._alpha = 1.0 - math.exp(-ts / self.k4_filter_s) if self.k4_filter_s > 0 else 1.0
-        self.name = f"sliding mode lambda={lam:.3g}"
+        self.name = f"sliding mode lambda={self.lam:.3g}"
 
     def boundary_layer(self, torque_ref_Nmm):
         """phi, N·mm/s^2, for a reference torque."""
