@@ -76,12 +76,11 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from agents.base import SETPOINT, ProcessController, Setting, check_setting, unwrap_as
-from agents.base import check_positive_number as _positive
 from machining_envs.core.checks import PY_NUMBER_TYPES
 from machining_envs.core.lti import zoh
 from machining_envs.drilling.env import MicroDrillingEnv
@@ -333,34 +332,30 @@ class PeckDrilling(_DrillingController):
 
     # [phase (0 feed, 1 out, 2 back), hole depth where the current peck began (mm), started]
     state_size = 3
-    #: Free parameters and their search ranges (low, high, log scale) for tuning.
-    TUNABLE = {"peck_diameters": (0.25, 5.0, True), "feed_scale": (0.2, 4.0, True)}
+    #: The settings after ``io``: default, accepted range, search range (``TUNABLE``);
+    #: ``hi=None``: the range is the stage's (checked in ``_setup``).
+    SETTINGS = {
+        "peck_diameters": Setting(1.0, hi=100.0, search=(0.25, 5.0, True)),
+        "clearance_mm": Setting(0.1, hi=None),
+        "approach_gap_mm": Setting(0.05, hi=5.0, lo_open=False),
+        "rapid_mm_s": Setting(None, hi=None),
+        "feed_scale": Setting(1.0, hi=None, search=(0.2, 4.0, True)),
+    }
     #: The env keywords the agent needs (it commands the feed): tuning makes its env so.
     ENV_KWARGS = {"control": "feed"}
 
-    def __init__(
-        self,
-        io: DrillingIO,
-        peck_diameters: float = 1.0,
-        clearance_mm: float = 0.1,
-        approach_gap_mm: float = 0.05,
-        rapid_mm_s: float | None = None,
-        feed_scale: float = 1.0,
-    ):
-        io.require("feed", "PeckDrilling")
-        self.io = io
-        p = io.params
-        self.peck_diameters = _positive("peck_diameters", peck_diameters, 100.0)
-        self.clearance_mm = _in_range("clearance_mm", clearance_mm, 0.0, p.retract_limit_mm)
-        self.approach_gap_mm = _in_range("approach_gap_mm", approach_gap_mm, 0.0, 5.0)
-        rapid = p.feed_speed_max_mm_s if rapid_mm_s is None else rapid_mm_s
+    def _setup(self):
+        self.io.require("feed", "PeckDrilling")
+        p = self.io.params
+        self.clearance_mm = _in_range("clearance_mm", self.clearance_mm, 0.0, p.retract_limit_mm)
+        rapid = p.feed_speed_max_mm_s if self.rapid_mm_s is None else self.rapid_mm_s
         self.rapid_mm_s = _in_range("rapid_mm_s", rapid, 1e-3, p.feed_speed_max_mm_s)
         self.feed_mm_s = p.feed_velocity_mm_s
         self.feed_scale = _in_range(
-            "feed_scale", feed_scale, 1e-3, p.feed_speed_max_mm_s / p.feed_velocity_mm_s
+            "feed_scale", self.feed_scale, 1e-3, p.feed_speed_max_mm_s / p.feed_velocity_mm_s
         )
-        self.name = f"peck q={peck_diameters:.3g}D" + (
-            f", {feed_scale:.3g}x feed" if feed_scale != 1.0 else ""
+        self.name = f"peck q={self.peck_diameters:.3g}D" + (
+            f", {self.feed_scale:.3g}x feed" if self.feed_scale != 1.0 else ""
         )
 
     def _act(self, obs, state):
@@ -420,25 +415,24 @@ class TorquePeck(PeckDrilling):
         How deep a peck goes at least before the torque may end it, in drill diameters
         (default 0.25): a retract clears the chips, so a torque still high there is noise,
         and the cycle does not peck on the spot.
-    **kwargs
-        :class:`PeckDrilling`'s ``clearance_mm``, ``approach_gap_mm``, ``rapid_mm_s``.
+    clearance_mm, approach_gap_mm, rapid_mm_s
+        As for :class:`PeckDrilling`.
     """
 
-    TUNABLE = {"torque_share": (0.3, 1.0, False), "feed_scale": (0.2, 4.0, True)}
+    #: The settings after ``io``; the rest as :class:`PeckDrilling`'s.
+    SETTINGS = {
+        "torque_share": Setting(0.8, lo=1e-3, hi=2.0, lo_open=False, search=(0.3, 1.0, False)),
+        "feed_scale": replace(PeckDrilling.SETTINGS["feed_scale"], default=0.7),
+        "peck_diameters": replace(
+            PeckDrilling.SETTINGS["peck_diameters"], default=100.0, search=None
+        ),
+        "min_peck_diameters": Setting(0.25, hi=100.0, lo_open=False),
+        **{k: PeckDrilling.SETTINGS[k] for k in ("clearance_mm", "approach_gap_mm", "rapid_mm_s")},
+    }
 
-    def __init__(
-        self,
-        io: DrillingIO,
-        torque_share: float = 0.8,
-        feed_scale: float = 0.7,
-        peck_diameters: float = 100.0,
-        min_peck_diameters: float = 0.25,
-        **kwargs,
-    ):
-        super().__init__(io, peck_diameters=peck_diameters, feed_scale=feed_scale, **kwargs)
-        self.torque_share = _in_range("torque_share", torque_share, 1e-3, 2.0)
-        self.min_peck_diameters = _in_range("min_peck_diameters", min_peck_diameters, 0.0, 100.0)
-        self.name = f"torque peck at {torque_share:.3g} x limit, {feed_scale:.3g}x feed"
+    def _setup(self):
+        super()._setup()
+        self.name = f"torque peck at {self.torque_share:.3g} x limit, {self.feed_scale:.3g}x feed"
 
     def _peck_now(self, obs, depth, began):
         torque, trigger = self.io.torque(obs, self.torque_share)
