@@ -34,7 +34,7 @@ import gymnasium as gym
 import numpy as np
 from scipy.linalg import block_diag
 
-from agents.base import Agent, check_positive, check_setting, unwrap, unwrap_as
+from agents.base import Agent, Setting, check_positive, tunable, unwrap, unwrap_as
 from machining_envs.contouring.env import ERROR_SCALE_MM, POSITION_SCALE_MM, ContouringEnv
 from machining_envs.contouring.feed_env import (
     DEFAULT_TOLERANCE_MM,
@@ -414,37 +414,27 @@ class LookAheadFeed(Agent):
 
     state_size = 0
     obs_dim = 16
-    #: Free parameters and their search ranges (low, high, log scale) for tuning.
-    TUNABLE = {
-        "centripetal_mm_s2": (10.0, 1e5, True),
-        "tangential_mm_s2": (10.0, 1e5, True),
-        "override_cap": (0.1, 2.0, False),
+    #: The settings after ``override_max``: default, accepted range, search range
+    #: (``TUNABLE``); ``override_cap`` is at most ``override_max``.
+    SETTINGS = {
+        "centripetal_mm_s2": Setting(1000.0, hi=1e7, search=(10.0, 1e5, True)),
+        "tangential_mm_s2": Setting(1000.0, hi=1e7, search=(10.0, 1e5, True)),
+        "override_cap": Setting(1.0, hi=None, search=(0.1, 2.0, False)),
     }
 
-    def __init__(
-        self,
-        override_max: float,
-        centripetal_mm_s2: float = 1000.0,
-        tangential_mm_s2: float = 1000.0,
-        override_cap: float = 1.0,
-    ):
+    def __init__(self, override_max: float, *args, **kwargs):
         self.override_max = check_positive("override_max", override_max, 10.0)
-        self.centripetal_mm_s2 = check_positive("centripetal_mm_s2", centripetal_mm_s2, 1e7)
-        self.tangential_mm_s2 = check_positive("tangential_mm_s2", tangential_mm_s2, 1e7)
-        self.override_cap = check_positive("override_cap", override_cap, self.override_max)
+        self.configure(args, kwargs)
+        self.override_cap = check_positive("override_cap", self.override_cap, self.override_max)
         self._d = np.asarray(LOOKAHEAD_MM, dtype=np.float64)
         self.name = "look-ahead feed"
 
     @classmethod
-    def from_env(
-        cls,
-        env,
-        centripetal_mm_s2: float = 1000.0,
-        tangential_mm_s2: float = 1000.0,
-        override_cap: float = 1.0,
-    ) -> LookAheadFeed:
+    def from_env(cls, env, *args, **kwargs) -> LookAheadFeed:
+        """The planner for a ContouringFeed-v0 env (its override range), with the settings
+        above."""
         base = unwrap_as(env, ContouringFeedEnv, "LookAheadFeed")
-        return cls(base.override_max, centripetal_mm_s2, tangential_mm_s2, override_cap)
+        return cls(base.override_max, *args, **kwargs)
 
     def _act(self, obs, state):
         feed = np.maximum(100.0 * obs[:, 12].astype(np.float64), 1e-9)
@@ -507,44 +497,32 @@ class ContourAFC(Agent):
         Bounds of the factor: ``fmin`` in [0.05, 1], ``fmax`` in [1, 5].
     fent : float
         The factor at the path's start, in [0.05, 1].
-    **planner
-        The planner's ``centripetal_mm_s2``, ``tangential_mm_s2``, ``override_cap``
-        (:class:`LookAheadFeed`).
+    centripetal_mm_s2, tangential_mm_s2, override_cap
+        The planner's (:class:`LookAheadFeed`).
     """
 
     state_size = 1  # the factor k
     obs_dim = 16
-    #: Free parameters and their search ranges (low, high, log scale) for tuning: the
-    #: planner's and the feedback's.
-    TUNABLE = {
-        **LookAheadFeed.TUNABLE,
-        "reference": (0.3, 1.0, False),
-        "gain": (0.01, 1.0, True),
-        "rise": (0.002, 0.5, True),
+    #: The settings after ``override_max``: the feedback's (default, accepted range, search
+    #: range), then the planner's.
+    SETTINGS = {
+        "reference": Setting(0.7, hi=2.0, search=(0.3, 1.0, False)),
+        "gain": Setting(0.2, hi=2.0, search=(0.01, 1.0, True)),
+        "rise": Setting(0.01, hi=1.0, search=(0.002, 0.5, True)),
+        "fmin": Setting(0.2, lo=0.05, hi=1.0, lo_open=False),
+        "fmax": Setting(1.2, lo=1.0, hi=5.0, lo_open=False),
+        "fent": Setting(0.9, lo=0.05, hi=1.0, lo_open=False),
+        **LookAheadFeed.SETTINGS,
     }
+    #: Free parameters and their search ranges for tuning: the planner's, the feedback's.
+    TUNABLE = {**LookAheadFeed.TUNABLE, **tunable(SETTINGS)}
 
-    def __init__(
-        self,
-        override_max: float,
-        reference: float = 0.7,
-        gain: float = 0.2,
-        rise: float = 0.01,
-        fmin: float = 0.2,
-        fmax: float = 1.2,
-        fent: float = 0.9,
-        **planner,
-    ):
+    def __init__(self, override_max: float, *args, **kwargs):
+        self.configure(args, kwargs)
+        planner = {k: getattr(self, k) for k in LookAheadFeed.SETTINGS}
         self.planner = LookAheadFeed(override_max, **planner)
         self.override_max = self.planner.override_max
-        self.centripetal_mm_s2 = self.planner.centripetal_mm_s2
-        self.tangential_mm_s2 = self.planner.tangential_mm_s2
         self.override_cap = self.planner.override_cap
-        self.reference = check_positive("reference", reference, 2.0)
-        self.gain = check_positive("gain", gain, 2.0)
-        self.fmin = check_setting("fmin", fmin, 0.05, 1.0)
-        self.fmax = check_setting("fmax", fmax, 1.0, 5.0)
-        self.fent = check_setting("fent", fent, 0.05, 1.0)
-        self.rise = check_setting("rise", rise, 0.0, 1.0, lo_open=True)
         self.name = f"contour AFC ref {self.reference:.2g}"
 
     @classmethod
