@@ -361,22 +361,14 @@ class DelayAwarePI(VariableGainPI):
         self.state_size = VariableGainPI.state_size + 1
 
     @classmethod
-    def from_env(
-        cls,
-        env,
-        delay_steps: int | None = None,
-        phase_margin_deg: float = 45.0,
-        kgh: float = 1.9,
-        setpoint: float = 1.0,
-        **kwargs,
-    ) -> DelayAwarePI:
-        """The design for ``env``; ``delay_steps`` by default the delay of the env's
-        ``actuation`` option (0 without one)."""
+    def from_env(cls, env, delay_steps: int | None = None, *args, **kwargs) -> DelayAwarePI:
+        """The design for ``env``, with the settings above; ``delay_steps`` by default the
+        delay of the env's ``actuation`` option (0 without one)."""
         base = unwrap_as(env, TurningEnv, "a turning controller")
         if delay_steps is None:
             act = getattr(base, "actuation", None)
             delay_steps = 0 if act is None else int(act.delay_steps)
-        return cls(TurningIO.from_env(env), delay_steps, phase_margin_deg, kgh, setpoint, **kwargs)
+        return cls(TurningIO.from_env(env), delay_steps, *args, **kwargs)
 
     def gain_at(self, spindle_rpm: float) -> float:
         """The open-loop gain K designed for ``spindle_rpm``."""
