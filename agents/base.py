@@ -195,11 +195,10 @@ class Agent:
     obs_dim: int | None = None
     #: The env's ``OBS_INDEX`` (field name -> first index), for error messages.
     obs_index: dict | None = None
-    #: The keyword settings (:class:`Setting`) that :meth:`configure` checks and keeps.
+    #: The keyword settings (:class:`Setting`) that :meth:`configure` checks and keeps. A
+    #: class that lists them gets ``TUNABLE`` (its free parameters and their search ranges
+    #: for ``agents.bench.tune``) from them unless it declares its own.
     SETTINGS: dict[str, Setting] = {}
-    #: The free parameters and their search ranges (low, high, log scale) for tuning
-    #: (``agents.bench.tune``); by default those of the class's own ``SETTINGS``.
-    TUNABLE: dict[str, tuple[float, float, bool]] = {}
     #: What counts as a number in a setting (``None``: any real number; a process's
     #: controllers may take Python numbers only, ``PY_NUMBER_TYPES``).
     setting_types: tuple[type, ...] | None = None
