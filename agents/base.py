@@ -76,10 +76,12 @@ class Setting:
 SETPOINT = Setting(1.0, hi=1.5, search=SETPOINT_SEARCH)
 
 
-def tunable(settings: dict[str, Setting]) -> dict[str, tuple[float, float, bool]]:
-    """The free parameters of ``settings`` and their search ranges, in order: a class's
-    ``TUNABLE``."""
-    return {name: s.search for name, s in settings.items() if s.search is not None}
+def tunable(settings: dict[str, Setting], *names: str) -> dict[str, tuple[float, float, bool]]:
+    """The free parameters of ``settings`` (those with a search range) and their search
+    ranges: a class's ``TUNABLE``, in the table's order or that of ``names`` (the order
+    tuning draws them in)."""
+    names = names or tuple(settings)
+    return {k: settings[k].search for k in names if settings[k].search is not None}
 
 
 def observation_field(index: int, obs_index: dict | None) -> str:

@@ -19,10 +19,10 @@ import numpy as np
 
 from agents.base import (
     SETPOINT,
-    SETPOINT_SEARCH,
     ProcessController,
     Setting,
     check_positive,
+    tunable,
     unwrap_as,
 )
 from machining_envs.core.actions import ActionMap
@@ -184,35 +184,23 @@ class IntegralACC(_MillingController):
     """
 
     state_size = 6  # [W, Km, Kc, U held, Km at start, Kc at start]
-    #: Free parameters and their search ranges (low, high, log scale) for tuning.
-    TUNABLE = {
-        "kc_design": (0.02, 1.0, True),
-        "c1": (1e-4, 1e-2, True),
-        "setpoint": SETPOINT_SEARCH,
+    #: The settings after ``io``: default, accepted range, search range (``TUNABLE``).
+    SETTINGS = {
+        "k": Setting(None),
+        "c1": Setting(1e-3, hi=10.0, search=(1e-4, 1e-2, True)),
+        "c2": Setting(1e-3, hi=10.0),
+        "kc_design": Setting(0.2, hi=1e6, search=(0.02, 1.0, True)),
+        "design_depth_mm": Setting(1.0, hi=100.0),
+        "min_torque_fraction": Setting(0.2, hi=1.0),
+        "setpoint": SETPOINT,
     }
+    #: Free parameters and their search ranges, in the order tuning draws them.
+    TUNABLE = tunable(SETTINGS, "kc_design", "c1", "setpoint")
 
-    def __init__(
-        self,
-        io: MillingIO,
-        k: float | None = None,
-        c1: float = 1e-3,
-        c2: float = 1e-3,
-        kc_design: float = 0.2,
-        design_depth_mm: float = 1.0,
-        min_torque_fraction: float = 0.2,
-        setpoint: float = 1.0,
-    ):
-        self.io = io
-        self.setpoint = check_positive("setpoint", setpoint, 1.5)
-        self.c1 = check_positive("c1", c1, 10.0)
-        self.c2 = check_positive("c2", c2, 10.0)
-        self.kc_design = check_positive("kc_design", kc_design, 1e6)
-        self.design_depth_mm = check_positive("design_depth_mm", design_depth_mm, 100.0)
-        self.min_torque_fraction = check_positive("min_torque_fraction", min_torque_fraction, 1.0)
-        if k is None:
-            km = float(io.params.process_gain(self.design_depth_mm))
-            k = self.kc_design * km / io.sample_time_s
-        self.k = check_positive("k", k, 1e9)
+    def _setup(self):
+        if self.k is None:  # the default design
+            km = float(self.io.params.process_gain(self.design_depth_mm))
+            self.k = check_positive("k", self.kc_design * km / self.io.sample_time_s, 1e9)
         self.name = f"integral ACC K={self.k:.3g}"
 
     @classmethod
