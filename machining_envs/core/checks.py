@@ -33,6 +33,8 @@ __all__ = [
     "check_below",
     "check_overload_ratio",
     "check_instance",
+    "ranged",
+    "check_ranged_fields",
     "resolve_settings",
 ]
 
@@ -216,6 +218,34 @@ def check_fields(params, rules: dict) -> None:
     ``__post_init__`` checks field by field."""
     for name, rule in rules.items():
         check_field(name, getattr(params, name), rule)
+
+
+def ranged(lo: float, hi: float, default=dataclasses.MISSING, *, lo_open: bool = False):
+    """A dataclass field (``default``, or none) whose value must be a number in
+    ``[lo, hi]`` (``(lo, hi]`` where ``lo_open``): the range stands with the field, and
+    :func:`check_ranged_fields` checks every field declared so (a scenario's
+    ``__post_init__``).
+
+    >>> @dataclasses.dataclass(frozen=True)
+    ... class Cut:
+    ...     noise_scale: float = ranged(0.0, 10.0, default=1.0)
+    ...     def __post_init__(self):
+    ...         check_ranged_fields(self)
+    >>> Cut(11.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: noise_scale must be in [0.0, 10.0], got 11.0
+    """
+    return dataclasses.field(default=default, metadata={"rule": (lo, hi, lo_open)})
+
+
+def check_ranged_fields(obj) -> None:
+    """Check every field of the dataclass instance ``obj`` declared with :func:`ranged`,
+    in the order of the fields, by its range (:func:`check_field`)."""
+    for f in dataclasses.fields(obj):
+        rule = f.metadata.get("rule")
+        if rule is not None:
+            check_field(f.name, getattr(obj, f.name), rule)
 
 
 def replace_checked(params, changes: dict, rules: dict, cls: type):

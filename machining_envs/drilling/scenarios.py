@@ -19,7 +19,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from machining_envs.core.checks import check_overload_ratio, check_range, drawn_instance
+from machining_envs.core.checks import (
+    check_overload_ratio,
+    check_range,
+    check_ranged_fields,
+    drawn_instance,
+    ranged,
+)
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.splits import split_stream
 from machining_envs.drilling.plant import DIAMETER_RANGE_MM, DrillingParams
@@ -85,29 +91,22 @@ class DrillingScenario:
     """
 
     name: str
-    diameter_mm: float
-    aspect_ratio: float = PAPER_ASPECT_RATIO
+    diameter_mm: float = ranged(*DIAMETER_RANGE_MM)
+    aspect_ratio: float = ranged(1.0, 20.0, default=PAPER_ASPECT_RATIO)
     torque_limit_Nmm: float | None = None
-    cutting_scale: float = 1.0
-    chip_scale: float = 1.0
-    fluctuation_scale: float = 1.0
-    noise_scale: float = 1.0
-    torque_limit_scale: float = 1.0
-    wear_per_mm: float = 0.0
+    cutting_scale: float = ranged(0.5, 2.0, default=1.0)
+    chip_scale: float = ranged(0.0, 5.0, default=1.0)
+    fluctuation_scale: float = ranged(0.0, 3.0, default=1.0)
+    noise_scale: float = ranged(0.0, 10.0, default=1.0)
+    torque_limit_scale: float = ranged(0.25, 4.0, default=1.0)
+    wear_per_mm: float = ranged(0.0, 10.0, default=0.0)
     overload_ratio: float = OVERLOAD_RATIO
 
     def __post_init__(self) -> None:
         check_overload_ratio(self.overload_ratio)
-        check_range("diameter_mm", self.diameter_mm, *DIAMETER_RANGE_MM)
-        check_range("aspect_ratio", self.aspect_ratio, 1.0, 20.0)
+        check_ranged_fields(self)
         if self.torque_limit_Nmm is not None:
             check_range("torque_limit_Nmm", self.torque_limit_Nmm, 1e-4, 100.0)
-        check_range("torque_limit_scale", self.torque_limit_scale, 0.25, 4.0)
-        check_range("cutting_scale", self.cutting_scale, 0.5, 2.0)
-        check_range("chip_scale", self.chip_scale, 0.0, 5.0)
-        check_range("fluctuation_scale", self.fluctuation_scale, 0.0, 3.0)
-        check_range("noise_scale", self.noise_scale, 0.0, 10.0)
-        check_range("wear_per_mm", self.wear_per_mm, 0.0, 10.0)
 
     @property
     def target_depth_mm(self) -> float:

@@ -25,8 +25,9 @@ from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
 from machining_envs.core.checks import (
     check_instance,
     check_overload_ratio,
-    check_range,
+    check_ranged_fields,
     drawn_instance,
+    ranged,
 )
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.workpieces import (
@@ -109,24 +110,19 @@ class MillingScenario:
 
     name: str
     profile: DepthProfile
-    spindle_scale: float = 1.0
-    torque_limit_scale: float = 1.0
-    torque_coefficient_scale: float = 1.0
-    feed_exponent_scale: float = 1.0
-    noise_scale: float = 1.0
-    wear_per_100mm: float = 0.0
+    spindle_scale: float = ranged(0.25, 4.0, default=1.0)
+    torque_limit_scale: float = ranged(0.25, 4.0, default=1.0)
+    torque_coefficient_scale: float = ranged(0.5, 2.0, default=1.0)
+    feed_exponent_scale: float = ranged(0.5, 2.0, default=1.0)
+    noise_scale: float = ranged(0.0, 10.0, default=1.0)
+    wear_per_100mm: float = ranged(0.0, 10.0, default=0.0)
     actuation: Actuation | None = None
     overload_ratio: float = OVERLOAD_RATIO
 
     def __post_init__(self) -> None:
         check_overload_ratio(self.overload_ratio)
         check_instance("profile", self.profile, DepthProfile)
-        check_range("spindle_scale", self.spindle_scale, 0.25, 4.0)
-        check_range("torque_limit_scale", self.torque_limit_scale, 0.25, 4.0)
-        check_range("torque_coefficient_scale", self.torque_coefficient_scale, 0.5, 2.0)
-        check_range("feed_exponent_scale", self.feed_exponent_scale, 0.5, 2.0)
-        check_range("noise_scale", self.noise_scale, 0.0, 10.0)
-        check_range("wear_per_100mm", self.wear_per_100mm, 0.0, 10.0)
+        check_ranged_fields(self)
         check_instance("actuation", self.actuation, Actuation, optional=True)
 
     def spindle_rpm(self, nominal: MillingParams) -> float:

@@ -24,7 +24,13 @@ import numba
 import numpy as np
 
 from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, Actuation
-from machining_envs.core.checks import check_instance, check_overload_ratio, drawn_instance
+from machining_envs.core.checks import (
+    check_instance,
+    check_overload_ratio,
+    check_ranged_fields,
+    drawn_instance,
+    ranged,
+)
 from machining_envs.core.env import resolve_scenario
 from machining_envs.core.workpieces import (
     DepthProfile,
@@ -91,12 +97,12 @@ class TurningScenario:
 
     name: str
     profile: DepthProfile
-    spindle_rpm: float
-    force_limit_N: float = 1000.0
-    force_coefficient_scale: float = 1.0
-    feed_exponent_scale: float = 1.0
-    noise_scale: float = 1.0
-    wear_per_100mm: float = 0.0
+    spindle_rpm: float = ranged(*SPINDLE_RPM_RANGE)
+    force_limit_N: float = ranged(1.0, 1e5, default=1000.0)
+    force_coefficient_scale: float = ranged(0.5, 2.0, default=1.0)
+    feed_exponent_scale: float = ranged(0.5, 2.0, default=1.0)
+    noise_scale: float = ranged(0.0, 10.0, default=1.0)
+    wear_per_100mm: float = ranged(0.0, 10.0, default=0.0)
     spindle_power_W: float = math.inf
     actuation: Actuation | None = None
     overload_ratio: float = OVERLOAD_RATIO
@@ -104,12 +110,7 @@ class TurningScenario:
     def __post_init__(self) -> None:
         check_overload_ratio(self.overload_ratio)
         check_instance("profile", self.profile, DepthProfile)
-        _check("spindle_rpm", self.spindle_rpm, *SPINDLE_RPM_RANGE)
-        _check("force_limit_N", self.force_limit_N, 1.0, 1e5)
-        _check("force_coefficient_scale", self.force_coefficient_scale, 0.5, 2.0)
-        _check("feed_exponent_scale", self.feed_exponent_scale, 0.5, 2.0)
-        _check("noise_scale", self.noise_scale, 0.0, 10.0)
-        _check("wear_per_100mm", self.wear_per_100mm, 0.0, 10.0)
+        check_ranged_fields(self)
         if self.spindle_power_W != math.inf:
             _check("spindle_power_W", self.spindle_power_W, 0.0, 1e7, lo_open=True)
         check_instance("actuation", self.actuation, Actuation, optional=True)
