@@ -201,6 +201,25 @@ def _paper(name: str, path: Callable[[], Path], feed: float, loads=()):
     return make
 
 
+class _PathRanges(NamedTuple):
+    """A split's ranges (the ends of each draw)."""
+
+    #: Number of segments of the path.
+    segments: tuple[int, int]
+    #: Length of its lines, mm.
+    line: tuple[float, float]
+    #: Radius of its arcs, mm.
+    radius: tuple[float, float]
+    #: Sweep of its arcs, degrees.
+    sweep: tuple[float, float]
+    #: Programmed feed, mm/s (drawn log-uniform).
+    feed: tuple[float, float]
+    #: Scale of each axis's inertia (drawn log-uniform).
+    inertia: tuple[float, float]
+    #: Largest load torque of a load step, N m, on either axis.
+    load_max: float
+
+
 class _RandomPaths:
     """The factory of a split's random scenarios: a tangent-continuous chain of lines and
     arcs (:meth:`Path.random_smooth`), a log-uniform feed, log-uniform inertia scales and,
@@ -209,18 +228,8 @@ class _RandomPaths:
     (:meth:`draw_lanes`, compiled) and builds a lane's scenario only when it is read
     (:meth:`build_lane`): the same scenarios, the same numbers."""
 
-    def __init__(
-        self,
-        name: str,
-        segments: tuple[int, int],
-        line: tuple[float, float],
-        radius: tuple[float, float],
-        sweep: tuple[float, float],
-        feed: tuple[float, float],
-        inertia: tuple[float, float],
-        load_max: float,
-        actuation: Actuation | None = None,
-    ) -> None:
+    def __init__(self, name: str, ranges: _PathRanges, actuation: Actuation | None = None) -> None:
+        segments, line, radius, sweep, feed, inertia, load_max = ranges
         self.name = name
         self.segments, self.line, self.radius, self.sweep = segments, line, radius, sweep
         self.feed, self.inertia, self.load_max, self.actuation = feed, inertia, load_max, actuation
@@ -405,7 +414,9 @@ def _draw_smooth_lanes(
 
 #: The ranges of the training distribution (segments, line length, radius, sweep, feed,
 #: inertia scale, largest load): see ``CONTOURING_SCENARIOS``.
-_TRAINING_RANGES = ((3, 5), (5.0, 20.0), (3.0, 30.0), (30.0, 180.0), (20.0, 60.0), (0.8, 1.25), 1.5)
+_TRAINING_RANGES = _PathRanges(
+    (3, 5), (5.0, 20.0), (3.0, 30.0), (30.0, 180.0), (20.0, 60.0), (0.8, 1.25), 1.5
+)
 
 #: name -> factory drawing a scenario from the env's generator. The paper's tests:
 #: ``paper_step`` / ``paper_step_load`` (Fig. 4-5: a 0.1 mm X step; with a 1 N m load step at
@@ -430,11 +441,12 @@ CONTOURING_SCENARIOS: dict[str, Callable[[np.random.Generator], ContouringScenar
         PAPER_FEED_MM_S,
         ((0.5, PAPER_LOAD_TORQUE_NM, PAPER_LOAD_TORQUE_NM),),
     ),
-    **{split: _RandomPaths(split, *_TRAINING_RANGES) for split in ("train", "validation", "test")},
+    **{split: _RandomPaths(split, _TRAINING_RANGES) for split in ("train", "validation", "test")},
     "ood": _RandomPaths(
-        "ood", (3, 6), (3.0, 20.0), (2.0, 40.0), (20.0, 240.0), (15.0, 90.0), (0.7, 1.4), 2.0
+        "ood",
+        _PathRanges((3, 6), (3.0, 20.0), (2.0, 40.0), (20.0, 240.0), (15.0, 90.0), (0.7, 1.4), 2.0),
     ),
-    "shopfloor": _RandomPaths("shopfloor", *_TRAINING_RANGES, actuation=SHOPFLOOR_OVERRIDE),
+    "shopfloor": _RandomPaths("shopfloor", _TRAINING_RANGES, actuation=SHOPFLOOR_OVERRIDE),
 }
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -222,6 +223,21 @@ def _fixed(name: str, profile: Callable[[], DepthProfile]):
     return make
 
 
+class _SplitRanges(NamedTuple):
+    """A split's ranges (the ends of each uniform draw)."""
+
+    #: Radial depth of the workpiece's segments, mm.
+    depth: tuple[float, float]
+    #: Number of segments.
+    segments: tuple[int, int]
+    #: Spindle speed as a multiple of the nominal (drawn log-uniform).
+    spindle: tuple[float, float]
+    #: Torque limit as a multiple of the nominal reference torque (drawn log-uniform).
+    ref: tuple[float, float]
+    #: Spreads of Ks and of m: each drawn uniform within ``1 -+ spread``.
+    truth: tuple[float, float]
+
+
 class _SplitFactory(SplitCuts):
     """The factory of a split's scenarios: ``factory(rng)`` draws one from the env's
     generator. The workpiece, then uniform in ``[low, high)`` each in order: the log
@@ -232,15 +248,11 @@ class _SplitFactory(SplitCuts):
     def __init__(
         self,
         name: str,
-        depth: tuple[float, float],
-        segments: tuple[int, int],
-        spindle: tuple[float, float],
-        ref: tuple[float, float],
-        truth: tuple[float, float],
+        ranges: _SplitRanges,
         wear: tuple[float, float] | None = None,
         actuation: Actuation | None = None,
     ) -> None:
-        ks, m = truth
+        depth, segments, spindle, ref, (ks, m) = ranges
         lows = [float(np.log(spindle[0])), float(np.log(ref[0])), 1.0 - ks, 1.0 - m, 0.5]
         highs = [float(np.log(spindle[1])), float(np.log(ref[1])), 1.0 + ks, 1.0 + m, 2.0]
         super().__init__(name, depth, segments, (5.0, 12.0), lows, highs, wear)
@@ -299,8 +311,7 @@ class _SplitFactory(SplitCuts):
         )
 
 
-#: The ranges of the training distribution (depth mm, segments, spindle and limit scales,
-#: the spreads of Ks and of m), which ``validation`` shares.
+#: The ranges of the training distribution, which ``validation`` shares.
 #:
 #: The nominal point is Park & Yoon's (docs/PLANTS.md, ``MillingParams``): 400 rpm, the
 #: 3600 N·mm reference torque, Ks = 118 kgf·mm and m = 0.3999 from their regression, radial
@@ -315,18 +326,24 @@ class _SplitFactory(SplitCuts):
 #: +-20 %: the feed at the limit goes as (limit / (Ks d^l))^(1/m), so a smaller m stretches
 #: the slowest cuts most: at +-30 % one training cut in twenty would need more than the
 #: 1200 s episode for its physical floor alone (at +-20 %, one in eighty).
-_TRAINING_RANGES = ((0.5, 3.5), (2, 5), (0.67, 1.6), (0.8, 1.25), (0.3, 0.2))
+_TRAINING_RANGES = _SplitRanges(
+    depth=(0.5, 3.5), segments=(2, 5), spindle=(0.67, 1.6), ref=(0.8, 1.25), truth=(0.3, 0.2)
+)
 
 #: The benchmark's ranges, which ``test``, ``wear`` and ``shopfloor`` draw from: the
 #: published benchmark's distribution (depth 0.5-3 mm, spindle and limit 0.8-1.25x, Ks and m
 #: within +-20 %), inside the training ranges. They stay as published so that the
 #: benchmark's tables compare across versions; what lies beyond them is checked on ``ood``.
-_BENCHMARK_RANGES = ((0.5, 3.0), (2, 5), (0.8, 1.25), (0.8, 1.25), (0.2, 0.2))
+_BENCHMARK_RANGES = _SplitRanges(
+    depth=(0.5, 3.0), segments=(2, 5), spindle=(0.8, 1.25), ref=(0.8, 1.25), truth=(0.2, 0.2)
+)
 
 #: The ``ood`` ranges: strictly wider than the training ranges in every field (depth to
 #: 4 mm, up to 6 segments, spindle 0.6-1.8x, limit 0.7-1.4x, Ks within +-40 %, m within
 #: +-25 %), so every ``ood`` cut may lie beyond what was trained and tuned on.
-_OOD_RANGES = ((0.4, 4.0), (2, 6), (0.6, 1.8), (0.7, 1.4), (0.4, 0.25))
+_OOD_RANGES = _SplitRanges(
+    depth=(0.4, 4.0), segments=(2, 6), spindle=(0.6, 1.8), ref=(0.7, 1.4), truth=(0.4, 0.25)
+)
 
 #: name -> factory drawing a scenario from the env's generator.
 #:
@@ -353,11 +370,11 @@ _OOD_RANGES = ((0.4, 4.0), (2, 6), (0.6, 1.8), (0.7, 1.4), (0.4, 0.25))
 MILLING_SCENARIOS: dict[str, Callable[[np.random.Generator], MillingScenario]] = {
     "paper_step": _fixed("paper_step", paper_step_profile),
     "paper_taper": _fixed("paper_taper", paper_taper_profile),
-    **{split: _SplitFactory(split, *_TRAINING_RANGES) for split in ("train", "validation")},
-    "test": _SplitFactory("test", *_BENCHMARK_RANGES),
-    "ood": _SplitFactory("ood", *_OOD_RANGES),
-    "wear": _SplitFactory("wear", *_BENCHMARK_RANGES, wear=(0.5, 1.5)),
-    "shopfloor": _SplitFactory("shopfloor", *_BENCHMARK_RANGES, actuation=SHOPFLOOR_ACTUATION),
+    **{split: _SplitFactory(split, _TRAINING_RANGES) for split in ("train", "validation")},
+    "test": _SplitFactory("test", _BENCHMARK_RANGES),
+    "ood": _SplitFactory("ood", _OOD_RANGES),
+    "wear": _SplitFactory("wear", _BENCHMARK_RANGES, wear=(0.5, 1.5)),
+    "shopfloor": _SplitFactory("shopfloor", _BENCHMARK_RANGES, actuation=SHOPFLOOR_ACTUATION),
 }
 
 

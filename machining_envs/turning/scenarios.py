@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -148,6 +149,19 @@ def _step_range(rng: np.random.Generator) -> TurningScenario:
     return TurningScenario("step_range", prof, float(np.exp(rng.uniform(np.log(245), np.log(700)))))
 
 
+class _SplitRanges(NamedTuple):
+    """A split's ranges (the ends of each uniform draw)."""
+
+    #: Spindle speed, rpm (drawn log-uniform).
+    rpm: tuple[float, float]
+    #: Depth of cut of the workpiece's segments, mm.
+    depth: tuple[float, float]
+    #: Number of segments.
+    segments: tuple[int, int]
+    #: Force limit, N (equal ends: the limit is fixed, nothing is drawn for it).
+    limit_N: tuple[float, float] = (1000.0, 1000.0)
+
+
 class _SplitFactory(SplitCuts):
     """The factory of a split's scenarios: ``factory(rng)`` draws one from the env's
     generator. The spindle speed log-uniform, then the workpiece, then uniform in
@@ -161,13 +175,11 @@ class _SplitFactory(SplitCuts):
     def __init__(
         self,
         name: str,
-        rpm: tuple[float, float],
-        depth: tuple[float, float],
-        segments: tuple[int, int],
-        limit_N: tuple[float, float] = (1000.0, 1000.0),
+        ranges: _SplitRanges,
         wear: tuple[float, float] | None = None,
         shopfloor: bool = False,
     ) -> None:
+        rpm, depth, segments, limit_N = ranges
         self.log_rpm = float(np.log(rpm[0]))
         self.log_span = float(np.log(rpm[1])) - self.log_rpm
         lows = [0.8, 0.8, 0.5]
@@ -237,9 +249,8 @@ class _SplitFactory(SplitCuts):
         )
 
 
-#: The ranges of the training distribution (spindle rpm, depth mm, segments), which
-#: ``wear`` and ``shopfloor`` share.
-_TRAINING_RANGES = ((245.0, 700.0), (0.5, 3.0), (2, 5))
+#: The ranges of the training distribution, which ``wear`` and ``shopfloor`` share.
+_TRAINING_RANGES = _SplitRanges(rpm=(245.0, 700.0), depth=(0.5, 3.0), segments=(2, 5))
 
 #: The spindle power of the ``shopfloor`` scenarios, W (``TurningParams.spindle_power_W``).
 SHOPFLOOR_SPINDLE_POWER_W = 2200.0
@@ -252,18 +263,23 @@ TURNING_SCENARIOS: dict[str, Callable[[np.random.Generator], TurningScenario]] =
     "paper_700": _paper(700),
     "taper_405": _taper,
     "step_range": _step_range,
-    **{split: _SplitFactory(split, *_TRAINING_RANGES) for split in ("train", "validation", "test")},
-    "ood": _SplitFactory("ood", (200.0, 800.0), (0.5, 3.5), (2, 6), (700.0, 1300.0)),
+    **{split: _SplitFactory(split, _TRAINING_RANGES) for split in ("train", "validation", "test")},
+    "ood": _SplitFactory(
+        "ood",
+        _SplitRanges(
+            rpm=(200.0, 800.0), depth=(0.5, 3.5), segments=(2, 6), limit_N=(700.0, 1300.0)
+        ),
+    ),
     # The training ranges with a tool that dulls along the cut: the force coefficient grows
     # by 30-100 % per 100 mm (up to +60 % at the end of the longest, 60 mm, workpiece). The
     # rate is chosen, not identified: large enough that a controller tuned on a sharp tool
     # meets a clearly duller one within one workpiece.
-    "wear": _SplitFactory("wear", *_TRAINING_RANGES, wear=(0.3, 1.0)),
+    "wear": _SplitFactory("wear", _TRAINING_RANGES, wear=(0.3, 1.0)),
     # The training ranges on a real machine: the CNC's override in 1 % steps, rate- and
     # acceleration-limited, two periods of interpolator delay (SHOPFLOOR_ACTUATION), and the
     # paper's 2.2 kW spindle, which slows when a cut asks for more (at 700 rpm on the 100 mm
     # bar that is any force above 600 N, below the 1 kN limit).
-    "shopfloor": _SplitFactory("shopfloor", *_TRAINING_RANGES, shopfloor=True),
+    "shopfloor": _SplitFactory("shopfloor", _TRAINING_RANGES, shopfloor=True),
 }
 
 
