@@ -12,14 +12,10 @@ import numpy as np
 
 from machining_envs.core.metrics import (
     episode_end,
-    episode_flag,
-    excess_ratio,
-    finish_time,
-    overload_ratio,
+    finished_at,
     reads_info,
-    sample_period,
     score_bound,
-    severity,
+    trajectory_severity,
 )
 from machining_envs.core.score import PrimaryScore, Task
 
@@ -131,8 +127,7 @@ def contouring_metrics(traj: dict) -> dict[str, float]:
     dr, ell = circle_radius_errors(traj)
     out["radius_reduction_mm"] = dr
     out["ellipse_mm"] = ell
-    finished = episode_flag(traj, "finished")
-    out["cycle_time_s"] = finish_time(traj, "machining_time_s", finished, t)
+    finished, out["cycle_time_s"] = finished_at(traj, "machining_time_s", t)
     tsq = np.asarray(traj["torque_sq_Nm2"], dtype=np.float64)[1:]
     out["effort_rms_Nm"] = float(np.sqrt(np.mean(tsq))) if tsq.size else 0.0
     cmd = [np.asarray(traj[k], dtype=np.float64)[1:] for k in ("command_x_mm_s", "command_y_mm_s")]
@@ -141,8 +136,7 @@ def contouring_metrics(traj: dict) -> dict[str, float]:
         cost = np.asarray(traj["cost"], dtype=np.float64)[1:]
         out["time_over_tolerance"] = float(np.mean(cost > 0.0)) if cost.size else 0.0
         tol = np.asarray(traj["contour_tolerance_mm"], dtype=np.float64)[1:]
-        dt = sample_period(t)
-        out.update(severity(excess_ratio(peak, tol, cost), dt, overload_ratio(traj)))
+        out.update(trajectory_severity(traj, t, peak, tol, cost))
     else:
         out["time_over_tolerance"] = math.nan
     out["score_bound"] = score_bound(traj)

@@ -20,6 +20,7 @@ __all__ = [
     "reads_info",
     "excess_ratio",
     "severity",
+    "trajectory_severity",
     "note_severity",
     "SEVERITY_KEYS",
     "regulation_metrics",
@@ -28,6 +29,7 @@ __all__ = [
     "episode_flag",
     "episode_end",
     "finish_time",
+    "finished_at",
     "sample_period",
     "score_bound",
     "overload_ratio",
@@ -94,6 +96,14 @@ def severity(excess: np.ndarray, dt: float, overload_ratio: float) -> dict[str, 
     }
 
 
+def trajectory_severity(traj: dict, t: np.ndarray, signal, limit, cost) -> dict[str, float]:
+    """:func:`severity` of the steps of a trajectory that count: the excess ratios of their
+    ``signal`` over ``limit`` (:func:`excess_ratio`, with their ``cost``), sampled at the
+    period of the trajectory's times ``t`` (:func:`sample_period`), against the episode's
+    overload ceiling (:func:`overload_ratio`)."""
+    return severity(excess_ratio(signal, limit, cost), sample_period(t), overload_ratio(traj))
+
+
 def note_severity(info: dict, keys: tuple[str, str] | None, overload_ratio) -> dict:
     """Add to a step's ``info`` (one env's, or a vector env's arrays) its ``excess`` (see
     :func:`excess_ratio`; ``keys`` = (signal, limit) info keys of the task, read with
@@ -146,6 +156,13 @@ def finish_time(traj: dict, key: str, finished: bool, t: np.ndarray) -> float:
         if vals.size:
             return float(vals[0])
     return float(t[-1])
+
+
+def finished_at(traj: dict, key: str, t: np.ndarray) -> tuple[bool, float]:
+    """Whether the episode finished (``info["finished"]`` set at any sample,
+    :func:`episode_flag`) and when (:func:`finish_time` of ``traj[key]``)."""
+    finished = episode_flag(traj, "finished")
+    return finished, finish_time(traj, key, finished, t)
 
 
 def segment_bounds(segment: np.ndarray) -> list[tuple[int, int]]:
@@ -244,7 +261,6 @@ def regulation_metrics(
     # and only while the tool is in the workpiece (the last sample of a finished cut is air).
     cutting = np.asarray(traj.get("depth_mm", np.ones(t.size)), dtype=np.float64)[1:] > 0
     te, ee = t[1:][cutting], e[1:][cutting]
-    excess = excess_ratio(y[1:][cutting], r[1:][cutting], cost[1:][cutting])
     cost = cost[1:][cutting]
     ae = np.abs(ee)
     out: dict[str, float] = {
@@ -274,9 +290,8 @@ def regulation_metrics(
     out["steady_state_error"] = float(np.mean(sse)) if sse else 0.0
     out["oscillation"] = float(max(osc)) if osc else 0.0
     out["time_over_limit"] = float(np.mean(cost > 0.0)) if cost.size else 0.0
-    out.update(severity(excess, dt, overload_ratio(traj)))
+    out.update(trajectory_severity(traj, t, y[1:][cutting], r[1:][cutting], cost))
     out["score_bound"] = score_bound(traj)
-    finished = episode_flag(traj, "finished")
-    out["machining_time_s"] = finish_time(traj, "machining_time_s", finished, t)
+    finished, out["machining_time_s"] = finished_at(traj, "machining_time_s", t)
     out.update(episode_end(traj, finished, t))
     return out

@@ -10,14 +10,10 @@ import numpy as np
 
 from machining_envs.core.metrics import (
     episode_end,
-    episode_flag,
-    excess_ratio,
-    finish_time,
-    overload_ratio,
+    finished_at,
     reads_info,
-    sample_period,
     score_bound,
-    severity,
+    trajectory_severity,
 )
 from machining_envs.core.score import PrimaryScore, Task
 
@@ -88,8 +84,7 @@ def drilling_metrics(traj: dict) -> dict[str, float]:
     ref = np.asarray(traj["torque_limit_Nmm"], dtype=np.float64)[1:][mask]
     cost = np.asarray(traj["cost"], dtype=np.float64)[1:][mask]
     hz = np.asarray(traj["spindle_hz"], dtype=np.float64)[1:][mask]
-    dt = sample_period(t)
-    out: dict[str, float] = severity(excess_ratio(tq, ref, cost), dt, overload_ratio(traj))
+    out: dict[str, float] = trajectory_severity(traj, t, tq, ref, cost)
     if tq.size:
         r = float(np.mean(ref))
         out["torque_mean_Nmm"] = float(np.mean(tq))
@@ -120,8 +115,7 @@ def drilling_metrics(traj: dict) -> dict[str, float]:
     out["peak_torque_Nmm"] = float(np.max(peak))
     tb = np.asarray(traj["breakage_torque_Nmm"], dtype=np.float64)
     out["peak_torque_rel"] = out["peak_torque_Nmm"] / float(tb[0])
-    finished = episode_flag(traj, "finished")
-    out["drilling_time_s"] = finish_time(traj, "drilling_time_s", finished, t)
+    finished, out["drilling_time_s"] = finished_at(traj, "drilling_time_s", t)
     pos = np.asarray(traj["position_mm"], dtype=np.float64)
     depth = np.asarray(traj["depth_mm"], dtype=np.float64)
     out_of_hole = (pos < 0.0) & (depth > 0.0)
