@@ -21,10 +21,12 @@ from machining_envs.core.rendering import (
     present_frame,
     ready_to_render,
     record_step,
+    render_signals,
 )
 
 __all__ = [
     "LaneEnv",
+    "FeedRegulationEnv",
     "episode_ended",
     "check_overrides",
     "check_episode_time",
@@ -249,3 +251,58 @@ class LaneEnv(gym.Env, abc.ABC):
         if not ready_to_render(self):
             return None
         return present_frame(self._draw(), self.render_mode, self._ID)
+
+
+class FeedRegulationEnv(LaneEnv):
+    """The single env of a process that holds a cutting load under its limit by the feed
+    (turning, end milling; its core a :class:`~machining_envs.core.lanes.FeedRegulationCore`):
+    it keeps the core's ``actuation`` and ``power_sensor`` options as attributes, and
+    ``render()`` draws the load (true, measured and the limit), the feed and the depth of cut.
+
+    A subclass names its load in :attr:`_LOAD` and its depth's label in :attr:`_DEPTH_LABEL`,
+    and says the limit and the title of the plot (:meth:`_limit`, :meth:`_title`).
+    """
+
+    #: The cutting load render() draws: ``(info key, axis label, legend)``.
+    _LOAD: tuple[str, str, str]
+    #: The axis label of the depth of cut render() draws.
+    _DEPTH_LABEL: str
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        #: The signals render() draws: name -> the info key each is read from.
+        cls._LOG_FIELDS = {
+            "t": "t_s",
+            "load": cls._LOAD[0],
+            "measured": "measured",
+            "feed": "feed_mm_per_rev",
+            "depth": "depth_mm",
+        }
+
+    def _open(self, core_cls: type, given: dict):
+        core = super()._open(core_cls, given)
+        #: The spindle-power sensor's settings (option ``power_sensor``), None when off.
+        self.power_sensor = core.power_sensor and core.power_sensor.sensor
+        #: The CNC's actuation (option ``actuation``), None when ideal.
+        self.actuation = core.actuation
+        return core
+
+    @abc.abstractmethod
+    def _limit(self) -> float:
+        """The episode's limit of the load, drawn as a line."""
+
+    @abc.abstractmethod
+    def _title(self) -> str:
+        """The plot's title."""
+
+    def _draw(self):
+        log = self._log
+        _, axis, legend = self._LOAD
+        limit = [self._limit()] * len(log["t"])
+        load = [(legend, log["load"], "C0-"), ("measured", log["measured"], "C1-")]
+        panels = [
+            (axis, [*load, ("limit", limit, "k--")]),
+            ("feed (mm/rev)", [("feed", log["feed"], "C2-")]),
+            (self._DEPTH_LABEL, [("depth", log["depth"], "C3-")]),
+        ]
+        return render_signals(log["t"], panels, self._title())

@@ -5,11 +5,8 @@ from __future__ import annotations
 from machining_envs.core.actuation import (
     Actuation,
 )
-from machining_envs.core.env import LaneEnv
+from machining_envs.core.env import FeedRegulationEnv
 from machining_envs.core.lanes import REGULATION_OBS_INDEX
-from machining_envs.core.rendering import (
-    render_signals,
-)
 from machining_envs.core.sensors import PowerSensor
 from machining_envs.core.vector import (
     LaneVectorEnv,
@@ -29,7 +26,7 @@ from machining_envs.milling.scenarios import (
 __all__ = ["EndMillingEnv", "EndMillingVectorEnv", "MillingReward"]
 
 
-class EndMillingEnv(LaneEnv):
+class EndMillingEnv(FeedRegulationEnv):
     """End milling as fast as the cutting-torque limit allows, by feed (Park & Yoon 1986).
 
     ## Description
@@ -174,14 +171,8 @@ class EndMillingEnv(LaneEnv):
     task = MILLING_TASK
     #: Positions of the observation's fields, for controllers that read them by name.
     OBS_INDEX = REGULATION_OBS_INDEX
-    #: The signals render() draws: name -> the info key each is read from.
-    _LOG_FIELDS = {
-        "t": "t_s",
-        "torque": "torque_Nmm",
-        "measured": "measured",
-        "feed": "feed_mm_per_rev",
-        "depth": "depth_mm",
-    }
+    _LOAD = ("torque_Nmm", "torque (N·mm)", "cutting torque")
+    _DEPTH_LABEL = "radial depth (mm)"
 
     def __init__(
         self,
@@ -195,33 +186,13 @@ class EndMillingEnv(LaneEnv):
         power_sensor: PowerSensor | dict | bool | None = None,
         **overrides,
     ):
-        core = self._open(MillingCore, locals())  # the core's options by their names
-        #: The spindle-power sensor's settings (option ``power_sensor``), None when off.
-        self.power_sensor = core.power_sensor and core.power_sensor.sensor
-        #: The CNC's actuation (option ``actuation``), None when ideal.
-        self.actuation = core.actuation
+        self._open(MillingCore, locals())  # the core's options by their names
 
-    def _draw(self):
-        log = self._log
-        t = log["t"]
-        tr = float(self._core.torque_limit[0])
-        rpm = float(self._core.spindle[0])
-        return render_signals(
-            t,
-            [
-                (
-                    "torque (N·mm)",
-                    [
-                        ("cutting torque", log["torque"], "C0-"),
-                        ("measured", log["measured"], "C1-"),
-                        ("limit", [tr] * len(t), "k--"),
-                    ],
-                ),
-                ("feed (mm/rev)", [("feed", log["feed"], "C2-")]),
-                ("radial depth (mm)", [("depth", log["depth"], "C3-")]),
-            ],
-            f"EndMilling-v0 | {self.scenario.name} | {rpm:.0f} rpm",
-        )
+    def _limit(self) -> float:
+        return float(self._core.torque_limit[0])
+
+    def _title(self) -> str:
+        return f"EndMilling-v0 | {self.scenario.name} | {float(self._core.spindle[0]):.0f} rpm"
 
 
 class EndMillingVectorEnv(LaneVectorEnv):

@@ -5,11 +5,8 @@ from __future__ import annotations
 from machining_envs.core.actuation import (
     Actuation,
 )
-from machining_envs.core.env import LaneEnv
+from machining_envs.core.env import FeedRegulationEnv
 from machining_envs.core.lanes import REGULATION_OBS_INDEX
-from machining_envs.core.rendering import (
-    render_signals,
-)
 from machining_envs.core.sensors import PowerSensor
 from machining_envs.core.vector import (
     LaneVectorEnv,
@@ -29,7 +26,7 @@ from machining_envs.turning.scenarios import (
 __all__ = ["TurningEnv", "TurningVectorEnv", "TurningReward"]
 
 
-class TurningEnv(LaneEnv):
+class TurningEnv(FeedRegulationEnv):
     """Turning as fast as the cutting-force limit allows, by feed (Noh, Kim & Kim 1992).
 
     ## Description
@@ -160,14 +157,8 @@ class TurningEnv(LaneEnv):
     task = TURNING_TASK
     #: Positions of the observation's fields, for controllers that read them by name.
     OBS_INDEX = REGULATION_OBS_INDEX
-    #: The signals render() draws: name -> the info key each is read from.
-    _LOG_FIELDS = {
-        "t": "t_s",
-        "force": "force_N",
-        "measured": "measured",
-        "feed": "feed_mm_per_rev",
-        "depth": "depth_mm",
-    }
+    _LOAD = ("force_N", "force (N)", "cutting force")
+    _DEPTH_LABEL = "depth of cut (mm)"
 
     def __init__(
         self,
@@ -182,31 +173,13 @@ class TurningEnv(LaneEnv):
         **overrides,
     ):
         core = self._open(TurningCore, locals())  # the core's options by their names
-        #: The spindle-power sensor's settings (option ``power_sensor``), None when off.
-        self.power_sensor = core.power_sensor and core.power_sensor.sensor
-        #: The CNC's actuation (option ``actuation``), None when ideal.
-        self.actuation = core.actuation
         self.spindle_rpm_override = core.spindle_rpm_override
 
-    def _draw(self):
-        log = self._log
-        t = log["t"]
-        return render_signals(
-            t,
-            [
-                (
-                    "force (N)",
-                    [
-                        ("cutting force", log["force"], "C0-"),
-                        ("measured", log["measured"], "C1-"),
-                        ("limit", [self._core.force_limit[0]] * len(t), "k--"),
-                    ],
-                ),
-                ("feed (mm/rev)", [("feed", log["feed"], "C2-")]),
-                ("depth of cut (mm)", [("depth", log["depth"], "C3-")]),
-            ],
-            f"Turning-v0 | {self.scenario.name} | {self.scenario.spindle_rpm:.0f} rpm",
-        )
+    def _limit(self) -> float:
+        return self._core.force_limit[0]
+
+    def _title(self) -> str:
+        return f"Turning-v0 | {self.scenario.name} | {self.scenario.spindle_rpm:.0f} rpm"
 
 
 class TurningVectorEnv(LaneVectorEnv):
