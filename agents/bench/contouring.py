@@ -331,55 +331,55 @@ def plot_contouring_reproduction(results, path) -> None:
 
 # --- The declaration: what the benchmark, the CLI and the docs know of contouring -------------
 
-PROCESS = Process(
-    "contouring",
-    benchmarks=(
-        BenchmarkSpec(
-            "machining_envs/Contouring-v0",
-            (PIPosition.from_env, HInf2DOF.from_env),
-            ("paper_circle", "paper_involute"),
-            "paper_circle",
-            tuned=(PIPosition, HInf2DOF),
-            learned=("contouring_ppo_residual",),
-            rows_seconds=500.0,
-            table_metrics=(
-                "max_contour_error_mm",
-                "rms_contour_error_mm",
-                "max_tracking_error_mm",
-                "radius_reduction_mm",
-                "ellipse_mm",
-                "cycle_time_s",
-                "effort_rms_Nm",
-                "finished",
-                "diverged",
-            ),
-            plot_main=("contour_error_mm", None, "contour error (mm)"),
-            plot_lower=("tracking_error_mm", "tracking error (mm)"),
-            plot_context=("path_s_mm", "set point along the path (mm)"),
-        ),
-        BenchmarkSpec(
-            "machining_envs/ContouringFeed-v0",
-            (ConstantOverride.from_env, functools.partial(ConstantOverride.from_env, override=1.0)),
-            ("paper_circle", "paper_involute"),
-            "paper_involute",
-            tuned=(ConstantOverride, LookAheadFeed),
-            machine_tuned=(ConstantOverride, LookAheadFeed, ContourAFC),
-            machine_reference=ConstantOverride,
-            learned=("contouring_feed_ppo_residual",),
-            extra_splits=("shopfloor",),
-            table_metrics=(
-                "cycle_time_s",
-                "max_contour_error_mm",
-                "rms_contour_error_mm",
-                "time_over_tolerance",
-                "effort_rms_Nm",
-                "finished",
-                "diverged",
-            ),
-            plot_main=("peak_contour_error_mm", "contour_tolerance_mm", "contour error (mm)"),
-            plot_lower=("feed_override", "feed override"),
-            plot_context=("path_s_mm", "set point along the path (mm)"),
-        ),
+#: The trajectory plot's context of both envs: where along the path the set point is.
+_PATH_CONTEXT = ("path_s_mm", "set point along the path (mm)")
+
+POSITION_BENCHMARK = BenchmarkSpec(
+    _ENV,
+    (PIPosition.from_env, HInf2DOF.from_env),
+    ("paper_circle", "paper_involute"),
+    "paper_circle",
+    tuned=(PIPosition, HInf2DOF),
+    learned=("contouring_ppo_residual",),
+    rows_seconds=500.0,
+    table_metrics=(
+        "max_contour_error_mm",
+        "rms_contour_error_mm",
+        "max_tracking_error_mm",
+        "radius_reduction_mm",
+        "ellipse_mm",
+        "cycle_time_s",
+        "effort_rms_Nm",
+        "finished",
+        "diverged",
     ),
-    reproduce=reproduce_contouring,
+    plot_main=("contour_error_mm", None, "contour error (mm)"),
+    plot_lower=("tracking_error_mm", "tracking error (mm)"),
+    plot_context=_PATH_CONTEXT,
 )
+
+FEED_BENCHMARK = BenchmarkSpec(
+    "machining_envs/ContouringFeed-v0",
+    (ConstantOverride.from_env, functools.partial(ConstantOverride.from_env, override=1.0)),
+    ("paper_circle", "paper_involute"),
+    "paper_involute",
+    tuned=(ConstantOverride, LookAheadFeed),
+    machine_tuned=(ConstantOverride, LookAheadFeed, ContourAFC),
+    machine_reference=ConstantOverride,
+    learned=("contouring_feed_ppo_residual",),
+    extra_splits=("shopfloor",),
+    table_metrics=(
+        "cycle_time_s",
+        "max_contour_error_mm",
+        "rms_contour_error_mm",
+        "time_over_tolerance",
+        "effort_rms_Nm",
+        "finished",
+        "diverged",
+    ),
+    plot_main=("peak_contour_error_mm", "contour_tolerance_mm", "contour error (mm)"),
+    plot_lower=("feed_override", "feed override"),
+    plot_context=_PATH_CONTEXT,
+)
+
+PROCESS = Process("contouring", (POSITION_BENCHMARK, FEED_BENCHMARK), reproduce_contouring)

@@ -342,42 +342,38 @@ def _grid_hole(cutting_scale: float, aspect_ratio: float) -> DrillingScenario:
     )
 
 
-PROCESS = Process(
-    "drilling",
-    benchmarks=(
-        BenchmarkSpec(
-            "machining_envs/MicroDrilling-v0",
-            (NoControl.from_env, PD.from_env, SlidingMode.from_env),
-            ("paper_0.5", "paper_0.6", "paper_0.7", "paper_0.8"),
-            "paper_0.8",
-            # The peck cycles drill with control="feed" (their ENV_KWARGS) on the same
-            # episodes, scored by the same task: agents.bench.run's tuned rows.
-            tuned=(NoControl, PD, SlidingMode, PeckDrilling, TorquePeck),
-            learned=("micro_drilling_ppo_peck",),
-            extra_splits=("wear",),
-            robustness=Robustness(
-                "cutting constant (x nominal)",
-                (0.85, 1.0, 1.15),
-                "hole depth / diameter",
-                (6.0, 8.0, 10.0, 12.0),
-                _grid_hole,
-            ),
-            table_metrics=(
-                "drilling_time_s",
-                "torque_mean_rel",
-                "torque_std_rel",
-                "thrust_mean_N",
-                "thrust_std_N",
-                "spindle_range_hz",
-                "time_over_limit",
-                "peak_torque_rel",
-                "breakage",
-                "finished",
-            ),
-            plot_main=("torque_Nmm", "torque_limit_Nmm", "torque (N·mm)"),
-            plot_lower=("spindle_hz", "spindle (Hz)"),
-            plot_context=("depth_mm", "hole depth (mm)"),
-        ),
+BENCHMARK = BenchmarkSpec(
+    ENV_ID,
+    (NoControl.from_env, PD.from_env, SlidingMode.from_env),
+    ("paper_0.5", "paper_0.6", "paper_0.7", "paper_0.8"),
+    "paper_0.8",
+    # The peck cycles drill with control="feed" (their ENV_KWARGS) on the same
+    # episodes, scored by the same task: agents.bench.run's tuned rows.
+    tuned=(NoControl, PD, SlidingMode, PeckDrilling, TorquePeck),
+    learned=("micro_drilling_ppo_peck",),
+    extra_splits=("wear",),
+    robustness=Robustness(
+        "cutting constant (x nominal)",
+        (0.85, 1.0, 1.15),
+        "hole depth / diameter",
+        (6.0, 8.0, 10.0, 12.0),
+        _grid_hole,
     ),
-    reproduce=reproduce_drilling,
+    table_metrics=(
+        "drilling_time_s",
+        "torque_mean_rel",
+        "torque_std_rel",
+        "thrust_mean_N",
+        "thrust_std_N",
+        "spindle_range_hz",
+        "time_over_limit",
+        "peak_torque_rel",
+        "breakage",
+        "finished",
+    ),
+    plot_main=("torque_Nmm", "torque_limit_Nmm", "torque (N·mm)"),
+    plot_lower=("spindle_hz", "spindle (Hz)"),
+    plot_context=("depth_mm", "hole depth (mm)"),
 )
+
+PROCESS = Process("drilling", (BENCHMARK,), reproduce_drilling)

@@ -411,51 +411,47 @@ def plot_milling_reproduction(runs: dict, fig5: dict, gains: dict, path) -> None
 # --- The declaration: what the benchmark, the CLI and the docs know of milling -------------
 
 
-PROCESS = Process(
-    "milling",
-    benchmarks=(
-        BenchmarkSpec(
-            "machining_envs/EndMilling-v0",
-            (MillingConstantFeed.from_env, FixedGainIntegral.from_env, IntegralACC.from_env),
-            ("paper_step", "paper_taper"),
-            "paper_step",
-            tuned=(MillingConstantFeed, FixedGainIntegral, IntegralACC),
-            machine_tuned=(
-                MillingConstantFeed,
-                FixedGainIntegral,
-                IntegralACC,
-                AdaptiveFeedControl,
-            ),
-            machine_reference=MillingConstantFeed,
-            learned=("end_milling_ppo",),
-            oracle=DeferredAgent("agents.oracle.MillingMPCOracle"),
-            oracle_episodes=20,
-            oracle_in_quick=False,  # a cut of some 2000 samples: about 16 s
-            oracle_seconds=16.0,
-            rows_seconds=250.0,
-            extra_splits=("wear", "shopfloor"),
-            robustness=Robustness(
-                "spindle speed (x nominal)",
-                (0.6, 0.8, 1.0, 1.3, 1.8),  # the ood split's speeds and depths
-                "radial depth (mm)",
-                (0.5, 1.0, 2.0, 4.0),
-                ConstantDepthCut(MillingScenario, PAPER_LENGTH_MM),
-            ),
-            table_metrics=(
-                "machining_time_min",
-                "mrr_mm3_per_min",
-                "iae",
-                "max_overshoot",
-                "settling_time_s",
-                "oscillation",
-                "time_over_limit",
-                "breakage",
-                "finished",
-            ),
-            plot_main=("torque_Nmm", "torque_limit_Nmm", "torque (N·mm)"),
-            plot_lower=("feed_mm_per_rev", "feed (mm/rev)"),
-            plot_context=("depth_mm", "radial depth (mm)"),
-        ),
+BENCHMARK = BenchmarkSpec(
+    ENV_ID,
+    (MillingConstantFeed.from_env, FixedGainIntegral.from_env, IntegralACC.from_env),
+    ("paper_step", "paper_taper"),
+    "paper_step",
+    tuned=(MillingConstantFeed, FixedGainIntegral, IntegralACC),
+    machine_tuned=(
+        MillingConstantFeed,
+        FixedGainIntegral,
+        IntegralACC,
+        AdaptiveFeedControl,
     ),
-    reproduce=reproduce_milling,
+    machine_reference=MillingConstantFeed,
+    learned=("end_milling_ppo",),
+    oracle=DeferredAgent("agents.oracle.MillingMPCOracle"),
+    oracle_episodes=20,
+    oracle_in_quick=False,  # a cut of some 2000 samples: about 16 s
+    oracle_seconds=16.0,
+    rows_seconds=250.0,
+    extra_splits=("wear", "shopfloor"),
+    robustness=Robustness(
+        "spindle speed (x nominal)",
+        (0.6, 0.8, 1.0, 1.3, 1.8),  # the ood split's speeds and depths
+        "radial depth (mm)",
+        (0.5, 1.0, 2.0, 4.0),
+        ConstantDepthCut(MillingScenario, PAPER_LENGTH_MM),
+    ),
+    table_metrics=(
+        "machining_time_min",
+        "mrr_mm3_per_min",
+        "iae",
+        "max_overshoot",
+        "settling_time_s",
+        "oscillation",
+        "time_over_limit",
+        "breakage",
+        "finished",
+    ),
+    plot_main=("torque_Nmm", "torque_limit_Nmm", "torque (N·mm)"),
+    plot_lower=("feed_mm_per_rev", "feed (mm/rev)"),
+    plot_context=("depth_mm", "radial depth (mm)"),
 )
+
+PROCESS = Process("milling", (BENCHMARK,), reproduce_milling)

@@ -52,6 +52,8 @@ __all__ = [
     "SLOW_RESPONSE_S",
 ]
 
+ENV_ID = "machining_envs/Turning-v0"
+
 UNSTABLE_OSCILLATION = 0.10
 SLOW_RESPONSE_S = 3.0
 
@@ -164,7 +166,7 @@ def reproduce_turning(
     kwargs = {} if sensor_gain is None else {"sensor_gain": float(sensor_gain)}
     results = []
     for exp in TURNING_EXPERIMENTS:
-        env = gym.make("machining_envs/Turning-v0", scenario=f"paper_{exp.spindle_rpm:g}", **kwargs)
+        env = gym.make(ENV_ID, scenario=f"paper_{exp.spindle_rpm:g}", **kwargs)
         traj = rollout(_agent(exp, env), env, seed=seed)
         env.close()
         c = classify_turning_run(traj)
@@ -239,32 +241,31 @@ def plot_turning_reproduction(results, path) -> None:
 # --- The declaration: what the benchmark, the CLI and the docs know of turning -------------
 
 
-PROCESS = Process(
-    "turning",
-    benchmarks=(
-        BenchmarkSpec(
-            "machining_envs/Turning-v0",
-            (ConstantFeed.from_env, FixedGainPI.from_env, VariableGainPI.from_env),
-            ("paper_245", "paper_405", "paper_700", "taper_405"),
-            "paper_405",
-            tuned=(ConstantFeed, FixedGainPI, VariableGainPI, AdaptiveFeedControl),
-            machine_tuned=(ConstantFeed, FixedGainPI, VariableGainPI, AdaptiveFeedControl),
-            machine_reference=ConstantFeed,
-            learned=("turning_ppo_residual",),
-            extra_splits=("wear", "shopfloor"),
-            margin_points=tuple(OperatingPoint(rpm, 2.0) for rpm in (245.0, 405.0, 700.0)),
-            oracle=DeferredAgent("agents.oracle.TurningMPCOracle"),
-            oracle_episodes=20,
-            oracle_seconds=2.0,
-            rows_seconds=100.0,
-            robustness=Robustness(
-                "spindle speed (rpm)",
-                (245.0, 350.0, 500.0, 700.0),
-                "depth of cut (mm)",
-                (0.5, 1.0, 2.0, 3.0),
-                ConstantDepthCut(TurningScenario, 3 * PAPER_STEP_SEGMENT_MM),
-            ),
-        ),
+#: The classical agents tuned for the benchmark's machine and for the shop-floor one alike.
+_TUNED = (ConstantFeed, FixedGainPI, VariableGainPI, AdaptiveFeedControl)
+
+BENCHMARK = BenchmarkSpec(
+    ENV_ID,
+    (ConstantFeed.from_env, FixedGainPI.from_env, VariableGainPI.from_env),
+    ("paper_245", "paper_405", "paper_700", "taper_405"),
+    "paper_405",
+    tuned=_TUNED,
+    machine_tuned=_TUNED,
+    machine_reference=ConstantFeed,
+    learned=("turning_ppo_residual",),
+    extra_splits=("wear", "shopfloor"),
+    margin_points=tuple(OperatingPoint(rpm, 2.0) for rpm in (245.0, 405.0, 700.0)),
+    oracle=DeferredAgent("agents.oracle.TurningMPCOracle"),
+    oracle_episodes=20,
+    oracle_seconds=2.0,
+    rows_seconds=100.0,
+    robustness=Robustness(
+        "spindle speed (rpm)",
+        (245.0, 350.0, 500.0, 700.0),
+        "depth of cut (mm)",
+        (0.5, 1.0, 2.0, 3.0),
+        ConstantDepthCut(TurningScenario, 3 * PAPER_STEP_SEGMENT_MM),
     ),
-    reproduce=reproduce_turning,
 )
+
+PROCESS = Process("turning", (BENCHMARK,), reproduce_turning)
