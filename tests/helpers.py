@@ -331,3 +331,35 @@ def assert_cores_alike(one, many) -> None:
     if acts[0] is not None:
         for name, arr in _arrays(acts[0]).items():
             np.testing.assert_array_equal(arr, _arrays(acts[1])[name], err_msg=name)
+
+
+def train_quietly(env_id: str, out, config_path, algo: str = "ppo", **kwargs):
+    """``agents.rl.train`` of ``algo`` on ``env_id`` into ``out`` with the config file
+    ``config_path``, without progress bar or printing (``kwargs``: train's other keywords)."""
+    from agents.rl import train
+
+    return train(
+        env_id, algo, out, config_path=config_path, progress_bar=False, verbose=False, **kwargs
+    )
+
+
+def episode_rows(times, over=None, policy_seed=None, overloaded: float = 0.0) -> list[dict]:
+    """Synthetic benchmark rows, one an episode (``seed`` its index): machining time ``times``,
+    share of steps over the limit ``over`` (none by default), every episode finished without
+    breakage and with a score bound of 10 s; ``policy_seed`` where a learned row's seed."""
+    over = np.zeros(len(times)) if over is None else over
+    out = []
+    for i, (t, o) in enumerate(zip(times, over, strict=True)):
+        r = {
+            "seed": i,
+            "machining_time_s": float(t),
+            "finished": 1.0,
+            "breakage": 0.0,
+            "time_over_limit": float(o),
+            "overloaded": overloaded,
+            "score_bound": 10.0,
+        }
+        if policy_seed is not None:
+            r["policy_seed"] = policy_seed
+        out.append(r)
+    return out

@@ -20,9 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from agents.bench.figures import save_figure
-from agents.eval import evaluate
+from agents.eval.harness import evaluate_validation
 from agents.eval.stats import iqm_interval
-from machining_envs.core.splits import split_seeds
 
 __all__ = ["LearningCurve", "learning_curve", "plot_learning_curves"]
 
@@ -111,14 +110,7 @@ def learning_curve(
     ref_name, ref_score, first = None, math.nan, None
     if reference is not None:
         ref_name, factory = reference
-        ev = evaluate(
-            factory,
-            env_id,
-            ["validation"],
-            n_episodes=n_episodes,
-            seed=split_seeds("validation", n_episodes)[0],
-            env_kwargs=env_kwargs,
-        )
+        ev = evaluate_validation(factory, env_id, n_episodes, env_kwargs=env_kwargs)
         ref_score = float(score(ev.rows, failed)["score"])
         hits = np.flatnonzero(iqm <= ref_score)
         first = int(hits[0]) if hits.size else None

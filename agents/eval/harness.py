@@ -14,8 +14,17 @@ import machining_envs  # noqa: F401  (registers the env ids)
 from machining_envs.core.checks import is_integer
 from machining_envs.core.metrics import regulation_metrics
 from machining_envs.core.score import REGULATION_SCORE, Task
+from machining_envs.core.splits import split_seeds
 
-__all__ = ["rollout", "rollout_batch", "evaluate", "Evaluation", "agent_name", "task_of"]
+__all__ = [
+    "rollout",
+    "rollout_batch",
+    "evaluate",
+    "evaluate_validation",
+    "Evaluation",
+    "agent_name",
+    "task_of",
+]
 
 #: Most lanes of one batch of :func:`evaluate` (an evaluation of more episodes runs in
 #: several batches): a batch runs until its longest episode ends, and a lane holds 8-16 kB.
@@ -477,3 +486,11 @@ def evaluate(
         env.close()
         if venv is not None:
             venv.close()
+
+
+def evaluate_validation(agent, env_id: str, n_episodes: int, **kwargs) -> Evaluation:
+    """:func:`evaluate` on the ``validation`` split's first ``n_episodes`` episodes (seeds
+    from ``split_seeds("validation", n_episodes)``), as training and tuning select on them;
+    ``kwargs``: evaluate's other keywords."""
+    seed = split_seeds("validation", n_episodes)[0]
+    return evaluate(agent, env_id, ["validation"], n_episodes=n_episodes, seed=seed, **kwargs)

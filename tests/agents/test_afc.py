@@ -119,20 +119,16 @@ def test_settings_are_checked(bad):
 
 
 def test_harness_records_the_log_on_the_env():
-    ev = evaluate(
-        AdaptiveFeedControl.from_env,
-        "machining_envs/Turning-v0",
-        ["validation"],
-        n_episodes=2,
-        env_kwargs={"power_sensor": True},
-    )
-    ev1 = evaluate(
-        AdaptiveFeedControl.from_env,
-        "machining_envs/Turning-v0",
-        ["validation"],
-        n_episodes=2,
-        env_kwargs={"power_sensor": True},
-        batched=False,
+    ev, ev1 = (
+        evaluate(
+            AdaptiveFeedControl.from_env,
+            "machining_envs/Turning-v0",
+            ["validation"],
+            n_episodes=2,
+            env_kwargs={"power_sensor": True},
+            batched=batched,
+        )
+        for batched in (None, False)
     )
     for row, row1 in zip(ev.rows, ev1.rows, strict=True):
         for f in AFC_LOG_FIELDS:

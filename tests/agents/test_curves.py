@@ -12,7 +12,8 @@ import pytest
 pytest.importorskip("rliable")
 
 from agents.bench.curves import learning_curve, plot_learning_curves  # noqa: E402
-from agents.eval import evaluate, task_of  # noqa: E402
+from agents.eval import task_of  # noqa: E402
+from agents.eval.harness import evaluate_validation  # noqa: E402
 from agents.turning import VariableGainPI  # noqa: E402
 from machining_envs.core.splits import split_seeds  # noqa: E402
 from tests.helpers import TURNING  # noqa: E402
@@ -50,13 +51,10 @@ def _task():
 def test_the_curve_is_the_seeds_iqm_and_finds_the_first_match(tmp_path):
     score, failed = _task()
     factory = VariableGainPI.from_env
-    ev = evaluate(
-        factory,
-        TURNING,
-        ["validation"],
-        n_episodes=N_EPISODES,
-        seed=split_seeds("validation", N_EPISODES)[0],
-    )
+    ev = evaluate_validation(factory, TURNING, N_EPISODES)
+    # The validation protocol's episodes: the split's first seeds, its scenario.
+    assert [r["seed"] for r in ev.rows] == list(split_seeds("validation", N_EPISODES))
+    assert {r["scenario"] for r in ev.rows} == {"validation"}
     ref = float(score(ev.rows, failed)["score"])
     assert math.isfinite(ref)
     # five seeds: far above the reference, then just above, then below at evaluation 3

@@ -19,12 +19,12 @@ import numpy as np
 import pytest
 
 from agents.eval import evaluate
-from agents.rl import ConfigError, evaluate_policy_file, load_policy, pretrained, train
+from agents.rl import ConfigError, evaluate_policy_file, load_policy, pretrained
 from agents.rl.policy import PRETRAINED_DIR, pretrained_seeds, read_run_config
 from agents.rl.stats import read_stats
 from agents.turning import ConstantFeed
 from tests.agents.test_rl import TINY
-from tests.helpers import CONTOURING, MILLING, TURNING
+from tests.helpers import CONTOURING, MILLING, TURNING, train_quietly
 
 SHIPPED = PRETRAINED_DIR / "turning_ppo"
 
@@ -259,7 +259,7 @@ def test_a_policy_that_cannot_be_built_is_refused_leaving_no_run_folder(tmp_path
     config.write_text(TINY + f"  {extra}\n")
     out = tmp_path / "runs" / "r"
     with pytest.raises(ConfigError, match=message):
-        train(TURNING, "ppo", out, config_path=config, progress_bar=False, verbose=False)
+        train_quietly(TURNING, out, config)
     assert not (tmp_path / "runs").exists()
 
 
@@ -269,7 +269,7 @@ def test_a_run_folder_under_a_file_is_refused_before_any_work(tmp_path):
     (tmp_path / "f").write_text("x")
     for out in (tmp_path / "f", tmp_path / "f" / "r"):
         with pytest.raises(FileExistsError, match="is a file"):
-            train(TURNING, "ppo", out, config_path=config, progress_bar=False, verbose=False)
+            train_quietly(TURNING, out, config)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.yml", "f"]
 
 
@@ -281,27 +281,11 @@ def test_a_run_that_cannot_be_resumed_is_refused_naming_the_file(run, tmp_path):
     shutil.copy(run / "best_model.zip", folder / "final_model.zip")
     # The run normalises: its statistics must be there.
     with pytest.raises(ConfigError, match="final_vecnormalize.json"):
-        train(
-            TURNING,
-            "ppo",
-            folder,
-            config_path=config,
-            resume=True,
-            progress_bar=False,
-            verbose=False,
-        )
+        train_quietly(TURNING, folder, config, resume=True)
     shutil.copy(run / "best_vecnormalize.json", folder / "final_vecnormalize.json")
     (folder / "final_model.zip").write_bytes(b"PK\x03\x04 damaged")
     with pytest.raises(ConfigError, match="final_model.zip: not a PPO model"):
-        train(
-            TURNING,
-            "ppo",
-            folder,
-            config_path=config,
-            resume=True,
-            progress_bar=False,
-            verbose=False,
-        )
+        train_quietly(TURNING, folder, config, resume=True)
 
 
 # ---- other files read -----------------------------------------------------------------------

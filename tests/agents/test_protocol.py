@@ -19,11 +19,11 @@ from agents.bench.tune import (
     tune_agent,
     tuned_factory,
 )
-from agents.rl import ConfigError, train
+from agents.rl import ConfigError
 from agents.turning import FixedGainPI
 from machining_envs.core.score import REGULATION_SCORE
 from machining_envs.core.splits import HELD_OUT, SPLITS, check_not_held_out, split_seeds
-from tests.helpers import TURNING
+from tests.helpers import TURNING, episode_rows, train_quietly
 
 
 @pytest.fixture
@@ -69,9 +69,7 @@ machining_envs/Turning-v0:
 def test_training_selects_on_validation_and_never_touches_held_out(tmp_path, scenarios_seen):
     path = tmp_path / "tiny.yml"
     path.write_text(TINY)
-    run = train(
-        TURNING, "ppo", tmp_path / "run", config_path=path, progress_bar=False, verbose=False
-    )
+    run = train_quietly(TURNING, tmp_path / "run", path)
     assert set(scenarios_seen) == {"train", "validation"}, set(scenarios_seen)
     cfg = json.loads((run / "config.json").read_text())["config"]
     assert cfg["eval_scenarios"] == ["validation"]
@@ -86,7 +84,7 @@ def test_training_refuses_held_out_splits(tmp_path, split, where):
     path = tmp_path / "bad.yml"
     path.write_text(text)
     with pytest.raises(ConfigError, match="held-out"):
-        train(TURNING, "ppo", tmp_path / "run", config_path=path, progress_bar=False, verbose=False)
+        train_quietly(TURNING, tmp_path / "run", path)
     assert not (tmp_path / "run").exists()
 
 
@@ -141,30 +139,13 @@ def test_the_benchmark_warns_when_the_tuned_settings_are_missing(tmp_path, monke
         assert benchmark._tuned_settings() == {}
 
 
-def _rows(values, policy_seed=None):
-    out = []
-    for i, v in enumerate(values):
-        r = {
-            "seed": i,
-            "machining_time_s": float(v),
-            "finished": 1.0,
-            "breakage": 0.0,
-            "time_over_limit": 0.0,
-            "score_bound": 10.0,
-        }
-        if policy_seed is not None:
-            r["policy_seed"] = policy_seed
-        out.append(r)
-    return out
-
-
 def test_statistics_pair_episodes_and_bracket_the_truth():
     from agents.eval.stats import agent_stats, paired_difference
 
     rng = np.random.default_rng(0)
     base = 30.0 + rng.normal(0.0, 3.0, 100)
-    ref = _rows(base)
-    better = _rows(base - 2.0)  # exactly 2 s better on every episode
+    ref = episode_rows(base)
+    better = episode_rows(base - 2.0)  # exactly 2 s better on every episode
     d = paired_difference(ref, better, REGULATION_SCORE, 200.0)
     assert d["diff"] == pytest.approx(2.0) and d["low"] == d["high"] == pytest.approx(2.0)
     assert d["p_improve"] == 1.0
@@ -172,11 +153,11 @@ def test_statistics_pair_episodes_and_bracket_the_truth():
     assert s.iqm_low <= s.iqm <= s.iqm_high and s.count_rate == 1.0
     assert s.efficiency == pytest.approx(np.mean(10.0 / base))
     # Five policy seeds are five columns of the same episodes.
-    seeds = [r for k in range(5) for r in _rows(base + k, k)]
+    seeds = [r for k in range(5) for r in episode_rows(base + k, policy_seed=k)]
     s5 = agent_stats(seeds, REGULATION_SCORE, 200.0)
     assert s5.n_seeds == 5 and s5.n_episodes == 100 and s5.mean == pytest.approx(base.mean() + 2)
     # An episode that does not count is charged the failure cost.
-    broken = _rows(base)
+    broken = episode_rows(base)
     broken[0]["breakage"] = 1.0
     assert agent_stats(broken, REGULATION_SCORE, 200.0).count_rate == 0.99
 

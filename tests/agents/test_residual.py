@@ -19,7 +19,7 @@ from agents.rl.residual import (  # noqa: E402
 )
 from agents.rl.vec import SB3VecEnv  # noqa: E402
 from agents.turning import VariableGainPI  # noqa: E402
-from tests.helpers import TURNING  # noqa: E402
+from tests.helpers import TURNING, train_quietly  # noqa: E402
 
 BASE = "agents.turning.VariableGainPI"
 
@@ -151,19 +151,13 @@ def test_bad_residual_settings_are_refused_naming_them(tmp_path, kwargs, match):
 
 
 def test_a_trained_residual_run_reloads_as_a_residual_agent_and_reproduces_its_score(tmp_path):
-    from agents.rl import load_policy, train
+    from agents.rl import load_policy
     from agents.rl.config import CONFIG_DIR
     from agents.rl.train import evaluate_policy_file
     from machining_envs.core.splits import split_seeds
 
-    out = train(
-        TURNING,
-        "ppo",
-        tmp_path / "run",
-        config_path=CONFIG_DIR / "ppo_residual.yml",
-        n_timesteps=2048,
-        progress_bar=False,
-        verbose=False,
+    out = train_quietly(
+        TURNING, tmp_path / "run", CONFIG_DIR / "ppo_residual.yml", n_timesteps=2048
     )
     agent = load_policy(out / "best_model.zip")
     assert isinstance(agent, ResidualAgent) and agent.base.name.startswith("AFC")  # its base

@@ -9,7 +9,7 @@ import pytest
 from agents.bench.cli import main
 from agents.eval import evaluate
 from agents.rl import ConfigError, load_config, load_policy, primary_score, train
-from tests.helpers import TURNING
+from tests.helpers import MILLING, TURNING, train_quietly
 
 TINY = """
 machining_envs/Turning-v0:
@@ -80,7 +80,7 @@ def test_bad_configs_fail_before_training(tmp_path, text, message):
     path = tmp_path / "bad.yml"
     path.write_text(text)
     with pytest.raises(ConfigError, match=message):
-        train(TURNING, "ppo", tmp_path / "run", config_path=path, progress_bar=False, verbose=False)
+        train_quietly(TURNING, tmp_path / "run", path)
     assert not (tmp_path / "run").exists()
 
 
@@ -150,15 +150,7 @@ def test_missing_config_file_and_bad_algo(tmp_path):
 
 
 def test_train_save_reload_resume(tiny, tmp_path):
-    run = train(
-        TURNING,
-        "ppo",
-        tmp_path / "run",
-        seed=1,
-        config_path=tiny,
-        progress_bar=False,
-        verbose=False,
-    )
+    run = train_quietly(TURNING, tmp_path / "run", tiny, seed=1)
     for name in (
         "final_model.zip",
         "final_vecnormalize.json",
@@ -184,20 +176,11 @@ def test_train_save_reload_resume(tiny, tmp_path):
     from stable_baselines3 import PPO
 
     with pytest.raises(FileExistsError):
-        train(TURNING, "ppo", run, config_path=tiny, progress_bar=False, verbose=False)
+        train_quietly(TURNING, run, tiny)
 
     def resumed_to(n_timesteps: int) -> int:
         """The steps of the final model after ``--resume`` to ``n_timesteps`` in all."""
-        train(
-            TURNING,
-            "ppo",
-            run,
-            config_path=tiny,
-            n_timesteps=n_timesteps,
-            resume=True,
-            progress_bar=False,
-            verbose=False,
-        )
+        train_quietly(TURNING, run, tiny, n_timesteps=n_timesteps, resume=True)
         return PPO.load(run / "final_model.zip").num_timesteps
 
     assert resumed_to(512) >= 512
@@ -249,30 +232,14 @@ def test_fixed_seed_reproduces_the_run(tiny, tmp_path):
 
     params = []
     for k in range(2):
-        run = train(
-            TURNING,
-            "ppo",
-            tmp_path / f"r{k}",
-            seed=7,
-            config_path=tiny,
-            progress_bar=False,
-            verbose=False,
-        )
+        run = train_quietly(TURNING, tmp_path / f"r{k}", tiny, seed=7)
         params.append(PPO.load(run / "final_model.zip").policy.state_dict())
     for key in params[0]:
         assert np.array_equal(params[0][key].numpy(), params[1][key].numpy()), key
 
 
 def test_cli_evaluate(tiny, tmp_path, capsys):
-    run = train(
-        TURNING,
-        "ppo",
-        tmp_path / "run",
-        seed=2,
-        config_path=tiny,
-        progress_bar=False,
-        verbose=False,
-    )
+    run = train_quietly(TURNING, tmp_path / "run", tiny, seed=2)
     assert (
         main(
             [
@@ -323,14 +290,7 @@ def test_training_evaluates_with_the_envs_own_metrics(tmp_path):
     )
     path = tmp_path / "mill.yml"
     path.write_text(text)
-    run = train(
-        "machining_envs/EndMilling-v0",
-        "ppo",
-        tmp_path / "run",
-        config_path=path,
-        progress_bar=False,
-        verbose=False,
-    )
+    run = train_quietly(MILLING, tmp_path / "run", path)
     rows = (run / "eval.csv").read_text().splitlines()
     assert len(rows) >= 2 and rows[0].startswith("timesteps,")
 
@@ -344,9 +304,7 @@ def test_a_policy_trained_on_increments_runs_on_the_plain_env(tmp_path):
 
     path = tmp_path / "inc.yml"
     path.write_text(TINY + "  action_increment: 0.3\n")
-    run = train(
-        TURNING, "ppo", tmp_path / "run", config_path=path, progress_bar=False, verbose=False
-    )
+    run = train_quietly(TURNING, tmp_path / "run", path)
     meta = json.loads((run / "config.json").read_text())
     assert meta["action_increment"] == {
         "max_step": 0.3,
@@ -380,7 +338,7 @@ def test_bad_action_increment_fails_before_training(tmp_path, line, message):
     path = tmp_path / "bad.yml"
     path.write_text(TINY + line)
     with pytest.raises(ConfigError, match=message):
-        train(TURNING, "ppo", tmp_path / "run", config_path=path, progress_bar=False, verbose=False)
+        train_quietly(TURNING, tmp_path / "run", path)
     assert not (tmp_path / "run").exists()
 
 
@@ -401,16 +359,7 @@ def test_native_vector_training_reproduces_a_fixed_seed_run(tmp_path, increment)
     path.write_text(text)
     runs = {}
     for name, vec in (("native_a", "native"), ("native_b", "native"), ("dummy", "dummy")):
-        runs[name] = train(
-            TURNING,
-            "ppo",
-            tmp_path / name,
-            seed=4,
-            config_path=path,
-            progress_bar=False,
-            verbose=False,
-            vec=vec,
-        )
+        runs[name] = train_quietly(TURNING, tmp_path / name, path, seed=4, vec=vec)
     assert json.loads((runs["native_a"] / "config.json").read_text())["vec"] == "native"
     a, b, d = (_final_parameters(runs[k]) for k in ("native_a", "native_b", "dummy"))
     for pa, pb, pd in zip(a, b, d, strict=True):

@@ -6,24 +6,7 @@ import pytest
 
 from agents.eval.stats import VERDICTS, allowance_sweep, seed_count_shares, verdict
 from machining_envs.core.score import ALLOWANCES, REGULATION_SCORE
-
-
-def _rows(times, over, policy_seed=None, overloaded=0.0):
-    out = []
-    for i, (t, o) in enumerate(zip(times, over, strict=True)):
-        r = {
-            "seed": i,
-            "machining_time_s": float(t),
-            "finished": 1.0,
-            "breakage": 0.0,
-            "time_over_limit": float(o),
-            "overloaded": overloaded,
-            "score_bound": 10.0,
-        }
-        if policy_seed is not None:
-            r["policy_seed"] = policy_seed
-        out.append(r)
-    return out
+from tests.helpers import episode_rows
 
 
 def test_the_rule_on_intervals():
@@ -43,20 +26,20 @@ def test_a_win_at_two_per_cent_that_is_a_loss_at_half_a_per_cent_depends_on_it()
     it is charged the failure cost (200 s) on each: a loss. The verdict says so."""
     rng = np.random.default_rng(0)
     base = 60.0 + rng.normal(0.0, 5.0, 60)
-    ref = _rows(base, np.zeros(60))
-    agent = _rows(base - 5.0, np.full(60, 0.015))
+    ref = episode_rows(base, np.zeros(60))
+    agent = episode_rows(base - 5.0, np.full(60, 0.015))
     diffs, v = allowance_sweep(ref, agent, REGULATION_SCORE, 200.0)
     assert [d["diff"] > 0 for d in diffs] == [False, False, True]
     assert diffs[0]["high"] < 0 and diffs[2]["low"] > 0
     assert v == "depends on the allowance"
     # The same agent inside 0.5 %: better at every allowance.
-    clean = _rows(base - 5.0, np.full(60, 0.004))
+    clean = episode_rows(base - 5.0, np.full(60, 0.004))
     assert allowance_sweep(ref, clean, REGULATION_SCORE, 200.0)[1] == "better"
     # Noise either way: unresolved.
-    noisy = _rows(base + rng.normal(0.0, 5.0, 60), np.zeros(60))
+    noisy = episode_rows(base + rng.normal(0.0, 5.0, 60), np.zeros(60))
     assert allowance_sweep(ref, noisy, REGULATION_SCORE, 200.0)[1] == "unresolved"
     # Slower everywhere: worse.
-    slow = _rows(base + 5.0, np.zeros(60))
+    slow = episode_rows(base + 5.0, np.zeros(60))
     assert allowance_sweep(ref, slow, REGULATION_SCORE, 200.0)[1] == "worse"
 
 
@@ -65,15 +48,15 @@ def test_the_ceiling_makes_an_episode_fail_at_every_allowance():
     of steps over the limit: a fast agent that overloads every cut loses at every
     allowance."""
     base = np.linspace(50.0, 70.0, 40)
-    ref = _rows(base, np.zeros(40))
-    over = _rows(base - 10.0, np.zeros(40), overloaded=1.0)
+    ref = episode_rows(base, np.zeros(40))
+    over = episode_rows(base - 10.0, np.zeros(40), overloaded=1.0)
     assert not any(REGULATION_SCORE.counts(r, a) for r in over for a in ALLOWANCES)
     assert allowance_sweep(ref, over, REGULATION_SCORE, 200.0)[1] == "worse"
 
 
 def test_each_seed_keeps_its_share_of_counting_episodes():
-    good = _rows(np.full(10, 30.0), np.zeros(10), policy_seed=0)
-    bad = _rows(np.full(10, 30.0), [0.0] * 7 + [0.03] * 3, policy_seed=1)
+    good = episode_rows(np.full(10, 30.0), np.zeros(10), policy_seed=0)
+    bad = episode_rows(np.full(10, 30.0), [0.0] * 7 + [0.03] * 3, policy_seed=1)
     shares = seed_count_shares(good + bad, REGULATION_SCORE)
     assert shares == {0: 1.0, 1: 0.7}
     assert seed_count_shares(bad, REGULATION_SCORE, allowance=0.05) == {1: 1.0}

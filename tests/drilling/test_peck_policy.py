@@ -113,9 +113,10 @@ def test_the_pecking_config_loads():
 
 @pytest.mark.slow
 def test_a_pecking_policy_trains_and_replays_over_the_peck_cycle(tmp_path):
-    from agents.rl import load_policy, train
+    from agents.rl import load_policy
     from agents.rl.config import CONFIG_DIR
     from agents.rl.residual import ResidualAgent
+    from tests.helpers import train_quietly
 
     wrapper = [
         {
@@ -138,14 +139,11 @@ def test_a_pecking_policy_trains_and_replays_over_the_peck_cycle(tmp_path):
             }
         }
     ]
-    out = train(
+    out = train_quietly(
         DRILLING_ID,
-        "ppo",
         tmp_path / "run",
-        config_path=CONFIG_DIR / "ppo_peck.yml",
+        CONFIG_DIR / "ppo_peck.yml",
         n_timesteps=2048,
-        progress_bar=False,
-        verbose=False,
         overrides={"env_wrapper": wrapper, "callback": cb, "n_envs": 2},
     )
     agent = load_policy(out / "best_model.zip")

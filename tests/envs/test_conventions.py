@@ -75,7 +75,6 @@ class RandomRun:
 class EnvCase:
     """One env (an id and its constructor keywords) and how the conventions drive it."""
 
-    name: str
     env_id: str
     env_class: type
     obs_dim: int
@@ -109,6 +108,11 @@ class EnvCase:
     pickle_run: tuple[int, float, int, float] = (20, 0.1, 30, 0.2)
     vector_run: tuple[int, float] = (20, 0.0)
     render_run: tuple[int, float] = (30, 0.0)
+
+    @property
+    def name(self) -> str:
+        """The case's test id: the env id's name, then its constructor keywords' values."""
+        return "-".join((self.env_id.split("/")[1], *map(str, self.kwargs.values())))
 
     def make(self, **kwargs) -> gym.Env:
         return gym.make(self.env_id, **{**self.kwargs, **kwargs})
@@ -150,7 +154,6 @@ _CONTOURING = dict(
 
 CASES = (
     EnvCase(
-        name="Turning-v0",
         env_id=TURNING,
         env_class=TurningEnv,
         signal="force_N",
@@ -164,7 +167,6 @@ CASES = (
         **_CUT_REGULATION,
     ),
     EnvCase(
-        name="EndMilling-v0",
         env_id=MILLING,
         env_class=EndMillingEnv,
         signal="torque_Nmm",
@@ -183,7 +185,6 @@ CASES = (
         **_CUT_REGULATION,
     ),
     EnvCase(
-        name="MicroDrilling-v0-voltage",
         kwargs={"control": "voltage"},
         clip_commands=lambda env: (10.0, 0.0),
         truncation=({"max_episode_time_s": 0.2}, 0.0, 20),
@@ -192,7 +193,6 @@ CASES = (
         **_DRILLING,
     ),
     EnvCase(
-        name="MicroDrilling-v0-feed",
         kwargs={"control": "feed"},
         clip_commands=lambda env: (3.0, -3.0),
         truncation=({"max_episode_time_s": 0.2}, -0.1, 20),
@@ -203,7 +203,6 @@ CASES = (
         **_DRILLING,
     ),
     EnvCase(
-        name="Contouring-v0",
         env_id=CONTOURING,
         env_class=ContouringEnv,
         obs_dim=14,
@@ -226,7 +225,6 @@ CASES = (
         **_CONTOURING,
     ),
     EnvCase(
-        name="ContouringFeed-v0",
         env_id=CONTOURING_FEED,
         env_class=ContouringFeedEnv,
         obs_dim=16,
