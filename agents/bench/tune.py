@@ -34,10 +34,12 @@ from it; the paper's settings stay as rows of their own.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import gymnasium as gym
@@ -67,41 +69,32 @@ TUNED_FILE = Path(__file__).resolve().parent / "tuned.json"
 SHOPFLOOR_TUNED_FILE = Path(__file__).resolve().parent / "tuned_shopfloor.json"
 
 
+@dataclass
 class TuningBudget:
     """Trials and episodes per trial, the same for every agent (stated in ``tuned.json``),
     and the allowance of steps over the limit the objective scores at (one of
     ``machining_envs.core.score.ALLOWANCES``; the protocol's 2 % by default, the verdict's
     strictest 0.5 % for the shop-floor file)."""
 
-    def __init__(
-        self,
-        trials: int = 30,
-        episodes: int = 16,
-        startup: int = 8,
-        seed: int = 0,
-        allowance: float = OVER_LIMIT_SHARE,
-    ):
-        if allowance not in ALLOWANCES:
-            raise ValueError(f"allowance must be one of {list(ALLOWANCES)}, got {allowance!r}")
-        self.allowance = float(allowance)
-        for name, v, lo in (
-            ("trials", trials, 1),
-            ("episodes", episodes, 1),
-            ("startup", startup, 0),
-        ):
+    trials: int = 30
+    episodes: int = 16
+    startup: int = 8
+    seed: int = 0
+    allowance: float = OVER_LIMIT_SHARE
+
+    def __post_init__(self):
+        if self.allowance not in ALLOWANCES:
+            raise ValueError(f"allowance must be one of {list(ALLOWANCES)}, got {self.allowance!r}")
+        self.allowance = float(self.allowance)
+        for name, lo in (("trials", 1), ("episodes", 1), ("startup", 0)):
+            v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise ValueError(f"{name} must be an integer >= {lo}, got {v!r}")
-        self.trials, self.episodes, self.startup, self.seed = trials, episodes, startup, seed
 
     def as_dict(self) -> dict:
-        out = {
-            "trials": self.trials,
-            "episodes": self.episodes,
-            "startup": self.startup,
-            "seed": self.seed,
-        }
-        if self.allowance != OVER_LIMIT_SHARE:  # the default is not written (older files)
-            out["allowance"] = self.allowance
+        out = dataclasses.asdict(self)
+        if self.allowance == OVER_LIMIT_SHARE:  # the default is not written (older files)
+            del out["allowance"]
         return out
 
 
