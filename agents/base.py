@@ -19,6 +19,7 @@ from machining_envs.core.checks import PY_NUMBER_TYPES, check_range
 __all__ = [
     "Agent",
     "ProcessController",
+    "CommandIO",
     "SETPOINT_SEARCH",
     "SETPOINT",
     "Setting",
@@ -340,6 +341,22 @@ class Agent:
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.name!r})"
+
+
+class CommandIO:
+    """What a feed-regulation controller's machine description (``TurningIO``,
+    ``MillingIO``) shares: commands in counts back to actions, through the env's
+    ``command_map`` where the description keeps one, else affinely over
+    ``[0, command_max]``."""
+
+    command_max: float
+    command_map = None
+
+    def action(self, command: np.ndarray) -> np.ndarray:
+        """Actions (n, 1) for commands (n,) in counts."""
+        if self.command_map is not None:
+            return self.command_map.command_to_action(command)[:, None]
+        return (2.0 * command / self.command_max - 1.0)[:, None]
 
 
 class ProcessController(Agent):

@@ -19,6 +19,7 @@ import numpy as np
 
 from agents.base import (
     SETPOINT,
+    CommandIO,
     ProcessController,
     Setting,
     check_positive,
@@ -39,7 +40,7 @@ MIN_LIMIT_SHARE = 1e-6
 
 
 @dataclass(frozen=True)
-class MillingIO:
+class MillingIO(CommandIO):
     """What a milling controller knows of the machine: its nominal calibration constants.
 
     Converts the normalised observation to sensor counts (the units of the paper's gains)
@@ -83,12 +84,6 @@ class MillingIO:
         model's gain, which grows as the torque's power ``1 - 1/e``, would overflow)."""
         lim = self.torque_scale_Nmm * obs[:, _I["limit"]]
         return np.where(lim > MIN_LIMIT_SHARE * self.torque_scale_Nmm, lim, self.torque_scale_Nmm)
-
-    def action(self, command: np.ndarray) -> np.ndarray:
-        """Actions (n, 1) for commands (n,) in counts."""
-        if self.command_map is not None:
-            return self.command_map.command_to_action(command)[:, None]
-        return (2.0 * command / self.command_max - 1.0)[:, None]
 
 
 class _MillingController(ProcessController):

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agents.base import SETPOINT, ProcessController, Setting, unwrap_as
+from agents.base import SETPOINT, CommandIO, ProcessController, Setting, unwrap_as
 from machining_envs.core.checks import PY_NUMBER_TYPES, check_integer, check_range
 from machining_envs.turning.env import TurningEnv
 from machining_envs.turning.plant import SPINDLE_RPM_RANGE, TurningParams, unit_plant_coefficients
@@ -36,7 +36,7 @@ MIN_LIMIT_SHARE = 1e-6
 
 
 @dataclass(frozen=True)
-class TurningIO:
+class TurningIO(CommandIO):
     """What a turning controller knows of the machine: its nominal calibration constants.
 
     Converts the normalised observation to ADC counts (the units of the paper's gains) and
@@ -70,10 +70,6 @@ class TurningIO:
 
     def spindle_rpm(self, obs: np.ndarray) -> np.ndarray:
         return 1000.0 * obs[:, _I["spindle"]]
-
-    def action(self, command: np.ndarray) -> np.ndarray:
-        """Actions (n, 1) for servo commands (n,) in counts."""
-        return (2.0 * command / self.command_max - 1.0)[:, None]
 
 
 class _TurningController(ProcessController):
