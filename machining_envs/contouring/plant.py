@@ -24,7 +24,6 @@ This module imports numpy, scipy and numba only; it knows nothing of gymnasium.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 from dataclasses import dataclass
@@ -34,7 +33,7 @@ import numba
 import numpy as np
 
 from machining_envs.contouring._exact import vecmat_rows
-from machining_envs.core.checks import check_fields, replace_checked
+from machining_envs.core.checks import CheckedParams
 from machining_envs.core.compiled.kernels import read_only
 
 __all__ = ["ContouringParams", "ContouringPlant", "ContouringStep", "AXES", "step_axes"]
@@ -48,7 +47,7 @@ AXES = ("x", "y")
 
 
 @dataclass(frozen=True)
-class ContouringParams:
+class ContouringParams(CheckedParams):
     """Identified parameters of one XY table (Choi et al., seed 004, Table 1).
 
     Every field is a physical constant with its unit; derived quantities (the velocity-loop
@@ -85,19 +84,10 @@ class ContouringParams:
     settles (2 %) in 8.4 ms like the continuous loop's 9.0 ms; at 1 kHz the same design
     overshoots 10 % and rings for 40 ms, at 2 kHz it overshoots 2 % (see docs/contouring.md)."""
 
-    def __post_init__(self) -> None:
-        check_fields(self, _FIELD_RULES)
-
     @classmethod
     def choi_et_al(cls) -> ContouringParams:
         """The TNV-40 machining centre's X/Y axes of the paper's Table 1 (the defaults)."""
         return cls()
-
-    def replace(self, **changes) -> ContouringParams:
-        """A copy with fields changed; unknown names raise ``TypeError``. Only the changed
-        fields are checked (:func:`~machining_envs.core.checks.replace_checked`): a vector
-        env's lane draws its table's inertias at every reset."""
-        return replace_checked(self, changes, _FIELD_RULES, ContouringParams)
 
     # ---- derived quantities (never stored) -------------------------------------------------
     def inertia_kgm2(self, axis: str) -> float:
@@ -161,7 +151,7 @@ _FIELD_RULES: dict[str, tuple] = {
     "motor_max_rpm": (0.0, 1e5, True),
     "sample_time_s": (0.0, 0.01, True),
 }
-assert tuple(_FIELD_RULES) == tuple(f.name for f in dataclasses.fields(ContouringParams))
+ContouringParams.check_by(_FIELD_RULES)
 
 
 @functools.lru_cache(maxsize=64)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import operator
+from typing import Self
 
 import numpy as np
 
@@ -36,6 +37,7 @@ __all__ = [
     "ranged",
     "check_ranged_fields",
     "resolve_settings",
+    "CheckedParams",
 ]
 
 #: Python's and numpy's real scalar types: what a parameter check accepts by default.
@@ -277,6 +279,47 @@ def replace_checked(params, changes: dict, rules: dict, cls: type):
     new.__dict__.update(params.__dict__)
     new.__dict__.update(changes)
     return new
+
+
+class CheckedParams:
+    """Base of the plants' frozen parameter dataclasses: a field that the class's rules name
+    is checked when an instance is made (``__post_init__``, by :func:`check_fields`), and
+    :meth:`replace` checks only the fields it changes (:func:`replace_checked`).
+
+    A subclass states its rules once, after its body, with :meth:`check_by`; one with
+    checks across fields extends ``__post_init__`` (calling this one first). A subclass of
+    a parameter class that does not call :meth:`check_by` itself is checked by its base's
+    rules, and its :meth:`replace` goes through ``dataclasses.replace`` and its whole
+    ``__post_init__``."""
+
+    _field_rules: dict = {}
+    _replace_rules: dict = {}
+    _checked_class: type | None = None
+
+    @classmethod
+    def check_by(cls, rules: dict, *, across: tuple[str, ...] = ()) -> None:
+        """Check the fields of this class by ``rules`` (field -> rule of
+        :func:`check_field`), which name fields of the class in the order of its fields
+        (``TypeError`` otherwise). :meth:`replace` checks a changed field alone, but for
+        those named in ``across`` (checked against another field by ``__post_init__``),
+        whose change checks the whole set again."""
+        names = [f.name for f in dataclasses.fields(cls)]
+        if [name for name in names if name in rules] != list(rules):
+            raise TypeError(
+                f"{cls.__name__}: the rules must name its fields, in their order; got {list(rules)}"
+            )
+        cls._field_rules = rules
+        cls._replace_rules = {k: v for k, v in rules.items() if k not in across}
+        cls._checked_class = cls
+
+    def __post_init__(self) -> None:
+        check_fields(self, self._field_rules)
+
+    def replace(self, **changes) -> Self:
+        """A copy with fields changed; unknown names raise ``TypeError``. Only the changed
+        fields are checked (:func:`replace_checked`): envs draw a cut's true parameters at
+        every reset."""
+        return replace_checked(self, changes, self._replace_rules, self._checked_class)
 
 
 def fields_of(cls: type, source):

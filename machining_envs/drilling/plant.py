@@ -53,13 +53,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from machining_envs.core.checks import (
-    check_below,
-    check_fields,
-    check_integer,
-    check_range,
-    replace_checked,
-)
+from machining_envs.core.checks import CheckedParams, check_below, check_integer, check_range
 from machining_envs.core.compiled.kernels import copy_into, powers, py_square, read_only
 from machining_envs.core.lti import zoh
 
@@ -85,7 +79,7 @@ _TWO_PI = 2.0 * math.pi
 
 
 @dataclass(frozen=True)
-class DrillingParams:
+class DrillingParams(CheckedParams):
     """Parameters of the micro-drilling plant (Cheong & Cho, seed 003).
 
     The paper identifies the valve-spindle constants and the shear and friction angles by a
@@ -263,7 +257,7 @@ class DrillingParams:
     """Normalisation of thrusts in observations, N."""
 
     def __post_init__(self) -> None:
-        check_fields(self, _FIELD_RULES)
+        super().__post_init__()
         check_range("nominal_voltage", self.nominal_voltage, 0.0, self.voltage_max, lo_open=True)
         check_below(
             "feed_velocity_mm_s",
@@ -278,12 +272,6 @@ class DrillingParams:
     def cheong_cho(cls) -> DrillingParams:
         """The micro-drilling machine of Cheong & Cho, SS40 mild steel (the defaults)."""
         return cls()
-
-    def replace(self, **changes) -> DrillingParams:
-        """A copy with fields changed; unknown names raise ``TypeError``. Only the changed
-        fields are checked (:func:`~machining_envs.core.checks.replace_checked`), but for
-        those checked against another, which check the whole set again."""
-        return replace_checked(self, changes, _REPLACE_RULES, DrillingParams)
 
     # ---- derived quantities (never stored) -------------------------------------------------
     @property
@@ -396,12 +384,9 @@ _FIELD_RULES: dict[str, tuple] = {
     "torque_scale_Nmm": (0.0, 1e6, True),
     "thrust_scale_N": (0.0, 1e6, True),
 }
-#: The fields :meth:`DrillingParams.replace` checks alone (not against another field).
-_REPLACE_RULES = {
-    k: v
-    for k, v in _FIELD_RULES.items()
-    if k not in ("voltage_max", "feed_velocity_mm_s", "feed_speed_max_mm_s")
-}
+DrillingParams.check_by(
+    _FIELD_RULES, across=("voltage_max", "feed_velocity_mm_s", "feed_speed_max_mm_s")
+)
 
 
 class _GeometryKey(NamedTuple):

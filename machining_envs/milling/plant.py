@@ -38,7 +38,6 @@ This module imports numpy, scipy and numba; it knows nothing of gymnasium.
 
 from __future__ import annotations
 
-import dataclasses
 import enum
 import functools
 import math
@@ -48,13 +47,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from machining_envs.core.checks import (
-    check_fields,
-    check_integer,
-    check_range,
-    fields_of,
-    replace_checked,
-)
+from machining_envs.core.checks import CheckedParams, check_integer, check_range, fields_of
 from machining_envs.core.compiled.kernels import copy_into, matvec, powers, read_only
 from machining_envs.core.compiled.schema import gather, record
 from machining_envs.core.lti import zoh, zoh_tf
@@ -85,7 +78,7 @@ SPINDLE_RPM_RANGE = (20.0, 6000.0)
 
 
 @dataclass(frozen=True)
-class MillingParams:
+class MillingParams(CheckedParams):
     """Identified parameters of the end-milling plant.
 
     The defaults are Park & Yoon (1986, seed 000): HSS end mill, SM45C steel, power-law
@@ -220,9 +213,6 @@ class MillingParams:
     0.1 mm/tooth), and about half the transverse rupture strength of HSS in bending at the
     flutes of the 152 mm overhang. The episode terminates past it."""
 
-    def __post_init__(self) -> None:
-        check_fields(self, _FIELD_RULES)
-
     # ---- parameter sets ------------------------------------------------------------------
     @classmethod
     def park_yoon_1986(cls) -> MillingParams:
@@ -259,11 +249,6 @@ class MillingParams:
             torque_limit_Nmm=round(ref, 1),
             breakage_torque_Nmm=round(4.0 * ref, 0),
         )
-
-    def replace(self, **changes) -> MillingParams:
-        """A copy with fields changed; unknown names raise ``TypeError``. Only the changed
-        fields are checked (:func:`~machining_envs.core.checks.replace_checked`)."""
-        return replace_checked(self, changes, _FIELD_RULES, MillingParams)
 
     # ---- derived quantities (never stored) -----------------------------------------------
     @property
@@ -389,7 +374,7 @@ _FIELD_RULES: dict[str, tuple] = {
     "wear_per_100mm": (0.0, 10.0, False),
     "breakage_torque_Nmm": (0.0, 1e9, True),
 }
-assert tuple(_FIELD_RULES) == tuple(f.name for f in dataclasses.fields(MillingParams))
+MillingParams.check_by(_FIELD_RULES)
 
 
 # ---- average cutting-force model (seed 002) ----------------------------------------------

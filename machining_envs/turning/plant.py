@@ -30,13 +30,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from machining_envs.core.checks import (
-    check_fields,
-    check_integer,
-    check_range,
-    fields_of,
-    replace_checked,
-)
+from machining_envs.core.checks import CheckedParams, check_integer, check_range, fields_of
 from machining_envs.core.compiled.kernels import fma, matvec, powers, read_only, row_max, row_min
 from machining_envs.core.compiled.schema import gather, record
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
@@ -64,7 +58,7 @@ _check = check_range
 
 
 @dataclass(frozen=True)
-class TurningParams:
+class TurningParams(CheckedParams):
     """Identified parameters of the turning plant (Noh, Kim & Kim 1992, seed 001).
 
     Every field is a physical constant with its unit; derived quantities (rad/s, the
@@ -157,7 +151,7 @@ class TurningParams:
     """Normalisation of forces in observations, N (the paper's reference force)."""
 
     def __post_init__(self) -> None:
-        check_fields(self, _FIELD_RULES)
+        super().__post_init__()
         if isinstance(self.sensor_filter_order, bool) or self.sensor_filter_order not in (1, 2):
             raise ValueError(
                 f"sensor_filter_order must be 1 or 2, got {self.sensor_filter_order!r}"
@@ -169,11 +163,6 @@ class TurningParams:
     def noh_kim_kim_1992(cls) -> TurningParams:
         """The lathe of Noh, Kim & Kim (1992), SM45C with a carbide tool (the defaults)."""
         return cls()
-
-    def replace(self, **changes) -> TurningParams:
-        """A copy with fields changed; unknown names raise ``TypeError``. Only the changed
-        fields are checked (:func:`~machining_envs.core.checks.replace_checked`)."""
-        return replace_checked(self, changes, _FIELD_RULES, TurningParams)
 
     # ---- derived quantities (never stored) -------------------------------------------------
     @property
@@ -258,6 +247,7 @@ _FIELD_RULES: dict[str, tuple] = {
     "workpiece_diameter_mm": (0.0, 1e4, True),
     "force_scale_N": (0.0, 1e7, True),
 }
+TurningParams.check_by(_FIELD_RULES)
 
 
 @dataclass(frozen=True)

@@ -93,3 +93,40 @@ def test_check_fields_checks_each_named_field_in_the_order_of_its_rules():
         check_fields(SimpleNamespace(gain=1.0, steps=9, mode="a"), rules)
     with pytest.raises(ValueError, match="mode must be 'a'"):
         check_fields(SimpleNamespace(gain=1.0, steps=2, mode="b"), rules)
+
+
+def test_checked_params_rules_must_name_fields_in_their_order():
+    from machining_envs.core.checks import CheckedParams
+
+    @dataclasses.dataclass(frozen=True)
+    class P(CheckedParams):
+        a: float = 1.0
+        b: float = 2.0
+
+    with pytest.raises(TypeError, match="in their order"):
+        P.check_by({"b": (0.0, 10.0, False), "a": (0.0, 10.0, False)})
+    with pytest.raises(TypeError, match="in their order"):
+        P.check_by({"a": (0.0, 10.0, False), "c": (0.0, 10.0, False)})
+    P.check_by({"b": (0.0, 10.0, True)}, across=("b",))  # a field left unchecked: allowed
+    with pytest.raises(ValueError, match="b must be in"):
+        P(b=0.0)
+    assert P(a=-5.0).a == -5.0
+
+
+def test_a_subclass_of_a_params_class_replaces_through_its_own_post_init():
+    """A user's subclass with its own checks: ``replace`` must not skip them (the fast path
+    is for the class that stated the rules)."""
+
+    @dataclasses.dataclass(frozen=True)
+    class Strict(TurningParams):
+        def __post_init__(self) -> None:
+            super().__post_init__()
+            if self.servo_gain > 1.0:
+                raise ValueError("servo_gain of this machine must be at most 1")
+
+    p = Strict()
+    with pytest.raises(ValueError, match="at most 1"):
+        p.replace(servo_gain=2.0)
+    with pytest.raises(ValueError, match="servo_gain must be in"):
+        p.replace(servo_gain=-1.0)
+    assert type(p.replace(servo_gain=0.5)) is Strict
