@@ -959,6 +959,12 @@ def _involute_at(row, th):
 
 
 @numba.njit(cache=True, inline="always")
+def _line_frame(row):
+    """A line's start point and unit direction: ``x0, y0, ux, uy``."""
+    return row[6], row[7], row[8], row[9]
+
+
+@numba.njit(cache=True, inline="always")
 def _line_xy(row, loc):
     """A line's point ``loc`` along it."""
     return row[6] + row[8] * loc, row[7] + row[9] * loc
@@ -1137,10 +1143,7 @@ def _segment_distance(row, px, py):
     """``Segment.closest(px, py)[0]``."""
     kind = row[0]
     if kind == _LINE:
-        x0 = row[6]
-        y0 = row[7]
-        ux = row[8]
-        uy = row[9]
+        x0, y0, ux, uy = _line_frame(row)
         t = (px - x0) * ux + (py - y0) * uy
         t = 0.0 if t < 0.0 else (row[10] if t > row[10] else t)
         return py_hypot(px - (x0 + ux * t), py - (y0 + uy * t))
@@ -1250,10 +1253,7 @@ def _segment_distances(row, px, py, n, out):
     """``Segment.closest_many(px[:n], py[:n])[0]`` into ``out[:n]``."""
     kind = row[0]
     if kind == _LINE:
-        x0 = row[6]
-        y0 = row[7]
-        ux = row[8]
-        uy = row[9]
+        x0, y0, ux, uy = _line_frame(row)
         for j in range(n):  # in vectors; the lengths vector_hypot leaves (NaN) then by libm
             t = min(max((px[j] - x0) * ux + (py[j] - y0) * uy, 0.0), row[10])
             out[j] = vector_hypot(px[j] - (x0 + ux * t), py[j] - (y0 + uy * t))
@@ -1343,14 +1343,13 @@ def _near_distance(row, x, y):
     and for an involute: :func:`_segment_distance` itself."""
     kind = row[0]
     if kind == _LINE:
-        ux = row[8]
-        uy = row[9]
-        t = (x - row[6]) * ux + (y - row[7]) * uy
+        x0, y0, ux, uy = _line_frame(row)
+        t = (x - x0) * ux + (y - y0) * uy
         t = 0.0 if t < 0.0 else (row[10] if t > row[10] else t)
-        dx = x - (row[6] + ux * t)
-        dy = y - (row[7] + uy * t)
+        dx = x - (x0 + ux * t)
+        dy = y - (y0 + uy * t)
         d = math.sqrt(dx * dx + dy * dy)
-        size = abs(row[6]) + abs(row[7]) + row[10]
+        size = abs(x0) + abs(y0) + row[10]
     elif kind == _ARC:
         cx = row[6]
         cy = row[7]
