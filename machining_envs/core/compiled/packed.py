@@ -74,11 +74,8 @@ def _code(kind: int, ndim: int) -> int:
     return 8 * kind + ndim
 
 
-# The codes the readers check (module globals: constants to the compiled code).
-_F8_1, _F8_2, _F8_3 = (_code(1, d) for d in (1, 2, 3))
-_F4_2 = _code(2, 2)
-_I8_1, _I8_2 = _code(3, 1), _code(3, 2)
-_B1_1, _B1_2 = _code(4, 1), _code(4, 2)
+# The code f8_2_rows checks (a module global: a constant to the compiled code).
+_F8_2 = _code(1, 2)
 #: Code of a 2-d float64 array whose rows are contiguous but further apart than a row
 #: (a view of some columns of a wider array), its row stride in the slot's last entry.
 _ROWS_APART = 14
@@ -157,27 +154,16 @@ class PackedArgs:
         self._table = None
 
 
-def _pointer_to(nbtype):
-    """An intrinsic making a ``CPointer(nbtype)`` of an int64 address."""
+@intrinsic
+def _address(typingctx, address):
+    """A ``void *`` of an int64 address (a packed array's data)."""
+    if address != types.int64:
+        return None
 
-    @intrinsic
-    def pointer(typingctx, address):
-        if address != types.int64:
-            return None
-        sig = types.CPointer(nbtype)(types.int64)
+    def codegen(context, builder, signature, args):
+        return builder.inttoptr(args[0], context.get_value_type(types.voidptr))
 
-        def codegen(context, builder, signature, args):
-            return builder.inttoptr(args[0], context.get_value_type(signature.return_type))
-
-        return sig, codegen
-
-    return pointer
-
-
-_f8 = _pointer_to(types.float64)
-_f4 = _pointer_to(types.float32)
-_i8 = _pointer_to(types.int64)
-_b1 = _pointer_to(types.boolean)
+    return types.voidptr(types.int64), codegen
 
 
 @numba.njit(cache=True, inline="always")
@@ -189,16 +175,39 @@ def _at(t, i, code):
     return o
 
 
-@numba.njit(cache=True, inline="always")
-def f8_1(t, i):
-    o = _at(t, i, _F8_1)
-    return numba.carray(_f8(t[o + 1]), (t[o + 2],))
+def _reader(dtype, ndim: int):
+    """The reader of an argument packed from a C-contiguous ``ndim``-d array of ``dtype``:
+    the array over the same memory (numba has no tuple of a length its argument gives,
+    so each number of dimensions has its own body)."""
+    code = _code(_KINDS[np.dtype(dtype)], ndim)
+    if ndim == 1:
+
+        @numba.njit(cache=True, inline="always")
+        def read(t, i):
+            o = _at(t, i, code)
+            return numba.carray(_address(t[o + 1]), (t[o + 2],), dtype)
+
+    elif ndim == 2:
+
+        @numba.njit(cache=True, inline="always")
+        def read(t, i):
+            o = _at(t, i, code)
+            return numba.carray(_address(t[o + 1]), (t[o + 2], t[o + 3]), dtype)
+
+    else:
+
+        @numba.njit(cache=True, inline="always")
+        def read(t, i):
+            o = _at(t, i, code)
+            return numba.carray(_address(t[o + 1]), (t[o + 2], t[o + 3], t[o + 4]), dtype)
+
+    return read
 
 
-@numba.njit(cache=True, inline="always")
-def f8_2(t, i):
-    o = _at(t, i, _F8_2)
-    return numba.carray(_f8(t[o + 1]), (t[o + 2], t[o + 3]))
+f8_1, f8_2, f8_3 = (_reader(np.float64, d) for d in (1, 2, 3))
+f4_2 = _reader(np.float32, 2)
+i8_1, i8_2 = _reader(np.int64, 1), _reader(np.int64, 2)
+b1_1, b1_2 = _reader(np.bool_, 1), _reader(np.bool_, 2)
 
 
 @numba.njit(cache=True, inline="always")
@@ -214,44 +223,8 @@ def f8_2_rows(t, i):
         raise TypeError("packed argument read as another kind")
     rows, cols = t[o + 2], t[o + 3]
     span = (rows - 1) * stride + cols if rows > 0 else 0
-    base = numba.carray(_f8(t[o + 1]), (span,))
+    base = numba.carray(_address(t[o + 1]), (span,), np.float64)
     return np.lib.stride_tricks.as_strided(base, shape=(rows, cols), strides=(8 * stride, 8))
-
-
-@numba.njit(cache=True, inline="always")
-def f8_3(t, i):
-    o = _at(t, i, _F8_3)
-    return numba.carray(_f8(t[o + 1]), (t[o + 2], t[o + 3], t[o + 4]))
-
-
-@numba.njit(cache=True, inline="always")
-def f4_2(t, i):
-    o = _at(t, i, _F4_2)
-    return numba.carray(_f4(t[o + 1]), (t[o + 2], t[o + 3]))
-
-
-@numba.njit(cache=True, inline="always")
-def i8_1(t, i):
-    o = _at(t, i, _I8_1)
-    return numba.carray(_i8(t[o + 1]), (t[o + 2],))
-
-
-@numba.njit(cache=True, inline="always")
-def i8_2(t, i):
-    o = _at(t, i, _I8_2)
-    return numba.carray(_i8(t[o + 1]), (t[o + 2], t[o + 3]))
-
-
-@numba.njit(cache=True, inline="always")
-def b1_1(t, i):
-    o = _at(t, i, _B1_1)
-    return numba.carray(_b1(t[o + 1]), (t[o + 2],))
-
-
-@numba.njit(cache=True, inline="always")
-def b1_2(t, i):
-    o = _at(t, i, _B1_2)
-    return numba.carray(_b1(t[o + 1]), (t[o + 2], t[o + 3]))
 
 
 @numba.njit(cache=True, inline="always")
