@@ -140,18 +140,17 @@ class ContouringParams(CheckedParams):
         )
 
 
-#: How each field of :class:`ContouringParams` is checked (rules of
-#: :func:`~machining_envs.core.checks.check_field`): a positive number up to a bound.
-_FIELD_RULES: dict[str, tuple] = {
-    "velocity_loop_gain": (0.0, 1e4, True),
-    "torque_constant_Nm_per_A": (0.0, 1e3, True),
-    "inertia_x_kgm2": (0.0, 10.0, True),
-    "inertia_y_kgm2": (0.0, 10.0, True),
-    "screw_lead_mm": (0.0, 1e3, True),
-    "motor_max_rpm": (0.0, 1e5, True),
-    "sample_time_s": (0.0, 0.01, True),
+#: Every field of :class:`ContouringParams` is a positive number, up to its bound here.
+_UPPER_BOUNDS = {
+    "velocity_loop_gain": 1e4,
+    "torque_constant_Nm_per_A": 1e3,
+    "inertia_x_kgm2": 10.0,
+    "inertia_y_kgm2": 10.0,
+    "screw_lead_mm": 1e3,
+    "motor_max_rpm": 1e5,
+    "sample_time_s": 0.01,
 }
-ContouringParams.check_by(_FIELD_RULES)
+ContouringParams.check_by({k: (0.0, hi, True) for k, hi in _UPPER_BOUNDS.items()})
 
 
 @functools.lru_cache(maxsize=64)
