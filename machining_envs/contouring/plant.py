@@ -33,7 +33,7 @@ import numba
 import numpy as np
 
 from machining_envs.contouring._exact import vecmat_rows
-from machining_envs.core.checks import CheckedParams
+from machining_envs.core.checks import CheckedParams, checked_params, ranged
 from machining_envs.core.compiled.kernels import read_only
 
 __all__ = ["ContouringParams", "ContouringPlant", "ContouringStep", "AXES", "step_axes"]
@@ -46,6 +46,7 @@ __all__ += ["PLANT_COLUMNS", "vecmat_rows"]
 AXES = ("x", "y")
 
 
+@checked_params()
 @dataclass(frozen=True)
 class ContouringParams(CheckedParams):
     """Identified parameters of one XY table (Choi et al., seed 004, Table 1).
@@ -54,30 +55,30 @@ class ContouringParams(CheckedParams):
     pole ``a``, discrete matrices, the command limit in mm/s) are computed from the fields.
     """
 
-    velocity_loop_gain: float = 1.3
+    velocity_loop_gain: float = ranged(0.0, 1e4, default=1.3, lo_open=True)
     """Ksp, proportional gain of the servo pack's velocity loop, A per rad/s (Table 1)."""
 
-    torque_constant_Nm_per_A: float = 1.2054
+    torque_constant_Nm_per_A: float = ranged(0.0, 1e3, default=1.2054, lo_open=True)
     """Kt, motor torque constant, N m / A (Table 1)."""
 
-    inertia_x_kgm2: float = 2.29 * 0.00376
+    inertia_x_kgm2: float = ranged(0.0, 10.0, default=2.29 * 0.00376, lo_open=True)
     """Jx, X motor plus table inertia at the motor shaft, kg m^2 (Table 1: 2.29 x 0.00376)."""
 
-    inertia_y_kgm2: float = 3.04 * 0.00376
+    inertia_y_kgm2: float = ranged(0.0, 10.0, default=3.04 * 0.00376, lo_open=True)
     """Jy, Y motor plus table inertia at the motor shaft, kg m^2 (Table 1: 3.04 x 0.00376)."""
 
-    screw_lead_mm: float = 10.0
+    screw_lead_mm: float = ranged(0.0, 1e3, default=10.0, lo_open=True)
     """Ball-screw lead, table mm per motor revolution. Not given in the paper: 10 mm is the
     usual lead of a 40-taper vertical machining centre's directly coupled X/Y screws. It only
     scales the load torque's effect (1 N m is 628 N of feed force at 10 mm) and the command
     limit; the command-to-position dynamics G(s) do not depend on it."""
 
-    motor_max_rpm: float = 2000.0
+    motor_max_rpm: float = ranged(0.0, 1e5, default=2000.0, lo_open=True)
     """Top motor speed, rpm: the limit of the velocity command. Not given in the paper:
     2000 rpm is the top speed of the 0.85 kW-class AC servo motors of the period (the paper's
     Yaskawa USAMED-09); with the 10 mm lead it is 333 mm/s (20 m/min) at the table."""
 
-    sample_time_s: float = 2e-4
+    sample_time_s: float = ranged(0.0, 0.01, default=2e-4, lo_open=True)
     """Servo period (position-loop sample time), s: 5 kHz. Chosen so that the H-infinity
     design of the paper, whose loop crosses over near 560 rad/s, keeps its continuous-time
     behaviour once discretised: at 5 kHz (Tustin) its step response overshoots 0.5 % and
@@ -138,19 +139,6 @@ class ContouringParams(CheckedParams):
         return _axis_zoh(
             self.velocity_pole(axis), -self.mm_per_rad / self.inertia_kgm2(axis), self.sample_time_s
         )
-
-
-#: Every field of :class:`ContouringParams` is a positive number, up to its bound here.
-_UPPER_BOUNDS = {
-    "velocity_loop_gain": 1e4,
-    "torque_constant_Nm_per_A": 1e3,
-    "inertia_x_kgm2": 10.0,
-    "inertia_y_kgm2": 10.0,
-    "screw_lead_mm": 1e3,
-    "motor_max_rpm": 1e5,
-    "sample_time_s": 0.01,
-}
-ContouringParams.check_by({k: (0.0, hi, True) for k, hi in _UPPER_BOUNDS.items()})
 
 
 @functools.lru_cache(maxsize=64)

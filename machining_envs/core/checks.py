@@ -35,9 +35,12 @@ __all__ = [
     "check_overload_ratio",
     "check_instance",
     "ranged",
+    "ranged_int",
+    "one_of",
     "check_ranged_fields",
     "resolve_settings",
     "CheckedParams",
+    "checked_params",
 ]
 
 #: Python's and numpy's real scalar types: what a parameter check accepts by default.
@@ -241,6 +244,20 @@ def ranged(lo: float, hi: float, default=dataclasses.MISSING, *, lo_open: bool =
     return dataclasses.field(default=default, metadata={"rule": (lo, hi, lo_open)})
 
 
+def ranged_int(lo: int, hi: int, default=dataclasses.MISSING):
+    """A dataclass field (``default``, or none) whose value must be an integer in
+    ``[lo, hi]`` (rule of :func:`check_integer`), declared as :func:`ranged` declares a
+    number's range."""
+    return dataclasses.field(default=default, metadata={"rule": ("int", lo, hi)})
+
+
+def one_of(allowed: tuple, wording: str, default=dataclasses.MISSING):
+    """A dataclass field (``default``, or none) whose value must be one of ``allowed``
+    (the message says it must be ``wording``), declared as :func:`ranged` declares a
+    number's range."""
+    return dataclasses.field(default=default, metadata={"rule": ("choice", allowed, wording)})
+
+
 def check_ranged_fields(obj) -> None:
     """Check every field of the dataclass instance ``obj`` declared with :func:`ranged`,
     in the order of the fields, by its range (:func:`check_field`)."""
@@ -282,35 +299,20 @@ def replace_checked(params, changes: dict, rules: dict, cls: type):
 
 
 class CheckedParams:
-    """Base of the plants' frozen parameter dataclasses: a field that the class's rules name
-    is checked when an instance is made (``__post_init__``, by :func:`check_fields`), and
-    :meth:`replace` checks only the fields it changes (:func:`replace_checked`).
+    """Base of the plants' frozen parameter dataclasses: each field declared with a range
+    (:func:`ranged`, :func:`ranged_int`, :func:`one_of`) is checked when an instance is
+    made (``__post_init__``), and :meth:`replace` checks only the fields it changes
+    (:func:`replace_checked`).
 
-    A subclass states its rules once, after its body, with :meth:`check_by`; one with
-    checks across fields extends ``__post_init__`` (calling this one first). A subclass of
-    a parameter class that does not call :meth:`check_by` itself is checked by its base's
-    rules, and its :meth:`replace` goes through ``dataclasses.replace`` and its whole
-    ``__post_init__``."""
+    A subclass is decorated with :func:`checked_params` (above ``@dataclass``), which
+    collects its fields' rules; one with checks across fields extends ``__post_init__``
+    (calling this one first). A subclass of a parameter class that is not decorated
+    itself is checked by its base's rules, and its :meth:`replace` goes through
+    ``dataclasses.replace`` and its whole ``__post_init__``."""
 
     _field_rules: dict = {}
     _replace_rules: dict = {}
     _checked_class: type | None = None
-
-    @classmethod
-    def check_by(cls, rules: dict, *, across: tuple[str, ...] = ()) -> None:
-        """Check the fields of this class by ``rules`` (field -> rule of
-        :func:`check_field`), which name fields of the class in the order of its fields
-        (``TypeError`` otherwise). :meth:`replace` checks a changed field alone, but for
-        those named in ``across`` (checked against another field by ``__post_init__``),
-        whose change checks the whole set again."""
-        names = [f.name for f in dataclasses.fields(cls)]
-        if [name for name in names if name in rules] != list(rules):
-            raise TypeError(
-                f"{cls.__name__}: the rules must name its fields, in their order; got {list(rules)}"
-            )
-        cls._field_rules = rules
-        cls._replace_rules = {k: v for k, v in rules.items() if k not in across}
-        cls._checked_class = cls
 
     def __post_init__(self) -> None:
         check_fields(self, self._field_rules)
@@ -320,6 +322,22 @@ class CheckedParams:
         fields are checked (:func:`replace_checked`): envs draw a cut's true parameters at
         every reset."""
         return replace_checked(self, changes, self._replace_rules, self._checked_class)
+
+
+def checked_params(*, across: tuple[str, ...] = ()):
+    """Class decorator of a :class:`CheckedParams` dataclass (above ``@dataclass``): the
+    rules of its fields, in their order, are the ones it checks. :meth:`~CheckedParams.replace`
+    checks a changed field alone, but for those named in ``across`` (checked against
+    another field by ``__post_init__``), whose change checks the whole set again."""
+
+    def collect(cls: type) -> type:
+        fields = dataclasses.fields(cls)
+        cls._field_rules = {f.name: f.metadata["rule"] for f in fields if "rule" in f.metadata}
+        cls._replace_rules = {k: v for k, v in cls._field_rules.items() if k not in across}
+        cls._checked_class = cls
+        return cls
+
+    return collect
 
 
 def fields_of(cls: type, source):

@@ -53,7 +53,15 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from machining_envs.core.checks import CheckedParams, check_below, check_integer, check_range
+from machining_envs.core.checks import (
+    CheckedParams,
+    check_below,
+    check_integer,
+    check_range,
+    checked_params,
+    ranged,
+    ranged_int,
+)
 from machining_envs.core.compiled.kernels import copy_into, powers, py_square, read_only
 from machining_envs.core.lti import zoh
 
@@ -78,6 +86,7 @@ DIAMETER_RANGE_MM = (0.3, 1.0)
 _TWO_PI = 2.0 * math.pi
 
 
+@checked_params(across=("voltage_max", "feed_velocity_mm_s", "feed_speed_max_mm_s"))
 @dataclass(frozen=True)
 class DrillingParams(CheckedParams):
     """Parameters of the micro-drilling plant (Cheong & Cho, seed 003).
@@ -89,18 +98,18 @@ class DrillingParams(CheckedParams):
     """
 
     # ---- valve (eq. 1, 17) -------------------------------------------------------------
-    valve_natural_freq_hz: float = 8.0
+    valve_natural_freq_hz: float = ranged(0.0, 1e3, default=8.0, lo_open=True)
     """wn of the pneumatic proportional valve, Hz (eq. 17). Not given: 8 Hz (50 rad/s), a
     response time of about 0.1 s, typical of proportional pressure valves of this size."""
 
-    valve_damping: float = 0.7
+    valve_damping: float = ranged(0.0, 10.0, default=0.7, lo_open=True)
     """zeta of the valve (eq. 17). Not given: 0.7, a well-damped spool."""
 
-    valve_static_gain_per_V: float = 0.1
+    valve_static_gain_per_V: float = ranged(0.0, 10.0, default=0.1, lo_open=True)
     """Steady spool opening per volt, ``k1 / wn^2`` (eq. 17), 1/V. Chosen so that the spool
     is fully open (x_v = 1) at ``voltage_max`` = 10 V; ``k1`` follows as a property."""
 
-    voltage_max: float = 10.0
+    voltage_max: float = ranged(0.0, 1e3, default=10.0, lo_open=True)
     """Largest valve voltage, V (a 0-10 V proportional valve); commands are clipped to
     [0, voltage_max]."""
 
@@ -110,47 +119,47 @@ class DrillingParams(CheckedParams):
     about threefold (to 1700 Hz at 10 V) and also slow it."""
 
     # ---- air spindle (eq. 2-4, 19) -----------------------------------------------------
-    spindle_friction_exponent: float = 0.608
+    spindle_friction_exponent: float = ranged(0.1, 1.0, default=0.608)
     """n of the air friction ``theta_dot^n`` (eq. 4, 19), identified in the paper."""
 
-    spindle_drive_gain: float = 45057.05
+    spindle_drive_gain: float = ranged(0.0, 1e9, default=45057.05, lo_open=True)
     """k2 = Kv A N r_av / I, rad/s^2 per unit spool opening (eq. 19). Not given: chosen with
     ``spindle_friction`` so that the unloaded spindle settles at 545 Hz at the nominal 5 V
     (k2 x_v = k3 w^n at w = 2 pi 545) with a time constant of 0.25 s there
     (1 / (n k3 w^(n-1)) = 0.25 s: an air turbine reaches speed in about a second)."""
 
-    spindle_friction: float = 159.849
+    spindle_friction: float = ranged(0.0, 1e9, default=159.849, lo_open=True)
     """k3, air friction coefficient, (rad/s^2) / (rad/s)^n (eq. 19). Chosen with
     ``spindle_drive_gain`` (see there)."""
 
-    spindle_inertia_Nmm_s2: float = 1.0e-3
+    spindle_inertia_Nmm_s2: float = ranged(0.0, 1e6, default=1.0e-3, lo_open=True)
     """I, rotor inertia, N·mm·s^2 (1e-6 kg·m^2: a turbine rotor of about 15 g and 12 mm with
     its collet). Not given; it sets how much the drilling torque slows the spindle (the
     paper's eq. 19 leaves that term out). The turbine then gives 22.5 N·mm, about 77 W, at
     545 Hz, and a 1 N·mm load slows it by 7 %."""
 
     # ---- drill geometry and cutting model (§3.2) ---------------------------------------
-    point_angle_deg: float = 118.0
+    point_angle_deg: float = ranged(60.0, 170.0, default=118.0)
     """Point angle 2 kappa, degrees. Not given: the standard 118 degrees of twist drills."""
 
-    helix_angle_deg: float = 30.0
+    helix_angle_deg: float = ranged(0.0, 50.0, default=30.0)
     """Helix angle at the drill's periphery, degrees. Not given: 30 degrees, usual for micro
     drills for steel."""
 
-    web_ratio: float = 0.15
+    web_ratio: float = ranged(0.0, 0.5, default=0.15, lo_open=True)
     """Web thickness over drill diameter, 2w/D. Not given: 0.15, chosen with
     ``chisel_rake_deg`` so that the chisel edge carries 35 % of the thrust, inside the
     30-40 % the paper cites (§3.2)."""
 
-    friction_angle_deg: float = 35.0
+    friction_angle_deg: float = ranged(0.0, 60.0, default=35.0)
     """Normal friction angle beta_n on the lips (eq. 7-9), degrees. Identified by GA in the
     paper, value not given: 35 degrees, typical of steel on carbide."""
 
-    chisel_rake_deg: float = -45.0
+    chisel_rake_deg: float = ranged(-70.0, 0.0, default=-45.0)
     """Static rake angle of the chisel edge, degrees (eq. 10-11). Not given: -45 degrees,
     within the -30 to -60 degrees of twist-drill chisel edges."""
 
-    shear_stress_MPa: float = 3000.0
+    shear_stress_MPa: float = ranged(0.0, 1e5, default=3000.0, lo_open=True)
     """Effective shear flow stress tau of SS40 (SS400) in eq. (6)-(11), N/mm^2. Identified
     by GA in the paper, value not given. At the paper's 0.32 mm/s and 545 Hz the chip per
     lip is 0.15 um thick, far below the edge radius of a micro drill, where the specific
@@ -158,32 +167,32 @@ class DrillingParams(CheckedParams):
     about seven times the macroscopic shear flow stress, gives 0.41 N·mm and 1.4 N of
     thrust for the 0.8 mm drill in the nominal cut."""
 
-    indentation_coeff_MPa: float = 1200.0
+    indentation_coeff_MPa: float = ranged(0.0, 1e5, default=1200.0)
     """k_c of the indentation thrust k_c f^2 tan(alpha_w) (eq. 14), N/mm^2 (about 3x the
     Brinell hardness of SS400). At micro-drilling feeds its thrust is below 0.1 %."""
 
-    indentation_wedge_deg: float = 60.0
+    indentation_wedge_deg: float = ranged(0.0, 89.0, default=60.0)
     """Half wedge angle alpha_w of the indenting chisel centre (eq. 14), degrees."""
 
     # ---- chips packed in the flutes (§5.1, Fig. 12) ------------------------------------
-    chip_friction: float = 0.235
+    chip_friction: float = ranged(0.0, 100.0, default=0.235)
     """g0 of the chip friction ratio g(L) = g0 (exp(L / (l D)) - 1). Not given: with
     ``chip_length_diameters`` = 5 the torque of a hole drilled in one pass has grown 2.5x by
     an aspect ratio of 10 (Fig. 12 shows a steady rise with depth; chip evacuation forces
     grow exponentially with hole depth)."""
 
-    chip_length_diameters: float = 5.0
+    chip_length_diameters: float = ranged(0.0, 1e3, default=5.0, lo_open=True)
     """l, the packed length (in drill diameters) over which chip friction grows e-fold."""
 
-    chip_fluctuation: float = 0.2
+    chip_fluctuation: float = ranged(0.0, 2.0, default=0.2)
     """sigma_c, relative standard deviation of the chip friction (chips pack and release
     irregularly). Not given; scaled by a scenario's ``fluctuation_scale``."""
 
-    chip_fluctuation_time_s: float = 0.2
+    chip_fluctuation_time_s: float = ranged(0.0, 100.0, default=0.2, lo_open=True)
     """Correlation time of the chip-friction fluctuation, s (an Ornstein-Uhlenbeck process)."""
 
     # ---- drill wear within the hole (off by default) ----------------------------------------
-    wear_per_mm: float = 0.0
+    wear_per_mm: float = ranged(0.0, 10.0, default=0.0)
     """Drill wear within the hole: the chip-free cutting torque and thrust at hole depth
     ``z`` are ``(1 + w z / mm)`` times the sharp drill's, ``w`` this share per mm drilled.
     Cutting forces grow almost linearly with the flank-wear land (the flank-wear force model
@@ -194,15 +203,15 @@ class DrillingParams(CheckedParams):
     paper's sharp drill, bit for bit; the ``wear`` scenarios draw ``w`` (see
     ``machining_envs.drilling.scenarios``)."""
 
-    cutting_fluctuation: float = 0.03
+    cutting_fluctuation: float = ranged(0.0, 0.5, default=0.03)
     """sigma_0, relative standard deviation of the chip-free cutting torque and thrust
     (material and edge irregularity); correlation time ``cutting_fluctuation_time_s``."""
 
-    cutting_fluctuation_time_s: float = 0.05
+    cutting_fluctuation_time_s: float = ranged(0.0, 100.0, default=0.05, lo_open=True)
     """Correlation time of the cutting fluctuation, s."""
 
     # ---- drill strength ------------------------------------------------------------------
-    breakage_coeff_N_per_mm2: float = 5.0
+    breakage_coeff_N_per_mm2: float = ranged(0.0, 1e6, default=5.0, lo_open=True)
     """c_b of the breakage torque T_b = c_b D^3 (N·mm, D in mm). The torsional strength of a
     drill's section grows as D^3; the paper gives no strength data. Micro drills rarely fail
     by static torsion (chip clogging, bending from wandering and fatigue break them far
@@ -213,47 +222,47 @@ class DrillingParams(CheckedParams):
     chip-free nominal torque (small drills are closer to breaking)."""
 
     # ---- feed (micro-stepping motor) -----------------------------------------------------
-    feed_velocity_mm_s: float = 0.32
+    feed_velocity_mm_s: float = ranged(0.0, 100.0, default=0.32, lo_open=True)
     """Feed velocity of the paper's runs, mm/s (Table 1)."""
 
-    feed_speed_max_mm_s: float = 3.0
+    feed_speed_max_mm_s: float = ranged(0.0, 100.0, default=3.0, lo_open=True)
     """Largest feed or retract speed of the stage, mm/s (``control="feed"`` maps actions onto
     [-feed_speed_max_mm_s, feed_speed_max_mm_s]). Not given: 3 mm/s, a rapid traverse
     of a micro-stepping stage; the stage follows the command within a sample."""
 
-    retract_limit_mm: float = 2.0
+    retract_limit_mm: float = ranged(0.0, 100.0, default=2.0)
     """Highest the drill point can be above the work surface, mm (the stage's travel)."""
 
     # ---- sensors -------------------------------------------------------------------------
-    sensor_cutoff_hz: float = 50.0
+    sensor_cutoff_hz: float = ranged(0.0, 1e4, default=50.0, lo_open=True)
     """Cut-off of the first-order low-pass of the torque and thrust amplifiers, Hz (anti-alias
     filter below the 50 Hz Nyquist rate of the 100 Hz loop). Not given."""
 
-    torque_noise_Nmm: float = 0.01
+    torque_noise_Nmm: float = ranged(0.0, 100.0, default=0.01)
     """Standard deviation of the torque sensor noise, N·mm: 2.5 % of the 0.8 mm drill's
     nominal torque but 6 % of the 0.5 mm drill's, the signal-to-noise problem of §7. Not
     given; scaled by a scenario's ``noise_scale``."""
 
-    thrust_noise_N: float = 0.02
+    thrust_noise_N: float = ranged(0.0, 1e3, default=0.02)
     """Standard deviation of the thrust (Kistler 9001 washer) noise, N. Not given."""
 
-    speed_noise_hz: float = 0.5
+    speed_noise_hz: float = ranged(0.0, 1e3, default=0.5)
     """Standard deviation of the fibre-optic spindle-speed measurement, Hz. Not given."""
 
     # ---- timing --------------------------------------------------------------------------
-    sample_time_s: float = 0.01
+    sample_time_s: float = ranged(0.0, 1.0, default=0.01, lo_open=True)
     """Controller sample time, s (100 Hz). Not given: ten times faster than the valve's
     response and 25 times faster than the spindle's."""
 
-    substeps: int = 2
+    substeps: int = ranged_int(1, 1000, default=2)
     """RK4 sub-steps per sample for the spindle (h = 5 ms, 1/50 of the spindle's time
     constant); ``tests/drilling/test_plant.py`` checks the step size against 64 sub-steps."""
 
     # ---- observation scales ----------------------------------------------------------------
-    torque_scale_Nmm: float = 1.0
+    torque_scale_Nmm: float = ranged(0.0, 1e6, default=1.0, lo_open=True)
     """Normalisation of torques in observations, N·mm."""
 
-    thrust_scale_N: float = 2.0
+    thrust_scale_N: float = ranged(0.0, 1e6, default=2.0, lo_open=True)
     """Normalisation of thrusts in observations, N."""
 
     def __post_init__(self) -> None:
@@ -341,52 +350,6 @@ class DrillingParams(CheckedParams):
         """Chip-free torque at the nominal voltage's free speed and the nominal feed, N·mm:
         the default torque reference (the spindle then stays near 545 Hz, their Fig. 22)."""
         return self.chip_free_torque_Nmm(diameter_mm, self.free_speed_hz(self.nominal_voltage))
-
-
-#: How each field of :class:`DrillingParams` is checked on its own, in the order of the
-#: fields (rules of :func:`~machining_envs.core.checks.check_field`); ``__post_init__`` then
-#: checks ``nominal_voltage`` against ``voltage_max`` and the feed against the stage's top
-#: speed.
-_FIELD_RULES: dict[str, tuple] = {
-    "valve_natural_freq_hz": (0.0, 1e3, True),
-    "valve_damping": (0.0, 10.0, True),
-    "valve_static_gain_per_V": (0.0, 10.0, True),
-    "voltage_max": (0.0, 1e3, True),
-    "spindle_friction_exponent": (0.1, 1.0, False),
-    "spindle_drive_gain": (0.0, 1e9, True),
-    "spindle_friction": (0.0, 1e9, True),
-    "spindle_inertia_Nmm_s2": (0.0, 1e6, True),
-    "point_angle_deg": (60.0, 170.0, False),
-    "helix_angle_deg": (0.0, 50.0, False),
-    "web_ratio": (0.0, 0.5, True),
-    "friction_angle_deg": (0.0, 60.0, False),
-    "chisel_rake_deg": (-70.0, 0.0, False),
-    "shear_stress_MPa": (0.0, 1e5, True),
-    "indentation_coeff_MPa": (0.0, 1e5, False),
-    "indentation_wedge_deg": (0.0, 89.0, False),
-    "chip_friction": (0.0, 100.0, False),
-    "chip_length_diameters": (0.0, 1e3, True),
-    "chip_fluctuation": (0.0, 2.0, False),
-    "chip_fluctuation_time_s": (0.0, 100.0, True),
-    "wear_per_mm": (0.0, 10.0, False),
-    "cutting_fluctuation": (0.0, 0.5, False),
-    "cutting_fluctuation_time_s": (0.0, 100.0, True),
-    "breakage_coeff_N_per_mm2": (0.0, 1e6, True),
-    "feed_velocity_mm_s": (0.0, 100.0, True),
-    "feed_speed_max_mm_s": (0.0, 100.0, True),
-    "retract_limit_mm": (0.0, 100.0, False),
-    "sensor_cutoff_hz": (0.0, 1e4, True),
-    "torque_noise_Nmm": (0.0, 100.0, False),
-    "thrust_noise_N": (0.0, 1e3, False),
-    "speed_noise_hz": (0.0, 1e3, False),
-    "sample_time_s": (0.0, 1.0, True),
-    "substeps": ("int", 1, 1000),
-    "torque_scale_Nmm": (0.0, 1e6, True),
-    "thrust_scale_N": (0.0, 1e6, True),
-}
-DrillingParams.check_by(
-    _FIELD_RULES, across=("voltage_max", "feed_velocity_mm_s", "feed_speed_max_mm_s")
-)
 
 
 class _GeometryKey(NamedTuple):

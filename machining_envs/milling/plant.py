@@ -47,7 +47,16 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from machining_envs.core.checks import CheckedParams, check_integer, check_range, fields_of
+from machining_envs.core.checks import (
+    CheckedParams,
+    check_integer,
+    check_range,
+    checked_params,
+    fields_of,
+    one_of,
+    ranged,
+    ranged_int,
+)
 from machining_envs.core.compiled.kernels import copy_into, matvec, powers, read_only
 from machining_envs.core.compiled.schema import gather, record
 from machining_envs.core.lti import zoh, zoh_tf
@@ -77,6 +86,7 @@ FORCE_MODELS = ("power_law", "average_force")
 SPINDLE_RPM_RANGE = (20.0, 6000.0)
 
 
+@checked_params()
 @dataclass(frozen=True)
 class MillingParams(CheckedParams):
     """Identified parameters of the end-milling plant.
@@ -88,79 +98,79 @@ class MillingParams(CheckedParams):
     """
 
     # ---- tool and set-up -----------------------------------------------------------------
-    tool_diameter_mm: float = 16.0
+    tool_diameter_mm: float = ranged(0.0, 200.0, default=16.0, lo_open=True)
     """D, end-mill diameter, mm (paper §3.1: HSS, phi 16)."""
 
-    n_teeth: int = 4
+    n_teeth: int = ranged_int(1, 50, default=4)
     """P (N_f in seed 002), number of teeth (paper §3.1: p = 4)."""
 
-    helix_angle_deg: float = 30.0
+    helix_angle_deg: float = ranged(0.0, 80.0, default=30.0)
     """Helix angle, degrees (paper Fig. 4: 30°). Mean torque and mean forces do not depend
     on it; kept to describe the tool."""
 
-    axial_depth_mm: float = 32.0
+    axial_depth_mm: float = ranged(0.0, 500.0, default=32.0, lo_open=True)
     """w, axial depth of cut, mm (paper §3.1 and Fig. 4)."""
 
-    spindle_rpm: float = 400.0
+    spindle_rpm: float = ranged(*SPINDLE_RPM_RANGE, default=400.0)
     """N, nominal spindle speed, rpm (paper §3.1). Scenarios may scale it."""
 
     # ---- torque law ----------------------------------------------------------------------
-    force_model: str = "power_law"
+    force_model: str = one_of(FORCE_MODELS, f"one of {FORCE_MODELS}", default="power_law")
     """``"power_law"`` (eq. 8 of seed 000) or ``"average_force"`` (eq. 1 of seed 002)."""
 
-    torque_coefficient_kgfmm: float = 118.0
+    torque_coefficient_kgfmm: float = ranged(0.0, 1e7, default=118.0, lo_open=True)
     """Ks of eq. (8), kgf·mm per (mm^l · mm^m · mm): T = Ks d^l f_t^m D with d and f_t in
     mm. Fitted by multiple regression on the paper's central-composite cuts (§4; the text
     calls it "K_c = 118"). In kgf·mm as published; the plant converts to N·mm."""
 
-    depth_exponent: float = 0.4236
+    depth_exponent: float = ranged(0.0, 2.0, default=0.4236, lo_open=True)
     """l, radial-depth exponent of eq. (8) (§4)."""
 
-    feed_exponent: float = 0.3999
+    feed_exponent: float = ranged(0.0, 2.0, default=0.3999, lo_open=True)
     """m, feed-per-tooth exponent of eq. (8) (§4). The feed in eq. (8) is per tooth: the
     regression cuts were set as feed per tooth, 0.025-0.1 mm (§3.1)."""
 
-    tangential_coefficient_N_mm2: float = 3220.0
+    tangential_coefficient_N_mm2: float = ranged(0.0, 1e6, default=3220.0, lo_open=True)
     """Kt of the average-force model, N/mm². Used when ``force_model="average_force"``.
     For SM45C it is not measured in either paper: chosen so that the average-force torque
     equals eq. (8) at the centre of Park & Yoon's cut design (d = 2 mm, f_t = 0.0625 mm)."""
 
-    radial_coefficient_N_mm2: float = 1290.0
+    radial_coefficient_N_mm2: float = ranged(0.0, 1e6, default=1290.0)
     """Kr of the average-force model, N/mm² (SM45C: not measured; 0.4 Kt, typical of a
     steel cut with an HSS tool of small rake)."""
 
-    axial_coefficient_N_mm2: float = 645.0
+    axial_coefficient_N_mm2: float = ranged(0.0, 1e6, default=645.0)
     """Ka of the average-force model, N/mm² (SM45C: not measured; 0.2 Kt, typical of a 30°
     helix)."""
 
-    milling_mode: str = "up"
+    milling_mode: str = one_of(("up", "down"), "'up' or 'down'", default="up")
     """``"up"`` (phi_st = 0, phi_ex = arccos(1 - d/R)) or ``"down"`` (phi_st = arccos(d/R - 1),
     phi_ex = pi, seed 002 eq. 5). Park & Yoon milled up (§2.4). The mean torque is the same
     for both; the mean forces differ."""
 
     # ---- CNC feed servo, eq. (5)-(7) -----------------------------------------------------
-    servo_gain: float = 0.02
+    servo_gain: float = ranged(0.0, 1e6, default=0.02, lo_open=True)
     """Kn, steady feed velocity per command count, mm/s per count (eq. 5; paper: 0.02 and
     0.025)."""
 
-    servo_natural_freq_hz: float = 3.0
+    servo_natural_freq_hz: float = ranged(0.0, 1e3, default=3.0, lo_open=True)
     """wn of the CNC servo loop, Hz (eq. 7). Not given: the AC command reaches the axis
     through the CNC's feed override, its cutting-feed acceleration filter (tens of ms) and
     the position loop (gain about 30 1/s on drives of the period); together they answer
     like a pair near 3 Hz, the order of the 2.66 Hz feed servo identified in seed 001."""
 
-    servo_damping: float = 0.7
+    servo_damping: float = ranged(0.0, 10.0, default=0.7, lo_open=True)
     """xi of the CNC servo loop (eq. 7). Not given: 0.7, the usual tuning of a position
     loop (about 5 % overshoot)."""
 
     # ---- process and sensor, eq. (9)-(10) ------------------------------------------------
-    process_lag_rev: float = 0.5
+    process_lag_rev: float = ranged(0.0, 100.0, default=0.5, lo_open=True)
     """tau of eq. (10), in spindle revolutions (tau = 60 * process_lag_rev / N s). Not
     given ("a revolution or less"): the torque the sensor reports is the mean over a
     revolution (tooth-passing and run-out ripple removed), and a one-revolution moving
     mean is, to first order, a lag of half a revolution (0.075 s at 400 rpm)."""
 
-    sensor_gain: float = 0.30
+    sensor_gain: float = ranged(0.0, 1e6, default=0.30, lo_open=True)
     """Ke, counts per N·mm (eq. 9). Not given: chosen so that the fixed-gain integral
     controller at the paper's Kc = 0.2 is stable at Kn = 0.02 and unstable at Kn = 0.025 on
     the 3 mm step, as Fig. 5 reports (larger Kn, faster but unstable as the depth grows).
@@ -171,34 +181,34 @@ class MillingParams(CheckedParams):
     Kn = 0.02 by under 8 % (``machining-bench reproduce milling``). The reference torque
     then reads about 1100 counts: a 12-bit converter spanning about twice the reference."""
 
-    noise_std_Nmm: float = 36.0
+    noise_std_Nmm: float = ranged(0.0, 1e6, default=36.0)
     """Standard deviation of white measurement noise, N·mm (1 % of the reference torque).
     Not given; scaled by a scenario's ``noise_scale``."""
 
     # ---- AC unit timing and limits -------------------------------------------------------
-    sample_time_s: float = 0.1
+    sample_time_s: float = ranged(0.0, 10.0, default=0.1, lo_open=True)
     """Ts, sample time of the AC unit, s. Not given: 0.1 s, as for the turning AC of
     seed 001; about two-thirds of a revolution at 400 rpm, and three samples per period of
     the servo."""
 
-    substeps: int = 10
+    substeps: int = ranged_int(1, 10000, default=10)
     """Sub-steps per sample at which the torque law is evaluated. Chosen: h = 10 ms, under a
     seventh of the 75 ms process lag and of the servo's 76 ms decay time 1/(xi wn); the
     torque then stays within 0.1 % of a fine ODE solution (``tests/milling/test_plant.py``)."""
 
-    command_max: float = 150.0
+    command_max: float = ranged(0.0, 1e9, default=150.0, lo_open=True)
     """Largest command U, counts; commands are clipped to [0, command_max] (the feed does
     not reverse). Not given: with Kn = 0.02 it is 3 mm/s = 180 mm/min, 0.11 mm per tooth at
     400 rpm, just above the paper's largest test feed (0.1 mm per tooth)."""
 
-    torque_limit_Nmm: float = 3600.0
+    torque_limit_Nmm: float = ranged(0.0, 1e8, default=3600.0, lo_open=True)
     """L, the process torque limit, N·mm (367 kgf·mm): the paper's reference (constraint)
     torque, at which its controllers regulated. Not given: chosen so that
     holding Tr at every depth of the step workpiece takes, by eq. (20), the paper's
     machining time with AC (3.117 min, Table 1): 3613 N·mm exactly, rounded to 3600
     (3.145 min). Observations are normalised by it."""
 
-    wear_per_100mm: float = 0.0
+    wear_per_100mm: float = ranged(0.0, 10.0, default=0.0)
     """Tool wear within the cut: the torque coefficient (Ks of eq. 8, or Kt of the
     average-force model) at position ``x`` along the workpiece is ``Ks (1 + w x / 100 mm)``.
     The tangential cutting coefficient grows almost linearly with the flank-wear land, and
@@ -207,7 +217,7 @@ class MillingParams(CheckedParams):
     force of each tooth). 0 (default): the papers' sharp tool; the ``wear`` scenarios draw
     ``w``."""
 
-    breakage_torque_Nmm: float = 15000.0
+    breakage_torque_Nmm: float = ranged(0.0, 1e9, default=15000.0, lo_open=True)
     """Torque at which the tool is taken to break, N·mm (1530 kgf·mm). Not given: above the
     ~1200 kgf·mm that the paper's own regression cuts reached without failure (3 mm,
     0.1 mm/tooth), and about half the transverse rupture strength of HSS in bending at the
@@ -343,38 +353,6 @@ class MillingParams(CheckedParams):
         """ZOH discretisation of :meth:`open_loop_tf` at ``sample_time_s``, in powers of z^-1."""
         num, den = self.open_loop_tf(spindle_rpm)
         return zoh_tf(num, den, self.sample_time_s)
-
-
-#: How each field of :class:`MillingParams` is checked, in the order of the fields (rules
-#: of :func:`~machining_envs.core.checks.check_field`).
-_FIELD_RULES: dict[str, tuple] = {
-    "tool_diameter_mm": (0.0, 200.0, True),
-    "n_teeth": ("int", 1, 50),
-    "helix_angle_deg": (0.0, 80.0, False),
-    "axial_depth_mm": (0.0, 500.0, True),
-    "spindle_rpm": (*SPINDLE_RPM_RANGE, False),
-    "force_model": ("choice", FORCE_MODELS, f"one of {FORCE_MODELS}"),
-    "torque_coefficient_kgfmm": (0.0, 1e7, True),
-    "depth_exponent": (0.0, 2.0, True),
-    "feed_exponent": (0.0, 2.0, True),
-    "tangential_coefficient_N_mm2": (0.0, 1e6, True),
-    "radial_coefficient_N_mm2": (0.0, 1e6, False),
-    "axial_coefficient_N_mm2": (0.0, 1e6, False),
-    "milling_mode": ("choice", ("up", "down"), "'up' or 'down'"),
-    "servo_gain": (0.0, 1e6, True),
-    "servo_natural_freq_hz": (0.0, 1e3, True),
-    "servo_damping": (0.0, 10.0, True),
-    "process_lag_rev": (0.0, 100.0, True),
-    "sensor_gain": (0.0, 1e6, True),
-    "noise_std_Nmm": (0.0, 1e6, False),
-    "sample_time_s": (0.0, 10.0, True),
-    "substeps": ("int", 1, 10000),
-    "command_max": (0.0, 1e9, True),
-    "torque_limit_Nmm": (0.0, 1e8, True),
-    "wear_per_100mm": (0.0, 10.0, False),
-    "breakage_torque_Nmm": (0.0, 1e9, True),
-}
-MillingParams.check_by(_FIELD_RULES)
 
 
 # ---- average cutting-force model (seed 002) ----------------------------------------------

@@ -30,7 +30,15 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from machining_envs.core.checks import CheckedParams, check_integer, check_range, fields_of
+from machining_envs.core.checks import (
+    CheckedParams,
+    check_integer,
+    check_range,
+    checked_params,
+    fields_of,
+    ranged,
+    ranged_int,
+)
 from machining_envs.core.compiled.kernels import fma, matvec, powers, read_only, row_max, row_min
 from machining_envs.core.compiled.schema import gather, record
 from machining_envs.core.lti import butterworth_lowpass, zoh, zoh_tf
@@ -57,6 +65,7 @@ SPINDLE_RPM_RANGE = (50.0, 3000.0)
 _check = check_range
 
 
+@checked_params()
 @dataclass(frozen=True)
 class TurningParams(CheckedParams):
     """Identified parameters of the turning plant (Noh, Kim & Kim 1992, seed 001).
@@ -65,26 +74,26 @@ class TurningParams(CheckedParams):
     process gain ``Kp`` of eq. 11, discrete matrices) are computed from the fields.
     """
 
-    servo_gain: float = 0.66
+    servo_gain: float = ranged(0.0, 1e6, default=0.66, lo_open=True)
     """Ks, servo gain from command counts to feed-rod speed, eq. (1); Fig. 2 Bode fit.
     (The OCR'd text calls it "K_f = 0.66"; it is the servo gain.)"""
 
-    servo_natural_freq_hz: float = 2.66
+    servo_natural_freq_hz: float = ranged(0.0, 1e3, default=2.66, lo_open=True)
     """wn of the feed servo, Hz, eq. (1); Fig. 2 (2.66 Hz = 16.71 rad/s)."""
 
-    servo_damping: float = 0.43
+    servo_damping: float = ranged(0.0, 10.0, default=0.43, lo_open=True)
     """zeta of the feed servo, eq. (1); Fig. 2."""
 
-    gear_ratio: float = 0.0021414
+    gear_ratio: float = ranged(0.0, 1e3, default=0.0021414, lo_open=True)
     """Km, gear train from feed-rod speed to tool feed velocity, eq. (2)."""
 
-    force_coefficient: float = 1822.0
+    force_coefficient: float = ranged(0.0, 1e6, default=1822.0, lo_open=True)
     """Kf, N per (mm/rev)^p per mm of depth, eq. (8); log-linear least squares, Fig. 3."""
 
-    feed_exponent: float = 0.7525
+    feed_exponent: float = ranged(0.0, 2.0, default=0.7525, lo_open=True)
     """p, feed exponent of the force law, eq. (8); Fig. 3."""
 
-    sensor_gain: float = 17.0
+    sensor_gain: float = ranged(0.0, 1e6, default=17.0, lo_open=True)
     """Ke, ADC counts per newton, eq. (10). Not given in the paper: calibrated here as one
     value for which the simulation shows all five behaviours of Fig. 8-15 under the criteria
     of ``agents.bench.turning`` (unstable: breakage or oscillation over 10 % of Fr; slow: first
@@ -92,36 +101,36 @@ class TurningParams(CheckedParams):
     strict reading ("Kh = 0.04 unstable from 2 mm on") holds for Ke from 17 to 19 counts/N;
     17 is taken. ``machining-bench reproduce turning --sensor-gain K`` explores others."""
 
-    sensor_cutoff_hz: float = 10.0
+    sensor_cutoff_hz: float = ranged(0.0, 1e4, default=10.0, lo_open=True)
     """Cut-off of the dynamometer amplifier's low-pass filter, Hz (paper §4.1)."""
 
     sensor_filter_order: int = 2
     """Order of that filter. Not given: 2 (Butterworth, -12 dB/oct) is the usual filter of a
     strain amplifier such as the Kyowa DPM-310B the paper used."""
 
-    sample_time_s: float = 0.1
+    sample_time_s: float = ranged(0.0, 10.0, default=0.1, lo_open=True)
     """Ts, controller sample time, s (paper §4.1: above the algorithm's run time, below the
     0.188 s the servo's natural frequency allows)."""
 
-    substeps: int = 50
+    substeps: int = ranged_int(1, 10000, default=50)
     """Sub-steps per sample on which force and filter input are evaluated (h = 2 ms: 8x finer
     than the 16 ms time constant of the 10 Hz filter). Chosen; see ``tests/turning/test_plant.py``."""
 
-    command_max: float = 4095.0
+    command_max: float = ranged(0.0, 1e9, default=4095.0, lo_open=True)
     """Largest servo command U, DAC counts. Not given: a 12-bit DAC; with eq. (1)-(2) it
     gives a top feed velocity of 5.79 mm/s (0.86 mm/rev at 405 rpm). Commands are clipped
     to [0, command_max]: the feed does not reverse."""
 
-    breakage_force_N: float = 3000.0
+    breakage_force_N: float = ranged(0.0, 1e7, default=3000.0, lo_open=True)
     """Cutting force at which the carbide insert is taken to break, N. Not given: 3x the
     paper's 1 kN reference, about the limit of its 2.2 kW spindle at 405 rpm on a 100 mm
     bar. The episode terminates when the force exceeds it."""
 
-    noise_std_N: float = 10.0
+    noise_std_N: float = ranged(0.0, 1e5, default=10.0)
     """Standard deviation of the white measurement noise at the ADC, in newtons (1 % of the
     1 kN reference). Not given; scaled by a scenario's ``noise_scale``."""
 
-    wear_per_100mm: float = 0.0
+    wear_per_100mm: float = ranged(0.0, 10.0, default=0.0)
     """Tool wear within the cut: the force coefficient at position ``x`` along the workpiece
     is ``Kf (1 + w x / 100 mm)``. Cutting forces grow almost linearly with the flank-wear
     land (Koren & Lenz 1972, the flank-wear model for turning steel with carbide that
@@ -138,16 +147,16 @@ class TurningParams(CheckedParams):
     power of a 1 kN cut at 405 rpm on the bar below), so 2200 is a natural setting; the
     ``shopfloor`` scenarios use it."""
 
-    spindle_inertia_kg_m2: float = 0.1
+    spindle_inertia_kg_m2: float = ranged(0.0, 1e3, default=0.1, lo_open=True)
     """J of the spindle, chuck and workpiece, kg m^2, for the power limit. Not given: a
     100 mm x 300 mm steel bar is 0.023, a 200 mm chuck about 0.05, the spindle and the
     motor's reflected rotor the rest."""
 
-    workpiece_diameter_mm: float = 100.0
+    workpiece_diameter_mm: float = ranged(0.0, 1e4, default=100.0, lo_open=True)
     """Workpiece diameter D, mm, for the cutting speed ``v_c = pi D n`` of the power limit.
     Not given: the 100 mm bar of a lathe of the paper's size."""
 
-    force_scale_N: float = 1000.0
+    force_scale_N: float = ranged(0.0, 1e7, default=1000.0, lo_open=True)
     """Normalisation of forces in observations, N (the paper's reference force)."""
 
     def __post_init__(self) -> None:
@@ -223,31 +232,6 @@ def unit_plant_coefficients(params: TurningParams, spindle_rpm: float) -> np.nda
     numd = np.pad(numd, (0, 4 - numd.size))
     dend = np.pad(dend, (0, 4 - dend.size))
     return read_only(np.concatenate([numd[1:4], dend[1:4]]))
-
-
-#: How each field of :class:`TurningParams` is checked, in the order of the fields (rules
-#: of :func:`~machining_envs.core.checks.check_field`), but for ``sensor_filter_order`` (1
-#: or 2, not a bool) and ``spindle_power_W`` (inf for none), which ``__post_init__`` checks.
-_FIELD_RULES: dict[str, tuple] = {
-    "servo_gain": (0.0, 1e6, True),
-    "servo_natural_freq_hz": (0.0, 1e3, True),
-    "servo_damping": (0.0, 10.0, True),
-    "gear_ratio": (0.0, 1e3, True),
-    "force_coefficient": (0.0, 1e6, True),
-    "feed_exponent": (0.0, 2.0, True),
-    "sensor_gain": (0.0, 1e6, True),
-    "sensor_cutoff_hz": (0.0, 1e4, True),
-    "sample_time_s": (0.0, 10.0, True),
-    "substeps": ("int", 1, 10000),
-    "command_max": (0.0, 1e9, True),
-    "breakage_force_N": (0.0, 1e7, True),
-    "noise_std_N": (0.0, 1e5, False),
-    "wear_per_100mm": (0.0, 10.0, False),
-    "spindle_inertia_kg_m2": (0.0, 1e3, True),
-    "workpiece_diameter_mm": (0.0, 1e4, True),
-    "force_scale_N": (0.0, 1e7, True),
-}
-TurningParams.check_by(_FIELD_RULES)
 
 
 @dataclass(frozen=True)

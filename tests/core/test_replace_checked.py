@@ -95,22 +95,43 @@ def test_check_fields_checks_each_named_field_in_the_order_of_its_rules():
         check_fields(SimpleNamespace(gain=1.0, steps=2, mode="b"), rules)
 
 
-def test_checked_params_rules_must_name_fields_in_their_order():
-    from machining_envs.core.checks import CheckedParams
+def test_checked_params_collects_the_rules_declared_with_the_fields():
+    from machining_envs.core.checks import (
+        CheckedParams,
+        checked_params,
+        one_of,
+        ranged,
+        ranged_int,
+    )
 
+    @checked_params(across=("b",))
     @dataclasses.dataclass(frozen=True)
     class P(CheckedParams):
-        a: float = 1.0
-        b: float = 2.0
+        a: float = ranged(0.0, 10.0, default=1.0, lo_open=True)
+        free: float = -5.0
+        n: int = ranged_int(1, 9, default=2)
+        mode: str = one_of(("x", "y"), "'x' or 'y'", default="x")
+        b: float = ranged(0.0, 10.0, default=2.0)
 
-    with pytest.raises(TypeError, match="in their order"):
-        P.check_by({"b": (0.0, 10.0, False), "a": (0.0, 10.0, False)})
-    with pytest.raises(TypeError, match="in their order"):
-        P.check_by({"a": (0.0, 10.0, False), "c": (0.0, 10.0, False)})
-    P.check_by({"b": (0.0, 10.0, True)}, across=("b",))  # a field left unchecked: allowed
-    with pytest.raises(ValueError, match="b must be in"):
-        P(b=0.0)
-    assert P(a=-5.0).a == -5.0
+        def __post_init__(self) -> None:
+            super().__post_init__()
+            if self.b < self.a:
+                raise ValueError("b must not be below a")
+
+    assert list(P._field_rules) == ["a", "n", "mode", "b"]  # the fields' order
+    assert list(P._replace_rules) == ["a", "n", "mode"]
+    for bad, match in (
+        ({"a": 0.0}, "a must be in \\(0.0"),
+        ({"n": 0}, "n must be an integer"),
+        ({"mode": "z"}, "mode must be 'x' or 'y'"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            P(**bad)
+        with pytest.raises(ValueError, match=match):
+            P().replace(**bad)
+    assert P(free=1e300).free == 1e300  # no rule: not checked
+    with pytest.raises(ValueError, match="below a"):
+        P().replace(b=0.5)  # across: the whole __post_init__
 
 
 def test_a_subclass_of_a_params_class_replaces_through_its_own_post_init():
