@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from machining_envs.core.actions import check_action_vector
 from machining_envs.core.env import LaneEnv
 from machining_envs.core.rendering import (
     render_signals,
@@ -208,6 +209,12 @@ class MicroDrillingEnv(LaneEnv):
     ):
         core = self._open(DrillingCore, locals())  # the core's options by their names
         self.control = core.control
+
+    def _set_action(self, action) -> None:
+        if self.control == "voltage_feed":
+            self._core.set_action(0, *check_action_vector(action, 2, "MicroDrillingEnv"))
+        else:
+            super()._set_action(action)
 
     def _draw(self):
         log = self._log
