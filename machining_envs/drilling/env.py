@@ -182,6 +182,7 @@ class MicroDrillingEnv(LaneEnv):
         "target": 7,
         "diameter": 8,
         "history": 9,
+        "prev_feed_action": 12,  # control="voltage_feed" only
     }
     #: The signals render() draws: name -> the info key each is read from.
     _LOG_FIELDS = {

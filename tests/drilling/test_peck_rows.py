@@ -110,3 +110,64 @@ def test_torque_peck_retracts_when_the_torque_reaches_its_share_of_the_limit():
     assert depth >= 0.25 * 0.6  # once the peck was a quarter diameter deep,
     assert all(t < 0.5 for t, d in seen if d >= 0.25 * 0.6)  # and not before either
     assert depth < 8 * 0.6  # far above the (disabled) depth trigger and the hole's bottom
+
+
+VOLTAGE_FEED = {"control": "voltage_feed"}
+
+
+def test_peck_cycles_with_a_voltage_refuse_the_other_modes_and_bad_voltages():
+    from agents.drilling import VoltagePeck, VoltageTorquePeck
+
+    for cls in (VoltagePeck, VoltageTorquePeck):
+        for control in ("voltage", "feed"):
+            with pytest.raises(ValueError, match="control='voltage_feed', got"):
+                cls.from_env(gym.make(ENV_ID, control=control))
+        env = gym.make(ENV_ID, **VOLTAGE_FEED)
+        for bad in (-0.1, 10.5, float("nan")):
+            with pytest.raises(ValueError, match="voltage"):
+                cls.from_env(env, voltage=bad)
+    with pytest.raises(ValueError, match="voltage applies to control='voltage_feed' only"):
+        PeckDrilling.from_env(gym.make(ENV_ID, **FEED), voltage=8.0)
+
+
+def test_the_feed_mode_is_the_voltage_feed_mode_at_the_nominal_voltage():
+    """PeckDrilling on control="voltage_feed" at its default voltage (the nominal 5 V) drills
+    the hole of control="feed" to the last bit: the new mode only adds the spindle."""
+    seed = split_seeds("validation", 1)[0]
+    runs = []
+    for kwargs in (FEED, VOLTAGE_FEED):
+        env = gym.make(ENV_ID, **kwargs)
+        agent = PeckDrilling.from_env(env, peck_diameters=1.5, feed_scale=0.7)
+        obs, _ = env.reset(seed=seed, options={"scenario": "validation"})
+        state, rows, done = None, [], False
+        while not done:
+            a, state = agent.predict(obs, state)
+            obs, r, te, tr, info = env.step(a)
+            done = te or tr
+            o = obs.tolist()
+            if len(o) == 13:  # the feed's previous action is entry 12 there, not 4
+                o[4] = o.pop(12)
+            rows.append((r, o, info["torque_Nmm"], info["position_mm"]))
+        runs.append(rows)
+    assert len(runs[0]) > 1000 and runs[0] == runs[1]
+
+
+def test_voltage_peck_holds_its_voltage_and_pecks_out_of_the_hole():
+    from agents.drilling import VoltagePeck, VoltageTorquePeck
+
+    env = gym.make(ENV_ID, **VOLTAGE_FEED)
+    for agent in (
+        VoltagePeck.from_env(env, voltage=9.0, peck_diameters=1.0, feed_scale=1.5),
+        VoltageTorquePeck.from_env(env, voltage=9.0, torque_share=0.9, feed_scale=2.0),
+    ):
+        assert agent.name.endswith(", 9 V") and agent.obs_dim == 13
+        obs, _ = env.reset(seed=0, options={"scenario": "paper_0.6"})
+        state, done, outside = None, False, 0
+        while not done:
+            a, state = agent.predict(obs, state)
+            assert a.shape == (2,) and float(a[0]) == pytest.approx(0.8)  # 9 V
+            obs, _, te, tr, info = env.step(a)
+            done = te or tr
+            outside += info["position_mm"] < 0.0 < info["depth_mm"]
+            assert info["voltage_V"] == pytest.approx(9.0)
+        assert info["finished"] and outside > 0, agent.name

@@ -119,7 +119,7 @@ def test_lanes_of_the_voltage_and_feed_control_peck_and_clip_like_the_single_env
         pairs,
         n_steps=800,
     )
-    assert ends["truncated"] >= 3 and ends["out_of_hole"] > 10 and ends["clipped"] > 100
+    assert ends["truncated"] >= 3 and ends["out_of_hole"] >= 3 and ends["clipped"] > 100
     assert ends["breakage"] + ends["finished"] >= 3
 
 
