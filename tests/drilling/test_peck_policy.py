@@ -150,3 +150,34 @@ def test_a_pecking_policy_trains_and_replays_over_the_peck_cycle(tmp_path):
     assert isinstance(agent, ResidualAgent) and agent.base.name.startswith("peck")
     rows = (out / "eval.csv").read_text().splitlines()
     assert len(rows) >= 2  # a header and at least one validation evaluation
+
+
+def test_the_fast_spindle_pecking_config_loads_and_its_zero_residual_is_the_cycle():
+    """``ppo_peck_voltage.yml``: the torque trigger of the tuned ``VoltageTorquePeck`` on
+    ``control="voltage_feed"``, kept at or under the limit; a policy that outputs 0 drives
+    the env exactly as the tuned cycle does (both components of its action)."""
+    from agents.drilling import VoltageTorquePeck
+    from agents.rl import load_config
+    from agents.rl.config import CONFIG_DIR
+    from agents.rl.residual import ResidualSpec, SetpointResidual
+
+    cfg = load_config(DRILLING_ID, "ppo", CONFIG_DIR / "ppo_peck_voltage.yml")
+    res = cfg.residual
+    assert res["base"] == "agents.drilling.VoltageTorquePeck" and res["knob"] == "torque_share"
+    assert cfg.env_kwargs["control"] == "voltage_feed" and res["hi"] <= 1.0
+    spec = ResidualSpec(**res).checked()
+    env = SetpointResidual(gym.make(DRILLING_ID, **{"control": "voltage_feed"}), **res)
+    plain = gym.make(DRILLING_ID, control="voltage_feed")
+    agent = VoltageTorquePeck.from_env(plain, **spec.settings(DRILLING_ID))
+    o, _ = env.reset(seed=5, options={"scenario": "validation"})
+    p, _ = plain.reset(seed=5, options={"scenario": "validation"})
+    st, retracts, done = None, 0, False
+    while not done:
+        a, st = agent.predict(p, st)
+        retracts += float(a[1]) < 0.0
+        o, r, te, tr, info = env.step(np.zeros(1, np.float32))
+        p, rp, tep, trp, _ = plain.step(a)
+        np.testing.assert_array_equal(o, p)
+        assert (r, te, tr) == (rp, tep, trp)
+        done = te or tr
+    assert retracts > 0 and info["finished"]
