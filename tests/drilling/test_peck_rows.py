@@ -8,7 +8,14 @@ import pytest
 from agents.bench.drilling import ENV_ID
 from agents.bench.run import jobs_of
 from agents.bench.tune import load_tuned
-from agents.drilling import NoControl, PeckDrilling, SlidingMode, TorquePeck
+from agents.drilling import (
+    NoControl,
+    PeckDrilling,
+    SlidingMode,
+    TorquePeck,
+    VoltagePeck,
+    VoltageTorquePeck,
+)
 from agents.eval import task_of
 from machining_envs.core.splits import split_seeds
 
@@ -24,7 +31,7 @@ def _spec():
 
 def test_the_drilling_benchmark_has_tuned_peck_rows_and_the_peck_policy():
     spec = _spec()
-    assert PeckDrilling in spec.tuned and TorquePeck in spec.tuned
+    assert {PeckDrilling, TorquePeck, VoltagePeck, VoltageTorquePeck} <= set(spec.tuned)
     assert PECK_POLICY in spec.learned
     assert spec.env_kwargs == {}  # the other rows keep the paper's voltage loop
 
@@ -54,6 +61,8 @@ def test_the_peck_rows_run_on_the_feed_env_the_others_on_the_spec_s():
     by_cls = {j.tuned_cls: j for j in jobs if j.kind == "tuned"}
     assert by_cls[PeckDrilling].env_kwargs == FEED
     assert by_cls[TorquePeck].env_kwargs == FEED
+    for cls in (VoltagePeck, VoltageTorquePeck):  # the spindle commanded beside the cycle
+        assert by_cls[cls].env_kwargs == {"control": "voltage_feed"}
     assert by_cls[NoControl].env_kwargs is None and by_cls[SlidingMode].env_kwargs is None
     learned = [j for j in jobs if j.kind == "learned"]
     assert [j.env_kwargs for j in learned] == [FEED]  # the peck policy
@@ -116,8 +125,6 @@ VOLTAGE_FEED = {"control": "voltage_feed"}
 
 
 def test_peck_cycles_with_a_voltage_refuse_the_other_modes_and_bad_voltages():
-    from agents.drilling import VoltagePeck, VoltageTorquePeck
-
     for cls in (VoltagePeck, VoltageTorquePeck):
         for control in ("voltage", "feed"):
             with pytest.raises(ValueError, match="control='voltage_feed', got"):
@@ -153,8 +160,6 @@ def test_the_feed_mode_is_the_voltage_feed_mode_at_the_nominal_voltage():
 
 
 def test_voltage_peck_holds_its_voltage_and_pecks_out_of_the_hole():
-    from agents.drilling import VoltagePeck, VoltageTorquePeck
-
     env = gym.make(ENV_ID, **VOLTAGE_FEED)
     for agent in (
         VoltagePeck.from_env(env, voltage=9.0, peck_diameters=1.0, feed_scale=1.5),
