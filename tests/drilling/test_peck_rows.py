@@ -20,6 +20,7 @@ from agents.eval import task_of
 from machining_envs.core.splits import split_seeds
 
 FEED = {"control": "feed"}
+VOLTAGE_FEED = {"control": "voltage_feed"}
 PECK_POLICY = "micro_drilling_ppo_peck"
 
 
@@ -65,7 +66,8 @@ def test_the_peck_rows_run_on_the_feed_env_the_others_on_the_spec_s():
         assert by_cls[cls].env_kwargs == {"control": "voltage_feed"}
     assert by_cls[NoControl].env_kwargs is None and by_cls[SlidingMode].env_kwargs is None
     learned = [j for j in jobs if j.kind == "learned"]
-    assert [j.env_kwargs for j in learned] == [FEED]  # the peck policy
+    # the peck policies: over PeckDrilling, over VoltageTorquePeck
+    assert [j.env_kwargs for j in learned] == [FEED, VOLTAGE_FEED]
     env = gym.make(spec.env_id, **{**spec.env_kwargs, **by_cls[PeckDrilling].env_kwargs})
     assert by_cls[PeckDrilling].factory(env).name.endswith("(tuned)")
 
@@ -119,9 +121,6 @@ def test_torque_peck_retracts_when_the_torque_reaches_its_share_of_the_limit():
     assert depth >= 0.25 * 0.6  # once the peck was a quarter diameter deep,
     assert all(t < 0.5 for t, d in seen if d >= 0.25 * 0.6)  # and not before either
     assert depth < 8 * 0.6  # far above the (disabled) depth trigger and the hole's bottom
-
-
-VOLTAGE_FEED = {"control": "voltage_feed"}
 
 
 def test_peck_cycles_with_a_voltage_refuse_the_other_modes_and_bad_voltages():
