@@ -175,3 +175,40 @@ def test_voltage_peck_holds_its_voltage_and_pecks_out_of_the_hole():
             outside += info["position_mm"] < 0.0 < info["depth_mm"]
             assert info["voltage_V"] == pytest.approx(9.0)
         assert info["finished"] and outside > 0, agent.name
+
+
+def test_the_bound_row_is_the_reference_s_floor_which_no_voltage_row_sets():
+    """The tuned rows on control="voltage_feed" drill faster than the voltage rows' floor
+    (the travel at the programmed feed); the physical bound row is the floor on the
+    reference's own episodes, the fast spindle's floor when the reference pecks there.
+    (Two ``validation`` episodes through ``split_results``; ``test`` is not run.)"""
+    from agents.bench.results import reference, split_results
+    from agents.bench.run import EnvRun
+    from agents.bench.tune import agent_env_kwargs, tuned_factory
+    from agents.eval import evaluate
+    from agents.eval.stats import iqm
+
+    tuned = load_tuned()
+    run = EnvRun(_spec())
+    for cls in (NoControl, VoltageTorquePeck):
+        factory = tuned_factory(cls, ENV_ID, tuned)
+        name = factory(gym.make(ENV_ID, **agent_env_kwargs(cls))).name
+        ev = evaluate(
+            factory,
+            ENV_ID,
+            ["validation"],
+            n_episodes=2,
+            seed=split_seeds("validation", 2)[0],
+            env_kwargs=agent_env_kwargs(cls),
+        )
+        run.add(name, "tuned", "validation", ev.rows)
+        run.tuned_cls[name] = cls
+    ref = reference(run, tuned)
+    assert run.tuned_cls[ref] is VoltageTorquePeck  # the lowest validation score
+    sr = split_results(run, "validation", ref)
+    floors = [r["score_bound"] for r in run.rows[ref]["validation"]]
+    voltage = next(n for n, c in run.tuned_cls.items() if c is NoControl)
+    programmed = [r["score_bound"] for r in run.rows[voltage]["validation"]]
+    assert sr.bound_iqm == pytest.approx(float(iqm(np.array(floors))))
+    assert all(f < p for f, p in zip(floors, programmed, strict=True))
+    assert all(r["drilling_time_s"] >= r["score_bound"] for r in run.rows[ref]["validation"])
