@@ -33,6 +33,8 @@ _EXPORTS = {
     "PD": "agents.drilling",
     "PeckDrilling": "agents.drilling",
     "TorquePeck": "agents.drilling",
+    "VoltagePeck": "agents.drilling",
+    "VoltageTorquePeck": "agents.drilling",
     "SlidingMode": "agents.drilling",
 }
 __all__ = list(_EXPORTS)

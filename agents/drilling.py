@@ -80,7 +80,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from agents.base import SETPOINT, ProcessController, Setting, check_setting, unwrap_as
+from agents.base import (
+    SETPOINT,
+    ProcessController,
+    Setting,
+    check_setting,
+    tunable,
+    unwrap_as,
+)
 from machining_envs.core.checks import PY_NUMBER_TYPES
 from machining_envs.core.lti import zoh
 from machining_envs.drilling.env import MicroDrillingEnv
@@ -92,6 +99,8 @@ __all__ = [
     "PD",
     "PeckDrilling",
     "TorquePeck",
+    "VoltagePeck",
+    "VoltageTorquePeck",
     "SlidingMode",
     "sliding_mode_input",
 ]
@@ -115,16 +124,24 @@ class DrillingIO:
     params: DrillingParams
     """The nominal plant (what the controller is designed from)."""
     control: str
-    """``"voltage"`` or ``"feed"``: what the action commands."""
+    """``"voltage"``, ``"feed"`` or ``"voltage_feed"``: what the action commands."""
     command_min: float
+    """The command range of the action (``"voltage_feed"``: of its voltage)."""
     command_max: float
     speed_scale_hz: float
     length_scale_mm: float
+    feed_min: float = math.nan
+    """``control="voltage_feed"``: the feed's command range, mm/s (else NaN)."""
+    feed_max: float = math.nan
 
     @classmethod
     def from_env(cls, env) -> DrillingIO:
         base = unwrap_as(env, MicroDrillingEnv, "a drilling controller")
         m = base.command_map
+        feed = ()
+        if base.control == "voltage_feed":
+            m, f = m.maps
+            feed = (f.command_min, f.command_max)
         return cls(
             base.params,
             base.control,
@@ -132,7 +149,13 @@ class DrillingIO:
             m.command_max,
             base.SPEED_SCALE_HZ,
             base.LENGTH_SCALE_MM,
+            *feed,
         )
+
+    @property
+    def obs_dim(self) -> int:
+        """The observation's length (13 with ``control="voltage_feed"``)."""
+        return _OBS_DIM + (self.control == "voltage_feed")
 
     def require(self, control: str, who: str) -> None:
         if self.control != control:
@@ -169,6 +192,11 @@ class DrillingIO:
         """Actions (n, 1) for commands (n,)."""
         span = self.command_max - self.command_min
         return (2.0 * (command - self.command_min) / span - 1.0)[:, None]
+
+    def pair_action(self, voltage: np.ndarray, feed: np.ndarray) -> np.ndarray:
+        """Actions (n, 2) of ``control="voltage_feed"`` for voltages (V) and feeds (mm/s)."""
+        fa = 2.0 * (feed - self.feed_min) / (self.feed_max - self.feed_min) - 1.0
+        return np.column_stack([self.action(voltage)[:, 0], fa])
 
 
 class _DrillingController(ProcessController):
@@ -307,6 +335,9 @@ _FEED, _OUT, _BACK = 0.0, 1.0, 2.0
 class PeckDrilling(_DrillingController):
     """Peck drilling on ``control="feed"``: feed ``q`` mm, retract out of the hole, return.
 
+    On ``control="voltage_feed"`` the same cycle commands the stage while the spindle's
+    valve holds ``voltage`` (:class:`VoltagePeck` is this cycle tuned with its voltage).
+
     The drill retracts once the hole is ``peck_diameters`` x D deeper than where the current
     peck began, with ``peck_diameters`` read at every step: a supervisor that lowers it
     (``agents.rl.residual`` with ``knob="peck_diameters"``) triggers a peck at once, one
@@ -328,6 +359,9 @@ class PeckDrilling(_DrillingController):
     feed_scale : float
         The feed while cutting as a multiple of the nominal ``feed_velocity_mm_s`` (default
         1, the programmed feed; at most the stage's top speed).
+    voltage : float or None
+        The valve voltage held, V (``control="voltage_feed"`` only; default the nominal
+        voltage, the spindle of ``control="feed"``).
     """
 
     # [phase (0 feed, 1 out, 2 back), hole depth where the current peck began (mm), started]
@@ -340,13 +374,25 @@ class PeckDrilling(_DrillingController):
         "approach_gap_mm": Setting(0.05, hi=5.0, lo_open=False),
         "rapid_mm_s": Setting(None, hi=None),
         "feed_scale": Setting(1.0, hi=None, search=(0.2, 4.0, True)),
+        # checked in _setup: control="voltage_feed" only; None: the nominal voltage
+        "voltage": Setting(None, hi=None),
     }
     #: The env keywords the agent needs (it commands the feed): tuning makes its env so.
     ENV_KWARGS = {"control": "feed"}
+    #: The env's control modes the cycle runs on.
+    CONTROLS = ("feed", "voltage_feed")
 
     def _setup(self):
-        self.io.require("feed", "PeckDrilling")
-        p = self.io.params
+        io = self.io
+        if io.control not in self.CONTROLS:
+            modes = " or ".join(f"control={c!r}" for c in self.CONTROLS)
+            raise ValueError(f"{type(self).__name__} needs the env's {modes}, got {io.control!r}")
+        self.obs_dim = io.obs_dim
+        p = io.params
+        if io.control == "feed" and self.voltage is not None:
+            raise ValueError("voltage applies to control='voltage_feed' only")
+        u = p.nominal_voltage if self.voltage is None else self.voltage
+        self.voltage = _in_range("voltage", u, 0.0, p.voltage_max)
         self.clearance_mm = _in_range("clearance_mm", self.clearance_mm, 0.0, p.retract_limit_mm)
         rapid = p.feed_speed_max_mm_s if self.rapid_mm_s is None else self.rapid_mm_s
         self.rapid_mm_s = _in_range("rapid_mm_s", rapid, 1e-3, p.feed_speed_max_mm_s)
@@ -357,6 +403,11 @@ class PeckDrilling(_DrillingController):
         self.name = f"peck q={self.peck_diameters:.3g}D" + (
             f", {self.feed_scale:.3g}x feed" if self.feed_scale != 1.0 else ""
         )
+        self.name += self._spindle()
+
+    def _spindle(self) -> str:
+        """The name's spindle part: the voltage held on ``control="voltage_feed"``."""
+        return f", {self.voltage:.3g} V" if self.io.control == "voltage_feed" else ""
 
     def _act(self, obs, state):
         io = self.io
@@ -386,6 +437,8 @@ class PeckDrilling(_DrillingController):
         )
         state[:, 0] = phase
         state[:, 2] = 1.0
+        if io.control == "voltage_feed":
+            return io.pair_action(np.full(v.shape, self.voltage), v)
         return io.action(v)
 
     def _peck_now(self, obs, depth, began):
@@ -415,7 +468,7 @@ class TorquePeck(PeckDrilling):
         How deep a peck goes at least before the torque may end it, in drill diameters
         (default 0.25): a retract clears the chips, so a torque still high there is noise,
         and the cycle does not peck on the spot.
-    clearance_mm, approach_gap_mm, rapid_mm_s
+    clearance_mm, approach_gap_mm, rapid_mm_s, voltage
         As for :class:`PeckDrilling`.
     """
 
@@ -427,17 +480,51 @@ class TorquePeck(PeckDrilling):
             PeckDrilling.SETTINGS["peck_diameters"], default=100.0, search=None
         ),
         "min_peck_diameters": Setting(0.25, hi=100.0, lo_open=False),
-        **{k: PeckDrilling.SETTINGS[k] for k in ("clearance_mm", "approach_gap_mm", "rapid_mm_s")},
+        **{
+            k: PeckDrilling.SETTINGS[k]
+            for k in ("clearance_mm", "approach_gap_mm", "rapid_mm_s", "voltage")
+        },
     }
 
     def _setup(self):
         super()._setup()
         self.name = f"torque peck at {self.torque_share:.3g} x limit, {self.feed_scale:.3g}x feed"
+        self.name += self._spindle()
 
     def _peck_now(self, obs, depth, began):
         torque, trigger = self.io.torque(obs, self.torque_share)
         deep = depth >= began + self.min_peck_diameters * self.io.diameter_mm(obs) - 1e-9
         return super()._peck_now(obs, depth, began) | (deep & (torque >= trigger))
+
+
+#: The voltage's search range of the peck cycles on ``control="voltage_feed"``: NoControl's.
+_VOLTAGE_SEARCH = (2.0, 10.0, False)
+
+
+def _with_voltage_search(settings: dict) -> dict:
+    """``settings`` with the voltage searched over :data:`_VOLTAGE_SEARCH`."""
+    return {**settings, "voltage": replace(settings["voltage"], search=_VOLTAGE_SEARCH)}
+
+
+class VoltagePeck(PeckDrilling):
+    """:class:`PeckDrilling` on ``control="voltage_feed"``: the peck cycle commands the stage
+    while the valve holds ``voltage`` (a fast spindle thins the chip, so the cycle can feed
+    faster at the same torque); tuned with its voltage, peck depth and feed."""
+
+    SETTINGS = _with_voltage_search(PeckDrilling.SETTINGS)
+    TUNABLE = tunable(SETTINGS, "voltage", "peck_diameters", "feed_scale")
+    ENV_KWARGS = {"control": "voltage_feed"}
+    CONTROLS = ("voltage_feed",)
+
+
+class VoltageTorquePeck(TorquePeck):
+    """:class:`TorquePeck` on ``control="voltage_feed"``: a constant voltage with a
+    torque-triggered peck; tuned with its voltage, trigger and feed."""
+
+    SETTINGS = _with_voltage_search(TorquePeck.SETTINGS)
+    TUNABLE = tunable(SETTINGS, "voltage", "torque_share", "feed_scale")
+    ENV_KWARGS = {"control": "voltage_feed"}
+    CONTROLS = ("voltage_feed",)
 
 
 _TWO_PI = 2.0 * math.pi

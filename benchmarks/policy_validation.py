@@ -10,11 +10,15 @@ charged time; per policy (the seeds pooled, an episode's value the mean over its
 the benchmark pools them) the counting share, the mean time and the paired difference
 against the reference (reference - policy, positive: the policy is better) with its 95 %
 bootstrap interval at each allowance of ``machining_envs.core.score.ALLOWANCES`` and the
-verdict. ``test`` and ``ood`` are never run.
+verdict. ``--tuned`` adds tuned classical agents (class names, run with their tuned
+settings and their ``ENV_KWARGS``) as rows compared with the reference the same way.
+``test`` and ``ood`` are never run.
 
     python benchmarks/policy_validation.py --env machining_envs/Turning-v0 \\
         agents/rl/pretrained/turning_ppo_residual runs/lag/lagafc --out val.json
     python benchmarks/policy_validation.py runs/pen runs/lag --baseline runs/pen
+    python benchmarks/policy_validation.py --env machining_envs/MicroDrilling-v0 \
+        --tuned VoltagePeck VoltageTorquePeck --reference NoControl --episodes 100
 """
 
 from __future__ import annotations
@@ -68,7 +72,10 @@ def seed_models(folder: Path) -> list[tuple[int, Path]]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--env", default="machining_envs/Turning-v0")
-    ap.add_argument("folders", nargs="+", type=Path)
+    ap.add_argument("folders", nargs="*", type=Path)
+    ap.add_argument(
+        "--tuned", nargs="*", default=[], help="tuned agent classes compared as rows too"
+    )
     ap.add_argument("--episodes", type=int, default=50, help="validation episodes")
     ap.add_argument("--reference", default=None, help="tuned agent class (default: the best)")
     ap.add_argument("--no-gate", action="store_true")
@@ -80,6 +87,8 @@ def main(argv=None) -> int:
     )
     ap.add_argument("--out", type=Path, default=None)
     a = ap.parse_args(argv)
+    if not a.folders and not a.tuned:
+        ap.error("give policy folders or --tuned agent classes")
 
     import torch
 
@@ -110,6 +119,32 @@ def main(argv=None) -> int:
         f"({time.perf_counter() - t0:.0f} s)",
         flush=True,
     )
+    report_tuned = {}
+    for name in a.tuned:
+        t1 = time.perf_counter()
+        cls = _agent_class(name)
+        factory = tuned_factory(cls, a.env)
+        if factory is None:
+            raise SystemExit(f"--tuned: {TUNED} holds no {name} entry for {a.env}")
+        rows = run(factory, agent_env_kwargs(cls))
+        diffs, verdict = allowance_sweep(ref_rows, rows, score, failed)
+        report_tuned[name] = {
+            "counts": float(np.mean([score.counts(x) for x in rows])),
+            "mean": float(np.mean([score.charged(x, failed) for x in rows])),
+            "diffs": {str(al): d for al, d in zip(ALLOWANCES, diffs, strict=True)},
+            "verdict": verdict,
+            "wall_s": round(time.perf_counter() - t1, 1),
+        }
+        cells = ", ".join(
+            f"{al:.1%}: {d['diff']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]"
+            for al, d in zip(ALLOWANCES, diffs, strict=True)
+        )
+        e = report_tuned[name]
+        print(
+            f"{name} (tuned): counts {e['counts']:.0%}, mean {e['mean']:.2f} s; "
+            f"vs {ref_name} {cells}; {verdict} ({e['wall_s']} s)",
+            flush=True,
+        )
     pooled_rows = {}
     report = {
         "env": a.env,
@@ -117,6 +152,7 @@ def main(argv=None) -> int:
         "reference": ref_name,
         "reference_counts": ref_counts,
         "reference_mean": ref_mean,
+        "tuned": report_tuned,
         "policies": {},
     }
     for folder in a.folders:

@@ -23,3 +23,20 @@ def test_policy_validation_script_compares_every_seed_with_the_best_tuned_agent(
     for d in (*row["diffs"].values(), *row["vs_baseline"]["diffs"].values()):
         assert d["n"] == 2 and d["low"] <= d["diff"] <= d["high"]
     assert "vs_baseline" not in data["policies"][td3]
+
+
+def test_policy_validation_script_compares_tuned_rows_on_their_own_env(tmp_path):
+    """``--tuned``: a tuned classical row (here the peck cycle on control="voltage_feed",
+    its ENV_KWARGS) against the reference on the same episodes, without policy folders."""
+    out = tmp_path / "t.json"
+    printed = run_benchmark(
+        "policy_validation.py --env machining_envs/MicroDrilling-v0 --tuned VoltagePeck "
+        f"--reference NoControl --episodes 2 --out {out}"
+    )
+    assert "reference NoControl" in printed and "VoltagePeck (tuned): counts" in printed
+    data = json.loads(out.read_text())
+    assert data["policies"] == {} and set(data["tuned"]) == {"VoltagePeck"}
+    row = data["tuned"]["VoltagePeck"]
+    assert set(row["diffs"]) == {"0.005", "0.01", "0.02"}
+    for d in row["diffs"].values():
+        assert d["n"] == 2 and d["low"] <= d["diff"] <= d["high"]

@@ -27,7 +27,15 @@ import numpy as np
 
 from agents.bench.figures import reproduction_figure, save_figure
 from agents.bench.spec import BenchmarkSpec, Process, Robustness
-from agents.drilling import PD, NoControl, PeckDrilling, SlidingMode, TorquePeck
+from agents.drilling import (
+    PD,
+    NoControl,
+    PeckDrilling,
+    SlidingMode,
+    TorquePeck,
+    VoltagePeck,
+    VoltageTorquePeck,
+)
 from agents.eval import rollout
 from machining_envs.drilling.metrics import drilling_mask, drilling_metrics
 from machining_envs.drilling.plant import DrillingParams, DrillingPlant
@@ -347,10 +355,11 @@ BENCHMARK = BenchmarkSpec(
     (NoControl.from_env, PD.from_env, SlidingMode.from_env),
     ("paper_0.5", "paper_0.6", "paper_0.7", "paper_0.8"),
     "paper_0.8",
-    # The peck cycles drill with control="feed" (their ENV_KWARGS) on the same
-    # episodes, scored by the same task: agents.bench.run's tuned rows.
-    tuned=(NoControl, PD, SlidingMode, PeckDrilling, TorquePeck),
-    learned=("micro_drilling_ppo_peck",),
+    # The peck cycles drill with control="feed" (the Voltage* ones with
+    # control="voltage_feed": a tuned spindle voltage beside the cycle; their ENV_KWARGS)
+    # on the same episodes, scored by the same task: agents.bench.run's tuned rows.
+    tuned=(NoControl, PD, SlidingMode, PeckDrilling, TorquePeck, VoltagePeck, VoltageTorquePeck),
+    learned=("micro_drilling_ppo_peck", "micro_drilling_ppo_peck_voltage"),
     extra_splits=("wear",),
     robustness=Robustness(
         "cutting constant (x nominal)",

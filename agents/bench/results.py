@@ -10,7 +10,8 @@ and with the physical bound on the oracle's own episodes.
 
 The reference is the best tuned classical agent: among the rows of the spec's ``tuned``
 classes, the lowest ``validation_score`` in ``tuned.json`` (chosen without looking at
-``test``). The rows tuned for the shop-floor machine (the ``shopfloor`` split's rows of the
+``test``); the physical bound row is the floor on the reference's episodes (its env's
+options). The rows tuned for the shop-floor machine (the ``shopfloor`` split's rows of the
 spec's ``machine_tuned``, :func:`machine_reference`) are compared with the constant feed
 tuned for that machine (the spec's ``machine_reference``), by the same rule.
 """
@@ -146,7 +147,12 @@ def split_results(run: EnvRun, split: str, ref: str | None, seed: int = 0) -> Sp
         out[name] = res
     others = [n for n in names if run.kind[n] != "oracle"] or names
     first = run.rows[others[0]][split] if others else []
-    b = _bounds(first, score.bound_key)
+    # The bound row: the floor on the reference's own rows where it has the split. Rows may
+    # run on other env options with floors of their own (MicroDrilling-v0's control modes:
+    # the voltage rows' floor is the travel at the programmed feed, which the peck cycles on
+    # control="voltage_feed" beat); the best tuned agent's is the floor of the best way.
+    src = run.rows.get(ref, {}).get(split) if ref is not None else None
+    b = _bounds(src or first, score.bound_key)
     return SplitResults(
         split, ref, out, None if b is None else float(iqm(b)), len({r["seed"] for r in first})
     )

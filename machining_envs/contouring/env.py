@@ -26,7 +26,7 @@ from machining_envs.contouring.plant import (
 from machining_envs.contouring.scenarios import (
     ContouringScenario,
 )
-from machining_envs.core.actions import real_actions
+from machining_envs.core.actions import check_action_vector
 from machining_envs.core.env import LaneEnv
 from machining_envs.core.rendering import (
     EpisodeLog,
@@ -51,33 +51,6 @@ __all__ = [
 
 
 #: Tracking errors in observations are divided by this, mm.
-def check_action_vector(action, n: int, env_name: str) -> tuple[list[float], bool]:
-    """The action as ``n`` floats in [-1, 1] and whether any had to be clipped.
-
-    Anything but real numbers (``real_actions``), NaN or inf raise ``ValueError`` naming
-    the env and the values; a wrong size raises ``ValueError``; finite values outside the
-    box are clipped (the caller counts them).
-    """
-    if isinstance(action, np.ndarray) and action.shape == (n,) and action.dtype.kind == "f":
-        a = action
-    else:
-        a = real_actions(action, env_name).reshape(-1)
-        if a.size != n:
-            raise ValueError(
-                f"{env_name}: action must hold {n} value(s), got shape {np.shape(action)}"
-            )
-    vals = a.tolist()
-    clipped = False
-    for i, v in enumerate(vals):
-        if -1.0 <= v <= 1.0:  # the usual case: one test (false for NaN)
-            continue
-        if not math.isfinite(v):
-            raise ValueError(f"{env_name}: action must be finite, got {a!r}")
-        vals[i] = 1.0 if v > 1.0 else -1.0
-        clipped = True
-    return vals, clipped
-
-
 class ContouringEnv(LaneEnv):
     """Two-axis contouring: command both feed axes so that the tool follows a path.
 

@@ -9,7 +9,14 @@ import numpy as np
 
 from machining_envs.core.checks import PY_NUMBER_TYPES, is_real
 
-__all__ = ["ActionMap", "ACTION_MAPS", "check_action", "real_actions"]
+__all__ = [
+    "ActionMap",
+    "ActionMaps",
+    "ACTION_MAPS",
+    "check_action",
+    "check_action_vector",
+    "real_actions",
+]
 
 
 ACTION_MAPS = ("linear", "log")
@@ -145,3 +152,60 @@ def check_action(action, env_name: str) -> tuple[float, bool]:
     if v < -1.0:
         return -1.0, True
     return v, False
+
+
+def check_action_vector(action, n: int, env_name: str) -> tuple[list[float], bool]:
+    """The action as ``n`` floats in [-1, 1] and whether any had to be clipped.
+
+    Anything but real numbers (``real_actions``), NaN or inf raise ``ValueError`` naming
+    the env and the values; a wrong size raises ``ValueError``; finite values outside the
+    box are clipped (the caller counts them).
+    """
+    if isinstance(action, np.ndarray) and action.shape == (n,) and action.dtype.kind == "f":
+        a = action
+    else:
+        a = real_actions(action, env_name).reshape(-1)
+        if a.size != n:
+            raise ValueError(
+                f"{env_name}: action must hold {n} value(s), got shape {np.shape(action)}"
+            )
+    vals = a.tolist()
+    clipped = False
+    for i, v in enumerate(vals):
+        if -1.0 <= v <= 1.0:  # the usual case: one test (false for NaN)
+            continue
+        if not math.isfinite(v):
+            raise ValueError(f"{env_name}: action must be finite, got {a!r}")
+        vals[i] = 1.0 if v > 1.0 else -1.0
+        clipped = True
+    return vals, clipped
+
+
+class ActionMaps:
+    """One linear :class:`ActionMap` per component of a vector action: component ``i`` of
+    an action (the last axis) maps onto ``maps[i]``'s command range. ``command_min``,
+    ``command_max``, ``mid`` and ``half`` are arrays, one entry per component.
+
+    >>> m = ActionMaps(ActionMap(0.0, 10.0), ActionMap(-3.0, 3.0))
+    >>> m.action_to_command([0.0, 0.5]).tolist(), m.command_to_action([10.0, -3.0]).tolist()
+    ([5.0, 1.5], [1.0, -1.0])
+    """
+
+    scale = "linear"
+
+    def __init__(self, *maps: ActionMap):
+        if not maps or any(m.scale != "linear" for m in maps):
+            raise ValueError("ActionMaps takes one or more linear ActionMap")
+        self.maps = maps
+        self.command_min = np.array([m.command_min for m in maps])
+        self.command_max = np.array([m.command_max for m in maps])
+        self.mid = np.array([m.mid for m in maps])
+        self.half = np.array([m.half for m in maps])
+
+    def action_to_command(self, action):
+        """Physical commands for actions in [-1, 1] (their last axis the components)."""
+        return self.mid + self.half * np.asarray(action, dtype=np.float64)
+
+    def command_to_action(self, command):
+        """Actions for physical commands (not clipped)."""
+        return (np.asarray(command, dtype=np.float64) - self.mid) / self.half

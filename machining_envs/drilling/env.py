@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from machining_envs.core.actions import check_action_vector
 from machining_envs.core.env import LaneEnv
 from machining_envs.core.rendering import (
     render_signals,
@@ -43,8 +44,8 @@ class MicroDrillingEnv(LaneEnv):
     integrated exactly and the spindle by RK4 sub-steps; the controller samples at 100 Hz.
 
     ## Action Space
-    ``Box(-1, 1, (1,), float32)``, mapped affinely onto the command (``action_to_command`` /
-    ``command_to_action``):
+    ``Box(-1, 1, (1,), float32)`` (``(2,)`` with ``control="voltage_feed"``), mapped affinely
+    onto the command (``action_to_command`` / ``command_to_action``):
 
     - ``control="voltage"`` (default, the paper's loop): the valve voltage in
       ``[0, voltage_max]`` V (0 to 10 V; 5 V, action 0, runs the free spindle at 545 Hz); the
@@ -52,13 +53,19 @@ class MicroDrillingEnv(LaneEnv):
     - ``control="feed"``: the feed velocity of the stage in
       ``[-feed_speed_max_mm_s, feed_speed_max_mm_s]`` (negative retracts the drill; a retract
       that takes the point out of the hole clears the chips); the voltage is held at
-      ``nominal_voltage``.
+      ``nominal_voltage``;
+    - ``control="voltage_feed"``: both, ``[voltage, feed]``, each on the map above (an
+      ``ActionMaps``; ``info["command"]`` is the pair): a controller can peck (retract to
+      clear the chips) while it runs the spindle fast, which thins the chip so that the
+      stage can feed faster at the same torque. The observation gains entry 12, the feed's
+      previous action (entry 4 is then the voltage's).
 
     A finite action outside the box is clipped and counted in ``info["n_action_clipped"]``;
     NaN or inf raises ``ValueError``.
 
     ## Observation Space
-    ``Box(float32, (12,))``: only what the machine measures or the operator set, normalised.
+    ``Box(float32, (12,))`` (``(13,)`` with ``control="voltage_feed"``): only what the machine
+    measures or the operator set, normalised.
 
     | index | observation | unit | range |
     |---|---|---|---|
@@ -72,6 +79,7 @@ class MicroDrillingEnv(LaneEnv):
     | 7 | target hole depth / 10 mm | - | [0, 2] |
     | 8 | drill diameter / 1 mm | - | [0, 1] |
     | 9-11 | measured torque one, two, three samples ago / ``torque_scale_Nmm`` | - | [-1, 10] |
+    | 12 | previous feed action (``control="voltage_feed"`` only) | - | [-1, 1] |
 
     The packed chips, the true cutting constant and the valve's spool position are hidden
     (they are in ``info``).
@@ -96,7 +104,15 @@ class MicroDrillingEnv(LaneEnv):
     counts takes the same time (``info["score_bound"]``, the travel at the programmed feed)
     and the score ranks the share of holes kept under the limit; the torque fluctuation is
     reported beside it. ``control="feed"`` lets the agent drill faster (its floor is the
-    travel at the stage's top speed).
+    travel at the stage's top speed, which no hole kept under the limit approaches: at the
+    nominal spindle speed the chip-free torque of the programmed feed is the limit itself).
+    ``control="voltage_feed"`` ranks time and kept holes together: its floor
+    (``machining_envs.drilling.lanes.floor_time_s``) is the point's entry at the stage's
+    top speed and the rest of the hole at the feed whose chip-free torque at the top
+    spindle speed (the free spindle at ``voltage_max``) is the limit (eq. 20: packed chips
+    only add torque and the load only slows the spindle), so no hole drilled under the
+    limit is faster but by the steps an allowance lets over it; the spindle's run-up from
+    545 Hz (about a second) and the pecks' trips keep real holes well above it.
 
     ## Starting State
     The spindle runs free at the nominal voltage (545 Hz, Table 1), the valve settled, the
@@ -181,6 +197,7 @@ class MicroDrillingEnv(LaneEnv):
         "target": 7,
         "diameter": 8,
         "history": 9,
+        "prev_feed_action": 12,  # control="voltage_feed" only
     }
     #: The signals render() draws: name -> the info key each is read from.
     _LOG_FIELDS = {
@@ -208,6 +225,12 @@ class MicroDrillingEnv(LaneEnv):
     ):
         core = self._open(DrillingCore, locals())  # the core's options by their names
         self.control = core.control
+
+    def _set_action(self, action) -> None:
+        if self.control == "voltage_feed":
+            self._core.set_action(0, *check_action_vector(action, 2, "MicroDrillingEnv"))
+        else:
+            super()._set_action(action)
 
     def _draw(self):
         log = self._log

@@ -12,7 +12,7 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
-from machining_envs.core.actions import ActionMap
+from machining_envs.core.actions import ActionMap, ActionMaps
 from machining_envs.core.checks import check_below
 from machining_envs.core.compiled.blocks import LaneBlocks, serve_one_table
 from machining_envs.core.compiled.normals import LaneGenerators, standard_normal
@@ -59,8 +59,12 @@ _HISTORY = 3
 SPEED_SCALE_HZ = 1000.0
 LENGTH_SCALE_MM = 10.0
 _TORQUE_OBS = (-1.0, 10.0)
-#: What the action commands: the valve voltage (the paper's loop) or the feed velocity.
-CONTROL_MODES = ("voltage", "feed")
+#: What the action commands: the valve voltage (the paper's loop), the feed velocity, or
+#: both (``[voltage, feed]``: the spindle command beside the stage, so that a controller
+#: can peck while the spindle runs fast).
+CONTROL_MODES = ("voltage", "feed", "voltage_feed")
+#: The kernel's code of each control mode (``consts[_K.MODE]``).
+_MODE_CODES = {"voltage": 0.0, "feed": 1.0, "voltage_feed": 2.0}
 
 
 #: The weights of the MicroDrilling reward (:class:`MicroDrillingEnv`, section Rewards): the
@@ -71,7 +75,10 @@ DrillingReward = LimitReward
 # The lane tables' columns, each declared once by name; the kernels index by these names
 # (an IntEnum's members are constants to the compiler).
 #: Columns of ``DrillingCore.ev`` (floats of the env per lane).
-_Ev = IntEnum("_Ev", "ACTION TR THRUST_MEAS SPEED_MEAS COMMAND VOLTAGE REWARD MEAS", start=0)
+#: (``ACTION2`` and ``FEED``: the feed's action and command of ``control="voltage_feed"``.)
+_Ev = IntEnum(
+    "_Ev", "ACTION TR THRUST_MEAS SPEED_MEAS COMMAND VOLTAGE REWARD MEAS ACTION2 FEED", start=0
+)
 #: Columns of ``DrillingCore.flags``.
 _Flag = IntEnum(
     "_Flag",
@@ -83,9 +90,30 @@ _Count = IntEnum("_Count", "N_CLIPPED SEGMENT", start=0)
 #: Entries of ``DrillingCore.consts`` (the reward weights from ``W`` on).
 _K = IntEnum(
     "_K",
-    "MID HALF FEED_MODE V0 U0 MAX_T TORQUE_SCALE THRUST_SCALE SPEED_SCALE LENGTH_SCALE W",
+    "MID HALF MODE V0 U0 MAX_T TORQUE_SCALE THRUST_SCALE SPEED_SCALE LENGTH_SCALE MID2 HALF2 W",
     start=0,
 )
+
+
+def floor_feed_mm_s(truth: DrillingParams, torque_per_feed: float, limit_Nmm: float) -> float:
+    """The fastest feed at which a fully engaged drill's chip-free torque stays at the limit
+    with the spindle at its top speed, mm/s (at most the stage's top speed): the torque is
+    ``c_T v / f`` (eq. 20) with ``f`` at most the free spindle's frequency at
+    ``voltage_max`` (the drilling torque only slows it) and packed chips only add to it.
+    ``truth``: the hole's true parameters; ``torque_per_feed``: its drill's ``c_T``."""
+    top_hz = truth.free_speed_hz(truth.voltage_max)
+    return min(truth.feed_speed_max_mm_s, limit_Nmm * top_hz / torque_per_feed)
+
+
+def floor_time_s(truth: DrillingParams, coeffs, target_mm: float, limit_Nmm: float) -> float:
+    """The floor of the drilling time with ``control="voltage_feed"``, s: the point's entry
+    (to full engagement, where the torque is a share of the full one) at the stage's top
+    speed, the rest of the hole at :func:`floor_feed_mm_s`. No hole drilled under the
+    limit is faster, but by the steps an allowance lets over it and by the cutting
+    fluctuation's dips. ``coeffs``: the drill's ``CuttingCoefficients`` (truth)."""
+    entry = min(coeffs.full_engagement_mm, target_mm)
+    v = floor_feed_mm_s(truth, coeffs.torque_per_feed, limit_Nmm)
+    return entry / truth.feed_speed_max_mm_s + (target_mm - entry) / v
 
 
 def _ints(columns: type[IntEnum]) -> type:
@@ -117,7 +145,8 @@ class _Tables(NamedTuple):
 class _Drill(NamedTuple):
     """A hole's drill for :func:`_start`: its ``par`` row and engagement tables, and ``x``
     = ``[voltage, valve x1, spindle speed (rad/s), start position, torque limit, feed of
-    the bound, initial action, its command]``."""
+    the bound, initial action, its command, initial feed action, its command]`` (the last
+    two are read by ``control="voltage_feed"`` only)."""
 
     row: np.ndarray
     eng_depth: np.ndarray
@@ -185,20 +214,35 @@ def _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs):
         obs[k, 2] = _pymin(_pymax(ev[k, _Ev.THRUST_MEAS] / c[_K.THRUST_SCALE], lo), hi)
         obs[k, 3] = _pymin(_pymax(ev[k, _Ev.SPEED_MEAS] / c[_K.SPEED_SCALE], 0.0), 3.0)
         obs[k, 4] = ev[k, _Ev.ACTION]
+        if obs.shape[1] > 9 + _HISTORY:  # control="voltage_feed": the feed's action too
+            obs[k, 9 + _HISTORY] = ev[k, _Ev.ACTION2]
         obs[k, 5] = _pymin(_pymax(out[k, _Out.position_mm] / ls, -1.0), 2.0)
         obs[k, 6] = _pymin(out[k, _Out.depth_mm] / ls, 2.0)
+
+
+@numba.njit(cache=True, inline="always")
+def _into_box(a):
+    """``a`` clipped to [-1, 1], and whether it had to be."""
+    if a > 1.0:
+        return 1.0, True
+    if a < -1.0:
+        return -1.0, True
+    return a, False
 
 
 @numba.njit(cache=True, nogil=True)
 def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, rng_table):
     """One step of every lane: the action's command, the plant, the env's outputs.
 
-    Lane ``k`` applies ``ev[k, _Ev.ACTION]``, clipped to the box here (and counted as clipped,
+    Lane ``k`` applies ``ev[k, _Ev.ACTION]`` (and with ``control="voltage_feed"`` the feed's
+    ``ev[k, _Ev.ACTION2]``), clipped to the box here (and counted as clipped, once a step,
     as it is when ``flags[k, _Flag.IN_CLIPPED]`` says it was clipped before), and draws five
     standard normals from its generator (row ``rng_table[k]``, ``core.compiled.normals``). The plant
     advances ``LANE_BLOCK`` lanes at a time.
     """
-    feed_mode = c[_K.FEED_MODE] != 0.0
+    mode = c[_K.MODE]
+    feed_mode = mode == 1.0
+    pair = mode == 2.0
     n = state.shape[0]
     inputs = np.empty((LANE_BLOCK, _N_IN))
     tmp = np.empty((LANE_BLOCK, _N_TMP))
@@ -206,22 +250,22 @@ def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, rng_table):
     for k0 in range(0, n, LANE_BLOCK):
         k1 = min(k0 + LANE_BLOCK, n)
         for k in range(k0, k1):
-            a = ev[k, _Ev.ACTION]
-            clipped = flags[k, _Flag.IN_CLIPPED]
-            if a > 1.0:
-                a = 1.0
-                clipped = True
-            elif a < -1.0:
-                a = -1.0
-                clipped = True
+            a, boxed = _into_box(ev[k, _Ev.ACTION])
+            clipped = flags[k, _Flag.IN_CLIPPED] or boxed
             ev[k, _Ev.ACTION] = a
-            flags[k, _Flag.CLIPPED] = clipped
-            counts[k, _Count.N_CLIPPED] += clipped
             command = c[_K.MID] + c[_K.HALF] * a
-            if feed_mode:
+            if pair:
+                a2, boxed2 = _into_box(ev[k, _Ev.ACTION2])
+                clipped = clipped or boxed2
+                ev[k, _Ev.ACTION2] = a2
+                voltage, feed = command, c[_K.MID2] + c[_K.HALF2] * a2
+                ev[k, _Ev.FEED] = feed
+            elif feed_mode:
                 voltage, feed = c[_K.U0], command
             else:
                 voltage, feed = command, c[_K.V0]
+            flags[k, _Flag.CLIPPED] = clipped
+            counts[k, _Count.N_CLIPPED] += clipped
             ev[k, _Ev.COMMAND] = command
             ev[k, _Ev.VOLTAGE] = voltage
             inputs[k - k0, 0] = voltage
@@ -281,6 +325,8 @@ def _start(k, drill, t):
     e[_Ev.SPEED_MEAS] = hz
     e[_Ev.COMMAND] = c0
     e[_Ev.VOLTAGE] = volt
+    e[_Ev.ACTION2] = x[8]
+    e[_Ev.FEED] = x[9]
     t.flags[k, :] = False
     t.counts[k, _Count.N_CLIPPED] = 0
     t.counts[k, _Count.SEGMENT] = 0
@@ -300,6 +346,8 @@ def _start(k, drill, t):
     o[8] = row[_P.D]
     for i in range(_HISTORY):
         o[9 + i] = _pymin(_pymax(0.0 / ts, lo), hi)
+    if o.shape[0] > 9 + _HISTORY:
+        o[9 + _HISTORY] = x[8]
     q = t.out[k]
     q[:] = 0.0
     q[_Out.measured_speed_hz] = q[_Out.speed_hz] = hz
@@ -350,31 +398,40 @@ class DrillingCore(LaneCore):
         self.max_episode_time_s = check_episode_time(max_episode_time_s)
         check_scenario_spec(scenario, DrillingScenario, DRILLING_SCENARIOS)
         p = self.params
-        if control == "voltage":
-            self.command_map = ActionMap(0.0, p.voltage_max)
-            self._a0 = float(self.command_map.command_to_action(p.nominal_voltage))
-        else:
-            self.command_map = ActionMap(-p.feed_speed_max_mm_s, p.feed_speed_max_mm_s)
-            self._a0 = float(self.command_map.command_to_action(p.feed_velocity_mm_s))
-        self._c0 = float(self.command_map.action_to_command(self._a0))
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        volts = ActionMap(0.0, p.voltage_max)
+        feeds = ActionMap(-p.feed_speed_max_mm_s, p.feed_speed_max_mm_s)
+        #: The feed's map (``control="voltage_feed"``; else unused).
+        self._feed_map = feeds
+        self._pair = control == "voltage_feed"
+        self._a0_feed = float(feeds.command_to_action(p.feed_velocity_mm_s))
+        self._c0_feed = float(feeds.action_to_command(self._a0_feed))
+        main = feeds if control == "feed" else volts
+        self._a0 = float(
+            main.command_to_action(p.feed_velocity_mm_s if control == "feed" else p.nominal_voltage)
+        )
+        self._c0 = float(main.action_to_command(self._a0))
+        self.command_map = ActionMaps(volts, feeds) if self._pair else main
+        n_act = 2 if self._pair else 1
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(n_act,), dtype=np.float32)
         t_lo, t_hi = _TORQUE_OBS
+        extra = [-1.0] if self._pair else []  # the feed's previous action
         low = np.array(
-            [t_lo, 0.0, t_lo, 0.0, -1.0, -1.0, 0.0, 0.0, 0.0] + [t_lo] * _HISTORY,
+            [t_lo, 0.0, t_lo, 0.0, -1.0, -1.0, 0.0, 0.0, 0.0] + [t_lo] * _HISTORY + extra,
             dtype=np.float32,
         )
         high = np.array(
-            [t_hi, 10.0, t_hi, 3.0, 1.0, 2.0, 2.0, 2.0, 1.0] + [t_hi] * _HISTORY,
+            [t_hi, 10.0, t_hi, 3.0, 1.0, 2.0, 2.0, 2.0, 1.0]
+            + [t_hi] * _HISTORY
+            + [-e for e in extra],
             dtype=np.float32,
         )
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         w = self.reward_weights
-        m = self.command_map
         self.consts = np.array(
             [
-                m.mid,
-                m.half,
-                float(control == "feed"),
+                main.mid,
+                main.half,
+                _MODE_CODES[control],
                 p.feed_velocity_mm_s,
                 p.nominal_voltage,
                 self.max_episode_time_s,
@@ -382,6 +439,8 @@ class DrillingCore(LaneCore):
                 p.thrust_scale_N,
                 SPEED_SCALE_HZ,
                 LENGTH_SCALE_MM,
+                feeds.mid,
+                feeds.half,
                 *w.weights(),
             ]
         )
@@ -393,7 +452,7 @@ class DrillingCore(LaneCore):
         self.flags = np.zeros((n, len(_Flag)), dtype=np.bool_)
         self.counts = np.zeros((n, len(_Count)), dtype=np.int64)
         self.bound = np.full(n, np.nan)
-        self.obs = np.zeros((n, 9 + _HISTORY), dtype=np.float32)
+        self.obs = np.zeros((n, 9 + _HISTORY + len(extra)), dtype=np.float32)
         #: The generators the lanes draw their noise from (their episodes').
         self.rngs = LaneGenerators(n)
         lanes = self.lanes
@@ -434,12 +493,18 @@ class DrillingCore(LaneCore):
         target = sc.target_depth_mm
         u = p.nominal_voltage
         # The floor of the drilling time: the whole travel at the programmed feed (voltage
-        # control) or at the stage's top speed (feed control).
-        v = p.feed_velocity_mm_s if self.control == "voltage" else p.feed_speed_max_mm_s
+        # control), at the stage's top speed (feed control), or (voltage and feed) at the
+        # feed of :func:`floor_feed_mm_s`, passed as the feed of the whole travel.
+        if self.control == "voltage":
+            v = p.feed_velocity_mm_s
+        elif self.control == "feed":
+            v = p.feed_speed_max_mm_s
+        else:
+            v = target / floor_time_s(truth, c, target, tr)
         x = (u, truth.valve_static_gain_per_V * u, truth.free_speed_rad_s(u), 0.0, tr, v)
         row = self.lanes.lane_row(truth, c, d, target)
         engagement = (c.engage_depth_mm, c.engage_torque, c.engage_thrust)
-        x = np.array((*x, self._a0, self._c0))
+        x = np.array((*x, self._a0, self._c0, self._a0_feed, self._c0_feed))
         _start_packed(self._packed(self._args), lane, row, *engagement, x, self.bound)
         self.rngs.bind(lane, rng)  # the hole's noise comes from it too
         breakage = float(self.lanes.par[lane, _P.BREAK])
@@ -452,12 +517,19 @@ class DrillingCore(LaneCore):
                 "the drill would break before the limit binds",
             )
 
-    def set_action(self, lane: int, action: float, clipped: bool) -> None:
-        self.ev[lane, _EvI.ACTION] = action
+    def set_action(self, lane: int, action, clipped: bool) -> None:
+        """``action``: a float, or with ``control="voltage_feed"`` ``[voltage, feed]``."""
+        if self._pair:
+            self.ev[lane, _EvI.ACTION] = action[0]
+            self.ev[lane, _EvI.ACTION2] = action[1]
+        else:
+            self.ev[lane, _EvI.ACTION] = action
         self.flags[lane, _FlagI.IN_CLIPPED] = clipped
 
     def set_actions(self, actions: np.ndarray) -> None:
         self.ev[:, _EvI.ACTION] = actions[:, 0]  # clipped to the box by the kernel
+        if self._pair:
+            self.ev[:, _EvI.ACTION2] = actions[:, 1]
 
     def outcome(self, lane: int) -> tuple[float, bool, bool]:
         f = self.flags[lane]
@@ -549,6 +621,8 @@ class DrillingCore(LaneCore):
             "segment": segment,
             "scenario": sc.name,
         }
+        if self._pair:
+            info["command"] = np.array((e[_EvI.COMMAND], e[_EvI.FEED]))
         if finished:
             info["drilling_time_s"] = finish
             info["machining_time_s"] = finish
@@ -564,9 +638,10 @@ class DrillingCore(LaneCore):
         lane = self.lanes.par[:, [_PI.BREAK, _PI.TARGET, _PI.D]]
         done = f[:, _FlagI.FINISHED]
         finish = o[:, _OutI.finish_time_s]  # NaN unless the hole was finished in this step
+        command = e[:, [_EvI.COMMAND, _EvI.FEED]] if self._pair else e[:, _EvI.COMMAND]
         return {
             "t_s": self.lanes.state[:, _SI.T].copy(),
-            "command": e[:, _EvI.COMMAND],
+            "command": command,
             "action_clipped": f[:, _FlagI.CLIPPED],
             "n_action_clipped": c[:, _CountI.N_CLIPPED],
             "breakage": f[:, _FlagI.BREAKAGE],

@@ -10,7 +10,12 @@ import pytest
 pytest.importorskip("stable_baselines3")
 
 import machining_envs  # noqa: E402,F401
-from agents.rl.policy import PRETRAINED_DIR, PolicyAgent, load_policy  # noqa: E402
+from agents.rl.policy import (  # noqa: E402
+    PRETRAINED_DIR,
+    PolicyAgent,
+    load_policy,
+    policy_env_kwargs,
+)
 
 SHIPPED = sorted(PRETRAINED_DIR.glob("**/best_model.zip"))
 LANES, STEPS = 64, 10
@@ -37,7 +42,8 @@ def test_a_shipped_policy_acts_the_same_alone_and_in_a_batch(path, monkeypatch):
     inner = agent.policy if hasattr(agent, "policy") else agent
     assert inner._fast, "the shipped policy must use the batch-independent actor"
     cfg = _config(path)
-    venv = gym.make_vec(cfg["env_id"], num_envs=LANES, **(cfg.get("env_kwargs") or {}))
+    # on the env as trained (the peck policies' control="feed" or "voltage_feed")
+    venv = gym.make_vec(cfg["env_id"], num_envs=LANES, **policy_env_kwargs(path))
     try:
         obs, _ = venv.reset(seed=0, options={"scenario": "validation"})
         state, start = None, np.ones(LANES, dtype=bool)

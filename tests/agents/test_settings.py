@@ -11,7 +11,14 @@ import pytest
 
 from agents.base import Setting
 from agents.contouring import ContourAFC, LookAheadFeed
-from agents.drilling import PD, PeckDrilling, SlidingMode, TorquePeck
+from agents.drilling import (
+    PD,
+    PeckDrilling,
+    SlidingMode,
+    TorquePeck,
+    VoltagePeck,
+    VoltageTorquePeck,
+)
 from agents.milling import FixedGainIntegral, IntegralACC, MillingConstantFeed
 from agents.turning import ConstantFeed, DelayAwarePI, FixedGainPI, TurningIO, VariableGainPI
 from tests.helpers import TURNING
@@ -33,9 +40,15 @@ SIGNATURES = {
     SlidingMode: "(io, lam=12.0, epsilon=0.03, near_rate=35.0, far_ratio=0.25, "
     "k4_filter_s=0.02, min_voltage=None, engage_fraction=0.3, setpoint=1.0)",
     PeckDrilling: "(io, peck_diameters=1.0, clearance_mm=0.1, approach_gap_mm=0.05, "
-    "rapid_mm_s=None, feed_scale=1.0)",
+    "rapid_mm_s=None, feed_scale=1.0, voltage=None)",
     TorquePeck: "(io, torque_share=0.8, feed_scale=0.7, peck_diameters=100.0, "
-    "min_peck_diameters=0.25, clearance_mm=0.1, approach_gap_mm=0.05, rapid_mm_s=None)",
+    "min_peck_diameters=0.25, clearance_mm=0.1, approach_gap_mm=0.05, rapid_mm_s=None, "
+    "voltage=None)",
+    VoltagePeck: "(io, peck_diameters=1.0, clearance_mm=0.1, approach_gap_mm=0.05, "
+    "rapid_mm_s=None, feed_scale=1.0, voltage=None)",
+    VoltageTorquePeck: "(io, torque_share=0.8, feed_scale=0.7, peck_diameters=100.0, "
+    "min_peck_diameters=0.25, clearance_mm=0.1, approach_gap_mm=0.05, rapid_mm_s=None, "
+    "voltage=None)",
     LookAheadFeed: "(override_max: 'float', centripetal_mm_s2=1000.0, "
     "tangential_mm_s2=1000.0, override_cap=1.0)",
     ContourAFC: "(override_max: 'float', reference=0.7, gain=0.2, rise=0.01, fmin=0.2, "
@@ -54,6 +67,8 @@ def test_tunable_keeps_the_order_tuning_draws_it_in():
     """Optuna draws the parameters in ``TUNABLE``'s order: a table may not reorder it."""
     assert list(DelayAwarePI.TUNABLE) == ["phase_margin_deg", "kgh", "setpoint"]
     assert list(TorquePeck.TUNABLE) == ["torque_share", "feed_scale"]
+    assert list(VoltagePeck.TUNABLE) == ["voltage", "peck_diameters", "feed_scale"]
+    assert list(VoltageTorquePeck.TUNABLE) == ["voltage", "torque_share", "feed_scale"]
     assert list(IntegralACC.TUNABLE) == ["kc_design", "c1", "setpoint"]
     assert list(ContourAFC.TUNABLE) == [
         *LookAheadFeed.TUNABLE,

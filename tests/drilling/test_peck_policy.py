@@ -73,20 +73,28 @@ def test_a_zero_residual_is_the_peck_cycle_step_for_step():
     )
     plain = gym.make(DRILLING_ID, control="feed")
     agent = PeckDrilling.from_env(plain, **PARAMS)
-    o, _ = env.reset(seed=5)
-    p, _ = plain.reset(seed=5)
+    retracts, info = _zero_residual_is(agent, env, plain, {}, feed=0, max_steps=3000)
+    assert retracts > 0  # the cycle pecked within the run compared
+    assert info["setpoint"] == 2.0
+
+
+def _zero_residual_is(agent, env, plain, options, feed, max_steps=100_000):
+    """Step the residual wrapper ``env`` with zero actions and ``plain`` with ``agent``'s
+    actions from the same seed: the same observations, rewards and ends at every step.
+    Returns the cycle's retracts (action ``feed`` below 0) and the wrapper's last info."""
+    o, _ = env.reset(seed=5, options=options)
+    p, _ = plain.reset(seed=5, options=options)
     st, retracts = None, 0
-    for _ in range(3000):
+    for _ in range(max_steps):
         a, st = agent.predict(p, st)
-        retracts += float(a[0]) < 0.0
+        retracts += float(a[feed]) < 0.0
         o, r, te, tr, info = env.step(np.zeros(1, np.float32))
         p, rp, tep, trp, _ = plain.step(a)
         np.testing.assert_array_equal(o, p)
         assert (r, te, tr) == (rp, tep, trp)
-        assert info["setpoint"] == 2.0
         if te or tr:
             break
-    assert retracts > 0  # the cycle pecked within the run compared
+    return retracts, info
 
 
 def test_peck_drilling_is_tuned_by_the_protocol_on_its_feed_control():
@@ -150,3 +158,24 @@ def test_a_pecking_policy_trains_and_replays_over_the_peck_cycle(tmp_path):
     assert isinstance(agent, ResidualAgent) and agent.base.name.startswith("peck")
     rows = (out / "eval.csv").read_text().splitlines()
     assert len(rows) >= 2  # a header and at least one validation evaluation
+
+
+def test_the_fast_spindle_pecking_config_loads_and_its_zero_residual_is_the_cycle():
+    """``ppo_peck_voltage.yml``: the torque trigger of the tuned ``VoltageTorquePeck`` on
+    ``control="voltage_feed"``, kept at or under the limit; a policy that outputs 0 drives
+    the env exactly as the tuned cycle does (both components of its action)."""
+    from agents.drilling import VoltageTorquePeck
+    from agents.rl import load_config
+    from agents.rl.config import CONFIG_DIR
+    from agents.rl.residual import ResidualSpec, SetpointResidual
+
+    cfg = load_config(DRILLING_ID, "ppo", CONFIG_DIR / "ppo_peck_voltage.yml")
+    res = cfg.residual
+    assert res["base"] == "agents.drilling.VoltageTorquePeck" and res["knob"] == "torque_share"
+    assert cfg.env_kwargs["control"] == "voltage_feed" and res["hi"] <= 1.0
+    spec = ResidualSpec(**res).checked()
+    env = SetpointResidual(gym.make(DRILLING_ID, **{"control": "voltage_feed"}), **res)
+    plain = gym.make(DRILLING_ID, control="voltage_feed")
+    agent = VoltageTorquePeck.from_env(plain, **spec.settings(DRILLING_ID))
+    retracts, info = _zero_residual_is(agent, env, plain, {"scenario": "validation"}, feed=1)
+    assert retracts > 0 and info["finished"]

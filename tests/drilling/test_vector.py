@@ -26,6 +26,8 @@ SHORT = DrillingScenario("short", 0.5, aspect_ratio=1.0)  # 0.5 mm deep: about 1
 def _same(a, b) -> bool:
     if isinstance(a, float) and np.isnan(a):
         return isinstance(b, (float, np.floating)) and np.isnan(b)
+    if isinstance(a, np.ndarray):  # control="voltage_feed"'s command pair
+        return np.array_equal(a, b)
     return a == b
 
 
@@ -99,6 +101,26 @@ def test_lanes_of_the_feed_control_retract_break_and_run_out_of_time_like_the_si
         {"control": "feed", "scenario": "ood", "max_episode_time_s": 1.0}, feeds, n_steps=800
     )
     assert ends["truncated"] >= 5 and ends["breakage"] >= 5 and ends["out_of_hole"] > 10
+
+
+def test_lanes_of_the_voltage_and_feed_control_peck_and_clip_like_the_single_env():
+    """``control="voltage_feed"``: voltages over the whole range beside feeds around a fast
+    one, with retracts out of the hole; both components clipped at times."""
+
+    def pairs(rng, n):
+        volts = rng.uniform(-1.3, 1.3, (n, 1))
+        feeds = rng.normal(0.6 / 3.0, 0.1, (n, 1))
+        jump = rng.random((n, 1)) < 0.05
+        feeds = np.where(jump, rng.uniform(-1.2, 1.2, (n, 1)), feeds)
+        return np.hstack([volts, feeds]).astype(np.float32)
+
+    ends = _compare_lanes(
+        {"control": "voltage_feed", "scenario": "ood", "max_episode_time_s": 1.0},
+        pairs,
+        n_steps=800,
+    )
+    assert ends["truncated"] >= 3 and ends["out_of_hole"] >= 3 and ends["clipped"] > 100
+    assert ends["breakage"] + ends["finished"] >= 3
 
 
 def test_the_plant_is_a_lane_of_the_batch():

@@ -203,6 +203,17 @@ CASES = (
         **_DRILLING,
     ),
     EnvCase(
+        kwargs={"control": "voltage_feed"},
+        clip_keys=("voltage_V", "feed_velocity_mm_s"),
+        clip_commands=lambda env: (10.0, -3.0),
+        truncation=({"max_episode_time_s": 0.2}, 0.0, 20),
+        random_runs=(
+            RandomRun(20_000, 2, _DRILLING_SCENARIOS, kwargs={"max_episode_time_s": 20.0}),
+        ),
+        **{**_DRILLING, "obs_dim": 13},
+        act_dim=2,
+    ),
+    EnvCase(
         env_id=CONTOURING,
         env_class=ContouringEnv,
         obs_dim=14,
