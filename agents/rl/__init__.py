@@ -27,6 +27,7 @@ from agents.rl.config import ALGOS, CONFIG_DIR, ConfigError, TrainConfig, load_c
 from agents.rl.policy import (
     GATE_FAILED,
     PRETRAINED_DIR,
+    SUPERSEDED,
     PolicyAgent,
     load_policy,
     pretrained,
@@ -50,4 +51,5 @@ __all__ = [
     "pretrained_seeds",
     "PRETRAINED_DIR",
     "GATE_FAILED",
+    "SUPERSEDED",
 ]

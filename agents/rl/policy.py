@@ -26,6 +26,7 @@ __all__ = [
     "pretrained_seeds",
     "PRETRAINED_DIR",
     "GATE_FAILED",
+    "SUPERSEDED",
 ]
 
 
@@ -531,6 +532,10 @@ GATE_FAILED = (
     "turning_ppo",
     "turning_td3_residual",
 )
+#: Shipped folders whose every seed passes the gate but whose formulation lost, on
+#: ``validation``, to another of the same env: the benchmark runs one learned formulation an
+#: env, the one that wins there (folder -> the row that replaced it).
+SUPERSEDED = {"micro_drilling_ppo_peck": "micro_drilling_ppo_peck_voltage"}
 
 
 def pretrained(name: str):

@@ -10,7 +10,7 @@ import pytest
 
 import machining_envs
 from agents.bench.declarations import BENCHMARKS
-from agents.rl import GATE_FAILED, PRETRAINED_DIR, pretrained, pretrained_seeds
+from agents.rl import GATE_FAILED, PRETRAINED_DIR, SUPERSEDED, pretrained, pretrained_seeds
 from machining_envs.core.splits import HELD_OUT
 
 FOLDERS = sorted(p for p in PRETRAINED_DIR.iterdir() if p.is_dir())
@@ -29,8 +29,15 @@ def test_every_env_has_a_pretrained_policy_in_the_benchmark():
     envs_with_row = {_records(PRETRAINED_DIR / name)[0]["env_id"] for name in listed}
     assert envs_with_row == set(machining_envs.ENV_IDS)
     # every shipped folder is a benchmark row or a formulation kept for the record
-    assert listed | set(GATE_FAILED) == {f.name for f in FOLDERS}
-    assert not listed & set(GATE_FAILED)
+    kept = set(GATE_FAILED) | set(SUPERSEDED)
+    assert listed | kept == {f.name for f in FOLDERS}
+    assert not listed & kept and not set(GATE_FAILED) & set(SUPERSEDED)
+    for old, new in SUPERSEDED.items():  # replaced by a row of its own env
+        assert new in listed
+        assert (
+            _records(PRETRAINED_DIR / old)[0]["env_id"]
+            == _records(PRETRAINED_DIR / new)[0]["env_id"]
+        )
     for spec in BENCHMARKS:
         for name in spec.learned:
             assert {r["env_id"] for r in _records(PRETRAINED_DIR / name)} == {spec.env_id}, name

@@ -31,9 +31,12 @@ def _spec():
 
 
 def test_the_drilling_benchmark_has_tuned_peck_rows_and_the_peck_policy():
+    from agents.rl import SUPERSEDED
+
     spec = _spec()
     assert {PeckDrilling, TorquePeck, VoltagePeck, VoltageTorquePeck} <= set(spec.tuned)
-    assert PECK_POLICY in spec.learned
+    # the policy over the fast-spindle cycle replaced the one over the feed cycle
+    assert spec.learned == (SUPERSEDED[PECK_POLICY],)
     assert spec.env_kwargs == {}  # the other rows keep the paper's voltage loop
 
 
@@ -66,8 +69,8 @@ def test_the_peck_rows_run_on_the_feed_env_the_others_on_the_spec_s():
         assert by_cls[cls].env_kwargs == {"control": "voltage_feed"}
     assert by_cls[NoControl].env_kwargs is None and by_cls[SlidingMode].env_kwargs is None
     learned = [j for j in jobs if j.kind == "learned"]
-    # the peck policies: over PeckDrilling, over VoltageTorquePeck
-    assert [j.env_kwargs for j in learned] == [FEED, VOLTAGE_FEED]
+    # the peck policy over VoltageTorquePeck
+    assert [j.env_kwargs for j in learned] == [VOLTAGE_FEED]
     env = gym.make(spec.env_id, **{**spec.env_kwargs, **by_cls[PeckDrilling].env_kwargs})
     assert by_cls[PeckDrilling].factory(env).name.endswith("(tuned)")
 
