@@ -359,7 +359,7 @@ BENCHMARK = BenchmarkSpec(
     # control="voltage_feed": a tuned spindle voltage beside the cycle; their ENV_KWARGS)
     # on the same episodes, scored by the same task: agents.bench.run's tuned rows.
     tuned=(NoControl, PD, SlidingMode, PeckDrilling, TorquePeck, VoltagePeck, VoltageTorquePeck),
-    learned=("micro_drilling_ppo_peck_voltage",),
+    learned=("micro_drilling_ppo_peck_voltage_feed",),
     extra_splits=("wear",),
     robustness=Robustness(
         "cutting constant (x nominal)",

@@ -535,7 +535,10 @@ GATE_FAILED = (
 #: Shipped folders whose every seed passes the gate but whose formulation lost, on
 #: ``validation``, to another of the same env: the benchmark runs one learned formulation an
 #: env, the one that wins there (folder -> the row that replaced it).
-SUPERSEDED = {"micro_drilling_ppo_peck": "micro_drilling_ppo_peck_voltage"}
+SUPERSEDED = {
+    "micro_drilling_ppo_peck": "micro_drilling_ppo_peck_voltage_feed",
+    "micro_drilling_ppo_peck_voltage": "micro_drilling_ppo_peck_voltage_feed",
+}
 
 
 def pretrained(name: str):
