@@ -497,7 +497,7 @@ class ContourAFC(Agent):
         Bounds of the factor: ``fmin`` in [0.05, 1], ``fmax`` in [1, 5].
     fent : float
         The factor at the path's start, in [0.05, 1].
-    centripetal_mm_s2, tangential_mm_s2, override_cap
+    centripetal_mm_s2, tangential_mm_s2, override_cap : float
         The planner's (:class:`LookAheadFeed`).
     """
 

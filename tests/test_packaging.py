@@ -123,7 +123,7 @@ assert sorted(agents.__all__) == sorted(
     ["Agent", "ConstantFeed", "FixedGainPI", "VariableGainPI", "FixedGainIntegral",
      "IntegralACC", "MillingConstantFeed", "ConstantOverride", "LookAheadFeed", "HInf2DOF",
      "PIPosition", "NoControl", "PD", "PeckDrilling", "SlidingMode", "AdaptiveFeedControl",
-     "DelayAwarePI", "ContourAFC", "TorquePeck"])
+     "DelayAwarePI", "ContourAFC", "TorquePeck", "VoltagePeck", "VoltageTorquePeck"])
 for name in agents.__all__:
     getattr(agents, name)
 """
