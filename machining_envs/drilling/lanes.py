@@ -15,6 +15,7 @@ from gymnasium import spaces
 from machining_envs.core.actions import ActionMap, ActionMaps
 from machining_envs.core.checks import check_below
 from machining_envs.core.compiled.blocks import LaneBlocks, serve_one_table
+from machining_envs.core.compiled.kernels import unit_clip
 from machining_envs.core.compiled.normals import LaneGenerators, standard_normal
 from machining_envs.core.compiled.packed import (
     PackedArgs,
@@ -220,16 +221,6 @@ def _env_lanes(k0, k1, par, state, out, c, ev, flags, counts, obs):
         obs[k, 6] = _pymin(out[k, _Out.depth_mm] / ls, 2.0)
 
 
-@numba.njit(cache=True, inline="always")
-def _into_box(a):
-    """``a`` clipped to [-1, 1], and whether it had to be."""
-    if a > 1.0:
-        return 1.0, True
-    if a < -1.0:
-        return -1.0, True
-    return a, False
-
-
 @numba.njit(cache=True, nogil=True)
 def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, rng_table):
     """One step of every lane: the action's command, the plant, the env's outputs.
@@ -250,12 +241,12 @@ def _step(m, g, par, eng, state, out, c, ev, flags, counts, obs, rng_table):
     for k0 in range(0, n, LANE_BLOCK):
         k1 = min(k0 + LANE_BLOCK, n)
         for k in range(k0, k1):
-            a, boxed = _into_box(ev[k, _Ev.ACTION])
+            a, boxed = unit_clip(ev[k, _Ev.ACTION])
             clipped = flags[k, _Flag.IN_CLIPPED] or boxed
             ev[k, _Ev.ACTION] = a
             command = c[_K.MID] + c[_K.HALF] * a
             if pair:
-                a2, boxed2 = _into_box(ev[k, _Ev.ACTION2])
+                a2, boxed2 = unit_clip(ev[k, _Ev.ACTION2])
                 clipped = clipped or boxed2
                 ev[k, _Ev.ACTION2] = a2
                 voltage, feed = command, c[_K.MID2] + c[_K.HALF2] * a2

@@ -35,6 +35,7 @@ __all__ = [
     "add_scaled8",
     "clip8",
     "clip_unit",
+    "unit_clip",
     "clip_unit_linear",
     "copy_into",
     "data_address",
@@ -272,7 +273,7 @@ def set_episode_flags(row, diverged, breakage, finished, terminated, truncated, 
 
 
 @numba.njit(cache=True, inline="always")
-def _unit(x):
+def unit_clip(x):
     """``x`` clipped to ``[-1, 1]`` (numpy's ``minimum(maximum(x, -1), 1)``, ``-0.0`` kept),
     and whether it was outside."""
     return min(max(x, -1.0), 1.0), x < -1.0 or x > 1.0
@@ -281,11 +282,11 @@ def _unit(x):
 @numba.njit(cache=True)
 def clip_unit(a, action, clipped):
     """A vector env's actions into its lanes' inputs in one pass: ``action[k]`` is ``a[k]``
-    clipped to ``[-1, 1]`` and ``clipped[k]`` whether it was outside (:func:`_unit`). The
+    clipped to ``[-1, 1]`` and ``clipped[k]`` whether it was outside (:func:`unit_clip`). The
     actions are finite (the vector env checked them); any of the outputs may be a strided
     column."""
     for k in range(a.shape[0]):
-        action[k], clipped[k] = _unit(a[k])
+        action[k], clipped[k] = unit_clip(a[k])
 
 
 @numba.njit(cache=True)
@@ -294,7 +295,7 @@ def clip_unit_linear(a, action, clipped, command, mid, half):
     linear ``ActionMap`` (``_mid``, ``_half``), rounded as numpy rounds it (a product, then
     a sum; no fused multiply-add)."""
     for k in range(a.shape[0]):
-        y, clipped[k] = _unit(a[k])
+        y, clipped[k] = unit_clip(a[k])
         action[k] = y
         command[k] = mid + half * y
 
