@@ -57,6 +57,14 @@ def _agent_class(name: str):
     return cls
 
 
+def _cells(diffs: list[dict]) -> str:
+    """The paired differences at each allowance with their intervals, for one line."""
+    return ", ".join(
+        f"{al:.1%}: {d['diff']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]"
+        for al, d in zip(ALLOWANCES, diffs, strict=True)
+    )
+
+
 def seed_models(folder: Path) -> list[tuple[int, Path]]:
     """``(seed, best_model.zip)`` of every ``seed_<k>/`` under ``folder``."""
     found = []
@@ -135,10 +143,7 @@ def main(argv=None) -> int:
             "verdict": verdict,
             "wall_s": round(time.perf_counter() - t1, 1),
         }
-        cells = ", ".join(
-            f"{al:.1%}: {d['diff']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]"
-            for al, d in zip(ALLOWANCES, diffs, strict=True)
-        )
+        cells = _cells(diffs)
         e = report_tuned[name]
         print(
             f"{name} (tuned): counts {e['counts']:.0%}, mean {e['mean']:.2f} s; "
@@ -206,10 +211,7 @@ def main(argv=None) -> int:
         }
         report["policies"][str(folder)] = pooled
         pooled_rows[folder] = rows
-        cells = ", ".join(
-            f"{al:.1%}: {d['diff']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]"
-            for al, d in zip(ALLOWANCES, diffs, strict=True)
-        )
+        cells = _cells(diffs)
         print(
             f"{folder}: counts {pooled['counts']:.0%}, mean {pooled['mean']:.2f} s; "
             f"vs {ref_name} {cells}; {verdict}",
@@ -227,10 +229,7 @@ def main(argv=None) -> int:
                 "verdict": verdict,
                 "diffs": {str(al): d for al, d in zip(ALLOWANCES, diffs, strict=True)},
             }
-            cells = ", ".join(
-                f"{al:.1%}: {d['diff']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]"
-                for al, d in zip(ALLOWANCES, diffs, strict=True)
-            )
+            cells = _cells(diffs)
             print(f"{folder} vs {a.baseline}: {cells}; {verdict}", flush=True)
     if a.out is not None:
         a.out.write_text(json.dumps(report, indent=2, default=float))
