@@ -43,6 +43,9 @@ class ActionIncrement(NamedTuple):
     max_step: float
     prev_action_index: int
     hide_action: bool = False
+    #: Further observation indices the agent sees as 0 (``IncrementalAction``'s
+    #: ``hide_fields``).
+    hidden: tuple[int, ...] = ()
 
     def check(self, n_obs: int | None = None) -> ActionIncrement:
         """``self`` if its fields can be applied (``max_step`` in (0, 2], an index of the
@@ -56,15 +59,39 @@ class ActionIncrement(NamedTuple):
             raise ValueError(f"prev_action_index must be an integer in [0, {hi}], got {index!r}")
         if not isinstance(self.hide_action, (bool, np.bool_)):
             raise ValueError(f"hide_action must be True or False, got {self.hide_action!r}")
+        if not isinstance(self.hidden, (tuple, list)) or not all(
+            is_integer(i) and 0 <= i and (n_obs is None or i < n_obs) for i in self.hidden
+        ):
+            raise ValueError(f"hidden must be a list of integers in [0, {hi}], got {self.hidden!r}")
         return self
+
+    @classmethod
+    def from_record(cls, record: dict) -> ActionIncrement:
+        """The increment recorded as ``_asdict()`` (a run's ``config.json``), checked."""
+        return cls(**{**record, "hidden": tuple(record.get("hidden", ()))}).check()
 
     def policy_observation(self, obs) -> np.ndarray:
         """What the agent sees of ``obs``."""
-        return IncrementalAction.policy_observation(obs, self.prev_action_index, self.hide_action)
+        return IncrementalAction.policy_observation(
+            obs, self.prev_action_index, self.hide_action, self.hidden
+        )
 
     def absolute_action(self, obs, delta) -> np.ndarray:
         """The env's action for the agent's output ``delta`` given the raw ``obs``."""
         return IncrementalAction.absolute_action(obs, delta, self.max_step, self.prev_action_index)
+
+
+def _field_index(env, field) -> int:
+    """The observation index of ``field`` (a name in ``env.OBS_INDEX`` or an index)."""
+    if is_integer(field):
+        return int(field)
+    names = sorted(k for k in getattr(env, "OBS_INDEX", {}) if k not in ("prev_action", "history"))
+    if field not in names:
+        raise ValueError(
+            f"hide_fields: {field!r} is not a field of {type(env).__name__}'s observation; "
+            f"one of {names} or an index (the applied action: hide_action)"
+        )
+    return int(env.OBS_INDEX[field])
 
 
 class IncrementalAction(gym.Wrapper):
@@ -82,9 +109,21 @@ class IncrementalAction(gym.Wrapper):
         wrapper still reads it from the env): the agent can then only act on the measured
         signals, so where its output is zero cannot depend on the command level, and the
         loop settles where the measured signals say it should (``policy_observation``).
+    hide_fields : sequence of str or int
+        Further observation fields the agent sees as 0, by their names in the env's
+        ``OBS_INDEX`` (``"limit"``, ``"spindle"``, ...) or by index. A policy that sees
+        neither the limit nor the spindle speed acts on the load measured as a share of the
+        limit alone, so it cannot read a limit or speed outside its training ranges as
+        something it never met (``agents/rl/configs/ppo.yml``'s EndMilling-v0 entry).
     """
 
-    def __init__(self, env: gym.Env, max_step: float = 0.25, hide_action: bool = False):
+    def __init__(
+        self,
+        env: gym.Env,
+        max_step: float = 0.25,
+        hide_action: bool = False,
+        hide_fields=(),
+    ):
         super().__init__(env)
         ActionIncrement(max_step, 0, False).check()  # max_step, before the env's checks
         base = env.unwrapped
@@ -100,7 +139,12 @@ class IncrementalAction(gym.Wrapper):
                 f"IncrementalAction needs an env with a Box(-1, 1, (1,)) action and an "
                 f"OBS_INDEX['prev_action'] field; {type(base).__name__} has not"
             )
-        self.increment = ActionIncrement(float(max_step), int(index), hide_action).check()
+        if isinstance(hide_fields, str):
+            raise ValueError(f"hide_fields must be a list of field names, got {hide_fields!r}")
+        hidden = tuple(_field_index(base, f) for f in hide_fields)
+        self.increment = ActionIncrement(float(max_step), int(index), hide_action, hidden).check(
+            env.observation_space.shape[0]
+        )
         self._obs: np.ndarray | None = None
 
     @staticmethod
@@ -117,13 +161,14 @@ class IncrementalAction(gym.Wrapper):
         return np.clip(prev + max_step * np.clip(d, -1.0, 1.0), -1.0, 1.0).astype(np.float32)
 
     @staticmethod
-    def policy_observation(obs, prev_action_index: int, hide_action: bool) -> np.ndarray:
+    def policy_observation(obs, prev_action_index: int, hide_action: bool, hidden=()) -> np.ndarray:
         """What the agent sees of observation(s) ``obs``: a copy with the applied action
-        zeroed if ``hide_action``, else ``obs`` itself."""
-        if not hide_action:
+        zeroed if ``hide_action`` and the fields ``hidden`` zeroed, else ``obs`` itself."""
+        zeroed = [*([prev_action_index] if hide_action else []), *hidden]
+        if not zeroed:
             return obs
         out = np.array(obs, dtype=np.float32, copy=True)
-        out[..., prev_action_index] = 0.0
+        out[..., zeroed] = 0.0
         return out
 
     def reset(self, **kwargs):

@@ -5,7 +5,8 @@ The files are rl-zoo3's hyperparameter files, so ``python -m rl_zoo3.train --con
 them unmodified: one entry per env id with rl-zoo3's keys (``policy``, ``n_timesteps``,
 ``n_envs``, ``normalize``, ``env_kwargs``, ``env_wrapper``, ``callback``, ``policy_kwargs``)
 and the algorithm's keywords. ``env_wrapper`` may name one of
-``machining_envs.wrappers.IncrementalAction`` (with ``max_step`` and ``hide_action``) and
+``machining_envs.wrappers.IncrementalAction`` (with ``max_step``, ``hide_action`` and
+``hide_fields``) and
 ``agents.rl.residual.SetpointResidual`` (the policy moves a tuned classical agent's setting);
 ``callback`` names ``agents.rl.callbacks.ValidationCallback`` (the evaluation on the
 ``validation`` split: its ``eval_freq``, ``n_episodes``, ``scenarios``,
@@ -171,6 +172,9 @@ class TrainConfig:
     (``machining_envs.wrappers.IncrementalAction``); the saved policy applies it by itself."""
     hide_action: bool = False
     """With ``action_increment``: the policy does not see the action now applied."""
+    hide_fields: tuple[str, ...] = ()
+    """With ``action_increment``: observation fields the policy sees as 0, by name
+    (``IncrementalAction``'s ``hide_fields``)."""
     noise_type: str | None = None
     """Exploration noise added to the actions of SAC and TD3 (rl-zoo3's key): ``"normal"``
     or ``"ornstein-uhlenbeck"``, of standard deviation ``noise_std`` in action units."""
@@ -280,11 +284,11 @@ def _read_wrappers(where: str, value, cfg: TrainConfig) -> None:
                 f"{where}: env_wrapper: machining-bench train applies {INCREMENT_WRAPPER} or "
                 f"{RESIDUAL_WRAPPER}, got {name!r}"
             )
-        bad = set(kwargs) - {"max_step", "hide_action"}
+        bad = set(kwargs) - {"max_step", "hide_action", "hide_fields"}
         if bad:
             raise ConfigError(
                 f"{where}: env_wrapper {name}: unknown keywords {sorted(bad)}; "
-                "allowed ['hide_action', 'max_step']"
+                "allowed ['hide_action', 'hide_fields', 'max_step']"
             )
         if "max_step" not in kwargs:
             raise ConfigError(f"{where}: env_wrapper {name}: max_step is required")
@@ -293,6 +297,13 @@ def _read_wrappers(where: str, value, cfg: TrainConfig) -> None:
         hide = kwargs.get("hide_action", False)
         _check_type(where, "hide_action", hide, (bool,))
         cfg.hide_action = hide
+        fields = kwargs.get("hide_fields", [])
+        if not (isinstance(fields, list) and all(isinstance(f, str) for f in fields)):
+            raise ConfigError(
+                f"{where}: env_wrapper {name}: hide_fields must be a list of observation "
+                f"field names, got {fields!r}"
+            )
+        cfg.hide_fields = tuple(fields)
 
 
 def _literal(where: str, key: str, text: str):

@@ -99,7 +99,15 @@ def _module(agent: PolicyAgent):
             inc = agent.increment
             if inc is not None and inc.hide_action:
                 mask[inc.prev_action_index] = 0.0
-            self.register_buffer("mask", mask)
+            for i in () if inc is None else inc.hidden:
+                mask[i] = 0.0
+            held, value = agent.held_fields()
+            keep = mask.clone()
+            keep[held] = 0.0
+            hold = torch.zeros(n_obs, dtype=f32)
+            hold[held] = torch.tensor(value, dtype=f32)
+            self.register_buffer("mask", keep)
+            self.register_buffer("hold", hold)
             rms = agent.obs_rms
             mean = np.zeros(n_obs) if rms is None else np.asarray(rms.mean)
             scale = np.ones(n_obs) if rms is None else np.sqrt(np.asarray(rms.var) + agent.epsilon)
@@ -126,7 +134,7 @@ def _module(agent: PolicyAgent):
             return actor(x)  # TD3: deterministic already
 
         def forward(self, obs):
-            x = obs * self.mask
+            x = obs * self.mask + self.hold  # hidden fields 0, held ones their value
             if self.normalise:
                 x = torch.clamp((x - self.mean) / self.scale, -self.clip_obs, self.clip_obs)
             a = self._deterministic(x)

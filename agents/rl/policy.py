@@ -30,6 +30,11 @@ __all__ = [
 ]
 
 
+#: Below this variance in the training statistics an observation field never varied: the
+#: envs' observations are of order one, so their fields that vary at all vary by far more.
+CONSTANT_VAR = 1e-6
+
+
 class PolicyAgent:
     """An SB3 model with its VecNormalize statistics, behind the agent protocol.
 
@@ -57,9 +62,26 @@ class PolicyAgent:
         self.name = name or f"{type(model).__name__} policy"
         self.increment = increment
 
+    def held_fields(self) -> tuple[np.ndarray, np.ndarray]:
+        """The observation fields that never varied in training and the value each had
+        (float32, the observations' type): those whose variance in the frozen statistics is
+        below ``CONSTANT_VAR`` (Turning-v0's force limit, fixed at 1000 N on ``train``; an
+        action the policy was not shown)."""
+        if self.obs_rms is None:
+            return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.float32)
+        index = np.flatnonzero(np.asarray(self.obs_rms.var) < CONSTANT_VAR)
+        return index, np.asarray(self.obs_rms.mean, dtype=np.float32).reshape(-1)[index]
+
     def normalize(self, obs: np.ndarray) -> np.ndarray:
+        """``obs`` normalised by the frozen statistics, clipped to ``clip_obs``; a field that
+        never varied in training is shown the value it had there (``held_fields``): divided
+        by the normaliser's near-zero spread, any other value would reach the clip."""
         if self.obs_rms is None:
             return obs
+        index, value = self.held_fields()
+        if index.size:
+            obs = np.array(obs, dtype=np.float32, copy=True)
+            obs[..., index] = value
         out = (obs - self.obs_rms.mean) / np.sqrt(self.obs_rms.var + self.epsilon)
         return np.clip(out, -self.clip_obs, self.clip_obs).astype(np.float32)
 
@@ -246,7 +268,7 @@ def read_run_config(path) -> dict:
         from machining_envs.wrappers import ActionIncrement
 
         try:
-            ActionIncrement(**meta["action_increment"]).check()
+            ActionIncrement.from_record(meta["action_increment"])
         except (TypeError, ValueError) as exc:
             raise ValueError(f"{path}: action_increment: {exc}") from None
     if meta.get("residual"):
@@ -417,7 +439,7 @@ def load_policy(
     if meta.get("action_increment"):
         from machining_envs.wrappers import ActionIncrement
 
-        increment = ActionIncrement(**meta["action_increment"])
+        increment = ActionIncrement.from_record(meta["action_increment"])
     if meta.get("residual"):
         from agents.rl.residual import ResidualSpec
 

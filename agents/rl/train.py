@@ -84,7 +84,11 @@ def _make_vec(cfg: TrainConfig, seed: int, vec: str | None = None):
     vec = _vec_kind(cfg.env_id, vec)
     wrapper_kwargs = None
     if cfg.action_increment is not None:
-        wrapper_kwargs = {"max_step": cfg.action_increment, "hide_action": cfg.hide_action}
+        wrapper_kwargs = {
+            "max_step": cfg.action_increment,
+            "hide_action": cfg.hide_action,
+            "hide_fields": cfg.hide_fields,
+        }
     if vec == "native":
         from agents.rl.vec import SB3VecEnv, VecIncrementalAction
 

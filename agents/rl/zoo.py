@@ -60,6 +60,7 @@ def _hyperparams(meta: dict) -> dict:
                 "machining_envs.wrappers.IncrementalAction": {
                     "max_step": inc["max_step"],
                     "hide_action": inc.get("hide_action", False),
+                    **({"hide_fields": list(inc["hidden"])} if inc.get("hidden") else {}),
                 }
             }
         ]

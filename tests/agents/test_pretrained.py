@@ -172,3 +172,32 @@ def test_the_folders_kept_out_of_the_benchmark_fail_the_seed_gate(name):
     seed, model = pretrained_seeds(name)[0]
     env_id = _records(PRETRAINED_DIR / name)[0]["env_id"]
     assert not gate_policy(model, env_id).passed, (name, seed)
+
+
+def test_a_field_that_never_varied_in_training_is_shown_its_training_value():
+    """Turning-v0's force limit is 1000 N on every ``train`` cut, so the shipped turning
+    policies' statistics give it a spread of about 1e-4.5: a limit of 1300 N (``ood``)
+    reached the network as the clip, 10 standard deviations, for any limit but 1000 N. The
+    policy is now shown the value it trained on, and on the training value it acts exactly
+    as before."""
+    import gymnasium as gym
+    import numpy as np
+
+    from agents.rl import load_policy
+
+    (_, model), *_ = pretrained_seeds("turning_ppo_residual")
+    policy = load_policy(model).policy
+    limit = gym.make("machining_envs/Turning-v0").unwrapped.OBS_INDEX["limit"]
+    index, value = policy.held_fields()
+    assert index.tolist() == [limit] and value.tolist() == [1.0]
+    rng = np.random.default_rng(3)
+    obs = np.abs(rng.normal(0.6, 0.2, size=(16, 7))).astype(np.float32)
+    obs[:, limit] = 1.0
+    raw = (obs - policy.obs_rms.mean) / np.sqrt(policy.obs_rms.var + policy.epsilon)
+    np.testing.assert_array_equal(policy.normalize(obs), np.clip(raw, -10, 10).astype(np.float32))
+    other = obs.copy()
+    other[:, limit] = 1.3
+    np.testing.assert_array_equal(policy.predict(other)[0], policy.predict(obs)[0])
+    varied = obs.copy()
+    varied[:, 0] += 0.2  # a field that varied in training still moves the action
+    assert not np.array_equal(policy.predict(varied)[0], policy.predict(obs)[0])

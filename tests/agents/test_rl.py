@@ -3,6 +3,7 @@
 import json
 import shlex
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -310,9 +311,10 @@ def test_a_policy_trained_on_increments_runs_on_the_plain_env(tmp_path):
         "max_step": 0.3,
         "prev_action_index": 2,
         "hide_action": False,
+        "hidden": [],
     }
     agent = load_policy(run / "final_model.zip")
-    assert agent.increment == (0.3, 2, False)
+    assert agent.increment == (0.3, 2, False, ())
     plain = gym.make(TURNING)
     wrapped = IncrementalAction(gym.make(TURNING), max_step=0.3)
     op, _ = plain.reset(seed=5, options={"scenario": "paper_700"})
@@ -324,6 +326,31 @@ def test_a_policy_trained_on_increments_runs_on_the_plain_env(tmp_path):
         ow, rw, *_ = wrapped.step(delta)
         np.testing.assert_array_equal(op, ow)
         assert rp == rw
+
+
+def test_a_policy_that_hides_fields_ignores_them_outside_the_wrapper(tmp_path):
+    """``hide_fields`` is recorded with the run, and the loaded policy applies it itself: on
+    the plain env, what it does cannot depend on the hidden fields."""
+    path = tmp_path / "hide.yml"
+    path.write_text(
+        TINY
+        + "  env_wrapper:\n    - machining_envs.wrappers.IncrementalAction:\n"
+        + "        max_step: 0.3\n        hide_fields: [limit, spindle]\n"
+    )
+    run = train_quietly(TURNING, tmp_path / "run", path, vec="dummy")
+    meta = json.loads((run / "config.json").read_text())
+    assert meta["action_increment"]["hidden"] == [1, 3]
+    agent = load_policy(run / "final_model.zip")
+    assert agent.increment.hidden == (1, 3)
+    env = gym.make(TURNING)
+    env.reset(seed=2, options={"scenario": "paper_405"})
+    for _ in range(5):  # mid-range feed, where the output is not clipped at the box
+        obs, *_ = env.step(np.zeros(1, dtype=np.float32))
+    moved = obs.copy()
+    moved[[1, 3]] += 0.7
+    np.testing.assert_array_equal(agent.predict(obs)[0], agent.predict(moved)[0])
+    moved[0] += 0.3  # a field it sees does move it
+    assert not np.array_equal(agent.predict(obs)[0], agent.predict(moved)[0])
 
 
 @pytest.mark.parametrize(

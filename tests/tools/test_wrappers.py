@@ -83,6 +83,8 @@ def test_non_finite_delta_and_step_before_reset_raise():
         ((True, 2), "max_step must be a number"),
         ((0.1, 7), r"prev_action_index must be an integer in \[0, 6\], got 7"),
         ((0.1, 2, "yes"), "hide_action must be True or False"),
+        ((0.1, 2, True, (1, 7)), r"hidden must be a list of integers in \[0, 6\], got \(1, 7\)"),
+        ((0.1, 2, True, "13"), "hidden must be a list of integers"),
     ],
 )
 def test_the_batched_increment_checks_its_fields(fields, message):
@@ -95,3 +97,43 @@ def test_the_batched_increment_checks_its_fields(fields, message):
     )
     with pytest.raises(ValueError, match=message):
         VecIncrementalAction(venv, ActionIncrement(*fields))
+
+
+def test_hidden_fields_read_as_zero_and_change_nothing_the_env_gets():
+    wrapped = IncrementalAction(
+        gym.make(MILLING), max_step=0.3, hide_action=True, hide_fields=["limit", "spindle"]
+    )
+    plain = gym.make(MILLING)
+    index = plain.unwrapped.OBS_INDEX
+    zeroed = [index["prev_action"], index["limit"], index["spindle"]]
+    assert wrapped.increment.hidden == (index["limit"], index["spindle"])
+    ow, _ = wrapped.reset(seed=3, options={"scenario": "ood"})
+    op, _ = plain.reset(seed=3, options={"scenario": "ood"})
+    rng = np.random.default_rng(1)
+    for _ in range(30):
+        assert op[index["limit"]] > 0 and op[index["spindle"]] > 0
+        np.testing.assert_array_equal(ow[zeroed], 0.0)
+        kept = np.delete(np.arange(op.size), zeroed)
+        np.testing.assert_array_equal(ow[kept], op[kept])
+        d = rng.uniform(-1.0, 1.0, size=(1,)).astype(np.float32)
+        a = IncrementalAction.absolute_action(op, d, 0.3, index["prev_action"])
+        ow, *_ = wrapped.step(d)
+        op, *_ = plain.step(a)
+
+
+@pytest.mark.parametrize(
+    "hide_fields, message",
+    [
+        (
+            ["limt"],
+            r"hide_fields: 'limt' is not a field of EndMillingEnv's observation; one of "
+            r"\['limit', 'measured', 'spindle'\]",
+        ),
+        (["history"], "'history' is not a field"),
+        ("limit", "hide_fields must be a list of field names"),
+        ([9], r"hidden must be a list of integers in \[0, 6\]"),
+    ],
+)
+def test_bad_hidden_fields_name_the_allowed_ones(hide_fields, message):
+    with pytest.raises(ValueError, match=message):
+        IncrementalAction(gym.make(MILLING), hide_fields=hide_fields)
