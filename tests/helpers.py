@@ -4,12 +4,15 @@ episode, a fresh interpreter, scenario draws, and the agent-protocol checks (SB3
 
 from __future__ import annotations
 
+import functools
 import subprocess
 import sys
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+import pytest
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
@@ -341,6 +344,26 @@ def train_quietly(env_id: str, out, config_path, algo: str = "ppo", **kwargs):
     return train(
         env_id, algo, out, config_path=config_path, progress_bar=False, verbose=False, **kwargs
     )
+
+
+def refuses_file(
+    path: Path, text: str, read: Callable[[Path], object], error: type[Exception], match: str
+) -> None:
+    """Write ``text`` to ``path``: ``read(path)`` must raise ``error`` with a message that
+    matches ``match`` (the key or value of the file it refuses)."""
+    path.write_text(text)
+    with pytest.raises(error, match=match):
+        read(path)
+
+
+def refuses_config(tmp_path: Path, text: str, message: str) -> None:
+    """Training Turning-v0 on a config file of ``text`` raises ``ConfigError`` matching
+    ``message`` before it writes anything (no run folder, nor the folder above it)."""
+    from agents.rl import ConfigError
+
+    train = functools.partial(train_quietly, TURNING, tmp_path / "runs" / "r")
+    refuses_file(tmp_path / "bad.yml", text, train, ConfigError, message)
+    assert not (tmp_path / "runs").exists()
 
 
 def episode_rows(times, over=None, policy_seed=None, overloaded: float = 0.0) -> list[dict]:

@@ -525,6 +525,13 @@ def _sweep_arguments(w):
     )
     w.add_argument("--resume", action="store_true", help="continue an interrupted sweep")
     w.add_argument("--no-progress", action="store_true", help="no progress bar")
+    w.add_argument(
+        "--gate",
+        action="store_true",
+        help="train the --seeds under the seed gate (agents.rl.gate): a seed that fails is "
+        "replaced by the next unused one, each round a sweep in --out/round_<k>; "
+        "--out/gate.json records the verdicts",
+    )
 
 
 def _sweep_settings(args):
@@ -546,6 +553,8 @@ def _sweep_settings(args):
 def _sweep_check(args):
     from agents.rl.sweep import check_address
 
+    if args.gate and (args.search or args.resume):
+        raise UsageError("--gate trains --seeds afresh: it takes neither --search nor --resume")
     _training_check(args)
     try:
         _sweep_settings(args).check()
@@ -561,6 +570,17 @@ def _sweep_check(args):
 def _sweep(args, command):
     from agents.rl.sweep import sweep
 
+    if args.gate:
+        from agents.rl.gate import gated_sweep
+
+        result = gated_sweep(
+            _sweep_settings(args), args.out, command=command, progress=not args.no_progress
+        )
+        print(
+            f"passed {result['passed']}, failed {result['failed']}, "
+            f"replacements {result['replacements']}; {Path(args.out) / 'gate.json'}"
+        )
+        return 0 if result["complete"] else 1
     sweep(
         _sweep_settings(args),
         args.out,
@@ -832,7 +852,8 @@ COMMANDS: dict[str, Command] = {
             "Run training trials on Ray Tune: with --search N, N trials whose hyperparameters "
             "Optuna's sampler draws (agents.rl.sweep.SEARCH_SPACES) to minimise the best "
             "validation score; without it, one trial per --seeds value with the config as it "
-            "is. Ray starts on this machine unless --address names a cluster. The results "
+            "is (with --gate, under the seed gate: failing seeds replaced by the next ones). "
+            "Ray starts on this machine unless --address names a cluster. The results "
             "folder keeps every trial's run, results.csv, curves.csv (learning curves) and "
             "the best model in best/. Needs the rl and ray extras.",
             _sweep_arguments,

@@ -21,7 +21,8 @@ Every training seed that ships must pass the same gate, whatever the env or algo
 
 ``python -m agents.rl.gate ENV_ID PATH...`` gates saved policies (a run folder, a
 ``best_model.zip``, a sweep's results folder or a shipped policy's folder with its
-``seed_<k>`` subfolders) and writes the verdicts as JSON.
+``seed_<k>`` subfolders) and writes the verdicts as JSON; ``machining-bench sweep --gate``
+trains seeds under the gate (:func:`gated_sweep`).
 """
 
 from __future__ import annotations
@@ -352,12 +353,14 @@ def gated_sweep(
     per_edge: int = 5,
     max_replacements: int | None = None,
     verbose: bool = True,
+    command: str | None = None,
+    progress: bool = True,
 ) -> dict:
     """Multi-seed training under the gate: ``agents.rl.sweep.sweep`` of ``settings.seeds``
     into ``out/round_0``, every trial gated, the failures replaced by the next seeds in
     ``out/round_1``, ... (:func:`gated_seeds`). Writes and returns ``out/gate.json``:
     the seeds asked for, passed, failed and added, each verdict, and the model path of
-    every seed that passed (the ones to ship)."""
+    every seed that passed (the ones to ship). ``command`` and ``progress``: the sweeps'."""
     from agents.rl.policy import read_run_config
     from agents.rl.sweep import sweep
 
@@ -370,7 +373,13 @@ def gated_sweep(
     def train_many(seeds):
         folder = out / f"round_{len(rounds)}"
         rounds.append(folder)
-        sweep(dataclasses.replace(settings, seeds=list(seeds)), folder, verbose=verbose)
+        sweep(
+            dataclasses.replace(settings, seeds=list(seeds)),
+            folder,
+            verbose=verbose,
+            command=command,
+            progress=progress,
+        )
         models = {}
         for trial in sorted((folder / "trials").iterdir()):
             meta = trial / "config.json"
@@ -421,42 +430,11 @@ def main(argv=None) -> int:
         prog="python -m agents.rl.gate", description=__doc__.split("\n")[0]
     )
     ap.add_argument("env_id")
-    ap.add_argument("paths", nargs="*", type=Path, help="policies to gate")
+    ap.add_argument("paths", nargs="+", type=Path, help="policies to gate")
     ap.add_argument("--n-validation", type=int, default=20)
     ap.add_argument("--per-edge", type=int, default=5)
     ap.add_argument("--out", type=Path, default=None, help="write the verdicts here (JSON)")
-    ap.add_argument(
-        "--sweep",
-        type=Path,
-        default=None,
-        metavar="FOLDER",
-        help="train --seeds under the gate into FOLDER (gated_sweep)",
-    )
-    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
-    ap.add_argument("--algo", default="ppo")
-    ap.add_argument("--config", default=None)
-    ap.add_argument("--n-timesteps", type=int, default=None)
-    ap.add_argument("--workers", type=int, default=2)
     a = ap.parse_args(argv)
-    if a.sweep is not None:
-        from agents.rl.sweep import SweepSettings
-
-        settings = SweepSettings(
-            a.env_id,
-            a.algo,
-            seeds=a.seeds,
-            n_timesteps=a.n_timesteps,
-            config_path=a.config,
-            workers=a.workers,
-        )
-        result = gated_sweep(settings, a.sweep, a.n_validation, a.per_edge)
-        print(
-            f"passed {result['passed']}, failed {result['failed']}, "
-            f"replacements {result['replacements']}; {a.sweep / 'gate.json'}"
-        )
-        return 0 if result["complete"] else 1
-    if not a.paths:
-        ap.error("give the policies to gate, or --sweep FOLDER")
     out, failed = {}, 0
     for path in a.paths:
         for name, model in _models(path):

@@ -4,6 +4,7 @@ one fails in one line on stderr, exit status 2, with nothing left behind."""
 from __future__ import annotations
 
 import json
+import shlex
 import shutil
 import socket
 import time
@@ -113,6 +114,35 @@ def test_sweep_fails_at_once_where_no_ray_cluster_listens(tmp_path, capsys):
         _one_line(capsys, "--address")
     assert time.perf_counter() - t0 < 30
     assert not out.exists() and not ray.is_initialized()
+
+
+def test_sweep_gate_trains_the_seeds_under_the_gate(tmp_path, monkeypatch, capsys):
+    """``sweep --gate`` hands the sweep's own settings to ``gated_sweep`` (and refuses a
+    search or a resume, which a gated sweep does not do)."""
+    pytest.importorskip("ray")
+    import agents.rl.gate
+    from agents.rl.sweep import SweepSettings
+
+    out = tmp_path / "s"
+    for extra in (["--search", "3"], ["--resume"]):
+        assert main(["sweep", "--env", TURNING, "--out", str(out), "--gate", *extra]) == 2
+        _one_line(capsys, "--gate")
+    calls = []
+
+    def gated_sweep(settings, folder, **kwargs):
+        calls.append((settings, folder, kwargs))
+        return {"passed": [0, 1], "failed": [], "replacements": [], "complete": True}
+
+    monkeypatch.setattr(agents.rl.gate, "gated_sweep", gated_sweep)
+    argv = ["sweep", "--env", TURNING, "--out", str(out), "--gate", "--seeds", "0", "1"]
+    argv += ["--timesteps", "512", "--workers", "1", "--vec", "dummy", "--no-progress"]
+    assert main(argv) == 0
+    settings = SweepSettings(TURNING, seeds=[0, 1], n_timesteps=512, workers=1, vec="dummy")
+    assert calls == [
+        (settings, str(out), {"command": shlex.join(["machining-bench", *argv]), "progress": False})
+    ]
+    assert "passed [0, 1]" in capsys.readouterr().out
+    assert not out.exists()
 
 
 # ---- export ------------------------------------------------------------------------------------

@@ -6,6 +6,7 @@ build, and a run it cannot resume, before it writes anything."""
 
 from __future__ import annotations
 
+import functools
 import json
 import re
 import shutil
@@ -24,7 +25,7 @@ from agents.rl.policy import PRETRAINED_DIR, pretrained_seeds, read_run_config
 from agents.rl.stats import read_stats
 from agents.turning import ConstantFeed
 from tests.agents.test_rl import TINY
-from tests.helpers import CONTOURING, MILLING, TURNING, train_quietly
+from tests.helpers import CONTOURING, MILLING, TURNING, refuses_config, train_quietly
 
 SHIPPED = PRETRAINED_DIR / "turning_ppo"
 
@@ -94,35 +95,44 @@ def _rewrite(path: Path, drop: str | None = None, replace: dict | None = None) -
             zf.writestr(name, data)
 
 
+def _truncate(path: Path) -> None:
+    path.write_bytes(path.read_bytes()[:2000])
+
+
 @pytest.mark.parametrize(
     "damage,message",
     [
-        ("truncated", "not a PPO model.*BadZipFile"),
-        ("no data", "not a PPO model.*no data"),
-        ("data not JSON", "not a PPO model.*not JSON"),
-        ("data binary", "not a PPO model.*not JSON"),
-        ("data a list", "not a PPO model.*does not name"),
-        ("no policy", "not a PPO model.*no policy.pth"),
-        ("policy garbage", "not a PPO model"),
+        pytest.param(_truncate, "BadZipFile", id="truncated"),
+        pytest.param(functools.partial(_rewrite, drop="data"), "no data", id="no data"),
+        pytest.param(
+            functools.partial(_rewrite, replace={"data": b'{"policy_class": '}),
+            "not JSON",
+            id="data not JSON",
+        ),
+        pytest.param(
+            functools.partial(_rewrite, replace={"data": bytes(range(128, 256))}),
+            "not JSON",
+            id="data binary",
+        ),
+        pytest.param(
+            functools.partial(_rewrite, replace={"data": b"[1, 2]"}),
+            "does not name",
+            id="data a list",
+        ),
+        pytest.param(
+            functools.partial(_rewrite, drop="policy.pth"), "no policy.pth", id="no policy"
+        ),
+        pytest.param(
+            functools.partial(_rewrite, replace={"policy.pth": b"\x00garbage" * 50}),
+            "",
+            id="policy garbage",
+        ),
     ],
 )
 def test_a_damaged_model_archive_is_refused_naming_the_file(run, damage, message):
     model = run / "best_model.zip"
-    if damage == "truncated":
-        model.write_bytes(model.read_bytes()[:2000])
-    elif damage == "no data":
-        _rewrite(model, drop="data")
-    elif damage == "data not JSON":
-        _rewrite(model, replace={"data": b'{"policy_class": '})
-    elif damage == "data binary":
-        _rewrite(model, replace={"data": bytes(range(128, 256))})
-    elif damage == "data a list":
-        _rewrite(model, replace={"data": b"[1, 2]"})
-    elif damage == "no policy":
-        _rewrite(model, drop="policy.pth")
-    else:
-        _rewrite(model, replace={"policy.pth": b"\x00garbage" * 50})
-    with pytest.raises(ValueError, match=f"best_model.zip: {message}"):
+    damage(model)
+    with pytest.raises(ValueError, match=f"best_model.zip: not a PPO model.*{message}"):
         load_policy(model)
 
 
@@ -255,12 +265,7 @@ def test_evaluate_checks_its_other_arguments_first():
     ],
 )
 def test_a_policy_that_cannot_be_built_is_refused_leaving_no_run_folder(tmp_path, extra, message):
-    config = tmp_path / "c.yml"
-    config.write_text(TINY + f"  {extra}\n")
-    out = tmp_path / "runs" / "r"
-    with pytest.raises(ConfigError, match=message):
-        train_quietly(TURNING, out, config)
-    assert not (tmp_path / "runs").exists()
+    refuses_config(tmp_path, TINY + f"  {extra}\n", message)
 
 
 def test_a_run_folder_under_a_file_is_refused_before_any_work(tmp_path):

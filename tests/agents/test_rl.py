@@ -10,7 +10,7 @@ import pytest
 from agents.bench.cli import main
 from agents.eval import evaluate
 from agents.rl import ConfigError, load_config, load_policy, primary_score, train
-from tests.helpers import MILLING, TURNING, train_quietly
+from tests.helpers import MILLING, TURNING, refuses_config, train_quietly
 
 TINY = """
 machining_envs/Turning-v0:
@@ -78,11 +78,7 @@ def test_a_config_outside_the_package_is_named_by_its_path(tmp_path, monkeypatch
     ],
 )
 def test_bad_configs_fail_before_training(tmp_path, text, message):
-    path = tmp_path / "bad.yml"
-    path.write_text(text)
-    with pytest.raises(ConfigError, match=message):
-        train_quietly(TURNING, tmp_path / "run", path)
-    assert not (tmp_path / "run").exists()
+    refuses_config(tmp_path, text, message)
 
 
 @pytest.mark.parametrize("algo", ["sac", "td3"])
@@ -362,11 +358,7 @@ def test_a_policy_that_hides_fields_ignores_them_outside_the_wrapper(tmp_path):
     ],
 )
 def test_bad_action_increment_fails_before_training(tmp_path, line, message):
-    path = tmp_path / "bad.yml"
-    path.write_text(TINY + line)
-    with pytest.raises(ConfigError, match=message):
-        train_quietly(TURNING, tmp_path / "run", path)
-    assert not (tmp_path / "run").exists()
+    refuses_config(tmp_path, TINY + line, message)
 
 
 def _final_parameters(run) -> list:

@@ -10,6 +10,7 @@ import machining_envs  # noqa: F401
 from machining_envs.core.actuation import SHOPFLOOR_ACTUATION, SHOPFLOOR_OVERRIDE
 from machining_envs.core.machine import SHOPFLOOR_MACHINE, Machine, load_machine
 from machining_envs.core.sensors import PowerSensor
+from tests.helpers import refuses_file
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "docs" / "my_cnc.yml"
 
@@ -58,10 +59,7 @@ def test_env_kwargs_per_env(tmp_path):
     ],
 )
 def test_bad_files_name_the_key(tmp_path, text, match):
-    f = tmp_path / "bad.yml"
-    f.write_text(text)
-    with pytest.raises(ValueError, match=match):
-        load_machine(f)
+    refuses_file(tmp_path / "bad.yml", text, load_machine, ValueError, match)
 
 
 def test_missing_file():
