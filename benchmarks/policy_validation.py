@@ -35,7 +35,7 @@ from agents.eval import evaluate
 from agents.eval.stats import allowance_sweep, seed_count_shares
 from agents.rl.callbacks import evaluation_setup
 from agents.rl.gate import gate_policy
-from agents.rl.policy import load_policy, policy_env_kwargs
+from agents.rl.policy import load_policy, policy_env_kwargs, pretrained_seeds
 from machining_envs.core.score import ALLOWANCES
 from machining_envs.core.splits import split_seeds
 
@@ -66,15 +66,9 @@ def _cells(diffs: list[dict]) -> str:
 
 
 def seed_models(folder: Path) -> list[tuple[int, Path]]:
-    """``(seed, best_model.zip)`` of every ``seed_<k>/`` under ``folder``."""
-    found = []
-    for p in sorted(folder.glob("seed_*/best_model.zip")):
-        tail = p.parent.name.removeprefix("seed_")
-        if tail.isdigit():
-            found.append((int(tail), p))
-    if not found:
-        raise FileNotFoundError(f"no seed_<k>/best_model.zip under {folder}")
-    return found
+    """``(seed, best_model.zip)`` of every policy in ``folder``: its own ``best_model.zip``
+    (a shipped folder's seed 0) and every ``seed_<k>/best_model.zip``."""
+    return pretrained_seeds(folder.name, folder.parent)
 
 
 def main(argv=None) -> int:

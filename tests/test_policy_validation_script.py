@@ -40,3 +40,19 @@ def test_policy_validation_script_compares_tuned_rows_on_their_own_env(tmp_path)
     assert set(row["diffs"]) == {"0.005", "0.01", "0.02"}
     for d in row["diffs"].values():
         assert d["n"] == 2 and d["low"] <= d["diff"] <= d["high"]
+
+
+def test_a_shipped_folders_own_policy_counts_as_its_seed_0():
+    """end_milling_ppo keeps seed 0 in the folder itself: the script ran seeds 1-4 only."""
+    import importlib.util
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location(
+        "policy_validation", root / "benchmarks" / "policy_validation.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    found = module.seed_models(root / "agents" / "rl" / "pretrained" / "end_milling_ppo")
+    assert [s for s, _ in found] == [0, 1, 2, 3, 4]
+    assert found[0][1].parent.name == "end_milling_ppo"

@@ -424,7 +424,7 @@ BENCHMARK = BenchmarkSpec(
         AdaptiveFeedControl,
     ),
     machine_reference=MillingConstantFeed,
-    learned=("end_milling_ppo",),
+    learned=("end_milling_ppo_load_only",),
     oracle=DeferredAgent("agents.oracle.MillingMPCOracle"),
     oracle_episodes=20,
     oracle_in_quick=False,  # a cut of some 2000 samples: about 16 s
