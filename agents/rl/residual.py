@@ -41,7 +41,7 @@ class ResidualSpec(NamedTuple):
     ``from_env``); ``params``: its settings, or ``"tuned"`` for the env's entry in
     ``agents/bench/tuned.json``; ``knob``: the tunable setting the policy moves (default
     ``setpoint``; ``override_cap`` for the contouring look-ahead planner); ``span``: it moves
-    at most this much from the regulator's own value; ``lo``, ``hi``: it never leaves
+    at most this much from the regulator's own value (at most ``hi - lo``); ``lo``, ``hi``: it never leaves
     ``[lo, hi]``. ``mode="add"`` instead adds the policy's correction, ``span`` x action, to
     every component of the regulator's action (the contouring servo: a correction on top of
     the H-infinity loop); ``knob``, ``lo`` and ``hi`` are then unused.
@@ -65,12 +65,16 @@ class ResidualSpec(NamedTuple):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
                 raise ValueError(f"{name} must be a finite number, got {v!r}")
-        if not 0.0 < self.span <= 1.0:
-            raise ValueError(f"span must be in (0, 1], got {self.span!r}")
         if not 0.0 < self.lo < self.hi <= 10.0:
             raise ValueError(f"lo and hi must satisfy 0 < lo < hi <= 10, got {self.lo}, {self.hi}")
         if self.mode not in ("knob", "add"):
             raise ValueError(f"mode must be 'knob' or 'add', got {self.mode!r}")
+        # a knob moves at most across [lo, hi]; a correction at most across the action box
+        top, what = (
+            (2.0, "the action range") if self.mode == "add" else (self.hi - self.lo, "hi - lo")
+        )
+        if not 0.0 < self.span <= top:
+            raise ValueError(f"span must be in (0, {top:g}] ({what}), got {self.span!r}")
         cls = self.base_class()
         if not hasattr(cls, "from_env"):
             raise ValueError(f"base {self.base} is not an agent class with from_env")

@@ -130,6 +130,14 @@ def test_the_vector_form_runs_each_lane_as_the_wrapper_does_across_resets():
         ({"base": BASE, "knob": "voltage"}, "no tunable .voltage."),
         ({"base": "agents.turning.Nope"}, "cannot import"),
         ({"base": BASE, "span": 0.0}, "span must be in"),
+        (
+            {"base": BASE, "span": 0.8, "lo": 0.3, "hi": 1.0},
+            r"span must be in \(0, 0.7\] \(hi - lo\)",
+        ),
+        (
+            {"base": BASE, "span": 2.5, "mode": "add"},
+            r"span must be in \(0, 2\] \(the action range\)",
+        ),
         ({"base": BASE, "lo": 0.8, "hi": 0.5}, "lo and hi"),
         ({"base": BASE, "params": 3}, "params must be"),
         ({"base": BASE, "spam": 1}, "spam"),
