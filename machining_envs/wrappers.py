@@ -114,7 +114,7 @@ class IncrementalAction(gym.Wrapper):
         ``OBS_INDEX`` (``"limit"``, ``"spindle"``, ...) or by index. A policy that sees
         neither the limit nor the spindle speed acts on the load measured as a share of the
         limit alone, so it cannot read a limit or speed outside its training ranges as
-        something it never met (``agents/rl/configs/ppo.yml``'s EndMilling-v0 entry).
+        something it never met (``agents/rl/configs/ppo_load_only.yml``).
     """
 
     def __init__(

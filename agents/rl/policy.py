@@ -65,8 +65,8 @@ class PolicyAgent:
     def held_fields(self) -> tuple[np.ndarray, np.ndarray]:
         """The observation fields that never varied in training and the value each had
         (float32, the observations' type): those whose variance in the frozen statistics is
-        below ``CONSTANT_VAR`` (Turning-v0's force limit, fixed at 1000 N on ``train``; an
-        action the policy was not shown)."""
+        below ``CONSTANT_VAR`` (Turning-v0's force limit, fixed at 1000 N on ``train``; a field
+        hidden from the policy, always 0)."""
         if self.obs_rms is None:
             return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.float32)
         index = np.flatnonzero(np.asarray(self.obs_rms.var) < CONSTANT_VAR)
