@@ -1,5 +1,6 @@
 """Run a script of ``benchmarks/`` as a user would, for the scripts' smoke tests."""
 
+import importlib.util
 import subprocess
 import sys
 from pathlib import Path
@@ -23,3 +24,11 @@ def run_benchmark_json(command: str, out: Path) -> tuple[str, object]:
 
     printed = run_benchmark(f"{command} --out {out}")
     return printed, json.loads(out.read_text())
+
+
+def load_benchmark(name: str):
+    """The script ``benchmarks/<name>.py`` imported as a module, for tests of its parts."""
+    spec = importlib.util.spec_from_file_location(name, BENCHMARKS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module

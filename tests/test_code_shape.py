@@ -1,13 +1,9 @@
 """The code's shape (``benchmarks/code_shape.py``): no long positional parameter lists and
 no ``# fmt: skip`` markers in the lane engines that take records of arrays."""
 
-import importlib.util
+from tests.benchmark_scripts import load_benchmark, run_benchmark
 
-from tests.benchmark_scripts import BENCHMARKS, run_benchmark
-
-_spec = importlib.util.spec_from_file_location("code_shape", BENCHMARKS / "code_shape.py")
-code_shape = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(code_shape)
+code_shape = load_benchmark("code_shape")
 
 #: The modules whose kernels take records (``core.compiled.schema``).
 RECORD_MODULES = (

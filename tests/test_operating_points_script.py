@@ -1,21 +1,14 @@
 """The operating-points script: what it changes in a cut, and a tiny end-to-end run."""
 
-import importlib.util
-from pathlib import Path
-
 import pytest
 
-from tests.benchmark_scripts import run_benchmark
+from tests.benchmark_scripts import load_benchmark, run_benchmark
 from tests.helpers import MILLING, TURNING
 
 
 @pytest.fixture(scope="module")
 def points():
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "operating_points.py"
-    spec = importlib.util.spec_from_file_location("operating_points", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("operating_points")
 
 
 def test_each_point_changes_one_thing_of_a_validation_cut(points):

@@ -2,7 +2,7 @@
 
 import json
 
-from tests.benchmark_scripts import run_benchmark
+from tests.benchmark_scripts import load_benchmark, run_benchmark
 
 
 def test_policy_validation_script_compares_every_seed_with_the_best_tuned_agent(tmp_path):
@@ -44,15 +44,9 @@ def test_policy_validation_script_compares_tuned_rows_on_their_own_env(tmp_path)
 
 def test_a_shipped_folders_own_policy_counts_as_its_seed_0():
     """end_milling_ppo keeps seed 0 in the folder itself: the script ran seeds 1-4 only."""
-    import importlib.util
-    from pathlib import Path
+    from agents.rl import PRETRAINED_DIR
 
-    root = Path(__file__).resolve().parents[1]
-    spec = importlib.util.spec_from_file_location(
-        "policy_validation", root / "benchmarks" / "policy_validation.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    found = module.seed_models(root / "agents" / "rl" / "pretrained" / "end_milling_ppo")
+    module = load_benchmark("policy_validation")
+    found = module.seed_models(PRETRAINED_DIR / "end_milling_ppo")
     assert [s for s, _ in found] == [0, 1, 2, 3, 4]
     assert found[0][1].parent.name == "end_milling_ppo"

@@ -3,19 +3,12 @@
 import numpy as np
 import pytest
 
-from tests.benchmark_scripts import run_benchmark
+from tests.benchmark_scripts import load_benchmark, run_benchmark
 
 
 @pytest.fixture(scope="module")
 def ceiling():
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "turning_ceiling.py"
-    spec = importlib.util.spec_from_file_location("turning_ceiling", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("turning_ceiling")
 
 
 def test_steps_over_the_limit_are_placed_against_segment_changes(ceiling):
