@@ -44,16 +44,34 @@ class ResidualSpec(NamedTuple):
     at most this much from the regulator's own value (at most ``hi - lo``); ``lo``, ``hi``: it never leaves
     ``[lo, hi]``. ``mode="add"`` instead adds the policy's correction, ``span`` x action, to
     every component of the regulator's action (the contouring servo: a correction on top of
-    the H-infinity loop); ``knob``, ``lo`` and ``hi`` are then unused.
+    the H-infinity loop); ``knob``, ``lo`` and ``hi`` are then unused. Several knobs: ``knob``
+    a list of names, ``span``, ``lo`` and ``hi`` each a number for all or a list of one per
+    knob; the policy's action has one component per knob.
     """
 
     base: str
     params: dict | str = "tuned"
-    span: float = 0.2
-    lo: float = 0.3
-    hi: float = 1.0
-    knob: str = "setpoint"
+    span: float | list = 0.2
+    lo: float | list = 0.3
+    hi: float | list = 1.0
+    knob: str | list = "setpoint"
     mode: str = "knob"
+
+    def knobs(self) -> list[tuple[str, float, float, float]]:
+        """``(name, span, lo, hi)`` of each knob the policy moves (one unless ``knob`` is a
+        list); ``ValueError`` when a list's length is not the number of knobs."""
+        names = [self.knob] if isinstance(self.knob, str) else list(self.knob)
+        cols = []
+        for field in ("span", "lo", "hi"):
+            v = getattr(self, field)
+            v = list(v) if isinstance(v, (list, tuple)) else [v] * len(names)
+            if len(v) != len(names):
+                raise ValueError(
+                    f"{field} must be a number or a list of {len(names)} (one per knob), "
+                    f"got {getattr(self, field)!r}"
+                )
+            cols.append(v)
+        return list(zip(names, *cols, strict=True))
 
     def checked(self) -> ResidualSpec:
         """This spec if its values are usable (``ValueError`` naming the field otherwise)."""
@@ -61,25 +79,27 @@ class ResidualSpec(NamedTuple):
             raise ValueError(f"base must be an import path 'module.Class', got {self.base!r}")
         if not (self.params == "tuned" or isinstance(self.params, dict)):
             raise ValueError(f"params must be a mapping or 'tuned', got {self.params!r}")
-        for name in ("span", "lo", "hi"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
-                raise ValueError(f"{name} must be a finite number, got {v!r}")
-        if not 0.0 < self.lo < self.hi <= 10.0:
-            raise ValueError(f"lo and hi must satisfy 0 < lo < hi <= 10, got {self.lo}, {self.hi}")
         if self.mode not in ("knob", "add"):
             raise ValueError(f"mode must be 'knob' or 'add', got {self.mode!r}")
-        # a knob moves at most across [lo, hi]; a correction at most across the action box
-        top, what = (
-            (2.0, "the action range") if self.mode == "add" else (self.hi - self.lo, "hi - lo")
-        )
-        if not 0.0 < self.span <= top:
-            raise ValueError(f"span must be in (0, {top:g}] ({what}), got {self.span!r}")
+        if not self.knob or not all(isinstance(k, str) for k in np.atleast_1d(self.knob)):
+            raise ValueError(f"knob must be a setting's name or a list of names, got {self.knob!r}")
         cls = self.base_class()
         if not hasattr(cls, "from_env"):
             raise ValueError(f"base {self.base} is not an agent class with from_env")
-        if self.mode == "knob" and self.knob not in getattr(cls, "TUNABLE", {}):
-            raise ValueError(f"base {self.base} has no tunable {self.knob!r} to supervise")
+        for knob, span, lo, hi in self.knobs():
+            for name, v in (("span", span), ("lo", lo), ("hi", hi)):
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+                    raise ValueError(f"{name} must be a finite number, got {v!r}")
+            if not 0.0 < lo < hi <= 10.0:
+                raise ValueError(f"lo and hi must satisfy 0 < lo < hi <= 10, got {lo}, {hi}")
+            # a knob moves at most across [lo, hi]; a correction at most across the action box
+            top, what = (2.0, "the action range") if self.mode == "add" else (hi - lo, "hi - lo")
+            if not 0.0 < span <= top:
+                raise ValueError(f"span must be in (0, {top:g}] ({what}), got {span!r}")
+            if self.mode == "knob" and knob not in getattr(cls, "TUNABLE", {}):
+                raise ValueError(f"base {self.base} has no tunable {knob!r} to supervise")
+        if self.mode == "add" and not isinstance(self.knob, str):
+            raise ValueError("mode 'add' takes no list of knobs")
         return self
 
     def base_class(self):
@@ -119,22 +139,28 @@ class ResidualSpec(NamedTuple):
         base = self.base_class().from_env(env, **self.settings(env_id))
         if self.mode == "add":
             return base
-        value = getattr(base, self.knob)
-        if not self.lo <= value <= self.hi:
-            raise ValueError(
-                f"the regulator's {self.knob} {value:.3g} is outside [lo, hi] = "
-                f"[{self.lo}, {self.hi}]"
-            )
+        for knob, _, lo, hi in self.knobs():
+            value = getattr(base, knob)
+            if not lo <= value <= hi:
+                raise ValueError(
+                    f"the regulator's {knob} {value:.3g} is outside [lo, hi] = [{lo}, {hi}]"
+                )
         return base
 
     def setpoints(self, base, action) -> np.ndarray:
-        """The knob's value in each lane for the policy's actions ``(n, 1)`` (or ``(1,)``)."""
-        a = np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
-        return np.clip(getattr(base, self.knob) + self.span * a, self.lo, self.hi)
+        """The knob's value in each lane for the policy's actions ``(n, 1)`` (or ``(1,)``);
+        with several knobs, ``(n, knobs)``, a column per knob."""
+        knobs = self.knobs()
+        a = np.clip(np.asarray(action, dtype=np.float64).reshape(-1, len(knobs)), -1.0, 1.0)
+        cols = [
+            np.clip(getattr(base, knob) + span * a[:, j], lo, hi)
+            for j, (knob, span, lo, hi) in enumerate(knobs)
+        ]
+        return cols[0] if len(cols) == 1 else np.stack(cols, axis=1)
 
     def action_dim(self, env_action_dim: int) -> int:
         """Components of the policy's action: one knob, or one correction per env action."""
-        return env_action_dim if self.mode == "add" else 1
+        return env_action_dim if self.mode == "add" else len(self.knobs())
 
     def act(self, base, obs: np.ndarray, state: np.ndarray, action) -> np.ndarray:
         """The regulator's command for the batch ``obs`` at the policy's setpoints (or with
@@ -144,12 +170,16 @@ class ResidualSpec(NamedTuple):
             u = np.clip(base._act(obs, state), -1.0, 1.0).astype(np.float32)
             a = np.clip(np.asarray(action, dtype=np.float64).reshape(u.shape), -1.0, 1.0)
             return np.clip(u.astype(np.float64) + self.span * a, -1.0, 1.0).astype(np.float32)
-        centre = getattr(base, self.knob)
-        setattr(base, self.knob, self.setpoints(base, action))
+        names = [k for k, *_ in self.knobs()]
+        centres = [getattr(base, k) for k in names]
+        values = self.setpoints(base, action).reshape(len(obs), len(names))
+        for j, k in enumerate(names):
+            setattr(base, k, values[:, j])
         try:
             u = base._act(np.asarray(obs, dtype=np.float64), state)
         finally:
-            setattr(base, self.knob, centre)
+            for k, c in zip(names, centres, strict=True):
+                setattr(base, k, c)
         return np.clip(u, -1.0, 1.0).astype(np.float32).reshape(len(obs), -1)
 
 
@@ -160,7 +190,8 @@ def _action_space(n: int) -> gym.spaces.Box:
 class SetpointResidual(gym.Wrapper):
     """The env with the policy setting the regulator's setpoint (see the module doc).
 
-    Parameters are :class:`ResidualSpec`'s. ``info["setpoint"]`` is the knob's value used.
+    Parameters are :class:`ResidualSpec`'s. ``info["setpoint"]`` is the knob's value used (a
+    list, a value per knob, with several).
     """
 
     def __init__(
@@ -189,7 +220,8 @@ class SetpointResidual(gym.Wrapper):
         self._state = state
         self._obs = np.asarray(obs, dtype=np.float64)[None, :]
         if self.residual.mode == "knob":
-            info = {**info, "setpoint": float(self.residual.setpoints(self.base, action)[0])}
+            used = np.asarray(self.residual.setpoints(self.base, action))[0]
+            info = {**info, "setpoint": float(used) if used.ndim == 0 else used.tolist()}
         return obs, reward, terminated, truncated, info
 
 

@@ -123,6 +123,37 @@ def test_the_vector_form_runs_each_lane_as_the_wrapper_does_across_resets():
     assert ends >= 1  # at least one lane finished and was reset on both sides
 
 
+def test_two_knobs_a_zero_policy_is_the_afc_and_each_knob_reaches_it():
+    """``knob`` a list: one action component per knob, each moving its own setting."""
+    from agents.afc import AdaptiveFeedControl
+
+    kw = {"knob": ["fmax", "reference"], "span": [1.0, 0.1], "lo": [1.0, 0.5], "hi": [4.0, 0.95]}
+    env, *_, agent, info = _zero_policy_runs_the_tuned_agent(
+        TURNING, AdaptiveFeedControl, 600, **kw
+    )
+    assert env.action_space.shape == (2,)
+    assert info["setpoint"] == pytest.approx([agent.fmax, agent.reference])
+    spec = env.residual
+    got = spec.setpoints(env.base, np.array([[1.0, -1.0], [-1.0, 0.5]]))
+    np.testing.assert_allclose(
+        got,
+        [
+            [min(agent.fmax + 1.0, 4.0), agent.reference - 0.1],
+            [agent.fmax - 1.0, agent.reference + 0.05],
+        ],
+    )
+    steps = {}
+    for a in ((0.0, 0.0), (1.0, 0.0), (0.0, -1.0)):
+        env.reset(seed=5)
+        te = tr = False
+        steps[a] = 0
+        while not (te or tr):
+            *_, te, tr, _ = env.step(np.array(a, np.float32))
+            steps[a] += 1
+    assert steps[(1.0, 0.0)] < 0.95 * steps[(0.0, 0.0)]  # a higher cap cuts sooner
+    assert steps[(0.0, -1.0)] > steps[(0.0, 0.0)]  # a lower reference later
+
+
 @pytest.mark.parametrize(
     "kwargs, match",
     [
@@ -130,6 +161,11 @@ def test_the_vector_form_runs_each_lane_as_the_wrapper_does_across_resets():
         ({"base": BASE, "knob": "voltage"}, "no tunable .voltage."),
         ({"base": "agents.turning.Nope"}, "cannot import"),
         ({"base": BASE, "span": 0.0}, "span must be in"),
+        (
+            {"base": BASE, "knob": ["setpoint", "setpoint"], "span": [0.1]},
+            r"span must be a number or a list of 2",
+        ),
+        ({"base": BASE, "knob": []}, "knob must be a setting's name or a list"),
         (
             {"base": BASE, "span": 0.8, "lo": 0.3, "hi": 1.0},
             r"span must be in \(0, 0.7\] \(hi - lo\)",
