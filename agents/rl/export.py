@@ -102,11 +102,10 @@ def _module(agent: PolicyAgent):
             for i in () if inc is None else inc.hidden:
                 mask[i] = 0.0
             held, value = agent.held_fields()
-            keep = mask.clone()
-            keep[held] = 0.0
+            mask[held] = 0.0
             hold = torch.zeros(n_obs, dtype=f32)
             hold[held] = torch.tensor(value, dtype=f32)
-            self.register_buffer("mask", keep)
+            self.register_buffer("mask", mask)
             self.register_buffer("hold", hold)
             rms = agent.obs_rms
             mean = np.zeros(n_obs) if rms is None else np.asarray(rms.mean)

@@ -35,6 +35,15 @@ __all__ = [
 CONSTANT_VAR = 1e-6
 
 
+def _never_varied(obs_rms) -> tuple[np.ndarray, np.ndarray]:
+    """``(index, value)`` of the fields whose variance in ``obs_rms`` is below
+    ``CONSTANT_VAR``, with their mean as float32 (none without statistics)."""
+    if obs_rms is None:
+        return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.float32)
+    index = np.flatnonzero(np.asarray(obs_rms.var) < CONSTANT_VAR)
+    return index, np.asarray(obs_rms.mean, dtype=np.float32).reshape(-1)[index]
+
+
 class PolicyAgent:
     """An SB3 model with its VecNormalize statistics, behind the agent protocol.
 
@@ -61,16 +70,22 @@ class PolicyAgent:
         self.epsilon = epsilon
         self.name = name or f"{type(model).__name__} policy"
         self.increment = increment
+        # the fields that never varied in training, found once: the statistics are frozen
+        self._held = _never_varied(obs_rms)
+        index, value = self._held
+        self._held_seen = (
+            None
+            if obs_rms is None
+            else (value - np.asarray(obs_rms.mean)[index])
+            / np.sqrt(np.asarray(obs_rms.var)[index] + epsilon)
+        )
 
     def held_fields(self) -> tuple[np.ndarray, np.ndarray]:
         """The observation fields that never varied in training and the value each had
         (float32, the observations' type): those whose variance in the frozen statistics is
         below ``CONSTANT_VAR`` (Turning-v0's force limit, fixed at 1000 N on ``train``; a field
         hidden from the policy, always 0)."""
-        if self.obs_rms is None:
-            return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.float32)
-        index = np.flatnonzero(np.asarray(self.obs_rms.var) < CONSTANT_VAR)
-        return index, np.asarray(self.obs_rms.mean, dtype=np.float32).reshape(-1)[index]
+        return self._held
 
     def normalize(self, obs: np.ndarray) -> np.ndarray:
         """``obs`` normalised by the frozen statistics, clipped to ``clip_obs``; a field that
@@ -78,11 +93,10 @@ class PolicyAgent:
         by the normaliser's near-zero spread, any other value would reach the clip."""
         if self.obs_rms is None:
             return obs
-        index, value = self.held_fields()
-        if index.size:
-            obs = np.array(obs, dtype=np.float32, copy=True)
-            obs[..., index] = value
         out = (obs - self.obs_rms.mean) / np.sqrt(self.obs_rms.var + self.epsilon)
+        index = self._held[0]
+        if index.size:
+            out[..., index] = self._held_seen
         return np.clip(out, -self.clip_obs, self.clip_obs).astype(np.float32)
 
     def _observations(self, observation) -> np.ndarray:
