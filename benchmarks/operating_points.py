@@ -23,12 +23,11 @@ import gymnasium as gym
 import numpy as np
 
 from agents.bench.declarations import BENCHMARKS
-from agents.bench.tune import agent_env_kwargs, load_tuned, tuned_factory
+from agents.bench.tune import agent_env_kwargs, best_tuned, tuned_factory
 from agents.eval import evaluate
-from agents.eval.stats import allowance_sweep
+from agents.eval.stats import allowance_cells, allowance_sweep
 from agents.rl.callbacks import evaluation_setup
 from agents.rl.policy import load_policy, policy_env_kwargs, pretrained_seeds
-from machining_envs.core.score import ALLOWANCES
 from machining_envs.core.workpieces import DepthProfile
 
 #: Where the learned rows are checked: (label, field, value) with field one of the
@@ -100,10 +99,7 @@ def main(argv=None) -> int:
     torch.set_num_threads(1)
     spec = next(s for s in BENCHMARKS if s.env_id == a.env)
     (learned,) = spec.learned
-    entries = load_tuned()["envs"][a.env]
-    reference = min(
-        spec.tuned, key=lambda c: entries.get(c.__name__, {}).get("validation_score", np.inf)
-    )
+    reference = next(c for c in spec.tuned if c.__name__ == best_tuned(a.env))
     _, score, failed = evaluation_setup(a.env, {})
     bases = base_scenarios(a.env, a.episodes, a.seed0)
     print(f"{a.env}: {learned} against {reference.__name__} (tuned), {a.episodes} cuts a point")
@@ -134,10 +130,7 @@ def main(argv=None) -> int:
             worst = min(worst, float(np.mean([score.counts(x) for x in r])))
             rows += r
         diffs, verdict = allowance_sweep(ref_rows, rows, score, failed)
-        cells = ", ".join(
-            f"{al:.1%}: {d['diff']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]"
-            for al, d in zip(ALLOWANCES, diffs, strict=True)
-        )
+        cells = allowance_cells(diffs)
         ref_counts = float(np.mean([score.counts(x) for x in ref_rows]))
         counts = float(np.mean([score.counts(x) for x in rows]))
         print(

@@ -30,22 +30,14 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.bench.tune import agent_env_kwargs, tuned_factory
+from agents.bench.tune import TUNED_FILE, agent_env_kwargs, best_tuned, tuned_factory
 from agents.eval import evaluate
-from agents.eval.stats import allowance_sweep, seed_count_shares
+from agents.eval.stats import allowance_cells, allowance_sweep, seed_count_shares
 from agents.rl.callbacks import evaluation_setup
 from agents.rl.gate import gate_policy
 from agents.rl.policy import load_policy, policy_env_kwargs, pretrained_seeds
 from machining_envs.core.score import ALLOWANCES
 from machining_envs.core.splits import split_seeds
-
-TUNED = Path(__file__).resolve().parents[1] / "agents" / "bench" / "tuned.json"
-
-
-def best_tuned(env_id: str) -> str:
-    """The class name of ``env_id``'s tuned agent with the lowest validation score."""
-    entries = json.loads(TUNED.read_text())["envs"][env_id]
-    return min(entries, key=lambda k: entries[k].get("validation_score", float("inf")))
 
 
 def _agent_class(name: str):
@@ -55,14 +47,6 @@ def _agent_class(name: str):
     if cls is None:
         raise ValueError(f"--reference: no agent class {name!r} in agents")
     return cls
-
-
-def _cells(diffs: list[dict]) -> str:
-    """The paired differences at each allowance with their intervals, for one line."""
-    return ", ".join(
-        f"{al:.1%}: {d['diff']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]"
-        for al, d in zip(ALLOWANCES, diffs, strict=True)
-    )
 
 
 def seed_models(folder: Path) -> list[tuple[int, Path]]:
@@ -127,7 +111,7 @@ def main(argv=None) -> int:
         cls = _agent_class(name)
         factory = tuned_factory(cls, a.env)
         if factory is None:
-            raise SystemExit(f"--tuned: {TUNED} holds no {name} entry for {a.env}")
+            raise SystemExit(f"--tuned: {TUNED_FILE} holds no {name} entry for {a.env}")
         rows = run(factory, agent_env_kwargs(cls))
         diffs, verdict = allowance_sweep(ref_rows, rows, score, failed)
         report_tuned[name] = {
@@ -137,7 +121,7 @@ def main(argv=None) -> int:
             "verdict": verdict,
             "wall_s": round(time.perf_counter() - t1, 1),
         }
-        cells = _cells(diffs)
+        cells = allowance_cells(diffs)
         e = report_tuned[name]
         print(
             f"{name} (tuned): counts {e['counts']:.0%}, mean {e['mean']:.2f} s; "
@@ -205,7 +189,7 @@ def main(argv=None) -> int:
         }
         report["policies"][str(folder)] = pooled
         pooled_rows[folder] = rows
-        cells = _cells(diffs)
+        cells = allowance_cells(diffs)
         print(
             f"{folder}: counts {pooled['counts']:.0%}, mean {pooled['mean']:.2f} s; "
             f"vs {ref_name} {cells}; {verdict}",
@@ -223,7 +207,7 @@ def main(argv=None) -> int:
                 "verdict": verdict,
                 "diffs": {str(al): d for al, d in zip(ALLOWANCES, diffs, strict=True)},
             }
-            cells = _cells(diffs)
+            cells = allowance_cells(diffs)
             print(f"{folder} vs {a.baseline}: {cells}; {verdict}", flush=True)
     if a.out is not None:
         a.out.write_text(json.dumps(report, indent=2, default=float))

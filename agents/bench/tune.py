@@ -283,6 +283,16 @@ def load_tuned(path=TUNED_FILE) -> dict:
     return read_json_object(path, "tuned settings file")
 
 
+def best_tuned(env_id: str, tuned: dict | None = None) -> str | None:
+    """The class name of ``env_id``'s tuned agent with the lowest validation score (None
+    where the file holds none): the reference a learned row is judged against."""
+    tuned = load_tuned() if tuned is None else tuned
+    entries = tuned.get("envs", {}).get(env_id, {})
+    if not entries:
+        return None
+    return min(entries, key=lambda k: entries[k].get("validation_score", float("inf")))
+
+
 def tuned_factory(cls, env_id: str, tuned: dict | None = None, label: str = "tuned"):
     """A factory ``env -> agent`` with ``cls``'s tuned settings for ``env_id``, named
     ``"<agent name> (<label>)"``; None where the file holds none."""

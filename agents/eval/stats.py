@@ -259,6 +259,15 @@ def allowance_sweep(
     return diffs, verdict([(d["low"], d["high"]) for d in diffs])
 
 
+def allowance_cells(diffs: Sequence[dict], allowances: Sequence[float] = ALLOWANCES) -> str:
+    """The paired differences of :func:`allowance_sweep` with their intervals, one line:
+    ``"0.5%: +1.20 [+0.10, +2.30], ..."``."""
+    return ", ".join(
+        f"{al:.1%}: {d['diff']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]"
+        for al, d in zip(allowances, diffs, strict=True)
+    )
+
+
 def seed_count_shares(
     rows: Sequence[dict], score: PrimaryScore, allowance: float = OVER_LIMIT_SHARE
 ) -> dict:

@@ -60,3 +60,21 @@ def test_each_seed_keeps_its_share_of_counting_episodes():
     shares = seed_count_shares(good + bad, REGULATION_SCORE)
     assert shares == {0: 1.0, 1: 0.7}
     assert seed_count_shares(bad, REGULATION_SCORE, allowance=0.05) == {1: 1.0}
+
+
+def test_the_reference_is_the_tuned_agent_with_the_lowest_validation_score():
+    from agents.bench.tune import best_tuned
+
+    tuned = {"envs": {"e": {"A": {"validation_score": 3.0}, "B": {"validation_score": 2.0}}}}
+    assert best_tuned("e", tuned) == "B"
+    assert best_tuned("other", tuned) is None
+    assert best_tuned("machining_envs/Turning-v0") == "AdaptiveFeedControl"
+
+
+def test_allowance_cells_print_each_difference_with_its_interval():
+    from agents.eval.stats import allowance_cells
+
+    d = {"diff": 1.234, "low": -0.5, "high": 2.0}
+    assert allowance_cells([d, d], allowances=(0.005, 0.02)) == (
+        "0.5%: +1.23 [-0.50, +2.00], 2.0%: +1.23 [-0.50, +2.00]"
+    )
