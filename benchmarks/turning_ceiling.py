@@ -10,11 +10,18 @@ Two numbers bound what a policy that moves the AFC's force reference can win:
   score of a supervisor that knew the workpiece in advance and held one reference over it.
   Its paired gain over the tuned AFC, at each allowance of the verdict, is an estimate of
   the room a learned reference knob has (a time-varying reference could gain more).
+- **A fixed overload brake** (``--brake``). The tuned AFC lowers its override by integral
+  action, over several samples; the same AFC with one rule added (on a sample whose load is
+  over the limit, the override cut to ``--brake-cut`` x itself and that sample's feed to
+  ``--brake-hold`` x the AFC's) runs at each reference of ``--brake-refs``, paired against
+  the tuned AFC. It measures what a supervisor that cuts the feed at once on an excursion
+  can gain; it is a measurement, not an agent of the library.
 
 ``test`` and ``ood`` are never run::
 
     python benchmarks/turning_ceiling.py                     # 100 episodes
     python benchmarks/turning_ceiling.py --episodes 20 --refs 0.7 0.9
+    python benchmarks/turning_ceiling.py --brake --brake-refs 0.8 0.85 0.9
 """
 
 from __future__ import annotations
@@ -27,7 +34,9 @@ from pathlib import Path
 import numpy as np
 
 from agents import AdaptiveFeedControl
+from agents.afc import _OVR
 from agents.eval import evaluate
+from agents.eval.stats import allowance_cells, allowance_sweep
 from agents.rl.callbacks import evaluation_setup
 from machining_envs.core.score import ALLOWANCES
 from machining_envs.core.splits import split_seeds
@@ -36,6 +45,25 @@ ENV = "machining_envs/Turning-v0"
 TUNED = Path(__file__).resolve().parents[1] / "agents" / "bench" / "tuned.json"
 #: References tried for the after-the-fact choice (the tuned one is always added).
 REFS = (0.70, 0.75, 0.85, 0.88, 0.91, 0.94, 0.97)
+
+
+class OverloadBrake(AdaptiveFeedControl):
+    """The AFC with a fixed overload brake (the module's ``--brake``): on a sample whose load
+    is over the observed limit, the override is cut to ``cut`` x itself (the integral
+    restarts there) and the feed of that sample to ``hold`` x the AFC's."""
+
+    def __init__(self, *args, cut: float = 0.7, hold: float = 0.6, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.cut, self.hold = cut, hold
+
+    def _act(self, obs, state):
+        u = super()._act(obs, state)[:, 0]
+        load, limit = self.load_units(obs)
+        over = load > limit
+        state[:, _OVR] = np.where(over, self.cut * state[:, _OVR], state[:, _OVR])
+        command = self.command_map.action_to_command(u)
+        command = np.where(over, self.hold * command, command)
+        return self.command_map.command_to_action(command)[:, None]
 
 
 def steps_near_segment_change(trajectory: dict, near_steps: int) -> tuple[int, int]:
@@ -63,10 +91,19 @@ def main(argv=None) -> int:
     ap.add_argument("--episodes", type=int, default=100, help="validation episodes")
     ap.add_argument("--refs", type=float, nargs="+", default=REFS)
     ap.add_argument("--near", type=float, default=1.5, help="seconds around a segment change")
+    ap.add_argument("--brake", action="store_true", help="measure the fixed overload brake")
+    ap.add_argument("--brake-refs", type=float, nargs="+", default=(0.85, 0.9))
+    ap.add_argument("--brake-cut", type=float, default=0.7, help="override cut, in (0, 1]")
+    ap.add_argument("--brake-hold", type=float, default=0.6, help="feed held, in [0, 1]")
     a = ap.parse_args(argv)
-    for r in a.refs:
-        if not 0.0 < r <= 1.5:
-            raise SystemExit(f"--refs: each reference must be in (0, 1.5], got {r}")
+    for flag, values in (("--refs", a.refs), ("--brake-refs", a.brake_refs)):
+        for r in values:
+            if not 0.0 < r <= 1.5:
+                raise SystemExit(f"{flag}: each reference must be in (0, 1.5], got {r}")
+    if not 0.0 < a.brake_cut <= 1.0:
+        raise SystemExit(f"--brake-cut must be in (0, 1], got {a.brake_cut}")
+    if not 0.0 <= a.brake_hold <= 1.0:
+        raise SystemExit(f"--brake-hold must be in [0, 1], got {a.brake_hold}")
     tuned = json.loads(TUNED.read_text())["envs"][ENV]["AdaptiveFeedControl"]["params"]
     tuned_ref = float(tuned["reference"])
     refs = sorted({*map(float, a.refs), tuned_ref})
@@ -99,6 +136,7 @@ def main(argv=None) -> int:
             flush=True,
         )
         if ref == tuned_ref:
+            tuned_rows = ev.rows
             dt = ev.trajectories[0]["t_s"][1] - ev.trajectories[0]["t_s"][0]
             near_steps = int(round(a.near / dt))
             pairs = [steps_near_segment_change(t, near_steps) for t in ev.trajectories]
@@ -116,6 +154,29 @@ def main(argv=None) -> int:
         + " / ".join(f"{g:+.2f}" for g in gain.mean(0))
         + " s"
     )
+    if a.brake:
+        for ref in a.brake_refs:
+            t0 = time.perf_counter()
+            ev = evaluate(
+                lambda env, p=dict(tuned, reference=ref): OverloadBrake.from_env(
+                    env, cut=a.brake_cut, hold=a.brake_hold, **p
+                ),
+                ENV,
+                ["validation"],
+                n_episodes=a.episodes,
+                seed=seed0,
+                metrics_fn=metrics_fn,
+            )
+            diffs, verdict = allowance_sweep(tuned_rows, ev.rows, score, failed)
+            counts = [np.mean([score.counts(r, al) for r in ev.rows]) for al in ALLOWANCES]
+            print(
+                f"overload brake (cut {a.brake_cut:g}, hold {a.brake_hold:g}) at reference "
+                f"{ref:.3f}: counts "
+                + " / ".join(f"{c:.0%}" for c in counts)
+                + f"; against the tuned AFC {allowance_cells(diffs)}; {verdict} "
+                f"({time.perf_counter() - t0:.1f} s)",
+                flush=True,
+            )
     return 0
 
 
