@@ -101,21 +101,30 @@ def learning_curve(
     steps = np.median([[int(e["timesteps"]) for e in r[:n_evals]] for r in runs], axis=0)
     wall = np.mean([[float(e["wall_s"]) for e in r[:n_evals]] for r in runs], axis=0)
     meta = seeds[0][1].parent / "config.json"
-    n_episodes = 10
+    n_episodes, first, allowances = 10, 0, None
     if meta.is_file():
-        n_episodes = int(json.loads(meta.read_text())["config"].get("eval_episodes", 10))
+        config = json.loads(meta.read_text())["config"]
+        n_episodes = int(config.get("eval_episodes", 10))
+        first = int(config.get("eval_first_episode", 0))
+        allowances = config.get("eval_allowances")
     iqm, low, high = (np.empty(n_evals) for _ in range(3))
     for k in range(n_evals):
         iqm[k], low[k], high[k] = iqm_interval(scores[:, k : k + 1], seed)
-    ref_name, ref_score, first = None, math.nan, None
+    ref_name, ref_score, reached = None, math.nan, None
     if reference is not None:
         ref_name, factory = reference
-        ev = evaluate_validation(factory, env_id, n_episodes, env_kwargs=env_kwargs)
-        ref_score = float(score(ev.rows, failed)["score"])
+        ev = evaluate_validation(factory, env_id, n_episodes, first, env_kwargs=env_kwargs)
+        # scored as the runs chose their models: at every allowance where they did
+        if allowances:
+            from agents.rl.callbacks import selection_score  # (loads SB3: only here)
+
+            ref_score = selection_score(ev.rows, score, failed, allowances)
+        else:
+            ref_score = float(score(ev.rows, failed)["score"])
         hits = np.flatnonzero(iqm <= ref_score)
-        first = int(hits[0]) if hits.size else None
+        reached = int(hits[0]) if hits.size else None
     return LearningCurve(
-        name, steps, wall, scores, iqm, low, high, n_episodes, ref_name, ref_score, first
+        name, steps, wall, scores, iqm, low, high, n_episodes, ref_name, ref_score, reached
     )
 
 

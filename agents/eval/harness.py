@@ -488,9 +488,11 @@ def evaluate(
             venv.close()
 
 
-def evaluate_validation(agent, env_id: str, n_episodes: int, **kwargs) -> Evaluation:
-    """:func:`evaluate` on the ``validation`` split's first ``n_episodes`` episodes (seeds
-    from ``split_seeds("validation", n_episodes)``), as training and tuning select on them;
-    ``kwargs``: evaluate's other keywords."""
-    seed = split_seeds("validation", n_episodes)[0]
+def evaluate_validation(
+    agent, env_id: str, n_episodes: int, first_episode: int = 0, **kwargs
+) -> Evaluation:
+    """:func:`evaluate` on ``n_episodes`` episodes of the ``validation`` split from its
+    ``first_episode`` on (seeds from ``split_seeds("validation", ...)``), as training and
+    tuning select on them; ``kwargs``: evaluate's other keywords."""
+    seed = split_seeds("validation", first_episode + n_episodes)[first_episode]
     return evaluate(agent, env_id, ["validation"], n_episodes=n_episodes, seed=seed, **kwargs)

@@ -3,8 +3,8 @@
 :class:`ValidationCallback` is the evaluation on ``validation`` named in the shipped configs
 (``callback:`` in ``agents/rl/configs/*.yml``, rl-zoo3's key). Every ``eval_freq`` env steps,
 and once more when training ends, it runs the policy through the evaluation harness on
-``n_episodes`` episodes of the ``validation`` split (seeds 5000, 5001, ...) and scores them
-with the env's own primary score. Under ``machining-bench train`` it also writes the run's
+``n_episodes`` episodes of the ``validation`` split (seeds 5000, 5001, ..., or from
+``first_episode`` on) and scores them with the env's own primary score. Under ``machining-bench train`` it also writes the run's
 ``eval.csv``, keeps ``best_model.zip`` with its statistics, and saves checkpoints every
 ``checkpoint_freq`` steps (statistics as JSON). Under ``python -m rl_zoo3.train`` it finds the
 env id, the env's keywords and the action increment in the training env, and reports
@@ -116,7 +116,8 @@ class ValidationCallback(BaseCallback):
     eval_freq : int
         Env steps (all envs together) between evaluations.
     n_episodes : int
-        Episodes per scenario of ``scenarios``, seeds ``5000 + i`` (the validation seeds).
+        Episodes per scenario of ``scenarios``, seeds ``5000 + first_episode + i`` (the
+        validation seeds).
     scenarios : list of str
         Scenario names to evaluate on; ``test`` and ``ood`` are refused (they are the
         benchmark's).
@@ -129,6 +130,11 @@ class ValidationCallback(BaseCallback):
         ``[0.005, 0.01, 0.02]``, the benchmark's verdict allowances, so that a policy that
         counts only at the loosest one is not chosen). Default: the score's own allowance
         (2 %). ``valid`` is always the share counting at 2 %.
+    first_episode : int, optional
+        The first validation episode used (default 0, the split's first). A run whose
+        policy is checked afterwards on the first 100 validation episodes
+        (``benchmarks/policy_validation.py``) chooses its best model on episodes apart from
+        them with ``first_episode: 100``, so that the check is not the choice's own score.
     """
 
     def __init__(
@@ -139,8 +145,9 @@ class ValidationCallback(BaseCallback):
         checkpoint_freq: int | None = None,
         verbose: int = 1,
         allowances=None,
+        first_episode: int = 0,
     ):
-        from machining_envs.core.splits import check_not_held_out
+        from machining_envs.core.splits import MAX_SPLIT_EPISODES, check_not_held_out
 
         super().__init__(verbose)
         self.eval_freq = _positive_int("eval_freq", eval_freq)
@@ -155,6 +162,17 @@ class ValidationCallback(BaseCallback):
             None if checkpoint_freq is None else _positive_int("checkpoint_freq", checkpoint_freq)
         )
         self.allowances = _allowances(allowances)
+        first = first_episode
+        if isinstance(first, float) and first.is_integer():
+            first = int(first)
+        top = MAX_SPLIT_EPISODES - self.n_episodes
+        if isinstance(first, bool) or not isinstance(first, int) or not 0 <= first <= top:
+            raise ValueError(
+                f"ValidationCallback: first_episode must be an integer in [0, {top}] (the "
+                f"split has {MAX_SPLIT_EPISODES} episodes, {self.n_episodes} are evaluated), "
+                f"got {first_episode!r}"
+            )
+        self.first_episode = first
         self.best = math.inf
         self.next_at = 0
         self.last: dict | None = None
@@ -264,7 +282,9 @@ class ValidationCallback(BaseCallback):
             self.env_id,
             self.scenarios,
             n_episodes=self.n_episodes,
-            seed=split_seeds("validation", self.n_episodes)[0],
+            seed=split_seeds("validation", self.first_episode + self.n_episodes)[
+                self.first_episode
+            ],
             env_kwargs=dict(self.env_kwargs),
             metrics_fn=metrics_fn,
         )

@@ -167,6 +167,9 @@ class TrainConfig:
     eval_allowances: list | None = None
     """The allowances the best model is chosen at (``ValidationCallback``'s ``allowances``;
     None: the score's own, 2 %)."""
+    eval_first_episode: int = 0
+    """The first validation episode the best model is chosen on (``ValidationCallback``'s
+    ``first_episode``)."""
     action_increment: float | None = None
     """If set, the policy outputs a change of the env's action of at most this much per step
     (``machining_envs.wrappers.IncrementalAction``); the saved policy applies it by itself."""
@@ -250,6 +253,7 @@ def _read_callbacks(where: str, value, cfg: TrainConfig) -> None:
             cfg.eval_freq, cfg.eval_episodes = cb.eval_freq, cb.n_episodes
             cfg.eval_scenarios = cb.scenarios
             cfg.eval_allowances = cb.allowances
+            cfg.eval_first_episode = cb.first_episode
             if cb.checkpoint_freq is not None:
                 cfg.checkpoint_freq = cb.checkpoint_freq
         else:

@@ -359,6 +359,7 @@ def train(
         cfg.checkpoint_freq,
         verbose=0,
         allowances=cfg.eval_allowances,
+        first_episode=cfg.eval_first_episode,
     ).bind(env_id, cfg.env_kwargs, increment, out, cfg.residual)
     eval_cb.on_evaluation = on_evaluation
     callbacks = [eval_cb, *(cls(**kwargs) for cls, kwargs in cfg.callbacks)]

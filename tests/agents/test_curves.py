@@ -21,14 +21,15 @@ from tests.helpers import TURNING  # noqa: E402
 N_EPISODES = 3
 
 
-def _fake_runs(tmp_path, table: dict[int, list[float]]):
-    """Seed folders with a config.json and an eval.csv of the given scores."""
+def _fake_runs(tmp_path, table: dict[int, list[float]], **config):
+    """Seed folders with a config.json (``config``: more of its settings) and an eval.csv of
+    the given scores."""
     seeds = []
     for seed, scores in table.items():
         d = tmp_path / f"seed_{seed}"
         d.mkdir()
         (d / "config.json").write_text(
-            json.dumps({"seed": seed, "config": {"eval_episodes": N_EPISODES}})
+            json.dumps({"seed": seed, "config": {"eval_episodes": N_EPISODES, **config}})
         )
         with open(d / "eval.csv", "w", newline="") as fh:
             w = csv.writer(fh)
@@ -89,3 +90,18 @@ def test_a_curve_that_never_matches_says_so_with_its_best(tmp_path):
     )
     assert c.first_match is None
     assert "never matches it within 2001 env steps" in c.summary(1.0, "s")
+
+
+def test_the_reference_is_scored_as_the_runs_chose_their_models(tmp_path):
+    from agents.rl.callbacks import selection_score
+
+    score, failed = _task()
+    factory, allowances = VariableGainPI.from_env, [0.005, 0.01, 0.02]
+    ev = evaluate_validation(factory, TURNING, N_EPISODES, first_episode=7)
+    assert [r["seed"] for r in ev.rows] == list(split_seeds("validation", 10))[7:]
+    want = selection_score(ev.rows, score, failed, allowances)
+    runs = _fake_runs(
+        tmp_path, {0: [1e6], 1: [1e6]}, eval_first_episode=7, eval_allowances=allowances
+    )
+    c = learning_curve("fake", runs, TURNING, {}, score, failed, ("adaptive PI", factory))
+    assert c.reference_score == pytest.approx(want, rel=1e-12)

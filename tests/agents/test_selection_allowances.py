@@ -47,3 +47,31 @@ def test_a_training_configuration_carries_them_to_the_run(tmp_path):
     assert load_config(env_id, "ppo", None).eval_allowances is None
     with pytest.raises(ConfigError, match="allowances"):
         load_config(env_id, "ppo", entry(2))
+
+
+@pytest.mark.parametrize("bad", [-1, 4981, 2.5, True, "100"])
+def test_a_first_episode_outside_the_split_is_refused_naming_it(bad):
+    with pytest.raises(ValueError, match=r"first_episode must be an integer in \[0, 4980\]"):
+        ValidationCallback(n_episodes=20, first_episode=bad)
+
+
+def test_the_choice_can_use_validation_episodes_apart_from_the_first(tmp_path):
+    from agents import ConstantFeed
+    from agents.eval.harness import evaluate_validation
+    from agents.rl.config import load_config
+
+    assert ValidationCallback(n_episodes=50, first_episode=100).first_episode == 100
+    assert ValidationCallback(first_episode=100.0).first_episode == 100  # YAML's 1e2
+    env_id, path = "machining_envs/Turning-v0", tmp_path / "ppo.yml"
+    cb = {"agents.rl.callbacks.ValidationCallback": {"n_episodes": 5, "first_episode": 100}}
+    path.write_text(yaml.safe_dump({env_id: {"n_timesteps": 1000, "callback": [cb]}}))
+    assert load_config(env_id, "ppo", path).eval_first_episode == 100
+    assert load_config(env_id, "ppo", None).eval_first_episode == 0
+    # episodes 3 and 4 of the split: the seeds 5003 and 5004, as evaluate gives them
+    ev = evaluate_validation(ConstantFeed.from_env, env_id, 2, first_episode=3)
+    assert [r["seed"] for r in ev.rows] == [5003, 5004]
+    first = evaluate_validation(ConstantFeed.from_env, env_id, 5)
+    assert [r["seed"] for r in first.rows][3:] == [5003, 5004]
+    assert [r["machining_time_s"] for r in first.rows][3:] == [
+        r["machining_time_s"] for r in ev.rows
+    ]
