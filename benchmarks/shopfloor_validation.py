@@ -70,7 +70,7 @@ def from_file(env_id: str, path: str, n: int, out: str | None) -> None:
     env.close()
     seed = split_seeds("validation", n)[0]
     rows, out_data = {}, {"env_kwargs": kwargs, "agents": {}}
-    for cls in spec.machine_tuned:
+    for cls in spec.machine_classes:
         f = machine_tuned_factory(cls, env_id, tuned)
         if f is None:
             print(f"{cls.__name__}: no settings in {path}")

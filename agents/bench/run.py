@@ -138,7 +138,7 @@ def jobs_of(
         kwargs = machine_tuned.get("env_kwargs", {}).get(spec.env_id, {})
         groups.append(
             (
-                spec.machine_tuned,
+                spec.machine_classes,
                 machine_tuned,
                 machine_tuned_factory,
                 "no settings tuned for the shop-floor machine",

@@ -143,6 +143,12 @@ class BenchmarkSpec:
     plot_context: tuple[str, str] | None = ("depth_mm", "depth (mm)")
 
     @property
+    def machine_classes(self) -> tuple[type, ...]:
+        """The classes tuned for a described machine and run on ``shopfloor``:
+        ``machine_tuned``, or ``tuned`` where it names none."""
+        return self.machine_tuned or self.tuned
+
+    @property
     def expected_seconds(self) -> float:
         """About how long the env takes in the full run with its oracle apart, s: the
         longer of its rows and its oracle's episodes."""

@@ -247,7 +247,7 @@ def tune_all(
     for spec in specs:
         if only is not None and spec.env_id != only:
             continue
-        classes = (spec.machine_tuned or spec.tuned) if machine is not None else spec.tuned
+        classes = spec.machine_classes if machine is not None else spec.tuned
         if not classes:
             continue
         if verbose:

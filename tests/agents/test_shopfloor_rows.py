@@ -19,7 +19,7 @@ TURNING = "machining_envs/Turning-v0"
 def _machine_file(spec, env):
     """A tuned-for-the-machine file holding the classes' default settings."""
     entries = {}
-    for cls in spec.machine_tuned:
+    for cls in spec.machine_classes:
         entries[cls.__name__] = {"params": paper_settings(cls, env), "validation_score": 1.0}
     return {
         "envs": {spec.env_id: entries},
@@ -51,6 +51,19 @@ def test_jobs_run_on_the_shopfloor_split_with_the_machine():
         assert j.tuned_cls is None  # not a candidate for the ideal rows' reference
     # No machine file: no such rows.
     assert not [j for j in jobs_of(spec, {}, False) if j.machine_cls]
+
+
+def test_a_spec_naming_no_machine_classes_runs_its_tuned_ones_as_tune_tunes_them():
+    import gymnasium as gym
+
+    spec = dataclasses.replace(benchmark_spec(TURNING), machine_tuned=())
+    assert spec.machine_classes == spec.tuned
+    env = gym.make(TURNING)
+    data = _machine_file(spec, env)
+    env.close()
+    assert set(data["envs"][TURNING]) == {cls.__name__ for cls in spec.tuned}
+    jobs = [j for j in jobs_of(spec, {}, False, machine_tuned=data) if j.machine_cls]
+    assert [j.machine_cls for j in jobs] == list(spec.tuned)
 
 
 def test_rows_labelled_and_judged_against_the_machine_constant_feed():
