@@ -4,12 +4,13 @@
 (``callback:`` in ``agents/rl/configs/*.yml``, rl-zoo3's key). Every ``eval_freq`` env steps,
 and once more when training ends, it runs the policy through the evaluation harness on
 ``n_episodes`` episodes of the ``validation`` split (seeds 5000, 5001, ..., or from
-``first_episode`` on) and scores them with the env's own primary score. Under ``machining-bench train`` it also writes the run's
-``eval.csv``, keeps ``best_model.zip`` with its statistics, and saves checkpoints every
-``checkpoint_freq`` steps (statistics as JSON). Under ``python -m rl_zoo3.train`` it finds the
-env id, the env's keywords and the action increment in the training env, and reports
-``validation/score`` and ``validation/counts`` in the logs; rl-zoo3 saves the models itself
-(``--save-freq``, its own ``EvalCallback``).
+``first_episode`` on) and scores them with the env's own primary score. Under
+``machining-bench train`` it also writes the run's ``eval.csv``, keeps ``best_model.zip``
+with its statistics, and saves checkpoints every ``checkpoint_freq`` steps (statistics as
+JSON). Under ``python -m rl_zoo3.train`` it finds the env id, the env's keywords and the
+action increment in the training env, and reports ``validation/score`` and
+``validation/counts`` in the logs; rl-zoo3 saves the models itself (``--save-freq``, its own
+``EvalCallback``).
 """
 
 from __future__ import annotations
