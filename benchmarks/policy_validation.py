@@ -2,9 +2,9 @@
 
 For each policy folder (a shipped ``agents/rl/pretrained/<name>`` with ``seed_<k>/``
 subfolders, or a folder of ``train`` run folders ``seed_<k>/``), every seed's policy runs
-the same ``--episodes`` ``validation`` episodes as the reference (the best tuned classical
-agent of ``agents/bench/tuned.json`` by its validation score, unless ``--reference``), and
-the seed gate (``agents.rl.gate``) runs on each seed unless ``--no-gate``. Printed and
+the same ``--episodes`` ``validation`` episodes (from ``--first-episode`` on) as the
+reference (the best tuned classical agent of ``agents/bench/tuned.json`` by its validation
+score, unless ``--reference``), and the seed gate (``agents.rl.gate``) runs on each seed unless ``--no-gate``. Printed and
 written (``--out``, JSON): per seed the gate verdict, the counting share and the mean
 charged time; per policy (the seeds pooled, an episode's value the mean over its seeds, as
 the benchmark pools them) the counting share, the mean time and the paired difference
@@ -37,7 +37,7 @@ from agents.rl.callbacks import evaluation_setup
 from agents.rl.gate import gate_policy
 from agents.rl.policy import load_policy, policy_env_kwargs, pretrained_seeds
 from machining_envs.core.score import ALLOWANCES
-from machining_envs.core.splits import split_seeds
+from machining_envs.core.splits import MAX_SPLIT_EPISODES, split_seeds
 
 
 def _agent_class(name: str):
@@ -63,6 +63,12 @@ def main(argv=None) -> int:
         "--tuned", nargs="*", default=[], help="tuned agent classes compared as rows too"
     )
     ap.add_argument("--episodes", type=int, default=50, help="validation episodes")
+    ap.add_argument(
+        "--first-episode",
+        type=int,
+        default=0,
+        help="the first validation episode (default 0): check on episodes kept apart",
+    )
     ap.add_argument("--reference", default=None, help="tuned agent class (default: the best)")
     ap.add_argument("--no-gate", action="store_true")
     ap.add_argument(
@@ -80,7 +86,12 @@ def main(argv=None) -> int:
 
     torch.set_num_threads(1)
     metrics_fn, score, failed = evaluation_setup(a.env, {})
-    seed0 = split_seeds("validation", a.episodes)[0]
+    if not 0 <= a.first_episode <= MAX_SPLIT_EPISODES - max(a.episodes, 1):
+        ap.error(
+            f"--first-episode must be in [0, {MAX_SPLIT_EPISODES} - --episodes], "
+            f"got {a.first_episode}"
+        )
+    seed0 = split_seeds("validation", a.first_episode + a.episodes)[a.first_episode]
 
     def run(agent, env_kwargs):
         ev = evaluate(
@@ -132,6 +143,7 @@ def main(argv=None) -> int:
     report = {
         "env": a.env,
         "episodes": a.episodes,
+        "first_episode": a.first_episode,
         "reference": ref_name,
         "reference_counts": ref_counts,
         "reference_mean": ref_mean,

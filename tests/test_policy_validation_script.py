@@ -50,3 +50,23 @@ def test_a_shipped_folders_own_policy_counts_as_its_seed_0():
     found = module.seed_models(PRETRAINED_DIR / "end_milling_ppo")
     assert [s for s, _ in found] == [0, 1, 2, 3, 4]
     assert found[0][1].parent.name == "end_milling_ppo"
+
+
+def test_the_check_can_run_on_validation_episodes_kept_apart(tmp_path):
+    import pytest
+
+    module = load_benchmark("policy_validation")
+    means = {}
+    for args in (("2", "0"), ("1", "0"), ("1", "1")):
+        out = tmp_path / f"{'_'.join(args)}.json"
+        module.main(
+            ["--tuned", "ConstantFeed", "--reference", "AdaptiveFeedControl", "--episodes"]
+            + [args[0], "--first-episode", args[1], "--out", str(out)]
+        )
+        data = json.loads(out.read_text())
+        assert data["first_episode"] == int(args[1])
+        means[args] = data["reference_mean"]
+    # episodes 0 and 1 together are episode 0 and episode 1 apart
+    assert means[("2", "0")] == pytest.approx((means[("1", "0")] + means[("1", "1")]) / 2)
+    with pytest.raises(SystemExit):
+        module.main(["--tuned", "ConstantFeed", "--episodes", "10", "--first-episode", "4995"])
