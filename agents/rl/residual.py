@@ -147,10 +147,11 @@ class ResidualSpec(NamedTuple):
                 )
         return base
 
-    def setpoints(self, base, action) -> np.ndarray:
+    def setpoints(self, base, action, knobs=None) -> np.ndarray:
         """The knob's value in each lane for the policy's actions ``(n, 1)`` (or ``(1,)``);
-        with several knobs, ``(n, knobs)``, a column per knob."""
-        knobs = self.knobs()
+        with several knobs, ``(n, knobs)``, a column per knob. ``knobs``: :meth:`knobs`,
+        where the caller holds it (the wrappers find it once)."""
+        knobs = self.knobs() if knobs is None else knobs
         a = np.clip(np.asarray(action, dtype=np.float64).reshape(-1, len(knobs)), -1.0, 1.0)
         cols = [
             np.clip(getattr(base, knob) + span * a[:, j], lo, hi)
@@ -162,17 +163,19 @@ class ResidualSpec(NamedTuple):
         """Components of the policy's action: one knob, or one correction per env action."""
         return env_action_dim if self.mode == "add" else len(self.knobs())
 
-    def act(self, base, obs: np.ndarray, state: np.ndarray, action) -> np.ndarray:
+    def act(self, base, obs: np.ndarray, state: np.ndarray, action, knobs=None) -> np.ndarray:
         """The regulator's command for the batch ``obs`` at the policy's setpoints (or with
-        its correction added); ``state`` is updated in place (the regulator's own state)."""
+        its correction added); ``state`` is updated in place (the regulator's own state).
+        ``knobs``: as for :meth:`setpoints`."""
         obs = np.asarray(obs, dtype=np.float64)
         if self.mode == "add":
             u = np.clip(base._act(obs, state), -1.0, 1.0).astype(np.float32)
             a = np.clip(np.asarray(action, dtype=np.float64).reshape(u.shape), -1.0, 1.0)
             return np.clip(u.astype(np.float64) + self.span * a, -1.0, 1.0).astype(np.float32)
-        names = [k for k, *_ in self.knobs()]
+        knobs = self.knobs() if knobs is None else knobs
+        names = [k for k, *_ in knobs]
         centres = [getattr(base, k) for k in names]
-        values = self.setpoints(base, action).reshape(len(obs), len(names))
+        values = self.setpoints(base, action, knobs).reshape(len(obs), len(names))
         for j, k in enumerate(names):
             setattr(base, k, values[:, j])
         try:
@@ -200,6 +203,7 @@ class SetpointResidual(gym.Wrapper):
         super().__init__(env)
         self.residual = ResidualSpec(base, params, span, lo, hi, knob, mode).checked()
         self.base = self.residual.make_base(env)
+        self._knobs = self.residual.knobs()
         self.action_space = _action_space(self.residual.action_dim(env.action_space.shape[0]))
         self._obs = None
         self._state = None
@@ -215,12 +219,12 @@ class SetpointResidual(gym.Wrapper):
             raise RuntimeError("SetpointResidual: call reset() before step()")
         _check_actions("SetpointResidual", action, self.action_space.shape)
         state = self._state.copy()  # kept only once the env has taken the step
-        u = self.residual.act(self.base, self._obs, state, action)[0]
+        u = self.residual.act(self.base, self._obs, state, action, self._knobs)[0]
         obs, reward, terminated, truncated, info = self.env.step(u)
         self._state = state
         self._obs = np.asarray(obs, dtype=np.float64)[None, :]
         if self.residual.mode == "knob":
-            used = np.asarray(self.residual.setpoints(self.base, action))[0]
+            used = np.asarray(self.residual.setpoints(self.base, action, self._knobs))[0]
             info = {**info, "setpoint": float(used) if used.ndim == 0 else used.tolist()}
         return obs, reward, terminated, truncated, info
 
@@ -264,6 +268,7 @@ class VecSetpointResidual(_vec_wrapper_base()):
         dim = residual.action_dim(venv.action_space.shape[0])
         super().__init__(venv, action_space=_action_space(dim))
         self.residual, self.base = residual, base
+        self._knobs = residual.knobs()
         self._obs = None
         self._state = None
         self._pending = None
@@ -277,7 +282,7 @@ class VecSetpointResidual(_vec_wrapper_base()):
     def step_async(self, actions):
         _check_actions("VecSetpointResidual", actions, (self.num_envs, *self.action_space.shape))
         state = self._state.copy()  # kept only once the envs have taken the step
-        u = self.residual.act(self.base, self._obs, state, actions)
+        u = self.residual.act(self.base, self._obs, state, actions, self._knobs)
         self.venv.step_async(u)
         self._pending = state
 
@@ -303,6 +308,7 @@ class ResidualAgent(Agent):
 
     def __init__(self, policy, residual: ResidualSpec, base, name: str | None = None):
         self.policy, self.residual, self.base = policy, residual, base
+        self._knobs = residual.knobs()
         self.name = name or f"{policy.name} over {base.name}"
         self.state_size = base.state_size
         self.obs_dim = base.obs_dim
@@ -314,5 +320,5 @@ class ResidualAgent(Agent):
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
         batch, single, st = self._checked_step(observation, state, episode_start)
         a, _ = self.policy.predict(batch, deterministic=deterministic)
-        u = self.residual.act(self.base, batch, st, a)
+        u = self.residual.act(self.base, batch, st, a, self._knobs)
         return (u[0] if single else u), st
