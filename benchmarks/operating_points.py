@@ -99,7 +99,8 @@ def main(argv=None) -> int:
     torch.set_num_threads(1)
     spec = next(s for s in BENCHMARKS if s.env_id == a.env)
     (learned,) = spec.learned
-    reference = next(c for c in spec.tuned if c.__name__ == best_tuned(a.env))
+    best = best_tuned(a.env, among=[c.__name__ for c in spec.tuned])
+    reference = next(c for c in spec.tuned if c.__name__ == best)
     _, score, failed = evaluation_setup(a.env, {})
     bases = base_scenarios(a.env, a.episodes, a.seed0)
     print(f"{a.env}: {learned} against {reference.__name__} (tuned), {a.episodes} cuts a point")

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agents.bench.run import EnvRun
+from agents.bench.tune import best_tuned
 from agents.eval.stats import (
     AgentStats,
     agent_stats,
@@ -94,13 +95,8 @@ class SplitResults:
 
 def reference(run: EnvRun, tuned: dict) -> str | None:
     """The best tuned classical agent (see the module docstring)."""
-    entries = tuned.get("envs", {}).get(run.spec.env_id, {})
-    best, best_v = None, math.inf
-    for name, cls in run.tuned_cls.items():
-        v = entries.get(cls.__name__, {}).get("validation_score", math.inf)
-        if v < best_v:
-            best, best_v = name, v
-    return best
+    rows = {cls.__name__: name for name, cls in run.tuned_cls.items()}
+    return rows.get(best_tuned(run.spec.env_id, tuned, among=rows))
 
 
 def machine_reference(run: EnvRun) -> str | None:

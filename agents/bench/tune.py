@@ -283,14 +283,16 @@ def load_tuned(path=TUNED_FILE) -> dict:
     return read_json_object(path, "tuned settings file")
 
 
-def best_tuned(env_id: str, tuned: dict | None = None) -> str | None:
-    """The class name of ``env_id``'s tuned agent with the lowest validation score (None
-    where the file holds none): the reference a learned row is judged against."""
+def best_tuned(env_id: str, tuned: dict | None = None, among=None) -> str | None:
+    """The class name of ``env_id``'s tuned agent with the lowest validation score, among
+    the class names ``among`` (in their order, the first on a tie; default: every entry):
+    the reference a learned row is judged against. None where none has a score."""
     tuned = load_tuned() if tuned is None else tuned
     entries = tuned.get("envs", {}).get(env_id, {})
-    if not entries:
-        return None
-    return min(entries, key=lambda k: entries[k].get("validation_score", float("inf")))
+    names = list(entries) if among is None else [n for n in among if n in entries]
+    scores = {n: entries[n].get("validation_score", math.inf) for n in names}
+    best = min(scores, key=scores.__getitem__, default=None)
+    return best if best is not None and scores[best] < math.inf else None
 
 
 def tuned_factory(cls, env_id: str, tuned: dict | None = None, label: str = "tuned"):
