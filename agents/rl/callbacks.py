@@ -75,12 +75,19 @@ class JsonStatsCheckpoint(CheckpointCallback):
         return keep
 
 
-def _positive_int(name: str, value) -> int:
+def _whole(value) -> int | None:
+    """``value`` as an int where it is a whole number (rl-zoo3 writes large counts as
+    ``!!float 1e6``), else None."""
     if isinstance(value, float) and value.is_integer():
-        value = int(value)  # rl-zoo3 writes large counts as !!float 1e6
-    if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+        value = int(value)
+    return None if isinstance(value, bool) or not isinstance(value, int) else value
+
+
+def _positive_int(name: str, value) -> int:
+    v = _whole(value)
+    if v is None or v < 1:
         raise ValueError(f"ValidationCallback: {name} must be an integer >= 1, got {value!r}")
-    return value
+    return v
 
 
 def _allowances(value) -> list[float] | None:
@@ -163,11 +170,9 @@ class ValidationCallback(BaseCallback):
             None if checkpoint_freq is None else _positive_int("checkpoint_freq", checkpoint_freq)
         )
         self.allowances = _allowances(allowances)
-        first = first_episode
-        if isinstance(first, float) and first.is_integer():
-            first = int(first)
+        first = _whole(first_episode)
         top = MAX_SPLIT_EPISODES - self.n_episodes
-        if isinstance(first, bool) or not isinstance(first, int) or not 0 <= first <= top:
+        if first is None or not 0 <= first <= top:
             raise ValueError(
                 f"ValidationCallback: first_episode must be an integer in [0, {top}] (the "
                 f"split has {MAX_SPLIT_EPISODES} episodes, {self.n_episodes} are evaluated), "
