@@ -86,7 +86,7 @@ def main(argv=None) -> int:
 
     torch.set_num_threads(1)
     metrics_fn, score, failed = evaluation_setup(a.env, {})
-    if not 0 <= a.first_episode <= MAX_SPLIT_EPISODES - max(a.episodes, 1):
+    if not 0 <= a.first_episode <= MAX_SPLIT_EPISODES - a.episodes:
         ap.error(
             f"--first-episode must be in [0, {MAX_SPLIT_EPISODES} - --episodes], "
             f"got {a.first_episode}"
