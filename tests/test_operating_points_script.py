@@ -32,6 +32,6 @@ def test_operating_points_script_runs_the_learned_row_against_the_reference():
     printed = run_benchmark(
         "operating_points.py --env machining_envs/Turning-v0 --episodes 2 --points Kf_x_1.25"
     )
-    assert "turning_ppo_residual against AdaptiveFeedControl (tuned)" in printed
+    assert "turning_ppo_residual_ref85 against AdaptiveFeedControl (tuned)" in printed
     (line,) = [x for x in printed.splitlines() if x.startswith("Kf x 1.25:")]
     assert "reference keeps" in line and "0.5%:" in line and "2.0%:" in line

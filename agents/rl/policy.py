@@ -576,6 +576,7 @@ SUPERSEDED = {
     "end_milling_ppo": "end_milling_ppo_load_only",
     "micro_drilling_ppo_peck": "micro_drilling_ppo_peck_voltage_feed",
     "micro_drilling_ppo_peck_voltage": "micro_drilling_ppo_peck_voltage_feed",
+    "turning_ppo_residual": "turning_ppo_residual_ref85",
 }
 
 
