@@ -5,8 +5,9 @@ subfolders, or a folder of ``train`` run folders ``seed_<k>/``), every seed's po
 the same ``--episodes`` ``validation`` episodes (from ``--first-episode`` on) as the
 reference (the best tuned classical agent of ``agents/bench/tuned.json`` by its validation
 score, unless ``--reference``), and the seed gate (``agents.rl.gate``) runs on each seed unless ``--no-gate``. Printed and
-written (``--out``, JSON): per seed the gate verdict, the counting share and the mean
-charged time; per policy (the seeds pooled, an episode's value the mean over its seeds, as
+written (``--out``, JSON): per seed the gate verdict, the counting share, the mean
+charged time and the seed's own paired difference and verdict against the reference; per
+policy (the seeds pooled, an episode's value the mean over its seeds, as
 the benchmark pools them) the counting share, the mean time and the paired difference
 against the reference (reference - policy, positive: the policy is better) with its 95 %
 bootstrap interval at each allowance of ``machining_envs.core.score.ALLOWANCES`` and the
@@ -159,9 +160,12 @@ def main(argv=None) -> int:
             for row in r:
                 row["policy_seed"] = seed
             rows += r
+            seed_diffs, seed_verdict = allowance_sweep(ref_rows, r, score, failed)
             entry = {
                 "counts": float(np.mean([score.counts(x) for x in r])),
                 "mean": float(np.mean([score.charged(x, failed) for x in r])),
+                "diffs": {str(al): d for al, d in zip(ALLOWANCES, seed_diffs, strict=True)},
+                "verdict": seed_verdict,
             }
             if not a.no_gate:
                 g = gate_policy(model, a.env)
@@ -185,7 +189,8 @@ def main(argv=None) -> int:
             )
             print(
                 f"{folder} seed {seed}: counts {entry['counts']:.0%}, mean "
-                f"{entry['mean']:.2f} s{gtxt} ({entry['wall_s']} s)",
+                f"{entry['mean']:.2f} s; alone {allowance_cells(seed_diffs)}; {seed_verdict}"
+                f"{gtxt} ({entry['wall_s']} s)",
                 flush=True,
             )
         diffs, verdict = allowance_sweep(ref_rows, rows, score, failed)

@@ -2,6 +2,10 @@
 
 import json
 
+import numpy as np
+import pytest
+
+from agents.eval.stats import VERDICTS
 from tests.benchmark_scripts import load_benchmark, run_benchmark
 
 
@@ -23,6 +27,17 @@ def test_policy_validation_script_compares_every_seed_with_the_best_tuned_agent(
     for d in (*row["diffs"].values(), *row["vs_baseline"]["diffs"].values()):
         assert d["n"] == 2 and d["low"] <= d["diff"] <= d["high"]
     assert "vs_baseline" not in data["policies"][td3]
+    # each seed is also compared alone (at 2 %, the score's own allowance: the reference's
+    # mean less the seed's), and the seeds' differences average to the pooled one
+    alone = [row["seeds"][k]["diffs"]["0.02"]["diff"] for k in sorted(row["seeds"])]
+    assert row["diffs"]["0.02"]["diff"] == pytest.approx(np.mean(alone))
+    for k, entry in row["seeds"].items():
+        assert entry["diffs"]["0.02"]["diff"] == pytest.approx(
+            data["reference_mean"] - entry["mean"]
+        )
+        assert entry["verdict"] in VERDICTS and set(entry["diffs"]) == set(row["diffs"])
+        assert f"{ppo} seed {k}: counts" in printed
+    assert "; alone 0.5%:" in printed
 
 
 def test_policy_validation_script_compares_tuned_rows_on_their_own_env(tmp_path):
@@ -53,8 +68,6 @@ def test_a_shipped_folders_own_policy_counts_as_its_seed_0():
 
 
 def test_the_check_can_run_on_validation_episodes_kept_apart(tmp_path):
-    import pytest
-
     module = load_benchmark("policy_validation")
     means = {}
     for args in (("2", "0"), ("1", "0"), ("1", "1")):
