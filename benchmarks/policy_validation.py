@@ -32,13 +32,13 @@ from pathlib import Path
 import numpy as np
 
 from agents.bench.tune import TUNED_FILE, agent_env_kwargs, best_tuned, tuned_factory
-from agents.eval import evaluate
+from agents.eval.harness import evaluate_validation
 from agents.eval.stats import allowance_cells, allowance_sweep, seed_count_shares
 from agents.rl.callbacks import evaluation_setup
 from agents.rl.gate import gate_policy
 from agents.rl.policy import load_policy, policy_env_kwargs, pretrained_seeds
 from machining_envs.core.score import ALLOWANCES
-from machining_envs.core.splits import MAX_SPLIT_EPISODES, split_seeds
+from machining_envs.core.splits import MAX_SPLIT_EPISODES
 
 
 def _agent_class(name: str):
@@ -48,6 +48,11 @@ def _agent_class(name: str):
     if cls is None:
         raise ValueError(f"--reference: no agent class {name!r} in agents")
     return cls
+
+
+def _by_allowance(diffs: list[dict]) -> dict:
+    """The paired differences of ``allowance_sweep`` keyed by their allowance, for the JSON."""
+    return {str(al): d for al, d in zip(ALLOWANCES, diffs, strict=True)}
 
 
 def seed_models(folder: Path) -> list[tuple[int, Path]]:
@@ -92,19 +97,16 @@ def main(argv=None) -> int:
             f"--first-episode must be in [0, {MAX_SPLIT_EPISODES} - --episodes], "
             f"got {a.first_episode}"
         )
-    seed0 = split_seeds("validation", a.first_episode + a.episodes)[a.first_episode]
 
     def run(agent, env_kwargs):
-        ev = evaluate(
+        return evaluate_validation(
             agent,
             a.env,
-            ["validation"],
-            n_episodes=a.episodes,
-            seed=seed0,
+            a.episodes,
+            a.first_episode,
             env_kwargs=env_kwargs,
             metrics_fn=metrics_fn,
-        )
-        return ev.rows
+        ).rows
 
     ref_name = a.reference or best_tuned(a.env)
     t0 = time.perf_counter()
@@ -129,7 +131,7 @@ def main(argv=None) -> int:
         report_tuned[name] = {
             "counts": float(np.mean([score.counts(x) for x in rows])),
             "mean": float(np.mean([score.charged(x, failed) for x in rows])),
-            "diffs": {str(al): d for al, d in zip(ALLOWANCES, diffs, strict=True)},
+            "diffs": _by_allowance(diffs),
             "verdict": verdict,
             "wall_s": round(time.perf_counter() - t1, 1),
         }
@@ -164,7 +166,7 @@ def main(argv=None) -> int:
             entry = {
                 "counts": float(np.mean([score.counts(x) for x in r])),
                 "mean": float(np.mean([score.charged(x, failed) for x in r])),
-                "diffs": {str(al): d for al, d in zip(ALLOWANCES, seed_diffs, strict=True)},
+                "diffs": _by_allowance(seed_diffs),
                 "verdict": seed_verdict,
             }
             if not a.no_gate:
@@ -200,7 +202,7 @@ def main(argv=None) -> int:
             "seed_counts_by_allowance": {
                 str(al): seed_count_shares(rows, score, al) for al in ALLOWANCES
             },
-            "diffs": {str(al): d for al, d in zip(ALLOWANCES, diffs, strict=True)},
+            "diffs": _by_allowance(diffs),
             "verdict": verdict,
             "seeds": seeds,
         }
@@ -222,7 +224,7 @@ def main(argv=None) -> int:
             report["policies"][str(folder)]["vs_baseline"] = {
                 "baseline": str(a.baseline),
                 "verdict": verdict,
-                "diffs": {str(al): d for al, d in zip(ALLOWANCES, diffs, strict=True)},
+                "diffs": _by_allowance(diffs),
             }
             cells = allowance_cells(diffs)
             print(f"{folder} vs {a.baseline}: {cells}; {verdict}", flush=True)

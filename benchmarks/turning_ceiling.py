@@ -27,22 +27,19 @@ Two numbers bound what a policy that moves the AFC's force reference can win:
 from __future__ import annotations
 
 import argparse
-import json
 import time
-from pathlib import Path
 
 import numpy as np
 
 from agents import AdaptiveFeedControl
 from agents.afc import _OVR
-from agents.eval import evaluate
+from agents.bench.tune import load_tuned
+from agents.eval.harness import evaluate_validation
 from agents.eval.stats import allowance_cells, allowance_sweep
 from agents.rl.callbacks import evaluation_setup
 from machining_envs.core.score import ALLOWANCES
-from machining_envs.core.splits import split_seeds
 
 ENV = "machining_envs/Turning-v0"
-TUNED = Path(__file__).resolve().parents[1] / "agents" / "bench" / "tuned.json"
 #: References tried for the after-the-fact choice (the tuned one is always added).
 REFS = (0.70, 0.75, 0.85, 0.88, 0.91, 0.94, 0.97)
 
@@ -104,21 +101,18 @@ def main(argv=None) -> int:
         raise SystemExit(f"--brake-cut must be in (0, 1], got {a.brake_cut}")
     if not 0.0 <= a.brake_hold <= 1.0:
         raise SystemExit(f"--brake-hold must be in [0, 1], got {a.brake_hold}")
-    tuned = json.loads(TUNED.read_text())["envs"][ENV]["AdaptiveFeedControl"]["params"]
+    tuned = load_tuned()["envs"][ENV]["AdaptiveFeedControl"]["params"]
     tuned_ref = float(tuned["reference"])
     refs = sorted({*map(float, a.refs), tuned_ref})
     metrics_fn, score, failed = evaluation_setup(ENV, {})
-    seed0 = split_seeds("validation", a.episodes)[0]
     charged = {}
     for ref in refs:
         t0 = time.perf_counter()
         params = dict(tuned, reference=ref)
-        ev = evaluate(
+        ev = evaluate_validation(
             lambda env, p=params: AdaptiveFeedControl.from_env(env, **p),
             ENV,
-            ["validation"],
-            n_episodes=a.episodes,
-            seed=seed0,
+            a.episodes,
             metrics_fn=metrics_fn,
             keep_trajectories=ref == tuned_ref,
         )
@@ -157,14 +151,12 @@ def main(argv=None) -> int:
     if a.brake:
         for ref in a.brake_refs:
             t0 = time.perf_counter()
-            ev = evaluate(
+            ev = evaluate_validation(
                 lambda env, p=dict(tuned, reference=ref): OverloadBrake.from_env(
                     env, cut=a.brake_cut, hold=a.brake_hold, **p
                 ),
                 ENV,
-                ["validation"],
-                n_episodes=a.episodes,
-                seed=seed0,
+                a.episodes,
                 metrics_fn=metrics_fn,
             )
             diffs, verdict = allowance_sweep(tuned_rows, ev.rows, score, failed)
